@@ -1,0 +1,34 @@
+# The two commands a newcomer types (README.md):
+#   make demo   set everything up (.venv) and run the main job
+#   make test   set everything up (.venv, test tools) and run lint + the test suite
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test paper lint bench clean
+
+$(STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/quadsitl paper --out out/paper
+
+paper: $(STAMP)
+	$(BIN)/quadsitl paper --out out/paper
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/pytest -q
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/inprocess.py
+
+clean:
+	rm -rf out .pytest_cache .ruff_cache

@@ -1,0 +1,52 @@
+"""IntBS attitude law (Bouabdallah & Siegwart 2007, the paper's ref. [2]), on eq. (4).
+
+Integral in the FIRST backstepping step, per Euler axis (e1 = eta - eta_d):
+chi' = e1, e2 = e1' + c1 e1 + lambda chi, and the commanded angular acceleration
+``eta_cmd'' = eta_d'' + (c1^2 - 1 - lambda) e1 - (c1 + c2) e2 + c1 lambda chi``, applied through
+the nominal model: ``tau = M(eta) eta_cmd'' + C(eta, eta') eta'``.
+"""
+
+from __future__ import annotations
+
+from quadcommon.frames import wrap_pi
+from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times
+
+Vector3 = tuple[float, float, float]
+
+
+class IntegralBacksteppingAttitude:
+    def __init__(self, c1: Vector3, c2: Vector3, k_integral: Vector3, inertia_kg_m2: Vector3):
+        self.c1, self.c2, self.lam = c1, c2, k_integral
+        self.inertia = inertia_kg_m2
+        self.integral = [0.0, 0.0, 0.0]
+
+    def reset(self) -> None:
+        self.integral = [0.0, 0.0, 0.0]
+
+    def update(
+        self,
+        euler: Vector3,
+        euler_rates: Vector3,
+        ref: Vector3,
+        ref_rate: Vector3,
+        ref_accel: Vector3,
+        dt: float,
+        integrate: bool = True,
+    ) -> Vector3:
+        e = (euler[0] - ref[0], euler[1] - ref[1], wrap_pi(euler[2] - ref[2]))
+        accel_cmd = []
+        for i in range(3):
+            c1, c2, lam = self.c1[i], self.c2[i], self.lam[i]
+            chi = self.integral[i]
+            e_dot = euler_rates[i] - ref_rate[i]
+            e2 = e_dot + c1 * e[i] + lam * chi
+            accel_cmd.append(
+                ref_accel[i] + (c1 * c1 - 1.0 - lam) * e[i] - (c1 + c2) * e2 + c1 * lam * chi
+            )
+        if integrate:
+            for i in range(3):
+                self.integral[i] += e[i] * dt
+        M = inertia_matrix(self.inertia, euler[0], euler[1])
+        Ma = matrix_times(M, tuple(accel_cmd))
+        Ce = matrix_times(coriolis_matrix_fast(self.inertia, euler, euler_rates), euler_rates)
+        return (Ma[0] + Ce[0], Ma[1] + Ce[1], Ma[2] + Ce[2])

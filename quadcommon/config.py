@@ -1,0 +1,484 @@
+"""Configuration records (frozen) and their loaders from ``config/``.
+
+Files and what they hold:
+
+* ``config/vehicle/NAME.toml``: the nominal model the controllers know (Section IV), the "true"
+  plant the simulator flies (CoM offset, products of inertia, drag), actuation and rotors.
+* ``config/controllers/NAME.toml``: a cascade (translational law, rotational law, gains, filter).
+* ``config/scenarios/NAME.toml``: trajectory, initial state, parametric uncertainty, gust profile,
+  duration.
+* ``config/sitl.toml``: rates, ports, home position, zenoh endpoints, lockstep timeouts.
+
+Gust profiles (``config/gusts/``) are read by :mod:`simulator.environment.gust_profile`.
+
+Every loader accepts a bare name (looked up in the config directory) or a path. Values are
+validated at load; errors name file, key, value and the allowed range (see :mod:`.schema`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from .schema import ConfigError, Section, load_toml
+
+Vector3 = tuple[float, float, float]
+
+CONFIG_DIR = Path(
+    os.environ.get("QUADSITL_CONFIG_DIR", Path(__file__).resolve().parents[1] / "config")
+)
+
+
+def config_path(kind: str, name_or_path: str | Path) -> Path:
+    """Resolve ``name_or_path``: an existing path, or ``CONFIG_DIR/kind/NAME.toml``."""
+    candidate = Path(name_or_path)
+    if candidate.suffix == ".toml" or candidate.exists():
+        if not candidate.exists():
+            raise ConfigError(f"{candidate}: file not found")
+        return candidate
+    path = CONFIG_DIR / kind / f"{name_or_path}.toml"
+    if not path.exists():
+        available = sorted(p.stem for p in (CONFIG_DIR / kind).glob("*.toml"))
+        raise ConfigError(
+            f"no {kind} named '{name_or_path}' (looked for {path}); "
+            f"available: {', '.join(available)}"
+        )
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# Vehicle
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class NominalModel:
+    """What the controllers believe (Section IV): the decoupled model of Section II."""
+
+    mass_kg: float
+    gravity_m_s2: float
+    arm_length_m: float
+    inertia_kg_m2: Vector3  # Ixx, Iyy, Izz
+
+    @property
+    def hover_thrust_n(self) -> float:
+        return self.mass_kg * self.gravity_m_s2
+
+
+@dataclass(frozen=True)
+class PlantStructure:
+    """The "more accurate" plant of Section IV (simulator only). See CONTROL.md."""
+
+    model: str  # "coupled" or "nominal" (the Section II equations, integrated in eta)
+    mass_kg: float
+    inertia_kg_m2: Vector3  # principal-axis terms about the CoM, before uncertainty scaling
+    products_of_inertia_kg_m2: Vector3  # Ixy, Ixz, Iyz about the CoM
+    com_offset_m: Vector3  # r_G: CoM position in the body frame, from the geometric centre O
+    drag_coefficient_n_s_m: Vector3  # linear aerodynamic drag per world axis, F = -k (v - wind)
+    ground_contact: bool
+
+
+@dataclass(frozen=True)
+class Actuation:
+    mode: str  # "wrench" (saturated U1 and tau) or "rotors" (allocation + rotor dynamics)
+    thrust_max_n: float
+    torque_max_n_m: Vector3
+
+
+@dataclass(frozen=True)
+class Rotors:
+    thrust_coefficient_n_s2: float  # b: thrust = b Omega^2
+    drag_coefficient_n_m_s2: float  # d: reaction torque = d Omega^2
+    inertia_kg_m2: float  # J_r, gyroscopic moment
+    time_constant_s: float  # first-order speed dynamics
+    speed_min_rad_s: float
+    speed_max_rad_s: float
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    name: str
+    nominal: NominalModel
+    plant: PlantStructure
+    actuation: Actuation
+    rotors: Rotors
+
+
+def load_vehicle(name_or_path: str | Path = "paper_quad") -> VehicleConfig:
+    path = config_path("vehicle", name_or_path)
+    root = load_toml(path)
+    name = root.string("name", Path(path).stem)
+
+    sec = root.section("nominal")
+    nominal = NominalModel(
+        mass_kg=sec.number("mass_kg", lo=0.0, lo_open=True, hi=100.0, unit="kg"),
+        gravity_m_s2=sec.number("gravity_m_s2", 9.81, lo=0.0, lo_open=True, hi=30.0, unit="m/s^2"),
+        arm_length_m=sec.number("arm_length_m", lo=0.0, lo_open=True, hi=5.0, unit="m"),
+        inertia_kg_m2=sec.vector("inertia_kg_m2", lo=0.0, lo_open=True, hi=10.0, unit="kg m^2"),
+    )
+    sec.finish()
+
+    sec = root.section("plant")
+    plant = PlantStructure(
+        model=sec.choice("model", ("coupled", "nominal"), "coupled"),
+        mass_kg=sec.number("mass_kg", nominal.mass_kg, lo=0.0, lo_open=True, hi=100.0, unit="kg"),
+        inertia_kg_m2=sec.vector(
+            "inertia_kg_m2", 3, nominal.inertia_kg_m2, lo=0.0, lo_open=True, hi=10.0, unit="kg m^2"
+        ),
+        products_of_inertia_kg_m2=sec.vector(
+            "products_of_inertia_kg_m2", 3, (0.0, 0.0, 0.0), lo=-1.0, hi=1.0, unit="kg m^2"
+        ),
+        com_offset_m=sec.vector("com_offset_m", 3, (0.0, 0.0, 0.0), lo=-0.5, hi=0.5, unit="m"),
+        drag_coefficient_n_s_m=sec.vector(
+            "drag_coefficient_n_s_m", 3, (0.0, 0.0, 0.0), lo=0.0, hi=50.0, unit="N s/m"
+        ),
+        ground_contact=sec.boolean("ground_contact", True),
+    )
+    sec.finish()
+
+    sec = root.section("actuation")
+    actuation = Actuation(
+        mode=sec.choice("mode", ("wrench", "rotors"), "wrench"),
+        thrust_max_n=sec.number("thrust_max_n", lo=0.0, lo_open=True, hi=1000.0, unit="N"),
+        torque_max_n_m=sec.vector("torque_max_n_m", lo=0.0, lo_open=True, hi=100.0, unit="N m"),
+    )
+    sec.finish()
+
+    sec = root.section("rotors")
+    rotors = Rotors(
+        thrust_coefficient_n_s2=sec.number(
+            "thrust_coefficient_n_s2", lo=0.0, lo_open=True, hi=1.0, unit="N s^2"
+        ),
+        drag_coefficient_n_m_s2=sec.number(
+            "drag_coefficient_n_m_s2", lo=0.0, lo_open=True, hi=1.0, unit="N m s^2"
+        ),
+        inertia_kg_m2=sec.number("inertia_kg_m2", lo=0.0, hi=1.0, unit="kg m^2"),
+        time_constant_s=sec.number("time_constant_s", lo=0.0, lo_open=True, hi=1.0, unit="s"),
+        speed_min_rad_s=sec.number("speed_min_rad_s", 0.0, lo=0.0, hi=1e4, unit="rad/s"),
+        speed_max_rad_s=sec.number("speed_max_rad_s", lo=0.0, lo_open=True, hi=1e4, unit="rad/s"),
+    )
+    if rotors.speed_min_rad_s >= rotors.speed_max_rad_s:
+        raise sec.error("speed_min_rad_s", rotors.speed_min_rad_s, "< rotors.speed_max_rad_s")
+    sec.finish()
+    root.finish()
+
+    _check_inertia_tensor(path, plant)
+    return VehicleConfig(name, nominal, plant, actuation, rotors)
+
+
+def _check_inertia_tensor(path: Path, plant: PlantStructure) -> None:
+    """The true inertia tensor must be positive definite (else the plant is not a rigid body)."""
+    Ixx, Iyy, Izz = plant.inertia_kg_m2
+    Ixy, Ixz, Iyz = plant.products_of_inertia_kg_m2
+    minors = (
+        Ixx,
+        Ixx * Iyy - Ixy * Ixy,
+        Ixx * (Iyy * Izz - Iyz * Iyz)
+        - Ixy * (Ixy * Izz - Iyz * Ixz)
+        + Ixz * (Ixy * Iyz - Iyy * Ixz),
+    )
+    if min(minors) <= 0.0:
+        raise ConfigError(
+            f"{path}: key 'plant.products_of_inertia_kg_m2' = {plant.products_of_inertia_kg_m2} "
+            "makes the inertia tensor not positive definite; allowed: products small enough that "
+            "the tensor stays positive definite"
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Controllers
+# --------------------------------------------------------------------------------------------
+TRANSLATIONAL_LAWS = ("integral_second_step", "integral_first_step", "backstepping")
+ROTATIONAL_LAWS = ("nlhinf", "integral_backstepping")
+
+
+@dataclass(frozen=True)
+class TranslationalGains:
+    """Per-axis (x, y, z) gains of the translational backstepping laws (Section 3.1, eq. 24-29).
+
+    ``k_integral`` is k_xi for the integral in the second step (the paper's law) and lambda for
+    the integral in the first step (IntBS); it is zero for plain backstepping.
+    """
+
+    law: str
+    c1: Vector3
+    c2: Vector3
+    k_integral: Vector3
+    tilt_max_rad: float
+
+
+@dataclass(frozen=True)
+class NlHinfGains:
+    """Weights of the nonlinear H-infinity law, eq. (44): omega1, omega2, omega3, omega_u."""
+
+    omega1: float
+    omega2: float
+    omega3: float
+    omega_u: float
+
+    @property
+    def k_d(self) -> float:
+        return math.sqrt(self.omega2**2 + 2.0 * self.omega1 * self.omega3) / self.omega1
+
+    @property
+    def k_p(self) -> float:
+        return self.omega3 / self.omega1
+
+
+@dataclass(frozen=True)
+class RotationalGains:
+    law: str
+    nlhinf: NlHinfGains | None  # for law = "nlhinf"
+    c1: Vector3  # for law = "integral_backstepping" (roll, pitch, yaw)
+    c2: Vector3
+    k_integral: Vector3
+
+
+@dataclass(frozen=True)
+class CommandFilter:
+    """Second-order filter giving eta_d, eta_d', eta_d'' from the roll/pitch references."""
+
+    natural_frequency_rad_s: float
+    damping: float
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    name: str
+    description: str
+    translational: TranslationalGains
+    rotational: RotationalGains
+    command_filter: CommandFilter
+
+
+def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConfig:
+    path = config_path("controllers", name_or_path)
+    root = load_toml(path)
+    name = root.string("name", Path(path).stem)
+    description = root.string("description", "")
+
+    sec = root.section("translational")
+    law = sec.choice("law", TRANSLATIONAL_LAWS)
+    positive = {"lo": 0.0, "lo_open": True, "hi": 1e4}
+    translational = TranslationalGains(
+        law=law,
+        c1=sec.vector("c1", **positive),
+        c2=sec.vector("c2", **positive),
+        k_integral=sec.vector("k_integral", 3, (0.0, 0.0, 0.0), lo=0.0, hi=1e4),
+        tilt_max_rad=sec.number("tilt_max_rad", 0.7, lo=0.05, hi=1.4, unit="rad"),
+    )
+    if law != "backstepping" and min(translational.k_integral) <= 0.0:
+        raise sec.error(
+            "k_integral", translational.k_integral, f"> 0 on every axis for law '{law}'"
+        )
+    sec.finish()
+
+    sec = root.section("rotational")
+    rlaw = sec.choice("law", ROTATIONAL_LAWS)
+    nlhinf = None
+    zero3 = (0.0, 0.0, 0.0)
+    c1 = c2 = k_int = zero3
+    if rlaw == "nlhinf":
+        nlhinf = NlHinfGains(
+            omega1=sec.number("omega1", lo=0.0, lo_open=True, hi=1e3),
+            omega2=sec.number("omega2", lo=0.0, lo_open=True, hi=1e3),
+            omega3=sec.number("omega3", lo=0.0, hi=1e3),
+            omega_u=sec.number("omega_u", lo=0.0, lo_open=True, hi=1e3),
+        )
+    else:
+        c1 = sec.vector("c1", **positive)
+        c2 = sec.vector("c2", **positive)
+        k_int = sec.vector("k_integral", lo=0.0, hi=1e4)
+    rotational = RotationalGains(rlaw, nlhinf, c1, c2, k_int)
+    sec.finish()
+
+    sec = root.section("command_filter", optional=True)
+    command_filter = CommandFilter(
+        natural_frequency_rad_s=sec.number(
+            "natural_frequency_rad_s", 60.0, lo=1.0, hi=1000.0, unit="rad/s"
+        ),
+        damping=sec.number("damping", 1.0, lo=0.1, hi=5.0),
+    )
+    sec.finish()
+    root.finish()
+    return ControllerConfig(name, description, translational, rotational, command_filter)
+
+
+CONTROLLER_NAMES = ("intbs_nlhinf", "intbs", "bs_nlhinf")
+
+
+# --------------------------------------------------------------------------------------------
+# Scenarios
+# --------------------------------------------------------------------------------------------
+TRAJECTORY_KINDS = ("circle", "helix", "hover")
+
+
+@dataclass(frozen=True)
+class TrajectorySpec:
+    """A named analytic reference (see :mod:`autopilot.guidance.trajectories`)."""
+
+    kind: str
+    radius_m: float = 0.0
+    angular_rate_rad_s: float = 0.0
+    center_m: Vector3 = (0.0, 0.0, 0.0)
+    vertical_amplitude_m: float = 0.0
+    climb_rate_m_s: float = 0.0
+    yaw_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    name: str
+    description: str
+    vehicle: str
+    duration_s: float
+    trajectory: TrajectorySpec
+    initial_position_m: Vector3
+    initial_euler_rad: Vector3
+    mass_scale: float
+    inertia_scale: float
+    gusts: str  # name or path of a gust profile; "" for none
+    takeoff_altitude_m: float = field(default=2.5)
+
+
+def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
+    path = config_path("scenarios", name_or_path)
+    root = load_toml(path)
+    name = root.string("name", Path(path).stem)
+    description = root.string("description", "")
+    vehicle = root.string("vehicle", "paper_quad")
+    duration = root.number("duration_s", lo=0.0, lo_open=True, hi=3600.0, unit="s")
+    gusts = root.string("gusts", "")
+    takeoff_alt = root.number("takeoff_altitude_m", 2.5, lo=0.1, hi=100.0, unit="m")
+
+    sec = root.section("trajectory")
+    kind = sec.choice("kind", TRAJECTORY_KINDS)
+    if kind == "hover":
+        spec = TrajectorySpec(
+            kind,
+            center_m=sec.vector("position_m", lo=-1e4, hi=1e4, unit="m"),
+            yaw_rad=sec.number("yaw_rad", 0.0, lo=-math.pi, hi=math.pi, unit="rad"),
+        )
+    else:
+        spec = TrajectorySpec(
+            kind,
+            radius_m=sec.number("radius_m", lo=0.0, hi=1e3, unit="m"),
+            angular_rate_rad_s=sec.number("angular_rate_rad_s", lo=-10.0, hi=10.0, unit="rad/s"),
+            center_m=sec.vector("center_m", lo=-1e4, hi=1e4, unit="m"),
+            vertical_amplitude_m=sec.number("vertical_amplitude_m", 0.0, lo=-1e3, hi=1e3, unit="m")
+            if kind == "circle"
+            else 0.0,
+            climb_rate_m_s=sec.number("climb_rate_m_s", 0.0, lo=-20.0, hi=20.0, unit="m/s")
+            if kind == "helix"
+            else 0.0,
+            yaw_rad=sec.number("yaw_rad", 0.0, lo=-math.pi, hi=math.pi, unit="rad"),
+        )
+    sec.finish()
+
+    sec = root.section("initial_state")
+    position = sec.vector("position_m", lo=-1e4, hi=1e4, unit="m")
+    euler = sec.vector("euler_rad", lo=-math.pi, hi=math.pi, unit="rad")
+    if abs(euler[1]) >= 0.5 * math.pi - 0.05:
+        raise sec.error("euler_rad", euler, "|theta| < pi/2 - 0.05 (away from gimbal lock)")
+    sec.finish()
+
+    sec = root.section("uncertainty", optional=True)
+    mass_scale = sec.number("mass_scale", 1.0, lo=0.5, hi=2.0)
+    inertia_scale = sec.number("inertia_scale", 1.0, lo=0.5, hi=2.0)
+    sec.finish()
+    root.finish()
+    return ScenarioConfig(
+        name,
+        description,
+        vehicle,
+        duration,
+        spec,
+        position,
+        euler,
+        mass_scale,
+        inertia_scale,
+        gusts,
+        takeoff_alt,
+    )
+
+
+def apply_uncertainty(vehicle: VehicleConfig, scenario: ScenarioConfig) -> VehicleConfig:
+    """The vehicle with the scenario's parametric uncertainty applied to the plant only."""
+    plant = vehicle.plant
+    s_i = scenario.inertia_scale
+    plant = replace(
+        plant,
+        mass_kg=plant.mass_kg * scenario.mass_scale,
+        inertia_kg_m2=tuple(v * s_i for v in plant.inertia_kg_m2),
+        products_of_inertia_kg_m2=tuple(v * s_i for v in plant.products_of_inertia_kg_m2),
+    )
+    return replace(vehicle, plant=plant)
+
+
+# --------------------------------------------------------------------------------------------
+# SITL: rates, ports, home, zenoh
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Rates:
+    physics_hz: float
+    control_hz: float
+    gps_hz: float
+
+    @property
+    def physics_steps_per_control(self) -> int:
+        return round(self.physics_hz / self.control_hz)
+
+
+@dataclass(frozen=True)
+class SitlConfig:
+    rates: Rates
+    hil_port_base: int
+    gcs_port_base: int
+    api_port_base: int
+    home: tuple[float, float, float]  # lat deg, lon deg, alt m (AMSL)
+    zenoh_port_base: int
+    zenoh_router: str  # "" for peer-to-peer on loopback, else an endpoint like tcp/host:7447
+    lockstep_timeout_s: float
+
+
+def load_rates(sec: Section) -> Rates:
+    rates = Rates(
+        physics_hz=sec.number("physics_hz", 1000.0, lo=100.0, hi=20000.0, unit="Hz"),
+        control_hz=sec.number("control_hz", 500.0, lo=50.0, hi=2000.0, unit="Hz"),
+        gps_hz=sec.number("gps_hz", 10.0, lo=1.0, hi=50.0, unit="Hz"),
+    )
+    ratio = rates.physics_hz / rates.control_hz
+    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
+        raise sec.error(
+            "control_hz", rates.control_hz, f"a whole divisor of physics_hz ({rates.physics_hz:g})"
+        )
+    return rates
+
+
+def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
+    path = config_path("", name_or_path) if name_or_path else CONFIG_DIR / "sitl.toml"
+    root = load_toml(path)
+    sec = root.section("rates", optional=True)
+    rates = load_rates(sec)
+    sec.finish()
+    sec = root.section("ports", optional=True)
+    hil = sec.integer("hil_base", 4560, lo=1024, hi=65000)
+    gcs = sec.integer("gcs_base", 14550, lo=1024, hi=65000)
+    api = sec.integer("api_base", 14540, lo=1024, hi=65000)
+    zenoh_port = sec.integer("zenoh_base", 7447, lo=1024, hi=65000)
+    sec.finish()
+    sec = root.section("home", optional=True)
+    home = (
+        sec.number("latitude_deg", 47.397742, lo=-89.0, hi=89.0, unit="deg"),
+        sec.number("longitude_deg", 8.545594, lo=-180.0, hi=180.0, unit="deg"),
+        sec.number("altitude_m", 488.0, lo=-500.0, hi=9000.0, unit="m"),
+    )
+    sec.finish()
+    sec = root.section("zenoh", optional=True)
+    router = sec.string("router", "")
+    sec.finish()
+    sec = root.section("lockstep", optional=True)
+    timeout = sec.number("timeout_s", 2.0, lo=0.05, hi=600.0, unit="s")
+    sec.finish()
+    root.finish()
+    return SitlConfig(rates, hil, gcs, api, home, zenoh_port, router, timeout)

@@ -1,0 +1,108 @@
+"""The ``quadsitl`` command line (the composition root's entry point).
+
+quadsitl paper [--out DIR] [--nominal-plant]      the paper's experiment, in-process
+quadsitl run SCENARIO [--controller NAME]          one in-process run
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from quadcommon.config import CONTROLLER_NAMES
+from quadcommon.schema import ConfigError
+
+
+def _cmd_paper(args: argparse.Namespace) -> int:
+    from .paper import run_paper
+
+    out = Path(args.out)
+    result = run_paper(
+        out,
+        scenarios=tuple(args.scenarios),
+        controllers=tuple(args.controllers),
+        nominal_plant=args.nominal_plant,
+        workers=args.workers,
+    )
+    print(f"\nwrote {len(result.outputs)} files to {out}/:")
+    print(
+        f"  tables:  {out / 'tables.md'}  "
+        "(+ table1_final_errors.csv, table2_ise.csv, table3_iadu.csv)"
+    )
+    print(
+        f"  figures: {out}/<scenario>_{{path3d,position,position_error,orientation,controls}}.png"
+    )
+    print(f"  runs:    {out / 'runs'}/<scenario>_<controller>.parquet")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from gcs_scripts.analysis.metrics import indices
+    from quadcommon.config import load_controller, load_scenario
+
+    from .inprocess import RunOptions, run_scenario
+
+    record = run_scenario(
+        load_scenario(args.scenario),
+        load_controller(args.controller),
+        RunOptions(nominal_plant=args.nominal_plant, duration_s=args.duration),
+    )
+    ind = indices(record)
+    e = ind.final_error_m
+    print(
+        f"{record.scenario} / {record.controller}: final error "
+        f"x={e[0]:+.5f} y={e[1]:+.5f} z={e[2]:+.5f} m"
+    )
+    print("ISE  " + "  ".join(f"{k}={v:.5f}" for k, v in ind.ise.items()))
+    print("IADU " + "  ".join(f"{k}={v:.4f}" for k, v in ind.iadu.items()))
+    if args.out:
+        path = record.write_parquet(args.out)
+        print(f"time series written to {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="quadsitl", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser(
+        "paper", help="reproduce the paper's experiment in-process (Tables I-III, figures)"
+    )
+    p.add_argument("--out", default="out/paper", help="output directory (default: out/paper)")
+    p.add_argument(
+        "--nominal-plant",
+        action="store_true",
+        help="fly the nominal Section II model instead of the coupled plant",
+    )
+    p.add_argument("--scenarios", nargs="+", default=["circle", "helix"])
+    p.add_argument("--controllers", nargs="+", default=list(CONTROLLER_NAMES))
+    p.add_argument("--workers", type=int, default=2, help="parallel runs (default 2)")
+    p.set_defaults(func=_cmd_paper)
+
+    p = sub.add_parser("run", help="one in-process run of a scenario")
+    p.add_argument("scenario", help="scenario name (config/scenarios) or path")
+    p.add_argument("--controller", default="intbs_nlhinf")
+    p.add_argument("--nominal-plant", action="store_true")
+    p.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
+    p.add_argument("--out", default=None, help="write the time series to this Parquet file")
+    p.set_defaults(func=_cmd_run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ConfigError as exc:
+        print(f"quadsitl: configuration error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("quadsitl: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,71 @@
+"""The paper's experiment in-process: the closed loops track, and the paper's pattern holds."""
+
+import numpy as np
+import pytest
+
+from gcs_scripts.analysis.metrics import indices
+from quadcommon.config import CONTROLLER_NAMES, load_controller, load_scenario
+from sitl.inprocess import RunOptions, run_scenario
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return {
+        (s, c): run_scenario(load_scenario(s), load_controller(c))
+        for s in ("circle", "helix")
+        for c in CONTROLLER_NAMES
+    }
+
+
+@pytest.mark.parametrize("scenario", ["circle", "helix"])
+@pytest.mark.parametrize("controller", CONTROLLER_NAMES)
+def test_closed_loop_tracks_with_the_papers_gains(runs, scenario, controller):
+    rec = runs[(scenario, controller)]
+    err = np.abs(rec.position_error_m)
+    after_transient = rec.time_s > 4.0
+    assert err[after_transient].max() < 0.1  # within 10 cm all along, disturbances included
+    assert np.abs(rec.euler_rad[:, :2]).max() < 0.75  # tilt limit 0.7 rad, small overshoot
+
+
+@pytest.mark.parametrize("scenario", ["circle", "helix"])
+def test_paper_pattern_final_errors(runs, scenario):
+    ours = np.abs(runs[(scenario, "intbs_nlhinf")].position_error_m[-1])
+    intbs = np.abs(runs[(scenario, "intbs")].position_error_m[-1])
+    bs = np.abs(runs[(scenario, "bs_nlhinf")].position_error_m[-1])
+    assert ours.max() < 1e-3  # IntBS-NLHinf: below 1 mm on every axis
+    assert 1e-3 < intbs.max() < 2e-2  # IntBS: a few mm, still converging
+    assert bs.max() >= 1e-2  # BS-NLHinf keeps a centimetre offset
+
+
+@pytest.mark.parametrize("scenario", ["circle", "helix"])
+def test_paper_controller_has_lowest_position_ise(runs, scenario):
+    table = {c: indices(runs[(scenario, c)]).ise for c in CONTROLLER_NAMES}
+    for axis in ("x", "y", "z"):
+        best = min(CONTROLLER_NAMES, key=lambda c: table[c][axis])
+        assert best == "intbs_nlhinf", (axis, table)
+
+
+def test_identical_runs_give_identical_results(runs):
+    again = run_scenario(load_scenario("helix"), load_controller("intbs_nlhinf"))
+    first = runs[("helix", "intbs_nlhinf")]
+    assert np.array_equal(first.position_m, again.position_m)
+    assert np.array_equal(first.torque_euler_n_m, again.torque_euler_n_m)
+
+
+def test_disturbances_follow_the_papers_schedule(runs):
+    rec = runs[("circle", "intbs_nlhinf")]
+    t = rec.time_s
+    assert rec.event_times_s == [5.0, 10.0, 15.0, 20.0, 25.0, 30.0]
+    assert np.all(rec.disturbance_force_n[t < 5.0] == 0.0)
+    assert np.all(rec.disturbance_force_n[t >= 25.0] == 1.0)
+    assert np.all(rec.disturbance_torque_n_m[t >= 30.0] == 1.0)
+
+
+def test_nominal_plant_option_flies_the_section_ii_model():
+    rec = run_scenario(
+        load_scenario("helix"),
+        load_controller("intbs_nlhinf"),
+        RunOptions(nominal_plant=True, duration_s=12.0),
+    )
+    assert rec.source.endswith("(nominal plant)")
+    assert np.abs(rec.position_error_m[-1]).max() < 5e-3
