@@ -1,0 +1,87 @@
+"""The contract on the wire between the processes: ports, ids, the HIL frame, zenoh keys.
+
+Both processes and the ground-station scripts read this module; neither process imports the
+other. Ports follow PX4 SITL's scheme, each offset by the instance number N:
+
+=====================  ==============  ==========================================================
+link                   port            who binds / who sends
+=====================  ==============  ==========================================================
+HIL                    4560 + N        simulator binds 127.0.0.1; autopilot sends first
+GCS (QGC, MAVProxy)    14550 + N       ground station listens; autopilot sends from 18570 + N
+API (MAVSDK, scripts)  14540 + N       script listens; autopilot sends from 14580 + N
+zenoh                  7447 + N        simulator's session listens on tcp/127.0.0.1
+=====================  ==============  ==========================================================
+
+HIL lockstep frame: the simulator sends ONE UDP datagram per control period holding
+``HIL_SENSOR``, ``HIL_STATE_QUATERNION``, ``ODOMETRY`` and, at the GPS rate, ``HIL_GPS``, all
+stamped with the same ``time_usec`` (simulation time since the simulator started, µs). The
+autopilot answers with one ``HIL_ACTUATOR_CONTROLS`` carrying the same ``time_usec``; the
+simulator steps the plant only after that answer.
+
+``HIL_STATE_QUATERNION`` quantises position to 1e-7 deg (~1 cm) and velocity to 1 cm/s, too
+coarse for the paper's millimetre results, so the frame also carries ``ODOMETRY`` (float32 local
+NED position, FRD body, as a motion-capture system feeds PX4). The autopilot's state source
+is ``ODOMETRY`` by default, ``HIL_STATE_QUATERNION`` on request (``[autopilot] state_source``).
+
+``HIL_ACTUATOR_CONTROLS``: ``mode`` has ``MAV_MODE_FLAG_SAFETY_ARMED`` when armed;
+``flags`` bit 0 = lockstep (always set), bit 1 = ``controls`` are a normalised wrench
+(``actuation = "wrench"``: U1/U1_max, then tau_x, tau_y, tau_z / tau_max in FRD body axes),
+clear = normalised rotor speeds Omega_i/Omega_max for rotors 1-4. The simulator refuses a frame
+whose bit 1 disagrees with its own vehicle config.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+LOOPBACK = "127.0.0.1"
+
+HIL_PORT_BASE = 4560
+GCS_REMOTE_BASE = 14550
+GCS_LOCAL_BASE = 18570
+API_REMOTE_BASE = 14540
+API_LOCAL_BASE = 14580
+ZENOH_PORT_BASE = 7447
+
+# MAVLink ids.
+AUTOPILOT_COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
+SIMULATOR_COMPONENT_ID = 51  # a component of the same system on the HIL link (not on GCS links)
+
+HIL_FLAG_LOCKSTEP = 1
+HIL_FLAG_WRENCH = 2
+
+
+def system_id(instance: int) -> int:
+    """MAVLink system id of vehicle ``instance`` (PX4: 1 + N)."""
+    return 1 + instance
+
+
+@dataclass(frozen=True)
+class Ports:
+    hil: int
+    gcs_remote: int
+    gcs_local: int
+    api_remote: int
+    api_local: int
+    zenoh: int
+
+
+def ports(instance: int, hil_base: int = HIL_PORT_BASE, gcs_base: int = GCS_REMOTE_BASE,
+          api_base: int = API_REMOTE_BASE, zenoh_base: int = ZENOH_PORT_BASE) -> Ports:
+    """Every port of vehicle ``instance`` (each base + N)."""
+    if not 0 <= instance <= 99:
+        raise ValueError(f"--instance must be in [0, 99], got {instance}")
+    n = instance
+    return Ports(
+        hil=hil_base + n,
+        gcs_remote=gcs_base + n,
+        gcs_local=GCS_LOCAL_BASE + (gcs_base - GCS_REMOTE_BASE) + n,
+        api_remote=api_base + n,
+        api_local=API_LOCAL_BASE + (api_base - API_REMOTE_BASE) + n,
+        zenoh=zenoh_base + n,
+    )
+
+
+def zenoh_key(instance: int, leaf: str) -> str:
+    """``quadsitl/<N>/<leaf>``: truth, controller, sim/gusts, info."""
+    return f"quadsitl/{instance}/{leaf}"
