@@ -26,9 +26,7 @@ from .schema import ConfigError, Section, load_toml
 
 Vector3 = tuple[float, float, float]
 
-CONFIG_DIR = Path(
-    os.environ.get("QUADSITL_CONFIG_DIR", Path(__file__).resolve().parents[1] / "config")
-)
+CONFIG_DIR = Path(os.environ.get("QUADSITL_CONFIG_DIR", Path(__file__).resolve().parents[1] / "config"))
 
 
 def config_path(kind: str, name_or_path: str | Path) -> Path:
@@ -42,8 +40,7 @@ def config_path(kind: str, name_or_path: str | Path) -> Path:
     if not path.exists():
         available = sorted(p.stem for p in (CONFIG_DIR / kind).glob("*.toml"))
         raise ConfigError(
-            f"no {kind} named '{name_or_path}' (looked for {path}); "
-            f"available: {', '.join(available)}"
+            f"no {kind} named '{name_or_path}' (looked for {path}); available: {', '.join(available)}"
         )
     return path
 
@@ -173,9 +170,7 @@ def _check_inertia_tensor(path: Path, plant: PlantStructure) -> None:
     minors = (
         Ixx,
         Ixx * Iyy - Ixy * Ixy,
-        Ixx * (Iyy * Izz - Iyz * Iyz)
-        - Ixy * (Ixy * Izz - Iyz * Ixz)
-        + Ixz * (Ixy * Iyz - Iyy * Ixz),
+        Ixx * (Iyy * Izz - Iyz * Iyz) - Ixy * (Ixy * Izz - Iyz * Ixz) + Ixz * (Ixy * Iyz - Iyy * Ixz),
     )
     if min(minors) <= 0.0:
         raise ConfigError(
@@ -268,9 +263,7 @@ def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConf
         tilt_max_rad=sec.number("tilt_max_rad", 0.7, lo=0.05, hi=1.4, unit="rad"),
     )
     if law != "backstepping" and min(translational.k_integral) <= 0.0:
-        raise sec.error(
-            "k_integral", translational.k_integral, f"> 0 on every axis for law '{law}'"
-        )
+        raise sec.error("k_integral", translational.k_integral, f"> 0 on every axis for law '{law}'")
     sec.finish()
 
     sec = root.section("rotational")
@@ -294,9 +287,7 @@ def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConf
 
     sec = root.section("command_filter", optional=True)
     command_filter = CommandFilter(
-        natural_frequency_rad_s=sec.number(
-            "natural_frequency_rad_s", 60.0, lo=1.0, hi=1000.0, unit="rad/s"
-        ),
+        natural_frequency_rad_s=sec.number("natural_frequency_rad_s", 60.0, lo=1.0, hi=1000.0, unit="rad/s"),
         damping=sec.number("damping", 1.0, lo=0.1, hi=5.0),
     )
     sec.finish()

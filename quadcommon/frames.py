@@ -43,6 +43,16 @@ def euler_from_ned(eta_ned: Vector3) -> Vector3:
     return (eta_ned[0], -eta_ned[1], -eta_ned[2])
 
 
+def yaw_to_ned(psi: float) -> float:
+    """Heading (yaw) from the paper's z-up frame to NED (same as the third Euler angle)."""
+    return -psi
+
+
+def yaw_from_ned(yaw_ned: float) -> float:
+    """Heading (yaw) from NED to the paper's z-up frame."""
+    return -yaw_ned
+
+
 def quaternion_to_ned(q: Quaternion) -> Quaternion:
     """Attitude quaternion (w, x, y, z) from the paper's frames to NED/FRD."""
     return (q[0], q[1], -q[2], -q[3])

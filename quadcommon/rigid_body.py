@@ -38,9 +38,7 @@ def euler_from_rotation(R: Matrix3) -> Vector3:
     return (math.atan2(R[2][1], R[2][2]), math.asin(sin_theta), math.atan2(R[1][0], R[0][0]))
 
 
-def quaternion_from_euler(
-    phi: float, theta: float, psi: float
-) -> tuple[float, float, float, float]:
+def quaternion_from_euler(phi: float, theta: float, psi: float) -> tuple[float, float, float, float]:
     """Unit quaternion ``(w, x, y, z)`` of the ZYX rotation, scalar first, w >= 0."""
     cf, sf = math.cos(0.5 * phi), math.sin(0.5 * phi)
     ct, st = math.cos(0.5 * theta), math.sin(0.5 * theta)
@@ -163,10 +161,7 @@ def coriolis_matrix(inertia: Vector3, eta: Vector3, eta_dot: Vector3) -> Matrix3
     return tuple(
         tuple(
             0.5
-            * sum(
-                (partials[i][k][j] + partials[j][k][i] - partials[k][i][j]) * eta_dot[i]
-                for i in range(3)
-            )
+            * sum((partials[i][k][j] + partials[j][k][i] - partials[k][i][j]) * eta_dot[i] for i in range(3))
             for j in range(3)
         )
         for k in range(3)

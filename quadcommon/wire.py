@@ -66,8 +66,13 @@ class Ports:
     zenoh: int
 
 
-def ports(instance: int, hil_base: int = HIL_PORT_BASE, gcs_base: int = GCS_REMOTE_BASE,
-          api_base: int = API_REMOTE_BASE, zenoh_base: int = ZENOH_PORT_BASE) -> Ports:
+def ports(
+    instance: int,
+    hil_base: int = HIL_PORT_BASE,
+    gcs_base: int = GCS_REMOTE_BASE,
+    api_base: int = API_REMOTE_BASE,
+    zenoh_base: int = ZENOH_PORT_BASE,
+) -> Ports:
     """Every port of vehicle ``instance`` (each base + N)."""
     if not 0 <= instance <= 99:
         raise ValueError(f"--instance must be in [0, 99], got {instance}")

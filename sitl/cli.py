@@ -26,13 +26,8 @@ def _cmd_paper(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     print(f"\nwrote {len(result.outputs)} files to {out}/:")
-    print(
-        f"  tables:  {out / 'tables.md'}  "
-        "(+ table1_final_errors.csv, table2_ise.csv, table3_iadu.csv)"
-    )
-    print(
-        f"  figures: {out}/<scenario>_{{path3d,position,position_error,orientation,controls}}.png"
-    )
+    print(f"  tables:  {out / 'tables.md'}  (+ table1_final_errors.csv, table2_ise.csv, table3_iadu.csv)")
+    print(f"  figures: {out}/<scenario>_{{path3d,position,position_error,orientation,controls}}.png")
     print(f"  runs:    {out / 'runs'}/<scenario>_<controller>.parquet")
     return 0
 
@@ -50,10 +45,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     )
     ind = indices(record)
     e = ind.final_error_m
-    print(
-        f"{record.scenario} / {record.controller}: final error "
-        f"x={e[0]:+.5f} y={e[1]:+.5f} z={e[2]:+.5f} m"
-    )
+    print(f"{record.scenario} / {record.controller}: final error x={e[0]:+.5f} y={e[1]:+.5f} z={e[2]:+.5f} m")
     print("ISE  " + "  ".join(f"{k}={v:.5f}" for k, v in ind.ise.items()))
     print("IADU " + "  ".join(f"{k}={v:.4f}" for k, v in ind.iadu.items()))
     if args.out:
@@ -62,15 +54,47 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _speed(text: str) -> str:
+    if text == "max":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--speed must be a positive number or 'max', got {text!r}"
+        ) from None
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f"--speed must be > 0, got {text!r}")
+    return text
+
+
+def _cmd_up(args: argparse.Namespace) -> int:
+    from quadcommon.config import load_controller, load_scenario, load_vehicle
+
+    from .up import VehicleSpec, run_up
+
+    # Validate names here so a typo fails before any process starts.
+    load_controller(args.controller)
+    load_scenario(args.scenario)
+    load_vehicle(args.vehicle)
+    specs = [
+        VehicleSpec(
+            instance=args.instance + k, controller=args.controller, vehicle=args.vehicle,
+            scenario=args.scenario, speed=args.speed, autostart=args.autostart,
+            duration_s=args.duration, sitl_config=args.sitl_config,
+        )
+        for k in range(args.count)
+    ]  # fmt: skip
+    return run_up(specs)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="quadsitl", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser(
-        "paper", help="reproduce the paper's experiment in-process (Tables I-III, figures)"
-    )
+    p = sub.add_parser("paper", help="reproduce the paper's experiment in-process (Tables I-III, figures)")
     p.add_argument("--out", default="out/paper", help="output directory (default: out/paper)")
     p.add_argument(
         "--nominal-plant",

@@ -94,9 +94,7 @@ def run_scenario(
         if progress is not None and k % report_every == 0:
             progress(k / steps)
         if not all(math.isfinite(v) for v in position):
-            raise FloatingPointError(
-                f"{scenario.name}/{controller.name}: state diverged at t={t:.3f} s"
-            )
+            raise FloatingPointError(f"{scenario.name}/{controller.name}: state diverged at t={t:.3f} s")
     if progress is not None:
         progress(1.0)
     data = np.asarray(rows, dtype=float)

@@ -83,9 +83,7 @@ class Allocator:
         return (thrust_n / self.thrust_max, t0 / tm[0], t1 / tm[1], t2 / tm[2])
 
 
-def _largest_scale(
-    base: tuple[float, ...], delta: tuple[float, ...], lo: float, hi: float
-) -> float:
+def _largest_scale(base: tuple[float, ...], delta: tuple[float, ...], lo: float, hi: float) -> float:
     """Largest k in [0, 1] with lo <= base_i + k delta_i <= hi for every i."""
     k = 1.0
     for b0, dl in zip(base, delta, strict=True):

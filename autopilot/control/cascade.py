@@ -91,9 +91,7 @@ class Cascade:
             integrate,
         )
         raw = (outer.roll_ref_rad, outer.pitch_ref_rad)
-        (phi_d, phi_d_dot, phi_d_ddot), (theta_d, theta_d_dot, theta_d_ddot) = self.filter.outputs(
-            raw
-        )
+        (phi_d, phi_d_dot, phi_d_ddot), (theta_d, theta_d_dot, theta_d_ddot) = self.filter.outputs(raw)
         self.filter.advance(raw)
         eta_d = (phi_d, theta_d, ref.yaw_rad)
         eta_d_dot = (phi_d_dot, theta_d_dot, ref.yaw_rate_rad_s)

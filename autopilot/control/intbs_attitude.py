@@ -40,9 +40,7 @@ class IntegralBacksteppingAttitude:
             chi = self.integral[i]
             e_dot = euler_rates[i] - ref_rate[i]
             e2 = e_dot + c1 * e[i] + lam * chi
-            accel_cmd.append(
-                ref_accel[i] + (c1 * c1 - 1.0 - lam) * e[i] - (c1 + c2) * e2 + c1 * lam * chi
-            )
+            accel_cmd.append(ref_accel[i] + (c1 * c1 - 1.0 - lam) * e[i] - (c1 + c2) * e2 + c1 * lam * chi)
         if integrate:
             for i in range(3):
                 self.integral[i] += e[i] * dt

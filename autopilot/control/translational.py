@@ -78,17 +78,13 @@ class TranslationalController:
             e1 = position[i] - ref_position[i]
             e1_dot = velocity[i] - ref_velocity[i]
             if law == "integral_second_step":
-                accel[i] = (
-                    ref_acceleration[i] - k * integral[i] - one_plus_c1c2 * e1 - c1_plus_c2 * e1_dot
-                )
+                accel[i] = ref_acceleration[i] - k * integral[i] - one_plus_c1c2 * e1 - c1_plus_c2 * e1_dot
                 if integrate:
                     integral[i] += (e1_dot + c1 * e1) * dt
             elif law == "integral_first_step":
                 chi = integral[i]
                 e2 = e1_dot + c1 * e1 + k * chi
-                accel[i] = (
-                    ref_acceleration[i] + (c1 * c1 - 1.0 - k) * e1 - c1_plus_c2 * e2 + c1 * k * chi
-                )
+                accel[i] = ref_acceleration[i] + (c1 * c1 - 1.0 - k) * e1 - c1_plus_c2 * e2 + c1 * k * chi
                 if integrate:
                     integral[i] += e1 * dt
             else:

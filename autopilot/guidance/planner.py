@@ -60,7 +60,12 @@ class LineMove:
     """Rest-to-rest straight move from ``start`` to ``end`` with an S-curve speed profile."""
 
     def __init__(
-        self, start: Vector3, end: Vector3, limits: Limits, yaw0: float = 0.0, yaw1: float = 0.0,
+        self,
+        start: Vector3,
+        end: Vector3,
+        limits: Limits,
+        yaw0: float = 0.0,
+        yaw1: float = 0.0,
         speed: float | None = None,
     ) -> None:
         delta = tuple(e - s for s, e in zip(start, end, strict=True))
@@ -117,9 +122,7 @@ class LineMove:
         )  # fmt: skip
 
 
-def transition(
-    start: Reference, target: Vector3, limits: Limits, yaw: float | None = None
-) -> Trajectory:
+def transition(start: Reference, target: Vector3, limits: Limits, yaw: float | None = None) -> Trajectory:
     """From the state of ``start`` to rest at ``target`` (quintic), within the limits.
 
     At rest, a straight :class:`LineMove` is used (cruises where the quintic would not).

@@ -135,9 +135,7 @@ def trajectory_from_spec(spec: TrajectorySpec) -> Trajectory:
             spec.yaw_rad,
         )
     if spec.kind == "helix":
-        return helix(
-            spec.radius_m, spec.angular_rate_rad_s, spec.center_m, spec.climb_rate_m_s, spec.yaw_rad
-        )
+        return helix(spec.radius_m, spec.angular_rate_rad_s, spec.center_m, spec.climb_rate_m_s, spec.yaw_rad)
     if spec.kind == "hover":
         return Hover(spec.center_m, spec.yaw_rad)
     raise ValueError(f"unknown trajectory kind {spec.kind!r}")
@@ -165,9 +163,7 @@ class QuinticSegment:
             raise ValueError(f"segment duration must be > 0 s, got {duration_s}")
         self.duration_s = duration_s
         T = duration_s
-        self.coeffs = [
-            _quintic_coefficients(p0[i], v0[i], a0[i], p1[i], v1[i], a1[i], T) for i in range(3)
-        ]
+        self.coeffs = [_quintic_coefficients(p0[i], v0[i], a0[i], p1[i], v1[i], a1[i], T) for i in range(3)]
         dyaw = (yaw1 - yaw0 + math.pi) % (2.0 * math.pi) - math.pi
         self.yaw_coeffs = _quintic_coefficients(yaw0, 0.0, 0.0, yaw0 + dyaw, 0.0, 0.0, T)
 

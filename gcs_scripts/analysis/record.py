@@ -42,9 +42,7 @@ class FlightRecord:
             if value.shape != (n, 3):
                 raise ValueError(f"FlightRecord.{name} has shape {value.shape}, expected ({n}, 3)")
         if self.thrust_n.shape != (n,):
-            raise ValueError(
-                f"FlightRecord.thrust_n has shape {self.thrust_n.shape}, expected ({n},)"
-            )
+            raise ValueError(f"FlightRecord.thrust_n has shape {self.thrust_n.shape}, expected ({n},)")
 
     @property
     def position_error_m(self) -> np.ndarray:

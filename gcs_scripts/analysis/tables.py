@@ -65,9 +65,7 @@ def _paper_table(
     return lines
 
 
-def paper_tables_markdown(
-    results: Results, scenarios: Sequence[str], controllers: Sequence[str]
-) -> str:
+def paper_tables_markdown(results: Results, scenarios: Sequence[str], controllers: Sequence[str]) -> str:
     """Tables I-III for each scenario; the paper's numbers stand beside ours for its helix."""
     out = ["# Tables I-III: ours beside the paper's", ""]
     out.append(

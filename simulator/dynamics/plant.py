@@ -282,8 +282,7 @@ class Plant:
         k4 = f([a + h * b for a, b in zip(s, k3, strict=True)])
         h6 = h / 6.0
         s = [
-            a + h6 * (b1 + 2.0 * (b2 + b3) + b4)
-            for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4, strict=True)
+            a + h6 * (b1 + 2.0 * (b2 + b3) + b4) for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4, strict=True)
         ]
         # Keep the quaternion on the unit sphere (RK4 drifts off it by O(h^5) per step).
         qw, qx, qy, qz = s[6], s[7], s[8], s[9]
@@ -355,9 +354,7 @@ class Plant:
         dw = (ds[10], ds[11], ds[12])
         wxr = _cross(w, self.com_offset)
         # a_O = a_G - R (w_dot x r + w x (w x r))
-        acc_rel = tuple(
-            a + b for a, b in zip(_cross(dw, self.com_offset), _cross(w, wxr), strict=True)
-        )
+        acc_rel = tuple(a + b for a, b in zip(_cross(dw, self.com_offset), _cross(w, wxr), strict=True))
         Rr = _rotate(R, (rx, ry, rz))
         Rwxr = _rotate(R, wxr)
         Racc = _rotate(R, acc_rel)

@@ -80,11 +80,7 @@ def parse_gust_profile(root: Section) -> GustProfile:
         channel = sec.choice("channel", CHANNELS)
         start = sec.number("start_s", lo=0.0, hi=1e6, unit="s")
         value = _channel_value(sec, channel)
-        end = (
-            sec.number("end_s", lo=start, lo_open=True, hi=1e6, unit="s")
-            if sec.has("end_s")
-            else math.inf
-        )
+        end = sec.number("end_s", lo=start, lo_open=True, hi=1e6, unit="s") if sec.has("end_s") else math.inf
         sec.finish()
         steps.append(Step(channel, start, value, end))
     ramps = []
@@ -93,11 +89,7 @@ def parse_gust_profile(root: Section) -> GustProfile:
         start = sec.number("start_s", lo=0.0, hi=1e6, unit="s")
         end = sec.number("end_s", lo=start, lo_open=True, hi=1e6, unit="s")
         value = _channel_value(sec, channel)
-        hold = (
-            sec.number("hold_until_s", lo=end, hi=1e6, unit="s")
-            if sec.has("hold_until_s")
-            else math.inf
-        )
+        hold = sec.number("hold_until_s", lo=end, hi=1e6, unit="s") if sec.has("hold_until_s") else math.inf
         sec.finish()
         ramps.append(Ramp(channel, start, end, value, hold))
     root.finish()
@@ -114,9 +106,7 @@ def load_gust_profile(name_or_path: str | Path) -> GustProfile:
 def gust_profile_from_mapping(data: Any, source: str = "uploaded profile") -> GustProfile:
     """Validate a profile given as a mapping (a parsed JSON upload)."""
     if not isinstance(data, dict):
-        raise ConfigError(
-            f"{source}: a gust profile must be an object/table, got {type(data).__name__}"
-        )
+        raise ConfigError(f"{source}: a gust profile must be an object/table, got {type(data).__name__}")
     return parse_gust_profile(Section(data, source))
 
 
@@ -131,9 +121,7 @@ class DisturbanceSchedule:
         self.start_time_s = start_time_s
         index = {c: i for i, c in enumerate(CHANNELS)}
         self._steps = [(index[s.channel], s.start_s, s.end_s, s.value) for s in profile.steps]
-        self._ramps = [
-            (index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps
-        ]
+        self._ramps = [(index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps]
         times = {s.start_s for s in profile.steps} | {s.end_s for s in profile.steps}
         times |= {r.start_s for r in profile.ramps} | {r.end_s for r in profile.ramps}
         times |= {r.hold_until_s for r in profile.ramps}

@@ -42,6 +42,4 @@ def test_roll_pitch_scaled_when_infeasible(allocator):
 def test_wrench_normalisation(allocator):
     thrust, torque = allocator.saturate_wrench(40.0, (2.0, -0.75, 0.1))
     assert thrust == 28.0 and torque == (1.5, -0.75, 0.1)
-    assert allocator.wrench_to_normalised(thrust, torque) == pytest.approx(
-        (1.0, 1.0, -0.5, 0.1 / 1.5)
-    )
+    assert allocator.wrench_to_normalised(thrust, torque) == pytest.approx((1.0, 1.0, -0.5, 0.1 / 1.5))

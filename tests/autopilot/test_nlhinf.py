@@ -21,11 +21,7 @@ def explicit_law(gains, eta, eta_dot, ref, ref_rate, ref_acc, integral):
     KI = gains.k_p * G
     e = np.array(eta) - np.array(ref)
     e_dot = np.array(eta_dot) - np.array(ref_rate)
-    return (
-        M @ np.array(ref_acc)
-        + C @ np.array(eta_dot)
-        - M @ (KD @ e_dot + KP @ e + KI @ np.array(integral))
-    )
+    return M @ np.array(ref_acc) + C @ np.array(eta_dot) - M @ (KD @ e_dot + KP @ e + KI @ np.array(integral))
 
 
 def test_law_equals_the_literal_gain_matrix_form():
@@ -52,9 +48,7 @@ def closed_loop_matrix(law_factory, inertia, dt=1e-6):
         law = law_factory()
         law.integral = list(x[0:3])
         eta, eta_dot = tuple(x[3:6]), tuple(x[6:9])
-        tau = np.array(
-            law.update(eta, eta_dot, (0, 0, 0), (0, 0, 0), (0, 0, 0), 0.0, integrate=False)
-        )
+        tau = np.array(law.update(eta, eta_dot, (0, 0, 0), (0, 0, 0), (0, 0, 0), 0.0, integrate=False))
         M = np.array(inertia_matrix(inertia, 0.0, 0.0))
         acc = np.linalg.solve(M, tau)
         A[0:3, col] = x[3:6] / dt

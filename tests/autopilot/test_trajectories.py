@@ -73,9 +73,7 @@ def test_piecewise_trajectory_is_continuous_and_holds_at_the_end():
     b = QuinticSegment(3.0, (1, 0, 0), (1, 2, 0))
     traj = PiecewiseTrajectory([a, b])
     assert traj.duration_s == 5.0
-    assert traj.sample(2.0 - 1e-9).position_m == pytest.approx(
-        traj.sample(2.0).position_m, abs=1e-6
-    )
+    assert traj.sample(2.0 - 1e-9).position_m == pytest.approx(traj.sample(2.0).position_m, abs=1e-6)
     assert traj.sample(10.0).position_m == pytest.approx((1, 2, 0))
     assert traj.sample(10.0).velocity_m_s == (0.0, 0.0, 0.0)
     with pytest.raises(ValueError):

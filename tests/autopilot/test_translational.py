@@ -17,9 +17,7 @@ def law(name):
 
 @pytest.mark.parametrize("name", ["intbs_nlhinf", "intbs", "bs_nlhinf"])
 def test_hover_on_reference_needs_weight_and_no_tilt(name):
-    out = law(name).update(
-        (1, 2, 3), (0, 0, 0), (0, 0, 0.4), (1, 2, 3), (0, 0, 0), (0, 0, 0), 0.002
-    )
+    out = law(name).update((1, 2, 3), (0, 0, 0), (0, 0, 0.4), (1, 2, 3), (0, 0, 0), (0, 0, 0), 0.002)
     assert out.thrust_n == pytest.approx(M * G)
     assert out.roll_ref_rad == pytest.approx(0.0, abs=1e-15)
     assert out.pitch_ref_rad == pytest.approx(0.0, abs=1e-15)

@@ -24,9 +24,7 @@ def test_euler_map_is_the_frame_rotation(eta):
 def test_quaternion_map_agrees_with_euler_map(eta):
     q_ned = frames.quaternion_to_ned(quaternion_from_euler(*eta))
     expected = quaternion_from_euler(*frames.euler_to_ned(eta))
-    assert np.allclose(
-        rotation_from_quaternion(*q_ned), rotation_from_quaternion(*expected), atol=1e-14
-    )
+    assert np.allclose(rotation_from_quaternion(*q_ned), rotation_from_quaternion(*expected), atol=1e-14)
     assert np.allclose(frames.quaternion_from_ned(q_ned), quaternion_from_euler(*eta))
 
 

@@ -101,9 +101,7 @@ def test_body_rates_and_euler_rates_are_inverse_maps():
         omega = rb.body_rates_from_euler_rates(eta[0], eta[1], eta_dot)
         W = np.array(rb.euler_rate_matrix(eta[0], eta[1]))
         assert np.allclose(omega, W @ np.array(eta_dot), atol=1e-14)
-        assert np.allclose(
-            rb.euler_rates_from_body_rates(eta[0], eta[1], omega), eta_dot, atol=1e-12
-        )
+        assert np.allclose(rb.euler_rates_from_body_rates(eta[0], eta[1], omega), eta_dot, atol=1e-12)
 
 
 def test_body_rates_are_rotation_kinematics():
@@ -113,14 +111,11 @@ def test_body_rates_are_rotation_kinematics():
         e0, ed = np.array(eta), np.array(eta_dot)
         R0 = np.array(rb.rotation_matrix(*e0))
         Rdot = (
-            np.array(rb.rotation_matrix(*(e0 + h * ed)))
-            - np.array(rb.rotation_matrix(*(e0 - h * ed)))
+            np.array(rb.rotation_matrix(*(e0 + h * ed))) - np.array(rb.rotation_matrix(*(e0 - h * ed)))
         ) / (2 * h)
         skew = R0.T @ Rdot
         omega = (skew[2, 1], skew[0, 2], skew[1, 0])
-        assert np.allclose(
-            omega, rb.body_rates_from_euler_rates(eta[0], eta[1], eta_dot), atol=1e-8
-        )
+        assert np.allclose(omega, rb.body_rates_from_euler_rates(eta[0], eta[1], eta_dot), atol=1e-8)
 
 
 def test_generalised_and_body_torques_are_dual():

@@ -170,9 +170,7 @@ def test_rotor_mode_hover_and_yaw_sign():
     assert plant.truth().position_m == pytest.approx((0.0, 0.0, 2.0), abs=1e-9)
     assert plant.truth().thrust_n == pytest.approx(v.plant.mass_kg * 9.81)
     # rotors 2 and 4 faster (clockwise from above): reaction torque turns the body to +yaw
-    plant.set_rotor_commands(
-        (hover_speed - 10, hover_speed + 10, hover_speed - 10, hover_speed + 10)
-    )
+    plant.set_rotor_commands((hover_speed - 10, hover_speed + 10, hover_speed - 10, hover_speed + 10))
     for _ in range(200):
         plant.step()
     assert plant.truth().body_rates_rad_s[2] > 0.0

@@ -20,9 +20,7 @@ def test_paper_command_writes_tables_figures_and_runs(tmp_path, capsys):
             rows = list(csv.reader(handle))
         assert rows[0] == columns
         keys = {(r[0], r[1]) for r in rows[1:]}
-        assert keys == {
-            (s, c) for s in ("circle", "helix") for c in ("intbs_nlhinf", "intbs", "bs_nlhinf")
-        }
+        assert keys == {(s, c) for s in ("circle", "helix") for c in ("intbs_nlhinf", "intbs", "bs_nlhinf")}
     with (tmp_path / "table1_final_errors.csv").open() as handle:
         finals = {(r["scenario"], r["controller"]): r for r in csv.DictReader(handle)}
     assert all(abs(float(finals[("helix", "intbs_nlhinf")][a])) < 1e-3 for a in "xyz")

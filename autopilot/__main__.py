@@ -1,0 +1,7 @@
+"""``python -m autopilot``: the flight-controller process (see autopilot/app.py)."""
+
+import sys
+
+from .app import main
+
+sys.exit(main())

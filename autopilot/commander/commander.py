@@ -1,0 +1,436 @@
+"""The commander: arming, flight modes, and what the vehicle should do next (the navigator).
+
+Pure: no sockets, no clocks. Every method takes the simulation time ``t`` (s) and the latest
+:class:`VehicleState`; :meth:`Commander.step` returns, once per control step, whether the motors
+are off, idling on the ground, or flying, and the reference (p_d, p_d', p_d'', yaw) to fly. Events
+worth telling a ground station (mode changes, failsafes, refusals with their reason) are queued
+as ``(severity, text)`` for the MAVLink shell to send as STATUSTEXT.
+
+Behaviour follows PX4 where PX4 users would expect it: arming only on the ground; takeoff climbs to
+``MIS_TAKEOFF_ALT`` (or the commanded altitude) then holds (AUTO.LOITER); land descends at
+``MPC_LAND_SPEED``, detects touchdown and disarms after ``COM_DISARM_LAND``; RTL climbs to
+``RTL_RETURN_ALT``, returns above home and lands; OFFBOARD needs a setpoint stream before it is
+entered and falls back to hold when setpoints stop for ``COM_OF_LOSS_T`` (simulation time); an
+armed vehicle that does not take off within ``COM_DISARM_PRFLT`` disarms itself.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+from typing import NamedTuple
+
+from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
+from ..guidance.planner import Limits, LineMove, stop_at
+from ..guidance.trajectories import PiecewiseTrajectory, Reference, Trajectory
+from ..params.store import ParameterStore
+from .modes import FlightMode, LandedState
+
+Vector3 = tuple[float, float, float]
+ZERO3: Vector3 = (0.0, 0.0, 0.0)
+
+# MAV_RESULT
+ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
+# MAV_SEVERITY
+SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 2, 4, 5, 6
+
+ON_GROUND_HEIGHT_M = 0.05  # O within this of the ground counts as touching it
+LANDED_SPEED_M_S = 0.1
+LANDED_CONFIRM_S = 0.3
+IN_AIR_HEIGHT_M = 0.1
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """What the commander knows of the vehicle (paper frames, SI)."""
+
+    time_s: float
+    position_m: Vector3
+    velocity_m_s: Vector3
+    euler_rad: Vector3
+    euler_rates_rad_s: Vector3
+
+
+class Motors(Enum):
+    OFF = 0  # disarmed
+    IDLE = 1  # armed on the ground, no thrust, controller states held at zero
+    FLY = 2  # the cascade tracks the reference
+
+
+class GuidanceOutput(NamedTuple):
+    motors: Motors
+    reference: Reference | None
+
+
+class Outcome(NamedTuple):
+    result: int  # MAV_RESULT
+    reason: str = ""
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == ACCEPTED
+
+
+class Phase(Enum):
+    IDLE = "idle"  # armed, on the ground, waiting
+    TAKEOFF = "takeoff"
+    HOLD = "hold"
+    OFFBOARD = "offboard"
+    LAND = "land"
+    LANDED = "landed"  # touched down, waiting to disarm
+    RTL = "rtl"
+    TRAJECTORY = "trajectory"  # a trajectory installed by a mission or a scenario
+
+
+class Commander:
+    def __init__(self, params: ParameterStore) -> None:
+        self.params = params
+        self.armed = False
+        self.mode = FlightMode.AUTO_LOITER
+        self.phase = Phase.IDLE
+        self.home: Vector3 | None = None
+        self.state: VehicleState | None = None
+        self.events: list[tuple[int, str]] = []
+        self.offboard = OffboardGuidance(self.limits())
+        self.last_reference: Reference | None = None
+        self._trajectory: Trajectory | None = None
+        self._trajectory_start = 0.0
+        self._armed_at = 0.0
+        self._landed_since: float | None = None
+        self._touchdown_at = 0.0
+        self._setpoint_times: list[float] = []
+        self._rtl_landing = False
+        self._after_trajectory: FlightMode | None = None
+        params.on_change(self._on_param_change)
+
+    # -- helpers -----------------------------------------------------------------------------------
+    def limits(self) -> Limits:
+        p = self.params
+        return Limits(
+            speed_horizontal=p["MPC_XY_VEL_MAX"],
+            speed_up=p["MPC_Z_VEL_MAX_UP"],
+            speed_down=p["MPC_Z_VEL_MAX_DN"],
+            acceleration=p["MPC_ACC_HOR"],
+            yaw_rate=p["MPC_YAWRAUTO_MAX"],
+        )
+
+    def _on_param_change(self, name: str, value: float) -> None:
+        self.offboard.limits = self.limits()
+
+    def _event(self, severity: int, text: str) -> None:
+        self.events.append((severity, text))
+
+    def drain_events(self) -> list[tuple[int, str]]:
+        events, self.events = self.events, []
+        return events
+
+    def _set_mode(self, mode: FlightMode) -> None:
+        if mode != self.mode:
+            self.mode = mode
+            self._event(SEVERITY_INFO, f"mode {mode.px4_name}")
+
+    def _near_ground(self, state: VehicleState) -> bool:
+        ground = self.home[2] if self.home else 0.0
+        return state.position_m[2] - ground < IN_AIR_HEIGHT_M
+
+    def in_air(self) -> bool:
+        return self.state is not None and not self._near_ground(self.state)
+
+    @property
+    def landed_state(self) -> LandedState:
+        if self.armed and self.phase == Phase.TAKEOFF:
+            return LandedState.TAKEOFF
+        if self.armed and self.phase == Phase.LAND or self._rtl_landing:
+            return LandedState.LANDING if self.in_air() else LandedState.ON_GROUND
+        if self.state is None or not self.in_air():
+            return LandedState.ON_GROUND
+        return LandedState.IN_AIR
+
+    def _fly(self, t: float, trajectory: Trajectory, phase: Phase) -> None:
+        self._trajectory = trajectory
+        self._trajectory_start = t
+        self.phase = phase
+
+    def _start_reference(self, state: VehicleState) -> Reference:
+        return Reference(state.position_m, state.velocity_m_s, ZERO3, state.euler_rad[2], 0.0, 0.0)
+
+    # -- inputs ------------------------------------------------------------------------------------
+    def update_state(self, state: VehicleState) -> None:
+        self.state = state
+        if self.home is None:
+            self.home = state.position_m
+
+    def arm(self, t: float, force: bool = False) -> Outcome:
+        if self.armed:
+            return Outcome(ACCEPTED, "already armed")
+        state = self.state
+        if state is None:
+            return self._refuse(TEMPORARILY_REJECTED, "arming refused: no vehicle state yet")
+        if not force:
+            if self.in_air() or math.hypot(*state.velocity_m_s) > 0.2:
+                return self._refuse(DENIED, "arming refused: vehicle not landed")
+            if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
+                return self._refuse(DENIED, "arming refused: OFFBOARD without a setpoint stream")
+        self.armed = True
+        self._armed_at = t
+        self.home = state.position_m  # PX4 sets home where it arms
+        self._landed_since = None
+        self._rtl_landing = False
+        self.phase = Phase.IDLE
+        self._event(SEVERITY_INFO, "armed")
+        if self.mode == FlightMode.OFFBOARD:
+            self.offboard.reset()
+            self.phase = Phase.OFFBOARD
+        return Outcome(ACCEPTED)
+
+    def disarm(self, t: float, force: bool = False) -> Outcome:
+        if not self.armed:
+            return Outcome(ACCEPTED, "already disarmed")
+        if not force and self.in_air() and self.phase != Phase.LANDED:
+            return self._refuse(DENIED, "disarm refused: vehicle in air (force to override)")
+        self._disarm("disarmed")
+        return Outcome(ACCEPTED)
+
+    def _disarm(self, why: str) -> None:
+        self.armed = False
+        self.phase = Phase.IDLE
+        self._trajectory = None
+        self._rtl_landing = False
+        self._event(SEVERITY_INFO, why)
+
+    def _refuse(self, result: int, reason: str) -> Outcome:
+        self._event(SEVERITY_WARNING, reason)
+        return Outcome(result, reason)
+
+    def takeoff(self, t: float, altitude_m: float | None = None) -> Outcome:
+        """Climb to ``altitude_m`` above home (default MIS_TAKEOFF_ALT), then hold."""
+        if not self.armed:
+            return self._refuse(DENIED, "takeoff refused: arm first")
+        state = self.state
+        assert state is not None and self.home is not None
+        altitude = self.params["MIS_TAKEOFF_ALT"] if altitude_m is None else altitude_m
+        if not 0.2 <= altitude <= 1000.0:
+            return self._refuse(DENIED, f"takeoff refused: altitude {altitude:.2f} m out of range")
+        target = (state.position_m[0], state.position_m[1], self.home[2] + altitude)
+        limits = self.limits()
+        climb = Limits(
+            limits.speed_horizontal,
+            self.params["MPC_TKO_SPEED"],
+            limits.speed_down,
+            limits.acceleration,
+            limits.yaw_rate,
+        )
+        yaw = state.euler_rad[2]
+        self._fly(
+            t, LineMove(self.last_or_measured(state).position_m, target, climb, yaw, yaw), Phase.TAKEOFF
+        )
+        self._set_mode(FlightMode.AUTO_TAKEOFF)
+        self._event(SEVERITY_INFO, f"takeoff to {altitude:.2f} m")
+        return Outcome(ACCEPTED)
+
+    def last_or_measured(self, state: VehicleState) -> Reference:
+        """Where a new plan starts: the measured state (a clean start after any transient)."""
+        return self._start_reference(state)
+
+    def hold(self, t: float, reason: str = "") -> Outcome:
+        state = self.state
+        if self.armed and state is not None and self.phase not in (Phase.IDLE, Phase.LANDED):
+            self._fly(
+                t,
+                stop_at(state.position_m, state.velocity_m_s, state.euler_rad[2], self.limits()),
+                Phase.HOLD,
+            )
+        self._rtl_landing = False
+        self._set_mode(FlightMode.AUTO_LOITER)
+        if reason:
+            self._event(SEVERITY_WARNING, reason)
+        return Outcome(ACCEPTED)
+
+    def land(self, t: float) -> Outcome:
+        state = self.state
+        self._set_mode(FlightMode.AUTO_LAND)
+        if not self.armed or state is None or self.phase in (Phase.IDLE, Phase.LANDED):
+            return Outcome(ACCEPTED)
+        self._start_landing(t, state)
+        return Outcome(ACCEPTED)
+
+    def _start_landing(self, t: float, state: VehicleState) -> None:
+        limits = self.limits()
+        descend = Limits(
+            limits.speed_horizontal,
+            limits.speed_up,
+            self.params["MPC_LAND_SPEED"],
+            limits.acceleration,
+            limits.yaw_rate,
+        )
+        # Aim far below the ground: the descent continues at the landing speed until touchdown.
+        x, y, z = state.position_m
+        brake = stop_at(
+            state.position_m, (state.velocity_m_s[0], state.velocity_m_s[1], 0.0), state.euler_rad[2], limits
+        )
+        end = brake.sample(brake.duration_s).position_m
+        down = LineMove(end, (end[0], end[1], z - 1000.0), descend, state.euler_rad[2], state.euler_rad[2])
+        self._fly(t, PiecewiseTrajectory([brake, down]), Phase.LAND)
+        self._landed_since = None
+        self._event(SEVERITY_INFO, "landing")
+
+    def return_to_launch(self, t: float) -> Outcome:
+        state = self.state
+        self._set_mode(FlightMode.AUTO_RTL)
+        if not self.armed or state is None or self.phase in (Phase.IDLE, Phase.LANDED):
+            return Outcome(ACCEPTED)
+        assert self.home is not None
+        limits = self.limits()
+        yaw = state.euler_rad[2]
+        altitude = max(state.position_m[2], self.home[2] + self.params["RTL_RETURN_ALT"])
+        brake = stop_at(state.position_m, state.velocity_m_s, yaw, limits)
+        p = brake.sample(brake.duration_s).position_m
+        climb_to = (p[0], p[1], altitude)
+        above_home = (self.home[0], self.home[1], altitude)
+        pieces = [
+            brake,
+            LineMove(p, climb_to, limits, yaw, yaw),
+            LineMove(climb_to, above_home, limits, yaw, yaw),
+        ]
+        self._fly(t, PiecewiseTrajectory(pieces), Phase.RTL)
+        self._rtl_landing = False
+        self._event(SEVERITY_INFO, f"returning to launch at {altitude - self.home[2]:.1f} m")
+        return Outcome(ACCEPTED)
+
+    def set_mode(self, t: float, mode: FlightMode) -> Outcome:
+        if mode == self.mode:
+            return Outcome(ACCEPTED)
+        if mode == FlightMode.OFFBOARD:
+            if not self.offboard_stream_active(t):
+                return self._refuse(DENIED, "OFFBOARD refused: no setpoint stream (send setpoints first)")
+            self.offboard.reset()
+            self._set_mode(FlightMode.OFFBOARD)
+            if self.armed:
+                self.phase = Phase.OFFBOARD
+            return Outcome(ACCEPTED)
+        if mode in (FlightMode.AUTO_LOITER, FlightMode.POSCTL):
+            self.hold(t)
+            self._set_mode(mode)
+            return Outcome(ACCEPTED)
+        if mode == FlightMode.AUTO_LAND:
+            return self.land(t)
+        if mode == FlightMode.AUTO_RTL:
+            return self.return_to_launch(t)
+        if mode == FlightMode.AUTO_TAKEOFF:
+            if not self.armed:
+                self._set_mode(mode)
+                return Outcome(ACCEPTED)
+            return self.takeoff(t)
+        if mode == FlightMode.AUTO_MISSION:
+            return self._refuse(DENIED, "AUTO.MISSION refused: no mission loaded")
+        return self._refuse(UNSUPPORTED, f"mode {mode.px4_name} not supported")
+
+    def offboard_setpoint(self, setpoint: OffboardSetpoint) -> None:
+        self.offboard.update(setpoint)
+        times = self._setpoint_times
+        times.append(setpoint.time_s)
+        if len(times) > 4:
+            del times[0]
+
+    def offboard_stream_active(self, t: float) -> bool:
+        """At least two setpoints within the loss timeout (a stream, not a single message)."""
+        window = self.params["COM_OF_LOSS_T"]
+        recent = [s for s in self._setpoint_times if t - s <= window]
+        return len(recent) >= 2
+
+    def fly_trajectory(
+        self,
+        t: float,
+        trajectory: Trajectory,
+        mode: FlightMode,
+        then: FlightMode | None = FlightMode.AUTO_LOITER,
+    ) -> None:
+        """Fly a trajectory given on the simulation clock from ``t`` (missions, scenarios)."""
+        self._fly(t, trajectory, Phase.TRAJECTORY)
+        self._after_trajectory = then
+        self._set_mode(mode)
+
+    def start_scenario(self, t: float, trajectory: Trajectory) -> None:
+        """The paper's experiment: armed from ``t`` and flying ``trajectory`` from its t = 0."""
+        self.armed = True
+        self._armed_at = t
+        if self.state is not None:
+            self.home = (self.state.position_m[0], self.state.position_m[1], 0.0)
+        self._event(SEVERITY_INFO, "armed for the scenario")
+        self.fly_trajectory(t, trajectory, FlightMode.AUTO_MISSION, then=None)
+
+    # -- the per-step decision ------------------------------------------------------------------------
+    def step(self, t: float, dt: float) -> GuidanceOutput:
+        """Decide this control step (``dt`` = control period, s)."""
+        state = self.state
+        if not self.armed or state is None:
+            return GuidanceOutput(Motors.OFF, None)
+        phase = self.phase
+        if phase == Phase.IDLE:
+            if t - self._armed_at > self.params["COM_DISARM_PRFLT"] > 0.0:
+                self._disarm("disarmed: no takeoff after arming")
+                return GuidanceOutput(Motors.OFF, None)
+            return GuidanceOutput(Motors.IDLE, None)
+        if phase == Phase.LANDED:
+            if t - self._touchdown_at >= self.params["COM_DISARM_LAND"]:
+                self._disarm("landed: disarmed")
+                return GuidanceOutput(Motors.OFF, None)
+            return GuidanceOutput(Motors.IDLE, None)
+
+        if phase == Phase.OFFBOARD:
+            if not self.offboard_stream_active(t) and self.offboard.setpoint is not None:
+                last = self._setpoint_times[-1] if self._setpoint_times else float("-inf")
+                if t - last > self.params["COM_OF_LOSS_T"]:
+                    self.hold(t, "offboard setpoints lost: switching to hold")
+                    return self.step(t, dt)
+            previous = self.last_reference or self._start_reference(state)
+            reference = self.offboard.reference(t, dt, previous)
+            if self.offboard.setpoint is None:
+                reference = previous
+        else:
+            assert self._trajectory is not None
+            local = t - self._trajectory_start
+            reference = self._trajectory.sample(local)
+            done = local >= self._trajectory.duration_s
+            if phase == Phase.TAKEOFF and done:
+                self.phase = Phase.HOLD
+                self._set_mode(FlightMode.AUTO_LOITER)
+            elif phase == Phase.RTL and done:
+                self._start_landing(t, state)
+                self._rtl_landing = True
+                self.phase = Phase.LAND
+                self._set_mode(FlightMode.AUTO_RTL)
+            elif phase == Phase.TRAJECTORY and done and self._after_trajectory is not None:
+                self.hold(t)
+                self._set_mode(self._after_trajectory)
+            elif phase == Phase.LAND and self._touched_down(t, state):
+                self.phase = Phase.LANDED
+                self._touchdown_at = t
+                self._rtl_landing = False
+                self._event(SEVERITY_INFO, "landing detected")
+                return GuidanceOutput(Motors.IDLE, None)
+        ground = self.home[2] if self.home else 0.0
+        if (
+            phase in (Phase.TAKEOFF, Phase.OFFBOARD, Phase.TRAJECTORY)
+            and self._near_ground(state)
+            and reference.position_m[2] - ground < 0.02
+        ):
+            # Waiting for the reference to lift off: do not fight the ground (integrators).
+            self.last_reference = reference
+            return GuidanceOutput(Motors.IDLE, reference)
+        self.last_reference = reference
+        return GuidanceOutput(Motors.FLY, reference)
+
+    def _touched_down(self, t: float, state: VehicleState) -> bool:
+        ground = self.home[2] if self.home else 0.0
+        resting = (
+            state.position_m[2] - ground < ON_GROUND_HEIGHT_M
+            and abs(state.velocity_m_s[2]) < LANDED_SPEED_M_S
+        )
+        if not resting:
+            self._landed_since = None
+            return False
+        if self._landed_since is None:
+            self._landed_since = t
+        return t - self._landed_since >= LANDED_CONFIRM_S

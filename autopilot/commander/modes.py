@@ -1,0 +1,68 @@
+"""Flight modes and their PX4 custom-mode encoding (HEARTBEAT.custom_mode, DO_SET_MODE).
+
+PX4 packs ``custom_mode = (main_mode << 16) | (sub_mode << 24)`` (px4_custom_mode union: two
+reserved bytes, main, sub). Ground stations (QGC, MAVSDK, MAVProxy/pymavlink ``px4_map``) decode
+mode names from these numbers when ``HEARTBEAT.autopilot = MAV_AUTOPILOT_PX4``.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+# PX4 main modes
+MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = (
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+    7,
+)
+# PX4 AUTO sub modes
+SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
+
+
+class FlightMode(Enum):
+    """The modes this autopilot flies, with their PX4 (main, sub) numbers."""
+
+    POSCTL = (MAIN_POSCTL, 0)
+    AUTO_TAKEOFF = (MAIN_AUTO, SUB_TAKEOFF)
+    AUTO_LOITER = (MAIN_AUTO, SUB_LOITER)
+    AUTO_MISSION = (MAIN_AUTO, SUB_MISSION)
+    AUTO_RTL = (MAIN_AUTO, SUB_RTL)
+    AUTO_LAND = (MAIN_AUTO, SUB_LAND)
+    OFFBOARD = (MAIN_OFFBOARD, 0)
+
+    @property
+    def custom_mode(self) -> int:
+        main, sub = self.value
+        return (main << 16) | (sub << 24)
+
+    @property
+    def px4_name(self) -> str:
+        return self.name.replace("_", ".", 1) if self.name.startswith("AUTO_") else self.name
+
+    @classmethod
+    def from_px4(cls, main: int, sub: int) -> FlightMode | None:
+        """The mode DO_SET_MODE asks for, or None if this autopilot does not fly it."""
+        for mode in cls:
+            m, s = mode.value
+            if m == main and (s == sub or (m != MAIN_AUTO and sub == 0)):
+                return mode
+        if main == MAIN_AUTO and sub == SUB_READY:
+            return cls.AUTO_LOITER  # AUTO.READY behaves as hold here
+        return None
+
+    @classmethod
+    def from_custom_mode(cls, custom_mode: int) -> FlightMode | None:
+        return cls.from_px4((custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF)
+
+
+class LandedState(Enum):
+    """MAV_LANDED_STATE values (EXTENDED_SYS_STATE)."""
+
+    ON_GROUND = 1
+    IN_AIR = 2
+    TAKEOFF = 3
+    LANDING = 4

@@ -1,0 +1,100 @@
+"""Offboard setpoints -> a smooth reference (p_d, p_d', p_d'', yaw) at every control step.
+
+PX4's SET_POSITION_TARGET_LOCAL_NED semantics, already decoded into the paper's frames by the
+MAVLink edge (:mod:`autopilot.mavlink.offboard`):
+
+* position only: the setpoint is a target; a C2 transition (within the speed and acceleration
+  limits) is planned from the current reference whenever the target moves, so a step in the
+  setpoint never becomes a step in p_d;
+* position + velocity (+ acceleration): a trajectory sample used as is, with the velocity and
+  acceleration as feedforward; between samples it is extrapolated (p + v tau + a tau^2 / 2) so a
+  50 Hz stream gives the 500 Hz cascade a continuous reference;
+* velocity (+ acceleration) without position: the position reference integrates the velocity;
+* yaw: absolute, or a yaw rate integrated; when neither is given the yaw reference is kept.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .planner import Limits, transition
+from .trajectories import Reference, Trajectory
+
+Vector3 = tuple[float, float, float]
+ZERO3: Vector3 = (0.0, 0.0, 0.0)
+_MAX_EXTRAPOLATION_S = 0.2
+
+
+@dataclass(frozen=True)
+class OffboardSetpoint:
+    """One decoded setpoint, paper world frame, absolute (offsets already resolved)."""
+
+    time_s: float  # simulation time of arrival
+    position: Vector3 | None = None
+    velocity: Vector3 | None = None
+    acceleration: Vector3 | None = None
+    yaw: float | None = None
+    yaw_rate: float | None = None
+
+
+class OffboardGuidance:
+    def __init__(self, limits: Limits) -> None:
+        self.limits = limits
+        self.setpoint: OffboardSetpoint | None = None
+        self._target: tuple[Vector3, float] | None = None
+        self._plan: Trajectory | None = None
+        self._plan_start = 0.0
+
+    def update(self, setpoint: OffboardSetpoint) -> None:
+        self.setpoint = setpoint
+
+    def reset(self) -> None:
+        """Forget the plan (entering offboard again starts from the current reference)."""
+        self._target = None
+        self._plan = None
+
+    def reference(self, t: float, dt: float, previous: Reference) -> Reference:
+        """The reference at time ``t``, continuing from ``previous`` (the last step's)."""
+        sp = self.setpoint
+        if sp is None:
+            return Reference(previous.position_m, ZERO3, ZERO3, previous.yaw_rad, 0.0, 0.0)
+        yaw, yaw_rate = previous.yaw_rad, 0.0
+        if sp.yaw is not None:
+            yaw = sp.yaw
+        elif sp.yaw_rate is not None:
+            yaw_rate = sp.yaw_rate
+            yaw = math.remainder(previous.yaw_rad + yaw_rate * dt, 2.0 * math.pi)
+
+        if sp.position is not None and sp.velocity is None and sp.acceleration is None:
+            target = (sp.position, yaw)
+            if self._plan is None or self._target is None or _moved(self._target, target):
+                self._target = target
+                self._plan = transition(previous, sp.position, self.limits, yaw)
+                self._plan_start = t
+            ref = self._plan.sample(t - self._plan_start)
+            if sp.yaw is None and sp.yaw_rate is not None:
+                return ref._replace(yaw_rad=yaw, yaw_rate_rad_s=yaw_rate, yaw_acceleration_rad_s2=0.0)
+            return ref
+
+        self._plan = None
+        self._target = None
+        acc = sp.acceleration or ZERO3
+        if sp.position is not None:
+            tau = min(max(t - sp.time_s, 0.0), _MAX_EXTRAPOLATION_S)
+            vel = sp.velocity or ZERO3
+            position = tuple(
+                p + v * tau + 0.5 * a * tau * tau for p, v, a in zip(sp.position, vel, acc, strict=True)
+            )
+            velocity = tuple(v + a * tau for v, a in zip(vel, acc, strict=True))
+        elif sp.velocity is not None:
+            velocity = sp.velocity
+            position = tuple(p + v * dt for p, v in zip(previous.position_m, velocity, strict=True))
+        else:  # acceleration only
+            velocity = tuple(v + a * dt for v, a in zip(previous.velocity_m_s, acc, strict=True))
+            position = tuple(p + v * dt for p, v in zip(previous.position_m, velocity, strict=True))
+        return Reference(position, velocity, acc, yaw, yaw_rate, 0.0)  # type: ignore[arg-type]
+
+
+def _moved(old: tuple[Vector3, float], new: tuple[Vector3, float]) -> bool:
+    return math.dist(old[0], new[0]) > 1e-3 or abs(math.remainder(old[1] - new[1], 2 * math.pi)) > 1e-3

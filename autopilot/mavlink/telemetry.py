@@ -1,0 +1,330 @@
+"""Telemetry to ground stations: what each message says, and how often (simulation time).
+
+Messages are built from :class:`VehicleStatus` (paper frames inside, NED/FRD and MAVLink units
+only here). Each GCS link has its own :class:`StreamTable`: PX4-like default rates, changed by
+``MAV_CMD_SET_MESSAGE_INTERVAL``; intervals count simulation time (lockstep), so at ``--speed 4``
+a 1 Hz HEARTBEAT arrives 4 times per wall second, as in PX4 SITL.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from quadcommon import frames
+from quadcommon.rigid_body import quaternion_from_euler
+
+from ..control.cascade import StateEstimate
+from ..guidance.trajectories import Reference
+from .codec import mavlink
+
+m = mavlink
+Vector3 = tuple[float, float, float]
+
+# onboard_control_sensors bits reported in SYS_STATUS
+SENSORS_PRESENT = (
+    m.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | m.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | m.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | m.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | m.MAV_SYS_STATUS_SENSOR_GPS
+    | m.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | m.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | m.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+    | m.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | m.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    | m.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | m.MAV_SYS_STATUS_AHRS
+    | m.MAV_SYS_STATUS_PREARM_CHECK
+)
+
+# Default rates, Hz (0 = off until requested). PX4's "normal" stream set, roughly.
+DEFAULT_RATES_HZ = {
+    m.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    m.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    m.MAVLINK_MSG_ID_ATTITUDE: 20.0,
+    m.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 10.0,
+    m.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
+    m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    m.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
+    m.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    m.MAVLINK_MSG_ID_ATTITUDE_TARGET: 10.0,
+    m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
+    m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
+    m.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.0,
+}
+
+
+@dataclass
+class VehicleStatus:
+    """Everything telemetry reports, refreshed by the autopilot shell every control frame."""
+
+    system_id: int
+    time_usec: int = 0
+    state: StateEstimate | None = None
+    armed: bool = False
+    custom_mode: int = 0
+    landed_state: int = m.MAV_LANDED_STATE_ON_GROUND
+    home_local: Vector3 = (0.0, 0.0, 0.0)  # paper frame
+    home_geodetic: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the configured origin
+    reference: Reference | None = None
+    euler_ref: Vector3 = (0.0, 0.0, 0.0)
+    thrust_normalised: float = 0.0
+    controls: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    wrench: bool = True
+    armable: bool = False
+    flight_sw_version: int = 0x01000000
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def time_boot_ms(self) -> int:
+        return self.time_usec // 1000
+
+
+# -- message builders --------------------------------------------------------------------------------
+def heartbeat(s: VehicleStatus):
+    base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (m.MAV_MODE_FLAG_SAFETY_ARMED if s.armed else 0)
+    state = m.MAV_STATE_ACTIVE if s.armed else m.MAV_STATE_STANDBY
+    return m.MAVLink_heartbeat_message(
+        m.MAV_TYPE_QUADROTOR, m.MAV_AUTOPILOT_PX4, base, s.custom_mode, state, 3
+    )
+
+
+def sys_status(s: VehicleStatus):
+    health = SENSORS_PRESENT if s.armable or s.armed else SENSORS_PRESENT & ~m.MAV_SYS_STATUS_PREARM_CHECK
+    if s.state is None:
+        health &= ~(m.MAV_SYS_STATUS_SENSOR_GPS | m.MAV_SYS_STATUS_AHRS)
+    return m.MAVLink_sys_status_message(
+        SENSORS_PRESENT, SENSORS_PRESENT, health, 250, 16000, -1, 100, 0, 0, 0, 0, 0, 0
+    )
+
+
+def extended_sys_state(s: VehicleStatus):
+    return m.MAVLink_extended_sys_state_message(m.MAV_VTOL_STATE_UNDEFINED, s.landed_state)
+
+
+def _ned_state(s: VehicleStatus):
+    st = s.state
+    return (
+        frames.vector_to_ned(st.position_m),
+        frames.vector_to_ned(st.velocity_m_s),
+        frames.euler_to_ned(st.euler_rad),
+    )
+
+
+def _body_rates_frd(st: StateEstimate) -> Vector3:
+    from quadcommon.rigid_body import body_rates_from_euler_rates
+
+    omega = body_rates_from_euler_rates(st.euler_rad[0], st.euler_rad[1], st.euler_rates_rad_s)
+    return frames.vector_to_ned(omega)
+
+
+def attitude(s: VehicleStatus):
+    _, _, eta = _ned_state(s)
+    p, q, r = _body_rates_frd(s.state)
+    return m.MAVLink_attitude_message(s.time_boot_ms, eta[0], eta[1], eta[2], p, q, r)
+
+
+def attitude_quaternion(s: VehicleStatus):
+    q = frames.quaternion_to_ned(quaternion_from_euler(*s.state.euler_rad))
+    p, qq, r = _body_rates_frd(s.state)
+    return m.MAVLink_attitude_quaternion_message(s.time_boot_ms, *q, p, qq, r, [0.0, 0.0, 0.0, 0.0])
+
+
+def local_position_ned(s: VehicleStatus):
+    pos, vel, _ = _ned_state(s)
+    return m.MAVLink_local_position_ned_message(s.time_boot_ms, *pos, *vel)
+
+
+def _geodetic(s: VehicleStatus, position_paper: Vector3):
+    n, e, d = frames.vector_to_ned(position_paper)
+    return frames.ned_to_geodetic(n, e, d, s.home_geodetic)
+
+
+def _heading_cdeg(psi: float) -> int:
+    return int(round(math.degrees(frames.yaw_to_ned(psi)) * 100.0)) % 36000
+
+
+def global_position_int(s: VehicleStatus):
+    pos, vel, _ = _ned_state(s)
+    lat, lon, alt = _geodetic(s, s.state.position_m)
+    home_alt = _geodetic(s, s.home_local)[2]
+    return m.MAVLink_global_position_int_message(
+        s.time_boot_ms,
+        int(round(lat * 1e7)),
+        int(round(lon * 1e7)),
+        int(round(alt * 1000)),
+        int(round((alt - home_alt) * 1000)),
+        *(int(round(v * 100)) for v in vel),
+        _heading_cdeg(s.state.euler_rad[2]),
+    )
+
+
+def gps_raw_int(s: VehicleStatus):
+    _, vel, _ = _ned_state(s)
+    lat, lon, alt = _geodetic(s, s.state.position_m)
+    speed = math.hypot(vel[0], vel[1])
+    cog = int(round(math.degrees(math.atan2(vel[1], vel[0])) * 100)) % 36000 if speed > 0.2 else 65535
+    return m.MAVLink_gps_raw_int_message(
+        s.time_usec,
+        m.GPS_FIX_TYPE_3D_FIX,
+        int(round(lat * 1e7)),
+        int(round(lon * 1e7)),
+        int(round(alt * 1000)),
+        80,
+        120,
+        int(round(speed * 100)),
+        cog,
+        12,
+    )
+
+
+def home_position(s: VehicleStatus):
+    lat, lon, alt = _geodetic(s, s.home_local)
+    x, y, z = frames.vector_to_ned(s.home_local)
+    return m.MAVLink_home_position_message(
+        int(round(lat * 1e7)),
+        int(round(lon * 1e7)),
+        int(round(alt * 1000)),
+        x,
+        y,
+        z,
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        0.0,
+        0.0,
+        s.time_usec,
+    )
+
+
+def attitude_target(s: VehicleStatus):
+    q = frames.quaternion_to_ned(quaternion_from_euler(*s.euler_ref))
+    ignore_rates = 7  # body roll/pitch/yaw rates not set: the target is an attitude
+    return m.MAVLink_attitude_target_message(
+        s.time_boot_ms, ignore_rates, list(q), 0.0, 0.0, 0.0, s.thrust_normalised
+    )
+
+
+def position_target_local_ned(s: VehicleStatus):
+    ref = s.reference
+    if ref is None:
+        return None
+    pos = frames.vector_to_ned(ref.position_m)
+    vel = frames.vector_to_ned(ref.velocity_m_s)
+    acc = frames.vector_to_ned(ref.acceleration_m_s2)
+    return m.MAVLink_position_target_local_ned_message(
+        s.time_boot_ms,
+        m.MAV_FRAME_LOCAL_NED,
+        0,
+        *pos,
+        *vel,
+        *acc,
+        frames.yaw_to_ned(ref.yaw_rad),
+        frames.yaw_to_ned(ref.yaw_rate_rad_s),
+    )
+
+
+def _pwm(s: VehicleStatus) -> list[int]:
+    """Outputs as PWM microseconds: rotors (or U1) 1000-2000; wrench torques 1500 +- 500."""
+    c = s.controls if s.armed else (0.0, 0.0, 0.0, 0.0)
+    if s.wrench:
+        values = [1000 + 1000 * c[0], *(1500 + 500 * v for v in c[1:4])]
+        if not s.armed:
+            values = [900, 1500, 1500, 1500]
+    else:
+        values = [1000 + 1000 * v for v in c] if s.armed else [900] * 4
+    return [int(round(v)) for v in values] + [0] * 4
+
+
+def servo_output_raw(s: VehicleStatus):
+    return m.MAVLink_servo_output_raw_message(s.time_usec & 0xFFFFFFFF, 0, *_pwm(s))
+
+
+def actuator_output_status(s: VehicleStatus):
+    values = list(s.controls if s.armed else (0.0, 0.0, 0.0, 0.0)) + [0.0] * 28
+    return m.MAVLink_actuator_output_status_message(s.time_usec, 4, values)
+
+
+def vfr_hud(s: VehicleStatus):
+    _, vel, _ = _ned_state(s)
+    speed = math.hypot(vel[0], vel[1])
+    heading = _heading_cdeg(s.state.euler_rad[2]) // 100
+    throttle = int(round(100 * s.thrust_normalised)) if s.armed else 0
+    return m.MAVLink_vfr_hud_message(speed, speed, heading, throttle, s.state.position_m[2], -vel[2])
+
+
+BUILDERS = {
+    m.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
+    m.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
+    m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
+    m.MAVLINK_MSG_ID_ATTITUDE: attitude,
+    m.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: attitude_quaternion,
+    m.MAVLINK_MSG_ID_LOCAL_POSITION_NED: local_position_ned,
+    m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
+    m.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
+    m.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    m.MAVLINK_MSG_ID_ATTITUDE_TARGET: attitude_target,
+    m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: position_target_local_ned,
+    m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: servo_output_raw,
+    m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: actuator_output_status,
+    m.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+}
+NEEDS_STATE = set(BUILDERS) - {
+    m.MAVLINK_MSG_ID_HEARTBEAT,
+    m.MAVLINK_MSG_ID_SYS_STATUS,
+    m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+    m.MAVLINK_MSG_ID_HOME_POSITION,
+    m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,
+    m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS,
+}
+
+
+def build(msg_id: int, status: VehicleStatus):
+    """The message ``msg_id`` describing ``status`` now, or None if it cannot be built yet."""
+    builder = BUILDERS.get(msg_id)
+    if builder is None or (msg_id in NEEDS_STATE and status.state is None):
+        return None
+    return builder(status)
+
+
+class StreamTable:
+    """Per-link stream intervals (simulation time) and when each message is next due."""
+
+    def __init__(self) -> None:
+        self.interval_s: dict[int, float] = {}
+        self.next_due: dict[int, float] = {}
+        for msg_id, hz in DEFAULT_RATES_HZ.items():
+            self.set_rate(msg_id, hz)
+
+    def set_rate(self, msg_id: int, hz: float, now: float = 0.0) -> None:
+        if hz <= 0.0:
+            self.interval_s.pop(msg_id, None)
+            self.next_due.pop(msg_id, None)
+        else:
+            self.interval_s[msg_id] = 1.0 / hz
+            self.next_due[msg_id] = now
+
+    def set_interval_us(self, msg_id: int, interval_us: float, now: float) -> bool:
+        """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, >0 interval (µs)."""
+        if msg_id not in BUILDERS:
+            return False
+        if interval_us == 0:
+            self.set_rate(msg_id, DEFAULT_RATES_HZ.get(msg_id, 0.0), now)
+        elif interval_us < 0:
+            self.set_rate(msg_id, 0.0, now)
+        else:
+            self.set_rate(msg_id, 1e6 / interval_us, now)
+        return True
+
+    def due(self, now: float) -> list[int]:
+        """Message ids due at ``now``; their next due times advance by one interval."""
+        ready = []
+        for msg_id, due in self.next_due.items():
+            if now + 1e-9 >= due:
+                ready.append(msg_id)
+                interval = self.interval_s[msg_id]
+                nxt = due + interval
+                self.next_due[msg_id] = nxt if nxt > now else now + interval
+        return ready
