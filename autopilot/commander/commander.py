@@ -35,6 +35,7 @@ ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
 # MAV_SEVERITY
 SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 2, 4, 5, 6
 
+GROUND_Z_M = 0.0  # the local frame's origin (the configured home) is on flat ground
 ON_GROUND_HEIGHT_M = 0.05  # O within this of the ground counts as touching it
 LANDED_SPEED_M_S = 0.1
 LANDED_CONFIRM_S = 0.3
@@ -131,8 +132,7 @@ class Commander:
             self._event(SEVERITY_INFO, f"mode {mode.px4_name}")
 
     def _near_ground(self, state: VehicleState) -> bool:
-        ground = self.home[2] if self.home else 0.0
-        return state.position_m[2] - ground < IN_AIR_HEIGHT_M
+        return state.position_m[2] - GROUND_Z_M < IN_AIR_HEIGHT_M
 
     def in_air(self) -> bool:
         return self.state is not None and not self._near_ground(self.state)
@@ -158,8 +158,8 @@ class Commander:
     # -- inputs ------------------------------------------------------------------------------------
     def update_state(self, state: VehicleState) -> None:
         self.state = state
-        if self.home is None:
-            self.home = state.position_m
+        if self.home is None:  # until arming: below where the vehicle booted, on the ground
+            self.home = (state.position_m[0], state.position_m[1], GROUND_Z_M)
 
     def arm(self, t: float, force: bool = False) -> Outcome:
         if self.armed:
@@ -410,7 +410,7 @@ class Commander:
                 self._rtl_landing = False
                 self._event(SEVERITY_INFO, "landing detected")
                 return GuidanceOutput(Motors.IDLE, None)
-        ground = self.home[2] if self.home else 0.0
+        ground = GROUND_Z_M
         if (
             phase in (Phase.TAKEOFF, Phase.OFFBOARD, Phase.TRAJECTORY)
             and self._near_ground(state)
@@ -423,7 +423,7 @@ class Commander:
         return GuidanceOutput(Motors.FLY, reference)
 
     def _touched_down(self, t: float, state: VehicleState) -> bool:
-        ground = self.home[2] if self.home else 0.0
+        ground = GROUND_Z_M
         resting = (
             state.position_m[2] - ground < ON_GROUND_HEIGHT_M
             and abs(state.velocity_m_s[2]) < LANDED_SPEED_M_S
