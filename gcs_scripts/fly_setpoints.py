@@ -45,8 +45,6 @@ DEFAULT_SQUARE: tuple[tuple[float, float, float, float | None], ...] = (
 STREAM_RATE_HZ = 50.0
 LOCAL_POSITION_NED_ID = 32
 EXTENDED_SYS_STATE_ID = 245
-MAV_LANDED_STATE_ON_GROUND = 1
-MAV_LANDED_STATE_IN_AIR = 2
 
 
 @dataclass(frozen=True)
@@ -180,9 +178,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[
     return args, setpoints
 
 
-def say(link: Link | None, text: str) -> None:
-    t = link.now() if link is not None else 0.0
-    print(f"t={t:.2f} s {text}", flush=True)
+say = mavlink_link.report
 
 
 def distance(a: Vector3, b: Vector3) -> float:
@@ -210,7 +206,7 @@ class Flight:
             5.0,
             what="LOCAL_POSITION_NED and EXTENDED_SYS_STATE",
         )
-        if link.armed and link.landed_state == MAV_LANDED_STATE_IN_AIR:
+        if link.armed and link.landed_state == mavlink_link.MAV_LANDED_STATE_IN_AIR:
             say(link, f"already flying ({link.mode}); skipping arming and takeoff")
             return
         link.arm()
@@ -220,8 +216,11 @@ class Flight:
         target_z = (start[2] if start else 0.0) + args.takeoff_alt
         say(link, f"taking off to {args.takeoff_alt:.2f} m")
         link.wait_until(
+            # Done when near the altitude and PX4-like hold (AUTO.LOITER) has taken over.
             lambda lk: (
-                abs(lk.position_paper[2] - target_z) < args.tolerance and abs(lk.velocity_paper[2]) < 0.2
+                abs(lk.position_paper[2] - target_z) < args.tolerance
+                and abs(lk.velocity_paper[2]) < 0.2
+                and lk.mode != "AUTO.TAKEOFF"
             ),
             args.timeout,
             what=f"takeoff to z={target_z:.2f} m",
@@ -269,37 +268,6 @@ class Flight:
                 f"(max {worst[0]:.3f} m)",
             )
 
-    def land(self, stream: SetpointStream | None) -> None:
-        link, args = self.link, self.args
-        link.land()
-        if stream is not None:
-            stream.stop()  # after the mode change: no gap that would trip the offboard failsafe
-        say(link, "landing")
-        link.wait_until(
-            lambda lk: lk.landed_state == MAV_LANDED_STATE_ON_GROUND and abs(lk.velocity_paper[2]) < 0.1,
-            args.timeout,
-            what="landing",
-        )
-        say(link, f"landed at ({', '.join(f'{v:.2f}' for v in link.position_paper)})")
-        try:
-            link.wait_until(lambda lk: not lk.armed, 5.0, what="automatic disarm")
-        except mavlink_link.LinkTimeout:
-            link.disarm()
-            link.wait_until(lambda lk: not lk.armed, 3.0, what="disarm")
-        say(link, "disarmed")
-
-
-def emergency_land(link: Link) -> None:
-    """Best effort after a failure: if the vehicle is armed and flying, ask it to land."""
-    try:
-        if link.armed and link.landed_state != MAV_LANDED_STATE_ON_GROUND:
-            link.land()
-            print("fly_setpoints: asked the vehicle to land (AUTO.LAND)", file=sys.stderr)
-        elif link.armed:
-            link.disarm()
-    except LinkError as exc:
-        print(f"fly_setpoints: could not command a landing: {exc}", file=sys.stderr)
-
 
 def run(args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
     try:
@@ -319,20 +287,20 @@ def run(args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
         stream = flight.start_offboard()
         for i, sp in enumerate(setpoints, start=1):
             flight.fly(i, sp)
-        flight.land(stream)
+        mavlink_link.land_and_disarm(link, args.timeout, stream)
         say(link, "done")
         return 0
     except LinkError as exc:
         print(f"fly_setpoints: failed: {exc}", file=sys.stderr)
         if stream is not None:
             stream.stop()
-        emergency_land(link)
+        mavlink_link.emergency_land(link, "fly_setpoints")
         return 1
     except KeyboardInterrupt:
         print("fly_setpoints: interrupted", file=sys.stderr)
         if stream is not None:
             stream.stop()
-        emergency_land(link)
+        mavlink_link.emergency_land(link, "fly_setpoints")
         return 130
     finally:
         link.close()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -589,6 +590,49 @@ class SetpointStream:
     def stop(self) -> None:
         if self.link.on_local_position == self._on_sample:
             self.link.on_local_position = None
+
+
+MAV_LANDED_STATE_ON_GROUND = 1
+MAV_LANDED_STATE_IN_AIR = 2
+
+
+def report(link: Link | None, text: str) -> None:
+    """One progress line on stdout, prefixed with the simulation time."""
+    t = link.now() if link is not None else 0.0
+    print(f"t={t:.2f} s {text}", flush=True)
+
+
+def land_and_disarm(link: Link, sim_timeout_s: float, stream: SetpointStream | None = None) -> None:
+    """NAV_LAND, wait for touchdown, then for the automatic disarm (or disarm after 5 s)."""
+    link.land()
+    if stream is not None:
+        stream.stop()  # after the mode change, so no gap trips the offboard-loss failsafe first
+    report(link, "landing")
+    link.wait_until(
+        lambda lk: lk.landed_state == MAV_LANDED_STATE_ON_GROUND and abs(lk.velocity_ned[2]) < 0.1,
+        sim_timeout_s,
+        what="landing",
+    )
+    report(link, "landed at ({:.2f}, {:.2f}, {:.2f})".format(*link.position_paper))
+    try:
+        link.wait_until(lambda lk: not lk.armed, 5.0, what="automatic disarm")
+    except LinkTimeout:
+        link.disarm()
+        link.wait_until(lambda lk: not lk.armed, 3.0, what="disarm")
+    report(link, "disarmed")
+
+
+def emergency_land(link: Link, who: str) -> None:
+    """Best effort after a failure: land if armed and flying, disarm if armed on the ground."""
+    try:
+        if link.armed and link.landed_state != MAV_LANDED_STATE_ON_GROUND:
+            link.land()
+            print(f"{who}: asked the vehicle to land (AUTO.LAND)", file=sys.stderr)
+        elif link.armed:
+            link.disarm()
+            print(f"{who}: disarmed the vehicle", file=sys.stderr)
+    except LinkError as exc:
+        print(f"{who}: could not command a landing: {exc}", file=sys.stderr)
 
 
 def connect(
