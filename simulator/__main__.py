@@ -1,0 +1,7 @@
+"""``python -m simulator``: the simulator process (see simulator/app.py)."""
+
+import sys
+
+from .app import main
+
+sys.exit(main())

@@ -1,0 +1,483 @@
+"""The simulator process: the plant side of the SITL, in lockstep with the autopilot over UDP.
+
+One thread, one loop. The simulator owns simulation time. Per control period it
+
+1. reads the plant's truth at frame time ``t = k / control_hz`` and the sensors' readings,
+2. sends ONE datagram (HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY, and HIL_GPS at the GPS rate,
+   all stamped ``time_usec = round(k * 1e6 / control_hz)``) to the autopilot,
+3. meanwhile (the autopilot is computing) appends the truth row to the zenoh batch and answers
+   info queries,
+4. waits for the ``HIL_ACTUATOR_CONTROLS`` with that ``time_usec`` (stale answers are ignored;
+   after ``[lockstep] timeout_s`` of wall time without one it says so and resends the frame every
+   timeout period until the autopilot answers),
+5. applies the controls (zero, i.e. motors off, unless the armed bit is set) and steps the plant
+   ``physics_hz / control_hz`` times, evaluating the disturbance schedule at every physics step,
+   exactly as :mod:`sitl.inprocess` couples the same cores, so SITL and in-process runs agree,
+6. paces on the wall clock: sleeps until ``wall_start + t / speed`` (no sleeping for ``max``);
+   more than 0.2 s behind, it re-anchors instead of sprinting to catch up.
+
+The UDP link binds 127.0.0.1:(4560 + N) and learns the autopilot's address from its first
+datagram (the autopilot sends HEARTBEAT to this port until frames flow). Ports in use, like bad
+configuration, end the process with exit code 2 and a message naming the port and ``--instance``.
+SIGINT/SIGTERM stop the loop cleanly (truth batch flushed, zenoh closed, socket closed; exit 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import math
+import signal
+import socket
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from quadcommon import bus, wire
+from quadcommon.config import apply_uncertainty, load_scenario, load_sitl, load_vehicle
+from quadcommon.schema import ConfigError
+
+from .dynamics.plant import make_plant
+from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
+from .mavlink.hil import ActuatorAnswer, ActuatorDecoder, HilFrameEncoder
+from .sensors import SensorSuite, load_sensors
+from .truth_bus import InfoServer, TruthStream, truth_row
+
+POLL_S = 0.05  # longest blocking wait: bounds the reaction time to SIGTERM and info queries
+RESYNC_BEHIND_S = 0.2  # further behind the wall-clock schedule than this: re-anchor, do not sprint
+RATE_REPORT_WALL_S = 10.0  # at most one "cannot keep up" line per this many wall seconds
+MAX_DATAGRAM = 65535
+_MOTORS_OFF = (0.0, 0.0, 0.0, 0.0)
+
+
+class StartupError(RuntimeError):
+    """The simulator cannot start (port in use, ...); the message says which and why."""
+
+
+@dataclass(frozen=True)
+class SimulatorOptions:
+    instance: int = 0
+    vehicle: str | None = None  # None: the scenario's vehicle
+    scenario: str = "hover"
+    speed: float | None = 1.0  # wall-clock pacing factor; None = as fast as lockstep allows
+    duration_s: float | None = None  # stop after this much simulated time (None: until stopped)
+    sitl_config: str | None = None
+    sensors: str = "default"  # config/sensors/NAME.toml
+
+
+class Simulator:
+    """The simulator process's state and loop; ``open`` -> ``run`` -> ``close`` (in ``finally``)."""
+
+    def __init__(self, options: SimulatorOptions) -> None:
+        self.options = options
+        self.instance = options.instance
+        self.sitl = sitl = load_sitl(options.sitl_config)
+        self.scenario = scenario = load_scenario(options.scenario)
+        self.vehicle = load_vehicle(options.vehicle or scenario.vehicle)
+        self.ports = wire.ports(
+            options.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base, sitl.zenoh_port_base
+        )
+        rates = sitl.rates
+        # Same time grid as sitl.inprocess.run_scenario (frame k at t = k * dt_control).
+        self.control_hz = rates.control_hz
+        self.physics_hz = rates.physics_hz
+        self.substeps = rates.physics_steps_per_control
+        self.dt_control = 1.0 / rates.control_hz
+        self.dt_physics = self.dt_control / self.substeps
+        self.gps_every = max(1, round(rates.control_hz / rates.gps_hz))
+        self.plant = make_plant(apply_uncertainty(self.vehicle, scenario), self.dt_physics)
+        self.plant.reset(scenario.initial_position_m, scenario.initial_euler_rad)
+        self.schedule = DisturbanceSchedule(load_gust_profile(scenario.gusts))
+        self._pending_schedule: DisturbanceSchedule | None = None
+        self.sensors = SensorSuite(load_sensors(options.sensors), sitl.home[2])
+        self.encoder = HilFrameEncoder(wire.system_id(options.instance), sitl.home)
+        self.decoder = ActuatorDecoder()
+        self.wrench = self.vehicle.actuation.mode == "wrench"
+        self.timeout_s = sitl.lockstep_timeout_s
+
+        self.sock: socket.socket | None = None
+        self.session: Any = None
+        self.truth_stream: TruthStream | None = None
+        self.info: InfoServer | None = None
+        self.peer: tuple[str, int] | None = None
+        self._running = True
+        self.sim_time_s = 0.0
+        self.frames_sent = 0
+        self.overruns = 0
+        self._resync = False  # re-anchor the wall clock after an outage
+        self._warned: set[str] = set()
+        # Wall time per frame split into own work and waiting for the autopilot (for the report).
+        self.work_s = 0.0
+        self.wait_s = 0.0
+
+    # -- setup / teardown ---------------------------------------------------------------------
+    def open(self) -> None:
+        """Bind the HIL port and open the zenoh hub; raises :class:`StartupError` on a port in use."""
+        n = self.instance
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.bind((wire.LOOPBACK, self.ports.hil))
+        except OSError as exc:
+            sock.close()
+            if exc.errno == errno.EADDRINUSE:
+                raise StartupError(
+                    f"UDP port {self.ports.hil} (HIL link, udp {wire.LOOPBACK}:{self.ports.hil}) is already "
+                    f"in use: is another simulator running with --instance {n}? (pick another --instance)"
+                ) from None
+            raise
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        sock.settimeout(POLL_S)
+        self.sock = sock
+        try:
+            self.session = bus.open_hub(self.ports.zenoh, self.sitl.zenoh_router)
+        except bus.BusError as exc:
+            raise StartupError(
+                f"{exc}: is another simulator running with --instance {n}? (pick another --instance)"
+            ) from None
+        self.truth_stream = TruthStream(self.session, wire.zenoh_key(n, "truth"))
+        self.info = InfoServer(self.session, wire.zenoh_key(n, "info"), self.describe)
+
+    def close(self) -> None:
+        """Flush the truth batch, close zenoh and the socket (idempotent)."""
+        if self.truth_stream is not None:
+            self.truth_stream.close()
+            self.truth_stream = None
+        if self.info is not None:
+            self.info.close()
+            self.info = None
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    def stop(self, *_args: object) -> None:
+        """Ask the loop to stop (signal handler: SIGINT, SIGTERM)."""
+        self._running = False
+
+    def describe(self) -> dict[str, Any]:
+        """The answer of the ``quadsitl/<N>/info`` queryable."""
+        speed = self.options.speed
+        return {
+            "instance": self.instance,
+            "vehicle": self.vehicle.name,
+            "scenario": self.scenario.name,
+            "actuation": self.vehicle.actuation.mode,
+            "physics_hz": self.physics_hz,
+            "control_hz": self.control_hz,
+            "speed": "max" if speed is None else speed,
+            "sim_time_s": self.sim_time_s,
+        }
+
+    # -- gust uploads (hook) ----------------------------------------------------------------------
+    def schedule_gust_profile(self, profile: GustProfile, start_time_s: float) -> None:
+        """Replace the active disturbance schedule by ``profile`` starting at ``start_time_s`` (s, sim).
+
+        Takes effect at the next frame boundary, so a frame's truth row and its physics steps
+        always see one schedule. (The upload queryable on ``quadsitl/<N>/sim/gusts`` is meant to
+        call this from the main loop.)
+        """
+        self._pending_schedule = DisturbanceSchedule(profile, start_time_s)
+
+    # -- messages -----------------------------------------------------------------------------------
+    def log(self, text: str) -> None:
+        print(f"simulator: {text}", flush=True)
+
+    def _warn_once(self, key: str, text: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            print(f"simulator: {text}", file=sys.stderr, flush=True)
+
+    # -- link ------------------------------------------------------------------------------------
+    def _wait_for_link(self) -> bool:
+        """Block until a MAVLink datagram arrives; remember its sender. False if stopped first."""
+        assert self.sock is not None and self.info is not None
+        self.log(f"waiting for the autopilot on udp {wire.LOOPBACK}:{self.ports.hil}")
+        probe = ActuatorDecoder().parser  # own parser: a stray datagram must not touch the lockstep one
+        while self._running:
+            try:
+                data, address = self.sock.recvfrom(MAX_DATAGRAM)
+            except TimeoutError:
+                self.info.poll()
+                continue
+            except OSError:
+                continue
+            try:
+                messages = probe.parse_buffer(data) or []
+            except Exception:
+                messages = []
+            if any(m.get_msgId() >= 0 for m in messages):
+                self.peer = address
+                self.log(f"linked with autopilot at {address[0]}:{address[1]}")
+                return True
+        return False
+
+    def _await_answer(self, time_usec: int, datagram: bytes) -> ActuatorAnswer | None:
+        """The autopilot's answer to the frame ``time_usec``; None if stopped while waiting.
+
+        Never hangs silently: after ``timeout_s`` wall seconds without the answer it reports the
+        outage once and resends the frame every ``timeout_s`` until answered (the autopilot
+        re-answers a frame it has already seen). A restarted autopilot (new address) is adopted
+        during an outage.
+        """
+        sock, decode, info = self.sock, self.decoder.decode, self.info
+        assert sock is not None and info is not None
+        deadline = time.perf_counter() + self.timeout_s
+        outage_start = None
+        while self._running:
+            try:
+                data, address = sock.recvfrom(MAX_DATAGRAM)
+            except TimeoutError:
+                now = time.perf_counter()
+                if now >= deadline:
+                    if outage_start is None:
+                        outage_start = now - self.timeout_s
+                        self.log(
+                            f"no HIL_ACTUATOR_CONTROLS for frame t={time_usec * 1e-6:.3f} s within "
+                            f"{self.timeout_s:.1f} s; is the autopilot running? "
+                            f"(udp {wire.LOOPBACK}:{self.ports.hil})"
+                        )
+                    self._send(datagram)
+                    deadline = now + self.timeout_s
+                info.poll()
+                continue
+            except OSError:
+                continue  # e.g. ICMP port unreachable surfaced by the kernel: the peer is gone
+            if address != self.peer:
+                if outage_start is not None:
+                    self.peer = address
+                    self.log(f"autopilot now at {address[0]}:{address[1]}; resending frame")
+                    self._send(datagram)
+                continue
+            answer = decode(data)
+            if answer is None or answer.time_usec != time_usec:
+                continue  # heartbeat, or a late answer to an earlier (resent) frame
+            if outage_start is not None:
+                self.log(
+                    f"link recovered: answer for frame t={time_usec * 1e-6:.3f} s after "
+                    f"{time.perf_counter() - outage_start:.1f} s"
+                )
+                self._resync = True
+            return answer
+        return None
+
+    def _send(self, datagram: bytes) -> None:
+        assert self.sock is not None and self.peer is not None
+        try:
+            self.sock.sendto(datagram, self.peer)
+        except OSError:
+            pass  # the autopilot is gone; the lockstep timeout reports it
+
+    def _apply(self, answer: ActuatorAnswer) -> None:
+        """Controls into the plant: zero unless armed, consistent and finite."""
+        controls = _MOTORS_OFF
+        if answer.wrench != self.wrench:
+            mode = "wrench" if answer.wrench else "rotors"
+            self._warn_once(
+                "actuation",
+                f"refusing HIL_ACTUATOR_CONTROLS: their flags say actuation '{mode}' but vehicle "
+                f"'{self.vehicle.name}' has actuation '{self.vehicle.actuation.mode}'; motors off. "
+                "Start both processes with the same --vehicle.",
+            )
+        elif answer.armed:
+            c = answer.controls
+            if math.isfinite(c[0] + c[1] + c[2] + c[3]):
+                controls = c
+            else:
+                self._warn_once("finite", f"non-finite actuator controls {c}; motors off for those frames")
+        if not answer.lockstep:
+            self._warn_once("lockstep", "HIL_ACTUATOR_CONTROLS without the lockstep flag (bit 0); accepted")
+        self.plant.set_actuator_controls(controls)
+
+    # -- loop --------------------------------------------------------------------------------------
+    def run(self) -> int:
+        """Until stopped or ``duration_s`` of simulated time; returns the exit code."""
+        assert self.truth_stream is not None and self.info is not None
+        if not self._wait_for_link():
+            return 0
+        plant, sensors, encoder = self.plant, self.sensors, self.encoder
+        append_truth, poll_info = self.truth_stream.append, self.info.poll
+        send = self._send
+        perf_counter = time.perf_counter
+        dt, dt_physics, substeps = self.dt_control, self.dt_physics, self.substeps
+        usec_per_frame = 1e6 / self.control_hz
+        gps_every = self.gps_every
+        speed = self.options.speed
+        last_frame = (
+            None if self.options.duration_s is None else round(self.options.duration_s / self.dt_control)
+        )
+        wall_anchor = perf_counter()
+        report_at = wall_anchor + RATE_REPORT_WALL_S
+        report_sim, report_wall = 0.0, wall_anchor
+        k = 0
+        while self._running:
+            start = perf_counter()
+            t = k * dt
+            time_usec = round(k * usec_per_frame)
+            if self._pending_schedule is not None:
+                self.schedule, self._pending_schedule = self._pending_schedule, None
+            schedule = self.schedule
+            truth = plant.truth()
+            p = truth.position_m
+            if not math.isfinite(p[0] + p[1] + p[2]):
+                print(f"simulator: the plant state is not finite at t={t:.3f} s; stopping", file=sys.stderr)
+                return 1
+            force, torque, wind = schedule.evaluate(t)
+            gps = sensors.sample_gps(truth) if k % gps_every == 0 else None
+            datagram = encoder.encode(time_usec, truth, sensors.sample(truth), wind, gps)
+            send(datagram)
+            self.frames_sent += 1
+            self.sim_time_s = t
+            # Bookkeeping while the autopilot computes its answer.
+            append_truth(truth_row(t, truth, force, torque, wind))
+            poll_info()
+            if last_frame is not None and k >= last_frame:
+                break  # the final frame (t = duration) is sent and recorded, not stepped
+            sent = perf_counter()
+            answer = self._await_answer(time_usec, datagram)
+            if answer is None:
+                break
+            answered = perf_counter()
+            self._apply(answer)
+            for j in range(substeps):
+                f, tq, w = schedule.evaluate(t + j * dt_physics)
+                plant.set_disturbance(f, tq, w)
+                plant.step()
+            k += 1
+            now = perf_counter()
+            self.work_s += (sent - start) + (now - answered)
+            self.wait_s += answered - sent
+            if speed is None:
+                continue
+            # Wall-clock pacing on top of lockstep.
+            t_next = k * dt
+            if self._resync:
+                self._resync = False
+                wall_anchor = now - t_next / speed
+            target = wall_anchor + t_next / speed
+            if target > now:
+                self._sleep_until(target)
+            elif now - target > RESYNC_BEHIND_S:
+                wall_anchor = now - t_next / speed
+                self.overruns += 1
+            if now >= report_at:
+                achieved = (t_next - report_sim) / (now - report_wall)
+                if achieved < 0.95 * speed:
+                    self.log(
+                        f"running at {achieved:.2f}x real time (asked {speed:g}x); "
+                        f"{self.overruns} re-anchors so far"
+                    )
+                report_at = now + RATE_REPORT_WALL_S
+                report_sim, report_wall = t_next, now
+        return 0
+
+    def _sleep_until(self, target: float) -> None:
+        """Sleep (no busy-wait) until ``perf_counter() >= target``, in slices that see a stop."""
+        while self._running:
+            remaining = target - time.perf_counter()
+            if remaining <= 0.0:
+                return
+            time.sleep(min(remaining, POLL_S))
+
+    def summary(self) -> str:
+        n = max(self.frames_sent - 1, 1)  # the final frame is not answered
+        return (
+            f"stopped at t={self.sim_time_s:.3f} s ({self.frames_sent} frames; per frame "
+            f"{1e6 * self.work_s / n:.0f} us own work, {1e6 * self.wait_s / n:.0f} us waiting for the "
+            f"autopilot; {self.overruns} re-anchors)"
+        )
+
+
+# -- command line -----------------------------------------------------------------------------------
+def _speed(text: str) -> float | None:
+    if text == "max":
+        return None
+    message = f"--speed must be a positive number or 'max', got {text!r}"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(message) from None
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(message)
+    return value
+
+
+def _duration(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--duration must be a number of seconds, got {text!r}") from None
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"--duration must be > 0 s, got {text!r}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m simulator",
+        description="The quadsitl simulator process (plant side of the SITL, lockstep over MAVLink HIL).",
+    )
+    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (ports +N, sysid 1+N)")
+    parser.add_argument("--vehicle", default=None, help="vehicle (config/vehicle); default: the scenario's")
+    parser.add_argument("--scenario", default="hover", help="scenario (config/scenarios); default: hover")
+    parser.add_argument(
+        "--speed", type=_speed, default=1.0, help="wall-clock pacing: a factor (1 = real time) or 'max'"
+    )
+    parser.add_argument("--duration", type=_duration, default=None, help="stop after S simulated seconds")
+    parser.add_argument("--config-dir", default=None, help="configuration directory (default: ./config)")
+    parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
+    parser.add_argument("--sensors", default="default", help="sensor models (config/sensors)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.config_dir is not None:
+        import quadcommon.config as qconfig
+
+        config_dir = Path(args.config_dir)
+        if not config_dir.is_dir():
+            print(f"simulator: --config-dir {config_dir} is not a directory", file=sys.stderr)
+            return 2
+        qconfig.CONFIG_DIR = config_dir  # config_path() reads it at call time
+    try:
+        app = Simulator(
+            SimulatorOptions(
+                instance=args.instance,
+                vehicle=args.vehicle,
+                scenario=args.scenario,
+                speed=args.speed,
+                duration_s=args.duration,
+                sitl_config=args.sitl_config,
+                sensors=args.sensors,
+            )
+        )
+    except (ConfigError, ValueError) as exc:
+        print(f"simulator: {exc}", file=sys.stderr)
+        return 2
+    signal.signal(signal.SIGTERM, app.stop)
+    signal.signal(signal.SIGINT, app.stop)
+    code = 2
+    opened = False
+    try:
+        app.open()
+        opened = True
+        speed = "max" if app.options.speed is None else f"{app.options.speed:g}x"
+        app.log(
+            f"instance {app.instance}, vehicle {app.vehicle.name} (actuation {app.vehicle.actuation.mode}, "
+            f"plant {app.vehicle.plant.model}), scenario {app.scenario.name}, physics {app.physics_hz:g} Hz, "
+            f"control {app.control_hz:g} Hz, speed {speed}; truth on zenoh "
+            f"{wire.zenoh_key(app.instance, 'truth')} (tcp/{wire.LOOPBACK}:{app.ports.zenoh})"
+        )
+        code = app.run()
+    except StartupError as exc:
+        print(f"simulator: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        app.close()
+        if opened:
+            app.log(app.summary())
+    return code

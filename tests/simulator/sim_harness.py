@@ -1,0 +1,184 @@
+"""Test harness for the simulator process: start it as a subprocess, talk to it as a scripted
+autopilot over real UDP on 127.0.0.1. Every wait is bounded; every process is stopped.
+
+Instances 40-59 belong to the simulator's tests (other suites use other instances).
+"""
+
+from __future__ import annotations
+
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from quadcommon import wire
+
+REPO = Path(__file__).resolve().parents[2]
+SITL_TOML = REPO / "config" / "sitl.toml"
+
+
+class SimProcess:
+    """``python -m simulator`` as a child; its stdout+stderr collected line by line."""
+
+    def __init__(self, instance: int, *args: str, speed: str = "max") -> None:
+        self.instance = instance
+        self.ports = wire.ports(instance)
+        cmd = [sys.executable, "-u", "-m", "simulator", "--instance", str(instance), "--speed", speed, *args]
+        self.proc = subprocess.Popen(
+            cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1
+        )
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._cond:
+                self.lines.append(line.rstrip("\n"))
+                self._cond.notify_all()
+
+    @property
+    def output(self) -> str:
+        with self._cond:
+            return "\n".join(self.lines)
+
+    def wait_line(self, needle: str, timeout: float = 5.0) -> str:
+        """The first output line containing ``needle``; AssertionError after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for line in self.lines:
+                    if needle in line:
+                        return line
+                remaining = deadline - time.monotonic()
+                if remaining <= 0 or (self.proc.poll() is not None and not self._thread.is_alive()):
+                    raise AssertionError(
+                        f"no line with {needle!r} within {timeout} s; output:\n{self.output}"
+                    )
+                self._cond.wait(min(remaining, 0.1))
+
+    def terminate(self, timeout: float = 2.0, sig: int = signal.SIGTERM) -> int:
+        """Send ``sig`` and wait for the exit code (AssertionError if it does not exit in time)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            code = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(
+                f"simulator did not exit within {timeout} s of {sig!r}:\n{self.output}"
+            ) from None
+        self._thread.join(2.0)
+        return code
+
+    def __enter__(self) -> SimProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(5.0)
+        self._thread.join(2.0)
+
+
+class Frame(dict):
+    """Messages of one datagram by type name (``frame["ODOMETRY"]``)."""
+
+    @property
+    def time_usec(self) -> int:
+        return self["HIL_SENSOR"].time_usec
+
+
+class ScriptedAutopilot:
+    """A minimal autopilot: says hello, receives frames, answers HIL_ACTUATOR_CONTROLS by hand."""
+
+    def __init__(self, instance: int) -> None:
+        self.address = (wire.LOOPBACK, wire.ports(instance).hil)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((wire.LOOPBACK, 0))
+        self.mav = mavlink.MAVLink(None, srcSystem=wire.system_id(instance), srcComponent=1)
+        self.parser = mavlink.MAVLink(None)
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> ScriptedAutopilot:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _pack(self, msg) -> bytes:
+        data = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) & 0xFF
+        return data
+
+    def hello(self) -> None:
+        hb = mavlink.MAVLink_heartbeat_message(
+            mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, mavlink.MAV_STATE_STANDBY, 3
+        )
+        self.sock.sendto(self._pack(hb), self.address)
+
+    def recv_frame(self, timeout: float = 2.0) -> Frame | None:
+        """The next datagram's messages, or None after ``timeout`` s."""
+        self.sock.settimeout(timeout)
+        try:
+            data = self.sock.recv(65535)
+        except TimeoutError:
+            return None
+        messages = self.parser.parse_buffer(data) or []
+        return Frame((m.get_type(), m) for m in messages)
+
+    def link(self, timeout: float = 8.0) -> Frame:
+        """HEARTBEAT every 0.1 s until the first frame arrives (what the real autopilot does)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.hello()
+            frame = self.recv_frame(0.1)
+            if frame is not None:
+                return frame
+        raise AssertionError(f"no frame from the simulator within {timeout} s")
+
+    def answer(
+        self,
+        time_usec: int,
+        controls: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
+        armed: bool = False,
+        wrench: bool = True,
+        lockstep: bool = True,
+    ) -> None:
+        mode = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if armed:
+            mode |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        flags = (wire.HIL_FLAG_LOCKSTEP if lockstep else 0) | (wire.HIL_FLAG_WRENCH if wrench else 0)
+        values = [*controls, *([0.0] * 12)]
+        msg = mavlink.MAVLink_hil_actuator_controls_message(time_usec, values, mode, flags)
+        self.sock.sendto(self._pack(msg), self.address)
+
+    def step(self, frame: Frame, timeout: float = 2.0, **answer_kwargs) -> Frame:
+        """Answer ``frame`` and return the next one (AssertionError if none comes)."""
+        self.answer(frame.time_usec, **answer_kwargs)
+        nxt = self.recv_frame(timeout)
+        assert nxt is not None, f"no frame after answering t={frame.time_usec} us"
+        return nxt
+
+
+def sitl_toml_with(tmp_path: Path, **lockstep: float) -> Path:
+    """A copy of config/sitl.toml with ``[lockstep]`` values replaced (e.g. timeout_s=0.3)."""
+    text = SITL_TOML.read_text()
+    for key, value in lockstep.items():
+        lines = []
+        for line in text.splitlines():
+            if line.split("=")[0].strip() == key:
+                line = f"{key} = {value}"
+            lines.append(line)
+        text = "\n".join(lines) + "\n"
+    path = tmp_path / "sitl.toml"
+    path.write_text(text)
+    return path
