@@ -1,0 +1,386 @@
+"""Record a SITL session: the MAVLink .tlog and a Parquet table joining zenoh truth with telemetry.
+
+Listens like a ground station (default ``udpin:127.0.0.1:14550+N``, QGroundControl's port) and
+subscribes to the vehicle's zenoh bus (``quadsitl/N/truth`` from the simulator,
+``quadsitl/N/controller`` from the autopilot; their ``info`` queryables give the metadata).
+Writes, for ``--out DIR/NAME`` (default ``runs/<timestamp>``):
+
+* ``NAME.tlog``: every MAVLink message received on the link, stamped with the wall clock
+  (readable by pymavlink's mavutil, ``mavlogdump.py``, MAVExplorer); flushed every second;
+* ``NAME.parts/part-000001.parquet``, ...: every second of wall time, the rows joined so far,
+  each part a complete Parquet file; on a clean exit they are merged into ``NAME.parquet`` and
+  deleted. If the recorder dies, the parts stay readable (``quadsitl analyze NAME.parts``).
+
+The table has one row per control step: ``time_s`` (simulation time), the truth and controller
+columns (paper frames: x north, y left, z up; joined exactly on time_s) and ``mav_*`` columns
+(MAVLink as received: NED/FRD; joined as of time_s: the latest sample at or before each row).
+The schema metadata (``quadsitl.session``, JSON) holds instance, scenario, controller, vehicle,
+rates, the two info answers, the recording's start simulation time and the STATUSTEXT events.
+
+Stops after ``--duration`` seconds of SIMULATION time, when ``--until-disarmed`` and the vehicle
+has been armed then disarmed, or on SIGINT/SIGTERM (Ctrl-C). Exit 0 on a clean stop, 2 on bad
+arguments or when the link cannot be opened.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from gcs_scripts import link as mavlink_link  # noqa: E402  (sets the pymavlink dialect first)
+from gcs_scripts.session_log import (  # noqa: E402
+    PartWriter,
+    SessionAssembler,
+    merge_parts,
+    part_paths,
+    session_metadata,
+)
+from gcs_scripts.tlog import TlogWriter  # noqa: E402
+from quadcommon import bus, wire  # noqa: E402
+from quadcommon.bus_records import CONTROLLER_CODEC, TRUTH_CODEC  # noqa: E402
+from quadcommon.config import load_sitl  # noqa: E402
+
+mavutil = mavlink_link.mavutil
+
+PART_INTERVAL_WALL_S = 1.0  # a crash loses at most this much
+PROGRESS_WALL_S = 10.0
+STOP_GRACE_WALL_S = 0.3  # after the stop condition: collect rows still in flight
+INFO_RETRY_WALL_S = 1.0
+MAX_DRAIN = 20000  # messages/samples per loop turn and source: keeps every source served
+
+
+@dataclass(frozen=True)
+class RecorderOptions:
+    instance: int = 0
+    out: Path = Path("runs/session")  # NAME: NAME.tlog, NAME.parquet, NAME.parts/
+    url: str | None = None
+    duration_s: float | None = None  # simulation seconds
+    until_disarmed: bool = False
+    sitl_config: str | None = None
+    quiet: bool = False
+    part_interval_s: float = PART_INTERVAL_WALL_S
+
+
+class _InfoRequest:
+    """A zenoh get polled without blocking, repeated until one answer arrives."""
+
+    def __init__(self, key: str) -> None:
+        self.key = key
+        self.handler: Any = None
+        self.next_try = 0.0
+        self.answer: dict[str, Any] | None = None
+
+    def poll(self, session: Any, wall: float) -> bool:
+        """True when the answer has just arrived."""
+        import zenoh
+
+        if self.answer is not None:
+            return False
+        if self.handler is None:
+            if wall < self.next_try:
+                return False
+            self.next_try = wall + INFO_RETRY_WALL_S
+            self.handler = session.get(self.key, handler=zenoh.handlers.FifoChannel(4), timeout=1.0)
+        try:
+            reply = self.handler.try_recv()
+        except zenoh.ZError:  # the get ended without an answer: nobody there yet
+            self.handler = None
+            return False
+        if reply is None:
+            return False
+        self.handler = None
+        if reply.ok is None:
+            return False
+        try:
+            self.answer = json.loads(reply.ok.payload.to_bytes())
+        except ValueError:
+            return False
+        return True
+
+
+class Recorder:
+    def __init__(self, options: RecorderOptions) -> None:
+        self.options = options
+        self.sitl = load_sitl(options.sitl_config)
+        self.ports = wire.ports(options.instance, zenoh_base=self.sitl.zenoh_port_base)
+        self.url = options.url or f"udpin:127.0.0.1:{self.sitl.gcs_port_base + options.instance}"
+        mavlink_link._check_loopback(self.url)
+        out = Path(options.out)
+        if out.suffix in (".parquet", ".tlog"):
+            out = out.with_suffix("")
+        self.base = out
+        self.tlog_path = out.with_name(out.name + ".tlog")
+        self.parquet_path = out.with_name(out.name + ".parquet")
+        self.parts_dir = out.with_name(out.name + ".parts")
+        self.assembler = SessionAssembler(wire.system_id(options.instance), wall=time.monotonic())
+        self.truth_info = _InfoRequest(wire.zenoh_key(options.instance, "info"))
+        self.autopilot_info = _InfoRequest(wire.zenoh_key(options.instance, "autopilot/info"))
+        self.conn: Any = None
+        self.session: Any = None
+        self.truth_sub: Any = None
+        self.controller_sub: Any = None
+        self.tlog: TlogWriter | None = None
+        self.parts: PartWriter | None = None
+        self.stop_reason = ""
+        self._stop_requested = False
+        self.decode_errors = 0
+        self.was_armed = False
+
+    def log(self, text: str) -> None:
+        if not self.options.quiet:
+            t = self.assembler.latest_time_s
+            stamp = f"t={t:.2f} s " if t is not None else ""
+            print(f"record: {stamp}{text}", flush=True)
+
+    # -- setup / teardown --------------------------------------------------------------------------
+    def open(self) -> None:
+        import zenoh
+
+        for path in (self.tlog_path, self.parquet_path):
+            if path.exists():
+                raise FileExistsError(f"{path} exists already: choose another --out")
+        if self.parts_dir.exists() and part_paths(self.parts_dir):
+            raise FileExistsError(f"{self.parts_dir} holds parts of another recording: choose another --out")
+        self.conn = mavutil.mavlink_connection(
+            self.url, source_system=mavlink_link.GCS_SYSTEM_ID, source_component=191, dialect="common"
+        )
+        self.session = bus.open_peer(self.ports.zenoh, self.sitl.zenoh_router)
+        n = self.options.instance
+        self.truth_sub = self.session.declare_subscriber(
+            wire.zenoh_key(n, "truth"), zenoh.handlers.FifoChannel(8192)
+        )
+        self.controller_sub = self.session.declare_subscriber(
+            wire.zenoh_key(n, "controller"), zenoh.handlers.FifoChannel(8192)
+        )
+        self.tlog = TlogWriter(self.tlog_path)
+        self.parts = PartWriter(self.parts_dir)
+
+    def close(self) -> Path | None:
+        """Close every source, then merge the parts (returns the merged file, if any rows)."""
+        for closer in (
+            lambda: self.session.close() if self.session is not None else None,
+            lambda: self.conn.close() if self.conn is not None else None,
+            lambda: self.tlog.close() if self.tlog is not None else None,
+        ):
+            try:
+                closer()
+            except Exception as exc:  # closing must go on: the data matters more
+                print(f"record: while closing: {exc}", file=sys.stderr)
+        if self.parts is None:
+            return None
+        if not part_paths(self.parts_dir):
+            try:
+                self.parts_dir.rmdir()
+            except OSError:
+                pass
+            return None
+        return merge_parts(self.parts_dir, self.parquet_path, self.metadata(final=True))
+
+    def metadata(self, final: bool = False) -> dict[str, Any]:
+        a = self.assembler
+        extra = {
+            "url": self.url,
+            "tlog": self.tlog_path.name,
+            "rows": a.rows_emitted,
+            "truth_rows": a.truth.count,
+            "controller_rows": a.controller.count,
+            "mavlink_messages": a.mav_messages,
+            "recording_end_sim_time_s": a.latest_time_s,
+            "complete": final,
+            "stopped_by": self.stop_reason,
+        }
+        return session_metadata(
+            self.options.instance,
+            self.truth_info.answer,
+            self.autopilot_info.answer,
+            a.first_time_s,
+            extra,
+            a.statustext,
+        )
+
+    # -- the loop ----------------------------------------------------------------------------------
+    def request_stop(self, *_args: Any) -> None:
+        self._stop_requested = True
+
+    def _drain_zenoh(self, sub: Any, codec: Any, add: Any, wall: float) -> int:
+        import zenoh
+
+        n = 0
+        for _ in range(MAX_DRAIN):
+            try:
+                sample = sub.try_recv()
+            except zenoh.ZError:
+                return n
+            if sample is None:
+                return n
+            n += 1
+            try:
+                rows = codec.decode(sample.payload.to_bytes())
+            except ValueError:
+                self.decode_errors += 1
+                continue
+            add(rows, wall)
+        return n
+
+    def _drain_mavlink(self, wall: float) -> int:
+        n = 0
+        now_unix = time.time()
+        for _ in range(MAX_DRAIN):
+            msg = self.conn.recv_msg()
+            if msg is None:
+                break
+            if msg.get_type() == "BAD_DATA":
+                continue
+            n += 1
+            self.tlog.write(msg.get_msgbuf(), now_unix)
+            self.assembler.add_mavlink(msg, wall)
+            if msg.get_type() == "STATUSTEXT" and msg.get_srcSystem() == self.assembler.system_id:
+                self.log(f"vehicle: {self.assembler.statustext[-1][2]}")
+        return n
+
+    def _write_part(self, wall: float, final: bool = False) -> None:
+        table = self.assembler.take(wall, final=final)
+        if table is not None and table.num_rows:
+            self.parts.write(table, self.metadata())
+        self.tlog.flush()
+
+    def _should_stop(self) -> str:
+        if self._stop_requested:
+            return "signal"
+        a = self.assembler
+        duration = self.options.duration_s
+        if duration is not None and a.first_key is not None and a.latest_time_s - a.first_time_s >= duration:
+            return f"duration {duration:g} s"
+        if self.options.until_disarmed:
+            if a.armed:
+                self.was_armed = True
+            elif self.was_armed and a.armed is False:
+                return "disarmed"
+        return ""
+
+    def run(self, max_wall_s: float | None = None) -> int:
+        """Record until a stop condition (or ``max_wall_s`` of wall time, for tests)."""
+        start_wall = time.monotonic()
+        self.log(
+            f"recording instance {self.options.instance}: MAVLink {self.url}, zenoh "
+            f"{bus.hub_endpoint(self.ports.zenoh)} -> {self.tlog_path}, {self.parquet_path} "
+            f"(parts in {self.parts_dir}/)"
+        )
+        next_part = start_wall + self.options.part_interval_s
+        next_progress = start_wall + PROGRESS_WALL_S
+        stop_at: float | None = None
+        a = self.assembler
+        while True:
+            wall = time.monotonic()
+            n = self._drain_zenoh(self.truth_sub, TRUTH_CODEC, a.add_truth, wall)
+            n += self._drain_zenoh(self.controller_sub, CONTROLLER_CODEC, a.add_controller, wall)
+            n += self._drain_mavlink(wall)
+            for name, request in (("simulator", self.truth_info), ("autopilot", self.autopilot_info)):
+                if request.poll(self.session, wall):
+                    self.log(f"{name} info: {json.dumps(request.answer)}")
+            if wall >= next_part:
+                self._write_part(wall)
+                next_part = wall + self.options.part_interval_s
+            if wall >= next_progress:
+                next_progress = wall + PROGRESS_WALL_S
+                self.log(
+                    f"{a.rows_emitted} rows, {a.mav_messages} MAVLink messages, {self.parts.index} parts"
+                )
+            if stop_at is None:
+                reason = self._should_stop()
+                if not reason and max_wall_s is not None and wall - start_wall > max_wall_s:
+                    reason = f"wall limit {max_wall_s:g} s"
+                if reason:
+                    self.stop_reason = reason
+                    # Rows of the last instants may still be in flight on the other streams.
+                    stop_at = wall + (0.0 if reason == "signal" else STOP_GRACE_WALL_S)
+            if stop_at is not None and wall >= stop_at:
+                break
+            if n == 0:
+                time.sleep(0.001)
+        self._write_part(time.monotonic(), final=True)
+        return 0
+
+
+def default_out() -> Path:
+    return Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="record.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output DIR/NAME without suffix (default runs/<timestamp>)"
+    )
+    parser.add_argument("--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14550+N)")
+    parser.add_argument(
+        "--duration", type=float, default=None, help="stop after S seconds of simulation time"
+    )
+    parser.add_argument(
+        "--until-disarmed", action="store_true", help="stop once the vehicle has been armed and then disarmed"
+    )
+    parser.add_argument("--sitl-config", default=None, help="alternative sitl.toml (ports, zenoh router)")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not 0 <= args.instance <= 99:
+        parser.error(f"--instance must be in [0, 99], got {args.instance}")
+    if args.duration is not None and not (args.duration > 0.0 and math.isfinite(args.duration)):
+        parser.error(f"--duration must be > 0 s, got {args.duration}")
+    options = RecorderOptions(
+        instance=args.instance,
+        out=args.out or default_out(),
+        url=args.url,
+        duration_s=args.duration,
+        until_disarmed=args.until_disarmed,
+        sitl_config=args.sitl_config,
+        quiet=args.quiet,
+    )
+    try:
+        recorder = Recorder(options)
+    except ValueError as exc:
+        parser.error(str(exc))
+    signal.signal(signal.SIGINT, recorder.request_stop)
+    signal.signal(signal.SIGTERM, recorder.request_stop)
+    try:
+        recorder.open()
+    except (FileExistsError, OSError, bus.BusError) as exc:
+        print(f"record: {exc}", file=sys.stderr)
+        recorder.close()
+        return 2
+    merged = None
+    try:
+        recorder.run()
+    finally:
+        merged = recorder.close()
+    a = recorder.assembler
+    span = ""
+    if a.first_time_s is not None:
+        span = f" covering t={a.first_time_s:.3f}..{a.latest_time_s:.3f} s"
+    print(
+        f"record: stopped ({recorder.stop_reason or 'error'}): {a.rows_emitted} rows{span}, "
+        f"{recorder.tlog.records if recorder.tlog else 0} MAVLink messages -> "
+        f"{merged or '(no rows)'}, {recorder.tlog_path}",
+        flush=True,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
