@@ -89,7 +89,7 @@ class Simulator:
         self.gps_every = max(1, round(rates.control_hz / rates.gps_hz))
         self.plant = make_plant(apply_uncertainty(self.vehicle, scenario), self.dt_physics)
         self.plant.reset(scenario.initial_position_m, scenario.initial_euler_rad)
-        self.schedule = DisturbanceSchedule(load_gust_profile(scenario.gusts))
+        self.schedule = self._new_schedule(load_gust_profile(scenario.gusts), 0.0)
         self._pending_schedule: DisturbanceSchedule | None = None
         self.sensors = SensorSuite(load_sensors(options.sensors), sitl.home[2])
         self.encoder = HilFrameEncoder(wire.system_id(options.instance), sitl.home)
@@ -180,7 +180,12 @@ class Simulator:
         always see one schedule. (The upload queryable on ``quadsitl/<N>/sim/gusts`` is meant to
         call this from the main loop.)
         """
-        self._pending_schedule = DisturbanceSchedule(profile, start_time_s)
+        self._pending_schedule = self._new_schedule(profile, start_time_s)
+
+    def _new_schedule(self, profile: GustProfile, start_time_s: float) -> DisturbanceSchedule:
+        """The one place schedules are built: evaluated at every physics step, in non-decreasing
+        time (the Dryden turbulence samples at ``step_s`` and only runs forward)."""
+        return DisturbanceSchedule(profile, start_time_s, step_s=self.dt_physics)
 
     # -- messages -----------------------------------------------------------------------------------
     def log(self, text: str) -> None:

@@ -182,3 +182,23 @@ def sitl_toml_with(tmp_path: Path, **lockstep: float) -> Path:
     path = tmp_path / "sitl.toml"
     path.write_text(text)
     return path
+
+
+def airborne_scenario(tmp_path: Path) -> Path:
+    """Tilted, yawed, in the air, with parametric uncertainty and gusts that start at 10 ms."""
+    gusts = tmp_path / "gusts.toml"
+    gusts.write_text(
+        'description = "test"\n'
+        '[[step]]\nchannel = "force_x"\nstart_s = 0.01\nvalue = 2.0\n'
+        '[[step]]\nchannel = "torque_roll"\nstart_s = 0.02\nvalue = 0.3\n'
+        '[[ramp]]\nchannel = "force_z"\nstart_s = 0.0\nend_s = 0.05\nvalue = -1.0\n'
+    )
+    path = tmp_path / "airborne.toml"
+    path.write_text(
+        f'name = "airborne"\ndescription = "test"\nvehicle = "paper_quad"\nduration_s = 5.0\n'
+        f'gusts = "{gusts}"\n'
+        '[trajectory]\nkind = "hover"\nposition_m = [1.0, -2.0, 3.0]\n'
+        "[initial_state]\nposition_m = [1.0, -2.0, 3.0]\neuler_rad = [0.1, -0.2, 0.7]\n"
+        "[uncertainty]\nmass_scale = 1.2\ninertia_scale = 0.9\n"
+    )
+    return path

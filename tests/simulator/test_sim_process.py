@@ -10,7 +10,6 @@ import math
 import signal
 import socket
 import time
-from pathlib import Path
 
 import pytest
 
@@ -21,31 +20,11 @@ from simulator.dynamics.plant import make_plant
 from simulator.environment.gust_profile import DisturbanceSchedule, load_gust_profile
 from simulator.sensors import isa_pressure_hpa
 
-from .sim_harness import ScriptedAutopilot, SimProcess, sitl_toml_with
+from .sim_harness import ScriptedAutopilot, SimProcess, airborne_scenario, sitl_toml_with
 
 RATES = load_sitl().rates
 FRAME_USEC = round(1e6 / RATES.control_hz)
 HOME = load_sitl().home
-
-
-def airborne_scenario(tmp_path: Path) -> Path:
-    """Tilted, yawed, in the air, with parametric uncertainty and gusts that start at 10 ms."""
-    gusts = tmp_path / "gusts.toml"
-    gusts.write_text(
-        'description = "test"\n'
-        '[[step]]\nchannel = "force_x"\nstart_s = 0.01\nvalue = 2.0\n'
-        '[[step]]\nchannel = "torque_roll"\nstart_s = 0.02\nvalue = 0.3\n'
-        '[[ramp]]\nchannel = "force_z"\nstart_s = 0.0\nend_s = 0.05\nvalue = -1.0\n'
-    )
-    path = tmp_path / "airborne.toml"
-    path.write_text(
-        f'name = "airborne"\ndescription = "test"\nvehicle = "paper_quad"\nduration_s = 5.0\n'
-        f'gusts = "{gusts}"\n'
-        '[trajectory]\nkind = "hover"\nposition_m = [1.0, -2.0, 3.0]\n'
-        "[initial_state]\nposition_m = [1.0, -2.0, 3.0]\neuler_rad = [0.1, -0.2, 0.7]\n"
-        "[uncertainty]\nmass_scale = 1.2\ninertia_scale = 0.9\n"
-    )
-    return path
 
 
 def quaternion_yaw_pitch_roll(q):
