@@ -71,7 +71,7 @@ Gust Gradient", NASA Langley (on discrete implementations and their verification
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import linalg, signal
@@ -269,7 +269,10 @@ class DrydenWind:
         self.dt_s = dt_s
         self.scales = params.scales()
         V = params.airspeed_m_s
-        self.filters = [_DiscreteFilter(num, den, dt_s) for num, den in shaping_filters(self.scales, V)]
+        # Filters for unit intensity, scaled per block: W20 = 0 (calm, mean wind only) must not
+        # give all-zero numerators, which scipy's tf2ss refuses with a warning.
+        unit = replace(self.scales, sigma_u_m_s=1.0, sigma_v_m_s=1.0, sigma_w_m_s=1.0)
+        self.filters = [_DiscreteFilter(num, den, dt_s) for num, den in shaping_filters(unit, V)]
         mx, my, mz = params.mean_wind_m_s
         horizontal = math.hypot(mx, my)
         # u along the horizontal mean wind (the frozen field is carried by it), else world x.
@@ -295,9 +298,10 @@ class DrydenWind:
         if self._block:
             self._block_start += len(self._block)
         noise = self._rng.standard_normal((3, self.block_size))
-        u = self.filters[0].run(noise[0])
-        v = self.filters[1].run(noise[1])
-        w = self.filters[2].run(noise[2])
+        s = self.scales
+        u = s.sigma_u_m_s * self.filters[0].run(noise[0])
+        v = s.sigma_v_m_s * self.filters[1].run(noise[1])
+        w = s.sigma_w_m_s * self.filters[2].run(noise[2])
         cx, cy, _ = self.u_axis
         mx, my, mz = self.params.mean_wind_m_s
         # v is to the left of u: (-cy, cx, 0).
@@ -337,7 +341,7 @@ def parse_dryden(sec: Section) -> DrydenTurbulence:
     airspeed = sec.number(
         "airspeed_m_s", DEFAULT_AIRSPEED_M_S, lo=MIN_AIRSPEED_M_S, hi=MAX_AIRSPEED_M_S, unit="m/s"
     )
-    seed = sec.integer("seed", lo=0, hi=2**63 - 1)
+    seed = sec.integer("seed", lo=0)
     start = sec.number("start_s", 0.0, lo=0.0, hi=MAX_TIME_S, unit="s")
     end = (
         sec.number("end_s", lo=start, lo_open=True, hi=MAX_TIME_S, unit="s") if sec.has("end_s") else math.inf
