@@ -165,10 +165,6 @@ class Autopilot:
         c.register(m.MAV_CMD_REQUEST_MESSAGE, self._cmd_request_message)
         c.register(m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, self._cmd_capabilities)
         c.register(
-            m.MAV_CMD_REQUEST_PROTOCOL_VERSION,
-            lambda r: self._send_requested(r, m.MAVLINK_MSG_ID_PROTOCOL_VERSION),
-        )
-        c.register(
             m.MAV_CMD_GET_HOME_POSITION, lambda r: self._send_requested(r, m.MAVLINK_MSG_ID_HOME_POSITION)
         )
         h = self.message_handlers
@@ -186,12 +182,20 @@ class Autopilot:
         return self.commander.disarm(self.sim_time, force)
 
     def _cmd_takeoff(self, r: CommandRequest) -> tuple[int, str]:
-        altitude_amsl = r.params[6]
-        relative = None
-        if math.isfinite(altitude_amsl) and altitude_amsl != 0.0:
-            home_z = self.commander.home[2] if self.commander.home else 0.0
-            relative = altitude_amsl - (self.sitl.home[2] + home_z)
-        return self.commander.takeoff(self.sim_time, relative)
+        """param7 is the altitude AMSL (PX4); NaN means MIS_TAKEOFF_ALT above home.
+
+        A value that would lie underground as AMSL (below the home altitude minus 10 m) is read as
+        a height above home instead: that is what ArduPilot-style clients (MAVProxy's ``takeoff
+        5``) send.
+        """
+        altitude = r.params[6]
+        if not math.isfinite(altitude) or altitude == 0.0:
+            return self.commander.takeoff(self.sim_time, None)
+        home_z = self.commander.home[2] if self.commander.home else 0.0
+        home_amsl = self.sitl.home[2] + home_z
+        if altitude >= home_amsl - 10.0:
+            return self.commander.takeoff(self.sim_time, altitude - home_amsl)
+        return self.commander.takeoff(self.sim_time, altitude)
 
     def _cmd_set_mode(self, r: CommandRequest) -> tuple[int, str]:
         base_mode = int(r.params[0])
@@ -225,8 +229,6 @@ class Autopilot:
     def _send_requested(self, r: CommandRequest, msg_id: int) -> tuple[int, str]:
         if msg_id == m.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             msg = self._autopilot_version()
-        elif msg_id == m.MAVLINK_MSG_ID_PROTOCOL_VERSION:
-            msg = m.MAVLink_protocol_version_message(200, 100, 200, [0] * 8, [0] * 8)
         else:
             msg = telemetry.build(msg_id, self.status)
         if msg is None:
@@ -308,10 +310,10 @@ class Autopilot:
     # -- frames --------------------------------------------------------------------------------------
     def _on_hil_datagram(self, data: bytes) -> None:
         try:
-            messages = self.hil_parser.parse_buffer(data) or []
-        except Exception:
+            frame = decode_frame(data, self.hil_parser, self.sitl.home, self.options.state_source == "odometry")
+        except Exception as exc:  # a corrupt datagram: report, do not die (the simulator resends)
+            self.log(f"bad HIL datagram ignored: {exc}")
             return
-        frame = decode_frame(messages, self.sitl.home, self.options.state_source == "odometry")
         if frame is None:
             return
         if frame.time_usec <= self.last_time_usec:

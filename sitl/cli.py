@@ -94,6 +94,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
+    p = sub.add_parser("up", help="start the SITL: simulator + autopilot, linked over MAVLink/UDP")
+    p.add_argument("--instance", type=int, default=0, help="first vehicle instance N (ports +N)")
+    p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1)")
+    p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
+    p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")
+    p.add_argument("--vehicle", default="paper_quad")
+    p.add_argument(
+        "--speed", type=_speed, default="1", help="wall-clock pacing: 1 = real time (default), a factor, or max"
+    )
+    p.add_argument(
+        "--autostart",
+        action="store_true",
+        help="arm at t=0 and fly the scenario's trajectory (the paper's experiment)",
+    )
+    p.add_argument("--duration", type=float, default=None, help="stop after this simulated time (s)")
+    p.add_argument("--sitl-config", default=None, help="alternative sitl.toml")
+    p.set_defaults(func=_cmd_up)
+
     p = sub.add_parser("paper", help="reproduce the paper's experiment in-process (Tables I-III, figures)")
     p.add_argument("--out", default="out/paper", help="output directory (default: out/paper)")
     p.add_argument(

@@ -160,8 +160,9 @@ def test_hil_frame_decoding_prefers_odometry():
         m.MAV_ESTIMATOR_TYPE_MOCAP,
         100,
     )
-    data = enc.pack(odo)
-    frame = decode_frame(new_parser().parse_buffer(data), HOME)
+    hb = m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)
+    data = enc.pack(hb) + enc.pack(odo)
+    frame = decode_frame(data, new_parser(), HOME)
     assert frame.time_usec == 5_000_000
     assert frame.state.position_m == pytest.approx((1.234567, 2.0, 3.0), abs=1e-6)
     assert frame.state.velocity_m_s == pytest.approx((0.1, -0.2, -0.3), abs=1e-7)
@@ -176,3 +177,23 @@ def test_actuator_answer_carries_time_flags_and_armed_bit():
     assert list(msg.controls[:4]) == pytest.approx([0.3, 0.1, -0.1, 0.0])
     off = new_parser().parse_buffer(enc.encode(44_000, (0.3, 0.1, -0.1, 0.0), armed=False))[0]
     assert not off.mode & m.MAV_MODE_FLAG_SAFETY_ARMED and max(off.controls) == 0.0
+
+
+def test_hil_state_quaternion_source_and_corruption():
+    enc = Encoder(1, 51)
+    q_ned = frames.quaternion_to_ned(quaternion_from_euler(0.0, 0.0, 0.5))
+    lat, lon, alt = frames.ned_to_geodetic(1.0, 2.0, -3.0, HOME)
+    hsq = m.MAVLink_hil_state_quaternion_message(
+        7_000, list(q_ned), 0.0, 0.0, 0.0, round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
+        10, -20, 30, 0, 0, 0, 0, 1000)
+    frame = decode_frame(enc.pack(hsq), new_parser(), HOME, use_odometry=True)
+    assert frame.time_usec == 7_000
+    # quantised: 1e-7 deg of latitude is ~1.1 cm
+    assert frame.state.position_m == pytest.approx((1.0, -2.0, 3.0), abs=0.01)
+    assert frame.state.velocity_m_s == pytest.approx((0.1, 0.2, -0.3))
+    assert frame.state.euler_rad[2] == pytest.approx(0.5, abs=1e-6)
+    data = bytearray(enc.pack(hsq))
+    data[20] ^= 0xFF  # corrupt the payload: the CRC check refuses it
+    with pytest.raises(Exception):
+        decode_frame(bytes(data), new_parser(), HOME)
+    assert decode_frame(enc.pack(m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)), new_parser(), HOME) is None
