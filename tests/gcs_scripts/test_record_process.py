@@ -1,0 +1,214 @@
+"""The recorder as a real process: fed by a real zenoh publisher and real MAVLink over UDP.
+
+The test plays both SITL processes: it opens the simulator's zenoh hub (truth + controller
+batches, the two info queryables) and sends MAVLink 2 telemetry from the autopilot's GCS port
+(18570+N) to the recorder (14550+N). One recorder is killed with SIGKILL mid-run: the parts it
+wrote must be readable. Another stops by itself (--until-disarmed) and merges its parts.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from gcs_scripts import record as record_module
+from gcs_scripts import session_log as sl
+from gcs_scripts.analysis.log_reader import read_session
+from gcs_scripts.link import mavutil
+from quadcommon import bus, wire
+from quadcommon.bus_records import CONTROLLER_CODEC, TRUTH_CODEC
+
+from .helpers import Vehicle, control_times, controller_rows, ref_x, truth_rows
+
+SIM_INFO = {"instance": 0, "vehicle": "paper_quad", "scenario": "circle", "actuation": "wrench",
+            "physics_hz": 1000.0, "control_hz": 500.0, "speed": "max", "sim_time_s": 0.0}  # fmt: skip
+AP_INFO = {"instance": 0, "controller": "intbs_nlhinf", "vehicle": "paper_quad", "control_hz": 500.0}
+
+
+class FakeSitl:
+    """The simulator's zenoh hub and the autopilot's GCS link, as the test's puppets."""
+
+    def __init__(self, instance: int) -> None:
+        self.instance = instance
+        ports = wire.ports(instance)
+        self.session = bus.open_hub(ports.zenoh)
+        self.truth_pub = self.session.declare_publisher(wire.zenoh_key(instance, "truth"))
+        self.ctrl_pub = self.session.declare_publisher(wire.zenoh_key(instance, "controller"))
+        self.queryables = [
+            (self.session.declare_queryable(wire.zenoh_key(instance, "info"), zenoh.handlers.FifoChannel(8)),
+             dict(SIM_INFO, instance=instance)),
+            (self.session.declare_queryable(wire.zenoh_key(instance, "autopilot/info"),
+                                            zenoh.handlers.FifoChannel(8)), dict(AP_INFO, instance=instance)),
+        ]  # fmt: skip
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((wire.LOOPBACK, ports.gcs_local))
+        self.gcs = (wire.LOOPBACK, ports.gcs_remote)
+        self.vehicle = Vehicle(instance)
+        self.k = 0  # control step counter
+        self.mav_sent: list[tuple[float, float]] = []  # (stamp s, x) of LOCAL_POSITION_NED sent
+        self.frames_sent = 0
+
+    def send(self, frame: bytes) -> None:
+        try:
+            self.sock.sendto(frame, self.gcs)
+            self.frames_sent += 1
+        except OSError:
+            pass  # recorder not listening yet (ICMP port unreachable)
+
+    def answer_queries(self) -> None:
+        for queryable, info in self.queryables:
+            query = queryable.try_recv()
+            if query is not None:
+                with query:
+                    query.reply(query.key_expr, json.dumps(info).encode())
+
+    def step(self, armed: bool = True) -> None:
+        """One batch: 10 control steps (20 ms of simulation time) on zenoh, telemetry on UDP."""
+        times = control_times(0.0, 10) + self.k * 0.002
+        self.k += 10
+        self.truth_pub.put(TRUTH_CODEC.encode(truth_rows(times).tolist()))
+        self.ctrl_pub.put(CONTROLLER_CODEC.encode(controller_rows(times).tolist()))
+        t = float(times[-1])
+        x = round(t, 3) * 10.0
+        self.send(self.vehicle.local_position(t, x=x))
+        self.mav_sent.append((round(t, 3), x))
+        if self.k % 500 == 0:  # 1 Hz of simulation time
+            self.send(self.vehicle.heartbeat(armed=armed))
+        self.answer_queries()
+
+    def close(self) -> None:
+        self.sock.close()
+        self.session.close()
+
+
+def _start_recorder(instance: int, out: Path, *extra: str) -> subprocess.Popen:
+    script = Path(record_module.__file__)
+    return subprocess.Popen(
+        [sys.executable, str(script), "--instance", str(instance), "--out", str(out), *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+def _wait_matching(sitl: FakeSitl, proc: subprocess.Popen) -> None:
+    deadline = time.monotonic() + 8.0
+    while time.monotonic() < deadline:
+        if sitl.truth_pub.matching_status.matching and sitl.ctrl_pub.matching_status.matching:
+            return
+        assert proc.poll() is None, proc.stdout.read()
+        time.sleep(0.01)
+    pytest.fail("the recorder's zenoh subscribers never matched")
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait(timeout=5)
+
+
+def _check_rows(table_cols: dict[str, np.ndarray], sitl: FakeSitl) -> None:
+    t = table_cols["time_s"]
+    assert np.all(np.diff(t) > 0), "rows in time order, no duplicates"
+    np.testing.assert_allclose(t / 0.002, np.rint(t / 0.002), atol=1e-6)  # on the control grid
+    have_truth = ~np.isnan(table_cols["x_m"])
+    have_ctrl = ~np.isnan(table_cols["x_ref_m"])
+    assert have_truth.mean() > 0.99 and have_ctrl.mean() > 0.99  # nothing lost on loopback
+    np.testing.assert_allclose(table_cols["x_m"][have_truth], np.sin(t[have_truth]), atol=1e-12)
+    np.testing.assert_allclose(table_cols["x_ref_m"][have_ctrl], ref_x(t[have_ctrl]), atol=1e-12)
+    # As-of join: the MAVLink value is the one sent with that stamp, and the stamp is <= the row.
+    sent = dict(sitl.mav_sent)
+    ok = ~np.isnan(table_cols["mav_local_time_s"])
+    assert ok.sum() > 0.9 * len(t)
+    stamps = table_cols["mav_local_time_s"][ok]
+    assert np.all(stamps <= t[ok] + 1e-9)
+    expected = np.array([sent[round(s, 3)] for s in stamps])
+    np.testing.assert_allclose(table_cols["mav_local_x_m"][ok], expected, rtol=1e-6)
+
+
+def test_recorder_killed_mid_run_leaves_readable_parts(tmp_path: Path) -> None:
+    instance = 70
+    out = tmp_path / "crash"
+    sitl = FakeSitl(instance)
+    proc = _start_recorder(instance, out)
+    try:
+        _wait_matching(sitl, proc)
+        deadline = time.monotonic() + 8.0
+        parts_dir = tmp_path / "crash.parts"
+        # Feed at ~4x real time until at least two parts are on disk, then kill -9 mid-stream.
+        while time.monotonic() < deadline and len(sl.part_paths(parts_dir)) < 2:
+            sitl.step()
+            time.sleep(0.005)
+        assert len(sl.part_paths(parts_dir)) >= 2
+        for _ in range(20):
+            sitl.step()
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=5)
+        assert proc.returncode == -signal.SIGKILL
+    finally:
+        _stop(proc)
+        sitl.close()
+    assert not (tmp_path / "crash.parquet").exists()  # no merge after a crash
+    table, meta = sl.read_session_table(parts_dir)
+    cols = {n: table.column(n).to_numpy() for n in table.column_names}
+    assert table.num_rows > 100
+    _check_rows(cols, sitl)
+    assert meta["instance"] == instance and meta["complete"] is False
+    assert meta["scenario"] == "circle" and meta["controller"] == "intbs_nlhinf"  # from the queryables
+    record = read_session(parts_dir)  # the analysis accepts the parts directory
+    assert len(record.time_s) == int((~np.isnan(cols["x_ref_m"]) & ~np.isnan(cols["x_m"])).sum())
+    # The tlog was flushed at least once a second: what is there reads back.
+    log = mavutil.mavlink_connection(str(tmp_path / "crash.tlog"))
+    types = []
+    for _ in range(100_000):
+        msg = log.recv_match(blocking=False)
+        if msg is None:
+            break
+        types.append(msg.get_type())
+    log.close()
+    assert types.count("LOCAL_POSITION_NED") > 10 and "BAD_DATA" not in types
+
+
+def test_recorder_stops_after_disarm_and_merges(tmp_path: Path) -> None:
+    instance = 71
+    out = tmp_path / "clean"
+    sitl = FakeSitl(instance)
+    proc = _start_recorder(instance, out, "--until-disarmed")
+    try:
+        _wait_matching(sitl, proc)
+        for _ in range(3):  # the recorder binds its UDP port at start: make sure it hears us
+            sitl.send(sitl.vehicle.heartbeat(armed=False))
+        for _ in range(150):  # 3 s of simulation time, armed
+            sitl.step(armed=True)
+            time.sleep(0.002)
+        sitl.send(sitl.vehicle.statustext("landed: disarmed"))
+        deadline = time.monotonic() + 8.0
+        while proc.poll() is None and time.monotonic() < deadline:
+            sitl.step(armed=False)
+            time.sleep(0.002)
+        output = proc.communicate(timeout=10)[0]
+        assert proc.returncode == 0, output
+        assert "stopped (disarmed)" in output
+    finally:
+        _stop(proc)
+        sitl.close()
+    assert (tmp_path / "clean.parquet").exists() and not (tmp_path / "clean.parts").exists()
+    table, meta = sl.read_session_table(tmp_path / "clean.parquet")
+    cols = {n: table.column(n).to_numpy() for n in table.column_names}
+    _check_rows(cols, sitl)
+    assert meta["complete"] is True and meta["stopped_by"] == "disarmed"
+    assert meta["simulator_info"]["physics_hz"] == 1000.0 and meta["control_hz"] == 500.0
+    assert meta["recording_start_sim_time_s"] == pytest.approx(cols["time_s"][0], abs=0.05)
+    assert [s[2] for s in meta["statustext"]] == ["landed: disarmed"]
+    assert cols["mav_armed"][-1] == 0.0 and np.nanmax(cols["mav_armed"]) == 1.0
+    assert meta["truth_rows"] == table.num_rows
