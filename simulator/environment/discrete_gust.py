@@ -108,7 +108,9 @@ def parse_one_minus_cosine(sec: Section) -> OneMinusCosineGust:
         direction = sec.vector("direction", 3, lo=-1e3, hi=1e3)
         if math.sqrt(sum(c * c for c in direction)) < 1e-9:
             raise sec.error(
-                "direction", list(direction), "a non-zero 3-vector (world frame: x forward, y left, z up)"
+                "direction",
+                sec.data["direction"],
+                "a non-zero 3-vector (world frame: x forward, y left, z up)",
             )
     else:
         raise ConfigError(

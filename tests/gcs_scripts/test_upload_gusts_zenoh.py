@@ -1,0 +1,204 @@
+"""End to end over real zenoh sessions on loopback: upload_gusts() against a queryable declared
+the way the simulator declares it (hub session, FIFO channel polled from the loop).
+
+``GustUploadServer`` below is the reference wiring for simulator/app.py.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from gcs_scripts import upload_gusts as ug
+from quadcommon import bus, wire
+from quadcommon.config import CONFIG_DIR
+from quadcommon.schema import ConfigError
+from simulator.environment.gust_profile import (
+    DisturbanceSchedule,
+    GustProfile,
+    load_gust_profile,
+    profile_to_mapping,
+)
+from simulator.environment.gust_upload import handle_gust_request
+
+INSTANCE = 81  # tests use instances 80-89 (zenoh ports 7527-7536) to stay clear of real vehicles
+
+
+class GustUploadServer:
+    """The simulator's side of ``quadsitl/<N>/sim/gusts``: call :meth:`poll` from the main loop.
+
+    ``now_s()`` is the simulation time; ``install(profile, start_s)`` swaps the schedule at the
+    next frame boundary (the app's ``schedule_gust_profile``).
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        now_s: Callable[[], float],
+        install: Callable[[GustProfile, float], None],
+        step_s: float,
+    ) -> None:
+        self.key = key
+        self.queryable = session.declare_queryable(key, zenoh.handlers.FifoChannel(16))
+        self.now_s, self.install, self.step_s = now_s, install, step_s
+
+    def poll(self) -> int:
+        """Answer every waiting upload (non-blocking); returns how many were answered."""
+        answered = 0
+        for _ in range(16):  # bounded: at most the channel's capacity per call
+            try:
+                query = self.queryable.try_recv()
+            except zenoh.ZError:
+                return answered  # channel closed (session closing)
+            if query is None:
+                return answered
+            with query:  # finalises the query: the getter's iteration ends after our reply
+                payload = query.payload.to_bytes() if query.payload is not None else b""
+                ok, reply, profile, start_s = handle_gust_request(payload, self.now_s(), self.step_s)
+                if ok:
+                    try:
+                        self.install(profile, start_s)  # type: ignore[arg-type]
+                    except (ValueError, ConfigError) as exc:  # not expected after validation
+                        query.reply_err(
+                            json.dumps({"accepted": False, "error": f"gust upload: {exc}"}).encode()
+                        )
+                    else:
+                        query.reply(self.key, reply)
+                else:
+                    query.reply_err(reply)
+            answered += 1
+        return answered
+
+    def close(self) -> None:
+        try:
+            self.queryable.undeclare()
+        except zenoh.ZError:
+            pass
+
+
+class FakeSimulator:
+    """Hub session + upload server polled by a bounded background loop (the simulator's loop)."""
+
+    def __init__(self, instance: int) -> None:
+        self.session = bus.open_hub(wire.ports(instance).zenoh)
+        self.sim_time_s = 10.0
+        self.schedule = DisturbanceSchedule(load_gust_profile("paper_steps"))  # the start-up profile
+        self.installed: list[tuple[GustProfile, float]] = []
+        self.server = GustUploadServer(
+            self.session, wire.zenoh_key(instance, "sim/gusts"), lambda: self.sim_time_s, self._install, 1e-3
+        )
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    def _install(self, profile: GustProfile, start_s: float) -> None:
+        self.schedule = DisturbanceSchedule(profile, start_s, 1e-3)  # replace semantics
+        self.installed.append((profile, start_s))
+
+    def _loop(self) -> None:
+        deadline = time.monotonic() + 60.0  # bounded even if a test forgets to stop it
+        while not self._stop.is_set() and time.monotonic() < deadline:
+            self.server.poll()
+            time.sleep(0.001)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.server.close()
+        self.session.close()
+
+
+@pytest.fixture(scope="module")
+def simulator() -> Iterator[FakeSimulator]:
+    sim = FakeSimulator(INSTANCE)
+    try:
+        yield sim
+    finally:
+        sim.close()
+
+
+def test_accepted_upload_replaces_the_start_up_profile(simulator: FakeSimulator) -> None:
+    mapping = profile_to_mapping(load_gust_profile("gust_1cos_x"))
+    answer = ug.upload_gusts(mapping, INSTANCE, ug.start_spec(after_s=1.5), timeout=5.0)
+    assert answer == {
+        "accepted": True,
+        "start_s": 11.5,
+        "summary": "3 m/s 1-cos gust along x, 10-12 s: 1-cos gust 3 m/s along +x at 10 s for 2 s",
+    }
+    profile, start_s = simulator.installed[-1]
+    assert profile == load_gust_profile("gust_1cos_x") and start_s == 11.5
+    force, torque, wind = simulator.schedule.evaluate(11.5 + 11.0)  # the gust's peak
+    assert force == (0.0, 0.0, 0.0) and torque == (0.0, 0.0, 0.0)  # the paper's steps are gone
+    assert wind == pytest.approx((3.0, 0.0, 0.0))
+
+
+def test_rejected_upload_returns_the_exact_validation_message(simulator: FakeSimulator) -> None:
+    before = len(simulator.installed)
+    bad = {
+        "one_minus_cosine": [
+            {"start_s": 0.0, "duration_s": 1.0, "amplitude_m_s": 2.0, "direction": [0, 0, 0]}
+        ]
+    }
+    answer = ug.upload_gusts(bad, INSTANCE, "now", timeout=5.0)
+    expected = json.loads(handle_gust_request(ug.build_request(bad, "now"), simulator.sim_time_s).reply)
+    assert answer == expected
+    assert answer["error"].startswith("gust upload: key 'profile.one_minus_cosine[0].direction' = [0, 0, 0]")
+    assert len(simulator.installed) == before
+
+
+def test_reusing_an_open_session(simulator: FakeSimulator) -> None:
+    session = bus.open_peer(wire.ports(INSTANCE).zenoh)
+    try:
+        for at in (20.0, 30.0):
+            answer = ug.upload_gusts({}, INSTANCE, {"at_s": at}, timeout=5.0, session=session)
+            assert answer["accepted"] and answer["start_s"] == at
+    finally:
+        session.close()
+    assert simulator.installed[-1] == (GustProfile(), 30.0)
+
+
+def test_command_line_exit_codes(
+    simulator: FakeSimulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good = str(CONFIG_DIR / "gusts" / "mixed.toml")
+    assert ug.main([good, "--instance", str(INSTANCE), "--start-at", "12", "--timeout", "5"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("accepted: starts at t = 12.000 s (simulation time): Mixed:")
+    assert simulator.installed[-1] == (load_gust_profile("mixed"), 12.0)
+
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"dryden": {"w20_m_s": 99.0, "altitude_m": 2.5, "seed": 1}}))
+    assert ug.main([str(bad), "--instance", str(INSTANCE), "--timeout", "5"]) == 1
+    err = capsys.readouterr().err
+    assert err.strip() == (
+        "rejected: gust upload: key 'profile.dryden.w20_m_s' = 99.0 is invalid; allowed: [0, 30] (m/s)"
+    )
+
+    assert ug.main([good, "--instance", str(INSTANCE), "--start-at", "1", "--timeout", "5"]) == 1  # past
+    assert "key 'start.at_s' = 1.0 is invalid" in capsys.readouterr().err
+
+
+def test_script_runs_as_a_file_from_any_directory(simulator: FakeSimulator, tmp_path: Path) -> None:
+    profile = str(CONFIG_DIR / "gusts" / "dryden_light.toml")
+    command = [
+        sys.executable,
+        str(Path(ug.__file__)),
+        profile,
+        "--instance",
+        str(INSTANCE),
+        "--start-after",
+        "2",
+    ]
+    done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stderr
+    assert "accepted: starts at t = 12.000 s (simulation time): Light Dryden turbulence" in done.stdout
+    assert simulator.installed[-1] == (load_gust_profile("dryden_light"), 12.0)
