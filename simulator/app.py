@@ -236,37 +236,40 @@ class Simulator:
             try:
                 data, address = sock.recvfrom(MAX_DATAGRAM)
             except TimeoutError:
-                now = time.perf_counter()
-                if now >= deadline:
-                    if outage_start is None:
-                        outage_start = now - self.timeout_s
-                        self.log(
-                            f"no HIL_ACTUATOR_CONTROLS for frame t={time_usec * 1e-6:.3f} s within "
-                            f"{self.timeout_s:.1f} s; is the autopilot running? "
-                            f"(udp {wire.LOOPBACK}:{self.ports.hil})"
-                        )
-                    self._send(datagram)
-                    deadline = now + self.timeout_s
-                info.poll()
-                continue
+                data = None
             except OSError:
-                continue  # e.g. ICMP port unreachable surfaced by the kernel: the peer is gone
-            if address != self.peer:
-                if outage_start is not None:
-                    self.peer = address
+                data = None  # e.g. ICMP port unreachable surfaced by the kernel: the peer is gone
+            if data is not None:
+                if address == self.peer:
+                    answer = decode(data)
+                    if answer is not None and answer.time_usec == time_usec:
+                        if outage_start is not None:
+                            self.log(
+                                f"link recovered: answer for frame t={time_usec * 1e-6:.3f} s after "
+                                f"{time.perf_counter() - outage_start:.1f} s"
+                            )
+                            self._resync = True
+                        return answer
+                    # else: a heartbeat, or a late answer to an earlier (resent) frame
+                elif outage_start is not None:
+                    self.peer = address  # a restarted autopilot says hello from a new port
                     self.log(f"autopilot now at {address[0]}:{address[1]}; resending frame")
                     self._send(datagram)
-                continue
-            answer = decode(data)
-            if answer is None or answer.time_usec != time_usec:
-                continue  # heartbeat, or a late answer to an earlier (resent) frame
-            if outage_start is not None:
-                self.log(
-                    f"link recovered: answer for frame t={time_usec * 1e-6:.3f} s after "
-                    f"{time.perf_counter() - outage_start:.1f} s"
-                )
-                self._resync = True
-            return answer
+                    continue
+            # Checked on every wake-up, so a peer chattering without answering is reported too.
+            now = time.perf_counter()
+            if now >= deadline:
+                if outage_start is None:
+                    outage_start = now - self.timeout_s
+                    self.log(
+                        f"no HIL_ACTUATOR_CONTROLS for frame t={time_usec * 1e-6:.3f} s within "
+                        f"{self.timeout_s:.1f} s; is the autopilot running? "
+                        f"(udp {wire.LOOPBACK}:{self.ports.hil})"
+                    )
+                self._send(datagram)
+                deadline = now + self.timeout_s
+            if data is None:
+                info.poll()
         return None
 
     def _send(self, datagram: bytes) -> None:

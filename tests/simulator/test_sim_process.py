@@ -146,6 +146,21 @@ def test_timeout_is_reported_frame_resent_and_link_recovers(tmp_path):
         assert sim.terminate() == 0
 
 
+def test_peer_that_chatters_without_answering_is_reported(tmp_path):
+    """Heartbeats and stale answers every 10 ms do not hide a missing answer."""
+    sitl = sitl_toml_with(tmp_path, timeout_s=0.3)
+    with SimProcess(56, "--sitl-config", str(sitl)) as sim, ScriptedAutopilot(56) as ap:
+        frame = ap.link()
+        frame = ap.step(frame)
+        deadline = time.monotonic() + 1.5
+        while time.monotonic() < deadline and "no HIL_ACTUATOR_CONTROLS" not in sim.output:
+            ap.hello()
+            ap.answer(frame.time_usec - FRAME_USEC)  # stale
+            time.sleep(0.01)
+        sim.wait_line(f"no HIL_ACTUATOR_CONTROLS for frame t={frame.time_usec * 1e-6:.3f} s", timeout=0.5)
+        assert sim.terminate() == 0
+
+
 def test_actuation_mismatch_is_refused_with_motors_off():
     """paper_quad flies a wrench; rotor-speed controls (flags bit 1 clear) are refused."""
     with SimProcess(43) as sim, ScriptedAutopilot(43) as ap:
