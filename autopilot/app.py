@@ -310,7 +310,9 @@ class Autopilot:
     # -- frames --------------------------------------------------------------------------------------
     def _on_hil_datagram(self, data: bytes) -> None:
         try:
-            frame = decode_frame(data, self.hil_parser, self.sitl.home, self.options.state_source == "odometry")
+            frame = decode_frame(
+                data, self.hil_parser, self.sitl.home, self.options.state_source == "odometry"
+            )
         except Exception as exc:  # a corrupt datagram: report, do not die (the simulator resends)
             self.log(f"bad HIL datagram ignored: {exc}")
             return
@@ -465,6 +467,8 @@ class Autopilot:
 
     def _wall_housekeeping(self, now: float) -> None:
         """Without frames: heartbeat on the wall clock, and tell the simulator we are here."""
+        if self._controller_rows and now - self.last_frame_wall > 0.05:
+            self._flush_controller_rows()  # frames paused: do not hold back the last rows
         if not self.linked or now - self.last_frame_wall > SIM_LOSS_WALL_S:
             if self.linked and not self.sim_lost:
                 self.sim_lost = True
