@@ -44,6 +44,7 @@ from .mavlink.commands import CommandDispatcher, CommandRequest, command_ack, re
 from .mavlink.hil import ActuatorEncoder, decode_frame
 from .mavlink.links import GcsLink, PortInUse
 from .mavlink.offboard import decode_setpoint
+from .mission.service import MissionService
 from .params.definitions import default_parameters
 
 m = mavlink
@@ -93,6 +94,16 @@ class Autopilot:
         self.commands = CommandDispatcher()
         self.message_handlers: dict[int, Callable] = {}
         self._register_handlers()
+        self.missions = MissionService(
+            self.commander,
+            self.encoder,
+            lambda: self.links,
+            self._statustext,
+            self.sitl.home,
+            self.system_id,
+            wire.AUTOPILOT_COMPONENT_ID,
+        )
+        self.missions.register(self.message_handlers, self.commands, lambda: self.sim_time)
         self.autostart_trajectory = None
         if options.autostart:
             self.autostart_trajectory = trajectory_from_spec(load_scenario(options.autostart).trajectory)
@@ -375,6 +386,7 @@ class Autopilot:
         self._update_status(frame, guidance, output)
         self._record_controller(t, guidance, output)
         self._send_telemetry(t)
+        self.missions.update(t)  # MISSION_CURRENT, MISSION_ITEM_REACHED
         if commander.events:
             self._send_events()
 
@@ -467,6 +479,7 @@ class Autopilot:
 
     def _wall_housekeeping(self, now: float) -> None:
         """Without frames: heartbeat on the wall clock, and tell the simulator we are here."""
+        self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         if self._controller_rows and now - self.last_frame_wall > 0.05:
             self._flush_controller_rows()  # frames paused: do not hold back the last rows
         if not self.linked or now - self.last_frame_wall > SIM_LOSS_WALL_S:
@@ -483,9 +496,9 @@ class Autopilot:
                 for link in self.links:
                     link.send(hb)
                     link.send(self.encoder.pack(telemetry.sys_status(self.status)))
-                if not self.linked:
-                    self.hil_sock.sendto(hb, self.hil_address)
-            if not self.linked and now >= self._next_hil_hello:
+                self.missions.update(self.sim_time, force=True)
+            if (not self.linked or self.sim_lost) and now >= self._next_hil_hello:
+                # Say hello until frames flow: a restarted simulator learns our address from it.
                 self._next_hil_hello = now + 0.2
                 self.hil_sock.sendto(self.encoder.pack(telemetry.heartbeat(self.status)), self.hil_address)
         self._poll_info(now)

@@ -31,6 +31,7 @@ import signal
 import socket
 import sys
 import time
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,12 +44,13 @@ from .dynamics.plant import make_plant
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
 from .mavlink.hil import ActuatorAnswer, ActuatorDecoder, HilFrameEncoder
 from .sensors import SensorSuite, load_sensors
-from .truth_bus import InfoServer, TruthStream, truth_row
+from .truth_bus import GustUploadServer, InfoServer, TruthStream, truth_row
 
 POLL_S = 0.05  # longest blocking wait: bounds the reaction time to SIGTERM and info queries
 RESYNC_BEHIND_S = 0.2  # further behind the wall-clock schedule than this: re-anchor, do not sprint
 RATE_REPORT_WALL_S = 10.0  # at most one "cannot keep up" line per this many wall seconds
 MAX_DATAGRAM = 65535
+MAX_ROUND_TRIP_SAMPLES = 2_000_000  # 16 MB at most, ~1 h at 500 Hz
 _MOTORS_OFF = (0.0, 0.0, 0.0, 0.0)
 
 
@@ -101,6 +103,7 @@ class Simulator:
         self.session: Any = None
         self.truth_stream: TruthStream | None = None
         self.info: InfoServer | None = None
+        self.gusts: GustUploadServer | None = None
         self.peer: tuple[str, int] | None = None
         self._running = True
         self.sim_time_s = 0.0
@@ -111,6 +114,8 @@ class Simulator:
         # Wall time per frame split into own work and waiting for the autopilot (for the report).
         self.work_s = 0.0
         self.wait_s = 0.0
+        # HIL round trip per frame (send -> matching answer), wall seconds; bounded memory.
+        self.round_trips = array("d")
 
     # -- setup / teardown ---------------------------------------------------------------------
     def open(self) -> None:
@@ -138,12 +143,19 @@ class Simulator:
             ) from None
         self.truth_stream = TruthStream(self.session, wire.zenoh_key(n, "truth"))
         self.info = InfoServer(self.session, wire.zenoh_key(n, "info"), self.describe)
+        self.gusts = GustUploadServer(
+            self.session, wire.zenoh_key(n, "sim/gusts"), lambda: self.sim_time_s,
+            self._install_uploaded_gusts, self.dt_physics, self._wind_warning,
+        )
 
     def close(self) -> None:
         """Flush the truth batch, close zenoh and the socket (idempotent)."""
         if self.truth_stream is not None:
             self.truth_stream.close()
             self.truth_stream = None
+        if self.gusts is not None:
+            self.gusts.close()
+            self.gusts = None
         if self.info is not None:
             self.info.close()
             self.info = None
@@ -182,6 +194,25 @@ class Simulator:
         """
         self._pending_schedule = self._new_schedule(profile, start_time_s)
 
+    def _poll_services(self) -> None:
+        """Answer zenoh queries (info, gust uploads) without blocking."""
+        self.info.poll()  # type: ignore[union-attr]
+        self.gusts.poll()  # type: ignore[union-attr]
+
+    def _install_uploaded_gusts(self, profile: GustProfile, start_time_s: float) -> None:
+        self.schedule_gust_profile(profile, start_time_s)
+        self.log(f"gust profile uploaded: applies from t={start_time_s:.3f} s")
+
+    def _wind_warning(self, profile: GustProfile) -> str | None:
+        """Wind acts through drag only: say so when this vehicle has none."""
+        has_wind = bool(profile.one_minus_cosine) or profile.dryden is not None
+        if has_wind and not any(self.vehicle.plant.drag_coefficient_n_s_m):
+            return (
+                f"vehicle '{self.vehicle.name}' has zero drag (plant.drag_coefficient_n_s_m), so wind "
+                "gusts and turbulence have no effect; use a vehicle with drag, e.g. paper_quad_drag"
+            )
+        return None
+
     def _new_schedule(self, profile: GustProfile, start_time_s: float) -> DisturbanceSchedule:
         """The one place schedules are built: evaluated at every physics step, in non-decreasing
         time (the Dryden turbulence samples at ``step_s`` and only runs forward)."""
@@ -206,7 +237,7 @@ class Simulator:
             try:
                 data, address = self.sock.recvfrom(MAX_DATAGRAM)
             except TimeoutError:
-                self.info.poll()
+                self._poll_services()
                 continue
             except OSError:
                 continue
@@ -269,7 +300,7 @@ class Simulator:
                 self._send(datagram)
                 deadline = now + self.timeout_s
             if data is None:
-                info.poll()
+                self._poll_services()
         return None
 
     def _send(self, datagram: bytes) -> None:
@@ -307,7 +338,7 @@ class Simulator:
         if not self._wait_for_link():
             return 0
         plant, sensors, encoder = self.plant, self.sensors, self.encoder
-        append_truth, poll_info = self.truth_stream.append, self.info.poll
+        append_truth, poll_info = self.truth_stream.append, self._poll_services
         send = self._send
         perf_counter = time.perf_counter
         dt, dt_physics, substeps = self.dt_control, self.dt_physics, self.substeps
@@ -336,6 +367,7 @@ class Simulator:
             force, torque, wind = schedule.evaluate(t)
             gps = sensors.sample_gps(truth) if k % gps_every == 0 else None
             datagram = encoder.encode(time_usec, truth, sensors.sample(truth), wind, gps)
+            sent_at = perf_counter()
             send(datagram)
             self.frames_sent += 1
             self.sim_time_s = t
@@ -349,6 +381,8 @@ class Simulator:
             if answer is None:
                 break
             answered = perf_counter()
+            if len(self.round_trips) < MAX_ROUND_TRIP_SAMPLES:
+                self.round_trips.append(answered - sent_at)
             self._apply(answer)
             for j in range(substeps):
                 f, tq, w = schedule.evaluate(t + j * dt_physics)
@@ -392,11 +426,17 @@ class Simulator:
 
     def summary(self) -> str:
         n = max(self.frames_sent - 1, 1)  # the final frame is not answered
-        return (
+        text = (
             f"stopped at t={self.sim_time_s:.3f} s ({self.frames_sent} frames; per frame "
             f"{1e6 * self.work_s / n:.0f} us own work, {1e6 * self.wait_s / n:.0f} us waiting for the "
             f"autopilot; {self.overruns} re-anchors)"
         )
+        if self.round_trips:
+            rtt = sorted(self.round_trips)
+            median = rtt[len(rtt) // 2]
+            p99 = rtt[min(int(0.99 * len(rtt)), len(rtt) - 1)]
+            text += f"; HIL round trip median {1e6 * median:.0f} us, p99 {1e6 * p99:.0f} us"
+        return text
 
 
 # -- command line -----------------------------------------------------------------------------------

@@ -22,6 +22,8 @@ import zenoh
 from quadcommon.bus_records import TRUTH_CODEC
 
 from .dynamics.plant import TruthState
+from .environment.gust_profile import GustProfile
+from .environment.gust_upload import handle_gust_request
 
 Vector3 = tuple[float, float, float]
 
@@ -109,6 +111,65 @@ class InfoServer:
                 return answered
             with query:
                 query.reply(self.key, json.dumps(self.describe()).encode())
+            answered += 1
+        return answered
+
+    def close(self) -> None:
+        try:
+            self.queryable.undeclare()
+        except zenoh.ZError:
+            pass
+
+
+class GustUploadServer:
+    """The simulator's side of ``quadsitl/<N>/sim/gusts`` (protocol: environment/gust_upload.py).
+
+    Call :meth:`poll` from the main loop. ``now_s()`` is the simulation time;
+    ``install(profile, start_s)`` swaps the schedule at the next frame boundary; ``warn(profile)``
+    may return a note added to an accepted answer (e.g. wind on a vehicle without drag).
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        now_s: Callable[[], float],
+        install: Callable[[GustProfile, float], None],
+        step_s: float,
+        warn: Callable[[GustProfile], str | None] = lambda profile: None,
+    ) -> None:
+        self.key = key
+        self.queryable = session.declare_queryable(key, zenoh.handlers.FifoChannel(16))
+        self.now_s, self.install, self.step_s, self.warn = now_s, install, step_s, warn
+
+    def poll(self) -> int:
+        """Answer every waiting upload (non-blocking); returns how many were answered."""
+        answered = 0
+        for _ in range(16):  # bounded: at most the channel's capacity per call
+            try:
+                query = self.queryable.try_recv()
+            except zenoh.ZError:
+                return answered  # channel closed (session closing)
+            if query is None:
+                return answered
+            with query:  # finalises the query: the getter's iteration ends after our reply
+                payload = query.payload.to_bytes() if query.payload is not None else b""
+                ok, reply, profile, start_s = handle_gust_request(payload, self.now_s(), self.step_s)
+                if not ok:
+                    query.reply_err(reply)
+                else:
+                    try:
+                        self.install(profile, start_s)  # type: ignore[arg-type]
+                    except ValueError as exc:  # not expected after validation
+                        error = {"accepted": False, "error": f"gust upload: {exc}"}
+                        query.reply_err(json.dumps(error).encode())
+                    else:
+                        note = self.warn(profile)  # type: ignore[arg-type]
+                        if note:
+                            answer = json.loads(reply)
+                            answer["warning"] = note
+                            reply = json.dumps(answer).encode()
+                        query.reply(self.key, reply)
             answered += 1
         return answered
 

@@ -101,7 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")
     p.add_argument("--vehicle", default="paper_quad")
     p.add_argument(
-        "--speed", type=_speed, default="1", help="wall-clock pacing: 1 = real time (default), a factor, or max"
+        "--speed",
+        type=_speed,
+        default="1",
+        help="wall-clock pacing: 1 = real time (default), a factor, or max",
     )
     p.add_argument(
         "--autostart",

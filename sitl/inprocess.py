@@ -68,7 +68,7 @@ def run_scenario(
     cascade = Cascade(controller, vehicle, dt_control)
     trajectory: Trajectory = trajectory_from_spec(scenario.trajectory)
     profile = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
-    schedule = DisturbanceSchedule(profile)
+    schedule = DisturbanceSchedule(profile, step_s=dt_physics)
 
     steps = int(round(duration / dt_control))
     rows: list[tuple[float, ...]] = []

@@ -194,6 +194,6 @@ def test_hil_state_quaternion_source_and_corruption():
     assert frame.state.euler_rad[2] == pytest.approx(0.5, abs=1e-6)
     data = bytearray(enc.pack(hsq))
     data[20] ^= 0xFF  # corrupt the payload: the CRC check refuses it
-    with pytest.raises(Exception):
+    with pytest.raises(m.MAVError):
         decode_frame(bytes(data), new_parser(), HOME)
     assert decode_frame(enc.pack(m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)), new_parser(), HOME) is None

@@ -1,7 +1,5 @@
-"""End to end over real zenoh sessions on loopback: upload_gusts() against a queryable declared
-the way the simulator declares it (hub session, FIFO channel polled from the loop).
-
-``GustUploadServer`` below is the reference wiring for simulator/app.py.
+"""End to end over real zenoh sessions on loopback: upload_gusts() against the simulator's own
+GustUploadServer on a hub session, polled from a loop as simulator/app.py polls it.
 """
 
 from __future__ import annotations
@@ -11,16 +9,14 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from gcs_scripts import upload_gusts as ug
 from quadcommon import bus, wire
 from quadcommon.config import CONFIG_DIR
-from quadcommon.schema import ConfigError
 from simulator.environment.gust_profile import (
     DisturbanceSchedule,
     GustProfile,
@@ -28,61 +24,9 @@ from simulator.environment.gust_profile import (
     profile_to_mapping,
 )
 from simulator.environment.gust_upload import handle_gust_request
+from simulator.truth_bus import GustUploadServer
 
 INSTANCE = 81  # tests use instances 80-89 (zenoh ports 7527-7536) to stay clear of real vehicles
-
-
-class GustUploadServer:
-    """The simulator's side of ``quadsitl/<N>/sim/gusts``: call :meth:`poll` from the main loop.
-
-    ``now_s()`` is the simulation time; ``install(profile, start_s)`` swaps the schedule at the
-    next frame boundary (the app's ``schedule_gust_profile``).
-    """
-
-    def __init__(
-        self,
-        session: zenoh.Session,
-        key: str,
-        now_s: Callable[[], float],
-        install: Callable[[GustProfile, float], None],
-        step_s: float,
-    ) -> None:
-        self.key = key
-        self.queryable = session.declare_queryable(key, zenoh.handlers.FifoChannel(16))
-        self.now_s, self.install, self.step_s = now_s, install, step_s
-
-    def poll(self) -> int:
-        """Answer every waiting upload (non-blocking); returns how many were answered."""
-        answered = 0
-        for _ in range(16):  # bounded: at most the channel's capacity per call
-            try:
-                query = self.queryable.try_recv()
-            except zenoh.ZError:
-                return answered  # channel closed (session closing)
-            if query is None:
-                return answered
-            with query:  # finalises the query: the getter's iteration ends after our reply
-                payload = query.payload.to_bytes() if query.payload is not None else b""
-                ok, reply, profile, start_s = handle_gust_request(payload, self.now_s(), self.step_s)
-                if ok:
-                    try:
-                        self.install(profile, start_s)  # type: ignore[arg-type]
-                    except (ValueError, ConfigError) as exc:  # not expected after validation
-                        query.reply_err(
-                            json.dumps({"accepted": False, "error": f"gust upload: {exc}"}).encode()
-                        )
-                    else:
-                        query.reply(self.key, reply)
-                else:
-                    query.reply_err(reply)
-            answered += 1
-        return answered
-
-    def close(self) -> None:
-        try:
-            self.queryable.undeclare()
-        except zenoh.ZError:
-            pass
 
 
 class FakeSimulator:
