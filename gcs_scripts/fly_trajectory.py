@@ -5,15 +5,18 @@ stream position setpoints at the trajectory's start point p_d(0) (one setpoint p
 LOCAL_POSITION_NED received, so the stream is paced in simulation time at any --speed), arm on
 the ground (no takeoff: OFFBOARD lifts the vehicle to p_d(0)) and switch to OFFBOARD; once within
 --tolerance of p_d(0) and nearly still, hold it --settle seconds; then stream the trajectory:
-position + velocity + acceleration (feed-forward) + yaw, sampled at t - t0 where t0 is the
-simulation time of the first trajectory sample (printed: the analysis aligns on it, e.g.
+position + velocity + acceleration (feed-forward) + yaw, sampled at t - t0 where t0 is a
+simulation time planned just ahead (printed as ``t0=...``: the analysis aligns on it, e.g.
 ``quadsitl analyze LOG --t0 T0 --duration D``). Progress every 5 s of simulation time; at the
 end hold the last point --hold seconds, land and disarm. If the vehicle is already flying the
 script skips arming and flies to p_d(0) from where it is.
 
 In-process runs start the scenario at its initial state; through the SITL the vehicle starts
 wherever it is, so the first seconds after t0 differ (the trajectory is then flown from rest at
-p_d(0), not from the scenario's initial state).
+p_d(0), not from the scenario's initial state). The simulator applies the scenario's gust
+profile from ITS start; ``--gusts PROFILE`` uploads a profile (config/gusts name or file) over
+zenoh to start exactly at t0, so disturbances hit at the same trajectory times as in-process
+(the upload replaces the simulator's active profile; needs the simulator's sim/gusts queryable).
 
 Frames: the scenario's trajectory is in the paper's frame (x north, y left, z up); setpoints
 are converted to MAVLink's NED at the edge (quadcommon.frames). Errors reported here come from
@@ -36,7 +39,7 @@ if __package__ in (None, ""):
 from autopilot.guidance.trajectories import Reference, Trajectory, trajectory_from_spec  # noqa: E402
 from gcs_scripts import link as mavlink_link  # noqa: E402
 from gcs_scripts.link import Link, LinkError, PositionTarget, SetpointStream  # noqa: E402
-from quadcommon.config import ScenarioConfig, load_scenario  # noqa: E402
+from quadcommon.config import ScenarioConfig, config_path, load_scenario  # noqa: E402
 from quadcommon.schema import ConfigError  # noqa: E402
 
 say = mavlink_link.report
@@ -44,6 +47,8 @@ LOCAL_POSITION_NED_ID = 32
 EXTENDED_SYS_STATE_ID = 245
 PROGRESS_EVERY_S = 5.0
 SETTLE_SPEED_M_S = 0.05  # "nearly still" before the settle period starts
+T0_LEAD_S = 0.1  # t0 is planned this far ahead (sim s) ...
+T0_LEAD_GUSTS_S = 1.0  # ... or this far with a gust upload (done within it even at max speed)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -70,6 +75,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=60.0,
         help="sim seconds allowed for each step other than the trajectory",
     )
+    parser.add_argument(
+        "--gusts",
+        default=None,
+        metavar="PROFILE",
+        help="upload this gust profile (config/gusts name or .toml/.json file) to start at t0 (zenoh)",
+    )
     return parser
 
 
@@ -90,7 +101,23 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Scena
         parser.error("--tolerance and --timeout must be > 0, --settle and --hold >= 0")
     if not 0 <= args.instance <= 99:
         parser.error(f"--instance must be in [0, 99], got {args.instance}")
+    args.gust_profile = None
+    if args.gusts is not None:
+        try:
+            args.gust_profile = load_gust_profile_mapping(args.gusts)
+        except (ConfigError, ValueError) as exc:
+            parser.error(f"--gusts: {exc}")
     return args, scenario
+
+
+def load_gust_profile_mapping(name_or_path: str) -> dict:
+    """A gust profile as a mapping (the simulator validates it): a config/gusts name or a file."""
+    from gcs_scripts.upload_gusts import load_profile_file
+
+    path = Path(name_or_path)
+    if not path.exists():
+        path = config_path("gusts", name_or_path)
+    return load_profile_file(path)
 
 
 def reference_target(ref: Reference) -> PositionTarget:
@@ -118,12 +145,14 @@ class TrajectoryFlight:
         self.error_max = 0.0
         self.next_progress = PROGRESS_EVERY_S
 
+    def start_at(self, t0: float) -> None:
+        """Fly the trajectory from simulation time ``t0`` (the hold continues until then)."""
+        self.t0 = t0
+        self.tracking = True
+
     def provide(self, t: float) -> PositionTarget | None:
-        if not self.tracking:
+        if not self.tracking or t < self.t0:
             return self.fixed
-        if self.t0 is None:
-            self.t0 = t
-            say(self.link, f"trajectory started: t0={t:.3f} s (simulation time of its first sample)")
         tau = t - self.t0
         if tau > self.duration_s:
             self.tracking = False
@@ -192,7 +221,11 @@ def fly(link: Link, args: argparse.Namespace, flight: TrajectoryFlight) -> Setpo
     _check_offboard(link)
     say(link, f"error at p_d(0) after settling {math.dist(link.position_paper, start):.3f} m")
 
-    flight.tracking = True
+    t0 = round(link.now() + (T0_LEAD_GUSTS_S if args.gust_profile is not None else T0_LEAD_S), 3)
+    if args.gust_profile is not None:
+        _upload_gusts(link, args, t0)
+    flight.start_at(t0)
+    say(link, f"trajectory starts at t0={t0:.3f} s (simulation time)")
     link.wait_until(
         lambda lk: flight.finished_at is not None or lk.mode != "OFFBOARD",
         args.duration + 5.0,
@@ -211,6 +244,21 @@ def fly(link: Link, args: argparse.Namespace, flight: TrajectoryFlight) -> Setpo
         error = math.dist(link.position_paper, flight.end_target.position_m)
         say(link, f"held the last point {args.hold:g} s: error {error:.3f} m")
     return stream
+
+
+def _upload_gusts(link: Link, args: argparse.Namespace, t0: float) -> None:
+    """Upload --gusts to start at t0; the zenoh session was opened early (opening can take 0.5 s)."""
+    from gcs_scripts.upload_gusts import NoSimulatorAnswer, upload_gusts
+
+    try:
+        answer = upload_gusts(args.gust_profile, args.instance, {"at_s": t0}, timeout=3.0, session=args.zenoh)
+    except NoSimulatorAnswer as exc:
+        raise LinkError(f"--gusts: {exc}") from None
+    if not answer.get("accepted"):
+        raise LinkError(f"--gusts: the simulator rejected the profile: {answer.get('error')}")
+    if link.now() >= t0:
+        raise LinkError(f"--gusts: the upload finished after t0={t0:.3f} s (now t={link.now():.3f} s)")
+    say(link, f"gust profile {args.gusts} starts at t0={t0:.3f} s ({answer.get('summary', '')})")
 
 
 def _check_offboard(link: Link) -> None:
@@ -235,6 +283,18 @@ def run(args: argparse.Namespace, scenario: ScenarioConfig) -> int:
         print(f"fly_trajectory: cannot listen on {where}: {exc}", file=sys.stderr)
         return 3
     flight.link = link
+    args.zenoh = None
+    if args.gust_profile is not None:
+        from quadcommon import bus
+        from quadcommon.config import load_sitl
+
+        sitl = load_sitl()
+        try:
+            args.zenoh = bus.open_peer(sitl.zenoh_port_base + args.instance, sitl.zenoh_router)
+        except bus.BusError as exc:
+            link.close()
+            print(f"fly_trajectory: --gusts: {exc}", file=sys.stderr)
+            return 3
     say(
         link,
         f"connected to system {link.target_system} ({link.mode}, {link.landed_state_name}); scenario "
@@ -258,6 +318,8 @@ def run(args: argparse.Namespace, scenario: ScenarioConfig) -> int:
         return 130
     finally:
         link.close()
+        if args.zenoh is not None:
+            args.zenoh.close()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -152,3 +152,36 @@ def test_fly_trajectory_through_the_sitl_lines_up_with_the_reference(
     # The controller's reference is the streamed trajectory (late by the stream's transit time).
     assert np.max(np.abs(flown.position_ref_m - p_d)) < 0.02
     assert np.max(np.linalg.norm(flown.position_error_m, axis=1)) < 0.05
+
+
+@pytest.fixture
+def circle_sitl_62() -> Iterator[int]:
+    with _sitl(62, "circle"):
+        yield 62
+
+
+def test_gusts_uploaded_for_t0_hit_at_the_in_process_times(circle_sitl_62: int, tmp_path: Path) -> None:
+    n = circle_sitl_62
+    profile = tmp_path / "steps.toml"
+    profile.write_text(
+        'description = "two steps"\n'
+        '[[step]]\nchannel = "force_x"\nstart_s = 1.0\nvalue = 1.0\n'
+        '[[step]]\nchannel = "torque_roll"\nstart_s = 2.0\nvalue = 0.5\n'
+    )
+    rec = _spawn(
+        str(Path(record.__file__)), "--instance", str(n), "--out", str(tmp_path / "g"), "--until-disarmed"
+    )
+    try:
+        done = _run_script(
+            fly_trajectory, "--instance", str(n), "--scenario", "circle", "--duration", "3",
+            "--settle", "0.5", "--hold", "0.5", "--timeout", "30", "--gusts", str(profile),
+        )  # fmt: skip
+        if done.returncode != 0 and "no simulator answered" in done.stderr:
+            pytest.skip("the simulator does not serve quadsitl/<N>/sim/gusts yet")
+        assert done.returncode == 0, done.stdout + done.stderr
+        t0 = float(re.search(r"^t0=(\d+\.\d+)$", done.stdout, re.M).group(1))
+        _finish_recorder(rec)
+    finally:
+        _terminate(rec)
+    flown = read_session(tmp_path / "g.parquet", window=(t0, 3.0))
+    assert flown.event_times_s == pytest.approx([1.0, 2.0], abs=0.0021)  # within one control step

@@ -140,6 +140,26 @@ def test_fly_trajectory_arguments_and_reference_setpoints() -> None:
     assert full.position == pytest.approx((ref.position_m[0], -ref.position_m[1], -ref.position_m[2]))
 
 
+def test_fly_trajectory_gusts_option_loads_the_profile(tmp_path: Path, capsys) -> None:
+    args, _ = fly_trajectory.parse_args(["--gusts", "paper_steps"])
+    assert [step["channel"] for step in args.gust_profile["step"]][:2] == ["force_x", "torque_roll"]
+    assert fly_trajectory.parse_args([])[0].gust_profile is None
+    with pytest.raises(SystemExit):
+        fly_trajectory.parse_args(["--gusts", "no_such_profile"])
+    assert "--gusts" in capsys.readouterr().err
+
+
+def test_trajectory_waits_for_t0_then_samples_from_it() -> None:
+    flight = fly_trajectory.TrajectoryFlight(None, _helix(), 10.0)  # type: ignore[arg-type]
+    assert flight.provide(3.0) is flight.start_target  # before start_at: hold p_d(0)
+    flight.start_at(5.0)
+    assert flight.provide(4.99) is flight.start_target  # planned t0 not reached yet
+    flight.link = type("L", (), {"position_paper": None})()
+    target = flight.provide(6.0)
+    assert target.position_m == pytest.approx(_helix().sample(1.0).position_m)
+    assert flight.provide(15.5) is flight.end_target and flight.finished_at == 15.5
+
+
 def _helix():
     from autopilot.guidance.trajectories import trajectory_from_spec
     from quadcommon.config import load_scenario
