@@ -415,7 +415,9 @@ class SessionAssembler:
             self._pending_untimed.append((group, values))
             return
         self._append(group, key, values)
-        if group.stamp != "time_usec32":  # a wrapped counter must not drive time
+        if group.stamp == "time_boot_ms":
+            # Only the telemetry clock drives time: SERVO_OUTPUT_RAW's counter wraps, and
+            # HOME_POSITION may carry time_usec = 0 (set before the first frame).
             self.mav_stream.saw(key, wall)
             self._saw_time(key)
         if self._pending_untimed:

@@ -33,6 +33,12 @@ class Vehicle:
     def attitude(self, t_s: float, roll: float, pitch: float, yaw: float) -> bytes:
         return self.pack(mavlink2.MAVLink_attitude_message(int(round(t_s * 1e3)), roll, pitch, yaw, 0, 0, 0))
 
+    def home_position(self, time_usec: int, altitude_m: float = 488.0) -> bytes:
+        msg = mavlink2.MAVLink_home_position_message(
+            0, 0, int(altitude_m * 1000), 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, time_usec
+        )
+        return self.pack(msg)
+
     def statustext(self, text: str) -> bytes:
         return self.pack(mavlink2.MAVLink_statustext_message(6, text.encode(), 0, 0))
 

@@ -120,6 +120,16 @@ def test_assembler_without_zenoh_falls_back_to_mavlink_rows() -> None:
     np.testing.assert_array_equal(table.column("mav_local_x_m").to_numpy(), np.arange(10.0))
 
 
+def test_only_the_telemetry_clock_sets_the_recording_start() -> None:
+    a = sl.SessionAssembler(system_id=1, wall=0.0)
+    vehicle = Vehicle()
+    # The autopilot may send HOME_POSITION with time_usec = 0 before its first frame.
+    for m in parse([vehicle.home_position(time_usec=0), vehicle.local_position(12.5, 0.0)]):
+        a.add_mavlink(m, wall=0.0)
+    assert a.first_time_s == 12.5
+    assert a.mav["home"].keys == [0]  # still tabulated (as of any later row)
+
+
 def test_assembler_ignores_other_systems_and_collects_statustext() -> None:
     a = sl.SessionAssembler(system_id=1, wall=0.0)
     mine, other = Vehicle(0), Vehicle(5)
