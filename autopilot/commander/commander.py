@@ -24,6 +24,7 @@ from typing import NamedTuple
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_at
 from ..guidance.trajectories import PiecewiseTrajectory, Reference, Trajectory
+from ..mission.executor import MissionAction, MissionExecutor, PlanContext, check_mission
 from ..params.store import ParameterStore
 from .modes import FlightMode, LandedState
 
@@ -81,7 +82,8 @@ class Phase(Enum):
     LAND = "land"
     LANDED = "landed"  # touched down, waiting to disarm
     RTL = "rtl"
-    TRAJECTORY = "trajectory"  # a trajectory installed by a mission or a scenario
+    TRAJECTORY = "trajectory"  # a trajectory installed by a scenario
+    MISSION = "mission"  # flying the stored mission (AUTO.MISSION)
 
 
 class Commander:
@@ -103,6 +105,7 @@ class Commander:
         self._setpoint_times: list[float] = []
         self._rtl_landing = False
         self._after_trajectory: FlightMode | None = None
+        self.mission: MissionExecutor | None = None  # the stored mission (set by the MAVLink shell)
         params.on_change(self._on_param_change)
 
     # -- helpers -----------------------------------------------------------------------------------
@@ -128,6 +131,8 @@ class Commander:
 
     def _set_mode(self, mode: FlightMode) -> None:
         if mode != self.mode:
+            if self.mode == FlightMode.AUTO_MISSION and self.mission is not None:
+                self.mission.pause()  # any other mode pauses the mission at its current item
             self.mode = mode
             self._event(SEVERITY_INFO, f"mode {mode.px4_name}")
 
@@ -182,6 +187,12 @@ class Commander:
         if self.mode == FlightMode.OFFBOARD:
             self.offboard.reset()
             self.phase = Phase.OFFBOARD
+        elif (
+            self.mode == FlightMode.AUTO_MISSION
+            and self.mission is not None
+            and not self._start_mission(t).accepted  # armed in AUTO.MISSION: fly it (PX4)
+        ):
+            self._set_mode(FlightMode.AUTO_LOITER)
         return Outcome(ACCEPTED)
 
     def disarm(self, t: float, force: bool = False) -> Outcome:
@@ -193,6 +204,8 @@ class Commander:
         return Outcome(ACCEPTED)
 
     def _disarm(self, why: str) -> None:
+        if self.mission is not None:
+            self.mission.pause()
         self.armed = False
         self.phase = Phase.IDLE
         self._trajectory = None
@@ -323,8 +336,65 @@ class Commander:
                 return Outcome(ACCEPTED)
             return self.takeoff(t)
         if mode == FlightMode.AUTO_MISSION:
-            return self._refuse(DENIED, "AUTO.MISSION refused: no mission loaded")
+            return self._enter_mission(t)
         return self._refuse(UNSUPPORTED, f"mode {mode.px4_name} not supported")
+
+    # -- missions ------------------------------------------------------------------------------------
+    def set_mission(self, t: float, mission: MissionExecutor | None) -> None:
+        """A new stored mission (upload accepted) or none (cleared); flying the old one: hold."""
+        if self.phase == Phase.MISSION:
+            self.hold(t, "mission replaced in flight: holding (AUTO.MISSION flies the new one)")
+        self.mission = mission
+
+    def start_mission(self, t: float, first_item: int | None = None) -> Outcome:
+        """MAV_CMD_MISSION_START: (optionally from ``first_item``) fly the mission, from any mode."""
+        mission = self.mission
+        if first_item is not None and mission is not None and not mission.set_current(first_item):
+            return self._refuse(DENIED, f"mission start refused: no item {first_item}")
+        return self._enter_mission(t, restart=True)
+
+    def mission_set_current(self, t: float, seq: int) -> Outcome:
+        """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: fly to ``seq`` next (at once if flying it)."""
+        if self.mission is None or not self.mission.set_current(seq):
+            return self._refuse(DENIED, f"set current mission item refused: no item {seq}")
+        if self.phase == Phase.MISSION:
+            return self._start_mission(t)
+        return Outcome(ACCEPTED)
+
+    def _enter_mission(self, t: float, restart: bool = False) -> Outcome:
+        mission = self.mission
+        if mission is None or mission.count == 0:
+            return self._refuse(DENIED, "AUTO.MISSION refused: no mission loaded")
+        if not self.armed or self.state is None:
+            # PX4: the mode may be selected on the ground; arming then starts the mission.
+            problem = check_mission(mission.items, mission.origin, self.limits())
+            if problem is not None:
+                return self._refuse(DENIED, f"AUTO.MISSION refused: {problem[1]}")
+            self._set_mode(FlightMode.AUTO_MISSION)
+            return Outcome(ACCEPTED)
+        if self.phase == Phase.MISSION and not restart:
+            return Outcome(ACCEPTED)
+        return self._start_mission(t)
+
+    def _start_mission(self, t: float) -> Outcome:
+        """Fly the mission from the measured state, at its current item."""
+        mission, state = self.mission, self.state
+        assert mission is not None and state is not None and self.home is not None
+        on_ground = self.phase in (Phase.IDLE, Phase.LANDED) or not self.in_air()
+        p = self.params
+        context = PlanContext(
+            self.home, self.limits(), p["NAV_ACC_RAD"], p["MIS_TAKEOFF_ALT"], p["MPC_TKO_SPEED"]
+        )
+        reason = mission.start(t, self.last_or_measured(state), context, on_ground)
+        if reason is not None:
+            return self._refuse(DENIED, f"AUTO.MISSION refused: {reason}")
+        self.phase = Phase.MISSION
+        self._trajectory = None
+        self._landed_since = None
+        self._rtl_landing = False
+        self._set_mode(FlightMode.AUTO_MISSION)
+        self._event(SEVERITY_INFO, f"mission: flying item {mission.current_seq} of {mission.count}")
+        return Outcome(ACCEPTED)
 
     def offboard_setpoint(self, setpoint: OffboardSetpoint) -> None:
         self.offboard.update(setpoint)
@@ -388,6 +458,16 @@ class Commander:
             reference = self.offboard.reference(t, dt, previous)
             if self.offboard.setpoint is None:
                 reference = previous
+        elif phase == Phase.MISSION:
+            assert self.mission is not None
+            out = self.mission.step(t, state.position_m)
+            if out.action == MissionAction.LAND:
+                self._start_landing(t, state)  # the mission's LAND item: mode stays AUTO.MISSION
+                return self.step(t, dt)
+            if out.action == MissionAction.RTL:
+                self.return_to_launch(t)
+                return self.step(t, dt)
+            reference = out.reference
         else:
             assert self._trajectory is not None
             local = t - self._trajectory_start
@@ -408,11 +488,13 @@ class Commander:
                 self.phase = Phase.LANDED
                 self._touchdown_at = t
                 self._rtl_landing = False
+                if self.mission is not None:
+                    self.mission.landed()  # reaches a mission's LAND item (no-op otherwise)
                 self._event(SEVERITY_INFO, "landing detected")
                 return GuidanceOutput(Motors.IDLE, None)
         ground = GROUND_Z_M
         if (
-            phase in (Phase.TAKEOFF, Phase.OFFBOARD, Phase.TRAJECTORY)
+            phase in (Phase.TAKEOFF, Phase.OFFBOARD, Phase.TRAJECTORY, Phase.MISSION)
             and self._near_ground(state)
             and reference.position_m[2] - ground < 0.02
         ):

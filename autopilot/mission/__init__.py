@@ -1,0 +1,1 @@
+"""Missions: the MAVLink mission protocol, item validation, and flying the stored mission."""
