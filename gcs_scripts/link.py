@@ -131,6 +131,8 @@ def custom_mode(name: str) -> tuple[int, int, int]:
 def mode_name(custom: int) -> str:
     """PX4 name of a HEARTBEAT ``custom_mode`` (``"MODE(main,sub)"`` if unknown)."""
     main, sub = (custom >> 16) & 0xFF, (custom >> 24) & 0xFF
+    if main == 0:
+        return "NONE"  # no mode yet (e.g. heartbeats before the autopilot's first frame)
     for name, (m, s) in PX4_MODES.items():
         if m == main and (s == sub or (m != 4 and sub == 0)):
             return name
@@ -220,6 +222,7 @@ class Link:
         instance: int = 0,
         wall_factor: float = 3.0,
         wall_margin_s: float = 10.0,
+        stall_wall_s: float = 5.0,
         log: Callable[[str], None] | None = None,
     ) -> None:
         self.conn = conn
@@ -229,6 +232,7 @@ class Link:
         self.target_component = 1
         self.wall_factor = wall_factor  # wall safety = factor * sim timeout + margin (s)
         self.wall_margin_s = wall_margin_s
+        self.stall_wall_s = stall_wall_s  # no new telemetry time stamp this long: simulation stopped
         self.view = VehicleView()
         self.sim_time_s: float | None = None  # latest time_boot_ms seen, s
         self.statustext: deque[tuple[float, int, str]] = deque(maxlen=200)
@@ -238,6 +242,7 @@ class Link:
         self._texts_seen = 0  # STATUSTEXT count, to find the ones that follow an ACK
         self._next_gcs_heartbeat = 0.0
         self.messages_received = 0
+        self._poll_first_time: float | None = None  # first telemetry time of the latest poll()
 
     # -- receiving -------------------------------------------------------------------------------
     def poll(self, max_messages: int = 1000) -> int:
@@ -251,6 +256,7 @@ class Link:
                 mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0
             )
         count = 0
+        self._poll_first_time = None
         for _ in range(max_messages):
             msg = self.conn.recv_msg()
             if msg is None:
@@ -269,6 +275,8 @@ class Link:
         time_boot_ms = getattr(msg, "time_boot_ms", None)
         if time_boot_ms is not None:
             self.sim_time_s = time_boot_ms * 1e-3
+            if self._poll_first_time is None:
+                self._poll_first_time = self.sim_time_s
         if kind == "HEARTBEAT":
             if msg.get_srcComponent() == self.target_component:
                 self.view.heartbeat = msg
@@ -363,30 +371,47 @@ class Link:
         """Poll until ``predicate(self)`` is truthy; return its value.
 
         Raises :class:`LinkTimeout` after ``sim_timeout_s`` of simulation time (counted from the
-        first time-stamped telemetry seen in this wait), or after ``wall_timeout_s`` of wall time
-        (default ``wall_factor * sim_timeout_s + wall_margin_s``): the latter fires when the
-        simulation stalls or runs far slower than real time.
+        first time-stamped telemetry seen in this wait); when simulation time stops advancing for
+        ``stall_wall_s`` of wall time (simulator stopped or lost: the autopilot then only sends
+        wall-clock heartbeats); or after ``wall_timeout_s`` of wall time (default
+        ``wall_factor * sim_timeout_s + wall_margin_s``: a simulation far slower than real time).
         """
         wall_limit = self.wall_timeout(sim_timeout_s) if wall_timeout_s is None else wall_timeout_s
-        wall_deadline = time.monotonic() + wall_limit
+        now = time.monotonic()
+        wall_deadline = now + wall_limit
         sim_start = self.sim_time_s
+        last_sim, last_advance = self.sim_time_s, now
         while True:
             got = self.poll()
             value = predicate(self)
             if value:
                 return value
+            now = time.monotonic()
+            if self.sim_time_s != last_sim:
+                last_sim, last_advance = self.sim_time_s, now
             if sim_start is None:
-                sim_start = self.sim_time_s
-            elif self.sim_time_s is not None and self.sim_time_s - sim_start > sim_timeout_s:
+                # One poll may drain a burst: count from its first stamp, not its last.
+                sim_start = self._poll_first_time
+            if (
+                sim_start is not None
+                and self.sim_time_s is not None
+                and self.sim_time_s - sim_start > sim_timeout_s
+            ):
                 raise LinkTimeout(
                     f"timed out after {sim_timeout_s:g} s of simulation time waiting for {what} "
                     f"(t={self.now():.2f} s, mode {self.mode or '?'}, {self.landed_state_name})"
                 )
-            if time.monotonic() > wall_deadline:
+            if now - last_advance > self.stall_wall_s:
+                last = f"; last STATUSTEXT: {self.statustext[-1][2]}" if self.statustext else ""
+                raise LinkTimeout(
+                    f"simulation time stopped at t={self.now():.2f} s ({self.stall_wall_s:g} s of wall "
+                    f"time without telemetry time stamps) while waiting for {what}: is the simulator "
+                    f"running?{last}"
+                )
+            if now > wall_deadline:
                 raise LinkTimeout(
                     f"timed out after {wall_limit:g} s of wall time waiting for {what} "
-                    f"(simulation time {'not advancing' if sim_start == self.sim_time_s else 'too slow'};"
-                    f" t={self.now():.2f} s)"
+                    f"(simulation too slow; t={self.now():.2f} s)"
                 )
             if got == 0:
                 time.sleep(0.0005)  # nothing waiting: yield the CPU (the SITL shares it)
