@@ -11,7 +11,8 @@ the client is ``gcs_scripts/upload_gusts.py``):
 
   ``profile`` has the schema of a ``config/gusts/*.toml`` file (:mod:`.gust_profile`: ``step``,
   ``ramp``, ``one_minus_cosine`` arrays, a ``dryden`` object, ``description``). ``start``
-  defaults to ``"now"``; ``at_s`` must not be in the simulator's past. ``mode`` is optional
+  defaults to ``"now"``; ``at_s`` may lie in the simulator's past only as far as the profile's
+  first event still lies in its future (a script anchors a profile on an instant it observed). ``mode`` is optional
   and ``"replace"`` is its only value (see below). Unknown keys are refused;
 * the simulator validates it and answers exactly one reply:
 
@@ -32,10 +33,9 @@ up), e.g. the paper's steps plus a gust. An empty profile (``{}``) removes every
 Determinism: the result depends only on the profile, the start time and the physics step (the
 Dryden turbulence is seeded and indexed by physics step from its start).
 
-Reference for the app (simulator/app.py): declare the queryable with a FIFO channel, poll it
-from the main loop, answer with ``handle_gust_request`` inside ``with query:``, swap the
-schedule at the next frame boundary; ``GustUploadServer`` in
-``tests/gcs_scripts/test_upload_gusts_zenoh.py`` is that wiring, tested end to end.
+The simulator's side (``simulator.truth_bus.GustUploadServer``) declares the queryable with a
+FIFO channel, polls it from the main loop, answers with ``handle_gust_request`` inside
+``with query:`` and swaps the schedule at the next frame boundary.
 """
 
 from __future__ import annotations
@@ -105,11 +105,15 @@ def parse_gust_request(
             )
         if start.has("at_s"):
             start_s = start.number("at_s", lo=0.0, hi=now_s + MAX_DELAY_S, unit="s, simulation time")
-            if start_s < now_s:
+            first_event = min(profile.event_times(), default=0.0)
+            if start_s + first_event < now_s:
+                # A start in the past is fine (a script anchors the profile on an instant it has
+                # just observed) as long as nothing of the profile would have happened already.
                 raise start.error(
                     "at_s",
                     start_s,
-                    f'>= the simulation time now, {now_s:.6f} s (use "now" or after_s to start at once)',
+                    f">= {now_s - first_event:.6f} s: the profile's first event ({first_event:g} s after "
+                    f'at_s) would lie before the simulation time now, {now_s:.6f} s (use "now" or after_s)',
                 )
         else:
             start_s = now_s + start.number("after_s", lo=0.0, hi=MAX_DELAY_S, unit="s")

@@ -81,7 +81,7 @@ def test_empty_profile_is_accepted_and_clears_disturbances() -> None:
         ),
         (
             _request(profile={}, start={"at_s": 3.0}),
-            ["key 'start.at_s' = 3.0 is invalid", ">= the simulation time now, 12.5"],
+            ["key 'start.at_s' = 3.0 is invalid", "would lie before the simulation time now, 12.5"],
         ),
         (_request(profile={}, start={"after_s": -1.0}), ["key 'start.after_s' = -1.0", "[0, 1e+06] (s)"]),
         (_request(profile={}, start={"at_s": 20.0, "after_s": 1.0}), ["key 'start'", "exactly one key"]),
@@ -116,3 +116,12 @@ def test_result_unpacks_into_four_values_and_has_names() -> None:
     result = handle_gust_request(_request(profile={}), 1.0)
     ok, reply, profile, start = result
     assert (result.ok, result.reply, result.profile, result.start_s) == (ok, reply, profile, start)
+
+
+def test_a_past_anchor_is_accepted_while_the_first_event_is_still_ahead():
+    """A script anchors the paper's steps (first at +5 s) on an instant it has just observed."""
+    steps = {"step": [{"channel": "force_x", "start_s": 5.0, "value": 1.0}]}
+    ok, reply, profile, start_s = handle_gust_request(_request(profile=steps, start={"at_s": 10.0}), 12.5)
+    assert ok and start_s == 10.0
+    ok, reply, _, _ = handle_gust_request(_request(profile=steps, start={"at_s": 7.0}), 12.5)
+    assert not ok and b"first event (5 s after at_s)" in reply
