@@ -42,18 +42,33 @@ def run_once(config: Path, duration: float, profile_dir: Path | None = None) -> 
     ap_prefix = py + (["-m", "cProfile", "-o", str(profile_dir / "autopilot.prof")] if profile_dir else [])
     common = ["--instance", str(INSTANCE), "--sitl-config", str(config)]
     sim = subprocess.Popen(
-        [*sim_prefix, "-m", "simulator", *common, "--scenario", "circle", "--speed", "max",
-         "--duration", str(duration)],
-        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        [
+            *sim_prefix,
+            "-m",
+            "simulator",
+            *common,
+            "--scenario",
+            "circle",
+            "--speed",
+            "max",
+            "--duration",
+            str(duration),
+        ],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     assert sim.stdout is not None
     for line in sim.stdout:
         if "waiting for the autopilot" in line:
             break
     ap = subprocess.Popen(
         [*ap_prefix, "-m", "autopilot", *common, "--autostart", "circle", "--quiet"],
-        cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     start = None
     rtt = (0, 0)
     try:
@@ -80,7 +95,9 @@ def print_profile(path: Path, title: str, top: int = 14) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--rates", type=int, nargs="+", default=[250, 500, 1000])
     parser.add_argument("--profile", action="store_true")
@@ -91,8 +108,10 @@ def main() -> None:
         for rate in args.rates:
             elapsed, median, p99 = run_once(sitl_toml(tmpdir, rate), args.duration)
             results[rate] = (args.duration / elapsed, median, p99)
-            print(f"{rate:5d} Hz control: {args.duration:.0f} s simulated in {elapsed:.2f} s wall "
-                  f"({args.duration / elapsed:.1f}x), HIL round trip median {median} us, p99 {p99} us")  # fmt: skip
+            print(
+                f"{rate:5d} Hz control: {args.duration:.0f} s simulated in {elapsed:.2f} s wall "
+                f"({args.duration / elapsed:.1f}x), HIL round trip median {median} us, p99 {p99} us"
+            )
         if args.profile:
             run_once(sitl_toml(tmpdir, 500), min(args.duration, 20.0), tmpdir)
             print_profile(tmpdir / "simulator.prof", "simulator")

@@ -11,8 +11,9 @@ the client is ``gcs_scripts/upload_gusts.py``):
 
   ``profile`` has the schema of a ``config/gusts/*.toml`` file (:mod:`.gust_profile`: ``step``,
   ``ramp``, ``one_minus_cosine`` arrays, a ``dryden`` object, ``description``). ``start``
-  defaults to ``"now"``; ``at_s`` may lie in the simulator's past only as far as the profile's
-  first event still lies in its future (a script anchors a profile on an instant it observed). ``mode`` is optional
+  defaults to ``"now"``; ``at_s`` may lie in the simulator's past only as far as the
+  profile's first event still lies in its future (a script anchors a profile on an instant it
+  has observed). ``mode`` is optional
   and ``"replace"`` is its only value (see below). Unknown keys are refused;
 * the simulator validates it and answers exactly one reply:
 
