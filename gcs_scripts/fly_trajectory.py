@@ -185,7 +185,7 @@ class TrajectoryFlight:
         return math.sqrt(self.errors_sq_sum / self.errors_n) if self.errors_n else math.nan
 
 
-def fmt(p) -> str:
+def fmt(p: tuple[float, ...]) -> str:
     return "(" + ", ".join(f"{v:.3f}" for v in p) + ")"
 
 
