@@ -88,6 +88,12 @@ def _cmd_up(args: argparse.Namespace) -> int:
     return run_up(specs)
 
 
+def _cmd_analyze(args: argparse.Namespace) -> int:
+    from gcs_scripts.analysis.analyze import main as analyze_main
+
+    return analyze_main(args.rest, prog="quadsitl analyze")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="quadsitl", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -115,6 +121,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sitl-config", default=None, help="alternative sitl.toml")
     p.set_defaults(func=_cmd_up)
 
+    p = sub.add_parser(
+        "analyze",
+        help="indices, figures and a comparison table from recorded logs (quadsitl analyze --help)",
+        add_help=False,
+    )
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=_cmd_analyze)
+
     p = sub.add_parser("paper", help="reproduce the paper's experiment in-process (Tables I-III, figures)")
     p.add_argument("--out", default="out/paper", help="output directory (default: out/paper)")
     p.add_argument(
@@ -138,6 +152,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["analyze"]:  # its own parser (options such as --help pass through)
+        from gcs_scripts.analysis.analyze import main as analyze_main
+
+        return analyze_main(argv[1:], prog="quadsitl analyze")
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

@@ -37,7 +37,8 @@ def _group(mask: int, bits: tuple[int, int, int], values: Vector3, fill: Vector3
 def decode_setpoint(
     msg, t: float, position_now: Vector3, yaw_now: float, reference_position: Vector3
 ) -> tuple[OffboardSetpoint | None, str]:
-    """(setpoint, "") or (None, reason). Positions etc. in the paper's frames, absolute."""
+    """(setpoint, "") or (None, reason). Positions etc. in the paper's frames, absolute; ``t`` is
+    the simulation time of arrival (see :func:`sample_time` for the setpoint's own time)."""
     mask = msg.type_mask
     frame = msg.coordinate_frame
     if mask & _FORCE:
@@ -77,4 +78,19 @@ def decode_setpoint(
     )
     if position is None and velocity is None and acceleration is None and yaw is None and yaw_rate is None:
         return None, "type_mask ignores everything"
-    return OffboardSetpoint(t, position, velocity, acceleration, yaw, yaw_rate), ""
+    return OffboardSetpoint(
+        sample_time(msg.time_boot_ms, t), position, velocity, acceleration, yaw, yaw_rate
+    ), ""
+
+
+def sample_time(time_boot_ms: int, t: float) -> float:
+    """When the setpoint was sampled: its ``time_boot_ms`` if that is our (simulation) clock.
+
+    A trajectory streamed by a script that stamps each sample with the simulation time it belongs
+    to is then extrapolated from the right instant, and the reference between samples is continuous
+    (stamping on arrival instead puts a small step in p_d at every sample, which the high-gain
+    cascade turns into torque chatter). Clients on another clock (MAVSDK stamps its own uptime)
+    fall back to the arrival time ``t``.
+    """
+    stamped = time_boot_ms * 1e-3
+    return stamped if t - 0.5 <= stamped <= t + 0.05 else t

@@ -184,8 +184,23 @@ def test_hil_state_quaternion_source_and_corruption():
     q_ned = frames.quaternion_to_ned(quaternion_from_euler(0.0, 0.0, 0.5))
     lat, lon, alt = frames.ned_to_geodetic(1.0, 2.0, -3.0, HOME)
     hsq = m.MAVLink_hil_state_quaternion_message(
-        7_000, list(q_ned), 0.0, 0.0, 0.0, round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
-        10, -20, 30, 0, 0, 0, 0, 1000)
+        7_000,
+        list(q_ned),
+        0.0,
+        0.0,
+        0.0,
+        round(lat * 1e7),
+        round(lon * 1e7),
+        round(alt * 1000),
+        10,
+        -20,
+        30,
+        0,
+        0,
+        0,
+        0,
+        1000,
+    )
     frame = decode_frame(enc.pack(hsq), new_parser(), HOME, use_odometry=True)
     assert frame.time_usec == 7_000
     # quantised: 1e-7 deg of latitude is ~1.1 cm
@@ -197,3 +212,14 @@ def test_hil_state_quaternion_source_and_corruption():
     with pytest.raises(m.MAVError):
         decode_frame(bytes(data), new_parser(), HOME)
     assert decode_frame(enc.pack(m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)), new_parser(), HOME) is None
+
+
+def test_setpoint_sample_time_comes_from_time_boot_ms_on_our_clock():
+    def at(time_boot_ms, t):
+        msg = m.MAVLink_set_position_target_local_ned_message(time_boot_ms, 1, 1, 1, 0xDF8, 1, 2, -3, 0, 0, 0,
+                                                              0, 0, 0, 0, 0)  # fmt: skip
+        return decode_setpoint(msg, t, (0, 0, 0), 0.0, (0, 0, 0))[0].time_s
+
+    assert at(9_990, 10.0) == pytest.approx(9.99)  # sampled 10 ms before it arrived
+    assert at(123_456_789, 10.0) == 10.0  # another clock (e.g. MAVSDK's uptime): arrival time
+    assert at(0, 10.0) == 10.0
