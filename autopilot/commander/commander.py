@@ -24,7 +24,7 @@ from typing import NamedTuple
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_at
 from ..guidance.trajectories import PiecewiseTrajectory, Reference, Trajectory
-from ..mission.executor import MissionAction, MissionExecutor, PlanContext, check_mission
+from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
 from ..params.store import ParameterStore
 from .modes import FlightMode, LandedState
 
@@ -187,12 +187,13 @@ class Commander:
         if self.mode == FlightMode.OFFBOARD:
             self.offboard.reset()
             self.phase = Phase.OFFBOARD
-        elif (
-            self.mode == FlightMode.AUTO_MISSION
-            and self.mission is not None
-            and not self._start_mission(t).accepted  # armed in AUTO.MISSION: fly it (PX4)
-        ):
-            self._set_mode(FlightMode.AUTO_LOITER)
+        elif self.mode == FlightMode.AUTO_MISSION and self.mission is not None:
+            # Armed in AUTO.MISSION: fly it (PX4). A completed mission does not fly again by
+            # itself (no surprise takeoff): select AUTO.MISSION again or send MISSION_START.
+            if self.mission.state == MissionState.COMPLETE:
+                self._event(SEVERITY_NOTICE, "mission complete: select AUTO.MISSION to fly it again")
+            elif not self._start_mission(t).accepted:
+                self._set_mode(FlightMode.AUTO_LOITER)
         return Outcome(ACCEPTED)
 
     def disarm(self, t: float, force: bool = False) -> Outcome:
@@ -312,7 +313,7 @@ class Commander:
         return Outcome(ACCEPTED)
 
     def set_mode(self, t: float, mode: FlightMode) -> Outcome:
-        if mode == self.mode:
+        if mode == self.mode and mode != FlightMode.AUTO_MISSION:  # re-selecting it may (re)start
             return Outcome(ACCEPTED)
         if mode == FlightMode.OFFBOARD:
             if not self.offboard_stream_active(t):

@@ -160,3 +160,19 @@ def test_new_mission_in_flight_holds(commander):
     commander.set_mission(t, square())
     assert commander.mode == FlightMode.AUTO_LOITER and commander.phase == Phase.HOLD
     assert commander.mission.state == MissionState.NOT_STARTED
+
+
+def test_a_completed_mission_does_not_restart_at_arming(commander):
+    commander.set_mission(0.0, square())
+    commander.set_mode(0.0, FlightMode.AUTO_MISSION)
+    commander.arm(0.0)
+    t = fly(commander, 0.0, 90.0, until=lambda c: not c.armed)
+    assert commander.mission.state == MissionState.COMPLETE and commander.mode == FlightMode.AUTO_MISSION
+    commander.drain_events()
+    assert commander.arm(t).accepted
+    assert commander.phase == Phase.IDLE  # no surprise takeoff
+    assert any("mission complete" in text for _, text in commander.drain_events())
+    assert commander.set_mode(t, FlightMode.AUTO_MISSION).accepted  # selecting it again flies it
+    assert commander.phase == Phase.MISSION and commander.mission.current_seq == 0
+    t = fly(commander, t, 10.0)
+    assert commander.state.position_m[2] > 1.0
