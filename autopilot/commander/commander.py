@@ -22,7 +22,7 @@ from enum import Enum
 from typing import NamedTuple
 
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
-from ..guidance.planner import Limits, LineMove, stop_at
+from ..guidance.planner import Limits, LineMove, stop_from
 from ..guidance.trajectories import PiecewiseTrajectory, Reference, Trajectory
 from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
 from ..params.store import ParameterStore
@@ -36,6 +36,7 @@ ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
 # MAV_SEVERITY
 SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 2, 4, 5, 6
 
+CONTINUE_WITHIN_M = 0.5  # a new plan continues the reference if the vehicle is this close to it
 GROUND_Z_M = 0.0  # the local frame's origin (the configured home) is on flat ground
 ON_GROUND_HEIGHT_M = 0.05  # O within this of the ground counts as touching it
 LANDED_SPEED_M_S = 0.1
@@ -244,17 +245,18 @@ class Commander:
         return Outcome(ACCEPTED)
 
     def last_or_measured(self, state: VehicleState) -> Reference:
-        """Where a new plan starts: the measured state (a clean start after any transient)."""
+        """Where a new plan starts: the reference flown so far (p_d, p_d', p_d'' stay continuous,
+        so the cascade sees no step) unless the vehicle is far from it (after a failsafe, or when
+        nothing was flown yet): then the measured state, at rest in acceleration."""
+        ref = self.last_reference
+        if ref is not None and self.armed and math.dist(ref.position_m, state.position_m) < CONTINUE_WITHIN_M:
+            return ref
         return self._start_reference(state)
 
     def hold(self, t: float, reason: str = "") -> Outcome:
         state = self.state
         if self.armed and state is not None and self.phase not in (Phase.IDLE, Phase.LANDED):
-            self._fly(
-                t,
-                stop_at(state.position_m, state.velocity_m_s, state.euler_rad[2], self.limits()),
-                Phase.HOLD,
-            )
+            self._fly(t, stop_from(self.last_or_measured(state), self.limits()), Phase.HOLD)
         self._rtl_landing = False
         self._set_mode(FlightMode.AUTO_LOITER)
         if reason:
@@ -278,13 +280,13 @@ class Commander:
             limits.acceleration,
             limits.yaw_rate,
         )
-        # Aim far below the ground: the descent continues at the landing speed until touchdown.
-        x, y, z = state.position_m
-        brake = stop_at(
-            state.position_m, (state.velocity_m_s[0], state.velocity_m_s[1], 0.0), state.euler_rad[2], limits
-        )
+        # Brake, then aim far below the ground: the descent goes on at the landing speed until
+        # touchdown is detected.
+        start = self.last_or_measured(state)
+        brake = stop_from(start, limits)
         end = brake.sample(brake.duration_s).position_m
-        down = LineMove(end, (end[0], end[1], z - 1000.0), descend, state.euler_rad[2], state.euler_rad[2])
+        yaw = start.yaw_rad
+        down = LineMove(end, (end[0], end[1], end[2] - 1000.0), descend, yaw, yaw)
         self._fly(t, PiecewiseTrajectory([brake, down]), Phase.LAND)
         self._landed_since = None
         self._event(SEVERITY_INFO, "landing")
@@ -296,9 +298,10 @@ class Commander:
             return Outcome(ACCEPTED)
         assert self.home is not None
         limits = self.limits()
-        yaw = state.euler_rad[2]
+        start = self.last_or_measured(state)
+        yaw = start.yaw_rad
         altitude = max(state.position_m[2], self.home[2] + self.params["RTL_RETURN_ALT"])
-        brake = stop_at(state.position_m, state.velocity_m_s, yaw, limits)
+        brake = stop_from(start, limits)
         p = brake.sample(brake.duration_s).position_m
         climb_to = (p[0], p[1], altitude)
         above_home = (self.home[0], self.home[1], altitude)
@@ -386,7 +389,7 @@ class Commander:
         context = PlanContext(
             self.home, self.limits(), p["NAV_ACC_RAD"], p["MIS_TAKEOFF_ALT"], p["MPC_TKO_SPEED"]
         )
-        reason = mission.start(t, self.last_or_measured(state), context, on_ground)
+        reason = mission.start(t, self._start_reference(state), context, on_ground)
         if reason is not None:
             return self._refuse(DENIED, f"AUTO.MISSION refused: {reason}")
         self.phase = Phase.MISSION

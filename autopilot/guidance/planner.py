@@ -10,7 +10,7 @@ p_d, p_d', p_d'' (C2 or smoother), never steps:
 * :func:`transition`: from any (p, v, a) to rest at a point (a quintic), with a duration long
   enough that sampled speed and acceleration stay within the limits; used when a new target
   arrives while moving.
-* :func:`stop_at`: brake from (p, v) to rest (hold mode entry).
+* :func:`stop_from`: brake to rest (hold, landing and RTL entry).
 """
 
 from __future__ import annotations
@@ -146,15 +146,18 @@ def transition(start: Reference, target: Vector3, limits: Limits, yaw: float | N
     return seg
 
 
-def stop_at(state_position: Vector3, state_velocity: Vector3, yaw: float, limits: Limits) -> Trajectory:
-    """Brake from the measured (p, v) to rest, about where a constant deceleration would stop."""
-    speed = math.sqrt(sum(v * v for v in state_velocity))
-    if speed < 1e-3:
-        return QuinticSegment(0.01, state_position, state_position, yaw0=yaw, yaw1=yaw)
+def stop_from(start: Reference, limits: Limits) -> Trajectory:
+    """Brake from ``start`` (p, v, a) to rest, about where a constant deceleration would stop."""
+    speed = math.sqrt(sum(v * v for v in start.velocity_m_s))
+    if speed < 1e-3 and not any(abs(a) > 1e-6 for a in start.acceleration_m_s2):
+        p = start.position_m
+        return QuinticSegment(0.01, p, p, yaw0=start.yaw_rad, yaw1=start.yaw_rad)
     stop_distance = speed * speed / (2.0 * limits.acceleration)
-    target = tuple(p + v / speed * stop_distance for p, v in zip(state_position, state_velocity, strict=True))
-    start = Reference(state_position, state_velocity, ZERO3, yaw, 0.0, 0.0)
-    return transition(start, target, limits, yaw)  # type: ignore[arg-type]
+    target = tuple(
+        p + (v / speed * stop_distance if speed > 0.0 else 0.0)
+        for p, v in zip(start.position_m, start.velocity_m_s, strict=True)
+    )
+    return transition(start, target, limits, start.yaw_rad)  # type: ignore[arg-type]
 
 
 def _peaks(traj: Trajectory, duration: float, samples: int = 40) -> tuple[float, float]:
