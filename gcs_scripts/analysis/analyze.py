@@ -12,7 +12,8 @@ recorder that died, or an in-process run's Parquet file) this builds a FlightRec
 ``--t0 S [S ...]`` and ``--duration S`` select a window of simulation time (one t0 for every
 log, or one per log) and shift it to start at 0, so a trajectory flown through the SITL from
 t0 (``fly_trajectory.py`` prints it) compares with the in-process run of the same scenario.
-In-process files start at 0 already: only ``--duration`` applies to them.
+In-process files start at 0; a t0 given for them trims their start in the same way (e.g.
+``--t0 T0+4 4 --duration 36`` compares both runs after a 4 s start-up transient).
 
 Usage: ``quadsitl analyze LOG... [--out DIR] [--t0 S ...] [--duration S] [--labels NAME ...]``
 (also ``python -m gcs_scripts.analysis.analyze``).

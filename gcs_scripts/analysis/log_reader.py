@@ -155,18 +155,18 @@ def read_session(
 
 
 def _read_flight_record(path: Path, window: Window | None, label: str | None) -> FlightRecord:
+    """An in-process run's file; a window applies as for SITL logs (its t0 defaults to 0)."""
     record = FlightRecord.read_parquet(path)
     if label:
         record.label = label
-    if window is None or window[1] is None:
+    if window is None or (window[0] is None and window[1] is None):
         return record
-    keep = record.time_s <= window[1] + _WINDOW_EPS_S
-    cols = {name: np.asarray(v)[keep] for name, v in record.to_columns().items()}
-    meta = {
-        "label": record.label,
-        "scenario": record.scenario,
-        "controller": record.controller,
-        "event_times_s": [t for t in record.event_times_s if t <= window[1]],
-        "source": record.source,
-    }
-    return FlightRecord.from_columns(cols, meta)
+    t0 = 0.0 if window[0] is None else window[0]
+    end = float(record.time_s[-1]) if window[1] is None else t0 + window[1]
+    trimmed = record.window(t0, end, shift=True)
+    if len(trimmed.time_s) == 0:
+        raise ValueError(
+            f"{path}: no samples in the window t0={t0:g} s, duration {window[1]} s "
+            f"(the run covers {record.time_s[0]:g}..{record.time_s[-1]:g} s)"
+        )
+    return trimmed

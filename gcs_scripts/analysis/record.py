@@ -58,6 +58,21 @@ class FlightRecord:
         """(N, 4): U1, tau_phi, tau_theta, tau_psi."""
         return np.column_stack([self.thrust_n, self.torque_euler_n_m])
 
+    def window(self, start_s: float, end_s: float, shift: bool = False) -> FlightRecord:
+        """The samples with ``start_s <= t <= end_s`` (µs tolerance); ``shift`` makes time start at 0."""
+        keep = (self.time_s >= start_s - 1e-6) & (self.time_s <= end_s + 1e-6)
+        cols = {name: np.asarray(v)[keep] for name, v in self.to_columns().items()}
+        offset = start_s if shift else 0.0
+        cols["time_s"] = cols["time_s"] - offset
+        meta = {
+            "label": self.label,
+            "scenario": self.scenario,
+            "controller": self.controller,
+            "event_times_s": [t - offset for t in self.event_times_s if start_s <= t <= end_s],
+            "source": self.source,
+        }
+        return FlightRecord.from_columns(cols, meta)
+
     # -- Parquet --------------------------------------------------------------------------------
     def to_columns(self) -> dict[str, np.ndarray]:
         """Flat named columns (the names the SITL log uses for the same quantities)."""

@@ -112,9 +112,14 @@ def test_inprocess_flight_record_files_are_accepted(tmp_path: Path) -> None:
     times = control_times(0.0, 1000)
     direct = _direct_record(times)
     path = direct.write_parquet(tmp_path / "inproc.parquet")
-    record = read_session(path, window=(12.3, 1.0))  # t0 is a SITL time: only the duration applies
-    assert record.time_s[-1] == pytest.approx(1.0)
+    record = read_session(path, window=(None, 1.0))  # from the start, 1 s
+    assert record.time_s[0] == 0.0 and record.time_s[-1] == pytest.approx(1.0)
     assert record.label == "direct"
+    later = read_session(path, window=(0.5, 1.0))  # a t0 trims in-process runs too, shifted to 0
+    assert later.time_s[0] == pytest.approx(0.0) and later.time_s[-1] == pytest.approx(1.0)
+    assert later.position_m[0] == pytest.approx(direct.position_m[np.searchsorted(direct.time_s, 0.5)])
+    with pytest.raises(ValueError, match="no samples"):
+        read_session(path, window=(12.3, 1.0))
 
 
 def test_coalesce_duplicate_times_merges_split_rows() -> None:
