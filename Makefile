@@ -1,5 +1,6 @@
 # The two commands a newcomer types (README.md):
-#   make demo   set everything up (.venv) and run the main job
+#   make demo   set everything up (.venv) and run the main job: the paper's experiment in-process
+#               (out/paper) and through the SITL, three cascades, recorded and analysed (out/demo)
 #   make test   set everything up (.venv, test tools) and run lint + the test suite
 PYTHON ?= python3
 VENV   ?= .venv
@@ -18,6 +19,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/quadsitl paper --out out/paper
+	$(BIN)/quadsitl demo --out out/demo
 
 paper: $(STAMP)
 	$(BIN)/quadsitl paper --out out/paper

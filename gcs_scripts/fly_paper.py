@@ -46,6 +46,7 @@ from quadcommon.bus_records import CONTROLLER_CODEC  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 AUTO_MISSION = (4 << 16) | (4 << 24)
+CURVE_MARGIN_S = 1.0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -132,8 +133,15 @@ def run(args: argparse.Namespace) -> int:
         upload_gusts({}, args.instance, "now", timeout=5.0, session=session)
         say(link, "start-up disturbances cleared")
         height = trajectory.sample(0.0).position_m[2]
+        # The curve runs CURVE_MARGIN_S past the scenario's duration, so that its last instant (the
+        # paper's "final error") is taken while the curve is still flown, not as the landing begins.
         items = upload_mission.curve_items(
-            trajectory, scenario.duration_s, args.rate, args.start_time, takeoff_altitude_m=height, end="land"
+            trajectory,
+            scenario.duration_s + CURVE_MARGIN_S,
+            args.rate,
+            args.start_time,
+            takeoff_altitude_m=height,
+            end="land",
         )
         link.upload(items)
         problems = upload_mission.verify(link, items)

@@ -121,6 +121,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sitl-config", default=None, help="alternative sitl.toml")
     p.set_defaults(func=_cmd_up)
 
+    p = sub.add_parser("demo", help="the paper's helix through the SITL for the three cascades (make demo)")
+    p.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
+    p.add_argument("--instance", type=int, default=0, help="vehicle instance used for the runs")
+    p.add_argument("--speed", type=_speed, default="max", help="SITL pacing (default max)")
+    p.set_defaults(
+        func=lambda a: __import__("sitl.demo", fromlist=["main_demo"]).main_demo(a.out, a.instance, a.speed)
+    )
+
     p = sub.add_parser(
         "analyze",
         help="indices, figures and a comparison table from recorded logs (quadsitl analyze --help)",

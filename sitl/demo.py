@@ -1,0 +1,141 @@
+"""``quadsitl demo`` (``make demo``): the paper's helix experiment flown through the SITL.
+
+For each cascade (IntBS-NLH∞, IntBS, BS-NLH∞) it starts the SITL (simulator + autopilot, two
+processes linked over MAVLink/UDP, ``--speed max``) with the helix scenario (plant mass and
+inertia +30 %), runs ``gcs_scripts/fly_paper.py`` against it, which uploads the helix as a timed
+mission and the paper's disturbance schedule as a gust profile, flies it and records the session,
+and stops the SITL. Then, from the recorded logs only, it computes the paper's indices over the
+40 s of the curve and writes:
+
+* ``comparison.md``: one table, final errors / ISE / IADU, a column per cascade (SITL);
+* ``sitl_vs_inprocess.md``: the same indices beside the in-process runs of the same scenario,
+  over t in [4, 40] s (the SITL flies the curve from a hover at p_d(0), the in-process run from
+  the paper's initial state: their first seconds differ by construction);
+* ``sitl_helix_{path3d,position,position_error,orientation,controls}.png``;
+* ``logs/helix_<cascade>.{parquet,tlog}``: the recorded sessions (``quadsitl analyze`` reads them).
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from gcs_scripts.analysis.figures import paper_figures
+from gcs_scripts.analysis.log_reader import read_session
+from gcs_scripts.analysis.metrics import STATE_NAMES, indices
+from gcs_scripts.analysis.tables import CONTROLLER_TITLES, comparison_markdown
+from quadcommon.config import CONTROLLER_NAMES, load_controller, load_scenario
+
+from .inprocess import run_scenario
+from .up import LaunchError, Sitl, VehicleSpec
+
+REPO = Path(__file__).resolve().parents[1]
+T0 = re.compile(r"^t0=([0-9.]+)", re.MULTILINE)
+TRANSIENT_S = 4.0
+
+
+def fly_one(controller: str, scenario: str, instance: int, log_base: Path, speed: str) -> float:
+    """One SITL run of ``scenario`` with ``controller``; returns the curve's start time t0."""
+    spec = VehicleSpec(instance=instance, controller=controller, scenario=scenario, speed=speed)
+    with Sitl([spec], echo=False):
+        cmd = [
+            sys.executable,
+            "-u",
+            str(REPO / "gcs_scripts" / "fly_paper.py"),
+            "--instance",
+            str(instance),
+            "--scenario",
+            scenario,
+            "--out",
+            str(log_base),
+        ]
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    if result.returncode != 0:
+        raise RuntimeError(
+            f"fly_paper.py failed for {controller}:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}"
+        )
+    match = T0.search(result.stdout)
+    if match is None:
+        raise RuntimeError(f"fly_paper.py did not report t0 for {controller}:\n{result.stdout[-2000:]}")
+    return float(match.group(1))
+
+
+def run_demo(
+    out_dir: Path,
+    scenario: str = "helix",
+    controllers: tuple[str, ...] = CONTROLLER_NAMES,
+    instance: int = 0,
+    speed: str = "max",
+    log=print,
+) -> Path:
+    out_dir = Path(out_dir)
+    logs = out_dir / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    duration = load_scenario(scenario).duration_s
+    t0s: dict[str, float] = {}
+    for k, controller in enumerate(controllers, 1):
+        started = time.perf_counter()
+        log(f"[{k}/{len(controllers)}] SITL: {scenario} with {controller} (speed {speed}) ...")
+        base = logs / f"{scenario}_{controller}"
+        for stale in (base.with_suffix(".parquet"), base.with_suffix(".tlog")):
+            stale.unlink(missing_ok=True)
+        t0s[controller] = fly_one(controller, scenario, instance, base, speed)
+        log(f"      flown and recorded in {time.perf_counter() - started:.1f} s wall -> {base}.parquet")
+
+    log("analysing the recorded logs ...")
+    sitl = {
+        c: read_session(logs / f"{scenario}_{c}.parquet", window=(t0s[c], duration), label=c)
+        for c in controllers
+    }
+    table = {CONTROLLER_TITLES.get(c, c): indices(r) for c, r in sitl.items()}
+    comparison = out_dir / "comparison.md"
+    comparison.write_text(
+        f"# Paper's {scenario} through the SITL (recorded logs, t in [0, {duration:g}] s of the curve)\n\n"
+        + comparison_markdown(table)
+    )
+    paper_figures(list(sitl.values()), out_dir, f"sitl_{scenario}")
+
+    log(f"in-process runs of the same scenario for comparison over [{TRANSIENT_S:g}, {duration:g}] s ...")
+    lines = [
+        f"# SITL vs in-process, {scenario}, ISE over t in [{TRANSIENT_S:g}, {duration:g}] s",
+        "",
+        "| cascade | run | " + " | ".join(f"ISE {n}" for n in STATE_NAMES) + " | final x (mm) | y | z |",
+        "|---|---|" + "---:|" * (len(STATE_NAMES) + 3),
+    ]
+    for c in controllers:
+        inproc = run_scenario(load_scenario(scenario), load_controller(c))
+        for name, rec in (("SITL", sitl[c]), ("in-process", inproc)):
+            ind = indices(rec.window(TRANSIENT_S, duration))
+            final = [1000 * e for e in ind.final_error_m]
+            lines.append(
+                f"| {CONTROLLER_TITLES.get(c, c)} | {name} | "
+                + " | ".join(f"{ind.ise[n]:.5f}" for n in STATE_NAMES)
+                + " | "
+                + " | ".join(f"{v:+.3f}" for v in final)
+                + " |"
+            )
+    side = out_dir / "sitl_vs_inprocess.md"
+    side.write_text("\n".join(lines) + "\n")
+
+    log("")
+    log(comparison.read_text())
+    log(side.read_text())
+    log(f"tables:  {comparison}, {side}")
+    log(f"figures: {out_dir}/sitl_{scenario}_{{path3d,position,position_error,orientation,controls}}.png")
+    log(f"logs:    {logs}/  (quadsitl analyze LOG --t0 T0 --duration {duration:g})")
+    return comparison
+
+
+def main_demo(out: str, instance: int, speed: str) -> int:
+    try:
+        run_demo(Path(out), instance=instance, speed=speed)
+    except LaunchError as exc:
+        print(f"quadsitl demo: {exc}", file=sys.stderr)
+        return 2
+    except RuntimeError as exc:
+        print(f"quadsitl demo: {exc}", file=sys.stderr)
+        return 1
+    return 0
