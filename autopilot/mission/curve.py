@@ -24,7 +24,8 @@ from ..guidance.trajectories import Reference
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
-POSITION_TOLERANCE_M = 1e-4  # one MISSION_ITEM_INT local-frame quantum
+POSITION_TOLERANCE_M = 1e-4  # one MISSION_ITEM_INT local-frame quantum (x, y, z)
+GLOBAL_TOLERANCE_M = (0.012, 0.012, 1e-4)  # global frames: 1e-7 deg is up to 1.1 cm (x, y, z)
 YAW_TOLERANCE_RAD = 1e-3
 KNOT_SPACINGS_S = (4.0, 2.0, 1.0, 0.5, 0.25)
 MIN_SAMPLES_PER_KNOT = 3
@@ -41,14 +42,18 @@ def _lsq_knots(times: np.ndarray, spacing: float, k: int) -> np.ndarray | None:
     return np.r_[[times[0]] * (k + 1), inner, [times[-1]] * (k + 1)]
 
 
-def fit_curve(times: np.ndarray, values: np.ndarray):
-    """A spline through ``values`` (n x 4: x, y, z, unwrapped yaw) at ``times`` (s, increasing);
-    callable as ``spline(t, nu)`` (nu = derivative order)."""
+def fit_curve(
+    times: np.ndarray,
+    values: np.ndarray,
+    tolerance_m: tuple[float, float, float] = (POSITION_TOLERANCE_M,) * 3,
+):
+    """A spline through ``values`` (n x 4: x, y, z, unwrapped yaw) at ``times`` (s, increasing),
+    within ``tolerance_m`` (per axis, m) of every sample; callable as ``spline(t, nu)``."""
     n = len(times)
     if n < 6:
         return CubicSpline(times, values, bc_type="natural")
     h = float(np.median(np.diff(times)))
-    tolerance = np.array([POSITION_TOLERANCE_M] * 3 + [YAW_TOLERANCE_RAD])
+    tolerance = np.array([*tolerance_m, YAW_TOLERANCE_RAD])
     for spacing in KNOT_SPACINGS_S:
         if spacing < MIN_SAMPLES_PER_KNOT * h:
             break
@@ -67,7 +72,8 @@ def fit_curve(times: np.ndarray, values: np.ndarray):
 class TimedCurve:
     """The timed samples ``times`` (s), ``positions`` (paper frame, m), ``yaws`` (rad, paper
     frame; None entries are filled with the previous yaw, or ``default_yaw`` at the start) as a
-    trajectory: ``sample(tau)`` with ``tau`` in seconds from the first sample."""
+    trajectory: ``sample(tau)`` with ``tau`` in seconds from the first sample. ``tolerance_m``:
+    the samples' resolution per axis (m), which the fit may deviate by."""
 
     def __init__(
         self,
@@ -75,6 +81,7 @@ class TimedCurve:
         positions: Sequence[Vector3],
         yaws: Sequence[float | None],
         default_yaw: float = 0.0,
+        tolerance_m: tuple[float, float, float] = (POSITION_TOLERANCE_M,) * 3,
     ) -> None:
         t = np.asarray(times, dtype=float)
         if t.ndim != 1 or t.size == 0 or np.any(np.diff(t) <= 0.0):
@@ -92,7 +99,7 @@ class TimedCurve:
         self.duration_s = float(self.times[-1])
         self._constant = values[0] if t.size == 1 else None
         if self._constant is None:
-            spline = fit_curve(self.times, values)
+            spline = fit_curve(self.times, values, tolerance_m)
             self._p = spline
             self._v = spline.derivative(1)
             self._a = spline.derivative(2)

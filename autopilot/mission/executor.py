@@ -51,8 +51,8 @@ from ..guidance.trajectories import (
     _quintic_coefficients,
 )
 from ..mavlink.codec import mavlink as m
-from .curve import TimedCurve
-from .items import ItemKind, MissionItem
+from .curve import GLOBAL_TOLERANCE_M, POSITION_TOLERANCE_M, TimedCurve
+from .items import ItemKind, MissionItem, PositionKind
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
@@ -220,6 +220,13 @@ def _timed_block(items: Sequence[MissionItem], seq: int) -> tuple[int, int]:
     return first, last
 
 
+def _resolution(block: Sequence[MissionItem]) -> tuple[float, float, float]:
+    """Per-axis resolution (m) of timed samples as the wire carried them (for the curve fit)."""
+    if all(it.position is not None and it.position.kind == PositionKind.LOCAL_NED for it in block):
+        return (POSITION_TOLERANCE_M,) * 3
+    return GLOBAL_TOLERANCE_M
+
+
 def check_mission(
     items: Sequence[MissionItem], origin: tuple[float, float, float], limits: Limits
 ) -> tuple[int, str] | None:
@@ -238,6 +245,7 @@ def check_mission(
             [it.time_s for it in block],
             [it.position.to_paper(origin, ZERO3) for it in block],
             [None] * len(block),
+            tolerance_m=_resolution(block),
         )
         vh, vup, vdown, acc = curve.peaks()
         checks = (
@@ -519,6 +527,7 @@ class MissionExecutor:
             [it.position.to_paper(self.origin, ctx.home_local) for it in block],
             [it.yaw_rad for it in block],
             default_yaw=start.yaw_rad,
+            tolerance_m=_resolution(block),
         )
         item = self.items[seq]
         tau0 = item.time_s - curve.t0

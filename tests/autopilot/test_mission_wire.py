@@ -186,3 +186,20 @@ def test_float_mission_request_is_refused_as_unsupported(vehicle):
     vehicle.mav.mission_request_send(*vehicle.target, 0, 0)
     ack = wait_for(vehicle, "MISSION_ACK", 2.0)
     assert ack is not None and ack.type == m.MAV_MISSION_UNSUPPORTED
+
+
+def test_mission_commands_set_current_and_start(vehicle):
+    items = mixed_mission()
+    vehicle.upload(items)
+    result = vehicle.command_long(m.MAV_CMD_DO_SET_MISSION_CURRENT, (3, 0), check=False)
+    assert result == m.MAV_RESULT_ACCEPTED
+    vehicle.wait_until(lambda lk: lk.mission_current is not None and lk.mission_current.seq == 3, 1e9,
+                       wall_timeout_s=3.0, what="MISSION_CURRENT 3")  # fmt: skip
+    assert vehicle.command_long(m.MAV_CMD_DO_SET_MISSION_CURRENT, (99, 0), check=False) == m.MAV_RESULT_DENIED
+    # Without a simulator there is no vehicle state: MISSION_START selects AUTO.MISSION (PX4:
+    # the mission then starts at arming) and its param1 makes item 1 current.
+    assert vehicle.command_long(m.MAV_CMD_MISSION_START, (1, 0), check=False) == m.MAV_RESULT_ACCEPTED
+    vehicle.wait_until(lambda lk: lk.mission_current is not None and lk.mission_current.seq == 1, 1e9,
+                       wall_timeout_s=3.0, what="MISSION_CURRENT 1")  # fmt: skip
+    vehicle.clear()
+    assert vehicle.command_long(m.MAV_CMD_MISSION_START, (0, 0), check=False) == m.MAV_RESULT_DENIED
