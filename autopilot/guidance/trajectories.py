@@ -163,24 +163,24 @@ class QuinticSegment:
             raise ValueError(f"segment duration must be > 0 s, got {duration_s}")
         self.duration_s = duration_s
         T = duration_s
-        self.coeffs = [_quintic_coefficients(p0[i], v0[i], a0[i], p1[i], v1[i], a1[i], T) for i in range(3)]
+        self.coeffs = [quintic_coefficients(p0[i], v0[i], a0[i], p1[i], v1[i], a1[i], T) for i in range(3)]
         dyaw = (yaw1 - yaw0 + math.pi) % (2.0 * math.pi) - math.pi
-        self.yaw_coeffs = _quintic_coefficients(yaw0, 0.0, 0.0, yaw0 + dyaw, 0.0, 0.0, T)
+        self.yaw_coeffs = quintic_coefficients(yaw0, 0.0, 0.0, yaw0 + dyaw, 0.0, 0.0, T)
 
     def sample(self, t: float) -> Reference:
         t = min(max(t, 0.0), self.duration_s)
         pos, vel, acc = [], [], []
         for c in self.coeffs:
-            p, v, a = _eval_quintic(c, t)
+            p, v, a = eval_quintic(c, t)
             pos.append(p)
             vel.append(v)
             acc.append(a)
-        y, yd, ydd = _eval_quintic(self.yaw_coeffs, t)
+        y, yd, ydd = eval_quintic(self.yaw_coeffs, t)
         y = (y + math.pi) % (2.0 * math.pi) - math.pi
         return Reference(tuple(pos), tuple(vel), tuple(acc), y, yd, ydd)  # type: ignore[arg-type]
 
 
-def _quintic_coefficients(p0, v0, a0, p1, v1, a1, T):
+def quintic_coefficients(p0, v0, a0, p1, v1, a1, T):
     """Coefficients c0..c5 of p(t) = sum c_k t^k meeting p, p', p'' at t = 0 and t = T."""
     T2, T3, T4, T5 = T * T, T**3, T**4, T**5
     c0, c1, c2 = p0, v0, 0.5 * a0
@@ -193,7 +193,7 @@ def _quintic_coefficients(p0, v0, a0, p1, v1, a1, T):
     return (c0, c1, c2, c3, c4, c5)
 
 
-def _eval_quintic(c, t):
+def eval_quintic(c, t):
     c0, c1, c2, c3, c4, c5 = c
     p = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))))
     v = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)))

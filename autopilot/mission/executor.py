@@ -47,8 +47,8 @@ from ..guidance.trajectories import (
     PiecewiseTrajectory,
     Reference,
     Trajectory,
-    _eval_quintic,
-    _quintic_coefficients,
+    eval_quintic,
+    quintic_coefficients,
 )
 from ..mavlink.codec import mavlink as m
 from .curve import GLOBAL_TOLERANCE_M, POSITION_TOLERANCE_M, TimedCurve
@@ -126,14 +126,14 @@ class _Blend:
         self.duration_s = duration_s
         T = duration_s
         self.coeffs = [
-            _quintic_coefficients(
+            quintic_coefficients(
                 start.position_m[i], start.velocity_m_s[i], start.acceleration_m_s2[i],
                 end.position_m[i], end.velocity_m_s[i], end.acceleration_m_s2[i], T,
             )
             for i in range(3)
         ]  # fmt: skip
         yaw1 = start.yaw_rad + math.remainder(end.yaw_rad - start.yaw_rad, 2.0 * math.pi)
-        self.yaw_coeffs = _quintic_coefficients(
+        self.yaw_coeffs = quintic_coefficients(
             start.yaw_rad, start.yaw_rate_rad_s, start.yaw_acceleration_rad_s2,
             yaw1, end.yaw_rate_rad_s, end.yaw_acceleration_rad_s2, T,
         )  # fmt: skip
@@ -144,8 +144,8 @@ class _Blend:
 
     def sample(self, t: float) -> Reference:
         t = min(max(t, 0.0), self.duration_s)
-        axes = [_eval_quintic(c, t) for c in self.coeffs]
-        y, yd, ydd = _eval_quintic(self.yaw_coeffs, t)
+        axes = [eval_quintic(c, t) for c in self.coeffs]
+        y, yd, ydd = eval_quintic(self.yaw_coeffs, t)
         return Reference(
             (axes[0][0], axes[1][0], axes[2][0]),
             (axes[0][1], axes[1][1], axes[2][1]),
