@@ -8,13 +8,20 @@ One thread, one loop. The simulator owns simulation time. Per control period it
 3. meanwhile (the autopilot is computing) appends the truth row to the zenoh batch and answers
    info queries,
 4. waits for the ``HIL_ACTUATOR_CONTROLS`` with that ``time_usec`` (stale answers are ignored;
-   after ``[lockstep] timeout_s`` of wall time without one it says so and resends the frame every
-   timeout period until the autopilot answers),
+   after ``[lockstep] timeout_s`` of wall time without one the autopilot is LOST, see below),
 5. applies the controls (zero, i.e. motors off, unless the armed bit is set) and steps the plant
    ``physics_hz / control_hz`` times, evaluating the disturbance schedule at every physics step,
    exactly as :mod:`sitl.inprocess` couples the same cores, so SITL and in-process runs agree,
 6. paces on the wall clock: sleeps until ``wall_start + t / speed`` (no sleeping for ``max``);
    more than 0.2 s behind, it re-anchors instead of sprinting to catch up.
+
+Autopilot lost: the simulator neither hangs nor leaves the vehicle in the air. It says so and
+keeps stepping (paced as before) under its own emergency descent (:mod:`simulator.safety`: level,
+descend at 0.5 m/s, motors off on touchdown; a vehicle already on the ground or disarmed keeps its
+motors off), still sending every frame to the autopilot. Under ``--speed max`` the descent runs
+as fast as it can (it is bounded: it ends on the ground) and, once down, time goes on at real
+time (1x) so an idle simulator does not spin. The first answer from the autopilot (or a
+restarted autopilot, at a new address) resumes lockstep from the current state.
 
 The UDP link binds 127.0.0.1:(4560 + N) and learns the autopilot's address from its first
 datagram (the autopilot sends HEARTBEAT to this port until frames flow). Ports in use, like bad
@@ -27,6 +34,7 @@ from __future__ import annotations
 import argparse
 import errno
 import math
+import select
 import signal
 import socket
 import sys
@@ -36,6 +44,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pymavlink.dialects.v20 import common as mavlink
+
 from quadcommon import bus, wire
 from quadcommon.config import apply_uncertainty, load_scenario, load_sitl, load_vehicle
 from quadcommon.schema import ConfigError
@@ -43,6 +53,7 @@ from quadcommon.schema import ConfigError
 from .dynamics.plant import make_plant
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
 from .mavlink.hil import ActuatorAnswer, ActuatorDecoder, HilFrameEncoder
+from .safety import MOTORS_OFF, emergency_descent, touched_down
 from .sensors import SensorSuite, load_sensors
 from .truth_bus import GustUploadServer, InfoServer, TruthStream, truth_row
 
@@ -52,6 +63,8 @@ RATE_REPORT_WALL_S = 10.0  # at most one "cannot keep up" line per this many wal
 MAX_DATAGRAM = 65535
 MAX_ROUND_TRIP_SAMPLES = 2_000_000  # 16 MB at most, ~1 h at 500 Hz
 _MOTORS_OFF = (0.0, 0.0, 0.0, 0.0)
+LOST = "lost"  # _await_answer's result when the autopilot does not answer within the timeout
+MAX_DRAIN = 1000  # datagrams read per frame while the autopilot is lost (bounded)
 
 
 class StartupError(RuntimeError):
@@ -89,7 +102,8 @@ class Simulator:
         self.dt_control = 1.0 / rates.control_hz
         self.dt_physics = self.dt_control / self.substeps
         self.gps_every = max(1, round(rates.control_hz / rates.gps_hz))
-        self.plant = make_plant(apply_uncertainty(self.vehicle, scenario), self.dt_physics)
+        self.plant_vehicle = apply_uncertainty(self.vehicle, scenario)  # what is flown (emergency law)
+        self.plant = make_plant(self.plant_vehicle, self.dt_physics)
         self.plant.reset(scenario.initial_position_m, scenario.initial_euler_rad)
         self.schedule = self._new_schedule(load_gust_profile(scenario.gusts), 0.0)
         self._pending_schedule: DisturbanceSchedule | None = None
@@ -116,6 +130,12 @@ class Simulator:
         self.wait_s = 0.0
         # HIL round trip per frame (send -> matching answer), wall seconds; bounded memory.
         self.round_trips = array("d")
+        # Autopilot lost: emergency descent state.
+        self.emergency = False
+        self.emergency_landed = False  # motors off for the rest of the outage
+        self._armed = False  # the armed bit of the last applied answer
+        self._lost_usec = 0  # the frame that was not answered
+        self._outage_wall = 0.0  # perf_counter() when the outage was declared
 
     # -- setup / teardown ---------------------------------------------------------------------
     def open(self) -> None:
@@ -232,7 +252,8 @@ class Simulator:
         """Block until a MAVLink datagram arrives; remember its sender. False if stopped first."""
         assert self.sock is not None and self.info is not None
         self.log(f"waiting for the autopilot on udp {wire.LOOPBACK}:{self.ports.hil}")
-        probe = ActuatorDecoder().parser  # own parser: a stray datagram must not touch the lockstep one
+        probe = mavlink.MAVLink(None)  # own parser: a stray datagram must not touch the lockstep one
+        probe.robust_parsing = True
         while self._running:
             try:
                 data, address = self.sock.recvfrom(MAX_DATAGRAM)
@@ -251,18 +272,13 @@ class Simulator:
                 return True
         return False
 
-    def _await_answer(self, time_usec: int, datagram: bytes) -> ActuatorAnswer | None:
-        """The autopilot's answer to the frame ``time_usec``; None if stopped while waiting.
-
-        Never hangs silently: after ``timeout_s`` wall seconds without the answer it reports the
-        outage once and resends the frame every ``timeout_s`` until answered (the autopilot
-        re-answers a frame it has already seen). A restarted autopilot (new address) is adopted
-        during an outage.
+    def _await_answer(self, time_usec: int, datagram: bytes) -> ActuatorAnswer | str | None:
+        """The autopilot's answer to the frame ``time_usec``; None if stopped while waiting;
+        :data:`LOST` after ``timeout_s`` wall seconds without it (reported here, once).
         """
         sock, decode, info = self.sock, self.decoder.decode, self.info
         assert sock is not None and info is not None
         deadline = time.perf_counter() + self.timeout_s
-        outage_start = None
         while self._running:
             try:
                 data, address = sock.recvfrom(MAX_DATAGRAM)
@@ -270,38 +286,90 @@ class Simulator:
                 data = None
             except OSError:
                 data = None  # e.g. ICMP port unreachable surfaced by the kernel: the peer is gone
-            if data is not None:
-                if address == self.peer:
-                    answer = decode(data)
-                    if answer is not None and answer.time_usec == time_usec:
-                        if outage_start is not None:
-                            self.log(
-                                f"link recovered: answer for frame t={time_usec * 1e-6:.3f} s after "
-                                f"{time.perf_counter() - outage_start:.1f} s"
-                            )
-                            self._resync = True
-                        return answer
-                    # else: a heartbeat, or a late answer to an earlier (resent) frame
-                elif outage_start is not None:
-                    self.peer = address  # a restarted autopilot says hello from a new port
-                    self.log(f"autopilot now at {address[0]}:{address[1]}; resending frame")
-                    self._send(datagram)
-                    continue
+            if data is not None and address == self.peer:
+                answer = decode(data)
+                if answer is not None and answer.time_usec == time_usec:
+                    return answer
+                # else: a heartbeat, or a late answer to an earlier frame
             # Checked on every wake-up, so a peer chattering without answering is reported too.
             now = time.perf_counter()
             if now >= deadline:
-                if outage_start is None:
-                    outage_start = now - self.timeout_s
-                    self.log(
-                        f"no HIL_ACTUATOR_CONTROLS for frame t={time_usec * 1e-6:.3f} s within "
-                        f"{self.timeout_s:.1f} s; is the autopilot running? "
-                        f"(udp {wire.LOOPBACK}:{self.ports.hil})"
-                    )
-                self._send(datagram)
-                deadline = now + self.timeout_s
+                self.log(
+                    f"no HIL_ACTUATOR_CONTROLS for frame t={time_usec * 1e-6:.3f} s within "
+                    f"{self.timeout_s:.1f} s; is the autopilot running? "
+                    f"(udp {wire.LOOPBACK}:{self.ports.hil})"
+                )
+                return LOST
             if data is None:
                 self._poll_services()
         return None
+
+    # -- autopilot lost ----------------------------------------------------------------------------
+    def _enter_emergency(self, time_usec: int) -> None:
+        """The autopilot did not answer frame ``time_usec``: fly the emergency descent from now."""
+        self.emergency = True
+        self._lost_usec = time_usec
+        self._outage_wall = time.perf_counter()
+        truth = self.plant.truth()
+        if not self._armed or touched_down(truth):
+            self.emergency_landed = True
+            what = "disarmed" if not self._armed else "on the ground"
+            self.log(f"autopilot lost: vehicle {what}, motors off; waiting for the autopilot to answer again")
+        else:
+            self.emergency_landed = False
+            self.log(
+                f"autopilot lost: emergency descent from z={truth.position_m[2]:.2f} m at 0.5 m/s "
+                "(levelled; motors off on touchdown); waiting for the autopilot to answer again"
+            )
+
+    def _emergency_controls(self, t: float) -> tuple[float, float, float, float]:
+        """This frame's controls under the emergency descent (motors off once down)."""
+        if self.emergency_landed:
+            return MOTORS_OFF
+        truth = self.plant.truth()
+        if touched_down(truth):
+            self.emergency_landed = True
+            self.log(f"emergency descent: touchdown at t={t:.3f} s, motors off")
+            return MOTORS_OFF
+        return emergency_descent(truth, self.plant_vehicle).controls
+
+    def _autopilot_answered(self) -> bool:
+        """Drain the socket without blocking; True once the autopilot answers a frame again.
+
+        Any answer to a frame at or after the one it missed counts (it may be catching up on
+        queued frames); a datagram from a new address is a restarted autopilot saying hello,
+        which becomes the peer (the next frame goes to it).
+        """
+        sock, decode = self.sock, self.decoder.decode
+        assert sock is not None
+        for _ in range(MAX_DRAIN):
+            # A socket with a timeout waits for it even with MSG_DONTWAIT: ask select first.
+            if not select.select((sock,), (), (), 0.0)[0]:
+                return False
+            try:
+                data, address = sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError, TimeoutError):
+                return False
+            except OSError:
+                continue  # ICMP unreachable from a send to the dead autopilot
+            if address != self.peer:
+                self.peer = address
+                self.log(f"autopilot now at {address[0]}:{address[1]}")
+                continue
+            answer = decode(data)
+            if answer is not None and answer.time_usec >= self._lost_usec:
+                return True
+        return False
+
+    def _leave_emergency(self, t: float) -> None:
+        self.emergency = False
+        self.emergency_landed = False
+        self._resync = True
+        outage = time.perf_counter() - self._outage_wall
+        self.log(
+            f"link recovered: the autopilot answers again after {outage:.1f} s; "
+            f"resuming lockstep at t={t:.3f} s"
+        )
 
     def _send(self, datagram: bytes) -> None:
         assert self.sock is not None and self.peer is not None
@@ -312,6 +380,7 @@ class Simulator:
 
     def _apply(self, answer: ActuatorAnswer) -> None:
         """Controls into the plant: zero unless armed, consistent and finite."""
+        self._armed = answer.armed
         controls = _MOTORS_OFF
         if answer.wrench != self.wrench:
             mode = "wrench" if answer.wrench else "rotors"
@@ -351,6 +420,7 @@ class Simulator:
         wall_anchor = perf_counter()
         report_at = wall_anchor + RATE_REPORT_WALL_S
         report_sim, report_wall = 0.0, wall_anchor
+        paced_at = speed  # the pacing factor in use (changes only around an autopilot outage)
         k = 0
         while self._running:
             start = perf_counter()
@@ -377,13 +447,27 @@ class Simulator:
             if last_frame is not None and k >= last_frame:
                 break  # the final frame (t = duration) is sent and recorded, not stepped
             sent = perf_counter()
-            answer = self._await_answer(time_usec, datagram)
-            if answer is None:
-                break
-            answered = perf_counter()
-            if len(self.round_trips) < MAX_ROUND_TRIP_SAMPLES:
-                self.round_trips.append(answered - sent_at)
-            self._apply(answer)
+            if self.emergency:
+                # Autopilot lost: our own descent this frame; lockstep again from the next one
+                # once it answers.
+                controls = self._emergency_controls(t)
+                if self._autopilot_answered():
+                    self._leave_emergency(t)
+                plant.set_actuator_controls(controls)
+                answered = perf_counter()
+            else:
+                answer = self._await_answer(time_usec, datagram)
+                if answer is None:
+                    break
+                answered = perf_counter()
+                if answer is LOST:
+                    self._enter_emergency(time_usec)
+                    self._resync = True  # the wait was an outage, not simulated time
+                    plant.set_actuator_controls(self._emergency_controls(t))
+                else:
+                    if len(self.round_trips) < MAX_ROUND_TRIP_SAMPLES:
+                        self.round_trips.append(answered - sent_at)
+                    self._apply(answer)  # type: ignore[arg-type]
             for j in range(substeps):
                 f, tq, w = schedule.evaluate(t + j * dt_physics)
                 plant.set_disturbance(f, tq, w)
@@ -392,20 +476,24 @@ class Simulator:
             now = perf_counter()
             self.work_s += (sent - start) + (now - answered)
             self.wait_s += answered - sent
-            if speed is None:
-                continue
+            pace = speed
+            if pace is None:
+                if not (self.emergency and self.emergency_landed):
+                    continue
+                pace = 1.0  # as fast as possible, but once landed without an autopilot: real time
             # Wall-clock pacing on top of lockstep.
             t_next = k * dt
-            if self._resync:
+            if self._resync or pace != paced_at:
                 self._resync = False
-                wall_anchor = now - t_next / speed
-            target = wall_anchor + t_next / speed
+                paced_at = pace
+                wall_anchor = now - t_next / pace
+            target = wall_anchor + t_next / pace
             if target > now:
                 self._sleep_until(target)
             elif now - target > RESYNC_BEHIND_S:
-                wall_anchor = now - t_next / speed
+                wall_anchor = now - t_next / pace
                 self.overruns += 1
-            if now >= report_at:
+            if now >= report_at and speed is not None:
                 achieved = (t_next - report_sim) / (now - report_wall)
                 if achieved < 0.95 * speed:
                     self.log(

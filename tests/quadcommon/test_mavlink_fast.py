@@ -1,0 +1,78 @@
+"""The fast lockstep decoder gives exactly what pymavlink's decoder gives, and refuses what it refuses."""
+
+import math
+import random
+
+import pytest
+from pymavlink.dialects.v20 import common as m
+
+from quadcommon.mavlink_fast import DecodeError, FastDecoder, split_frames
+
+
+def packed(msg, system=1, component=51):
+    mav = m.MAVLink(None, srcSystem=system, srcComponent=component)
+    return bytes(msg.pack(mav))
+
+
+def random_odometry(rng):
+    return m.MAVLink_odometry_message(
+        rng.randrange(2**40),
+        1,
+        rng.choice((1, 12)),
+        *(rng.uniform(-50, 50) for _ in range(3)),
+        [rng.uniform(-1, 1) for _ in range(4)],
+        *(rng.uniform(-5, 5) for _ in range(6)),
+        [math.nan] + [rng.uniform(0, 1) for _ in range(20)],
+        [math.nan] + [0.0] * 20,
+        rng.randrange(256),
+        6,
+        rng.randrange(101),
+    )
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_odometry_matches_pymavlink(seed):
+    rng = random.Random(seed)
+    msg = random_odometry(rng)
+    frame = packed(msg)
+    fast = FastDecoder(m.MAVLink_odometry_message)
+    values = fast.unpack(frame)
+    ref = m.MAVLink(None).decode(bytearray(frame))
+    for name in m.MAVLink_odometry_message.fieldnames:
+        got, want = values[fast.slices[name]], getattr(ref, name)
+        if isinstance(want, list):
+            assert list(got) == pytest.approx(want, nan_ok=True), name
+        else:
+            assert got == pytest.approx(want, nan_ok=True), name
+
+
+def test_truncated_payload_is_zero_padded():
+    """MAVLink 2 drops trailing zeros: an actuator message with zero controls is shorter."""
+    msg = m.MAVLink_hil_actuator_controls_message(7, [0.25] + [0.0] * 15, 0, 0)
+    frame = packed(msg)
+    assert frame[1] < m.MAVLink_hil_actuator_controls_message.unpacker.size
+    fast = FastDecoder(m.MAVLink_hil_actuator_controls_message)
+    values = fast.unpack(frame)
+    assert values[fast.slices["time_usec"]] == 7
+    assert list(values[fast.slices["controls"]]) == [0.25] + [0.0] * 15
+    assert values[fast.slices["mode"]] == 0
+
+
+def test_refuses_bad_crc_wrong_message_and_garbage():
+    fast = FastDecoder(m.MAVLink_hil_actuator_controls_message)
+    frame = bytearray(packed(m.MAVLink_hil_actuator_controls_message(7, [0.5] * 16, 128, 1)))
+    frame[12] ^= 0x10
+    with pytest.raises(DecodeError, match="CRC"):
+        fast.unpack(bytes(frame))
+    with pytest.raises(DecodeError, match="message id"):
+        fast.unpack(packed(m.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
+    with pytest.raises(DecodeError):
+        fast.unpack(b"\xfd\x05garbage")
+
+
+def test_split_frames_of_a_multi_message_datagram():
+    a = packed(m.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3))
+    b = packed(random_odometry(random.Random(1)))
+    parts = split_frames(a + b + b"\x00junk")
+    assert [msg_id for msg_id, _ in parts] == [m.MAVLINK_MSG_ID_HEARTBEAT, m.MAVLINK_MSG_ID_ODOMETRY]
+    assert parts[0][1] == a and parts[1][1] == b
