@@ -187,7 +187,8 @@ class Autopilot:
         h[m.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
 
     def _cmd_arm_disarm(self, r: CommandRequest) -> tuple[int, str]:
-        force = int(round(r.params[1])) == FORCE_MAGIC
+        # MAVSDK sends param2 = NaN ("unset") with a plain arm; only 21196 means force.
+        force = r.params[1] == FORCE_MAGIC
         if r.params[0] >= 0.5:
             return self.commander.arm(self.sim_time, force)
         return self.commander.disarm(self.sim_time, force)

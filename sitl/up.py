@@ -55,6 +55,9 @@ def _check_udp(port: int, what: str, instance: int) -> None:
 
 def _check_tcp(port: int, what: str, instance: int) -> None:
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    # As zenoh's own listener does: connections of a vehicle just stopped linger in TIME_WAIT for
+    # a minute and must not block starting it again; a live listener still makes bind fail.
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((wire.LOOPBACK, port))
     except OSError as exc:

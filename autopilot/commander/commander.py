@@ -148,7 +148,9 @@ class Commander:
         if self.armed and self.phase == Phase.TAKEOFF:
             return LandedState.TAKEOFF
         if self.armed and self.phase == Phase.LAND or self._rtl_landing:
-            return LandedState.LANDING if self.in_air() else LandedState.ON_GROUND
+            # LANDING until touchdown is confirmed (phase LANDED), as PX4's land detector: scripts
+            # wait for "not in air" and then disarm, which must not happen a few cm up.
+            return LandedState.LANDING
         if self.state is None or not self.in_air():
             return LandedState.ON_GROUND
         return LandedState.IN_AIR

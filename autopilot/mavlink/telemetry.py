@@ -96,6 +96,9 @@ def sys_status(s: VehicleStatus):
     health = SENSORS_PRESENT if s.armable or s.armed else SENSORS_PRESENT & ~m.MAV_SYS_STATUS_PREARM_CHECK
     if s.state is None:
         health &= ~(m.MAV_SYS_STATUS_SENSOR_GPS | m.MAV_SYS_STATUS_AHRS)
+    # The geofence bit reads "not breached" in health (it is neither present nor enabled):
+    # MAVProxy's fence module otherwise announces "fence breach" on connecting.
+    health |= m.MAV_SYS_STATUS_GEOFENCE
     return m.MAVLink_sys_status_message(
         SENSORS_PRESENT, SENSORS_PRESENT, health, 250, 16000, -1, 100, 0, 0, 0, 0, 0, 0
     )
