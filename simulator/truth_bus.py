@@ -91,13 +91,13 @@ class TruthStream:
             pass
 
 
-class InfoServer:
-    """Answers queries on ``key`` with ``describe()`` as JSON; call :meth:`poll` from the loop."""
+class _PolledQueryable:
+    """A queryable on a FIFO channel, drained from the simulator's loop (never a Python callback:
+    those wait for the GIL behind the busy loop, and keep the process alive at exit)."""
 
-    def __init__(self, session: zenoh.Session, key: str, describe: Callable[[], dict[str, Any]]) -> None:
+    def __init__(self, session: zenoh.Session, key: str) -> None:
         self.key = key
         self.queryable = session.declare_queryable(key, zenoh.handlers.FifoChannel(16))
-        self.describe = describe
 
     def poll(self) -> int:
         """Answer every waiting query (non-blocking); returns how many were answered."""
@@ -109,10 +109,13 @@ class InfoServer:
                 return answered  # channel closed (session closing)
             if query is None:
                 return answered
-            with query:
-                query.reply(self.key, json.dumps(self.describe()).encode())
+            with query:  # finalises the query: the getter's iteration ends after our reply
+                self.answer(query)
             answered += 1
         return answered
+
+    def answer(self, query: zenoh.Query) -> None:
+        raise NotImplementedError
 
     def close(self) -> None:
         try:
@@ -121,7 +124,18 @@ class InfoServer:
             pass
 
 
-class GustUploadServer:
+class InfoServer(_PolledQueryable):
+    """Answers queries on ``key`` with ``describe()`` as JSON; call :meth:`poll` from the loop."""
+
+    def __init__(self, session: zenoh.Session, key: str, describe: Callable[[], dict[str, Any]]) -> None:
+        super().__init__(session, key)
+        self.describe = describe
+
+    def answer(self, query: zenoh.Query) -> None:
+        query.reply(self.key, json.dumps(self.describe()).encode())
+
+
+class GustUploadServer(_PolledQueryable):
     """The simulator's side of ``quadsitl/<N>/sim/gusts`` (protocol: environment/gust_upload.py).
 
     Call :meth:`poll` from the main loop. ``now_s()`` is the simulation time;
@@ -138,43 +152,24 @@ class GustUploadServer:
         step_s: float,
         warn: Callable[[GustProfile], str | None] = lambda profile: None,
     ) -> None:
-        self.key = key
-        self.queryable = session.declare_queryable(key, zenoh.handlers.FifoChannel(16))
+        super().__init__(session, key)
         self.now_s, self.install, self.step_s, self.warn = now_s, install, step_s, warn
 
-    def poll(self) -> int:
-        """Answer every waiting upload (non-blocking); returns how many were answered."""
-        answered = 0
-        for _ in range(16):  # bounded: at most the channel's capacity per call
-            try:
-                query = self.queryable.try_recv()
-            except zenoh.ZError:
-                return answered  # channel closed (session closing)
-            if query is None:
-                return answered
-            with query:  # finalises the query: the getter's iteration ends after our reply
-                payload = query.payload.to_bytes() if query.payload is not None else b""
-                ok, reply, profile, start_s = handle_gust_request(payload, self.now_s(), self.step_s)
-                if not ok:
-                    query.reply_err(reply)
-                else:
-                    try:
-                        self.install(profile, start_s)  # type: ignore[arg-type]
-                    except ValueError as exc:  # not expected after validation
-                        error = {"accepted": False, "error": f"gust upload: {exc}"}
-                        query.reply_err(json.dumps(error).encode())
-                    else:
-                        note = self.warn(profile)  # type: ignore[arg-type]
-                        if note:
-                            answer = json.loads(reply)
-                            answer["warning"] = note
-                            reply = json.dumps(answer).encode()
-                        query.reply(self.key, reply)
-            answered += 1
-        return answered
-
-    def close(self) -> None:
+    def answer(self, query: zenoh.Query) -> None:
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        ok, reply, profile, start_s = handle_gust_request(payload, self.now_s(), self.step_s)
+        if not ok:
+            query.reply_err(reply)
+            return
         try:
-            self.queryable.undeclare()
-        except zenoh.ZError:
-            pass
+            self.install(profile, start_s)  # type: ignore[arg-type]
+        except ValueError as exc:  # not expected after validation
+            error = {"accepted": False, "error": f"gust upload: {exc}"}
+            query.reply_err(json.dumps(error).encode())
+            return
+        note = self.warn(profile)  # type: ignore[arg-type]
+        if note:
+            answer = json.loads(reply)
+            answer["warning"] = note
+            reply = json.dumps(answer).encode()
+        query.reply(self.key, reply)
