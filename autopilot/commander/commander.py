@@ -410,10 +410,14 @@ class Commander:
             del times[0]
 
     def offboard_stream_active(self, t: float) -> bool:
-        """At least two setpoints within the loss timeout (a stream, not a single message)."""
+        """A setpoint within the loss timeout COM_OF_LOSS_T (PX4's rule).
+
+        Not "two setpoints": MAVSDK's ``set_position_ned(); start()`` sends one setpoint and then
+        DO_SET_MODE at once, its 20 Hz stream starting on a timer thread that may come second; PX4
+        accepts that, and the loss failsafe catches a stream that never follows.
+        """
         window = self.params["COM_OF_LOSS_T"]
-        recent = [s for s in self._setpoint_times if t - s <= window]
-        return len(recent) >= 2
+        return any(t - s <= window for s in self._setpoint_times)
 
     def fly_trajectory(
         self,

@@ -201,6 +201,12 @@ def test_what_mavsdk_needs_item_by_item(compat_sitl_config):
             assert status.onboard_control_sensors_health & (bits | 1 << 28) == bits | 1 << 28  # armable
             assert gcs.last["EXTENDED_SYS_STATE"].landed_state == m.MAV_LANDED_STATE_ON_GROUND
 
+            # MAVSDK's offboard start(): ONE setpoint, then DO_SET_MODE at once (its 20 Hz stream
+            # starts on a timer thread that may come second). PX4 accepts a fresh setpoint.
+            gcs.send_position_setpoint(0.0, 0.0, 0.0)
+            ack = gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 6, 0)
+            assert ack.result == m.MAV_RESULT_ACCEPTED, gcs.statustext[-2:]
+
             nan = math.nan
             latency = {}
             for command, params in (
