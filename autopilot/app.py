@@ -21,6 +21,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 from quadcommon import bus, wire
 from quadcommon.bus_records import CONTROLLER_CODEC
@@ -44,12 +45,18 @@ from .mavlink.commands import CommandDispatcher, CommandRequest, command_ack, re
 from .mavlink.hil import ActuatorEncoder, decode_frame
 from .mavlink.links import GcsLink, PortInUse
 from .mavlink.offboard import decode_setpoint
+from .mavlink.params import ParamService
 from .mission.service import MissionService
-from .params.definitions import default_parameters
+from .params.definitions import (
+    consistency_problems,
+    controller_config_from_params,
+    default_parameters,
+    is_controller_param,
+)
+from .params.storage import load_params_file
 
 m = mavlink
 FORCE_MAGIC = 21196  # param2 of ARM_DISARM that forces arming/disarming (as PX4)
-SIM_LOSS_WALL_S = 1.0  # no frame for this long (wall) while linked: simulator reported lost
 CONTROLLER_BATCH = 10
 
 
@@ -63,6 +70,7 @@ class AutopilotOptions:
     state_source: str = "odometry"  # or "hil_state_quaternion"
     zenoh: bool = True
     quiet: bool = False
+    params_file: str | None = None  # params.toml: loaded at start, saved on every change
 
 
 class Autopilot:
@@ -82,10 +90,18 @@ class Autopilot:
         self.system_id = wire.system_id(options.instance)
         self.dt = 1.0 / self.sitl.rates.control_hz
         self.wrench = self.vehicle.actuation.mode == "wrench"
-        self.params = default_parameters()
+        self.params = default_parameters(self.controller_config, self.sitl.rates)
         self.params.values["MAV_SYS_ID"] = float(self.system_id)
+        if options.params_file and Path(options.params_file).exists():
+            loaded = load_params_file(options.params_file, self.params)  # ConfigError names file, key
+            self.log(f"{len(loaded)} parameters loaded from {options.params_file}")
+        for problem in consistency_problems(self.params):
+            self.log(f"warning: parameters inconsistent (arming refused until fixed): {problem}")
         self.commander = Commander(self.params)
-        self.cascade = Cascade(self.controller_config, self.vehicle, self.dt)
+        self.cascade = Cascade(
+            controller_config_from_params(self.controller_config, self.params), self.vehicle, self.dt
+        )
+        self.params.on_change(self._on_param_change)
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
         self.status = telemetry.VehicleStatus(
@@ -104,6 +120,17 @@ class Autopilot:
             wire.AUTOPILOT_COMPONENT_ID,
         )
         self.missions.register(self.message_handlers, self.commands, lambda: self.sim_time)
+        self.param_service = ParamService(
+            self.params,
+            self.encoder,
+            lambda: self.links,
+            self._statustext,
+            self.system_id,
+            wire.AUTOPILOT_COMPONENT_ID,
+            options.params_file,
+            header=f"controller {self.controller_config.name}, vehicle {self.vehicle.name}",
+        )
+        self.param_service.register(self.message_handlers, self.commands)
         self.autostart_trajectory = None
         if options.autostart:
             self.autostart_trajectory = trajectory_from_spec(load_scenario(options.autostart).trajectory)
@@ -308,9 +335,25 @@ class Autopilot:
         self.commander.offboard_setpoint(setpoint)
 
     def _on_gcs_heartbeat(self, msg, link: GcsLink, address) -> None:
-        if msg.type != m.MAV_TYPE_GCS and msg.get_srcComponent() == wire.AUTOPILOT_COMPONENT_ID:
-            return  # another vehicle, not a ground station
+        if msg.type != m.MAV_TYPE_GCS:
+            return  # another vehicle or an onboard component: only ground stations count (link loss)
         link.last_heartbeat_s = self.sim_time
+        self.commander.gcs_heartbeat(self.sim_time)
+        self._send_events()
+
+    def _on_param_change(self, name: str, value: float) -> None:
+        """Gains take effect between two control steps (this runs between frames), no jump in
+        the integral action (Cascade.retune)."""
+        if is_controller_param(name):
+            try:
+                self.cascade.retune(controller_config_from_params(self.controller_config, self.params))
+            except ValueError as exc:  # not reachable with the declared parameters; never crash
+                self._statustext(m.MAV_SEVERITY_CRITICAL, f"retune failed: {exc}")
+        if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_")):
+            for problem in consistency_problems(self.params):
+                self._statustext(
+                    m.MAV_SEVERITY_WARNING, f"parameters inconsistent (arming refused): {problem}"
+                )
 
     def _on_timesync(self, msg, link: GcsLink, address) -> None:
         if msg.tc1 == 0:  # a request: answer with our (simulation) clock in ns
@@ -481,15 +524,18 @@ class Autopilot:
     def _wall_housekeeping(self, now: float) -> None:
         """Without frames: heartbeat on the wall clock, and tell the simulator we are here."""
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
+        self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
         if self._controller_rows and now - self.last_frame_wall > 0.05:
             self._flush_controller_rows()  # frames paused: do not hold back the last rows
-        if not self.linked or now - self.last_frame_wall > SIM_LOSS_WALL_S:
+        sim_loss_s = self.params["COM_SIM_LOSS_T"]
+        if not self.linked or now - self.last_frame_wall > sim_loss_s:
             if self.linked and not self.sim_lost:
                 self.sim_lost = True
                 self._flying = False
+                self.commander.simulator_lost()  # no position: arming refused until frames resume
                 self._statustext(
                     m.MAV_SEVERITY_CRITICAL,
-                    f"simulator lost: no frame for {SIM_LOSS_WALL_S:.0f} s; motors off",
+                    f"simulator lost: no sensor frame for {sim_loss_s:g} s (COM_SIM_LOSS_T); motors off",
                 )
             if now >= self._next_wall_heartbeat:
                 self._next_wall_heartbeat = now + 1.0
@@ -587,6 +633,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--state-source", choices=("odometry", "hil_state_quaternion"), default="odometry")
     parser.add_argument("--no-zenoh", action="store_true", help="do not publish controller internals")
     parser.add_argument("--quiet", action="store_true")
+    parser.add_argument(
+        "--params",
+        metavar="FILE",
+        default=None,
+        help="parameter file (params.toml, NAME = value): loaded at start if it exists, saved on "
+        "every change and on MAV_CMD_PREFLIGHT_STORAGE",
+    )
     args = parser.parse_args(argv)
     from quadcommon.schema import ConfigError
 
@@ -601,6 +654,7 @@ def main(argv: list[str] | None = None) -> int:
                 args.state_source,
                 not args.no_zenoh,
                 args.quiet,
+                args.params,
             )
         )
         app.open()

@@ -68,20 +68,42 @@ def _speed(text: str) -> str:
     return text
 
 
+def _params_file(args: argparse.Namespace, instance: int, controller) -> str | None:
+    """Vehicle ``instance``'s parameter file, checked now (a bad one fails before any process
+    starts, naming file, key, value and range); a file that does not exist yet is created on the
+    first save. Several vehicles need ``{instance}`` in the path: each saves its own."""
+    if not args.params:
+        return None
+    if args.count > 1 and "{instance}" not in args.params:
+        raise ConfigError(
+            f"--params {args.params}: with --count {args.count} the path must contain {{instance}} "
+            "(each vehicle saves its own parameters), e.g. params-{instance}.toml"
+        )
+    path = args.params.replace("{instance}", str(instance))
+    if Path(path).exists():
+        from autopilot.params.definitions import default_parameters
+        from autopilot.params.storage import read_params_file
+        from quadcommon.config import load_sitl
+
+        read_params_file(path, default_parameters(controller, load_sitl(args.sitl_config).rates))
+    return path
+
+
 def _cmd_up(args: argparse.Namespace) -> int:
     from quadcommon.config import load_controller, load_scenario, load_vehicle
 
     from .up import VehicleSpec, run_up
 
     # Validate names here so a typo fails before any process starts.
-    load_controller(args.controller)
+    controller = load_controller(args.controller)
     load_scenario(args.scenario)
     load_vehicle(args.vehicle)
+    params = [_params_file(args, args.instance + k, controller) for k in range(args.count)]
     specs = [
         VehicleSpec(
             instance=args.instance + k, controller=args.controller, vehicle=args.vehicle,
             scenario=args.scenario, speed=args.speed, autostart=args.autostart,
-            duration_s=args.duration, sitl_config=args.sitl_config,
+            duration_s=args.duration, sitl_config=args.sitl_config, params_file=params[k],
         )
         for k in range(args.count)
     ]  # fmt: skip
@@ -119,6 +141,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--duration", type=float, default=None, help="stop after this simulated time (s)")
     p.add_argument("--sitl-config", default=None, help="alternative sitl.toml")
+    p.add_argument(
+        "--params",
+        metavar="FILE",
+        default=None,
+        help="autopilot parameter file (params.toml, NAME = value): loaded at start if it exists, "
+        "saved on every change; with --count > 1 put {instance} in the path",
+    )
     p.set_defaults(func=_cmd_up)
 
     p = sub.add_parser("demo", help="the paper's helix through the SITL for the three cascades (make demo)")

@@ -92,6 +92,7 @@ class VehicleSpec:
     autostart: bool = False  # the autopilot arms at t=0 and flies the scenario's trajectory
     duration_s: float | None = None  # simulator stops after this simulated time
     sitl_config: str | None = None
+    params_file: str | None = None  # the autopilot's params.toml (--params): loaded, saved on change
     extra_simulator_args: Sequence[str] = ()
     extra_autopilot_args: Sequence[str] = ()
 
@@ -174,6 +175,8 @@ class Sitl:
         ]
         if spec.autostart:
             ap_cmd += ["--autostart", spec.scenario]
+        if spec.params_file:
+            ap_cmd += ["--params", spec.params_file]
         for name, cmd in ((f"simulator[{n}]", sim_cmd), (f"autopilot[{n}]", ap_cmd)):
             process = subprocess.Popen(
                 cmd,

@@ -26,6 +26,7 @@ from ..guidance.planner import Limits, LineMove, stop_from
 from ..guidance.trajectories import PiecewiseTrajectory, Reference, Trajectory
 from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
 from ..params.store import ParameterStore
+from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, prearm_problem
 from .modes import FlightMode, LandedState
 
 Vector3 = tuple[float, float, float]
@@ -107,6 +108,8 @@ class Commander:
         self._rtl_landing = False
         self._after_trajectory: FlightMode | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the MAVLink shell)
+        self.failsafes = FailsafeMonitor(params)
+        self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         params.on_change(self._on_param_change)
 
     # -- helpers -----------------------------------------------------------------------------------
@@ -166,6 +169,7 @@ class Commander:
     # -- inputs ------------------------------------------------------------------------------------
     def update_state(self, state: VehicleState) -> None:
         self.state = state
+        self.position_valid = True
         if self.home is None:  # until arming: below where the vehicle booted, on the ground
             self.home = (state.position_m[0], state.position_m[1], GROUND_Z_M)
 
@@ -173,13 +177,17 @@ class Commander:
         if self.armed:
             return Outcome(ACCEPTED, "already armed")
         state = self.state
-        if state is None:
-            return self._refuse(TEMPORARILY_REJECTED, "arming refused: no vehicle state yet")
-        if not force:
+        if state is None or not self.position_valid:
+            # Not even a forced arm: without a state there is nothing to control.
+            return self._refuse(DENIED, "arming refused: no position (no sensor frames from the simulator)")
+        if not force:  # the pre-arm checks (a forced arm skips them, as in PX4)
             if self.in_air() or math.hypot(*state.velocity_m_s) > 0.2:
                 return self._refuse(DENIED, "arming refused: vehicle not landed")
             if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
                 return self._refuse(DENIED, "arming refused: OFFBOARD without a setpoint stream")
+            problem = prearm_problem(self.params, state.position_m, self.home, self.position_valid)
+            if problem:
+                return self._refuse(DENIED, f"arming refused: {problem}")
         self.armed = True
         self._armed_at = t
         self.home = state.position_m  # PX4 sets home where it arms
@@ -440,12 +448,43 @@ class Commander:
         self._event(SEVERITY_INFO, "armed for the scenario")
         self.fly_trajectory(t, trajectory, FlightMode.AUTO_MISSION, then=None)
 
+    # -- failsafes ----------------------------------------------------------------------------------
+    def gcs_heartbeat(self, t: float) -> None:
+        """A HEARTBEAT from a ground station (MAV_TYPE_GCS) at simulation time ``t``."""
+        for text in self.failsafes.gcs_heartbeat(t):
+            self._event(SEVERITY_INFO, text)
+
+    def simulator_lost(self) -> None:
+        """No sensor frames any more: the position is unknown until they resume (no arming)."""
+        self.position_valid = False
+
+    def _check_failsafes(self, t: float, state: VehicleState) -> None:
+        """Data link loss and geofence (failsafe.py); called once per step while armed off the ground."""
+        flying = self.in_air()
+        for action, text in self.failsafes.check(t, state.position_m, self.home, flying):
+            busy = self.phase in (Phase.LAND, Phase.RTL) or self._rtl_landing
+            if action == HOLD and not busy:
+                self.hold(t)
+                self._event(SEVERITY_CRITICAL, f"{text}: holding")
+            elif action == RTL and not busy:
+                self.return_to_launch(t)
+                self._event(SEVERITY_CRITICAL, f"{text}: returning to launch")
+            elif action == LAND and self.phase != Phase.LAND:
+                self.land(t)
+                self._event(SEVERITY_CRITICAL, f"{text}: landing")
+            elif action == WARN:
+                self._event(SEVERITY_WARNING, text)
+            else:  # the vehicle is already returning or landing: let it
+                self._event(SEVERITY_CRITICAL, f"{text} (already {self.mode.px4_name})")
+
     # -- the per-step decision ------------------------------------------------------------------------
     def step(self, t: float, dt: float) -> GuidanceOutput:
         """Decide this control step (``dt`` = control period, s)."""
         state = self.state
         if not self.armed or state is None:
             return GuidanceOutput(Motors.OFF, None)
+        if self.phase not in (Phase.IDLE, Phase.LANDED):
+            self._check_failsafes(t, state)
         phase = self.phase
         if phase == Phase.IDLE:
             if t - self._armed_at > self.params["COM_DISARM_PRFLT"] > 0.0:

@@ -71,6 +71,29 @@ class Cascade:
         self.filter = SecondOrderFilter(controller.command_filter, dt, channels=2)
         self.allocator = Allocator(vehicle)
 
+    def retune(self, controller: ControllerConfig) -> None:
+        """Switch to the gains of ``controller`` (same laws) between two steps.
+
+        Each law rescales its integral states so that the integral action's contribution to its
+        output is unchanged at the moment of the change (no jump in U1 or tau from the integrals);
+        the command filter keeps its state. Laws cannot change in flight (ValueError).
+        """
+        old = self.config
+        if (
+            controller.translational.law != old.translational.law
+            or controller.rotational.law != old.rotational.law
+        ):
+            raise ValueError("retune keeps the laws; a different cascade needs a restart")
+        self.translational.retune(controller.translational)
+        rot = controller.rotational
+        if rot.law == "nlhinf":
+            assert rot.nlhinf is not None
+            self.rotational.retune(rot.nlhinf)  # type: ignore[call-arg]
+        else:
+            self.rotational.retune(rot.c1, rot.c2, rot.k_integral)  # type: ignore[call-arg]
+        self.filter.retune(controller.command_filter)
+        self.config = controller
+
     def reset(self) -> None:
         """Zero every integral and re-initialise the command filter (disarmed / on the ground)."""
         self.translational.reset()

@@ -17,18 +17,24 @@ class SecondOrderFilter:
     """A bank of identical exact-discretised second-order filters, one per channel."""
 
     def __init__(self, config: CommandFilter, dt: float, channels: int = 2) -> None:
+        self.dt = dt
+        self.retune(config)
+        self.channels = channels
+        self.value = [0.0] * channels
+        self.rate = [0.0] * channels
+        self.initialised = False
+
+    def retune(self, config: CommandFilter) -> None:
+        """New wn, zeta from the next step on; the state (y, y') is kept, so y is continuous."""
+        self.config = config
         wn, zeta = config.natural_frequency_rad_s, config.damping
         self.wn2 = wn * wn
         self.two_zeta_wn = 2.0 * zeta * wn
         # Augmented continuous system [y, y', r]' with r constant over the step.
         A = np.array([[0.0, 1.0, 0.0], [-self.wn2, -self.two_zeta_wn, self.wn2], [0.0, 0.0, 0.0]])
-        Phi = expm(A * dt)
+        Phi = expm(A * self.dt)
         # Plain floats for the per-step path.
         self._phi = tuple(tuple(float(v) for v in row) for row in Phi[:2])
-        self.channels = channels
-        self.value = [0.0] * channels
-        self.rate = [0.0] * channels
-        self.initialised = False
 
     def reset(self, values: list[float] | tuple[float, ...] | None = None) -> None:
         """Start at ``values`` at rest (or re-initialise on the next update)."""

@@ -23,6 +23,26 @@ class IntegralBacksteppingAttitude:
     def reset(self) -> None:
         self.integral = [0.0, 0.0, 0.0]
 
+    def integral_acceleration(self) -> Vector3:
+        """The integral's term of eta_cmd'' now: ``-c2 lambda chi`` per axis (rad/s^2).
+
+        In eta_cmd'' the chi terms are ``-(c1 + c2) lambda chi`` (through e2) and ``+c1 lambda chi``,
+        which add up to ``-c2 lambda chi``; tau = M eta_cmd'' + C eta' carries them through M.
+        """
+        return tuple(-self.c2[i] * self.lam[i] * self.integral[i] for i in range(3))  # type: ignore[return-value]
+
+    def retune(self, c1: Vector3, c2: Vector3, k_integral: Vector3) -> None:
+        """New gains from the next step on, without a jump in the integral action.
+
+        chi_i is rescaled by ``(c2 lambda)_old / (c2 lambda)_new`` so every component of the
+        integral term of eta_cmd'' is unchanged, and so is its image ``M (.)`` in tau at any
+        state. A new lambda of zero drops the integral.
+        """
+        for i in range(3):
+            old, new = self.c2[i] * self.lam[i], c2[i] * k_integral[i]
+            self.integral[i] = self.integral[i] * old / new if new != 0.0 else 0.0
+        self.c1, self.c2, self.lam = tuple(c1), tuple(c2), tuple(k_integral)
+
     def update(
         self,
         euler: Vector3,

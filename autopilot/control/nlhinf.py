@@ -18,9 +18,11 @@ do not depend on gamma. With omega3 = 0 (BS-NLHinf) K_I = 0 and there is no inte
 
 from __future__ import annotations
 
+import math
+
 from quadcommon.config import NlHinfGains
 from quadcommon.frames import wrap_pi
-from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times
+from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times, solve3
 
 Vector3 = tuple[float, float, float]
 
@@ -29,15 +31,63 @@ class NonlinearHinfAttitude:
     """eq. (43)-(44) on the nominal inertia; holds the integral of the attitude error."""
 
     def __init__(self, gains: NlHinfGains, inertia_kg_m2: Vector3) -> None:
-        self.gains = gains
         self.inertia = inertia_kg_m2
+        self.integral = [0.0, 0.0, 0.0]
+        self._set_gains(gains)
+        # (eta, eta') of the latest update: where retune() evaluates C
+        self._last_state: tuple[Vector3, Vector3] | None = None
+
+    def _set_gains(self, gains: NlHinfGains) -> None:
+        self.gains = gains
         self.k_d = gains.k_d
         self.k_p = gains.k_p
         self.r_inv = 1.0 / gains.omega_u**2
-        self.integral = [0.0, 0.0, 0.0]
 
     def reset(self) -> None:
         self.integral = [0.0, 0.0, 0.0]
+
+    def _integral_matrix(self, k_p: float, r_inv: float, state: tuple[Vector3, Vector3] | None):
+        """``(C + r_inv 1) k_p``: tau's integral term is minus this times int(eta~) dt."""
+        if state is None:
+            C = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        else:
+            C = coriolis_matrix_fast(self.inertia, state[0], state[1])
+        return tuple(tuple(k_p * (C[i][j] + (r_inv if i == j else 0.0)) for j in range(3)) for i in range(3))
+
+    def integral_torque(self, euler: Vector3, euler_rates: Vector3) -> Vector3:
+        """The integral's contribution to tau_eta at the state (eta, eta') now (N m)."""
+        A = self._integral_matrix(self.k_p, self.r_inv, (euler, euler_rates))
+        v = matrix_times(A, tuple(self.integral))
+        return (-v[0], -v[1], -v[2])
+
+    def retune(self, gains: NlHinfGains) -> None:
+        """New weights from the next step on, without a jump in the integral action.
+
+        The integral enters tau only through ``-(C + w_u^-2 1) k_p int(eta~)`` (the s term of
+        the module docstring). Keeping it equal at the latest state means solving
+        ``(C + w_u'^-2 1) k_p' I' = (C + w_u^-2 1) k_p I`` for the new integral I'. C is
+        evaluated at the (eta, eta') of the latest update, so the integral term is exactly
+        continuous there; by the next step the state has moved by one control period, an O(dt)
+        difference. Before any update (or if the system is singular) C is taken as 0, which is
+        the small-rate approximation ``I' = I (k_p / k_p') (w_u'^2 / w_u^2)``, exact at hover.
+        k_p' = w3' / w1' = 0 removes the integral action, and the integral is zeroed.
+        """
+        k_p_new, r_inv_new = gains.omega3 / gains.omega1, 1.0 / gains.omega_u**2
+        if k_p_new == 0.0:
+            self.integral = [0.0, 0.0, 0.0]
+        else:
+            state = self._last_state
+            old = matrix_times(self._integral_matrix(self.k_p, self.r_inv, state), tuple(self.integral))
+            new = self._integral_matrix(k_p_new, r_inv_new, state)
+            try:
+                solved = solve3(new, old)
+                if not all(math.isfinite(v) for v in solved):
+                    raise ZeroDivisionError
+                self.integral = list(solved)
+            except ZeroDivisionError:
+                scale = (self.k_p * self.r_inv) / (k_p_new * r_inv_new)
+                self.integral = [v * scale for v in self.integral]
+        self._set_gains(gains)
 
     def update(
         self,
@@ -51,6 +101,7 @@ class NonlinearHinfAttitude:
     ) -> Vector3:
         """Generalised torque tau_eta (N m) on the Euler coordinates."""
         k_d, k_p = self.k_d, self.k_p
+        self._last_state = (euler, euler_rates)
         e = (euler[0] - ref[0], euler[1] - ref[1], wrap_pi(euler[2] - ref[2]))
         e_dot = (
             euler_rates[0] - ref_rate[0],

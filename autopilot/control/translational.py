@@ -41,15 +41,18 @@ class TranslationalController:
     def __init__(
         self, gains: TranslationalGains, mass_kg: float, gravity_m_s2: float, thrust_max_n: float
     ) -> None:
-        self.gains = gains
         self.law = gains.law
         self.mass = mass_kg
         self.gravity = gravity_m_s2
         self.thrust_max = thrust_max_n
         # Below this thrust the horizontal directions u_x, u_y are meaningless (free fall).
         self.thrust_floor = 0.1 * mass_kg * gravity_m_s2
-        self.sin_tilt_max = math.sin(gains.tilt_max_rad)
         self.integral = [0.0, 0.0, 0.0]
+        self._set_gains(gains)
+
+    def _set_gains(self, gains: TranslationalGains) -> None:
+        self.gains = gains
+        self.sin_tilt_max = math.sin(gains.tilt_max_rad)
         c1, c2, k = gains.c1, gains.c2, gains.k_integral
         # Precomputed per-axis coefficients of the laws.
         self._coef = [(c1[i], c2[i], k[i], 1.0 + c1[i] * c2[i], c1[i] + c2[i]) for i in range(3)]
@@ -57,6 +60,38 @@ class TranslationalController:
     def reset(self) -> None:
         """Zero the integral states (on the ground, disarmed, or at a law switch)."""
         self.integral = [0.0, 0.0, 0.0]
+
+    def _integral_weights(self, gains: TranslationalGains) -> Vector3:
+        """w_i such that the integral term of ``a_i`` is ``-w_i * integral_i`` (1/s^2 units)."""
+        if self.law == "integral_second_step":
+            return gains.k_integral  # -k_xi xi
+        if self.law == "integral_first_step":
+            # (c1^2 - 1 - lambda) e1 - (c1 + c2)(e1' + c1 e1 + lambda chi) + c1 lambda chi: the chi
+            # terms add up to -(c1 + c2) lambda chi + c1 lambda chi = -c2 lambda chi.
+            c2, lam = gains.c2, gains.k_integral
+            return (c2[0] * lam[0], c2[1] * lam[1], c2[2] * lam[2])
+        return (0.0, 0.0, 0.0)
+
+    def integral_acceleration(self) -> Vector3:
+        """The integral states' contribution to the commanded acceleration now (m/s^2)."""
+        w = self._integral_weights(self.gains)
+        return (-w[0] * self.integral[0], -w[1] * self.integral[1], -w[2] * self.integral[2])
+
+    def retune(self, gains: TranslationalGains) -> None:
+        """New gains from the next step on, without a jump in the integral action.
+
+        Each integral state is rescaled by ``w_old / w_new`` (w = k_xi for the integral in the 2nd
+        step, c2 lambda for the integral in the 1st step), so ``w * integral`` and hence the
+        commanded acceleration's integral term are unchanged at the moment of the change; the new
+        gains then shape how it evolves. The proportional terms change with c1, c2 as they must.
+        A new integral gain of zero drops the integral (its term cannot be kept).
+        """
+        if gains.law != self.law:
+            raise ValueError(f"cannot switch translational law {self.law} -> {gains.law} by retuning")
+        old, new = self._integral_weights(self.gains), self._integral_weights(gains)
+        for i in range(3):
+            self.integral[i] = self.integral[i] * old[i] / new[i] if new[i] != 0.0 else 0.0
+        self._set_gains(gains)
 
     def update(
         self,

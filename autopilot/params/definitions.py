@@ -1,8 +1,31 @@
-"""The autopilot's parameters and their defaults (PX4 names where the meaning matches)."""
+"""The autopilot's parameters and their defaults (PX4 names where the meaning matches).
+
+Three groups:
+
+* commander and failsafe parameters (fixed defaults, PX4's where PX4 has the parameter);
+* controller gains of the ACTIVE cascade, whose defaults are the controller config's values
+  (``config/controllers/NAME.toml``); only the laws the cascade runs have parameters;
+* rates (read-only: ``config/sitl.toml`` fixes them for both processes, and lockstep depends on
+  them, so a change is refused with that reason rather than half-applied).
+
+:func:`controller_config_from_params` maps the gain parameters back onto a
+:class:`~quadcommon.config.ControllerConfig` for :meth:`~autopilot.control.cascade.Cascade.retune`;
+:func:`consistency_problems` is the "bad parameters" pre-arm check.
+"""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+from quadcommon.config import ControllerConfig, NlHinfGains, Rates
+
 from .store import INT32, ParameterStore, ParamSpec
+
+# NAV_DLL_ACT (GCS data link loss action): PX4's enum values (0 disabled, 1 hold, 2 return,
+# 3 land; PX4's 5 terminate and 6 disarm are not supported here).
+DLL_NONE, DLL_HOLD, DLL_RTL, DLL_LAND = 0, 1, 2, 3
+# GF_ACTION (geofence breach action): PX4's values; 4 (terminate) is not supported here.
+GF_NONE, GF_WARN, GF_HOLD, GF_RTL, GF_TERMINATE, GF_LAND = 0, 1, 2, 3, 4, 5
 
 COMMANDER_PARAMS = (
     ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.2, 100.0, unit="m", description="takeoff altitude above home"),
@@ -21,7 +44,7 @@ COMMANDER_PARAMS = (
         0.1,
         60.0,
         unit="s",
-        description="offboard setpoint loss timeout (sim time)",
+        description="offboard setpoint loss timeout (sim time); then hold",
     ),
     ParamSpec("COM_DISARM_LAND", 2.0, 0.0, 20.0, unit="s", description="disarm this long after landing"),
     ParamSpec(
@@ -38,10 +61,248 @@ COMMANDER_PARAMS = (
         1,
         250,
         kind=INT32,
-        description="MAVLink system id (read-only in effect: set by --instance)",
+        description="MAVLink system id",
+        read_only="set by --instance N (sysid 1+N)",
     ),
 )
 
+FAILSAFE_PARAMS = (
+    ParamSpec(
+        "COM_DL_LOSS_T",
+        10,
+        5,
+        300,
+        kind=INT32,
+        unit="s",
+        description="GCS heartbeat loss timeout (sim time; PX4's int32 seconds)",
+    ),
+    ParamSpec(
+        "NAV_DLL_ACT",
+        DLL_NONE,
+        0,
+        3,
+        kind=INT32,
+        description="GCS heartbeat loss action: 0 none, 1 hold, 2 return (RTL), 3 land (PX4 values)",
+    ),
+    ParamSpec(
+        "COM_SIM_LOSS_T",
+        1.0,
+        0.2,
+        30.0,
+        unit="s",
+        description="no sensor frame for this long (wall): simulator lost, motors off",
+    ),
+    ParamSpec(
+        "GF_MAX_HOR_DIST",
+        0.0,
+        0.0,
+        10000.0,
+        unit="m",
+        description="geofence: horizontal distance from home (0 = disabled)",
+    ),
+    ParamSpec(
+        "GF_MAX_VER_DIST",
+        0.0,
+        0.0,
+        10000.0,
+        unit="m",
+        description="geofence: height above home (0 = disabled)",
+    ),
+    ParamSpec(
+        "GF_ACTION",
+        GF_HOLD,
+        0,
+        5,
+        kind=INT32,
+        description="geofence breach action: 0 none, 1 warning, 2 hold, 3 return (RTL), 5 land (PX4 values)",
+        refused={float(GF_TERMINATE): "flight termination is not supported"},
+    ),
+)
 
-def default_parameters() -> ParameterStore:
-    return ParameterStore(COMMANDER_PARAMS)
+RATES_READ_ONLY = (
+    "fixed by config/sitl.toml [rates] for simulator and autopilot (lockstep); edit it and restart"
+)
+
+AXES = ("X", "Y", "Z")
+EULER_AXES = ("R", "P", "Y")  # roll, pitch, yaw
+GAIN_HI = 1000.0
+INTEGRAL_LO = 0.001  # integral gains stay > 0: the retune keeps k * integral, which needs k != 0
+
+
+def controller_params(config: ControllerConfig) -> tuple[ParamSpec, ...]:
+    """Gain parameters of the cascade ``config`` (defaults = the config's values)."""
+    specs: list[ParamSpec] = []
+    tr = config.translational
+    for name, values, what in (("C1", tr.c1, "c1"), ("C2", tr.c2, "c2")):
+        for i, axis in enumerate(AXES):
+            specs.append(
+                ParamSpec(
+                    f"BS_{name}_{axis}",
+                    values[i],
+                    0.01,
+                    GAIN_HI,
+                    unit="1/s",
+                    description=f"translational backstepping {what}, {axis.lower()} axis",
+                )
+            )
+    if tr.law != "backstepping":
+        what = "k_xi (integral of e2)" if tr.law == "integral_second_step" else "lambda (integral of e1)"
+        for i, axis in enumerate(AXES):
+            specs.append(
+                ParamSpec(
+                    f"BS_KI_{axis}",
+                    tr.k_integral[i],
+                    INTEGRAL_LO,
+                    GAIN_HI,
+                    description=f"translational {what}, {axis.lower()} axis",
+                )
+            )
+    specs.append(
+        ParamSpec(
+            "BS_TILT_MAX", tr.tilt_max_rad, 0.05, 1.4, unit="rad", description="tilt limit of phi_r, theta_r"
+        )
+    )
+    rot = config.rotational
+    if rot.law == "nlhinf":
+        g = rot.nlhinf
+        assert g is not None
+        specs += [
+            ParamSpec("NLH_W1", g.omega1, 0.001, GAIN_HI, description="NLHinf weight omega1 (eq. 44)"),
+            ParamSpec("NLH_W2", g.omega2, 0.001, GAIN_HI, description="NLHinf weight omega2 (eq. 44)"),
+            ParamSpec(
+                "NLH_W3",
+                g.omega3,
+                INTEGRAL_LO,
+                GAIN_HI,
+                description="NLHinf weight omega3 (eq. 44; integral action K_I = k_p G)",
+                read_only="" if g.omega3 > 0.0 else "this cascade has no attitude integral (omega3 = 0)",
+            ),
+            ParamSpec("NLH_WU", g.omega_u, 0.01, GAIN_HI, description="NLHinf weight omega_u (eq. 44)"),
+        ]
+    else:
+        for name, values, lo, what in (
+            ("C1", rot.c1, 0.01, "c1"),
+            ("C2", rot.c2, 0.01, "c2"),
+            ("KI", rot.k_integral, INTEGRAL_LO, "lambda (integral)"),
+        ):
+            for i, axis in enumerate(EULER_AXES):
+                specs.append(
+                    ParamSpec(
+                        f"ATT_{name}_{axis}",
+                        values[i],
+                        lo,
+                        GAIN_HI,
+                        description=f"IntBS attitude {what}, {('roll', 'pitch', 'yaw')[i]}",
+                    )
+                )
+    cf = config.command_filter
+    specs += [
+        ParamSpec(
+            "CF_WN",
+            cf.natural_frequency_rad_s,
+            1.0,
+            1000.0,
+            unit="rad/s",
+            description="command filter natural frequency (roll/pitch references)",
+        ),
+        ParamSpec("CF_ZETA", cf.damping, 0.1, 5.0, description="command filter damping ratio"),
+    ]
+    return tuple(specs)
+
+
+def rate_params(rates: Rates) -> tuple[ParamSpec, ...]:
+    """The SITL rates, reported read-only."""
+    return (
+        ParamSpec("SITL_PHYS_HZ", rates.physics_hz, rates.physics_hz, rates.physics_hz, unit="Hz",
+                  description="simulator physics rate", read_only=RATES_READ_ONLY),
+        ParamSpec("SITL_CTRL_HZ", rates.control_hz, rates.control_hz, rates.control_hz, unit="Hz",
+                  description="control rate (one step per sensor frame)", read_only=RATES_READ_ONLY),
+        ParamSpec("SITL_GPS_HZ", rates.gps_hz, rates.gps_hz, rates.gps_hz, unit="Hz",
+                  description="HIL_GPS rate", read_only=RATES_READ_ONLY),
+    )  # fmt: skip
+
+
+def default_parameters(
+    controller: ControllerConfig | None = None, rates: Rates | None = None
+) -> ParameterStore:
+    """Commander and failsafe parameters, plus the gains of ``controller`` and ``rates`` if given."""
+    specs = [*COMMANDER_PARAMS, *FAILSAFE_PARAMS]
+    if controller is not None:
+        specs += controller_params(controller)
+    if rates is not None:
+        specs += rate_params(rates)
+    return ParameterStore(specs)
+
+
+def is_controller_param(name: str) -> bool:
+    return name.startswith(("BS_", "NLH_", "ATT_", "CF_"))
+
+
+def controller_config_from_params(base: ControllerConfig, params: ParameterStore) -> ControllerConfig:
+    """``base`` with every gain that ``params`` holds replaced by its current value."""
+
+    def vec(prefix: str, axes: tuple[str, ...], default: tuple[float, float, float]):
+        names = [f"{prefix}_{a}" for a in axes]
+        if not all(n in params for n in names):
+            return default
+        return tuple(params[n] for n in names)
+
+    tr = base.translational
+    translational = replace(
+        tr,
+        c1=vec("BS_C1", AXES, tr.c1),
+        c2=vec("BS_C2", AXES, tr.c2),
+        k_integral=vec("BS_KI", AXES, tr.k_integral),
+        tilt_max_rad=params.get("BS_TILT_MAX", tr.tilt_max_rad),
+    )
+    rot = base.rotational
+    if rot.law == "nlhinf" and "NLH_W1" in params:
+        rotational = replace(
+            rot,
+            nlhinf=NlHinfGains(params["NLH_W1"], params["NLH_W2"], params["NLH_W3"], params["NLH_WU"]),
+        )
+    else:
+        rotational = replace(
+            rot,
+            c1=vec("ATT_C1", EULER_AXES, rot.c1),
+            c2=vec("ATT_C2", EULER_AXES, rot.c2),
+            k_integral=vec("ATT_KI", EULER_AXES, rot.k_integral),
+        )
+    cf = base.command_filter
+    command_filter = replace(
+        cf,
+        natural_frequency_rad_s=params.get("CF_WN", cf.natural_frequency_rad_s),
+        damping=params.get("CF_ZETA", cf.damping),
+    )
+    return replace(base, translational=translational, rotational=rotational, command_filter=command_filter)
+
+
+def consistency_problems(params: ParameterStore) -> list[str]:
+    """Combinations of individually valid values that make no sense (pre-arm: "bad parameters").
+
+    * with a vertical geofence, the takeoff altitude and the return altitude must lie inside it
+      (else takeoff or RTL would breach the fence by themselves);
+    * the takeoff and landing speeds must respect the climb and descent limits.
+    """
+    p = params
+    problems = []
+    fence_z = p["GF_MAX_VER_DIST"]
+    if fence_z > 0.0:
+        if p["MIS_TAKEOFF_ALT"] >= fence_z:
+            problems.append(
+                f"MIS_TAKEOFF_ALT {p['MIS_TAKEOFF_ALT']:g} m is not below GF_MAX_VER_DIST {fence_z:g} m"
+            )
+        if p["RTL_RETURN_ALT"] >= fence_z:
+            problems.append(
+                f"RTL_RETURN_ALT {p['RTL_RETURN_ALT']:g} m is not below GF_MAX_VER_DIST {fence_z:g} m"
+            )
+    if p["MPC_TKO_SPEED"] > p["MPC_Z_VEL_MAX_UP"]:
+        problems.append(
+            f"MPC_TKO_SPEED {p['MPC_TKO_SPEED']:g} m/s exceeds MPC_Z_VEL_MAX_UP {p['MPC_Z_VEL_MAX_UP']:g} m/s"
+        )
+    if p["MPC_LAND_SPEED"] > p["MPC_Z_VEL_MAX_DN"]:
+        problems.append(
+            f"MPC_LAND_SPEED {p['MPC_LAND_SPEED']:g} m/s exceeds "
+            f"MPC_Z_VEL_MAX_DN {p['MPC_Z_VEL_MAX_DN']:g} m/s"
+        )
+    return problems

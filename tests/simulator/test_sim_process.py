@@ -123,7 +123,9 @@ def test_lockstep_waits_for_the_answer_and_never_skips_a_frame():
         assert ap.recv_frame(0.2) is None
 
 
-def test_timeout_is_reported_frame_resent_and_link_recovers(tmp_path):
+def test_timeout_is_reported_then_simulation_goes_on_and_link_recovers(tmp_path):
+    """A missing answer is reported once; the simulator then steps on by itself (autopilot lost:
+    disarmed on the ground here, motors off) and resumes lockstep at the autopilot's next answer."""
     sitl = sitl_toml_with(tmp_path, timeout_s=0.3)
     with SimProcess(42, "--sitl-config", str(sitl)) as sim, ScriptedAutopilot(42) as ap:
         frame = ap.link()
@@ -133,16 +135,24 @@ def test_timeout_is_reported_frame_resent_and_link_recovers(tmp_path):
         line = sim.wait_line("no HIL_ACTUATOR_CONTROLS", timeout=3.0)
         assert f"t={stuck * 1e-6:.3f} s within 0.3 s" in line
         assert f"udp 127.0.0.1:{wire.ports(42).hil}" in line and "autopilot running" in line
-        resent = [ap.recv_frame(1.0) for _ in range(2)]
-        assert all(f is not None and f.time_usec == stuck for f in resent)
-        # The message is printed once per outage, not per resend.
+        sim.wait_line("autopilot lost: vehicle disarmed, motors off", timeout=1.0)
+        later = [ap.recv_frame(1.0) for _ in range(3)]
+        assert all(f is not None for f in later)
+        assert stuck < later[0].time_usec < later[1].time_usec < later[2].time_usec  # time goes on
+        assert later[-1]["ODOMETRY"].z == 0.0  # still resting on the ground
+        # The message is printed once per outage, not per frame.
         assert sim.output.count("no HIL_ACTUATOR_CONTROLS") == 1
-        frame = ap.step(resent[-1])
-        assert frame.time_usec == stuck + FRAME_USEC
+        while (newer := ap.recv_frame(0.0005)) is not None:  # the newest frame queued so far
+            later.append(newer)
+        ap.answer(later[-1].time_usec)
         sim.wait_line("link recovered", timeout=2.0)
+        while (newer := ap.recv_frame(0.2)) is not None:  # frames sent before the answer arrived
+            later.append(newer)
+        frame = later[-1]
+        resumed = frame.time_usec
         for _ in range(5):
             frame = ap.step(frame)
-        assert frame.time_usec == stuck + 6 * FRAME_USEC
+        assert frame.time_usec == resumed + 5 * FRAME_USEC  # lockstep again: one frame per answer
         assert sim.terminate() == 0
 
 

@@ -1,0 +1,143 @@
+"""Failsafe monitors and pre-arm checks of the commander (pure: simulation time in, decisions out).
+
+Each failsafe is a parameter with PX4's name, values and default:
+
+* GCS data link loss: no HEARTBEAT from a ground station (MAV_TYPE_GCS) for ``COM_DL_LOSS_T``
+  seconds of simulation time -> ``NAV_DLL_ACT`` (0 none, the default as in PX4; 1 hold, 2 return,
+  3 land). A ground station that never sent a heartbeat never triggers it; with action 0 nothing is
+  announced either (at ``--speed max`` a 1 Hz wall-clock heartbeat is many simulated seconds apart,
+  so a silent default keeps fast runs quiet). The action is taken once per loss, while flying; a
+  heartbeat ends the loss ("regained").
+* Geofence: horizontal distance from home above ``GF_MAX_HOR_DIST`` or height above home above
+  ``GF_MAX_VER_DIST`` (0 disables either; both 0 by default, as PX4) -> ``GF_ACTION`` (0 none,
+  1 warning, 2 hold (PX4's default), 3 return, 5 land). A breach latches: the action is taken once,
+  and the fence re-arms only when the vehicle is back inside by a margin (hysteresis, so holding at
+  the boundary does not retrigger every step).
+* Offboard setpoint loss (``COM_OF_LOSS_T``) and simulator loss (``COM_SIM_LOSS_T``) live in the
+  commander and the process shell respectively.
+
+Actions are returned as :class:`FailsafeAction` records; the commander applies them (it knows how
+to hold, return and land) and a failsafe never overrides a landing or return already under way.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from ..params.definitions import (
+    DLL_HOLD,
+    DLL_LAND,
+    DLL_RTL,
+    GF_HOLD,
+    GF_LAND,
+    GF_RTL,
+    GF_WARN,
+    consistency_problems,
+)
+from ..params.store import ParameterStore
+
+Vector3 = tuple[float, float, float]
+
+WARN, HOLD, RTL, LAND = "warn", "hold", "rtl", "land"
+_DLL_ACTIONS = {DLL_HOLD: HOLD, DLL_RTL: RTL, DLL_LAND: LAND}
+_GF_ACTIONS = {GF_WARN: WARN, GF_HOLD: HOLD, GF_RTL: RTL, GF_LAND: LAND}
+FENCE_REARM_M = 0.5  # back inside by this much (or 10 % of the limit if smaller) re-arms the fence
+
+
+class FailsafeAction(NamedTuple):
+    action: str  # WARN, HOLD, RTL or LAND
+    text: str  # for STATUSTEXT (the commander adds what it does)
+
+
+def fence_excess(params: ParameterStore, position: Vector3, home: Vector3) -> tuple[float, str]:
+    """How far outside the geofence ``position`` is (m, <= 0 inside) and a description."""
+    worst, what = -math.inf, ""
+    limit = params["GF_MAX_HOR_DIST"]
+    if limit > 0.0:
+        d = math.hypot(position[0] - home[0], position[1] - home[1])
+        if d - limit > worst:
+            worst, what = d - limit, f"{d:.1f} m from home > GF_MAX_HOR_DIST {limit:g} m"
+    limit = params["GF_MAX_VER_DIST"]
+    if limit > 0.0:
+        h = position[2] - home[2]
+        if h - limit > worst:
+            worst, what = h - limit, f"{h:.1f} m above home > GF_MAX_VER_DIST {limit:g} m"
+    return worst, what
+
+
+def _rearm_margin(params: ParameterStore) -> float:
+    limits = [v for v in (params["GF_MAX_HOR_DIST"], params["GF_MAX_VER_DIST"]) if v > 0.0]
+    return min([FENCE_REARM_M] + [0.1 * v for v in limits])
+
+
+class FailsafeMonitor:
+    """Data link loss and geofence state; :meth:`check` once per control step while flying."""
+
+    def __init__(self, params: ParameterStore) -> None:
+        self.params = params
+        self.last_gcs_heartbeat_s: float | None = None
+        self.link_lost = False  # a loss was announced and no heartbeat came since
+        self._link_acted = False  # the loss action was taken for this loss
+        self.fence_breached = False  # latched until back inside by the margin
+
+    def gcs_heartbeat(self, t: float) -> list[str]:
+        """A ground station's HEARTBEAT at ``t``; returns messages to announce (link regained)."""
+        self.last_gcs_heartbeat_s = t
+        if self.link_lost:
+            self.link_lost = False
+            self._link_acted = False
+            return ["GCS connection regained"]
+        return []
+
+    def check(self, t: float, position: Vector3, home: Vector3 | None, flying: bool) -> list[FailsafeAction]:
+        """Failsafe actions due at ``t`` (each at most once per event)."""
+        out: list[FailsafeAction] = []
+        p = self.params
+        action = int(p["NAV_DLL_ACT"])
+        last = self.last_gcs_heartbeat_s
+        if action in _DLL_ACTIONS and last is not None and t - last > p["COM_DL_LOSS_T"]:
+            if not self.link_lost:
+                self.link_lost = True
+                if not flying:
+                    text = f"GCS connection lost: no heartbeat for {t - last:.1f} s"
+                    out.append(FailsafeAction(WARN, text))
+            if flying and not self._link_acted:
+                self._link_acted = True
+                out.append(
+                    FailsafeAction(
+                        _DLL_ACTIONS[action],
+                        f"GCS connection lost: no heartbeat for {t - last:.1f} s (NAV_DLL_ACT {action})",
+                    )
+                )
+        if home is not None and flying:
+            excess, what = fence_excess(p, position, home)
+            if excess > 0.0 and not self.fence_breached:
+                self.fence_breached = True
+                gf_action = _GF_ACTIONS.get(int(p["GF_ACTION"]))
+                if gf_action is not None:
+                    out.append(FailsafeAction(gf_action, f"geofence breached: {what}"))
+            elif self.fence_breached and excess < -_rearm_margin(p):
+                self.fence_breached = False
+        return out
+
+
+def prearm_problem(
+    params: ParameterStore, position: Vector3 | None, home: Vector3 | None, position_valid: bool
+) -> str | None:
+    """Why arming must be refused (beyond "not landed", which the commander checks), or None.
+
+    Checked: a position (sensor frames flowing), consistent parameters
+    (:func:`~autopilot.params.definitions.consistency_problems`), and the vehicle inside the
+    geofence around the current home (PX4 checks the fence before arming too).
+    """
+    if position is None or not position_valid:
+        return "no position (no sensor frames from the simulator)"
+    problems = consistency_problems(params)
+    if problems:
+        return "bad parameters: " + "; ".join(problems)
+    if home is not None:
+        excess, what = fence_excess(params, position, home)
+        if excess > 0.0:
+            return f"outside the geofence: {what}"
+    return None

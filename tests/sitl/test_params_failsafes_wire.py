@@ -1,0 +1,411 @@
+"""Parameters and failsafes over the real wire: the simulator and autopilot processes at
+--speed max, a pymavlink ground station on the API port, zenoh for truth and controller rows.
+
+Instances 90-99 belong to this module. Every wait is bounded (simulation time for flight
+events, wall time for process events).
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import struct
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as m
+
+from autopilot.commander.modes import FlightMode
+from autopilot.mavlink.params import param_set_raw_value
+from gcs_scripts.upload_gusts import upload_gusts
+from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS
+
+from .harness import REPO, Gcs, Proc, Sitl
+
+LOITER = FlightMode.AUTO_LOITER.custom_mode
+POSCTL = FlightMode.POSCTL.custom_mode
+RTL = FlightMode.AUTO_RTL.custom_mode
+OFFBOARD = FlightMode.OFFBOARD.custom_mode
+REAL32, INT32 = m.MAV_PARAM_TYPE_REAL32, m.MAV_PARAM_TYPE_INT32
+TRUTH = {name: i for i, name in enumerate(TRUTH_FIELDS)}
+CTRL = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
+
+
+# -- ground-station helpers ---------------------------------------------------------------------
+def texts(gcs: Gcs) -> str:
+    """Every STATUSTEXT so far, chunks joined (long texts arrive in 50-character pieces)."""
+    return "".join(gcs.statustext)
+
+
+def value_of(msg) -> float:
+    raw = param_set_raw_value(msg)  # bytewise INT32: read the bytes, never the float
+    return struct.unpack("<i", raw)[0] if msg.param_type == INT32 else struct.unpack("<f", raw)[0]
+
+
+def wait_param_value(gcs: Gcs, name: str, timeout: float = 5.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        msg = gcs.poll(0.05)
+        if msg is not None and msg.get_type() == "PARAM_VALUE" and msg.param_id == name:
+            return msg
+    raise AssertionError(f"no PARAM_VALUE {name} within {timeout} s")
+
+
+def param_get(gcs: Gcs, name: str):
+    gcs.conn.mav.param_request_read_send(gcs.system_id, 1, name.encode(), -1)
+    return wait_param_value(gcs, name)
+
+
+def param_set(gcs: Gcs, name: str, value: float, param_type: int = REAL32):
+    """PARAM_SET (INT32 bytewise, as PX4/MAVSDK) and the PARAM_VALUE echo."""
+    wire_value = struct.unpack("<f", struct.pack("<i", int(value)))[0] if param_type == INT32 else value
+    gcs.conn.mav.param_set_send(gcs.system_id, 1, name.encode(), wire_value, param_type)
+    return wait_param_value(gcs, name)
+
+
+def keep_link(gcs: Gcs, state: dict) -> None:
+    """A GCS heartbeat every 0.5 s of simulation time (the link-loss clock is simulation time)."""
+    if gcs.sim_time - state.get("hb", -1.0) >= 0.5:
+        gcs.conn.mav.heartbeat_send(m.MAV_TYPE_GCS, m.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        state["hb"] = gcs.sim_time
+
+
+def take_off(gcs: Gcs, altitude: float = 2.0, link: dict | None = None) -> None:
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    nan = math.nan
+    ack = gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 488.0 + altitude)
+    assert ack.result == m.MAV_RESULT_ACCEPTED
+
+    def up(g: Gcs) -> bool:
+        if link is not None:
+            keep_link(g, link)
+        return (
+            "LOCAL_POSITION_NED" in g.last and g.position()[2] > altitude - 0.03 and g.custom_mode == LOITER
+        )
+
+    gcs.wait(up, sim_timeout=15, what="takeoff")
+
+
+def wait_sim(gcs: Gcs, seconds: float, link: dict | None = None, feed=None) -> None:
+    t0 = gcs.sim_time
+
+    def done(g: Gcs) -> bool:
+        if link is not None:
+            keep_link(g, link)
+        if feed is not None:
+            feed(g)
+        return g.sim_time > t0 + seconds
+
+    gcs.wait(done, sim_timeout=seconds + 5, what=f"{seconds} s of simulation")
+
+
+@pytest.fixture
+def vehicle(request, tmp_path):
+    instance, kwargs = request.param
+    with Sitl(instance, **kwargs) as sitl:
+        gcs = sitl.gcs()
+        try:
+            gcs.wait_heartbeat()
+            yield sitl, gcs
+        finally:
+            gcs.close()
+
+
+# -- parameter protocol ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("vehicle", [(90, {})], indirect=True)
+def test_param_list_get_set_and_refusals(vehicle):
+    _, gcs = vehicle
+    gcs.conn.mav.param_request_list_send(gcs.system_id, 1)
+    values: dict[int, object] = {}
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        msg = gcs.poll(0.05)
+        if msg is not None and msg.get_type() == "PARAM_VALUE":
+            values[msg.param_index] = msg
+            if len(values) == msg.param_count:
+                break
+    count = next(iter(values.values())).param_count
+    assert sorted(values) == list(range(count)) and all(v.param_count == count for v in values.values())
+    by_name = {v.param_id: v for v in values.values()}
+    for name in (
+        "MIS_TAKEOFF_ALT",
+        "BS_KI_X",
+        "NLH_W3",
+        "CF_WN",
+        "COM_DL_LOSS_T",
+        "NAV_DLL_ACT",
+        "GF_ACTION",
+    ):
+        assert name in by_name
+    assert by_name["MIS_TAKEOFF_ALT"].param_type == REAL32 and value_of(by_name["MIS_TAKEOFF_ALT"]) == 2.5
+    assert by_name["GF_ACTION"].param_type == INT32 and value_of(by_name["GF_ACTION"]) == 2
+    assert value_of(by_name["MAV_SYS_ID"]) == gcs.system_id
+
+    # get / set a float
+    assert value_of(param_get(gcs, "NLH_W3")) == 9.0
+    echo = param_set(gcs, "NLH_W3", 4.5)
+    assert (echo.param_type, value_of(echo)) == (REAL32, 4.5)
+    assert value_of(param_get(gcs, "NLH_W3")) == 4.5
+    # get / set an int32, bytewise
+    echo = param_set(gcs, "NAV_DLL_ACT", 3, INT32)
+    assert (echo.param_type, value_of(echo)) == (INT32, 3)
+    assert echo.param_value == pytest.approx(4.2e-45)  # the int's bytes in the float field
+
+    # refusals: the old value comes back, and a STATUSTEXT says why
+    echo = param_set(gcs, "MIS_TAKEOFF_ALT", 500.0)
+    assert value_of(echo) == 2.5
+    echo = param_set(gcs, "GF_ACTION", 4, INT32)
+    assert value_of(echo) == 2
+    echo = param_set(gcs, "NAV_DLL_ACT", 1.0, REAL32)  # wrong type
+    assert (echo.param_type, value_of(echo)) == (INT32, 3)
+    gcs.conn.mav.param_set_send(gcs.system_id, 1, b"NO_SUCH_PARAM", 1.0, REAL32)
+    gcs.wait(lambda g: "unknown parameter 'NO_SUCH_PARAM'" in texts(g), sim_timeout=1e9, wall_timeout=5,
+             what="unknown-parameter STATUSTEXT")  # fmt: skip
+    all_text = texts(gcs)
+    assert "MIS_TAKEOFF_ALT: 500 out of range [0.2, 100] m" in all_text
+    assert "flight termination is not supported" in all_text
+    assert "type 9 refused, it is INT32" in all_text
+
+    # MAVLink FTP gets a NAK (MAVProxy then falls back to PARAM_REQUEST_LIST at once)
+    header = struct.pack("<HBBBBBBI", 1, 0, 4, 16, 0, 0, 0, 0) + b"@PARAM/param.pck"
+    gcs.conn.mav.file_transfer_protocol_send(0, gcs.system_id, 1, list(header.ljust(251, b"\0")))
+    deadline = time.monotonic() + 5.0
+    reply = None
+    while reply is None and time.monotonic() < deadline:
+        msg = gcs.poll(0.05)
+        if msg is not None and msg.get_type() == "FILE_TRANSFER_PROTOCOL":
+            reply = msg
+    assert reply is not None
+    seq, _, opcode, size, req_opcode = struct.unpack_from("<HBBBB", bytes(reply.payload))
+    assert (seq, opcode, size, req_opcode, reply.payload[12]) == (2, 129, 1, 4, 10)  # NAK FileNotFound
+
+
+@pytest.mark.parametrize("vehicle", [(91, {"collect": True})], indirect=True)
+def test_gain_change_in_flight_changes_the_flight_without_a_jump(vehicle):
+    """Under a sustained 1 N push the x integral carries the load; lowering BS_KI_X then keeps
+    U1 and the attitude references continuous (the integral is rescaled), and the next push is
+    rejected far more slowly (the new gain acts)."""
+    sitl, gcs = vehicle
+    take_off(gcs, 2.0)
+    push = {"description": "test", "step": [{"channel": "force_x", "start_s": 0.0, "value": 1.0}]}
+    first = upload_gusts(push, sitl.instance, "now", 5.0, session=sitl.session)
+    assert first["accepted"], first
+    t1 = first["start_s"]
+    wait_sim(gcs, 4.0)
+    echo = param_set(gcs, "BS_KI_X", 0.3)
+    assert value_of(echo) == pytest.approx(0.3)
+    t_change = gcs.sim_time
+    wait_sim(gcs, 1.0)
+    push["step"][0]["value"] = 2.0  # one more newton (an upload replaces the profile)
+    second = upload_gusts(push, sitl.instance, "now", 5.0, session=sitl.session)
+    t2 = second["start_s"]
+    wait_sim(gcs, 3.5)
+
+    rows = sitl.controller_rows()
+    t = rows[:, CTRL["time_s"]]
+    window = (t > t_change - 1.0) & (t < t_change + 0.5)
+    assert window.sum() > 200
+    for field in ("U1_n", "theta_raw_rad", "phi_raw_rad", "tau_theta_n_m"):
+        steps = np.abs(np.diff(rows[window, CTRL[field]]))
+        # Without the rescale the x integral term would jump by (1.5 - 0.3) * xi ~ 1 m/s^2,
+        # i.e. ~0.1 rad in theta_r: the largest step here is orders of magnitude below.
+        assert steps.max() < 2e-3, (field, steps.max())
+    truth = sitl.truth()
+    tt, x = truth[:, TRUTH["time_s"]], truth[:, TRUTH["x_m"]]
+
+    def error_at(time_s: float) -> float:
+        return abs(x[np.argmin(np.abs(tt - time_s))])
+
+    peak1 = np.abs(x[(tt > t1) & (tt < t1 + 3.0)]).max()
+    peak2 = np.abs(x[(tt > t2) & (tt < t2 + 3.0)] - error_at(t2)).max()
+    assert 0.01 < peak1 < 0.06 and 0.01 < peak2 < 0.1
+    # 3 s after each push: k_xi = 1.5 has removed most of the offset, k_xi = 0.3 has not.
+    assert error_at(t2 + 3.0) > 2.5 * error_at(t1 + 3.0), (error_at(t1 + 3.0), error_at(t2 + 3.0))
+
+
+@pytest.mark.parametrize("vehicle", [(92, {})], indirect=True)
+def test_saved_parameters_persist_across_a_restart(vehicle, tmp_path):
+    sitl, gcs = vehicle  # a first vehicle without --params: saving is refused with the reason
+    ack = gcs.command(m.MAV_CMD_PREFLIGHT_STORAGE, 1)
+    assert ack.result == m.MAV_RESULT_DENIED
+    gcs.wait(lambda g: "--params FILE" in texts(g), sim_timeout=1e9, wall_timeout=5, what="reason")
+    gcs.close()
+    sitl.stop()
+
+    path = tmp_path / "params.toml"
+    with Sitl(92, ap_args=("--params", str(path))) as s2:
+        g2 = s2.gcs()
+        try:
+            g2.wait_heartbeat()
+            assert value_of(param_set(g2, "NLH_W3", 4.5)) == 4.5
+            assert value_of(param_set(g2, "NAV_DLL_ACT", 2, INT32)) == 2
+            assert g2.command(m.MAV_CMD_PREFLIGHT_STORAGE, 1).result == m.MAV_RESULT_ACCEPTED
+        finally:
+            g2.close()
+    text = path.read_text()
+    assert "NLH_W3 = 4.5" in text and "NAV_DLL_ACT = 2" in text
+    with Sitl(92, ap_args=("--params", str(path))) as s3:
+        g3 = s3.gcs()
+        try:
+            g3.wait_heartbeat()
+            assert value_of(param_get(g3, "NLH_W3")) == 4.5
+            assert value_of(param_get(g3, "NAV_DLL_ACT")) == 2
+        finally:
+            g3.close()
+        assert "parameters loaded from" in s3.ap.output
+
+
+def test_bad_parameter_file_is_a_clear_startup_error(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("MIS_TAKEOFF_ALT = 3.0\nNLH_W3 = -1.0\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "autopilot", "--instance", "97", "--no-zenoh", "--params", str(path)],
+        cwd=REPO, capture_output=True, text=True, timeout=20,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert str(path) in result.stderr and "'NLH_W3' = -1.0" in result.stderr
+    assert "allowed: [0.001, 1000]" in result.stderr
+
+
+# -- failsafes ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("vehicle", [(93, {})], indirect=True)
+def test_gcs_heartbeat_loss_with_hold_action(vehicle):
+    _, gcs = vehicle
+    link: dict = {}
+    keep_link(gcs, link)
+    assert value_of(param_set(gcs, "NAV_DLL_ACT", 1, INT32)) == 1
+    assert value_of(param_set(gcs, "COM_DL_LOSS_T", 5, INT32)) == 5
+    take_off(gcs, 2.0, link)
+    assert gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 3, 0).result == m.MAV_RESULT_ACCEPTED  # POSCTL
+    wait_sim(gcs, 2.0, link)
+    assert gcs.custom_mode == POSCTL and "GCS connection lost" not in texts(gcs)
+    last_heartbeat = link["hb"]
+    gcs.wait(lambda g: g.custom_mode == LOITER, sim_timeout=10, what="hold after link loss")
+    # (the autopilot stamps the heartbeat on arrival, a little after the telemetry time we saw)
+    assert 4.5 < gcs.sim_time - last_heartbeat < 7.0
+    gcs.wait(lambda g: "GCS connection lost" in texts(g), sim_timeout=2, what="announcement")
+    assert "(NAV_DLL_ACT 1): holding" in texts(gcs)
+    keep_link(gcs, {})
+    gcs.wait(lambda g: "GCS connection regained" in texts(g), sim_timeout=2, what="regained")
+
+
+@pytest.mark.parametrize("vehicle", [(94, {})], indirect=True)
+def test_arming_refused_with_a_reason_then_geofence_breach_returns(vehicle):
+    _, gcs = vehicle
+    # An inconsistent combination: a vertical fence below the takeoff altitude.
+    assert value_of(param_set(gcs, "GF_MAX_VER_DIST", 2.0)) == 2.0
+    ack = gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert ack.result == m.MAV_RESULT_DENIED
+    gcs.wait(lambda g: "arming refused: bad parameters" in texts(g), sim_timeout=1e9, wall_timeout=5,
+             what="arming refusal STATUSTEXT")  # fmt: skip
+    assert "MIS_TAKEOFF_ALT 2.5 m is not below GF_MAX_VER_DIST 2 m" in texts(gcs)
+    assert not gcs.armed
+    param_set(gcs, "GF_MAX_VER_DIST", 0.0)
+    # Horizontal fence at 3 m, breach -> return to launch.
+    param_set(gcs, "GF_MAX_HOR_DIST", 3.0)
+    assert value_of(param_set(gcs, "GF_ACTION", 3, INT32)) == 3
+    take_off(gcs, 2.0)
+    for _ in range(10):
+        gcs.send_position_setpoint(6.0, 0.0, 2.0)
+        gcs.poll(0.01)
+    assert gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 6, 0).result == m.MAV_RESULT_ACCEPTED  # OFFBOARD
+
+    def flying_out(g: Gcs) -> bool:
+        if g.last.get("LOCAL_POSITION_NED") is not None:
+            g.send_position_setpoint(6.0, 0.0, 2.0)
+        return g.custom_mode == RTL
+
+    gcs.wait(flying_out, sim_timeout=15, what="RTL after the geofence breach")
+    assert 2.9 < gcs.position()[0] < 4.0  # caught at the fence, not at the setpoint
+    gcs.wait(lambda g: "geofence breached" in texts(g), sim_timeout=2, what="announcement")
+    assert "from home > GF_MAX_HOR_DIST 3 m: returning to launch" in texts(gcs)
+    gcs.wait(lambda g: g.position()[0] < 0.5, sim_timeout=15, what="back home")
+
+
+@pytest.mark.parametrize("vehicle", [(95, {})], indirect=True)
+def test_simulator_killed_autopilot_reports_and_keeps_answering(vehicle):
+    sitl, gcs = vehicle
+    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last, what="telemetry")
+    sitl.sim.proc.send_signal(signal.SIGKILL)
+    sitl.sim.proc.wait(5.0)
+    gcs.wait(lambda g: "(COM_SIM_LOSS_T); motors off" in texts(g), sim_timeout=1e9, wall_timeout=5,
+             what="simulator lost")  # fmt: skip
+    assert "simulator lost: no sensor frame for 1 s" in texts(gcs)
+    # Heartbeats go on (wall clock) and commands are answered.
+    gcs.last.pop("HEARTBEAT", None)
+    gcs.wait_heartbeat()
+    ack = gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert ack.result == m.MAV_RESULT_DENIED
+    gcs.wait(lambda g: "arming refused: no position" in texts(g), sim_timeout=1e9, wall_timeout=5,
+             what="reason")  # fmt: skip
+    assert value_of(param_get(gcs, "MIS_TAKEOFF_ALT")) == 2.5
+    assert sitl.ap.proc.poll() is None
+
+
+@pytest.mark.parametrize("vehicle", [(96, {"collect": True})], indirect=True)
+def test_autopilot_killed_in_flight_simulator_lands_the_vehicle(vehicle):
+    sitl, gcs = vehicle
+    take_off(gcs, 2.0)
+    sitl.ap.proc.send_signal(signal.SIGKILL)
+    sitl.ap.proc.wait(5.0)
+    sitl.sim.wait_line("autopilot lost: emergency descent from z=2.", 10.0)
+    line = sitl.sim.wait_line("emergency descent: touchdown", 20.0)
+    t_down = float(line.split("touchdown at t=")[1].split(" s")[0])
+    time.sleep(0.5)  # the simulator goes on (real time once landed): truth keeps coming
+    truth = sitl.truth()
+    assert truth[-1, TRUTH["on_ground"]] == 1.0 and abs(truth[-1, TRUTH["z_m"]]) < 1e-6
+    assert truth[-1, TRUTH["thrust_n"]] == 0.0  # motors off
+    airborne = truth[truth[:, TRUTH["z_m"]] > 0.1]
+    descent = airborne[airborne[:, TRUTH["time_s"]] > airborne[-1, TRUTH["time_s"]] - 1.0]
+    assert np.mean(descent[:, TRUTH["vz_m_s"]]) == pytest.approx(-0.5, abs=0.1)
+    assert np.abs(truth[-1, [TRUTH["x_m"], TRUTH["y_m"]]]).max() < 0.5  # landed where it was lost
+    # A new autopilot resumes lockstep from the current (landed) state; nobody hung.
+    sitl.ap = Proc("autopilot", [sys.executable, "-u", "-m", "autopilot", "--instance", str(sitl.instance)])
+    sitl.sim.wait_line("link recovered", 10.0)
+    gcs.last.clear()
+
+    def fresh(g: Gcs) -> bool:  # (the socket may still hold telemetry of the killed autopilot)
+        lp = g.last.get("LOCAL_POSITION_NED")
+        return lp is not None and lp.time_boot_ms * 1e-3 > t_down and "EXTENDED_SYS_STATE" in g.last
+
+    gcs.wait(fresh, sim_timeout=1e9, wall_timeout=10, what="telemetry from the new autopilot")
+    assert abs(gcs.position()[2]) < 0.01 and not gcs.armed
+    assert gcs.last["EXTENDED_SYS_STATE"].landed_state == m.MAV_LANDED_STATE_ON_GROUND
+    assert sitl.sim.proc.poll() is None
+
+
+# -- quadsitl up --params ---------------------------------------------------------------------------
+def test_quadsitl_up_refuses_a_bad_parameter_file_before_starting(tmp_path):
+    path = tmp_path / "params.toml"
+    path.write_text("GF_ACTION = 4\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "sitl.cli", "up", "--instance", "98", "--params", str(path)],
+        cwd=REPO, capture_output=True, text=True, timeout=20,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert str(path) in result.stderr and "'GF_ACTION' = 4" in result.stderr
+    assert "flight termination is not supported" in result.stderr and "allowed: [0, 5]" in result.stderr
+    result = subprocess.run(
+        [sys.executable, "-m", "sitl.cli", "up", "--instance", "98", "--count", "2", "--params", str(path)],
+        cwd=REPO, capture_output=True, text=True, timeout=20,
+    )  # fmt: skip
+    assert result.returncode == 2 and "{instance}" in result.stderr
+
+
+def test_quadsitl_up_passes_the_parameter_file_to_the_autopilot(tmp_path):
+    from sitl.up import Sitl as Up
+    from sitl.up import VehicleSpec
+
+    path = tmp_path / "params-{instance}.toml"
+    (tmp_path / "params-99.toml").write_text("MIS_TAKEOFF_ALT = 3.5\n")
+    with Up([VehicleSpec(instance=99, speed="max", params_file=str(path).replace("{instance}", "99"))],
+            echo=False) as up:  # fmt: skip
+        gcs = Gcs(up.ports[99].api_remote, 100)
+        try:
+            gcs.wait_heartbeat()
+            assert value_of(param_get(gcs, "MIS_TAKEOFF_ALT")) == 3.5
+        finally:
+            gcs.close()
