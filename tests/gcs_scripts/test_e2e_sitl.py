@@ -48,9 +48,9 @@ def _terminate(proc: subprocess.Popen) -> str:
 
 
 @contextmanager
-def _sitl(instance: int, scenario: str) -> Iterator[None]:
+def _sitl(instance: int, scenario: str, speed: str = "max") -> Iterator[None]:
     sim = _spawn("-m", "simulator", "--instance", str(instance), "--vehicle", "paper_quad",
-                 "--scenario", scenario, "--speed", "max")  # fmt: skip
+                 "--scenario", scenario, "--speed", speed)  # fmt: skip
     ap = _spawn("-m", "autopilot", "--instance", str(instance), "--controller", "intbs_nlhinf",
                 "--vehicle", "paper_quad")  # fmt: skip
     try:
@@ -72,7 +72,10 @@ def hover_sitl() -> Iterator[int]:
 
 @pytest.fixture
 def circle_sitl() -> Iterator[int]:
-    with _sitl(61, "circle"):
+    # Speed 2, not max: this test measures how the streamed trajectory lines up with the reference;
+    # at max speed on a loaded 2-core machine the 100 Hz Python stream falls behind the simulation
+    # by tenths of a (simulated) second now and then, which is the machine, not the stream.
+    with _sitl(61, "circle", speed="2"):
         yield 61
 
 
