@@ -38,32 +38,20 @@ def _die_with_parent() -> None:  # runs in the child between fork and exec (Linu
     os.setpgrp()  # own process group: a terminal Ctrl-C reaches the launcher, which stops us
 
 
-def _check_udp(port: int, what: str, instance: int) -> None:
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+def _check_port(port: int, kind: int, what: str, instance: int) -> None:
+    """Bind ``port`` on loopback and let go: in use -> LaunchError naming it and ``--instance``."""
+    sock = socket.socket(socket.AF_INET, kind)
+    if kind == socket.SOCK_STREAM:
+        # As zenoh's own listener does: connections of a vehicle just stopped linger in TIME_WAIT
+        # for a minute and must not block starting it again; a live listener still makes bind fail.
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((wire.LOOPBACK, port))
     except OSError as exc:
         if exc.errno == errno.EADDRINUSE:
+            proto = "TCP" if kind == socket.SOCK_STREAM else "UDP"
             raise LaunchError(
-                f"UDP port {port} ({what}) is already in use: another SITL with --instance "
-                f"{instance} may be running; stop it or choose another --instance"
-            ) from None
-        raise
-    finally:
-        sock.close()
-
-
-def _check_tcp(port: int, what: str, instance: int) -> None:
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    # As zenoh's own listener does: connections of a vehicle just stopped linger in TIME_WAIT for
-    # a minute and must not block starting it again; a live listener still makes bind fail.
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((wire.LOOPBACK, port))
-    except OSError as exc:
-        if exc.errno == errno.EADDRINUSE:
-            raise LaunchError(
-                f"TCP port {port} ({what}) is already in use: another SITL with --instance "
+                f"{proto} port {port} ({what}) is already in use: another SITL with --instance "
                 f"{instance} may be running; stop it or choose another --instance"
             ) from None
         raise
@@ -74,11 +62,12 @@ def _check_tcp(port: int, what: str, instance: int) -> None:
 def check_ports(instance: int, sitl_config: str | None = None) -> wire.Ports:
     cfg = load_sitl(sitl_config)
     ports = wire.ports(instance, cfg.hil_port_base, cfg.gcs_port_base, cfg.api_port_base, cfg.zenoh_port_base)
-    _check_udp(ports.hil, "simulator HIL link", instance)
-    _check_udp(ports.gcs_local, "autopilot GCS link", instance)
-    _check_udp(ports.api_local, "autopilot API link", instance)
+    udp = socket.SOCK_DGRAM
+    _check_port(ports.hil, udp, "simulator HIL link", instance)
+    _check_port(ports.gcs_local, udp, "autopilot GCS link", instance)
+    _check_port(ports.api_local, udp, "autopilot API link", instance)
     if not cfg.zenoh_router:
-        _check_tcp(ports.zenoh, "simulator zenoh endpoint", instance)
+        _check_port(ports.zenoh, socket.SOCK_STREAM, "simulator zenoh endpoint", instance)
     return ports
 
 
