@@ -447,6 +447,8 @@ class Autopilot:
         s.reference = guidance.reference
         s.controls = self._controls
         s.armable = not c.armed and not c.in_air()
+        s.geofence_enabled = self.params["GF_MAX_HOR_DIST"] > 0.0 or self.params["GF_MAX_VER_DIST"] > 0.0
+        s.geofence_breached = c.failsafes.fence_breached
         if output is not None:
             s.euler_ref = output.euler_ref_rad
             s.thrust_normalised = output.thrust_n / self.vehicle.actuation.thrust_max_n

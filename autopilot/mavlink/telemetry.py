@@ -75,6 +75,8 @@ class VehicleStatus:
     controls: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     wrench: bool = True
     armable: bool = False
+    geofence_enabled: bool = False
+    geofence_breached: bool = False
     flight_sw_version: int = 0x01000000
     extra: dict = field(default_factory=dict)
 
@@ -96,12 +98,15 @@ def sys_status(s: VehicleStatus):
     health = SENSORS_PRESENT if s.armable or s.armed else SENSORS_PRESENT & ~m.MAV_SYS_STATUS_PREARM_CHECK
     if s.state is None:
         health &= ~(m.MAV_SYS_STATUS_SENSOR_GPS | m.MAV_SYS_STATUS_AHRS)
-    # The geofence bit reads "not breached" in health (it is neither present nor enabled):
-    # MAVProxy's fence module otherwise announces "fence breach" on connecting.
-    health |= m.MAV_SYS_STATUS_GEOFENCE
-    return m.MAVLink_sys_status_message(
-        SENSORS_PRESENT, SENSORS_PRESENT, health, 250, 16000, -1, 100, 0, 0, 0, 0, 0, 0
-    )
+    present = enabled = SENSORS_PRESENT
+    if s.geofence_enabled:
+        present |= m.MAV_SYS_STATUS_GEOFENCE
+        enabled |= m.MAV_SYS_STATUS_GEOFENCE
+    # The geofence bit reads healthy unless breached (also when no fence is set: MAVProxy's fence
+    # module otherwise announces "fence breach" on connecting).
+    if not s.geofence_breached:
+        health |= m.MAV_SYS_STATUS_GEOFENCE
+    return m.MAVLink_sys_status_message(present, enabled, health, 250, 16000, -1, 100, 0, 0, 0, 0, 0, 0)
 
 
 def extended_sys_state(s: VehicleStatus):

@@ -322,7 +322,19 @@ def test_arming_refused_with_a_reason_then_geofence_breach_returns(vehicle):
     assert 2.9 < gcs.position()[0] < 4.0  # caught at the fence, not at the setpoint
     gcs.wait(lambda g: "geofence breached" in texts(g), sim_timeout=2, what="announcement")
     assert "from home > GF_MAX_HOR_DIST 3 m: returning to launch" in texts(gcs)
+    fence = m.MAV_SYS_STATUS_GEOFENCE
+
+    def fence_bits(g: Gcs) -> tuple[bool, bool] | None:
+        status = g.last.get("SYS_STATUS")
+        if status is None:
+            return None
+        return bool(status.onboard_control_sensors_present & fence), bool(
+            status.onboard_control_sensors_health & fence
+        )
+
+    gcs.wait(lambda g: fence_bits(g) == (True, False), sim_timeout=3, what="SYS_STATUS: fence breached")
     gcs.wait(lambda g: g.position()[0] < 0.5, sim_timeout=15, what="back home")
+    gcs.wait(lambda g: fence_bits(g) == (True, True), sim_timeout=3, what="SYS_STATUS: fence healthy again")
 
 
 @pytest.mark.parametrize("vehicle", [(95, {})], indirect=True)
