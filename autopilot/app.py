@@ -58,6 +58,7 @@ from .params.storage import load_params_file
 m = mavlink
 FORCE_MAGIC = 21196  # param2 of ARM_DISARM that forces arming/disarming (as PX4)
 CONTROLLER_BATCH = 10
+SPIN_BELOW_GAP_S = 0.001  # frames closer than this (wall): spin-wait for the next one
 
 
 @dataclass(frozen=True)
@@ -144,6 +145,7 @@ class Autopilot:
         self.linked = False
         self.sim_lost = False
         self.last_frame_wall = 0.0
+        self._frame_gap_s = 1.0  # wall time between the last two frames
         self.sim_time = 0.0
         self.last_time_usec = -1
         self.frames = 0
@@ -382,7 +384,9 @@ class Autopilot:
                     self.hil_address,
                 )
                 return
-        self.last_frame_wall = time.monotonic()
+        now = time.monotonic()
+        self._frame_gap_s = now - self.last_frame_wall
+        self.last_frame_wall = now
         if not self.linked or self.sim_lost:
             self.log(f"linked with simulator (frames at t={frame.time_usec * 1e-6:.3f} s)")
             if self.sim_lost:
@@ -597,6 +601,11 @@ class Autopilot:
             if now >= next_housekeeping:
                 self._wall_housekeeping(now)
                 next_housekeeping = now + 0.05
+            # Frames in quick succession (faster than real time): wait for the next one awake
+            # (see quadcommon.wire.spin_until_readable); paced at real time, just block.
+            gap = self._frame_gap_s
+            if gap < SPIN_BELOW_GAP_S:
+                wire.spin_until_readable(hil, min(self.sitl.lockstep_spin_s, 3.0 * gap))
             for key, _ in select(0.05):
                 if key.data == "hil":
                     while True:

@@ -430,6 +430,7 @@ class SitlConfig:
     zenoh_port_base: int
     zenoh_router: str  # "" for peer-to-peer on loopback, else an endpoint like tcp/host:7447
     lockstep_timeout_s: float
+    lockstep_spin_s: float = 0.002  # busy-wait for the peer's datagram this long before blocking
 
 
 def load_rates(sec: Section) -> Rates:
@@ -470,6 +471,7 @@ def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
     sec.finish()
     sec = root.section("lockstep", optional=True)
     timeout = sec.number("timeout_s", 2.0, lo=0.05, hi=600.0, unit="s")
+    spin = sec.number("spin_s", 0.002, lo=0.0, hi=0.05, unit="s")
     sec.finish()
     root.finish()
-    return SitlConfig(rates, hil, gcs, api, home, zenoh_port, router, timeout)
+    return SitlConfig(rates, hil, gcs, api, home, zenoh_port, router, timeout, spin)

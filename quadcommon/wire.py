@@ -32,6 +32,8 @@ whose bit 1 disagrees with its own vehicle config.
 
 from __future__ import annotations
 
+import select
+import time
 from dataclasses import dataclass
 
 LOOPBACK = "127.0.0.1"
@@ -49,6 +51,24 @@ SIMULATOR_COMPONENT_ID = 51  # a component of the same system on the HIL link (n
 
 HIL_FLAG_LOCKSTEP = 1
 HIL_FLAG_WRENCH = 2
+
+
+def spin_until_readable(sock, seconds: float) -> bool:
+    """Busy-wait up to ``seconds`` for ``sock`` to become readable; True if it did.
+
+    Lockstep hands control back and forth every frame. A blocking wait lets the vCPU go idle and
+    waking it costs tens of microseconds per hop on a virtual machine, more than a frame's
+    compute; polling for a moment first keeps it awake (bounded: then the caller blocks).
+    """
+    if seconds <= 0.0:
+        return False
+    select_ = select.select
+    end = time.perf_counter() + seconds
+    while True:
+        if select_((sock,), (), (), 0.0)[0]:
+            return True
+        if time.perf_counter() >= end:
+            return False
 
 
 def system_id(instance: int) -> int:

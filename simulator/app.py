@@ -112,6 +112,7 @@ class Simulator:
         self.decoder = ActuatorDecoder()
         self.wrench = self.vehicle.actuation.mode == "wrench"
         self.timeout_s = sitl.lockstep_timeout_s
+        self.spin_s = sitl.lockstep_spin_s
 
         self.sock: socket.socket | None = None
         self.session: Any = None
@@ -279,6 +280,7 @@ class Simulator:
         sock, decode, info = self.sock, self.decoder.decode, self.info
         assert sock is not None and info is not None
         deadline = time.perf_counter() + self.timeout_s
+        wire.spin_until_readable(sock, self.spin_s)  # the answer is due within ~100 µs
         while self._running:
             try:
                 data, address = sock.recvfrom(MAX_DATAGRAM)
