@@ -1,18 +1,23 @@
-"""``quadsitl demo`` (``make demo``): the paper's helix experiment flown through the SITL.
+"""``quadsitl demo`` (``make demo``): the paper's experiment flown through the SITL.
 
-For each cascade (IntBS-NLH∞, IntBS, BS-NLH∞) it starts the SITL (simulator + autopilot, two
-processes linked over MAVLink/UDP, ``--speed max``) with the helix scenario (plant mass and
+First the paper's circle, with its disturbance schedule, streamed as OFFBOARD position + velocity +
+acceleration setpoints by ``gcs_scripts/fly_trajectory.py`` while ``gcs_scripts/record.py``
+records; its indices from the log beside the in-process run (``circle_offboard.md``,
+``sitl_circle_*.png``).
+
+Then, for each cascade (IntBS-NLH∞, IntBS, BS-NLH∞), it starts the SITL (simulator + autopilot,
+two processes linked over MAVLink/UDP, ``--speed max``) with the helix scenario (plant mass and
 inertia +30 %), runs ``gcs_scripts/fly_paper.py`` against it, which uploads the helix as a timed
 mission and the paper's disturbance schedule as a gust profile, flies it and records the session,
-and stops the SITL. Then, from the recorded logs only, it computes the paper's indices over the
-40 s of the curve and writes:
+and stops the SITL. From the recorded logs only, it computes the paper's indices over the 40 s of
+the curve and writes:
 
 * ``comparison.md``: one table, final errors / ISE / IADU, a column per cascade (SITL);
 * ``sitl_vs_inprocess.md``: the same indices beside the in-process runs of the same scenario,
   over t in [4, 40] s (the SITL flies the curve from a hover at p_d(0), the in-process run from
   the paper's initial state: their first seconds differ by construction);
 * ``sitl_helix_{path3d,position,position_error,orientation,controls}.png``;
-* ``logs/helix_<cascade>.{parquet,tlog}``: the recorded sessions (``quadsitl analyze`` reads them).
+* ``logs/``: the recorded sessions (``.parquet``, ``.tlog``; ``quadsitl analyze`` reads them).
 """
 
 from __future__ import annotations
@@ -63,6 +68,57 @@ def fly_one(controller: str, scenario: str, instance: int, log_base: Path, speed
     return float(match.group(1))
 
 
+def fly_offboard(scenario: str, instance: int, log_base: Path, speed: str) -> float:
+    """The scenario streamed as OFFBOARD setpoints (p, v, a) by fly_trajectory.py, recorded by
+    record.py, with the paper's gusts uploaded to start with the trajectory; returns t0."""
+    spec = VehicleSpec(instance=instance, scenario=scenario, speed=speed)
+    scripts = REPO / "gcs_scripts"
+    with Sitl([spec], echo=False):
+        recorder = subprocess.Popen(
+            [
+                sys.executable,
+                "-u",
+                str(scripts / "record.py"),
+                "--instance",
+                str(instance),
+                "--out",
+                str(log_base),
+                "--until-disarmed",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        try:
+            result = subprocess.run(
+                [
+                    sys.executable,
+                    "-u",
+                    str(scripts / "fly_trajectory.py"),
+                    "--instance",
+                    str(instance),
+                    "--scenario",
+                    scenario,
+                    "--gusts",
+                    "paper_steps",
+                ],
+                capture_output=True,
+                text=True,
+                timeout=900,
+            )
+            recorder.wait(timeout=60)
+        finally:
+            if recorder.poll() is None:
+                recorder.terminate()
+                recorder.wait(timeout=10)
+    if result.returncode != 0:
+        raise RuntimeError(f"fly_trajectory.py failed:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}")
+    match = T0.search(result.stdout)
+    if match is None:
+        raise RuntimeError(f"fly_trajectory.py did not report t0:\n{result.stdout[-2000:]}")
+    return float(match.group(1))
+
+
 def run_demo(
     out_dir: Path,
     scenario: str = "helix",
@@ -74,6 +130,30 @@ def run_demo(
     out_dir = Path(out_dir)
     logs = out_dir / "logs"
     logs.mkdir(parents=True, exist_ok=True)
+
+    # The paper's circle streamed in OFFBOARD by a ground-station script, recorded, analysed.
+    started = time.perf_counter()
+    log("[0] SITL: the paper's circle streamed as OFFBOARD setpoints (fly_trajectory.py), recorded ...")
+    circle_log = logs / "circle_offboard"
+    for stale in (circle_log.with_suffix(".parquet"), circle_log.with_suffix(".tlog")):
+        stale.unlink(missing_ok=True)
+    t0 = fly_offboard("circle", instance, circle_log, speed)
+    circle_duration = load_scenario("circle").duration_s
+    circle = read_session(
+        circle_log.with_suffix(".parquet"), window=(t0, circle_duration), label="SITL, offboard"
+    )
+    circle_inproc = run_scenario(load_scenario("circle"), load_controller("intbs_nlhinf"))
+    circle_inproc.label = "in-process"
+    circle_md = out_dir / "circle_offboard.md"
+    circle_md.write_text(
+        "# The paper's circle, IntBS-NLH∞: streamed through the SITL vs in-process (t in [0, 40] s)\n\n"
+        "The SITL run starts from a hover at p_d(0), the in-process run from the paper's initial state\n"
+        "(on the ground, yaw 0.5 rad): their first seconds differ by construction.\n\n"
+        + comparison_markdown({"SITL, offboard": indices(circle), "in-process": indices(circle_inproc)})
+    )
+    paper_figures([circle, circle_inproc], out_dir, "sitl_circle")
+    log(f"    flown, recorded and analysed in {time.perf_counter() - started:.1f} s wall -> {circle_md}")
+
     duration = load_scenario(scenario).duration_s
     t0s: dict[str, float] = {}
     for k, controller in enumerate(controllers, 1):
@@ -123,8 +203,11 @@ def run_demo(
     log("")
     log(comparison.read_text())
     log(side.read_text())
-    log(f"tables:  {comparison}, {side}")
-    log(f"figures: {out_dir}/sitl_{scenario}_{{path3d,position,position_error,orientation,controls}}.png")
+    log(f"tables:  {comparison}, {side}, {circle_md}")
+    log(
+        f"figures: {out_dir}/sitl_{{{scenario},circle}}_"
+        "{path3d,position,position_error,orientation,controls}.png"
+    )
     log(f"logs:    {logs}/  (quadsitl analyze LOG --t0 T0 --duration {duration:g})")
     return comparison
 
