@@ -4,10 +4,6 @@ running simulator, over the real wire (MAVLink/UDP, zenoh), checked from the rec
 
 import json
 import math
-import re
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,11 +14,11 @@ from gcs_scripts.analysis.metrics import indices
 from gcs_scripts.upload_gusts import upload_gusts
 from quadcommon.bus_records import TRUTH_FIELDS
 from quadcommon.config import load_controller, load_scenario
+from sitl.demo import fly_one
 from sitl.inprocess import run_scenario
 
 from .harness import Sitl
 
-REPO = Path(__file__).resolve().parents[2]
 T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 TRANSIENT_S = 4.0
 
@@ -74,36 +70,13 @@ def test_gust_uploads_are_validated_and_move_the_vehicle():
     assert abs(x[t > start + 5.5].mean() - before) < 0.003  # and the integral action brought it back
 
 
-def fly_paper(instance: int, controller: str, out: Path) -> float:
-    with Sitl(instance, scenario="helix", controller=controller):
-        result = subprocess.run(
-            [
-                sys.executable,
-                "-u",
-                str(REPO / "gcs_scripts" / "fly_paper.py"),
-                "--instance",
-                str(instance),
-                "--scenario",
-                "helix",
-                "--out",
-                str(out),
-            ],
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    t0 = float(re.search(r"^t0=([0-9.]+)", result.stdout, re.M).group(1))
-    sidecar = json.loads((out.parent / f"{out.name}.flight.json").read_text())
-    assert sidecar["t0_s"] == pytest.approx(t0, abs=1e-3)
-    return t0
-
-
 @pytest.mark.parametrize("controller, instance", [("intbs_nlhinf", 14), ("bs_nlhinf", 15)])
 def test_paper_helix_through_the_sitl_matches_the_in_process_run(controller, instance, tmp_path):
     """Mission + gust upload + recording; indices from the log only, beside the in-process run."""
     log = tmp_path / f"helix_{controller}"
-    t0 = fly_paper(instance, controller, log)
+    t0 = fly_one(controller, "helix", instance, log, speed="max")  # what make demo runs
+    sidecar = json.loads((tmp_path / f"helix_{controller}.flight.json").read_text())
+    assert sidecar["t0_s"] == pytest.approx(t0, abs=1e-3)
     duration = load_scenario("helix").duration_s
     sitl = read_session(log.with_suffix(".parquet"), window=(t0, duration))
     inproc = run_scenario(load_scenario("helix"), load_controller(controller))
