@@ -146,6 +146,10 @@ class Autopilot:
         self.sim_lost = False
         self.last_frame_wall = 0.0
         self._frame_gap_s = 1.0  # wall time between the last two frames
+        self._next_wall_heartbeat = 0.0
+        self._next_hil_hello = 0.0
+        # A message a command asked for, sent right after its COMMAND_ACK (as PX4 does).
+        self._pending_after_ack: tuple | None = None
         self.sim_time = 0.0
         self.last_time_usec = -1
         self.frames = 0
@@ -311,8 +315,6 @@ class Autopilot:
             plink.send_to(data, paddress)
             self._pending_after_ack = None
         self._send_events()
-
-    _pending_after_ack = None
 
     def _on_set_mode_message(self, msg, link, address) -> None:
         if msg.target_system not in (0, self.system_id):
@@ -555,9 +557,6 @@ class Autopilot:
                 self._next_hil_hello = now + 0.2
                 self.hil_sock.sendto(self.encoder.pack(telemetry.heartbeat(self.status)), self.hil_address)
         self._poll_info(now)
-
-    _next_wall_heartbeat = 0.0
-    _next_hil_hello = 0.0
 
     def _poll_info(self, now: float) -> None:
         if self.info_queryable is None:
