@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from pathlib import Path
 
-from quadcommon.schema import ConfigError
+from quadcommon.schema import ConfigError, load_toml
 
 from .store import INT32, ParameterStore
 
@@ -23,13 +22,7 @@ from .store import INT32, ParameterStore
 def read_params_file(path: str | Path, store: ParameterStore) -> dict[str, float]:
     """The values of ``path``, each checked against ``store``'s specs; ConfigError if any is bad."""
     path = Path(path)
-    try:
-        with path.open("rb") as handle:
-            data = tomllib.load(handle)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: parameter file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    data = load_toml(path).data  # "PATH: file not found" / "PATH: not valid TOML: ..."
     values: dict[str, float] = {}
     for key, value in data.items():
         spec = store.specs.get(key)
