@@ -78,7 +78,7 @@ def test_auto_mission_needs_a_mission(commander):
 def test_mission_mode_on_the_ground_starts_at_arming_and_ends_landed_and_disarmed(commander):
     commander.set_mission(0.0, square())
     assert commander.set_mode(0.0, FlightMode.AUTO_MISSION).result == ACCEPTED  # disarmed: PX4 allows
-    assert commander.phase == Phase.IDLE and commander.mission.state == MissionState.NOT_STARTED
+    assert commander.phase == Phase.DISARMED and commander.mission.state == MissionState.NOT_STARTED
     assert commander.arm(0.0).accepted
     assert commander.phase == Phase.MISSION and commander.mode == FlightMode.AUTO_MISSION
     log: list[int] = []

@@ -1,0 +1,200 @@
+"""Every row of the commander's transition table, driven (generated from the table itself).
+
+For each (phase, event) pair the table defines, a fresh commander is flown into the phase along a
+route of table rows (each step of the route is itself checked), the event is made to happen (a
+command is fired; an internal event is provoked: a plan is let run out, setpoints stop, the
+vehicle touches down, the geofence is breached) and the phase and mode afterwards must be the
+row's. The vehicle follows its reference exactly and stops at the ground, as in the other
+commander tests.
+"""
+
+import math
+
+import pytest
+
+from autopilot.commander.commander import Commander, Motors, VehicleState
+from autopilot.commander.modes import FlightMode
+from autopilot.commander.transitions import (
+    AFTER,
+    ASKED,
+    KEEP,
+    REFUSALS,
+    TABLE,
+    TRANSITIONS,
+    Event,
+    Phase,
+    describe,
+    lookup,
+)
+from autopilot.guidance.offboard import OffboardSetpoint
+from autopilot.guidance.trajectories import Hover
+from autopilot.mavlink.codec import mavlink as m
+from autopilot.mission.executor import MissionExecutor
+from autopilot.mission.items import WireItem, parse_item
+from autopilot.params.definitions import GF_HOLD, GF_LAND, GF_RTL, default_parameters
+from quadcommon import frames
+
+HOME = (47.397742, 8.545594, 488.0)
+DT = 0.002
+E, P = Event, Phase
+SCENARIO_THEN = FlightMode.POSCTL  # distinct from the modes the table sets itself
+HOLD_ASKED = FlightMode.POSCTL
+
+# How to reach each phase from a fresh (disarmed) commander: events, each a row of the table.
+ROUTES: dict[Phase, list[Event]] = {
+    P.DISARMED: [],
+    P.IDLE: [E.ARM],
+    P.TAKEOFF: [E.ARM, E.TAKEOFF],
+    P.HOLD: [E.ARM, E.TAKEOFF, E.PLAN_DONE],
+    P.OFFBOARD: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.OFFBOARD],
+    P.MISSION: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.MISSION],
+    P.TRAJECTORY: [E.SCENARIO],
+    P.LAND: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.LAND],
+    P.RTL: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.RTL],
+    P.RTL_LAND: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.RTL, E.PLAN_DONE],
+    P.LANDED: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.LAND, E.TOUCHDOWN],
+}
+FAILSAFE_ACTION = {E.FAILSAFE_HOLD: GF_HOLD, E.FAILSAFE_RTL: GF_RTL, E.FAILSAFE_LAND: GF_LAND}
+
+
+def _item(seq, command, xyz=(0.0, 0.0, 0.0)):
+    n, e, d = frames.vector_to_ned(xyz)
+    return WireItem(seq, m.MAV_FRAME_LOCAL_NED, command, 0, 1, 0.0, 0.0, 0.0, math.nan,
+                    round(n * 1e4), round(e * 1e4), d)  # fmt: skip
+
+
+def _mission(last_command: int) -> MissionExecutor:
+    wires = [
+        _item(0, m.MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 2.5)),
+        _item(1, m.MAV_CMD_NAV_WAYPOINT, (1.0, 0.0, 2.5)),
+        _item(2, last_command, (1.0, 0.0, 0.0)),
+    ]
+    items = []
+    for w in wires:
+        items.append(parse_item(w, HOME, items[-1] if items else None))
+    return MissionExecutor(items, HOME)
+
+
+class Flight:
+    """A commander and a vehicle that follows its reference exactly (and stops at the ground)."""
+
+    def __init__(self, mission_end: int) -> None:
+        self.c = Commander(default_parameters())
+        self.t = 0.0
+        self.feed_setpoints = True
+        self._state((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        self.c.set_mission(0.0, _mission(mission_end))
+
+    def _state(self, p, v, yaw=0.0) -> None:
+        self.c.update_state(VehicleState(self.t, p, v, (0.0, 0.0, yaw), (0.0, 0.0, 0.0)))
+
+    def step(self) -> None:
+        if self.feed_setpoints:
+            self.c.offboard_setpoint(OffboardSetpoint(self.t, position=(0.0, 0.0, 2.5)))
+        out = self.c.step(self.t, DT)
+        if out.motors == Motors.FLY:
+            ref = out.reference
+            z = max(ref.position_m[2], 0.0)
+            v = ref.velocity_m_s if z > 0.0 else (0.0, 0.0, 0.0)
+            self._state((ref.position_m[0], ref.position_m[1], z), v, ref.yaw_rad)
+        self.t += DT
+
+    def step_until(self, done, seconds: float = 120.0) -> None:
+        for _ in range(int(seconds / DT)):
+            self.step()
+            if done():
+                return
+        raise AssertionError(f"still {self.c.phase.name} after {seconds} s")
+
+    @property
+    def height(self) -> float:
+        return self.c.state.position_m[2]
+
+    def happen(self, event: Event) -> None:
+        """Make ``event`` happen in the current phase."""
+        c, phase = self.c, self.c.phase
+        if event == E.PLAN_DONE:
+            self.step_until(lambda: c.phase != phase)
+        elif event == E.TOUCHDOWN:
+            self.step_until(lambda: c.phase == P.LANDED)
+        elif event in (E.LANDED_TIMEOUT, E.PREFLIGHT_TIMEOUT):
+            self.step_until(lambda: c.phase == P.DISARMED)
+        elif event == E.OFFBOARD_LOST:
+            self.feed_setpoints = False
+            self.step_until(lambda: c.phase != phase)
+        elif event in (E.MISSION_LAND, E.MISSION_RTL):
+            self.step_until(lambda: c.phase != phase)
+        elif event in FAILSAFE_ACTION:
+            if self.height < 0.5:  # just taken off: high enough to put a fence below it
+                self.step_until(lambda: self.height > 0.5, seconds=10.0)
+            assert c.phase == phase
+            c.params.set("GF_ACTION", FAILSAFE_ACTION[event])
+            c.params.set("GF_MAX_VER_DIST", round(self.height / 2.0, 2))
+            self.step()
+        else:  # a command
+            args = {
+                E.DISARM: {"force": True, "why": "disarmed"},
+                E.HOLD: {"mode": HOLD_ASKED},
+                E.SCENARIO: {"trajectory": Hover((0.0, 0.0, 1.5), 0.0, 1.0), "then": SCENARIO_THEN},
+            }.get(event, {})
+            if self.feed_setpoints:  # a fresh setpoint: OFFBOARD needs a stream
+                c.offboard_setpoint(OffboardSetpoint(self.t, position=(0.0, 0.0, 2.5)))
+            assert c._fire(self.t, event, **args).accepted, c.events[-1:]
+
+
+def _fly_to(phase: Phase, mission_end: int) -> Flight:
+    flight = Flight(mission_end)
+    for event in ROUTES[phase]:
+        before = flight.c.phase
+        row = lookup(before, event)
+        assert row is not None, f"route to {phase.name}: no row {before.name} + {event.name}"
+        flight.happen(event)
+        expected = before if not isinstance(row.to, Phase) else row.to
+        assert flight.c.phase == expected, f"route to {phase.name}: {event.name} from {before.name}"
+    assert flight.c.phase == phase
+    return flight
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    "phase, event", sorted(TRANSITIONS, key=lambda k: (k[0].value, k[1].value)), ids=lambda x: x.name
+)
+def test_every_row_of_the_table(phase: Phase, event: Event) -> None:
+    row = TRANSITIONS[(phase, event)]
+    flight = _fly_to(phase, m.MAV_CMD_NAV_RETURN_TO_LAUNCH if event == E.MISSION_RTL else m.MAV_CMD_NAV_LAND)
+    mode_before = flight.c.mode
+    flight.happen(event)
+    c = flight.c
+    assert c.phase == (phase if not isinstance(row.to, Phase) else row.to)
+    expected_mode = {KEEP: mode_before, ASKED: HOLD_ASKED, AFTER: SCENARIO_THEN}.get(row.mode, row.mode)
+    assert c.mode == expected_mode
+    assert c.armed == (c.phase != P.DISARMED)
+
+
+@pytest.mark.timeout(60)
+def test_commands_without_a_row_are_refused_with_a_reason() -> None:
+    flight = Flight(m.MAV_CMD_NAV_LAND)
+    outcome = flight.c.takeoff(0.0)
+    assert not outcome.accepted and outcome.reason == REFUSALS[E.TAKEOFF]
+    assert flight.c.phase == P.DISARMED
+
+
+@pytest.mark.timeout(60)
+def test_offboard_during_rtl_descent_is_offboard_not_landing() -> None:
+    """Found reading the old implicit machine: switching to OFFBOARD in RTL's final descent kept
+    a 'landing' flag, so the vehicle reported LANDING while flying offboard and failsafes treated it
+    as busy. In the table it is the phase RTL_LAND, which OFFBOARD leaves."""
+    flight = _fly_to(P.RTL_LAND, m.MAV_CMD_NAV_LAND)
+    assert flight.c.landed_state.name == "LANDING"
+    assert flight.c.set_mode(flight.t, FlightMode.OFFBOARD).accepted
+    assert flight.c.phase == P.OFFBOARD
+    flight.step_until(lambda: flight.height > 2.4, seconds=20.0)
+    assert flight.c.landed_state.name == "IN_AIR"
+    flight.happen(E.FAILSAFE_HOLD)  # not busy any more: the failsafe acts
+    assert flight.c.phase == P.HOLD
+
+
+def test_the_table_is_printable() -> None:
+    lines = describe().splitlines()
+    assert len(lines) == len(TABLE) + 2  # header, rule, one line per row
+    assert "| DISARMED | ARM | IDLE | (keep) | arm |" in lines
