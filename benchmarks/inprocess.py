@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from quadcommon.config import load_controller, load_scenario, load_vehicle
+from autopilot.control.config import load_controller
+from quadcommon.config import load_scenario, load_vehicle
 from simulator.dynamics.plant import Plant
 from sitl.inprocess import run_scenario
 

@@ -17,11 +17,11 @@ from __future__ import annotations
 import argparse
 import pstats
 import re
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
+
+from sitl.launcher import LINKED, Launcher, VehicleSpec
 
 REPO = Path(__file__).resolve().parents[1]
 INSTANCE = 30
@@ -37,54 +37,25 @@ def sitl_toml(directory: Path, control_hz: int) -> Path:
 
 
 def run_once(config: Path, duration: float, profile_dir: Path | None = None) -> tuple[float, int, int]:
-    py = [sys.executable, "-u"]
-    sim_prefix = py + (["-m", "cProfile", "-o", str(profile_dir / "simulator.prof")] if profile_dir else [])
-    ap_prefix = py + (["-m", "cProfile", "-o", str(profile_dir / "autopilot.prof")] if profile_dir else [])
-    common = ["--instance", str(INSTANCE), "--sitl-config", str(config)]
-    sim = subprocess.Popen(
-        [
-            *sim_prefix,
-            "-m",
-            "simulator",
-            *common,
-            "--scenario",
-            "circle",
-            "--speed",
-            "max",
-            "--duration",
-            str(duration),
-        ],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    assert sim.stdout is not None
-    for line in sim.stdout:
-        if "waiting for the autopilot" in line:
-            break
-    ap = subprocess.Popen(
-        [*ap_prefix, "-m", "autopilot", *common, "--autostart", "circle", "--quiet"],
-        cwd=REPO,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    start = None
-    rtt = (0, 0)
-    try:
-        for line in sim.stdout:
-            if "simulator: linked" in line:
-                start = time.perf_counter()
-            match = RTT.search(line)
-            if match:
-                rtt = (int(match.group(1)), int(match.group(2)))
-        sim.wait(timeout=600)
-        elapsed = time.perf_counter() - (start or time.perf_counter())
-    finally:
-        ap.terminate()
-        ap.wait(timeout=10)
-        if sim.poll() is None:
-            sim.kill()
+    """One SITL run through the project's launcher; (wall seconds from linked to the end, RTT median
+    and p99 in µs as the simulator reports them)."""
+    def profiled(spec_cmd: list[str], name: str) -> list[str]:
+        if profile_dir is None:
+            return spec_cmd
+        return [spec_cmd[0], "-u", "-m", "cProfile", "-o", str(profile_dir / f"{name}.prof"), *spec_cmd[2:]]
+
+    spec = VehicleSpec(instance=INSTANCE, scenario="circle", speed="max", autostart=True, duration_s=duration,
+                       sitl_config=str(config), extra_autopilot_args=("--quiet",))  # fmt: skip
+    with Launcher() as launcher:
+        sim = launcher.spawn("simulator", profiled(spec.simulator_command(), "simulator"))
+        sim.wait_line("waiting for the autopilot", 30.0)
+        launcher.spawn("autopilot", profiled(spec.autopilot_command(), "autopilot"))
+        sim.wait_line(LINKED, 30.0)
+        start = time.perf_counter()
+        sim.wait(600.0)
+        elapsed = time.perf_counter() - start
+        match = RTT.search(sim.output)
+    rtt = (int(match.group(1)), int(match.group(2))) if match else (0, 0)
     return elapsed, *rtt
 
 

@@ -116,9 +116,9 @@ def _mission_start_time(session, instance: int, wall_timeout_s: float) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    from autopilot.guidance.trajectories import trajectory_from_spec
     from gcs_scripts.fly_trajectory import load_gust_profile_mapping
     from quadcommon.config import load_scenario
+    from quadcommon.trajectories import trajectory_from_spec
 
     scenario = load_scenario(args.scenario)
     trajectory = trajectory_from_spec(scenario.trajectory)

@@ -36,11 +36,11 @@ from pathlib import Path
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from autopilot.guidance.trajectories import Reference, Trajectory, trajectory_from_spec  # noqa: E402
 from gcs_scripts import link as mavlink_link  # noqa: E402
 from gcs_scripts.link import Link, LinkError, PositionTarget, SetpointStream  # noqa: E402
 from quadcommon.config import ScenarioConfig, config_path, load_scenario  # noqa: E402
 from quadcommon.schema import ConfigError  # noqa: E402
+from quadcommon.trajectories import Reference, Trajectory, trajectory_from_spec  # noqa: E402
 
 say = mavlink_link.report
 LOCAL_POSITION_NED_ID = 32

@@ -227,6 +227,9 @@ class Link:
     ) -> None:
         self.conn = conn
         self.mav = conn.mav
+        # An in-process connection (sitl.inprocess.StackConnection) advances the simulation when
+        # polled: waiting must not sleep then.
+        self._steps_time = bool(getattr(conn, "steps_time", False))
         self.instance = instance
         self.target_system = 1 + instance
         self.target_component = 1
@@ -413,7 +416,7 @@ class Link:
                     f"timed out after {wall_limit:g} s of wall time waiting for {what} "
                     f"(simulation too slow; t={self.now():.2f} s)"
                 )
-            if got == 0:
+            if got == 0 and not self._steps_time:
                 time.sleep(0.0005)  # nothing waiting: yield the CPU (the SITL shares it)
 
     def sleep_sim(self, seconds: float, what: str = "") -> None:

@@ -211,8 +211,8 @@ def items_from_list(spec: dict) -> list[Item]:
     def yaw_param(entry: dict) -> float:
         if "yaw_deg" not in entry:
             return math.nan
-        yaw = float(entry["yaw_deg"])
-        return -yaw if paper else yaw  # paper yaw is counter-clockwise; MAVLink's is clockwise
+        yaw = float(entry["yaw_deg"])  # paper: counter-clockwise from x; NED: clockwise from north
+        return math.degrees(frames.yaw_to_ned(math.radians(yaw))) if paper else yaw
 
     local = m.MAV_FRAME_LOCAL_NED
     items = []
@@ -222,8 +222,9 @@ def items_from_list(spec: dict) -> list[Item]:
         try:
             if kind == "takeoff":
                 alt = float(entry.get("altitude_m", math.nan))
+                down = frames.vector_to_ned((0.0, 0.0, alt))[2]  # an altitude is "up" in both frames
                 items.append(
-                    make_item(local, m.MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, yaw_param(entry)), z=-alt)
+                    make_item(local, m.MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, yaw_param(entry)), z=down)
                 )
             elif kind in ("waypoint", "loiter"):
                 n, e, d = ned(_vector(entry.get("position"), where))
@@ -295,7 +296,8 @@ def curve_items(
     ("land", "rtl" or "hold")."""
     local = m.MAV_FRAME_LOCAL_NED
     alt = math.nan if takeoff_altitude_m is None else takeoff_altitude_m
-    items = [make_item(local, m.MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan), z=-alt)]
+    down = frames.vector_to_ned((0.0, 0.0, alt))[2]
+    items = [make_item(local, m.MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, math.nan), z=down)]
     count = int(math.floor(duration_s * rate_hz + 1e-9)) + 1
     for k in range(count):
         t = k / rate_hz
@@ -536,8 +538,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def build_items(args: argparse.Namespace) -> list[Item]:
     if args.curve:
-        from autopilot.guidance.trajectories import trajectory_from_spec
         from quadcommon.config import load_scenario
+        from quadcommon.trajectories import trajectory_from_spec
 
         scenario = load_scenario(args.scenario or args.curve)
         duration = scenario.duration_s if args.duration is None else args.duration

@@ -4,7 +4,7 @@ Files and what they hold:
 
 * ``config/vehicle/NAME.toml``: the nominal model the controllers know (Section IV), the "true"
   plant the simulator flies (CoM offset, products of inertia, drag), actuation and rotors.
-* ``config/controllers/NAME.toml``: a cascade (translational law, rotational law, gains, filter).
+* ``config/controllers/NAME.toml``: read by :mod:`autopilot.control.config` (the laws' own schemas).
 * ``config/scenarios/NAME.toml``: trajectory, initial state, parametric uncertainty, gust profile,
   duration.
 * ``config/sitl.toml``: rates, ports, home position, zenoh endpoints, lockstep timeouts.
@@ -181,124 +181,6 @@ def _check_inertia_tensor(path: Path, plant: PlantStructure) -> None:
 
 
 # --------------------------------------------------------------------------------------------
-# Controllers
-# --------------------------------------------------------------------------------------------
-TRANSLATIONAL_LAWS = ("integral_second_step", "integral_first_step", "backstepping")
-ROTATIONAL_LAWS = ("nlhinf", "integral_backstepping")
-
-
-@dataclass(frozen=True)
-class TranslationalGains:
-    """Per-axis (x, y, z) gains of the translational backstepping laws (Section 3.1, eq. 24-29).
-
-    ``k_integral`` is k_xi for the integral in the second step (the paper's law) and lambda for
-    the integral in the first step (IntBS); it is zero for plain backstepping.
-    """
-
-    law: str
-    c1: Vector3
-    c2: Vector3
-    k_integral: Vector3
-    tilt_max_rad: float
-
-
-@dataclass(frozen=True)
-class NlHinfGains:
-    """Weights of the nonlinear H-infinity law, eq. (44): omega1, omega2, omega3, omega_u."""
-
-    omega1: float
-    omega2: float
-    omega3: float
-    omega_u: float
-
-    @property
-    def k_d(self) -> float:
-        return math.sqrt(self.omega2**2 + 2.0 * self.omega1 * self.omega3) / self.omega1
-
-    @property
-    def k_p(self) -> float:
-        return self.omega3 / self.omega1
-
-
-@dataclass(frozen=True)
-class RotationalGains:
-    law: str
-    nlhinf: NlHinfGains | None  # for law = "nlhinf"
-    c1: Vector3  # for law = "integral_backstepping" (roll, pitch, yaw)
-    c2: Vector3
-    k_integral: Vector3
-
-
-@dataclass(frozen=True)
-class CommandFilter:
-    """Second-order filter giving eta_d, eta_d', eta_d'' from the roll/pitch references."""
-
-    natural_frequency_rad_s: float
-    damping: float
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    name: str
-    description: str
-    translational: TranslationalGains
-    rotational: RotationalGains
-    command_filter: CommandFilter
-
-
-def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConfig:
-    path = config_path("controllers", name_or_path)
-    root = load_toml(path)
-    name = root.string("name", Path(path).stem)
-    description = root.string("description", "")
-
-    sec = root.section("translational")
-    law = sec.choice("law", TRANSLATIONAL_LAWS)
-    positive = {"lo": 0.0, "lo_open": True, "hi": 1e4}
-    translational = TranslationalGains(
-        law=law,
-        c1=sec.vector("c1", **positive),
-        c2=sec.vector("c2", **positive),
-        k_integral=sec.vector("k_integral", 3, (0.0, 0.0, 0.0), lo=0.0, hi=1e4),
-        tilt_max_rad=sec.number("tilt_max_rad", 0.7, lo=0.05, hi=1.4, unit="rad"),
-    )
-    if law != "backstepping" and min(translational.k_integral) <= 0.0:
-        raise sec.error("k_integral", translational.k_integral, f"> 0 on every axis for law '{law}'")
-    sec.finish()
-
-    sec = root.section("rotational")
-    rlaw = sec.choice("law", ROTATIONAL_LAWS)
-    nlhinf = None
-    zero3 = (0.0, 0.0, 0.0)
-    c1 = c2 = k_int = zero3
-    if rlaw == "nlhinf":
-        nlhinf = NlHinfGains(
-            omega1=sec.number("omega1", lo=0.0, lo_open=True, hi=1e3),
-            omega2=sec.number("omega2", lo=0.0, lo_open=True, hi=1e3),
-            omega3=sec.number("omega3", lo=0.0, hi=1e3),
-            omega_u=sec.number("omega_u", lo=0.0, lo_open=True, hi=1e3),
-        )
-    else:
-        c1 = sec.vector("c1", **positive)
-        c2 = sec.vector("c2", **positive)
-        k_int = sec.vector("k_integral", lo=0.0, hi=1e4)
-    rotational = RotationalGains(rlaw, nlhinf, c1, c2, k_int)
-    sec.finish()
-
-    sec = root.section("command_filter", optional=True)
-    command_filter = CommandFilter(
-        natural_frequency_rad_s=sec.number("natural_frequency_rad_s", 60.0, lo=1.0, hi=1000.0, unit="rad/s"),
-        damping=sec.number("damping", 1.0, lo=0.1, hi=5.0),
-    )
-    sec.finish()
-    root.finish()
-    return ControllerConfig(name, description, translational, rotational, command_filter)
-
-
-CONTROLLER_NAMES = ("intbs_nlhinf", "intbs", "bs_nlhinf")
-
-
-# --------------------------------------------------------------------------------------------
 # Scenarios
 # --------------------------------------------------------------------------------------------
 TRAJECTORY_KINDS = ("circle", "helix", "hover")
@@ -306,7 +188,7 @@ TRAJECTORY_KINDS = ("circle", "helix", "hover")
 
 @dataclass(frozen=True)
 class TrajectorySpec:
-    """A named analytic reference (see :mod:`autopilot.guidance.trajectories`)."""
+    """A named analytic reference (see :mod:`quadcommon.trajectories`)."""
 
     kind: str
     radius_m: float = 0.0

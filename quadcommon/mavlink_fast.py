@@ -1,4 +1,4 @@
-"""Decoding the lockstep messages without building pymavlink message objects.
+"""Encoding and decoding the lockstep messages without building pymavlink message objects.
 
 In lockstep every frame crosses the wire twice before the plant may step, so decoding sits on the
 critical path. pymavlink's generic ``MAVLink.decode`` builds a message object field by field:
@@ -8,13 +8,31 @@ pymavlink's own pieces, the message class's ``struct`` unpacker, CRC extra and w
 and the same MAVLink 2 rules (zero-padding of truncated payloads, CRC over header + payload +
 CRC extra), and returns the fields by name from one ``unpack``: a few µs.
 
-Only for messages we receive on the HIL link, whose layout is fixed by the dialect; everything
-else goes through pymavlink's parser as usual.
+:class:`FastEncoder` is the other direction for the messages sent every frame (HIL_SENSOR,
+HIL_STATE_QUATERNION, ODOMETRY, HIL_GPS, HIL_ACTUATOR_CONTROLS): a flat, reusable list of field
+values in wire order, packed by the class's ``struct`` and framed exactly as pymavlink's
+``MAVLink_message._pack`` frames it (MAVLink 2, trailing zeros of the payload dropped, CRC extra,
+unsigned): the same bytes (tested), about 4x cheaper.
+
+Only for the lockstep messages, whose layout is fixed by the dialect; everything else goes
+through pymavlink as usual.
 """
 
 from __future__ import annotations
 
+import struct
+
 from pymavlink.dialects.v20 import common as mavlink
+
+try:  # what pymavlink itself uses for the CRC when present (fastcrc, a project dependency)
+    from fastcrc.crc16 import mcrf4xx as _crc
+except ImportError:  # pragma: no cover - pymavlink's pure-Python CRC then
+
+    def _crc(data: bytes, initial: int) -> int:
+        crc = mavlink.x25crc()
+        crc.crc = initial
+        crc.accumulate(data)
+        return crc.crc
 
 _STX_V2 = 0xFD
 _HEADER_LEN = 10
@@ -53,13 +71,7 @@ class FastDecoder:
         self.unpacker = message_class.unpacker
         self.size = self.unpacker.size
         self.crc_extra = message_class.crc_extra
-        # Where each field lands in the flat tuple ``unpack`` returns (wire order, arrays inline).
-        self.slices: dict[str, int | slice] = {}
-        offset = 0
-        for name in message_class.ordered_fieldnames:
-            length = message_class.lengths[message_class.ordered_fieldnames.index(name)]
-            self.slices[name] = offset if length == 1 else slice(offset, offset + length)
-            offset += length
+        self.slices = _flat_slices(message_class)  # where each field sits in unpack()'s tuple
 
     def unpack(self, frame: bytes) -> tuple:
         """The flat field tuple of one complete MAVLink 2 frame (CRC checked)."""
@@ -81,3 +93,53 @@ class FastDecoder:
         if length < self.size:  # MAVLink 2 drops trailing zero bytes: put them back
             payload = payload + bytes(self.size - length)
         return self.unpacker.unpack_from(payload)
+
+
+def _flat_slices(message_class) -> dict[str, int | slice]:
+    """Where each field lands in the flat tuple of the class's struct (wire order, arrays inline)."""
+    slices: dict[str, int | slice] = {}
+    offset = 0
+    for name, length in zip(message_class.ordered_fieldnames, _lengths(message_class), strict=True):
+        slices[name] = offset if length == 1 else slice(offset, offset + length)
+        offset += length
+    return slices
+
+
+def _lengths(message_class) -> list[int]:
+    names = message_class.ordered_fieldnames
+    return [message_class.lengths[message_class.ordered_fieldnames.index(n)] for n in names]
+
+
+_HEADER_V2 = struct.Struct("<BBBBBBBHB")
+
+
+class FastEncoder:
+    """One message type, framed from :attr:`values` (flat, wire order; ``slices[name]`` says where).
+
+    Fill ``values[slices[name]]`` and call :meth:`frame`; fields never written keep the values of
+    the ``template`` message given at construction (or zero).
+    """
+
+    def __init__(self, message_class, system_id: int, component_id: int, template=None) -> None:
+        self.msg_id = message_class.id
+        self.packer = message_class.unpacker
+        self.slices = _flat_slices(message_class)
+        self._crc_extra = bytes((message_class.crc_extra,))
+        self._ids = (system_id, component_id, self.msg_id & 0xFFFF, self.msg_id >> 16)
+        flat: list = []
+        for name, length in zip(message_class.ordered_fieldnames, _lengths(message_class), strict=True):
+            value = getattr(template, name) if template is not None else (0 if length == 1 else [0] * length)
+            if length == 1:
+                flat.append(value)
+            else:
+                flat.extend(value[:length])
+        self.values = flat
+
+    def frame(self, seq: int) -> bytes:
+        """The MAVLink 2 frame of :attr:`values` with sequence number ``seq`` (0-255)."""
+        payload = self.packer.pack(*self.values).rstrip(b"\0") or b"\0"
+        system_id, component_id, id_low, id_high = self._ids
+        body = _HEADER_V2.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, id_low, id_high)
+        body += payload
+        crc = _crc(body[1:] + self._crc_extra, 0xFFFF)
+        return body + bytes((crc & 0xFF, crc >> 8))

@@ -1,7 +1,106 @@
-"""``python -m simulator``: the simulator process (see simulator/app.py)."""
+"""``python -m simulator``: the plant process (see simulator/app.py), its command line."""
 
+from __future__ import annotations
+
+import argparse
+import math
+import signal
 import sys
+from pathlib import Path
 
-from .app import main
+from quadcommon import wire
+from quadcommon.schema import ConfigError
 
-sys.exit(main())
+from .app import Simulator, StartupError
+from .core import SimulatorSetup
+
+
+# -- command line -----------------------------------------------------------------------------------
+def _speed(text: str) -> float | None:
+    if text == "max":
+        return None
+    message = f"--speed must be a positive number or 'max', got {text!r}"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(message) from None
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(message)
+    return value
+
+
+def _duration(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--duration must be a number of seconds, got {text!r}") from None
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"--duration must be > 0 s, got {text!r}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m simulator",
+        description="The quadsitl simulator process (plant side of the SITL, lockstep over MAVLink HIL).",
+    )
+    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (ports +N, sysid 1+N)")
+    parser.add_argument("--vehicle", default=None, help="vehicle (config/vehicle); default: the scenario's")
+    parser.add_argument("--scenario", default="hover", help="scenario (config/scenarios); default: hover")
+    parser.add_argument(
+        "--speed", type=_speed, default=1.0, help="wall-clock pacing: a factor (1 = real time) or 'max'"
+    )
+    parser.add_argument("--duration", type=_duration, default=None, help="stop after S simulated seconds")
+    parser.add_argument("--config-dir", default=None, help="configuration directory (default: ./config)")
+    parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
+    parser.add_argument("--sensors", default="default", help="sensor models (config/sensors)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.config_dir is not None:
+        import quadcommon.config as qconfig
+
+        config_dir = Path(args.config_dir)
+        if not config_dir.is_dir():
+            print(f"simulator: --config-dir {config_dir} is not a directory", file=sys.stderr)
+            return 2
+        qconfig.CONFIG_DIR = config_dir  # config_path() reads it at call time
+    try:
+        setup = SimulatorSetup.load(
+            args.instance, args.scenario, args.vehicle, args.sitl_config, args.sensors
+        )
+        app = Simulator(setup, args.speed, args.duration)
+    except (ConfigError, ValueError) as exc:
+        print(f"simulator: {exc}", file=sys.stderr)
+        return 2
+    signal.signal(signal.SIGTERM, app.stop)
+    signal.signal(signal.SIGINT, app.stop)
+    code = 2
+    opened = False
+    try:
+        app.open()
+        opened = True
+        speed = "max" if app.speed is None else f"{app.speed:g}x"
+        v, core = setup.vehicle, app.core
+        app.log(
+            f"instance {app.instance}, vehicle {v.name} (actuation {v.actuation.mode}, "
+            f"plant {v.plant.model}), scenario {setup.scenario.name}, physics {core.physics_hz:g} Hz, "
+            f"control {core.control_hz:g} Hz, "
+            f"speed {speed}; truth on zenoh {wire.zenoh_key(app.instance, 'truth')} "
+            f"(tcp/{wire.LOOPBACK}:{app.ports.zenoh})"
+        )
+        code = app.run()
+    except StartupError as exc:
+        print(f"simulator: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        app.close()
+        if opened:
+            app.log(app.summary())
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -22,8 +22,6 @@ import zenoh
 from quadcommon.bus_records import TRUTH_CODEC
 
 from .dynamics.plant import TruthState
-from .environment.gust_profile import GustProfile
-from .environment.gust_upload import handle_gust_request
 
 Vector3 = tuple[float, float, float]
 
@@ -136,40 +134,21 @@ class InfoServer(_PolledQueryable):
 
 
 class GustUploadServer(_PolledQueryable):
-    """The simulator's side of ``quadsitl/<N>/sim/gusts`` (protocol: environment/gust_upload.py).
-
-    Call :meth:`poll` from the main loop. ``now_s()`` is the simulation time;
-    ``install(profile, start_s)`` swaps the schedule at the next frame boundary; ``warn(profile)``
-    may return a note added to an accepted answer (e.g. wind on a vehicle without drag).
-    """
+    """The simulator's side of ``quadsitl/<N>/sim/gusts``: each query's payload goes to
+    ``handle(payload) -> (accepted, reply)`` (:meth:`simulator.core.SimulatorCore.upload_gusts`,
+    the protocol of environment/gust_upload.py) and the reply goes back. Call :meth:`poll` from the
+    main loop."""
 
     def __init__(
-        self,
-        session: zenoh.Session,
-        key: str,
-        now_s: Callable[[], float],
-        install: Callable[[GustProfile, float], None],
-        step_s: float,
-        warn: Callable[[GustProfile], str | None] = lambda profile: None,
+        self, session: zenoh.Session, key: str, handle: Callable[[bytes], tuple[bool, bytes]]
     ) -> None:
         super().__init__(session, key)
-        self.now_s, self.install, self.step_s, self.warn = now_s, install, step_s, warn
+        self.handle = handle
 
     def answer(self, query: zenoh.Query) -> None:
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        ok, reply, profile, start_s = handle_gust_request(payload, self.now_s(), self.step_s)
-        if not ok:
+        ok, reply = self.handle(payload)
+        if ok:
+            query.reply(self.key, reply)
+        else:
             query.reply_err(reply)
-            return
-        try:
-            self.install(profile, start_s)  # type: ignore[arg-type]
-        except ValueError as exc:  # not expected after validation
-            error = {"accepted": False, "error": f"gust upload: {exc}"}
-            query.reply_err(json.dumps(error).encode())
-            return
-        note = self.warn(profile)  # type: ignore[arg-type]
-        if note:
-            answer = json.loads(reply)
-            answer["warning"] = note
-            reply = json.dumps(answer).encode()
-        query.reply(self.key, reply)

@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from quadcommon.config import CONTROLLER_NAMES
+from autopilot.control.config import CONTROLLER_NAMES
 from quadcommon.schema import ConfigError
 
 
@@ -33,8 +33,9 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from autopilot.control.config import load_controller
     from gcs_scripts.analysis.metrics import indices
-    from quadcommon.config import load_controller, load_scenario
+    from quadcommon.config import load_scenario
 
     from .inprocess import RunOptions, run_scenario
 
@@ -90,7 +91,8 @@ def _params_file(args: argparse.Namespace, instance: int, controller) -> str | N
 
 
 def _cmd_up(args: argparse.Namespace) -> int:
-    from quadcommon.config import load_controller, load_scenario, load_vehicle
+    from autopilot.control.config import load_controller
+    from quadcommon.config import load_scenario, load_vehicle
 
     from .up import VehicleSpec, run_up
 

@@ -23,19 +23,19 @@ the curve and writes:
 from __future__ import annotations
 
 import re
-import subprocess
 import sys
 import time
 from pathlib import Path
 
+from autopilot.control.config import CONTROLLER_NAMES, load_controller
 from gcs_scripts.analysis.figures import paper_figures
 from gcs_scripts.analysis.log_reader import read_session
 from gcs_scripts.analysis.metrics import STATE_NAMES, indices
 from gcs_scripts.analysis.tables import CONTROLLER_TITLES, comparison_markdown
-from quadcommon.config import CONTROLLER_NAMES, load_controller, load_scenario
+from quadcommon.config import load_scenario
 
 from .inprocess import run_scenario
-from .up import LaunchError, Sitl, VehicleSpec
+from .launcher import Launcher, LaunchError, VehicleSpec, python_script
 
 REPO = Path(__file__).resolve().parents[1]
 T0 = re.compile(r"^t0=([0-9.]+)", re.MULTILINE)
@@ -45,26 +45,21 @@ TRANSIENT_S = 4.0
 def fly_one(controller: str, scenario: str, instance: int, log_base: Path, speed: str) -> float:
     """One SITL run of ``scenario`` with ``controller``; returns the curve's start time t0."""
     spec = VehicleSpec(instance=instance, controller=controller, scenario=scenario, speed=speed)
-    with Sitl([spec], echo=False):
-        cmd = [
-            sys.executable,
-            "-u",
-            str(REPO / "gcs_scripts" / "fly_paper.py"),
-            "--instance",
-            str(instance),
-            "--scenario",
-            scenario,
-            "--out",
-            str(log_base),
-        ]
-        result = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-    if result.returncode != 0:
-        raise RuntimeError(
-            f"fly_paper.py failed for {controller}:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}"
-        )
-    match = T0.search(result.stdout)
+    with Launcher() as launcher:
+        launcher.start_vehicles([spec])
+        args = ("--instance", str(instance), "--scenario", scenario, "--out", str(log_base))
+        script = launcher.spawn("fly_paper.py", python_script("gcs_scripts/fly_paper.py", *args))
+        return _t0_of(script, f"fly_paper.py ({controller})")
+
+
+def _t0_of(script, what: str, timeout_s: float = 900.0) -> float:
+    """The ``t0=`` a flying script prints, once it has finished successfully."""
+    code = script.wait(timeout_s)
+    if code != 0:
+        raise RuntimeError(f"{what} failed (exit code {code}):\n{script.tail(60)}")
+    match = T0.search(script.output)
     if match is None:
-        raise RuntimeError(f"fly_paper.py did not report t0 for {controller}:\n{result.stdout[-2000:]}")
+        raise RuntimeError(f"{what} did not report t0:\n{script.tail(40)}")
     return float(match.group(1))
 
 
@@ -72,51 +67,18 @@ def fly_offboard(scenario: str, instance: int, log_base: Path, speed: str) -> fl
     """The scenario streamed as OFFBOARD setpoints (p, v, a) by fly_trajectory.py, recorded by
     record.py, with the paper's gusts uploaded to start with the trajectory; returns t0."""
     spec = VehicleSpec(instance=instance, scenario=scenario, speed=speed)
-    scripts = REPO / "gcs_scripts"
-    with Sitl([spec], echo=False):
-        recorder = subprocess.Popen(
-            [
-                sys.executable,
-                "-u",
-                str(scripts / "record.py"),
-                "--instance",
-                str(instance),
-                "--out",
-                str(log_base),
-                "--until-disarmed",
-            ],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        try:
-            result = subprocess.run(
-                [
-                    sys.executable,
-                    "-u",
-                    str(scripts / "fly_trajectory.py"),
-                    "--instance",
-                    str(instance),
-                    "--scenario",
-                    scenario,
-                    "--gusts",
-                    "paper_steps",
-                ],
-                capture_output=True,
-                text=True,
-                timeout=900,
-            )
-            recorder.wait(timeout=60)
-        finally:
-            if recorder.poll() is None:
-                recorder.terminate()
-                recorder.wait(timeout=10)
-    if result.returncode != 0:
-        raise RuntimeError(f"fly_trajectory.py failed:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}")
-    match = T0.search(result.stdout)
-    if match is None:
-        raise RuntimeError(f"fly_trajectory.py did not report t0:\n{result.stdout[-2000:]}")
-    return float(match.group(1))
+    n = str(instance)
+    with Launcher() as launcher:
+        launcher.start_vehicles([spec])
+        recorder = launcher.spawn("record.py", python_script(
+            "gcs_scripts/record.py", "--instance", n, "--out", str(log_base), "--until-disarmed"
+        ))  # fmt: skip
+        script = launcher.spawn("fly_trajectory.py", python_script(
+            "gcs_scripts/fly_trajectory.py", "--instance", n, "--scenario", scenario, "--gusts", "paper_steps"
+        ))  # fmt: skip
+        t0 = _t0_of(script, "fly_trajectory.py")
+        recorder.wait(60.0)  # --until-disarmed: it ends (and merges its parts) by itself
+        return t0
 
 
 def run_demo(

@@ -1,40 +1,245 @@
-"""In-process runner: the plant core and a control cascade coupled without sockets.
+"""The whole flight stack in one process: the simulator's and the autopilot's cores in lockstep.
 
-Deterministic: fixed physics step (RK4), one control step every ``physics_hz / control_hz``
-physics steps, actuator commands held in between (zero-order hold), the disturbance evaluated at
-every physics step. The actuator commands cross from controller to plant as the same normalised
-controls that travel in ``HIL_ACTUATOR_CONTROLS`` in the SITL, so both paths share the code on
-either side of the wire.
+:class:`Lockstep` couples :class:`~simulator.core.SimulatorCore` and
+:class:`~autopilot.core.AutopilotCore` through the bytes they exchange over UDP in the SITL (real
+MAVLink encoding and decoding, no sockets): per frame the simulator's datagram goes to the
+autopilot, its answer back, the autopilot's output to the in-process ground stations, then the
+plant steps. So the commander, missions, parameters, failsafes and telemetry all run, in
+simulation time, deterministically; the SITL is the same two cores with UDP in between, and
+their trajectories are identical.
+
+The autopilot's wall clock (``now``: mission transfer timeouts, parameter list pacing, simulator
+loss) is simulation time here: nothing waits on anything real.
+
+Ground stations act in simulation time: a :class:`GroundStation` receives what the autopilot
+sends to it (parsed by pymavlink, as any client) and sends MAVLink messages, delivered before the
+next frame. A ``script(gcs, t)`` callback runs once per frame; :meth:`Lockstep.run_until` stops on
+a predicate or a time.
+
+:func:`run_scenario` is the paper's experiment on it (armed at t = 0, flying the scenario's
+trajectory: ``--autostart``), returning the time series as a FlightRecord.
 """
 
 from __future__ import annotations
 
-import math
+import itertools
+import os
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from autopilot.control.cascade import Cascade, StateEstimate
-from autopilot.guidance.trajectories import Trajectory, trajectory_from_spec
-from gcs_scripts.analysis.record import FlightRecord
-from quadcommon.config import (
-    ControllerConfig,
-    Rates,
-    ScenarioConfig,
-    VehicleConfig,
-    apply_uncertainty,
-    load_sitl,
-    load_vehicle,
-)
-from simulator.dynamics.plant import make_plant
-from simulator.environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-# Columns of one recorded row (per control step).
-_COLUMNS = (
-    "t", "x", "y", "z", "xd", "yd", "zd", "phi", "theta", "psi", "phid", "thetad", "psid",
-    "U1", "tau_phi", "tau_theta", "tau_psi", "Ax", "Ay", "Az", "Ap", "Aq", "Ar",
-)  # fmt: skip
+from autopilot.control.config import ControllerConfig  # noqa: E402
+from autopilot.core import AutopilotCore, AutopilotSetup  # noqa: E402
+from autopilot.mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing  # noqa: E402
+from gcs_scripts.analysis.record import FlightRecord  # noqa: E402
+from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS  # noqa: E402
+from quadcommon.config import Rates, ScenarioConfig, VehicleConfig, load_sitl, load_vehicle  # noqa: E402
+from quadcommon.trajectories import trajectory_from_spec  # noqa: E402
+from simulator.core import SimulatorCore, SimulatorSetup, as_nominal  # noqa: E402
+from simulator.environment.gust_profile import GustProfile, load_gust_profile  # noqa: E402
+from simulator.sensors import load_sensors  # noqa: E402
+
+HOUSEKEEPING_S = 0.05  # the autopilot's tick, as its process runs it (here in simulation time)
+_T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
+_C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
+_ports = itertools.count(20000)
+
+
+class GroundStation:
+    """A scripted ground station on one of the autopilot's links (GCS or API), in-process.
+
+    ``mav`` builds and packs messages as pymavlink does (``gcs.mav.command_long_send(...)`` works:
+    what it writes is delivered to the autopilot before the next frame); everything the autopilot
+    sends to this station lands in :attr:`messages` (parsed), newest last, and in :attr:`last` by
+    type. Time is the simulation time of the stack.
+    """
+
+    def __init__(self, stack: Lockstep, link: int, system_id: int = 255, component_id: int = 190) -> None:
+        self.stack = stack
+        self.link = link
+        self.address = ("in-process", next(_ports))
+        self.mav = mavlink.MAVLink(self, srcSystem=system_id, srcComponent=component_id)
+        self.mav.robust_parsing = True
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self.messages: list = []  # everything received (keep=False: only the last of each type)
+        self.keep = True
+        self.inbox: deque = deque()  # not yet taken by recv_msg()
+        self.last: dict[str, object] = {}
+        self.statustext: list[str] = []
+
+    def write(self, data: bytes) -> None:
+        """pymavlink's file interface: ``mav.*_send`` lands here."""
+        self.stack.deliver(self.link, self.address, bytes(data))
+
+    def send_bytes(self, data: bytes) -> None:
+        """Raw bytes (hostile input, hand-made frames) to the autopilot."""
+        self.stack.deliver(self.link, self.address, data)
+
+    def receive(self, data: bytes) -> None:
+        for msg in self._parser.parse_buffer(data) or []:
+            if self.keep:
+                self.messages.append(msg)
+            self.inbox.append(msg)
+            kind = msg.get_type()
+            self.last[kind] = msg
+            if kind == "STATUSTEXT":
+                self.statustext.append(msg.text)
+
+    def of_type(self, kind: str) -> list:
+        return [m for m in self.messages if m.get_type() == kind]
+
+    def heartbeat(self) -> None:
+        """A ground station's HEARTBEAT (MAV_TYPE_GCS)."""
+        self.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def command(self, command: int, *params: float, target: int | None = None) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        self.mav.command_long_send(self.stack.autopilot.system_id if target is None else target, 1,
+                                   command, 0, *p)  # fmt: skip
+
+    def acks(self, command: int) -> list:
+        return [a for a in self.of_type("COMMAND_ACK") if a.command == command]
+
+
+class StackConnection:
+    """What ``pymavlink.mavutil`` connections offer to a client (``mav``, ``recv_msg()``,
+    ``close()``), on a Lockstep: the ground-station scripts' :class:`gcs_scripts.link.Link` runs
+    on it unchanged, in simulation time. ``recv_msg()`` returns the next message the vehicle sent
+    this station; when there is none it steps the stack one frame (time passes only while the
+    client waits, as a client's time passes in the SITL) and returns what that frame brought, or
+    None."""
+
+    steps_time = True  # gcs_scripts.link.Link: polling advances the simulation, never sleep
+
+    def __init__(self, stack: Lockstep, link: int = API_LINK) -> None:
+        self.stack = stack
+        self.station = stack.ground_station(link)
+        self.station.keep = False
+        self.mav = self.station.mav
+
+    def recv_msg(self):
+        inbox = self.station.inbox
+        if not inbox:
+            self.stack.step()
+        return inbox.popleft() if inbox else None
+
+    def close(self) -> None:
+        self.stack.stations.pop(self.station.address, None)
+
+
+class Lockstep:
+    """The simulator core and the autopilot core in lockstep, with in-process ground stations."""
+
+    def __init__(self, simulator: SimulatorSetup, autopilot: AutopilotSetup, log=lambda text: None) -> None:
+        self.sim = SimulatorCore(simulator, log)
+        self.autopilot = AutopilotCore(autopilot, log)
+        self.stations: dict[tuple[str, int], GroundStation] = {}
+        self.truth_rows: list[tuple[float, ...]] = []
+        self.controller_rows: list[tuple[float, ...]] = []
+        self.record_rows = True
+        self.answer_frames = True  # False: the autopilot sees no frame (it is gone: the simulator
+        # flies its emergency descent)
+        self.frames_flow = True  # False: the simulator is gone (no frames; the autopilot's clock runs)
+        self.clock = 0.0  # the autopilot's wall clock: simulation time, unless the simulator pauses
+        self._inbox: list[tuple[int, tuple[str, int], bytes]] = []
+        self._next_tick = 0.0
+        self.frames = 0
+
+    @property
+    def t(self) -> float:
+        """The stack's clock (s): the simulation time while frames flow."""
+        return self.clock
+
+    def ground_station(self, link: int = API_LINK, listen: bool = True, **ids) -> GroundStation:
+        """A station on ``link``; ``listen``: it is where the link sends by default (as MAVSDK on
+        14540 + N, QGC on 14550 + N), so it receives telemetry before it has sent anything."""
+        gcs = GroundStation(self, link, **ids)
+        self.stations[gcs.address] = gcs
+        if listen:
+            self.autopilot.links[link].peers.append(gcs.address)
+        return gcs
+
+    def deliver(self, link: int, address: tuple[str, int], data: bytes) -> None:
+        self._inbox.append((link, address, data))
+
+    def _dispatch(self, out: list[Outgoing]) -> None:
+        for link, address, data in out:
+            if link == HIL_LINK:
+                continue  # hellos to the simulator: it is linked already
+            station = self.stations.get(address) if address is not None else None
+            if station is not None:
+                station.receive(data)
+
+    def step(self) -> None:
+        """One frame: ground-station datagrams in, the frame, its answer, the plant steps."""
+        sim, ap, t = self.sim, self.autopilot, self.clock
+        if self._inbox:
+            inbox, self._inbox = self._inbox, []
+            for link, address, data in inbox:
+                self._dispatch(ap.on_gcs_datagram(link, address, data, t))
+        if t >= self._next_tick:
+            self._next_tick = t + HOUSEKEEPING_S
+            self._dispatch(ap.tick(t))
+        self.clock = t + sim.dt_control
+        if not self.frames_flow:
+            return
+        datagram = sim.begin_frame()
+        answer = None
+        if not self.answer_frames:  # the link is cut: the simulator flies its emergency descent
+            if not sim.emergency:
+                sim.autopilot_lost()
+        else:
+            data = ap.on_hil_datagram(datagram, t)
+            self._dispatch(ap.after_frame())
+            if sim.emergency:
+                if data is not None:
+                    sim.answers_again(data)
+            elif data is None or (answer := sim.answer_to_frame(data)) is None:
+                raise RuntimeError(f"the autopilot did not answer frame t={t:.3f} s")
+        if self.record_rows:
+            self.truth_rows.append(sim.truth_row)
+            self.controller_rows.extend(ap.take_controller_rows())
+        else:
+            ap.controller_rows.clear()
+        sim.end_frame(answer)
+        self.frames += 1
+
+    def final_frame(self) -> None:
+        """The last frame of a run: sent, answered and recorded, not stepped (as the SITL's
+        ``--duration``)."""
+        sim, ap, t = self.sim, self.autopilot, self.clock
+        datagram = sim.begin_frame()
+        ap.on_hil_datagram(datagram, t)
+        self._dispatch(ap.after_frame())
+        if self.record_rows:
+            self.truth_rows.append(sim.truth_row)
+            self.controller_rows.extend(ap.take_controller_rows())
+
+    def run_until(
+        self,
+        t_end: float,
+        until: Callable[[Lockstep], bool] | None = None,
+        script: Callable[[Lockstep, float], None] | None = None,
+    ) -> bool:
+        """Step until simulation time ``t_end`` (True) or ``until(self)`` (False returned only if
+        ``until`` never held); ``script(self, t)`` runs before every frame."""
+        frames = round((t_end - self.clock) / self.sim.dt_control)
+        for _ in range(max(frames, 0)):
+            if script is not None:
+                script(self, self.clock)
+            self.step()
+            if until is not None and until(self):
+                return True
+        return until is None
+
+    def run_for(self, seconds: float, **kw) -> bool:
+        return self.run_until(self.clock + seconds, **kw)
 
 
 @dataclass(frozen=True)
@@ -43,6 +248,28 @@ class RunOptions:
     duration_s: float | None = None  # default: the scenario's
     rates: Rates | None = None  # default: config/sitl.toml
     gusts: GustProfile | None = None  # default: the scenario's profile
+    sensors: str = "default"  # config/sensors/NAME.toml
+
+
+def paper_stack(
+    scenario: ScenarioConfig,
+    controller: ControllerConfig,
+    options: RunOptions = RunOptions(),
+    vehicle: VehicleConfig | None = None,
+) -> Lockstep:
+    """The paper's experiment as a Lockstep: armed at t = 0, flying the scenario's trajectory."""
+    vehicle = vehicle or load_vehicle(scenario.vehicle)
+    sitl = load_sitl()
+    if options.rates is not None:
+        sitl = replace(sitl, rates=options.rates)
+    if options.nominal_plant:
+        vehicle = as_nominal(vehicle)
+    gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
+    sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors), gusts,
+                         nominal_plant=options.nominal_plant)  # fmt: skip
+    ap = AutopilotSetup(sitl, vehicle, controller, autostart=trajectory_from_spec(scenario.trajectory),
+                        default_remotes=False)  # fmt: skip
+    return Lockstep(sim, ap)
 
 
 def run_scenario(
@@ -52,78 +279,50 @@ def run_scenario(
     vehicle: VehicleConfig | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> FlightRecord:
-    """Fly ``scenario`` with ``controller``; return the time series at the control rate."""
-    vehicle = vehicle or load_vehicle(scenario.vehicle)
-    rates = options.rates or load_sitl().rates
-    plant_vehicle = apply_uncertainty(vehicle, scenario)
-    if options.nominal_plant:
-        plant_vehicle = _as_nominal(plant_vehicle)
-    dt_control = 1.0 / rates.control_hz
-    substeps = rates.physics_steps_per_control
-    dt_physics = dt_control / substeps
+    """Fly ``scenario`` with ``controller`` through the whole stack; the time series per frame."""
+    stack = paper_stack(scenario, controller, options, vehicle)
     duration = options.duration_s if options.duration_s is not None else scenario.duration_s
-
-    plant = make_plant(plant_vehicle, dt_physics)
-    plant.reset(scenario.initial_position_m, scenario.initial_euler_rad)
-    cascade = Cascade(controller, vehicle, dt_control)
-    trajectory: Trajectory = trajectory_from_spec(scenario.trajectory)
-    profile = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
-    schedule = DisturbanceSchedule(profile, step_s=dt_physics)
-
-    steps = int(round(duration / dt_control))
-    rows: list[tuple[float, ...]] = []
-    append = rows.append
+    steps = int(round(duration / stack.sim.dt_control))
     report_every = max(steps // 20, 1)
-    for k in range(steps + 1):
-        t = k * dt_control
-        position, velocity, euler, euler_rates = plant.kinematics()
-        ref = trajectory.sample(t)
-        out = cascade.step(StateEstimate(position, velocity, euler, euler_rates), ref)
-        force, torque, _ = schedule.evaluate(t)
-        append(
-            (t, *position, *ref.position_m, *euler, *out.euler_ref_rad, out.thrust_n,
-             *out.torque_euler_n_m, *force, *torque)
-        )  # fmt: skip
-        if k == steps:
-            break
-        plant.set_actuator_controls(out.actuator_controls)
-        for j in range(substeps):
-            force, torque, wind = schedule.evaluate(t + j * dt_physics)
-            plant.set_disturbance(force, torque, wind)
-            plant.step()
+    for k in range(steps):
+        stack.step()
         if progress is not None and k % report_every == 0:
             progress(k / steps)
-        if not all(math.isfinite(v) for v in position):
-            raise FloatingPointError(f"{scenario.name}/{controller.name}: state diverged at t={t:.3f} s")
+    stack.final_frame()
     if progress is not None:
         progress(1.0)
-    data = np.asarray(rows, dtype=float)
+    return flight_record(stack, scenario.name, controller.name, nominal=options.nominal_plant)
+
+
+def flight_record(stack: Lockstep, scenario: str, controller: str, nominal: bool = False) -> FlightRecord:
+    """The rows a Lockstep recorded as a FlightRecord (truth joined with the controller's rows)."""
+    truth = np.asarray(stack.truth_rows, dtype=float)
+    ctrl = np.asarray(stack.controller_rows, dtype=float)
+    if len(ctrl) != len(truth):
+        raise RuntimeError(f"{len(truth)} truth rows but {len(ctrl)} controller rows")
+
+    def cols(table, index, *names):
+        return table[:, [index[n] for n in names]]
+
     return FlightRecord(
-        label=controller.name,
-        scenario=scenario.name,
-        controller=controller.name,
-        time_s=data[:, 0],
-        position_m=data[:, 1:4],
-        position_ref_m=data[:, 4:7],
-        euler_rad=data[:, 7:10],
-        euler_ref_rad=data[:, 10:13],
-        thrust_n=data[:, 13],
-        torque_euler_n_m=data[:, 14:17],
-        disturbance_force_n=data[:, 17:20],
-        disturbance_torque_n_m=data[:, 20:23],
-        event_times_s=profile.event_times(),
-        source="in-process (nominal plant)" if options.nominal_plant else "in-process",
+        label=controller,
+        scenario=scenario,
+        controller=controller,
+        time_s=truth[:, _T["time_s"]],
+        position_m=cols(truth, _T, "x_m", "y_m", "z_m"),
+        position_ref_m=cols(ctrl, _C, "x_ref_m", "y_ref_m", "z_ref_m"),
+        euler_rad=cols(truth, _T, "phi_rad", "theta_rad", "psi_rad"),
+        euler_ref_rad=cols(ctrl, _C, "phi_ref_rad", "theta_ref_rad", "psi_ref_rad"),
+        thrust_n=ctrl[:, _C["U1_n"]],
+        torque_euler_n_m=cols(ctrl, _C, "tau_phi_n_m", "tau_theta_n_m", "tau_psi_n_m"),
+        disturbance_force_n=cols(truth, _T, "Ax_n", "Ay_n", "Az_n"),
+        disturbance_torque_n_m=cols(truth, _T, "Ap_n_m", "Aq_n_m", "Ar_n_m"),
+        event_times_s=stack.sim.setup.gusts.event_times(),
+        source="in-process (nominal plant)" if nominal else "in-process",
     )
 
 
-def _as_nominal(vehicle: VehicleConfig) -> VehicleConfig:
-    """The vehicle flown as the Section II model: no CoM offset, no crossed inertia, wrench."""
-    from dataclasses import replace
-
-    plant = replace(
-        vehicle.plant,
-        model="nominal",
-        com_offset_m=(0.0, 0.0, 0.0),
-        products_of_inertia_kg_m2=(0.0, 0.0, 0.0),
-    )
-    return replace(vehicle, plant=plant, actuation=replace(vehicle.actuation, mode="wrench"))
+__all__ = [
+    "GCS_LINK", "API_LINK", "GroundStation", "Lockstep", "RunOptions", "StackConnection", "paper_stack",
+    "run_scenario",
+]  # fmt: skip

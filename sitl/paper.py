@@ -18,11 +18,12 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+from autopilot.control.config import CONTROLLER_NAMES, load_controller
 from gcs_scripts.analysis.figures import paper_figures
 from gcs_scripts.analysis.metrics import Indices, indices
 from gcs_scripts.analysis.record import FlightRecord
 from gcs_scripts.analysis.tables import paper_tables_markdown, write_paper_csvs
-from quadcommon.config import CONTROLLER_NAMES, load_controller, load_scenario
+from quadcommon.config import load_scenario
 
 from .inprocess import RunOptions, run_scenario
 

@@ -24,9 +24,10 @@ from dataclasses import dataclass, replace
 from enum import Enum
 from typing import NamedTuple
 
+from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
+
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
-from ..guidance.trajectories import PiecewiseTrajectory, Reference, Trajectory
 from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
 from ..params.store import ParameterStore
 from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, prearm_problem

@@ -1,8 +1,9 @@
 """The control cascade: translational law -> command filter -> attitude law -> actuators.
 
 Cascades are selected by name (``config/controllers/NAME.toml``): ``intbs_nlhinf`` (the
-paper's), ``intbs`` (integral in the first step, both loops), ``bs_nlhinf`` (no integral).
-Pure: one :meth:`Cascade.step` per control period, driven by whoever owns the clock.
+paper's), ``intbs`` (integral in the first step, both loops), ``bs_nlhinf`` (no integral); the
+laws themselves are looked up by name (:mod:`.registry`, ``laws/``). Pure: one
+:meth:`Cascade.step` per control period, driven by whoever owns the clock.
 
 The attitude laws produce the generalised torque tau_eta of eq. (4); the actuators produce a
 body torque, ``tau_body = W_eta^-T tau_eta``, which is what is saturated (or allocated to the
@@ -14,14 +15,14 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from quadcommon.config import ControllerConfig, VehicleConfig
+from quadcommon.config import VehicleConfig
 from quadcommon.rigid_body import body_torque_from_euler_torque, euler_torque_from_body_torque
+from quadcommon.trajectories import Reference
 
-from ..guidance.trajectories import Reference
+from . import registry
 from .allocation import Allocator
 from .command_filter import SecondOrderFilter
-from .intbs_attitude import IntegralBacksteppingAttitude
-from .nlhinf import NonlinearHinfAttitude
+from .config import ControllerConfig
 from .translational import TranslationalController
 
 Vector3 = tuple[float, float, float]
@@ -55,19 +56,13 @@ class Cascade:
         self.dt = dt
         nominal = vehicle.nominal
         self.rotor_mode = vehicle.actuation.mode == "rotors"
+        tr_law = registry.law(registry.TRANSLATIONAL, controller.translational.law)
+        rot_law = registry.law(registry.ROTATIONAL, controller.rotational.law)
         self.translational = TranslationalController(
-            controller.translational,
-            nominal.mass_kg,
-            nominal.gravity_m_s2,
-            vehicle.actuation.thrust_max_n,
-        )
-        rot = controller.rotational
-        if rot.law == "nlhinf":
-            self.rotational = NonlinearHinfAttitude(rot.nlhinf, nominal.inertia_kg_m2)
-        else:
-            self.rotational = IntegralBacksteppingAttitude(
-                rot.c1, rot.c2, rot.k_integral, nominal.inertia_kg_m2
-            )
+            tr_law(controller.translational, nominal), nominal, vehicle.actuation.thrust_max_n,
+            controller.tilt_max_rad,
+        )  # fmt: skip
+        self.rotational = rot_law(controller.rotational, nominal)
         self.filter = SecondOrderFilter(controller.command_filter, dt, channels=2)
         self.allocator = Allocator(vehicle)
 
@@ -84,13 +79,9 @@ class Cascade:
             or controller.rotational.law != old.rotational.law
         ):
             raise ValueError("retune keeps the laws; a different cascade needs a restart")
-        self.translational.retune(controller.translational)
-        rot = controller.rotational
-        if rot.law == "nlhinf":
-            assert rot.nlhinf is not None
-            self.rotational.retune(rot.nlhinf)  # type: ignore[call-arg]
-        else:
-            self.rotational.retune(rot.c1, rot.c2, rot.k_integral)  # type: ignore[call-arg]
+        self.translational.law.retune(controller.translational)
+        self.translational.set_tilt_max(controller.tilt_max_rad)
+        self.rotational.retune(controller.rotational)
         self.filter.retune(controller.command_filter)
         self.config = controller
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from quadcommon.config import CommandFilter
+from .config import CommandFilter
 
 
 class SecondOrderFilter:

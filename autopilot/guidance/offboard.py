@@ -18,8 +18,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from quadcommon.trajectories import Reference, Trajectory
+
 from .planner import Limits, transition
-from .trajectories import Reference, Trajectory
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)

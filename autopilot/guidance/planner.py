@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .trajectories import QuinticSegment, Reference, Trajectory
+from quadcommon.trajectories import QuinticSegment, Reference, Trajectory
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)

@@ -28,7 +28,7 @@ Handler = Callable[[CommandRequest], tuple[int, str]]
 
 def request_from_message(msg, link, address) -> CommandRequest:
     """A COMMAND_LONG or COMMAND_INT as a CommandRequest (COMMAND_INT x/y stay integers)."""
-    if msg.id == mavlink.MAVLINK_MSG_ID_COMMAND_INT:
+    if msg.get_msgId() == mavlink.MAVLINK_MSG_ID_COMMAND_INT:
         params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
         frame = msg.frame
     else:

@@ -1,81 +1,55 @@
-"""UDP links of the autopilot: two GCS links (as PX4 SITL) and the HIL link.
+"""The autopilot's ground-station links as the core sees them: peers, parser, streams; no socket.
 
-A :class:`GcsLink` binds a local loopback port, sends to a default remote (the port ground
-stations and API scripts listen on) and also answers every address that talks to it.
+PX4 SITL has two: GCS (QGC, MAVProxy) and API (MAVSDK, scripts). Each sends to a default remote
+(the port those clients listen on) and also answers every address that talks to it. What a link
+sends is appended to the core's outbox as :class:`Outgoing` records; the process shell turns
+them into ``sendto`` calls on the link's socket, the in-process runner hands them to a scripted
+ground station.
 """
 
 from __future__ import annotations
 
-import errno
-import socket
-
-from quadcommon.wire import LOOPBACK
+from typing import NamedTuple
 
 from .codec import new_parser
 from .telemetry import StreamTable
 
-MAX_DATAGRAM = 65535
+Address = tuple[str, int]
+GCS_LINK, API_LINK, HIL_LINK = 0, 1, 2  # link numbers in Outgoing records
+LINK_NAMES = ("GCS", "API", "HIL")
 
 
-class PortInUse(RuntimeError):
-    pass
+class Outgoing(NamedTuple):
+    """One datagram to send: on ``link``, to ``address`` (None: the HIL link's simulator)."""
 
-
-def bind_udp(port: int, what: str) -> socket.socket:
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        sock.bind((LOOPBACK, port))
-    except OSError as exc:
-        sock.close()
-        if exc.errno == errno.EADDRINUSE:
-            raise PortInUse(f"UDP port {port} ({what}) is already in use") from None
-        raise
-    sock.setblocking(False)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-    return sock
+    link: int
+    address: Address | None
+    data: bytes
 
 
 class GcsLink:
-    def __init__(self, name: str, local_port: int, remote_port: int) -> None:
-        self.name = name
-        self.sock = bind_udp(local_port, f"{name} link")
-        self.local_port = local_port
-        self.default_remote = (LOOPBACK, remote_port)
-        self.peers: list[tuple[str, int]] = [self.default_remote]
+    def __init__(self, index: int, default_remote: Address | None, outbox: list[Outgoing]) -> None:
+        self.index = index
+        self.name = LINK_NAMES[index]
+        self.default_remote = default_remote
+        self.peers: list[Address] = [default_remote] if default_remote is not None else []
         self.parser = new_parser()
         self.streams = StreamTable()
         self.last_heartbeat_s: float | None = None  # simulation time of the last GCS heartbeat
+        self._outbox = outbox
 
     def send(self, data: bytes) -> None:
+        """To every peer of the link."""
+        index, append = self.index, self._outbox.append
         for address in self.peers:
-            try:
-                self.sock.sendto(data, address)
-            except OSError:
-                pass  # nobody listening (ECONNREFUSED on loopback) is normal for a GCS port
+            append(Outgoing(index, address, data))
 
-    def send_to(self, data: bytes, address: tuple[str, int]) -> None:
-        try:
-            self.sock.sendto(data, address)
-        except OSError:
-            pass
+    def send_to(self, data: bytes, address: Address) -> None:
+        self._outbox.append(Outgoing(self.index, address, data))
 
-    def receive(self) -> list[tuple[object, tuple[str, int]]]:
-        """Every message waiting on the socket, with the address it came from."""
-        out = []
-        while True:
-            try:
-                data, address = self.sock.recvfrom(MAX_DATAGRAM)
-            except (BlockingIOError, InterruptedError):
-                return out
-            except OSError:
-                continue  # ICMP port unreachable from an earlier send: ignore
-            if address not in self.peers:
-                self.peers.append(address)
-            try:
-                messages = self.parser.parse_buffer(data) or []
-            except Exception:
-                continue  # garbage on the link must not stop the autopilot
-            out.extend((msg, address) for msg in messages)
-
-    def close(self) -> None:
-        self.sock.close()
+    def receive(self, data: bytes, address: Address) -> list:
+        """The messages in one datagram from ``address`` (who becomes a peer); garbage parses to
+        BAD_DATA objects, which the dispatcher counts and drops."""
+        if address not in self.peers:
+            self.peers.append(address)
+        return self.parser.parse_buffer(data) or []

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import struct
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -134,15 +133,16 @@ class ParamService:
         self,
         store: ParameterStore,
         encoder: Encoder,
-        links: Callable[[], Sequence],
+        links: Sequence,
         statustext: Callable[[int, str], None],
         system_id: int,
         component_id: int,
         storage_path: str | Path | None = None,
         header: str = "",
-        clock: Callable[[], float] = time.monotonic,
+        *,
+        clock: Callable[[], float],
     ) -> None:
-        """``links()`` = the GCS links (``send(data)``, ``send_to(data, address)``)."""
+        """``links`` = the GCS links (``send(data)``, ``send_to(data, address)``)."""
         self.store = store
         self.encoder = encoder
         self.links = links
@@ -179,7 +179,7 @@ class ParamService:
     def on_message(self, msg, link, address) -> None:
         if not self._for_us(msg):
             return
-        kind = msg.id
+        kind = msg.get_msgId()
         if kind == m.MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
             self._streams[(id(link), address)] = [link, address, 0]
             self._pump(self._streams[(id(link), address)])
@@ -222,7 +222,7 @@ class ParamService:
         if problem:
             self._refused(f"param set refused: {problem}")
         data = self.value_frame(name)  # the value now: new if accepted, unchanged if refused
-        for each in self.links():
+        for each in self.links:
             each.send(data)
         if address not in getattr(link, "peers", ()):
             link.send_to(data, address)
@@ -312,7 +312,7 @@ class ParamService:
         for name, value in self.store.values.items():
             if before.get(name) != value:
                 data = self.value_frame(name)
-                for link in self.links():
+                for link in self.links:
                     link.send(data)
 
     def _cmd_storage(self, r: CommandRequest) -> tuple[int, str]:

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 from quadcommon import frames
 from quadcommon.rigid_body import quaternion_from_euler
+from quadcommon.trajectories import Reference
 
 from ..control.cascade import StateEstimate
-from ..guidance.trajectories import Reference
 from .codec import mavlink
 
 m = mavlink
@@ -289,6 +289,19 @@ NEEDS_STATE = set(BUILDERS) - {
 }
 
 
+STATUSTEXT_CHUNK = 50  # bytes of text per STATUSTEXT
+STATUSTEXT_MAX = 200  # longer texts are cut (4 chunks)
+
+
+def statustext_messages(severity: int, text: str, ident: int) -> list:
+    """STATUSTEXT for ``text``: one message, or 50-byte chunks sharing ``ident`` (MAVLink 2's rule:
+    ``id`` 0 for a single message, ``chunk_seq`` 0, 1, ...)."""
+    raw = text.encode("utf-8")[:STATUSTEXT_MAX]
+    chunks = [raw[i : i + STATUSTEXT_CHUNK] for i in range(0, len(raw), STATUSTEXT_CHUNK)] or [b""]
+    ident = ident if len(chunks) > 1 else 0
+    return [m.MAVLink_statustext_message(severity, chunk, ident, seq) for seq, chunk in enumerate(chunks)]
+
+
 def build(msg_id: int, status: VehicleStatus):
     """The message ``msg_id`` describing ``status`` now, or None if it cannot be built yet."""
     builder = BUILDERS.get(msg_id)
@@ -325,6 +338,11 @@ class StreamTable:
         else:
             self.set_rate(msg_id, 1e6 / interval_us, now)
         return True
+
+    def restart(self) -> None:
+        """Every stream due now: the simulation clock started again (a restarted simulator)."""
+        for msg_id in self.next_due:
+            self.next_due[msg_id] = 0.0
 
     def due(self, now: float) -> list[int]:
         """Message ids due at ``now``; their next due times advance by one interval."""

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.interpolate import CubicSpline, make_interp_spline, make_lsq_spline
 
-from ..guidance.trajectories import Reference
+from quadcommon.trajectories import Reference
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)

@@ -41,8 +41,7 @@ from dataclasses import dataclass, field, replace
 from enum import Enum, IntEnum
 from typing import NamedTuple
 
-from ..guidance.planner import Limits, LineMove, transition
-from ..guidance.trajectories import (
+from quadcommon.trajectories import (
     Hover,
     PiecewiseTrajectory,
     Reference,
@@ -50,6 +49,8 @@ from ..guidance.trajectories import (
     eval_quintic,
     quintic_coefficients,
 )
+
+from ..guidance.planner import Limits, LineMove, transition
 from ..mavlink.codec import mavlink as m
 from .curve import GLOBAL_TOLERANCE_M, POSITION_TOLERANCE_M, TimedCurve
 from .items import ItemKind, MissionItem, PositionKind

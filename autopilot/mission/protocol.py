@@ -150,7 +150,7 @@ class MissionProtocol:
         if target[0] not in (0, self.system_id) or target[1] not in (*_COMPONENTS, self.component_id):
             return out
         sender = (msg.get_srcSystem(), msg.get_srcComponent())
-        mid = msg.id
+        mid = msg.get_msgId()
         if mid == m.MAVLINK_MSG_ID_MISSION_COUNT:
             self._on_count(msg, sender, now, out)
         elif mid == m.MAVLINK_MSG_ID_MISSION_ITEM_INT:

@@ -15,7 +15,6 @@ commander, joined to the GCS links (this is the only part of :mod:`autopilot.mis
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable, Sequence
 
 from ..commander.commander import Commander
@@ -47,14 +46,14 @@ class MissionService:
         self,
         commander: Commander,
         encoder: Encoder,
-        links: Callable[[], Sequence],
+        links: Sequence,
         statustext: Callable[[int, str], None],
         origin: tuple[float, float, float],
         system_id: int,
         component_id: int,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float],
     ) -> None:
-        """``links()`` = the GCS links (each with ``send(data)`` and ``send_to(data, address)``);
+        """``links`` = the GCS links (each with ``send(data)`` and ``send_to(data, address)``);
         ``origin`` = the configured geodetic home of the local frame (lat, lon deg, alt m)."""
         self.commander = commander
         self.encoder = encoder
@@ -141,6 +140,10 @@ class MissionService:
         self.update(self._sim_time(), force=True)
         return outcome.result, outcome.reason
 
+    def restart_clock(self) -> None:
+        """The simulation clock started again: MISSION_CURRENT is due at once."""
+        self._next_current_s = 0.0
+
     # -- progress ----------------------------------------------------------------------------------------
     def _current_seq(self) -> int:
         mission = self.commander.mission
@@ -171,5 +174,5 @@ class MissionService:
 
     def _broadcast(self, msg) -> None:
         data = self.encoder.pack(msg)
-        for link in self.links():
+        for link in self.links:
             link.send(data)

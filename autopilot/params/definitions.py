@@ -9,7 +9,7 @@ Three groups:
   them, so a change is refused with that reason rather than half-applied).
 
 :func:`controller_config_from_params` maps the gain parameters back onto a
-:class:`~quadcommon.config.ControllerConfig` for :meth:`~autopilot.control.cascade.Cascade.retune`;
+:class:`~autopilot.control.config.ControllerConfig` for :meth:`~autopilot.control.cascade.Cascade.retune`;
 :func:`consistency_problems` is the "bad parameters" pre-arm check.
 """
 
@@ -17,8 +17,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from quadcommon.config import ControllerConfig, NlHinfGains, Rates
+from quadcommon.config import Rates
 
+from ..control import registry
+from ..control.config import ControllerConfig
 from .store import INT32, ParameterStore, ParamSpec
 
 # NAV_DLL_ACT (GCS data link loss action): PX4's enum values (0 disabled, 1 hold, 2 return,
@@ -123,91 +125,21 @@ RATES_READ_ONLY = (
     "fixed by config/sitl.toml [rates] for simulator and autopilot (lockstep); edit it and restart"
 )
 
-AXES = ("X", "Y", "Z")
-EULER_AXES = ("R", "P", "Y")  # roll, pitch, yaw
-GAIN_HI = 1000.0
-INTEGRAL_LO = 0.001  # integral gains stay > 0: the retune keeps k * integral, which needs k != 0
-
-
 def controller_params(config: ControllerConfig) -> tuple[ParamSpec, ...]:
-    """Gain parameters of the cascade ``config`` (defaults = the config's values)."""
-    specs: list[ParamSpec] = []
-    tr = config.translational
-    for name, values, what in (("C1", tr.c1, "c1"), ("C2", tr.c2, "c2")):
-        for i, axis in enumerate(AXES):
-            specs.append(
-                ParamSpec(
-                    f"BS_{name}_{axis}",
-                    values[i],
-                    0.01,
-                    GAIN_HI,
-                    unit="1/s",
-                    description=f"translational backstepping {what}, {axis.lower()} axis",
-                )
-            )
-    if tr.law != "backstepping":
-        what = "k_xi (integral of e2)" if tr.law == "integral_second_step" else "lambda (integral of e1)"
-        for i, axis in enumerate(AXES):
-            specs.append(
-                ParamSpec(
-                    f"BS_KI_{axis}",
-                    tr.k_integral[i],
-                    INTEGRAL_LO,
-                    GAIN_HI,
-                    description=f"translational {what}, {axis.lower()} axis",
-                )
-            )
-    specs.append(
-        ParamSpec(
-            "BS_TILT_MAX", tr.tilt_max_rad, 0.05, 1.4, unit="rad", description="tilt limit of phi_r, theta_r"
-        )
-    )
-    rot = config.rotational
-    if rot.law == "nlhinf":
-        g = rot.nlhinf
-        assert g is not None
-        specs += [
-            ParamSpec("NLH_W1", g.omega1, 0.001, GAIN_HI, description="NLHinf weight omega1 (eq. 44)"),
-            ParamSpec("NLH_W2", g.omega2, 0.001, GAIN_HI, description="NLHinf weight omega2 (eq. 44)"),
-            ParamSpec(
-                "NLH_W3",
-                g.omega3,
-                INTEGRAL_LO,
-                GAIN_HI,
-                description="NLHinf weight omega3 (eq. 44; integral action K_I = k_p G)",
-                read_only="" if g.omega3 > 0.0 else "this cascade has no attitude integral (omega3 = 0)",
-            ),
-            ParamSpec("NLH_WU", g.omega_u, 0.01, GAIN_HI, description="NLHinf weight omega_u (eq. 44)"),
-        ]
-    else:
-        for name, values, lo, what in (
-            ("C1", rot.c1, 0.01, "c1"),
-            ("C2", rot.c2, 0.01, "c2"),
-            ("KI", rot.k_integral, INTEGRAL_LO, "lambda (integral)"),
-        ):
-            for i, axis in enumerate(EULER_AXES):
-                specs.append(
-                    ParamSpec(
-                        f"ATT_{name}_{axis}",
-                        values[i],
-                        lo,
-                        GAIN_HI,
-                        description=f"IntBS attitude {what}, {('roll', 'pitch', 'yaw')[i]}",
-                    )
-                )
+    """Parameters of the cascade ``config`` (defaults = the config's values): those its two laws
+    declare (:mod:`autopilot.control.registry`), the tilt limit and the command filter."""
+    tr = registry.law(registry.TRANSLATIONAL, config.translational.law)
+    rot = registry.law(registry.ROTATIONAL, config.rotational.law)
     cf = config.command_filter
-    specs += [
-        ParamSpec(
-            "CF_WN",
-            cf.natural_frequency_rad_s,
-            1.0,
-            1000.0,
-            unit="rad/s",
-            description="command filter natural frequency (roll/pitch references)",
-        ),
+    return (
+        *tr.parameters(config.translational),
+        ParamSpec("BS_TILT_MAX", config.tilt_max_rad, 0.05, 1.4, unit="rad",
+                  description="tilt limit of phi_r, theta_r"),
+        *rot.parameters(config.rotational),
+        ParamSpec("CF_WN", cf.natural_frequency_rad_s, 1.0, 1000.0, unit="rad/s",
+                  description="command filter natural frequency (roll/pitch references)"),
         ParamSpec("CF_ZETA", cf.damping, 0.1, 5.0, description="command filter damping ratio"),
-    ]
-    return tuple(specs)
+    )  # fmt: skip
 
 
 def rate_params(rates: Rates) -> tuple[ParamSpec, ...]:
@@ -234,47 +166,20 @@ def default_parameters(
     return ParameterStore(specs)
 
 
-def is_controller_param(name: str) -> bool:
-    return name.startswith(("BS_", "NLH_", "ATT_", "CF_"))
-
-
 def controller_config_from_params(base: ControllerConfig, params: ParameterStore) -> ControllerConfig:
     """``base`` with every gain that ``params`` holds replaced by its current value."""
-
-    def vec(prefix: str, axes: tuple[str, ...], default: tuple[float, float, float]):
-        names = [f"{prefix}_{a}" for a in axes]
-        if not all(n in params for n in names):
-            return default
-        return tuple(params[n] for n in names)
-
-    tr = base.translational
-    translational = replace(
-        tr,
-        c1=vec("BS_C1", AXES, tr.c1),
-        c2=vec("BS_C2", AXES, tr.c2),
-        k_integral=vec("BS_KI", AXES, tr.k_integral),
-        tilt_max_rad=params.get("BS_TILT_MAX", tr.tilt_max_rad),
-    )
-    rot = base.rotational
-    if rot.law == "nlhinf" and "NLH_W1" in params:
-        rotational = replace(
-            rot,
-            nlhinf=NlHinfGains(params["NLH_W1"], params["NLH_W2"], params["NLH_W3"], params["NLH_WU"]),
-        )
-    else:
-        rotational = replace(
-            rot,
-            c1=vec("ATT_C1", EULER_AXES, rot.c1),
-            c2=vec("ATT_C2", EULER_AXES, rot.c2),
-            k_integral=vec("ATT_KI", EULER_AXES, rot.k_integral),
-        )
+    tr = registry.law(registry.TRANSLATIONAL, base.translational.law)
+    rot = registry.law(registry.ROTATIONAL, base.rotational.law)
+    values = params.values
     cf = base.command_filter
-    command_filter = replace(
-        cf,
-        natural_frequency_rad_s=params.get("CF_WN", cf.natural_frequency_rad_s),
-        damping=params.get("CF_ZETA", cf.damping),
-    )
-    return replace(base, translational=translational, rotational=rotational, command_filter=command_filter)
+    return replace(
+        base,
+        translational=tr.gains_from_params(base.translational, values),
+        rotational=rot.gains_from_params(base.rotational, values),
+        tilt_max_rad=params.get("BS_TILT_MAX", base.tilt_max_rad),
+        command_filter=replace(cf, natural_frequency_rad_s=params.get("CF_WN", cf.natural_frequency_rad_s),
+                               damping=params.get("CF_ZETA", cf.damping)),
+    )  # fmt: skip
 
 
 def consistency_problems(params: ParameterStore) -> list[str]:

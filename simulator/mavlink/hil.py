@@ -37,7 +37,7 @@ from typing import NamedTuple
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
-from quadcommon.mavlink_fast import DecodeError, FastDecoder, split_frames
+from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 
 from ..dynamics.plant import TruthState
 from ..sensors.models import GpsReading, SensorReadings
@@ -65,37 +65,46 @@ def _i32(x: float) -> int:
 
 
 class HilFrameEncoder:
-    """Packs the lockstep datagram; the message objects are built once and refilled each frame."""
+    """Packs the lockstep datagram: one :class:`~quadcommon.mavlink_fast.FastEncoder` per message,
+    its flat field list refilled each frame (the constant fields stay as the templates set them)."""
 
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = home
-        self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=wire.SIMULATOR_COMPONENT_ID)
+        self.seq = 0
+        ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
         z3 = (0.0, 0.0, 0.0)
-        self._sensor = mavlink.MAVLink_hil_sensor_message(0, *z3, *z3, *z3, 0.0, 0.0, 0.0, 0.0, 0, 0)
-        self._sensor.fields_updated = FIELDS_UPDATED_ALL
-        self._state = mavlink.MAVLink_hil_state_quaternion_message(
+        sensor = mavlink.MAVLink_hil_sensor_message(
+            0, *z3, *z3, *z3, 0.0, 0.0, 0.0, 0.0, FIELDS_UPDATED_ALL, 0
+        )
+        self._sensor = FastEncoder(mavlink.MAVLink_hil_sensor_message, *ids, sensor)
+        state = mavlink.MAVLink_hil_state_quaternion_message(
             0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0
         )
-        self._odometry = mavlink.MAVLink_odometry_message(
-            0,
-            mavlink.MAV_FRAME_LOCAL_NED,
-            mavlink.MAV_FRAME_LOCAL_NED,
-            0.0, 0.0, 0.0,
-            [1.0, 0.0, 0.0, 0.0],
-            0.0, 0.0, 0.0,
-            0.0, 0.0, 0.0,
-            list(_UNKNOWN_COVARIANCE),
-            list(_UNKNOWN_COVARIANCE),
-            0,
-            mavlink.MAV_ESTIMATOR_TYPE_MOCAP,
-            100,
+        self._state = FastEncoder(mavlink.MAVLink_hil_state_quaternion_message, *ids, state)
+        odometry = mavlink.MAVLink_odometry_message(
+            0, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED, 0.0, 0.0, 0.0,
+            [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            list(_UNKNOWN_COVARIANCE), list(_UNKNOWN_COVARIANCE), 0, mavlink.MAV_ESTIMATOR_TYPE_MOCAP, 100,
         )  # fmt: skip
-        self._gps = mavlink.MAVLink_hil_gps_message(0, GPS_FIX_3D, 0, 0, 0, 100, 100, 0, 0, 0, 0, 0, 10, 0, 0)
+        self._odometry = FastEncoder(mavlink.MAVLink_odometry_message, *ids, odometry)
+        gps = mavlink.MAVLink_hil_gps_message(0, GPS_FIX_3D, 0, 0, 0, 100, 100, 0, 0, 0, 0, 0, 10, 0, 0)
+        self._gps = FastEncoder(mavlink.MAVLink_hil_gps_message, *ids, gps)
+        # Where the per-frame fields sit in each flat list.
+        self._s = _slots(self._sensor, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro",
+                         "xmag", "ymag", "zmag", "abs_pressure", "pressure_alt", "temperature")  # fmt: skip
+        self._h = _slots(self._state, "time_usec", "rollspeed", "pitchspeed", "yawspeed", "lat", "lon",
+                         "alt", "vx", "vy", "vz", "ind_airspeed", "true_airspeed",
+                         "xacc", "yacc", "zacc")  # fmt: skip
+        self._h_q = self._state.slices["attitude_quaternion"]
+        self._o = _slots(self._odometry, "time_usec", "x", "y", "z", "vx", "vy", "vz",
+                         "rollspeed", "pitchspeed", "yawspeed")  # fmt: skip
+        self._o_q = self._odometry.slices["q"]
+        self._g = _slots(self._gps, "time_usec", "lat", "lon", "alt", "eph", "epv", "vel", "vn", "ve", "vd",
+                         "cog", "satellites_visible")  # fmt: skip
 
-    def _pack(self, message) -> bytes:
-        mav = self.mav
-        data = message.pack(mav)
-        mav.seq = (mav.seq + 1) & 0xFF  # pack() does not advance it (only send() does)
+    def _frame(self, encoder: FastEncoder) -> bytes:
+        data = encoder.frame(self.seq)
+        self.seq = (self.seq + 1) & 0xFF
         return data
 
     def encode(
@@ -108,62 +117,67 @@ class HilFrameEncoder:
     ) -> bytes:
         """One datagram: HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``)."""
         to_ned = frames.vector_to_ned
-        q_ned = list(frames.quaternion_to_ned(truth.quaternion))
+        q_ned = frames.quaternion_to_ned(truth.quaternion)
         rates_frd = to_ned(truth.body_rates_rad_s)
         pos_ned = to_ned(truth.position_m)
         vel_ned = to_ned(truth.velocity_m_s)
 
-        s = self._sensor
-        s.time_usec = time_usec
-        s.xacc, s.yacc, s.zacc = to_ned(readings.imu.specific_force_m_s2)
-        s.xgyro, s.ygyro, s.zgyro = to_ned(readings.imu.angular_rate_rad_s)
-        s.xmag, s.ymag, s.zmag = to_ned(readings.magnetic_field_gauss)
+        v, i = self._sensor.values, self._s
         baro = readings.baro
-        s.abs_pressure = baro.pressure_hpa
-        s.pressure_alt = baro.pressure_altitude_m
-        s.temperature = baro.temperature_c
+        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
+         v[i[10]], v[i[11]], v[i[12]]) = (
+            time_usec, *to_ned(readings.imu.specific_force_m_s2), *to_ned(readings.imu.angular_rate_rad_s),
+            *to_ned(readings.magnetic_field_gauss), baro.pressure_hpa, baro.pressure_altitude_m,
+            baro.temperature_c,
+        )  # fmt: skip
 
         lat, lon, alt = frames.ned_to_geodetic(pos_ned[0], pos_ned[1], pos_ned[2], self.home)
         f_frd = to_ned(truth.specific_force_body_m_s2)
         to_mg = 1000.0 / STANDARD_GRAVITY_M_S2
         wx, wy, wz = wind_world_m_s
-        v = truth.velocity_m_s
-        airspeed_cm_s = _u16(100.0 * math.sqrt((v[0] - wx) ** 2 + (v[1] - wy) ** 2 + (v[2] - wz) ** 2))
-        h = self._state
-        h.time_usec = time_usec
-        h.attitude_quaternion = q_ned
-        h.rollspeed, h.pitchspeed, h.yawspeed = rates_frd
-        h.lat, h.lon, h.alt = _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000.0)
-        h.vx, h.vy, h.vz = _i16(vel_ned[0] * 100.0), _i16(vel_ned[1] * 100.0), _i16(vel_ned[2] * 100.0)
-        h.ind_airspeed = h.true_airspeed = airspeed_cm_s
-        h.xacc, h.yacc, h.zacc = _i16(f_frd[0] * to_mg), _i16(f_frd[1] * to_mg), _i16(f_frd[2] * to_mg)
+        w = truth.velocity_m_s
+        airspeed_cm_s = _u16(100.0 * math.sqrt((w[0] - wx) ** 2 + (w[1] - wy) ** 2 + (w[2] - wz) ** 2))
+        v, i = self._state.values, self._h
+        v[self._h_q] = q_ned
+        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
+         v[i[10]], v[i[11]], v[i[12]], v[i[13]], v[i[14]]) = (
+            time_usec, *rates_frd, _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000.0),
+            _i16(vel_ned[0] * 100.0), _i16(vel_ned[1] * 100.0), _i16(vel_ned[2] * 100.0),
+            airspeed_cm_s, airspeed_cm_s,
+            _i16(f_frd[0] * to_mg), _i16(f_frd[1] * to_mg), _i16(f_frd[2] * to_mg),
+        )  # fmt: skip
 
-        o = self._odometry
-        o.time_usec = time_usec
-        o.x, o.y, o.z = pos_ned
-        o.q = q_ned
-        o.vx, o.vy, o.vz = vel_ned
-        o.rollspeed, o.pitchspeed, o.yawspeed = rates_frd
+        v, i = self._odometry.values, self._o
+        v[self._o_q] = q_ned
+        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]]) = (
+            time_usec, *pos_ned, *vel_ned, *rates_frd
+        )
 
-        datagram = self._pack(s) + self._pack(h) + self._pack(o)
+        datagram = self._frame(self._sensor) + self._frame(self._state) + self._frame(self._odometry)
         if gps is not None:
-            datagram += self._pack(self._fill_gps(time_usec, gps))
+            self._fill_gps(time_usec, gps)
+            datagram += self._frame(self._gps)
         return datagram
 
-    def _fill_gps(self, time_usec: int, reading: GpsReading):
+    def _fill_gps(self, time_usec: int, reading: GpsReading) -> None:
         p_ned = frames.vector_to_ned(reading.position_m)
         v_ned = frames.vector_to_ned(reading.velocity_m_s)
         lat, lon, alt = frames.ned_to_geodetic(p_ned[0], p_ned[1], p_ned[2], self.home)
-        g = self._gps
-        g.time_usec = time_usec
-        g.lat, g.lon, g.alt = _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000.0)
-        g.eph, g.epv = _u16(reading.eph_m * 100.0), _u16(reading.epv_m * 100.0)
-        g.vel = _u16(100.0 * math.hypot(v_ned[0], v_ned[1]))
-        g.vn, g.ve, g.vd = _i16(v_ned[0] * 100.0), _i16(v_ned[1] * 100.0), _i16(v_ned[2] * 100.0)
         # Course over ground, 0 = north, clockwise (NED), in [0, 36000) cdeg.
-        g.cog = round(math.degrees(math.atan2(v_ned[1], v_ned[0])) * 100.0) % 36000
-        g.satellites_visible = reading.satellites_visible
-        return g
+        cog = round(math.degrees(math.atan2(v_ned[1], v_ned[0])) * 100.0) % 36000
+        v, i = self._gps.values, self._g
+        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
+         v[i[10]], v[i[11]]) = (
+            time_usec, _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000.0),
+            _u16(reading.eph_m * 100.0), _u16(reading.epv_m * 100.0),
+            _u16(100.0 * math.hypot(v_ned[0], v_ned[1])),
+            _i16(v_ned[0] * 100.0), _i16(v_ned[1] * 100.0), _i16(v_ned[2] * 100.0), cog,
+            reading.satellites_visible,
+        )  # fmt: skip
+
+
+def _slots(encoder: FastEncoder, *names: str) -> tuple[int, ...]:
+    return tuple(encoder.slices[name] for name in names)  # type: ignore[misc]
 
 
 class ActuatorAnswer(NamedTuple):

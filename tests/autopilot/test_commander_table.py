@@ -27,12 +27,12 @@ from autopilot.commander.transitions import (
     lookup,
 )
 from autopilot.guidance.offboard import OffboardSetpoint
-from autopilot.guidance.trajectories import Hover
 from autopilot.mavlink.codec import mavlink as m
 from autopilot.mission.executor import MissionExecutor
 from autopilot.mission.items import WireItem, parse_item
 from autopilot.params.definitions import GF_HOLD, GF_LAND, GF_RTL, default_parameters
 from quadcommon import frames
+from quadcommon.trajectories import Hover
 
 HOME = (47.397742, 8.545594, 488.0)
 DT = 0.002

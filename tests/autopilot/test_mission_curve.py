@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from autopilot.guidance.trajectories import circle, helix
 from autopilot.mission.curve import GLOBAL_TOLERANCE_M, TimedCurve
 from quadcommon import frames
+from quadcommon.trajectories import circle, helix
 
 HOME = (47.397742, 8.545594, 488.0)
 CIRCLE = circle(0.5, math.pi / 20, (0.0, 0.0, 2.5), -2.0)

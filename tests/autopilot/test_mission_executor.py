@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from autopilot.guidance.planner import Limits
-from autopilot.guidance.trajectories import Reference, circle
 from autopilot.mavlink.codec import mavlink
 from autopilot.mission.executor import (
     MissionAction,
@@ -17,6 +16,7 @@ from autopilot.mission.executor import (
 )
 from autopilot.mission.items import CMD_TIMED, WireItem, parse_item
 from quadcommon import frames
+from quadcommon.trajectories import Reference, circle
 
 m = mavlink
 HOME = (47.397742, 8.545594, 488.0)

@@ -1,15 +1,13 @@
-"""The mission protocol on the real wire: ``python -m autopilot`` (no simulator needed) and a
-pymavlink client over UDP on 127.0.0.1 (instances 20-22). Upload/download round trip, broken
-uploads that must leave the old mission intact, clear, set current, refused float messages."""
+"""The mission protocol on the wire, in simulation time: the whole stack in-process (real MAVLink
+bytes, no sockets) and the ground-station scripts' own client (gcs_scripts.upload_mission).
+Upload/download round trip, broken uploads that must leave the old mission intact, clear, set
+current, refused float messages. The autopilot's mission transfer timeouts run on its wall clock,
+which is simulation time in-process, so the retry timing is checked exactly."""
 
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
@@ -18,12 +16,12 @@ from gcs_scripts.upload_mission import (
     Item,
     MissionError,
     MissionLink,
-    connect,
     make_item,
     same_item,
 )
 
-REPO = Path(__file__).resolve().parents[2]
+from ..stack import connect, make_stack
+
 m = __import__("gcs_scripts.link", fromlist=["mavutil"]).mavutil.mavlink
 LOCAL, GLOBAL_REL, MISSION = m.MAV_FRAME_LOCAL_NED, m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, m.MAV_FRAME_MISSION
 NAN4 = (0.0, 0.0, 0.0, math.nan)
@@ -44,35 +42,27 @@ def mixed_mission() -> list[Item]:
     ]
 
 
-@pytest.fixture(scope="module")
-def vehicle(tmp_path_factory) -> Iterator[MissionLink]:
-    instance = 20
-    log = tmp_path_factory.mktemp("ap") / "autopilot.log"
-    with open(log, "w") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "autopilot", "--instance", str(instance), "--no-zenoh"],
-            cwd=REPO,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    link = None
-    try:
-        link = connect(None, instance, timeout_s=15.0)
-        yield link
-    finally:
-        if link is not None:
-            link.close()
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-        print(log.read_text()[-4000:])
+@pytest.fixture
+def vehicle() -> Iterator[MissionLink]:
+    stack = make_stack()
+    link = connect(stack, MissionLink)
+    link.stack = stack
+    yield link
+    link.close()
 
 
-def wait_for(link: MissionLink, kind: str, timeout_s: float, accept=lambda msg: True):
-    return link._wait(lambda x: x.get_type() == kind and accept(x), timeout_s)
+def wait_for(link: MissionLink, kind: str, sim_s: float, accept=lambda msg: True):
+    """The first mission message of ``kind`` that ``accept`` takes within ``sim_s`` of simulation
+    time (None after that)."""
+    stack = link.stack
+    end = stack.t + sim_s
+    while stack.t <= end:
+        link.poll()
+        for msg in list(link.mission_inbox):
+            if msg.get_type() == kind and accept(msg):
+                link.mission_inbox.remove(msg)
+                return msg
+    return None
 
 
 def download_equals(link: MissionLink, items: list[Item]) -> bool:
@@ -96,20 +86,23 @@ def test_missing_items_time_out_and_the_old_mission_stays(vehicle):
         req = wait_for(vehicle, "MISSION_REQUEST_INT", 2.0, lambda x, s=seq: x.seq == s)
         assert req is not None
         vehicle.mav.send(new[seq].message(vehicle.target, seq))
-    start = time.monotonic()
-    rerequests = 0
+    stack = vehicle.stack
+    start = stack.t
+    requests = []
     ack = None
-    while ack is None and time.monotonic() - start < 6.0:
-        msg = vehicle._wait(lambda x: x.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"), 0.2)
+    while ack is None and stack.t - start < 6.0:
+        msg = wait_for(vehicle, "MISSION_REQUEST_INT", 0.01) or wait_for(vehicle, "MISSION_ACK", 0.0)
         if msg is not None and msg.get_type() == "MISSION_REQUEST_INT":
             assert msg.seq == 3
-            rerequests += 1
+            requests.append(stack.t - start)
         elif msg is not None:
             ack = msg
-    elapsed = time.monotonic() - start
+    elapsed = stack.t - start
     assert ack is not None and ack.type == m.MAV_MISSION_OPERATION_CANCELLED
-    assert rerequests == 1 + 5  # the request itself, then 5 retries 0.5 s apart
-    assert 2.5 < elapsed < 4.0
+    assert len(requests) == 1 + 5  # the request itself, then 5 retries 0.5 s apart
+    gaps = [b - a for a, b in zip(requests, requests[1:], strict=False)]
+    assert all(0.49 < g < 0.52 for g in gaps), gaps
+    assert 2.99 < elapsed < 3.1  # cancelled 0.5 s after the last retry (transfers polled every 50 ms)
     assert download_equals(vehicle, old)
 
 
@@ -193,13 +186,13 @@ def test_mission_commands_set_current_and_start(vehicle):
     vehicle.upload(items)
     result = vehicle.command_long(m.MAV_CMD_DO_SET_MISSION_CURRENT, (3, 0), check=False)
     assert result == m.MAV_RESULT_ACCEPTED
-    vehicle.wait_until(lambda lk: lk.mission_current is not None and lk.mission_current.seq == 3, 1e9,
-                       wall_timeout_s=3.0, what="MISSION_CURRENT 3")  # fmt: skip
+    vehicle.wait_until(lambda lk: lk.mission_current is not None and lk.mission_current.seq == 3, 1.0,
+                       what="MISSION_CURRENT 3")  # fmt: skip
     assert vehicle.command_long(m.MAV_CMD_DO_SET_MISSION_CURRENT, (99, 0), check=False) == m.MAV_RESULT_DENIED
-    # Without a simulator there is no vehicle state: MISSION_START selects AUTO.MISSION (PX4:
-    # the mission then starts at arming) and its param1 makes item 1 current.
+    # Disarmed: MISSION_START selects AUTO.MISSION (PX4: the mission then starts at arming) and its
+    # param1 makes item 1 current.
     assert vehicle.command_long(m.MAV_CMD_MISSION_START, (1, 0), check=False) == m.MAV_RESULT_ACCEPTED
-    vehicle.wait_until(lambda lk: lk.mission_current is not None and lk.mission_current.seq == 1, 1e9,
-                       wall_timeout_s=3.0, what="MISSION_CURRENT 1")  # fmt: skip
+    vehicle.wait_until(lambda lk: lk.mission_current is not None and lk.mission_current.seq == 1, 1.0,
+                       what="MISSION_CURRENT 1")  # fmt: skip
     vehicle.clear()
     assert vehicle.command_long(m.MAV_CMD_MISSION_START, (0, 0), check=False) == m.MAV_RESULT_DENIED

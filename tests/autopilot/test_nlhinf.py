@@ -3,12 +3,14 @@
 import numpy as np
 import pytest
 
-from autopilot.control.intbs_attitude import IntegralBacksteppingAttitude
-from autopilot.control.nlhinf import NonlinearHinfAttitude
-from quadcommon.config import load_controller
+from autopilot.control.config import load_controller
+from autopilot.control.laws.integral_backstepping_attitude import IntegralBacksteppingAttitude
+from autopilot.control.laws.nlhinf import NonlinearHinfAttitude
+from quadcommon.config import load_vehicle
 from quadcommon.rigid_body import coriolis_matrix, inertia_matrix
 
 INERTIA = (0.004, 0.004, 0.0084)
+NOMINAL = load_vehicle("paper_quad").nominal  # m 0.74 kg, the inertia above
 
 
 def explicit_law(gains, eta, eta_dot, ref, ref_rate, ref_acc, integral):
@@ -25,10 +27,10 @@ def explicit_law(gains, eta, eta_dot, ref, ref_rate, ref_acc, integral):
 
 
 def test_law_equals_the_literal_gain_matrix_form():
-    gains = load_controller("intbs_nlhinf").rotational.nlhinf
+    gains = load_controller("intbs_nlhinf").rotational
     rng = np.random.default_rng(7)
     for _ in range(30):
-        law = NonlinearHinfAttitude(gains, INERTIA)
+        law = NonlinearHinfAttitude(gains, NOMINAL)
         law.integral = list(rng.normal(scale=0.1, size=3))
         eta = tuple(rng.uniform(-0.8, 0.8, size=3))
         eta_dot = tuple(rng.normal(size=3))
@@ -58,8 +60,8 @@ def closed_loop_matrix(law_factory, inertia, dt=1e-6):
 
 
 def test_linearised_poles_are_those_of_CONTROL_md():
-    gains = load_controller("intbs_nlhinf").rotational.nlhinf
-    A = closed_loop_matrix(lambda: NonlinearHinfAttitude(gains, INERTIA), INERTIA)
+    gains = load_controller("intbs_nlhinf").rotational
+    A = closed_loop_matrix(lambda: NonlinearHinfAttitude(gains, NOMINAL), INERTIA)
     poles = np.sort(np.linalg.eigvals(A).real)
     # roll/pitch: -1/(w_u^2 Ixx) = -111.1, yaw: -1/(w_u^2 Izz) = -52.9; all axes -29.8 and -3.02
     expected = sorted([-1 / (2.25 * 0.004)] * 2 + [-1 / (2.25 * 0.0084)] + [-29.8, -3.02] * 3)
@@ -70,7 +72,7 @@ def test_intbs_attitude_matches_the_nlhinf_poles():
     """Config intbs.toml is tuned to the NLHinf linearised loop (CONTROL.md)."""
     cfg = load_controller("intbs").rotational
     A = closed_loop_matrix(
-        lambda: IntegralBacksteppingAttitude(cfg.c1, cfg.c2, cfg.k_integral, INERTIA), INERTIA
+        lambda: IntegralBacksteppingAttitude(cfg, NOMINAL), INERTIA
     )
     poles = np.sort(np.linalg.eigvals(A).real)
     expected = sorted([-111.1, -111.1, -52.9] + [-29.8, -3.02] * 3)
@@ -78,9 +80,9 @@ def test_intbs_attitude_matches_the_nlhinf_poles():
 
 
 def test_omega3_zero_removes_integral_action():
-    gains = load_controller("bs_nlhinf").rotational.nlhinf
+    gains = load_controller("bs_nlhinf").rotational
     assert gains.k_p == 0.0
-    law = NonlinearHinfAttitude(gains, INERTIA)
+    law = NonlinearHinfAttitude(gains, NOMINAL)
     law.integral = [1.0, 1.0, 1.0]
     tau = law.update((0, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0), 0.002)
     assert tau == pytest.approx((0.0, 0.0, 0.0))
@@ -88,8 +90,8 @@ def test_omega3_zero_removes_integral_action():
 
 def test_integral_rejects_a_constant_torque_disturbance():
     """Closed loop on the nominal model with 0.5 N m on yaw: the error goes to zero."""
-    gains = load_controller("intbs_nlhinf").rotational.nlhinf
-    law = NonlinearHinfAttitude(gains, INERTIA)
+    gains = load_controller("intbs_nlhinf").rotational
+    law = NonlinearHinfAttitude(gains, NOMINAL)
     eta, eta_dot, dt = np.zeros(3), np.zeros(3), 0.001
     for _ in range(int(10 / dt)):
         tau = np.array(law.update(tuple(eta), tuple(eta_dot), (0, 0, 0), (0, 0, 0), (0, 0, 0), dt))

@@ -5,6 +5,7 @@ import struct
 
 import pytest
 
+from autopilot.control.config import load_controller
 from autopilot.mavlink.codec import Encoder, mavlink, new_parser
 from autopilot.mavlink.commands import CommandDispatcher, CommandRequest
 from autopilot.mavlink.params import (
@@ -18,7 +19,7 @@ from autopilot.mavlink.params import (
 )
 from autopilot.params.definitions import default_parameters
 from autopilot.params.store import INT32, ParameterStore, ParamSpec
-from quadcommon.config import load_controller, load_sitl
+from quadcommon.config import load_sitl
 
 m = mavlink
 SYS = 3
@@ -84,7 +85,7 @@ def service():
     link = FakeLink()
     texts = []
     clock = [0.0]
-    svc = ParamService(store, Encoder(SYS, 1), lambda: [link], lambda s, t: texts.append(t), SYS, 1,
+    svc = ParamService(store, Encoder(SYS, 1), [link], lambda s, t: texts.append(t), SYS, 1,
                        clock=lambda: clock[0])  # fmt: skip
     svc.link, svc.texts, svc.clock_value = link, texts, clock
     return svc
@@ -115,7 +116,7 @@ def test_param_set_int_is_decoded_from_raw_bytes_including_signalling_nans():
 def test_signalling_nan_int_is_set_and_echoed_exactly():
     store = ParameterStore([ParamSpec("WIDE_INT", 0, -(2**31), 2**31 - 1, kind=INT32)])
     link = FakeLink()
-    svc = ParamService(store, Encoder(SYS, 1), lambda: [link], lambda s, t: None, SYS, 1)
+    svc = ParamService(store, Encoder(SYS, 1), [link], lambda s, t: None, SYS, 1, clock=lambda: 0.0)
     for value in SNAN_INTS:
         link.clear()
         frame = param_set_frame("WIDE_INT", struct.pack("<i", value), m.MAV_PARAM_TYPE_INT32)
@@ -233,7 +234,8 @@ def test_preflight_storage_save_load_reset(tmp_path):
     path = tmp_path / "p.toml"
     store = default_parameters(load_controller("intbs"), load_sitl().rates)
     link, texts = FakeLink(), []
-    svc = ParamService(store, Encoder(SYS, 1), lambda: [link], lambda s, t: texts.append(t), SYS, 1, path)
+    svc = ParamService(store, Encoder(SYS, 1), [link], lambda s, t: texts.append(t), SYS, 1, path,
+                       clock=lambda: 0.0)  # fmt: skip
     commands = CommandDispatcher()
     svc.register({}, commands)
     store.set("ATT_KI_R", 50.0)  # autosaved

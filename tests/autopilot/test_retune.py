@@ -8,13 +8,15 @@ import pytest
 
 from autopilot.control.cascade import Cascade, StateEstimate
 from autopilot.control.command_filter import SecondOrderFilter
-from autopilot.control.intbs_attitude import IntegralBacksteppingAttitude
-from autopilot.control.nlhinf import NonlinearHinfAttitude
+from autopilot.control.config import load_controller
+from autopilot.control.laws.integral_backstepping_attitude import IntegralBacksteppingAttitude
+from autopilot.control.laws.nlhinf import NonlinearHinfAttitude, nlhinf_gains
 from autopilot.control.translational import TranslationalController
-from autopilot.guidance.trajectories import Reference
-from quadcommon.config import NlHinfGains, load_controller, load_vehicle
+from quadcommon.config import load_vehicle
+from quadcommon.trajectories import Reference
 
 INERTIA = (0.004, 0.004, 0.0084)
+NOMINAL = load_vehicle("paper_quad").nominal  # m 0.74 kg, the inertia above
 M, G, UMAX = 0.74, 9.81, 28.0
 DT = 0.002
 
@@ -30,7 +32,7 @@ def translational_step(ctrl, rng, integrate=False):
 @pytest.mark.parametrize("name", ["intbs_nlhinf", "intbs"])
 def test_translational_integral_term_is_continuous_and_new_gains_act(name):
     gains = load_controller(name).translational
-    ctrl = TranslationalController(gains, M, G, UMAX)
+    ctrl = TranslationalController.for_gains(gains, NOMINAL, UMAX)
     ctrl.integral = [0.4, -0.7, 1.3]
     before = ctrl.integral_acceleration()
     out_before = translational_step(ctrl, np.random.default_rng(3))
@@ -50,7 +52,7 @@ def test_translational_output_is_identical_when_only_the_integral_gain_changes(n
     """On the reference position (e1 = 0) the integral gain enters only through the integral term,
     so the whole output (U1, phi_r, theta_r, a) is unchanged at the change (1e-9)."""
     gains = load_controller(name).translational
-    ctrl = TranslationalController(gains, M, G, UMAX)
+    ctrl = TranslationalController.for_gains(gains, NOMINAL, UMAX)
     ctrl.integral = [0.3, 0.2, -0.5]
     rp = (0.5, -0.2, 2.0)
     args = (rp, (0.1, -0.3, 0.2), (0.05, -0.02, 0.4), rp, (0.2, 0.1, -0.1), (0.3, 0.0, 0.1), DT, False)
@@ -64,7 +66,7 @@ def test_translational_output_is_identical_when_only_the_integral_gain_changes(n
 
 def test_translational_new_integral_gain_acts_afterwards():
     gains = load_controller("intbs_nlhinf").translational
-    ctrl = TranslationalController(gains, M, G, UMAX)
+    ctrl = TranslationalController.for_gains(gains, NOMINAL, UMAX)
     ctrl.retune(replace(gains, k_integral=(3.0, 3.0, 3.0)))
     ctrl.integral = [0.0, 0.0, 0.0]
     # A constant error of 0.1 m in x for 1 s: xi grows by e2 = c1 e1 per second.
@@ -84,14 +86,14 @@ def random_attitude(rng):
 @pytest.mark.parametrize(
     "new",
     [
-        NlHinfGains(0.1, 3.0, 4.0, 1.5),  # lower omega3 (k_p and K_I)
-        NlHinfGains(0.1, 3.0, 9.0, 0.8),  # omega_u: the integral enters through (C + w_u^-2) k_p
-        NlHinfGains(0.2, 5.0, 20.0, 3.0),  # everything
+        nlhinf_gains(0.1, 3.0, 4.0, 1.5),  # lower omega3 (k_p and K_I)
+        nlhinf_gains(0.1, 3.0, 9.0, 0.8),  # omega_u: the integral enters through (C + w_u^-2) k_p
+        nlhinf_gains(0.2, 5.0, 20.0, 3.0),  # everything
     ],
 )
 def test_nlhinf_integral_torque_is_continuous_at_the_state_of_the_change(new):
     rng = np.random.default_rng(11)
-    law = NonlinearHinfAttitude(load_controller("intbs_nlhinf").rotational.nlhinf, INERTIA)
+    law = NonlinearHinfAttitude(load_controller("intbs_nlhinf").rotational, NOMINAL)
     for _ in range(20):
         law.integral = list(rng.normal(scale=0.2, size=3))
         eta, eta_dot, ref, ref_rate, ref_acc = random_attitude(rng)
@@ -106,11 +108,11 @@ def test_nlhinf_integral_torque_is_continuous_at_the_state_of_the_change(new):
 
 def test_nlhinf_torque_is_continuous_on_the_reference_when_the_gains_change():
     """On the reference (eta~ = eta~' = 0) the integral is the whole feedback: tau unchanged."""
-    law = NonlinearHinfAttitude(load_controller("intbs_nlhinf").rotational.nlhinf, INERTIA)
+    law = NonlinearHinfAttitude(load_controller("intbs_nlhinf").rotational, NOMINAL)
     law.integral = [0.05, -0.03, 0.02]
     eta, eta_dot = (0.1, -0.2, 0.3), (0.4, 0.1, -0.3)
     tau_before = law.update(eta, eta_dot, eta, eta_dot, (0.0, 0.0, 0.0), DT, integrate=False)
-    law.retune(NlHinfGains(0.1, 3.0, 3.0, 1.0))
+    law.retune(nlhinf_gains(0.1, 3.0, 3.0, 1.0))
     tau_after = law.update(eta, eta_dot, eta, eta_dot, (0.0, 0.0, 0.0), DT, integrate=False)
     assert np.allclose(tau_after, tau_before, rtol=0, atol=1e-9)
     # The new gains act on an error: a smaller omega3 gives a smaller k_p.
@@ -118,24 +120,24 @@ def test_nlhinf_torque_is_continuous_on_the_reference_when_the_gains_change():
 
 
 def test_nlhinf_retune_before_any_state_uses_the_hover_approximation():
-    gains = load_controller("intbs_nlhinf").rotational.nlhinf
-    law = NonlinearHinfAttitude(gains, INERTIA)
+    gains = load_controller("intbs_nlhinf").rotational
+    law = NonlinearHinfAttitude(gains, NOMINAL)
     law.integral = [1.0, 2.0, 3.0]
-    law.retune(NlHinfGains(0.1, 3.0, 4.5, 3.0))
+    law.retune(nlhinf_gains(0.1, 3.0, 4.5, 3.0))
     scale = (90.0 / 1.5**2) / (45.0 / 3.0**2)
     assert law.integral == pytest.approx([scale, 2 * scale, 3 * scale])
 
 
 def test_intbs_attitude_integral_term_is_continuous():
     rot = load_controller("intbs").rotational
-    law = IntegralBacksteppingAttitude(rot.c1, rot.c2, rot.k_integral, INERTIA)
+    law = IntegralBacksteppingAttitude(rot, NOMINAL)
     rng = np.random.default_rng(2)
     law.integral = list(rng.normal(scale=0.1, size=3))
     eta, eta_dot, ref, ref_rate, ref_acc = random_attitude(rng)
     before = law.integral_acceleration()
     tau_before = law.update(eta, eta_dot, ref, ref_rate, ref_acc, DT, integrate=False)
     # Only lambda and c2 together such that c2 lambda changes, c1 kept.
-    law.retune(rot.c1, (50.0, 90.0, 40.0), (45.0, 60.0, 100.0))
+    law.retune(replace(rot, c2=(50.0, 90.0, 40.0), k_integral=(45.0, 60.0, 100.0)))
     after = law.integral_acceleration()
     assert np.allclose(after, before, rtol=0, atol=1e-12)
     tau_after = law.update(eta, eta_dot, ref, ref_rate, ref_acc, DT, integrate=False)
@@ -172,8 +174,8 @@ def test_cascade_thrust_is_continuous_across_a_retune(name):
     on_ref = StateEstimate((0.0, 0.0, 2.0), (0.0, 0.0, 0.0), (0.01, -0.01, 0.0), (0.0, 0.0, 0.0))
     before = cascade.step(on_ref, ref, integrate=False)
     tr, rot = config.translational, config.rotational
-    if rot.law == "nlhinf" and rot.nlhinf.omega3 > 0:
-        rot = replace(rot, nlhinf=replace(rot.nlhinf, omega3=4.0))
+    if rot.law == "nlhinf" and rot.omega3 > 0:
+        rot = replace(rot, omega3=4.0)
     elif rot.law != "nlhinf":
         rot = replace(rot, k_integral=tuple(0.5 * k for k in rot.k_integral))
     if tr.law != "backstepping":

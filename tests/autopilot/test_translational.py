@@ -5,14 +5,17 @@ import math
 import numpy as np
 import pytest
 
+from autopilot.control.config import load_controller
 from autopilot.control.translational import TranslationalController
-from quadcommon.config import load_controller
+from quadcommon.config import load_vehicle
 
 M, G, UMAX = 0.74, 9.81, 28.0
+NOMINAL = load_vehicle("paper_quad").nominal  # m and g above
 
 
 def law(name):
-    return TranslationalController(load_controller(name).translational, M, G, UMAX)
+    config = load_controller(name)
+    return TranslationalController.for_gains(config.translational, NOMINAL, UMAX, config.tilt_max_rad)
 
 
 @pytest.mark.parametrize("name", ["intbs_nlhinf", "intbs", "bs_nlhinf"])

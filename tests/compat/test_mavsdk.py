@@ -184,7 +184,7 @@ def test_what_mavsdk_needs_item_by_item(compat_sitl_config):
     messages, health bits, landed state, bytewise int32 parameters."""
     from pymavlink.dialects.v20 import common as m
 
-    from ..sitl.harness import Gcs
+    from ..sitl.harness import UdpGcs as Gcs
 
     with vehicle(4, compat_sitl_config) as sitl:
         gcs = Gcs(ports(4).api_remote, 5)

@@ -19,10 +19,9 @@ from __future__ import annotations
 import math
 import os
 import re
+import signal
 import socket
-import subprocess
 import sys
-import threading
 import time
 
 import pytest
@@ -34,9 +33,9 @@ from pymavlink.dialects.v20 import common as m  # noqa: E402
 
 from quadcommon import bus, wire  # noqa: E402
 from quadcommon.bus_records import TRUTH_CODEC  # noqa: E402
-from sitl.up import LaunchError, check_ports  # noqa: E402
+from sitl.launcher import Child, LaunchError, VehicleSpec, check_ports  # noqa: E402
 
-from .vehicles import REPO, ports  # noqa: E402
+from .vehicles import ports  # noqa: E402
 
 FIRST = 7  # instances 7 and 8 of the compat port block (PX4 instances 107, 108): sysids 8, 9
 TARGETS = {7: (2.0, 0.0, 2.5), 8: (0.0, -2.0, 3.5)}  # paper frame (x north, y west, z up), m
@@ -115,37 +114,27 @@ def wait(clients, what: str, predicate, timeout_s: float, each=None) -> None:
     raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
-def start_up(config) -> tuple[subprocess.Popen, list[str]]:
-    """``quadsitl up --instance 7 --count 2``, the command a user types; returns it and its output."""
-    cmd = [sys.executable, "-m", "sitl.cli", "up", "--instance", str(FIRST), "--count", "2",
+def start_up(config) -> tuple[Child, Child]:
+    """``quadsitl up --instance 7 --count 2``, the command a user types; returns it twice (as the
+    process and as its collected output: one Child is both)."""
+    cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(FIRST), "--count", "2",
            "--speed", "2", "--sitl-config", str(config)]  # fmt: skip
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines: list[str] = []
-
-    def pump():
-        for line in proc.stdout:
-            lines.append(line.rstrip("\n"))
-
-    threading.Thread(target=pump, daemon=True).start()
-    deadline = time.monotonic() + 30.0
-    while not any("Ctrl-C stops every process" in line for line in lines):
-        if proc.poll() is not None or time.monotonic() > deadline:
-            proc.kill()
-            raise AssertionError("quadsitl up did not come up:\n" + "\n".join(lines[-40:]))
-        time.sleep(0.05)
-    return proc, lines
+    up = Child("quadsitl up", cmd)
+    try:
+        up.wait_line("Ctrl-C stops every process", 30.0)
+    except LaunchError:
+        up.stop()
+        raise
+    return up, up
 
 
-def stop(proc: subprocess.Popen) -> int:
+def stop(up: Child) -> int:
     """Ctrl-C, as a user stops it; killed if it has not stopped within 10 s."""
-    if proc.poll() is None:
-        proc.send_signal(2)
-        try:
-            proc.wait(10.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5.0)
-    return proc.returncode
+    up.signal(signal.SIGINT)
+    try:
+        return up.wait(10.0)
+    except LaunchError:
+        return up.stop(grace_s=0.0)
 
 
 class SharedBus:
@@ -250,15 +239,15 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config):
             c.command(m.MAV_CMD_NAV_LAND)
         wait(clients, "both landed and disarmed", lambda: not any(c.armed for c in clients), 25)
     except AssertionError as exc:
-        raise AssertionError(f"{exc}\n--- quadsitl up:\n" + "\n".join(output[-40:])) from None
+        raise AssertionError(f"{exc}\n--- quadsitl up:\n" + output.tail(40)) from None
     finally:
         for c in clients:
             c.close()
         if shared is not None:
             shared.close()
         rc = stop(proc)
-    assert rc == 0, "\n".join(output[-20:])
-    assert any(line.startswith("quadsitl: stopped") for line in output)
+    assert rc == 0, output.tail(20)
+    assert any(line.startswith("quadsitl: stopped") for line in output.lines)
     assert time.monotonic() - started < 60
 
 
@@ -275,13 +264,13 @@ def test_a_vehicle_restarts_at_once_on_its_ports(compat_sitl_config):
     accepted.close()  # the server side closes first: its end goes to TIME_WAIT
     server.close()
     peer.close()
-    check_ports(9, str(compat_sitl_config))  # no LaunchError
+    check_ports(VehicleSpec(instance=9, sitl_config=str(compat_sitl_config)))  # no LaunchError
     live = socket.socket()  # a vehicle really running: its listener (zenoh sets SO_REUSEADDR too)
     live.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     live.bind((wire.LOOPBACK, zenoh_port))
     live.listen()
     try:
         with pytest.raises(LaunchError, match=re.escape(f"TCP port {zenoh_port}")):
-            check_ports(9, str(compat_sitl_config))
+            check_ports(VehicleSpec(instance=9, sitl_config=str(compat_sitl_config)))
     finally:
         live.close()

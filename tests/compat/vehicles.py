@@ -25,7 +25,7 @@ from pathlib import Path
 
 from quadcommon import wire
 from quadcommon.config import CONFIG_DIR
-from sitl.up import Sitl, VehicleSpec
+from sitl.launcher import Launcher, VehicleSpec
 
 REPO = Path(__file__).resolve().parents[2]
 PORT_SHIFT = 100
@@ -60,24 +60,21 @@ def ports(instance: int) -> wire.Ports:
 
 
 @contextmanager
-def vehicle(instance: int, sitl_config: Path, speed: str = "2") -> Iterator[Sitl]:
+def vehicle(instance: int, sitl_config: Path, speed: str = "2") -> Iterator[Launcher]:
     """One vehicle (simulator + autopilot) started by the ``quadsitl up`` launcher; always stopped.
 
     ``speed`` is the wall-clock pacing: MAVSDK and MAVProxy time out on the wall clock, so they run
     at a modest factor, never at ``max``.
     """
     assert 0 <= instance <= 9, "compat tests use instances 0-9 of the shifted port block"
-    sitl = Sitl([VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config))], echo=False)
-    sitl.start(link_timeout_s=20.0)
-    try:
+    with Launcher() as sitl:
+        sitl.start_vehicles([VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config))], 20.0)
         yield sitl
-    finally:
-        sitl.stop()
 
 
-def sitl_output(sitl: Sitl, lines: int = 40) -> str:
+def sitl_output(sitl: Launcher, lines: int = 40) -> str:
     """The last lines each process printed (for failure messages)."""
-    return "\n".join(f"--- {c.name}:\n" + "\n".join(c.lines[-lines:]) for c in sitl.children)
+    return "\n".join(f"--- {c.name}:\n" + c.tail(lines) for c in sitl.children)
 
 
 class FlowResult:

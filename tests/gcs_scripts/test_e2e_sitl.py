@@ -1,14 +1,12 @@
-"""End to end through the real SITL: simulator + autopilot processes, the flying scripts, the
-recorder, the analysis. Skipped until both processes exist. Instances 60-69, --speed max.
+"""End to end through the real SITL, as a newcomer runs it: simulator + autopilot processes (the
+project's launcher), the flying scripts and the recorder as processes, the analysis from the
+recorded log. The trajectory-streaming fidelity is measured in-process (simulation time, same
+cores and bytes) in test_fly_trajectory_lines_up_with_the_reference.
 """
 
 from __future__ import annotations
 
 import re
-import signal
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -16,107 +14,45 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+from gcs_scripts import fly_setpoints, fly_trajectory, record
+from gcs_scripts.analysis.analyze import analyze
+from gcs_scripts.analysis.log_reader import read_session
+from sitl.launcher import Launcher, VehicleSpec, python_script
 
-from gcs_scripts import fly_setpoints, fly_trajectory, record  # noqa: E402
-from gcs_scripts.analysis.analyze import analyze  # noqa: E402
-from gcs_scripts.analysis.log_reader import read_session  # noqa: E402
+from ..stack import connect, make_stack
 
 WALL_LIMIT_S = 60.0
 
 
-def _spawn(*args: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
-    )
-
-
-def _terminate(proc: subprocess.Popen) -> str:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-    try:
-        return proc.communicate(timeout=5)[0] or ""
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        return ""
-
-
 @contextmanager
-def _sitl(instance: int, scenario: str, speed: str = "max") -> Iterator[None]:
-    sim = _spawn("-m", "simulator", "--instance", str(instance), "--vehicle", "paper_quad",
-                 "--scenario", scenario, "--speed", speed)  # fmt: skip
-    ap = _spawn("-m", "autopilot", "--instance", str(instance), "--controller", "intbs_nlhinf",
-                "--vehicle", "paper_quad")  # fmt: skip
-    try:
-        time.sleep(0.5)
-        for proc, name in ((sim, "simulator"), (ap, "autopilot")):
-            if proc.poll() is not None:
-                pytest.fail(f"{name} exited: {proc.communicate()[0]}")
-        yield
-    finally:
-        out_ap, out_sim = _terminate(ap), _terminate(sim)
-        print("--- autopilot ---\n" + out_ap[-3000:] + "\n--- simulator ---\n" + out_sim[-3000:])
+def _sitl(instance: int, scenario: str, speed: str = "max") -> Iterator[Launcher]:
+    with Launcher() as launcher:
+        launcher.start_vehicles([VehicleSpec(instance=instance, scenario=scenario, speed=speed)], 20.0)
+        yield launcher
 
 
-@pytest.fixture
-def hover_sitl() -> Iterator[int]:
-    with _sitl(60, "hover"):
-        yield 60
+def _script(launcher: Launcher, module, *args: str):
+    return launcher.spawn(Path(module.__file__).name, python_script(Path(module.__file__), *args))
 
 
-@pytest.fixture
-def circle_sitl() -> Iterator[int]:
-    # Speed 2, not max: this test measures how the streamed trajectory lines up with the reference;
-    # at max speed on a loaded 2-core machine the 100 Hz Python stream falls behind the simulation
-    # by tenths of a (simulated) second now and then, which is the machine, not the stream.
-    with _sitl(61, "circle", speed="2"):
-        yield 61
+def _recorder(launcher: Launcher, instance: int, out: Path):
+    return _script(launcher, record, "--instance", str(instance), "--out", str(out), "--until-disarmed")
 
 
-def _run_script(module, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, str(Path(module.__file__)), *args],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=WALL_LIMIT_S,
-    )
-
-
-def _finish_recorder(proc: subprocess.Popen) -> str:
-    """The recorder stops by itself after the disarm (--until-disarmed)."""
-    try:
-        out = proc.communicate(timeout=15)[0]
-    except subprocess.TimeoutExpired:
-        out = _terminate(proc)
-        pytest.fail(f"recorder did not stop after the disarm:\n{out}")
-    assert proc.returncode == 0, out
-    return out
-
-
-def test_fly_setpoints_through_the_sitl_and_record_it(hover_sitl: int, tmp_path: Path) -> None:
-    n = hover_sitl
-    rec = _spawn(
-        str(Path(record.__file__)), "--instance", str(n), "--out", str(tmp_path / "s"), "--until-disarmed"
-    )
-    try:
-        done = _run_script(
-            fly_setpoints, "--instance", str(n), "--takeoff-alt", "1.5", "--setpoint", "1", "0.5", "1.5",
-            "--hold", "0.5", "--timeout", "30",
+def test_fly_setpoints_through_the_sitl_and_record_it(tmp_path: Path) -> None:
+    n = 60
+    with _sitl(n, "hover") as launcher:
+        rec = _recorder(launcher, n, tmp_path / "s")
+        done = _script(
+            launcher, fly_setpoints, "--instance", str(n), "--takeoff-alt", "1.5", "--setpoint", "1", "0.5",
+            "1.5", "--hold", "0.5", "--timeout", "30",
         )  # fmt: skip
-        assert done.returncode == 0, done.stdout + done.stderr
-        assert re.search(
-            r"t=\d+\.\d\d s reached setpoint 1 \(1\.00, 0\.50, 1\.50\) error 0\.\d{3} m", done.stdout
-        )
-        assert "disarmed" in done.stdout
-        rec_out = _finish_recorder(rec)
-    finally:
-        _terminate(rec)
-    assert "stopped (disarmed)" in rec_out
+        assert done.wait(WALL_LIMIT_S) == 0, done.tail()
+        reached = r"t=\d+\.\d\d s reached setpoint 1 \(1\.00, 0\.50, 1\.50\) error 0\.\d{3} m"
+        assert re.search(reached, done.output)
+        assert "disarmed" in done.output
+        assert rec.wait(15.0) == 0, rec.tail()  # --until-disarmed: it stops by itself
+        assert "stopped (disarmed)" in rec.output
     record_ = read_session(tmp_path / "s.parquet")
     assert record_.scenario == "hover" and record_.controller == "intbs_nlhinf"
     # Ground truth (paper frame, z up) went to the setpoint: 1 m north, 0.5 m LEFT, 1.5 m up.
@@ -126,61 +62,47 @@ def test_fly_setpoints_through_the_sitl_and_record_it(hover_sitl: int, tmp_path:
     assert (tmp_path / "analysis" / "comparison.md").exists() and len(paths) == 6
 
 
-def test_fly_trajectory_through_the_sitl_lines_up_with_the_reference(
-    circle_sitl: int, tmp_path: Path
-) -> None:
-    n = circle_sitl
+def test_fly_trajectory_lines_up_with_the_reference() -> None:
+    """fly_trajectory's own flight (p, v, a setpoints streamed at 100 Hz, paced by the telemetry)
+    against the whole stack in-process: the controller's reference is the streamed trajectory."""
     duration = 4.0
-    rec = _spawn(
-        str(Path(record.__file__)), "--instance", str(n), "--out", str(tmp_path / "c"), "--until-disarmed"
+    args, scenario = fly_trajectory.parse_args(
+        ["--scenario", "circle", "--duration", str(duration), "--settle", "0.5", "--hold", "0.5"]
     )
-    try:
-        done = _run_script(
-            fly_trajectory, "--instance", str(n), "--scenario", "circle", "--duration", str(duration),
-            "--settle", "0.5", "--hold", "0.5", "--timeout", "30",
-        )  # fmt: skip
-        assert done.returncode == 0, done.stdout + done.stderr
-        t0 = float(re.search(r"^t0=(\d+\.\d+)$", done.stdout, re.M).group(1))
-        _finish_recorder(rec)
-    finally:
-        _terminate(rec)
-    flown = read_session(tmp_path / "c.parquet", window=(t0, duration))
-    assert flown.time_s[0] == pytest.approx(0.0, abs=1e-6)
-    assert flown.time_s[-1] == pytest.approx(duration, abs=0.003)
-    _, scenario = fly_trajectory.parse_args(["--scenario", "circle"])
+    stack = make_stack("circle")
+    link = connect(stack)
     trajectory = fly_trajectory.trajectory_from_spec(scenario.trajectory)
-    p_d = np.array([trajectory.sample(t).position_m for t in flown.time_s])
-    # The controller's reference is the streamed trajectory (late by the stream's transit time).
-    assert np.max(np.abs(flown.position_ref_m - p_d)) < 0.02
-    assert np.max(np.linalg.norm(flown.position_error_m, axis=1)) < 0.05
+    flight = fly_trajectory.TrajectoryFlight(link, trajectory, args.duration)
+    args.zenoh = None
+    fly_trajectory.fly(link, args, flight)
+    t = np.asarray(stack.controller_rows)[:, 0]
+    ref = np.asarray(stack.controller_rows)[:, 1:4]
+    truth = np.asarray(stack.truth_rows)[:, 1:4]
+    window = (t >= flight.t0) & (t <= flight.t0 + duration)
+    p_d = np.array([trajectory.sample(x - flight.t0).position_m for x in t[window]])
+    # The reference is the streamed trajectory (late by the stream's one-message transit time).
+    assert np.max(np.abs(ref[window] - p_d)) < 0.02
+    assert np.max(np.linalg.norm(truth[window] - ref[window], axis=1)) < 0.05
 
 
-@pytest.fixture
-def circle_sitl_62() -> Iterator[int]:
-    with _sitl(62, "circle"):
-        yield 62
-
-
-def test_gusts_uploaded_for_t0_hit_at_the_in_process_times(circle_sitl_62: int, tmp_path: Path) -> None:
-    n = circle_sitl_62
+def test_gusts_uploaded_for_t0_hit_at_the_in_process_times(tmp_path: Path) -> None:
+    """fly_trajectory --gusts: the profile goes over zenoh to the simulator process, anchored at
+    the trajectory's t0; the recorded disturbance steps land at t0 + 1 s and t0 + 2 s."""
+    n = 62
     profile = tmp_path / "steps.toml"
     profile.write_text(
         'description = "two steps"\n'
         '[[step]]\nchannel = "force_x"\nstart_s = 1.0\nvalue = 1.0\n'
         '[[step]]\nchannel = "torque_roll"\nstart_s = 2.0\nvalue = 0.5\n'
     )
-    rec = _spawn(
-        str(Path(record.__file__)), "--instance", str(n), "--out", str(tmp_path / "g"), "--until-disarmed"
-    )
-    try:
-        done = _run_script(
-            fly_trajectory, "--instance", str(n), "--scenario", "circle", "--duration", "3",
+    with _sitl(n, "circle") as launcher:
+        rec = _recorder(launcher, n, tmp_path / "g")
+        done = _script(
+            launcher, fly_trajectory, "--instance", str(n), "--scenario", "circle", "--duration", "3",
             "--settle", "0.5", "--hold", "0.5", "--timeout", "30", "--gusts", str(profile),
         )  # fmt: skip
-        assert done.returncode == 0, done.stdout + done.stderr
-        t0 = float(re.search(r"^t0=(\d+\.\d+)$", done.stdout, re.M).group(1))
-        _finish_recorder(rec)
-    finally:
-        _terminate(rec)
+        assert done.wait(WALL_LIMIT_S) == 0, done.tail()
+        t0 = float(re.search(r"^t0=(\d+\.\d+)$", done.output, re.M).group(1))
+        assert rec.wait(15.0) == 0, rec.tail()
     flown = read_session(tmp_path / "g.parquet", window=(t0, 3.0))
     assert flown.event_times_s == pytest.approx([1.0, 2.0], abs=0.0021)  # within one control step

@@ -9,11 +9,8 @@ wrote must be readable. Another stops by itself (--until-disarmed) and merges it
 from __future__ import annotations
 
 import json
-import os
 import signal
 import socket
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -27,6 +24,7 @@ from gcs_scripts.analysis.log_reader import read_session
 from gcs_scripts.link import mavutil
 from quadcommon import bus, wire
 from quadcommon.bus_records import CONTROLLER_CODEC, TRUTH_CODEC
+from sitl.launcher import Child, python_script
 
 from .helpers import Vehicle, control_times, controller_rows, ref_x, truth_rows
 
@@ -91,30 +89,24 @@ class FakeSitl:
         self.session.close()
 
 
-def _start_recorder(instance: int, out: Path, *extra: str) -> subprocess.Popen:
+def _start_recorder(instance: int, out: Path, *extra: str) -> Child:
     script = Path(record_module.__file__)
-    return subprocess.Popen(
-        [sys.executable, str(script), "--instance", str(instance), "--out", str(out), *extra],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+    return Child("record.py", python_script(script, "--instance", str(instance), "--out", str(out), *extra))
 
 
-def _wait_matching(sitl: FakeSitl, proc: subprocess.Popen) -> None:
+def _wait_matching(sitl: FakeSitl, proc: Child) -> None:
     deadline = time.monotonic() + 8.0
     while time.monotonic() < deadline:
         if sitl.truth_pub.matching_status.matching and sitl.ctrl_pub.matching_status.matching:
             return
-        assert proc.poll() is None, proc.stdout.read()
+        assert proc.alive, proc.output
         time.sleep(0.01)
     pytest.fail("the recorder's zenoh subscribers never matched")
 
 
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait(timeout=5)
+def _stop(proc: Child) -> None:
+    proc.signal(signal.SIGKILL)
+    proc.wait(5.0)
 
 
 def _check_rows(table_cols: dict[str, np.ndarray], sitl: FakeSitl) -> None:
@@ -152,9 +144,8 @@ def test_recorder_killed_mid_run_leaves_readable_parts(tmp_path: Path) -> None:
         assert len(sl.part_paths(parts_dir)) >= 2
         for _ in range(20):
             sitl.step()
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=5)
-        assert proc.returncode == -signal.SIGKILL
+        proc.signal(signal.SIGKILL)
+        assert proc.wait(5.0) == -signal.SIGKILL
     finally:
         _stop(proc)
         sitl.close()
@@ -193,12 +184,11 @@ def test_recorder_stops_after_disarm_and_merges(tmp_path: Path) -> None:
             time.sleep(0.002)
         sitl.send(sitl.vehicle.statustext("landed: disarmed"))
         deadline = time.monotonic() + 8.0
-        while proc.poll() is None and time.monotonic() < deadline:
+        while proc.alive and time.monotonic() < deadline:
             sitl.step(armed=False)
             time.sleep(0.002)
-        output = proc.communicate(timeout=10)[0]
-        assert proc.returncode == 0, output
-        assert "stopped (disarmed)" in output
+        assert proc.wait(10.0) == 0, proc.output
+        assert "stopped (disarmed)" in proc.output
     finally:
         _stop(proc)
         sitl.close()

@@ -161,8 +161,8 @@ def test_trajectory_waits_for_t0_then_samples_from_it() -> None:
 
 
 def _helix():
-    from autopilot.guidance.trajectories import trajectory_from_spec
     from quadcommon.config import load_scenario
+    from quadcommon.trajectories import trajectory_from_spec
 
     return trajectory_from_spec(load_scenario("helix").trajectory)
 

@@ -1,5 +1,6 @@
 """End to end over real zenoh sessions on loopback: upload_gusts() against the simulator's own
-GustUploadServer on a hub session, polled from a loop as simulator/app.py polls it.
+GustUploadServer and SimulatorCore on a hub session, polled from a loop as simulator/app.py polls
+it (the core held at t = 10 s: no frames are flown here).
 """
 
 from __future__ import annotations
@@ -17,36 +18,42 @@ import pytest
 from gcs_scripts import upload_gusts as ug
 from quadcommon import bus, wire
 from quadcommon.config import CONFIG_DIR
-from simulator.environment.gust_profile import (
-    DisturbanceSchedule,
-    GustProfile,
-    load_gust_profile,
-    profile_to_mapping,
-)
+from simulator.core import SimulatorCore, SimulatorSetup
+from simulator.environment.gust_profile import GustProfile, load_gust_profile, profile_to_mapping
 from simulator.environment.gust_upload import handle_gust_request
 from simulator.truth_bus import GustUploadServer
 
 INSTANCE = 81  # tests use instances 80-89 (zenoh ports 7527-7536) to stay clear of real vehicles
 
 
-class FakeSimulator:
-    """Hub session + upload server polled by a bounded background loop (the simulator's loop)."""
+class ServedSimulator:
+    """A real SimulatorCore at t = 10 s behind the real upload server on a hub session, polled by a
+    bounded background loop (the simulator's loop); uploads land in the core as in the process."""
 
     def __init__(self, instance: int) -> None:
         self.session = bus.open_hub(wire.ports(instance).zenoh)
-        self.sim_time_s = 10.0
-        self.schedule = DisturbanceSchedule(load_gust_profile("paper_steps"))  # the start-up profile
+        # The circle's profile is paper_steps; a vehicle with drag, so wind is accepted silently.
+        self.core = SimulatorCore(SimulatorSetup.load(scenario="circle", vehicle="paper_quad_drag"))
+        self.core.k = round(10.0 / self.core.dt_control)
+        self.sim_time_s = self.core.t
         self.installed: list[tuple[GustProfile, float]] = []
-        self.server = GustUploadServer(
-            self.session, wire.zenoh_key(instance, "sim/gusts"), lambda: self.sim_time_s, self._install, 1e-3
-        )
+        core_install = self.core.schedule_gust_profile
+
+        def install(profile: GustProfile, start_s: float) -> None:
+            core_install(profile, start_s)
+            self.installed.append((profile, start_s))
+
+        self.core.schedule_gust_profile = install  # type: ignore[method-assign] # observe, then the core
+        key = wire.zenoh_key(instance, "sim/gusts")
+        self.server = GustUploadServer(self.session, key, self.core.upload_gusts)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
         self._thread.start()
 
-    def _install(self, profile: GustProfile, start_s: float) -> None:
-        self.schedule = DisturbanceSchedule(profile, start_s, 1e-3)  # replace semantics
-        self.installed.append((profile, start_s))
+    @property
+    def schedule(self):
+        """The schedule the next frame flies (an accepted upload swaps in at a frame boundary)."""
+        return self.core._pending_schedule or self.core.schedule
 
     def _loop(self) -> None:
         deadline = time.monotonic() + 60.0  # bounded even if a test forgets to stop it
@@ -62,15 +69,15 @@ class FakeSimulator:
 
 
 @pytest.fixture(scope="module")
-def simulator() -> Iterator[FakeSimulator]:
-    sim = FakeSimulator(INSTANCE)
+def simulator() -> Iterator[ServedSimulator]:
+    sim = ServedSimulator(INSTANCE)
     try:
         yield sim
     finally:
         sim.close()
 
 
-def test_accepted_upload_replaces_the_start_up_profile(simulator: FakeSimulator) -> None:
+def test_accepted_upload_replaces_the_start_up_profile(simulator: ServedSimulator) -> None:
     mapping = profile_to_mapping(load_gust_profile("gust_1cos_x"))
     answer = ug.upload_gusts(mapping, INSTANCE, ug.start_spec(after_s=1.5), timeout=5.0)
     assert answer == {
@@ -85,7 +92,7 @@ def test_accepted_upload_replaces_the_start_up_profile(simulator: FakeSimulator)
     assert wind == pytest.approx((3.0, 0.0, 0.0))
 
 
-def test_rejected_upload_returns_the_exact_validation_message(simulator: FakeSimulator) -> None:
+def test_rejected_upload_returns_the_exact_validation_message(simulator: ServedSimulator) -> None:
     before = len(simulator.installed)
     bad = {
         "one_minus_cosine": [
@@ -99,7 +106,7 @@ def test_rejected_upload_returns_the_exact_validation_message(simulator: FakeSim
     assert len(simulator.installed) == before
 
 
-def test_reusing_an_open_session(simulator: FakeSimulator) -> None:
+def test_reusing_an_open_session(simulator: ServedSimulator) -> None:
     session = bus.open_peer(wire.ports(INSTANCE).zenoh)
     try:
         for at in (20.0, 30.0):
@@ -111,7 +118,7 @@ def test_reusing_an_open_session(simulator: FakeSimulator) -> None:
 
 
 def test_command_line_exit_codes(
-    simulator: FakeSimulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    simulator: ServedSimulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     good = str(CONFIG_DIR / "gusts" / "mixed.toml")
     assert ug.main([good, "--instance", str(INSTANCE), "--start-at", "12", "--timeout", "5"]) == 0
@@ -131,7 +138,7 @@ def test_command_line_exit_codes(
     assert "key 'start.at_s' = 1.0 is invalid" in capsys.readouterr().err
 
 
-def test_script_runs_as_a_file_from_any_directory(simulator: FakeSimulator, tmp_path: Path) -> None:
+def test_script_runs_as_a_file_from_any_directory(simulator: ServedSimulator, tmp_path: Path) -> None:
     profile = str(CONFIG_DIR / "gusts" / "dryden_light.toml")
     command = [
         sys.executable,

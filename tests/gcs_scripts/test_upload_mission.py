@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from autopilot.guidance.trajectories import circle
 from autopilot.mission.items import WireItem, parse_item
 from gcs_scripts.upload_mission import (
     CMD_TIMED,
@@ -22,6 +21,8 @@ from gcs_scripts.upload_mission import (
     same_item,
     write_wpl,
 )
+from quadcommon.trajectories import circle
+from sitl.launcher import Launcher
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "gcs_scripts" / "upload_mission.py"
@@ -145,26 +146,16 @@ def test_bad_file_exits_2_without_contacting_a_vehicle(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def autopilot(tmp_path_factory):
+def autopilot():
+    """An autopilot process alone (no simulator needed for the mission protocol), for the script's
+    command line; the protocol itself is tested in-process (tests/autopilot/test_mission_wire.py)."""
     instance = 22
-    log = tmp_path_factory.mktemp("ap") / "autopilot.log"
-    with open(log, "w") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "autopilot", "--instance", str(instance), "--no-zenoh"],
-            cwd=REPO,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
+    with Launcher() as launcher:
+        proc = launcher.spawn("autopilot", [sys.executable, "-u", "-m", "autopilot", "--instance",
+                                            str(instance), "--no-zenoh"])  # fmt: skip
+        proc.wait_line("autopilot: instance", 20.0)
         yield instance
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-        print(log.read_text()[-3000:])
+        print(proc.tail(40))
 
 
 def test_script_uploads_verifies_downloads_and_clears(autopilot, tmp_path):

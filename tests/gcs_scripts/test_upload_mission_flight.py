@@ -1,52 +1,23 @@
-"""Missions flown through the real SITL (simulator + autopilot processes, --speed max, instances
-23-24), driven over MAVLink by gcs_scripts/upload_mission.py's client: a waypoint mission with every
-MISSION_ITEM_REACHED in order, ending landed and disarmed; the paper's circle as timed items,
-tracked to a fraction of a millimetre after the approach (no gusts: the hover scenario's plant)."""
+"""Missions flown through the whole stack in-process (simulator core + autopilot core, real MAVLink
+bytes, simulation time), driven by gcs_scripts/upload_mission.py's own client: a waypoint mission
+with every MISSION_ITEM_REACHED in order, ending landed and disarmed; the paper's circle as timed
+items, tracked to a fraction of a millimetre after the approach (no gusts: the hover scenario)."""
 
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
+from gcs_scripts import link as mavlink_link
+from gcs_scripts.upload_mission import MissionLink, curve_items, fly, items_from_list
+from quadcommon import frames
+from quadcommon.config import load_scenario
+from quadcommon.trajectories import trajectory_from_spec
 
-from autopilot.guidance.trajectories import trajectory_from_spec  # noqa: E402
-from gcs_scripts import link as mavlink_link  # noqa: E402
-from gcs_scripts.upload_mission import MissionLink, curve_items, fly, items_from_list  # noqa: E402
-from quadcommon import frames  # noqa: E402
-from quadcommon.config import load_scenario  # noqa: E402
+from ..stack import connect, make_stack
 
 m = mavlink_link.mavutil.mavlink
-
-
-@contextmanager
-def sitl(instance: int, logs: Path) -> Iterator[None]:
-    procs = []
-    for name in ("simulator", "autopilot"):
-        args = ["--scenario", "hover", "--speed", "max"] if name == "simulator" else ["--no-zenoh"]
-        out = open(logs / f"{name}.log", "w")  # noqa: SIM115  (closed below)
-        procs.append((name, out, subprocess.Popen(
-            [sys.executable, "-m", name, "--instance", str(instance), *args],
-            cwd=REPO, stdout=out, stderr=subprocess.STDOUT,
-        )))  # fmt: skip
-    try:
-        yield
-    finally:
-        for name, out, proc in reversed(procs):
-            proc.terminate()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=5)
-            out.close()
-            print(f"--- {name} ---\n" + (logs / f"{name}.log").read_text()[-3000:])
 
 
 class Recorder(MissionLink):
@@ -66,11 +37,9 @@ class Recorder(MissionLink):
             self.targets[msg.time_boot_ms] = frames.vector_from_ned((msg.x, msg.y, msg.z))
 
 
-def open_link(instance: int) -> Recorder:
-    base = mavlink_link.connect(None, instance, 20.0)
-    link = Recorder(base.conn, instance)
-    link.view = base.view
-    link.wait_until(lambda lk: lk.position_ned is not None, 30.0, what="telemetry")
+def open_link() -> Recorder:
+    link = connect(make_stack(), Recorder)
+    link.wait_until(lambda lk: lk.position_ned is not None, 1.0, what="telemetry")
     return link
 
 
@@ -87,34 +56,32 @@ def test_waypoint_mission_reaches_every_item_in_order_and_ends_disarmed(tmp_path
         ],
     }
     items = items_from_list(spec)
-    with sitl(23, tmp_path):
-        link = open_link(23)
-        try:
-            link.upload(items)
-            fly(link, items, timeout_s=120.0)
-            reached = [seq for _, seq in link.reached]
-            assert reached == list(range(len(items)))  # each once, in order
-            assert not link.armed and link.landed_state == m.MAV_LANDED_STATE_ON_GROUND
-            x, y, z = link.position_paper
-            assert math.hypot(x - 0.5, y) < 0.05 and abs(z) < 0.05
-        finally:
-            link.close()
+    link = open_link()
+    try:
+        link.upload(items)
+        fly(link, items, timeout_s=120.0)
+        reached = [seq for _, seq in link.reached]
+        assert reached == list(range(len(items)))  # each once, in order
+        assert not link.armed and link.landed_state == m.MAV_LANDED_STATE_ON_GROUND
+        x, y, z = link.position_paper
+        assert math.hypot(x - 0.5, y) < 0.05 and abs(z) < 0.05
+    finally:
+        link.close()
 
 
 def test_timed_circle_mission_is_tracked_to_the_analytic_curve(tmp_path):
     duration = 20.0
     traj = trajectory_from_spec(load_scenario("circle").trajectory)
     items = curve_items(traj, duration, 10.0, end="land")
-    with sitl(24, tmp_path):
-        link = open_link(24)
-        try:
-            link.set_message_interval(m.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50.0)
-            link.set_message_interval(m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED, 50.0)
-            link.upload(items)
-            fly(link, items, timeout_s=120.0)
-            assert [seq for _, seq in link.reached] == list(range(len(items)))
-        finally:
-            link.close()
+    link = open_link()
+    try:
+        link.set_message_interval(m.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50.0)
+        link.set_message_interval(m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED, 50.0)
+        link.upload(items)
+        fly(link, items, timeout_s=120.0)
+        assert [seq for _, seq in link.reached] == list(range(len(items)))
+    finally:
+        link.close()
     t_ref = np.array(sorted(link.targets)) * 1e-3
     ref = np.array([link.targets[k] for k in sorted(link.targets)])
     t_pos = np.array(sorted(link.positions)) * 1e-3

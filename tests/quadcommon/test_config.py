@@ -4,6 +4,7 @@ import shutil
 
 import pytest
 
+from autopilot.control import config as controllers
 from quadcommon import config
 from quadcommon.schema import ConfigError
 
@@ -12,8 +13,8 @@ def test_shipped_configs_load():
     vehicle = config.load_vehicle("paper_quad")
     assert vehicle.nominal.mass_kg == 0.74
     assert vehicle.nominal.inertia_kg_m2 == (0.004, 0.004, 0.0084)
-    for name in config.CONTROLLER_NAMES:
-        assert config.load_controller(name).name == name
+    for name in controllers.CONTROLLER_NAMES:
+        assert controllers.load_controller(name).name == name
     for name in ("circle", "helix", "hover"):
         assert config.load_scenario(name).name == name
     sitl = config.load_sitl()
@@ -21,7 +22,7 @@ def test_shipped_configs_load():
 
 
 def test_nlhinf_gain_formulae():
-    g = config.load_controller("intbs_nlhinf").rotational.nlhinf
+    g = controllers.load_controller("intbs_nlhinf").rotational
     assert g.k_d == pytest.approx((9 + 2 * 0.1 * 9) ** 0.5 / 0.1)
     assert g.k_p == pytest.approx(90.0)
 
@@ -46,7 +47,7 @@ def test_unknown_key_is_refused(tmp_path):
     path = copy_config(tmp_path, "controllers", "intbs_nlhinf")
     path.write_text(path.read_text().replace("omega1 = 0.1", "omega1 = 0.1\nomgea2 = 3.0"))
     with pytest.raises(ConfigError, match=r"unknown key 'rotational.omgea2'"):
-        config.load_controller(path)
+        controllers.load_controller(path)
 
 
 def test_wrong_type_is_refused(tmp_path):
@@ -60,7 +61,7 @@ def test_wrong_choice_lists_the_options(tmp_path):
     path = copy_config(tmp_path, "controllers", "intbs")
     path.write_text(path.read_text().replace('law = "integral_first_step"', 'law = "pid"'))
     with pytest.raises(ConfigError, match=r"translational.law.*'pid'.*integral_second_step"):
-        config.load_controller(path)
+        controllers.load_controller(path)
 
 
 def test_unknown_name_lists_available():

@@ -8,83 +8,38 @@ from __future__ import annotations
 
 import signal
 import socket
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import wire
+from sitl.launcher import Child
 
 REPO = Path(__file__).resolve().parents[2]
 SITL_TOML = REPO / "config" / "sitl.toml"
 
 
-class SimProcess:
-    """``python -m simulator`` as a child; its stdout+stderr collected line by line."""
+class SimProcess(Child):
+    """``python -m simulator`` as a child of the project's launcher (output collected line by line)."""
 
     def __init__(self, instance: int, *args: str, speed: str = "max") -> None:
         self.instance = instance
         self.ports = wire.ports(instance)
         cmd = [sys.executable, "-u", "-m", "simulator", "--instance", str(instance), "--speed", speed, *args]
-        self.proc = subprocess.Popen(
-            cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1
-        )
-        self.lines: list[str] = []
-        self._cond = threading.Condition()
-        self._thread = threading.Thread(target=self._pump, daemon=True)
-        self._thread.start()
-
-    def _pump(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            with self._cond:
-                self.lines.append(line.rstrip("\n"))
-                self._cond.notify_all()
-
-    @property
-    def output(self) -> str:
-        with self._cond:
-            return "\n".join(self.lines)
-
-    def wait_line(self, needle: str, timeout: float = 5.0) -> str:
-        """The first output line containing ``needle``; AssertionError after ``timeout`` s."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                for line in self.lines:
-                    if needle in line:
-                        return line
-                remaining = deadline - time.monotonic()
-                if remaining <= 0 or (self.proc.poll() is not None and not self._thread.is_alive()):
-                    raise AssertionError(
-                        f"no line with {needle!r} within {timeout} s; output:\n{self.output}"
-                    )
-                self._cond.wait(min(remaining, 0.1))
+        super().__init__(f"simulator[{instance}]", cmd)
 
     def terminate(self, timeout: float = 2.0, sig: int = signal.SIGTERM) -> int:
-        """Send ``sig`` and wait for the exit code (AssertionError if it does not exit in time)."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-        try:
-            code = self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            raise AssertionError(
-                f"simulator did not exit within {timeout} s of {sig!r}:\n{self.output}"
-            ) from None
-        self._thread.join(2.0)
-        return code
+        """Send ``sig`` and wait for the exit code (LaunchError if it does not exit in time)."""
+        self.signal(sig)
+        return self.wait(timeout)
 
     def __enter__(self) -> SimProcess:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(5.0)
-        self._thread.join(2.0)
+        self.stop(grace_s=2.0)
 
 
 class Frame(dict):

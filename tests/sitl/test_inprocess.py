@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from autopilot.control.config import CONTROLLER_NAMES, load_controller
 from gcs_scripts.analysis.metrics import indices
-from quadcommon.config import CONTROLLER_NAMES, load_controller, load_scenario
+from quadcommon.config import load_scenario
 from sitl.inprocess import RunOptions, run_scenario
 
 

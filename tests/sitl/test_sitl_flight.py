@@ -1,7 +1,6 @@
-"""The SITL over real UDP: linking, commands and ACKs, offboard flight, offboard loss.
-
-Both processes run at --speed max (lockstep, simulation time); the test acts as a pymavlink
-ground station and times everything by the simulation time in the telemetry.
+"""Flying on the wire, in simulation time: linking, commands and ACKs, offboard flight, offboard
+loss. The whole stack in-process (simulator core + autopilot core, real MAVLink bytes); the test
+acts as a pymavlink ground station. Over real UDP: test_sitl_smoke.py.
 """
 
 import math
@@ -11,22 +10,19 @@ from pymavlink.dialects.v20 import common as m
 
 from autopilot.commander.modes import FlightMode
 
-from .harness import Sitl
+from ..stack import Gcs, make_stack
 
 OFFBOARD = FlightMode.OFFBOARD.custom_mode
 LOITER = FlightMode.AUTO_LOITER.custom_mode
 
 
 @pytest.fixture
-def sitl(request):
-    instance = request.param if hasattr(request, "param") else 5
-    with Sitl(instance) as s:
-        gcs = s.gcs()
-        try:
-            gcs.wait_heartbeat()
-            yield s, gcs
-        finally:
-            gcs.close()
+def sitl():
+    stack = make_stack()
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    yield stack, gcs
+    gcs.close()
 
 
 def take_off(gcs, altitude=2.0):
@@ -42,7 +38,7 @@ def take_off(gcs, altitude=2.0):
 def start_offboard(gcs, target):
     for _ in range(10):
         gcs.send_position_setpoint(*target)
-        gcs.poll(0.01)
+        gcs.poll()
     ack = gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 6, 0)
     assert ack.result == m.MAV_RESULT_ACCEPTED
 
@@ -52,7 +48,7 @@ def fly_to(gcs, target, settle_s=3.0, sim_timeout=20.0):
     start = gcs.sim_time
     arrived_at = None
     while gcs.sim_time - start < sim_timeout:
-        msg = gcs.poll(0.2)
+        msg = gcs.poll()
         if msg is None or msg.get_type() != "LOCAL_POSITION_NED":
             continue
         gcs.send_position_setpoint(*target)
@@ -64,7 +60,6 @@ def fly_to(gcs, target, settle_s=3.0, sim_timeout=20.0):
     raise AssertionError(f"did not reach {target} (position {gcs.position()})")
 
 
-@pytest.mark.parametrize("sitl", [5], indirect=True)
 def test_link_and_vehicle_at_rest_on_the_ground(sitl):
     _, gcs = sitl
     gcs.wait(lambda g: "EXTENDED_SYS_STATE" in g.last and "LOCAL_POSITION_NED" in g.last, what="telemetry")
@@ -77,7 +72,6 @@ def test_link_and_vehicle_at_rest_on_the_ground(sitl):
     assert abs(gcs.position()[2]) < 1e-6  # resting, not falling through the ground
 
 
-@pytest.mark.parametrize("sitl", [6], indirect=True)
 def test_every_command_gets_an_ack(sitl):
     _, gcs = sitl
     nan = math.nan
@@ -104,11 +98,10 @@ def test_every_command_gets_an_ack(sitl):
     # COMMAND_INT takes the same path
     gcs.acks.clear()
     gcs.conn.mav.command_int_send(gcs.system_id, 1, 0, 31000, 0, 0, 0, 0, 0, 0, 0, 0, 0)
-    gcs.wait(lambda g: any(a.command == 31000 for a in g.acks), sim_timeout=1e9, wall_timeout=5, what="ack")
+    gcs.wait(lambda g: any(a.command == 31000 for a in g.acks), sim_timeout=0.5, what="ack")
     assert gcs.acks[-1].result == m.MAV_RESULT_UNSUPPORTED
 
 
-@pytest.mark.parametrize("sitl", [7], indirect=True)
 def test_offboard_square_and_land(sitl):
     _, gcs = sitl
     take_off(gcs, 2.0)
@@ -125,7 +118,6 @@ def test_offboard_square_and_land(sitl):
     assert any("landing detected" in text for text in gcs.statustext)
 
 
-@pytest.mark.parametrize("sitl", [8], indirect=True)
 def test_offboard_loss_switches_to_hold(sitl):
     _, gcs = sitl
     take_off(gcs, 2.0)

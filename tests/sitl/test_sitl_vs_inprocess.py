@@ -1,47 +1,45 @@
-"""The SITL (two processes, MAVLink on UDP) and the in-process runner fly the same cores.
+"""The one lockstep loop: the SITL (two processes, MAVLink over UDP) and the whole stack in-process
+fly the same cores through the same bytes, so their trajectories are identical.
 
-The autopilot is started with --autostart: armed at t = 0, it flies the scenario's trajectory
-exactly as the in-process runner does, so the only difference is the wire: float32 state in
-ODOMETRY and float32 controls in HIL_ACTUATOR_CONTROLS. Stated tolerance: the position
-trajectories agree within 1 µm and the attitudes within 1e-5 rad (measured over the full 40 s
-of both paper scenarios: 2e-8 m).
+The autopilot is started with --autostart (armed at t = 0, flying the scenario's trajectory), as
+the in-process paper runner does (sitl.inprocess.run_scenario). Both see the state through float32
+ODOMETRY and send float32 controls; nothing else differs. Asserted: the ground truth of every frame
+agrees to 1e-9 m (in practice bit for bit) and the controller's rows match.
 """
 
 import numpy as np
 import pytest
 
+from autopilot.control.config import load_controller
 from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS
-from quadcommon.config import load_controller, load_scenario
-from sitl.inprocess import RunOptions, run_scenario
+from quadcommon.config import load_scenario
+from sitl.inprocess import RunOptions, paper_stack
+from sitl.launcher import VehicleSpec
 
-from .harness import Sitl
+from .harness import running
 
 T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
 DURATION = 12.0  # covers the take-off transient and the disturbances at 5 and 10 s
 
 
-@pytest.mark.parametrize("scenario, instance", [("helix", 1), ("circle", 2)])
-def test_sitl_and_inprocess_agree(scenario, instance):
-    inproc = run_scenario(
-        load_scenario(scenario), load_controller("intbs_nlhinf"), RunOptions(duration_s=DURATION)
-    )
-    with Sitl(instance, scenario=scenario, autostart=True, duration=DURATION, collect=True) as sitl:
-        assert sitl.wait_simulator_exit(120.0) == 0
-        truth = sitl.truth()
-        ctrl = sitl.controller_rows()
-    times = truth[:, T["time_s"]]
-    n = len(inproc.time_s)
-    assert len(times) == n, f"{len(times)} truth rows for {n} control steps"
-    assert np.allclose(times, inproc.time_s, atol=1e-9)
-    pos = truth[:, [T["x_m"], T["y_m"], T["z_m"]]]
-    euler = truth[:, [T["phi_rad"], T["theta_rad"], T["psi_rad"]]]
-    gap = np.abs(pos - inproc.position_m).max()
-    assert gap < 1e-6, f"position gap {gap:.2e} m"
-    assert np.abs(euler - inproc.euler_rad).max() < 1e-5
-    # the disturbance schedule ran on the simulator's clock exactly as in-process
-    assert np.array_equal(truth[:, [T["Ax_n"], T["Ay_n"], T["Az_n"]]], inproc.disturbance_force_n)
-    # controller internals: same references, same thrust to float32 precision
-    assert len(ctrl) == n
-    assert np.allclose(ctrl[:, [C["x_ref_m"], C["y_ref_m"], C["z_ref_m"]]], inproc.position_ref_m, atol=1e-9)
-    assert np.allclose(ctrl[:, C["U1_n"]], inproc.thrust_n, rtol=1e-3, atol=1e-3)
+@pytest.mark.timeout(180)
+def test_sitl_and_the_in_process_stack_agree_frame_by_frame():
+    stack = paper_stack(load_scenario("helix"), load_controller("intbs_nlhinf"), RunOptions())
+    steps = round(DURATION / stack.sim.dt_control)
+    for _ in range(steps):
+        stack.step()
+    stack.final_frame()
+    inproc_truth, inproc_ctrl = np.asarray(stack.truth_rows), np.asarray(stack.controller_rows)
+
+    spec = VehicleSpec(instance=1, scenario="helix", speed="max", autostart=True, duration_s=DURATION)
+    with running(spec, leaves=("truth", "controller")) as (launcher, taps):
+        assert launcher.child("simulator[1]").wait(120.0) == 0
+        launcher.child("autopilot[1]").stop()  # flushes its last controller rows
+        truth, ctrl = taps["truth"].rows(), taps["controller"].rows()
+    assert len(truth) == len(inproc_truth) == steps + 1
+    assert np.array_equal(truth[:, T["time_s"]], inproc_truth[:, T["time_s"]])
+    gap = np.abs(truth[:, 1:] - inproc_truth[:, 1:]).max()
+    assert gap <= 1e-9, f"largest difference in the truth rows: {gap:.2e}"
+    assert len(ctrl) == len(inproc_ctrl)
+    assert np.allclose(ctrl, inproc_ctrl, atol=1e-9, rtol=0.0, equal_nan=True)

@@ -3,12 +3,12 @@
 import os
 import re
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
+from sitl.launcher import Child
+
 INSTANCE = 9
 
 
@@ -39,49 +39,32 @@ def alive(pid: int) -> bool:
     return state not in ("Z", "X")
 
 
-def start_up(*args: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(INSTANCE), "--speed", "max", *args],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-
-
-def read_until(proc: subprocess.Popen, needle: str, timeout: float) -> str:
-    seen = []
-    deadline = time.monotonic() + timeout
-    assert proc.stdout is not None
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        seen.append(line)
-        if needle in line:
-            return "".join(seen)
-    raise AssertionError(f"no {needle!r} within {timeout} s:\n" + "".join(seen))
+def start_up(*args: str) -> Child:
+    """``quadsitl up`` as a child of the launcher (its output read by a thread: no blocking read)."""
+    cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(INSTANCE), "--speed", "max", *args]
+    return Child("quadsitl up", cmd)
 
 
 def test_up_prints_endpoints_stops_cleanly_and_refuses_a_port_clash():
     up = start_up()
     try:
-        text = read_until(up, "Ctrl-C stops", 30.0)
+        up.wait_line("Ctrl-C stops", 30.0)
+        text = up.output
         assert f"vehicle {INSTANCE} is up (MAVLink sysid {INSTANCE + 1}" in text
         assert f"udp {14550 + INSTANCE}" in text and f"udpin://0.0.0.0:{14540 + INSTANCE}" in text
         assert f"tcp/127.0.0.1:{7447 + INSTANCE}" in text
-        kids = children_of(up.pid)
+        kids = children_of(up.process.pid)
         assert len(kids) == 2, kids  # simulator and autopilot
 
         clash = start_up()
-        out, _ = clash.communicate(timeout=30)
-        assert clash.returncode == 2
-        assert re.search(rf"port {4560 + INSTANCE} .*already in use.*--instance {INSTANCE}", out), out
+        assert clash.wait(30.0) == 2
+        pattern = rf"port {4560 + INSTANCE} .*already in use.*--instance {INSTANCE}"
+        assert re.search(pattern, clash.output), clash.output
     finally:
-        up.send_signal(signal.SIGTERM)
-        rest, _ = up.communicate(timeout=30)
-    assert up.returncode == 0, rest
-    assert "quadsitl: stopped" in rest
+        up.signal(signal.SIGTERM)
+        code = up.wait(30.0)
+    assert code == 0, up.tail()
+    assert "quadsitl: stopped" in up.output
     deadline = time.monotonic() + 5
     while any(alive(k) for k in kids) and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -91,12 +74,12 @@ def test_up_prints_endpoints_stops_cleanly_and_refuses_a_port_clash():
 def test_up_leaves_no_orphan_when_the_launcher_is_killed():
     up = start_up()
     try:
-        read_until(up, "Ctrl-C stops", 30.0)
-        kids = children_of(up.pid)
+        up.wait_line("Ctrl-C stops", 30.0)
+        kids = children_of(up.process.pid)
         assert len(kids) == 2
     finally:
-        up.kill()  # SIGKILL: no chance to clean up; PR_SET_PDEATHSIG must take the children down
-        up.wait(10)
+        up.signal(signal.SIGKILL)  # no chance to clean up: PR_SET_PDEATHSIG must take the children down
+        up.wait(10.0)
     deadline = time.monotonic() + 10
     while any(alive(k) for k in kids) and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -8,16 +8,68 @@ the nominal model: ``tau = M(eta) eta_cmd'' + C(eta, eta') eta'``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+from quadcommon.config import NominalModel
 from quadcommon.frames import wrap_pi
 from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times
+from quadcommon.schema import Section
+
+from ...params.store import ParamSpec
+from ..registry import ROTATIONAL, register
+from ..translational import GAIN_HI, INTEGRAL_LO
 
 Vector3 = tuple[float, float, float]
+EULER_AXES = ("R", "P", "Y")  # parameter suffixes: roll, pitch, yaw
+_POSITIVE = {"lo": 0.0, "lo_open": True, "hi": 1e4}
 
 
+@dataclass(frozen=True)
+class IntBSAttitudeGains:
+    """Per Euler axis (roll, pitch, yaw): c1, c2 and lambda (the integral gain)."""
+
+    law: str
+    c1: Vector3
+    c2: Vector3
+    k_integral: Vector3
+
+
+@register(ROTATIONAL)
 class IntegralBacksteppingAttitude:
-    def __init__(self, c1: Vector3, c2: Vector3, k_integral: Vector3, inertia_kg_m2: Vector3):
-        self.c1, self.c2, self.lam = c1, c2, k_integral
-        self.inertia = inertia_kg_m2
+    NAME = "integral_backstepping"
+
+    @classmethod
+    def load_gains(cls, section: Section) -> IntBSAttitudeGains:
+        c1, c2 = section.vector("c1", **_POSITIVE), section.vector("c2", **_POSITIVE)
+        return IntBSAttitudeGains(cls.NAME, c1, c2, section.vector("k_integral", lo=0.0, hi=1e4))
+
+    @staticmethod
+    def parameters(gains: IntBSAttitudeGains) -> tuple[ParamSpec, ...]:
+        specs = []
+        groups = (("C1", gains.c1, 0.01, "c1"), ("C2", gains.c2, 0.01, "c2"),
+                  ("KI", gains.k_integral, INTEGRAL_LO, "lambda (integral)"))  # fmt: skip
+        for name, values, lo, what in groups:
+            for i, axis in enumerate(EULER_AXES):
+                what_axis = f"IntBS attitude {what}, {('roll', 'pitch', 'yaw')[i]}"
+                specs.append(ParamSpec(f"ATT_{name}_{axis}", values[i], lo, GAIN_HI, description=what_axis))
+        return tuple(specs)
+
+    @staticmethod
+    def gains_from_params(gains: IntBSAttitudeGains, params: Mapping[str, float]) -> IntBSAttitudeGains:
+        def vec(prefix: str, default: Vector3) -> Vector3:
+            names = [f"{prefix}_{a}" for a in EULER_AXES]
+            if not all(n in params for n in names):
+                return default
+            return (params[names[0]], params[names[1]], params[names[2]])
+
+        return replace(gains, c1=vec("ATT_C1", gains.c1), c2=vec("ATT_C2", gains.c2),
+                       k_integral=vec("ATT_KI", gains.k_integral))  # fmt: skip
+
+    def __init__(self, gains: IntBSAttitudeGains, nominal: NominalModel) -> None:
+        self.gains = gains
+        self.c1, self.c2, self.lam = gains.c1, gains.c2, gains.k_integral
+        self.inertia = nominal.inertia_kg_m2
         self.integral = [0.0, 0.0, 0.0]
 
     def reset(self) -> None:
@@ -31,17 +83,19 @@ class IntegralBacksteppingAttitude:
         """
         return tuple(-self.c2[i] * self.lam[i] * self.integral[i] for i in range(3))  # type: ignore[return-value]
 
-    def retune(self, c1: Vector3, c2: Vector3, k_integral: Vector3) -> None:
+    def retune(self, gains: IntBSAttitudeGains) -> None:
         """New gains from the next step on, without a jump in the integral action.
 
         chi_i is rescaled by ``(c2 lambda)_old / (c2 lambda)_new`` so every component of the
         integral term of eta_cmd'' is unchanged, and so is its image ``M (.)`` in tau at any
         state. A new lambda of zero drops the integral.
         """
+        c2, k_integral = gains.c2, gains.k_integral
         for i in range(3):
             old, new = self.c2[i] * self.lam[i], c2[i] * k_integral[i]
             self.integral[i] = self.integral[i] * old / new if new != 0.0 else 0.0
-        self.c1, self.c2, self.lam = tuple(c1), tuple(c2), tuple(k_integral)
+        self.gains = gains
+        self.c1, self.c2, self.lam = tuple(gains.c1), tuple(c2), tuple(k_integral)
 
     def update(
         self,

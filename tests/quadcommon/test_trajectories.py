@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from autopilot.guidance.trajectories import (
+from quadcommon.config import load_scenario
+from quadcommon.trajectories import (
     PiecewiseTrajectory,
     QuinticSegment,
     circle,
     helix,
     trajectory_from_spec,
 )
-from quadcommon.config import load_scenario
 
 
 def finite_difference_check(traj, times, h=1e-5):

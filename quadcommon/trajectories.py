@@ -17,7 +17,7 @@ from bisect import bisect_right
 from collections.abc import Sequence
 from typing import NamedTuple, Protocol
 
-from quadcommon.config import TrajectorySpec
+from .config import TrajectorySpec
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)

@@ -19,19 +19,82 @@ do not depend on gamma. With omega3 = 0 (BS-NLHinf) K_I = 0 and there is no inte
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
-from quadcommon.config import NlHinfGains
+from quadcommon.config import NominalModel
 from quadcommon.frames import wrap_pi
 from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times, solve3
+from quadcommon.schema import Section
+
+from ...params.store import ParamSpec
+from ..registry import ROTATIONAL, register
+from ..translational import GAIN_HI, INTEGRAL_LO
 
 Vector3 = tuple[float, float, float]
 
 
+@dataclass(frozen=True)
+class NlHinfGains:
+    """Weights of the nonlinear H-infinity law, eq. (44): omega1, omega2, omega3, omega_u."""
+
+    law: str
+    omega1: float
+    omega2: float
+    omega3: float
+    omega_u: float
+
+    @property
+    def k_d(self) -> float:
+        return math.sqrt(self.omega2**2 + 2.0 * self.omega1 * self.omega3) / self.omega1
+
+    @property
+    def k_p(self) -> float:
+        return self.omega3 / self.omega1
+
+
+def nlhinf_gains(omega1: float, omega2: float, omega3: float, omega_u: float) -> NlHinfGains:
+    return NlHinfGains(NonlinearHinfAttitude.NAME, omega1, omega2, omega3, omega_u)
+
+
+@register(ROTATIONAL)
 class NonlinearHinfAttitude:
     """eq. (43)-(44) on the nominal inertia; holds the integral of the attitude error."""
 
-    def __init__(self, gains: NlHinfGains, inertia_kg_m2: Vector3) -> None:
-        self.inertia = inertia_kg_m2
+    NAME = "nlhinf"
+
+    @classmethod
+    def load_gains(cls, section: Section) -> NlHinfGains:
+        return NlHinfGains(
+            cls.NAME,
+            omega1=section.number("omega1", lo=0.0, lo_open=True, hi=1e3),
+            omega2=section.number("omega2", lo=0.0, lo_open=True, hi=1e3),
+            omega3=section.number("omega3", lo=0.0, hi=1e3),
+            omega_u=section.number("omega_u", lo=0.0, lo_open=True, hi=1e3),
+        )
+
+    @staticmethod
+    def parameters(g: NlHinfGains) -> tuple[ParamSpec, ...]:
+        return (
+            ParamSpec("NLH_W1", g.omega1, 0.001, GAIN_HI, description="NLHinf weight omega1 (eq. 44)"),
+            ParamSpec("NLH_W2", g.omega2, 0.001, GAIN_HI, description="NLHinf weight omega2 (eq. 44)"),
+            ParamSpec(
+                "NLH_W3", g.omega3, INTEGRAL_LO, GAIN_HI,
+                description="NLHinf weight omega3 (eq. 44; integral action K_I = k_p G)",
+                read_only="" if g.omega3 > 0.0 else "this cascade has no attitude integral (omega3 = 0)",
+            ),  # fmt: skip
+            ParamSpec("NLH_WU", g.omega_u, 0.01, GAIN_HI, description="NLHinf weight omega_u (eq. 44)"),
+        )
+
+    @staticmethod
+    def gains_from_params(g: NlHinfGains, params: Mapping[str, float]) -> NlHinfGains:
+        if "NLH_W1" not in params:
+            return g
+        return replace(g, omega1=params["NLH_W1"], omega2=params["NLH_W2"], omega3=params["NLH_W3"],
+                       omega_u=params["NLH_WU"])  # fmt: skip
+
+    def __init__(self, gains: NlHinfGains, nominal: NominalModel) -> None:
+        self.inertia = nominal.inertia_kg_m2
         self.integral = [0.0, 0.0, 0.0]
         self._set_gains(gains)
         # (eta, eta') of the latest update: where retune() evaluates C

@@ -1,0 +1,68 @@
+"""Controller configuration (``config/controllers/NAME.toml``): a cascade by name, validated.
+
+A cascade is a translational law, a rotational law (each looked up by name in :mod:`.registry`,
+each reading its own keys of its section), the tilt limit of the translational loop and the
+command filter between the loops. Errors name file, key, value and the allowed range.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from quadcommon.config import config_path
+from quadcommon.schema import load_toml
+
+from . import registry
+
+CONTROLLER_NAMES = ("intbs_nlhinf", "intbs", "bs_nlhinf")  # the paper's three cascades
+
+
+@dataclass(frozen=True)
+class CommandFilter:
+    """Second-order filter giving eta_d, eta_d', eta_d'' from the roll/pitch references."""
+
+    natural_frequency_rad_s: float
+    damping: float
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    name: str
+    description: str
+    translational: Any  # the translational law's gains record (has .law)
+    rotational: Any  # the rotational law's gains record (has .law)
+    command_filter: CommandFilter
+    tilt_max_rad: float = 0.7  # limit of phi_r, theta_r (translational loop, eq. 29)
+
+    def with_gains(self, translational=None, rotational=None, **changes) -> ControllerConfig:
+        return replace(self, translational=translational or self.translational,
+                       rotational=rotational or self.rotational, **changes)  # fmt: skip
+
+
+def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConfig:
+    path = config_path("controllers", name_or_path)
+    root = load_toml(path)
+    name = root.string("name", Path(path).stem)
+    description = root.string("description", "")
+
+    sec = root.section("translational")
+    law = registry.law(registry.TRANSLATIONAL, sec.choice("law", registry.names(registry.TRANSLATIONAL)))
+    tilt_max = sec.number("tilt_max_rad", 0.7, lo=0.05, hi=1.4, unit="rad")
+    translational = law.load_gains(sec)
+    sec.finish()
+
+    sec = root.section("rotational")
+    law = registry.law(registry.ROTATIONAL, sec.choice("law", registry.names(registry.ROTATIONAL)))
+    rotational = law.load_gains(sec)
+    sec.finish()
+
+    sec = root.section("command_filter", optional=True)
+    command_filter = CommandFilter(
+        natural_frequency_rad_s=sec.number("natural_frequency_rad_s", 60.0, lo=1.0, hi=1000.0, unit="rad/s"),
+        damping=sec.number("damping", 1.0, lo=0.1, hi=5.0),
+    )
+    sec.finish()
+    root.finish()
+    return ControllerConfig(name, description, translational, rotational, command_filter, tilt_max)

@@ -1,0 +1,467 @@
+"""The whole autopilot as a step machine: bytes and times in, bytes out; no socket, no clock.
+
+:class:`AutopilotCore` holds every rule of the flight controller: the commander, guidance,
+missions, parameters, failsafes, telemetry scheduling and the control cascade, behind four entry
+points, each given the time by its caller:
+
+* :meth:`~AutopilotCore.on_hil_datagram` ``(data, now) -> answer``: one lockstep frame from the
+  simulator; runs exactly one control step and returns the ``HIL_ACTUATOR_CONTROLS`` datagram to
+  send back at once (the simulator is waiting);
+* :meth:`~AutopilotCore.after_frame` ``() -> [Outgoing]``: that frame's bookkeeping (telemetry
+  due on the simulation clock, STATUSTEXT, mission progress), deliberately after the answer;
+* :meth:`~AutopilotCore.on_gcs_datagram` ``(link, address, data, now) -> [Outgoing]``: one datagram
+  from a ground station on the GCS or API link;
+* :meth:`~AutopilotCore.tick` ``(now) -> [Outgoing]``: wall-clock housekeeping (mission transfer
+  retries, paced parameter lists, simulator loss, heartbeat and hello while no frames flow).
+
+``now`` is the wall clock (monotonic seconds) of the process shell, or any clock the caller
+chooses (the in-process runner passes simulation time): only rules that are about wall time use
+it (COM_SIM_LOSS_T, mission transfer timeouts, parameter list pacing); everything a ground
+station sees as time is the simulation time of the frames.
+
+No exception raised while handling an input leaves the core: it is logged once per kind with
+its traceback, counted (:meth:`~AutopilotCore.info`), announced by a rate-limited STATUSTEXT, and
+the core goes on (:mod:`.mavlink.dispatch`).
+
+The process shell (:mod:`autopilot.app`) owns the sockets, the selector and the pacing; the
+in-process runner (:mod:`sitl.inprocess`) couples this core with the simulator's through the same
+bytes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from quadcommon import wire
+from quadcommon.config import SitlConfig, VehicleConfig, load_scenario, load_sitl, load_vehicle
+from quadcommon.trajectories import Trajectory, trajectory_from_spec
+
+from .commander.commander import Commander, Motors, VehicleState
+from .commander.modes import FlightMode
+from .control.cascade import Cascade
+from .control.config import ControllerConfig, load_controller
+from .mavlink import telemetry
+from .mavlink.codec import Encoder, mavlink, new_parser
+from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
+from .mavlink.dispatch import FaultLog, MessageDispatcher
+from .mavlink.hil import ActuatorEncoder, decode_frame
+from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
+from .mavlink.offboard import decode_setpoint
+from .mavlink.params import ParamService
+from .mavlink.vehicle_commands import VehicleCommands
+from .mission.service import MissionService
+from .params.definitions import (
+    consistency_problems,
+    controller_config_from_params,
+    controller_params,
+    default_parameters,
+)
+from .params.storage import load_params_file
+
+m = mavlink
+WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)
+HIL_HELLO_S = 0.2  # heartbeat to the simulator until frames flow: it learns our address from it
+_NAN3 = (math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class AutopilotSetup:
+    """What one autopilot is: configuration loaded and validated, nothing running."""
+
+    sitl: SitlConfig
+    vehicle: VehicleConfig
+    controller: ControllerConfig
+    instance: int = 0
+    autostart: Trajectory | None = None  # armed at the first frame, flying this from t = 0
+    use_odometry: bool = True  # the state from ODOMETRY (float32) or HIL_STATE_QUATERNION (1 cm)
+    params_file: str | None = None  # params.toml: loaded at start if it exists, saved on change
+    default_remotes: bool = True  # the GCS/API links send to 14550+N / 14540+N before anyone talks
+
+    @classmethod
+    def load(
+        cls,
+        instance: int = 0,
+        controller: str = "intbs_nlhinf",
+        vehicle: str = "paper_quad",
+        sitl_config: str | None = None,
+        autostart: str | None = None,
+        state_source: str = "odometry",
+        params_file: str | None = None,
+    ) -> AutopilotSetup:
+        """By names (config/...), as the command line gives them; ConfigError names file and key."""
+        trajectory = trajectory_from_spec(load_scenario(autostart).trajectory) if autostart else None
+        return cls(
+            load_sitl(sitl_config), load_vehicle(vehicle), load_controller(controller), instance,
+            trajectory, state_source == "odometry", params_file,
+        )  # fmt: skip
+
+
+class AutopilotCore:
+    def __init__(self, setup: AutopilotSetup, log: Callable[[str], None] = lambda text: None) -> None:
+        self.setup = setup
+        self.log = log
+        sitl = setup.sitl
+        self.system_id = wire.system_id(setup.instance)
+        self.dt = 1.0 / sitl.rates.control_hz
+        self.wrench = setup.vehicle.actuation.mode == "wrench"
+        self.wall_now = 0.0  # the caller's clock at the latest entry point
+        self.sim_time = 0.0
+        self.last_time_usec = -1
+        self.frames = 0
+        self.linked = False
+        self.sim_lost = False
+        self.last_frame_wall = 0.0
+        self.frame_gap_s = 1.0  # wall time between the last two frames (the shell spins below 1 ms)
+        self.controller_rows: list[tuple[float, ...]] = []  # one per frame, drained by the caller
+        self._out: list[Outgoing] = []
+        self._next_wall_heartbeat = 0.0
+        self._next_hil_hello = 0.0
+        self._flying = False
+        self._controls = (0.0, 0.0, 0.0, 0.0)
+        self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
+        self._statustext_id = 0
+
+        self.params = default_parameters(setup.controller, sitl.rates)
+        self.params.values["MAV_SYS_ID"] = float(self.system_id)
+        if setup.params_file:
+            from pathlib import Path
+
+            if Path(setup.params_file).exists():
+                loaded = load_params_file(setup.params_file, self.params)  # ConfigError: file, key
+                log(f"{len(loaded)} parameters loaded from {setup.params_file}")
+        for problem in consistency_problems(self.params):
+            log(f"warning: parameters inconsistent (arming refused until fixed): {problem}")
+        self.commander = Commander(self.params)
+        self.cascade = Cascade(
+            controller_config_from_params(setup.controller, self.params), setup.vehicle, self.dt
+        )
+        self._gain_names = {spec.name for spec in controller_params(setup.controller)}
+        self.params.on_change(self._on_param_change)
+        self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
+        self.actuators = ActuatorEncoder(self.encoder, self.wrench)
+        self.status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
+        self.hil_parser = new_parser()
+
+        ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
+        remotes = (
+            ((wire.LOOPBACK, ports.gcs_remote), (wire.LOOPBACK, ports.api_remote))
+            if setup.default_remotes
+            else (None, None)
+        )
+        self.links = [GcsLink(GCS_LINK, remotes[0], self._out), GcsLink(API_LINK, remotes[1], self._out)]
+        self.faults = FaultLog(log, lambda text: self.statustext(m.MAV_SEVERITY_ERROR, text))
+        self.dispatcher = MessageDispatcher(self.faults)
+        self.commands = CommandDispatcher()
+        clock = lambda: self.wall_now  # noqa: E731 - the services' wall clock is the caller's
+        self.missions = MissionService(
+            self.commander, self.encoder, self.links, self.statustext, sitl.home, self.system_id,
+            wire.AUTOPILOT_COMPONENT_ID, clock,
+        )  # fmt: skip
+        self.missions.register(self.dispatcher, self.commands, lambda: self.sim_time)
+        self.param_service = ParamService(
+            self.params, self.encoder, self.links, self.statustext, self.system_id,
+            wire.AUTOPILOT_COMPONENT_ID, setup.params_file,
+            header=f"controller {setup.controller.name}, vehicle {setup.vehicle.name}", clock=clock,
+        )  # fmt: skip
+        self.param_service.register(self.dispatcher, self.commands)
+        self.vehicle_commands = VehicleCommands(self)
+        self.vehicle_commands.register(self.commands)
+        d = self.dispatcher
+        d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
+        d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
+        d[m.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED] = self._on_setpoint
+        d[m.MAVLINK_MSG_ID_SET_MODE] = self._on_set_mode_message
+        d[m.MAVLINK_MSG_ID_HEARTBEAT] = self._on_gcs_heartbeat
+        d[m.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
+
+    # -- entry points ---------------------------------------------------------------------------
+    def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:
+        """One datagram on the HIL link: a lockstep frame is answered (controls), else None."""
+        self.wall_now = now
+        try:
+            return self._frame(data, now)
+        except Exception as exc:
+            self.faults.record("HIL frame", exc, now)
+            return None
+
+    def after_frame(self) -> list[Outgoing]:
+        """Telemetry, STATUSTEXT and mission progress of the frame just answered."""
+        if self._frame_done is not None:
+            try:
+                self._bookkeeping(*self._frame_done)
+            except Exception as exc:
+                self.faults.record("frame bookkeeping", exc, self.wall_now)
+            self._frame_done = None
+        return self._take()
+
+    def on_gcs_datagram(self, link: int, address: Address, data: bytes, now: float) -> list[Outgoing]:
+        """One datagram from a ground station on link ``link`` (GCS_LINK or API_LINK)."""
+        self.wall_now = now
+        gcs = self.links[link]
+        try:
+            messages = gcs.receive(data, address)
+        except Exception as exc:
+            self.faults.record(f"{gcs.name} parser", exc, now)
+            messages = []
+        for msg in messages:
+            self.dispatcher.dispatch(msg, gcs, address, now)
+        return self._take()
+
+    def tick(self, now: float) -> list[Outgoing]:
+        """Wall-clock housekeeping; call every ~50 ms of ``now``."""
+        self.wall_now = now
+        try:
+            self._housekeeping(now)
+        except Exception as exc:
+            self.faults.record("housekeeping", exc, now)
+        return self._take()
+
+    def take_controller_rows(self) -> list[tuple[float, ...]]:
+        """The controller internals of every frame since the last call (CONTROLLER_FIELDS order)."""
+        rows, self.controller_rows = self.controller_rows, []
+        return rows
+
+    def info(self) -> dict:
+        """What ``quadsitl/<N>/autopilot/info`` answers."""
+        setup = self.setup
+        return {
+            "instance": setup.instance,
+            "controller": setup.controller.name,
+            "vehicle": setup.vehicle.name,
+            "control_hz": setup.sitl.rates.control_hz,
+            "sim_time_s": self.sim_time,
+            "armed": self.commander.armed,
+            "mode": self.commander.mode.px4_name,
+            "faults": dict(self.faults.counts),
+            "received": dict(self.dispatcher.received),
+        }
+
+    def _take(self) -> list[Outgoing]:
+        out = self._out
+        if not out:
+            return []
+        taken = out[:]
+        out.clear()
+        return taken
+
+    # -- frames ---------------------------------------------------------------------------------
+    def _frame(self, data: bytes, now: float) -> bytes | None:
+        frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry)
+        if frame is None:
+            return None  # a heartbeat from the simulator, or no state in it
+        if frame.time_usec <= self.last_time_usec:
+            if frame.time_usec == self.last_time_usec:
+                # The simulator resent a frame it got no answer to: the same answer again.
+                return self.actuators.encode(frame.time_usec, self._controls, self.commander.armed)
+            self._simulator_restarted()
+        self.frame_gap_s = now - self.last_frame_wall
+        self.last_frame_wall = now
+        if not self.linked or self.sim_lost:
+            self.log(f"linked with simulator (frames at t={frame.time_usec * 1e-6:.3f} s)")
+            if self.sim_lost:
+                self.statustext(m.MAV_SEVERITY_INFO, "simulator link recovered")
+            self.linked, self.sim_lost = True, False
+        return self._control_step(frame)
+
+    def _simulator_restarted(self) -> None:
+        self.log("simulator time went backwards: simulator restarted; resetting")
+        self.commander.disarm(self.sim_time, force=True)
+        self.commander.home = None
+        self.last_time_usec = -1
+        for link in self.links:  # stream deadlines were on the old run's clock
+            link.streams.restart()
+        self.missions.restart_clock()
+
+    def _control_step(self, frame) -> bytes:
+        t = frame.time_usec * 1e-6
+        self.sim_time = t
+        self.last_time_usec = frame.time_usec
+        est = frame.state
+        commander = self.commander
+        commander.update_state(
+            VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
+        )
+        if self.frames == 0 and self.setup.autostart is not None:
+            commander.start_scenario(t, self.setup.autostart)
+        self.frames += 1
+        guidance = commander.step(t, self.dt)
+        output = None
+        if guidance.motors == Motors.FLY:
+            if not self._flying:
+                self.cascade.reset()
+                self._flying = True
+            output = self.cascade.step(est, guidance.reference)
+            controls = output.actuator_controls
+        else:
+            self._flying = False
+            self.cascade.reset()
+            controls = (0.0, 0.0, 0.0, 0.0)
+        self._controls = controls
+        self._frame_done = (frame, guidance, output)
+        return self.actuators.encode(frame.time_usec, controls, commander.armed)
+
+    def _bookkeeping(self, frame, guidance, output) -> None:
+        t = self.sim_time
+        self._update_status(frame, guidance, output)
+        self._record_controller(t, guidance, output)
+        self._send_telemetry(t)
+        self.missions.update(t)  # MISSION_CURRENT, MISSION_ITEM_REACHED
+        self.send_events()
+
+    def _update_status(self, frame, guidance, output) -> None:
+        s, c = self.status, self.commander
+        s.time_usec = frame.time_usec
+        s.state = frame.state
+        s.armed = c.armed
+        s.custom_mode = c.mode.custom_mode
+        s.landed_state = c.landed_state.value
+        if c.home is not None:
+            s.home_local = c.home
+        s.reference = guidance.reference
+        s.controls = self._controls
+        s.armable = not c.armed and not c.in_air()
+        s.geofence_enabled = self.params["GF_MAX_HOR_DIST"] > 0.0 or self.params["GF_MAX_VER_DIST"] > 0.0
+        s.geofence_breached = c.failsafes.fence_breached
+        if output is not None:
+            s.euler_ref = output.euler_ref_rad
+            s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n
+        else:
+            s.euler_ref = (0.0, 0.0, frame.state.euler_rad[2])
+            s.thrust_normalised = 0.0
+
+    def _record_controller(self, t: float, guidance, output) -> None:
+        ref = guidance.reference
+        if ref is not None:
+            p, v, a = ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2
+        else:
+            p = v = a = _NAN3
+        if output is not None:
+            eta_d, raw = output.euler_ref_rad, output.roll_pitch_raw_rad
+            u1, tau = output.thrust_n, output.torque_euler_n_m
+        else:
+            eta_d, raw, u1, tau = _NAN3, (math.nan, math.nan), 0.0, (0.0, 0.0, 0.0)
+        c = self.commander
+        self.controller_rows.append(
+            (t, *p, *v, *a, *eta_d, *raw, u1, *tau, float(c.armed), float(c.mode.custom_mode))
+        )
+
+    def _send_telemetry(self, t: float) -> None:
+        cache: dict[int, bytes | None] = {}
+        for link in self.links:
+            if not link.peers:
+                continue
+            for msg_id in link.streams.due(t):
+                if msg_id not in cache:
+                    msg = telemetry.build(msg_id, self.status)
+                    cache[msg_id] = self.encoder.pack(msg) if msg is not None else None
+                data = cache[msg_id]
+                if data is not None:
+                    link.send(data)
+
+    # -- ground stations ------------------------------------------------------------------------
+    def send_events(self) -> None:
+        """The commander's queued events as STATUSTEXT."""
+        for severity, text in self.commander.drain_events():
+            self.statustext(severity, text)
+
+    def statustext(self, severity: int, text: str) -> None:
+        """STATUSTEXT on every link (long texts in 50-byte chunks with one id, as MAVLink 2)."""
+        self.log(f"[t={self.sim_time:8.3f}] {text}")
+        self._statustext_id = (self._statustext_id % 65535) + 1
+        for msg in telemetry.statustext_messages(severity, text, self._statustext_id):
+            data = self.encoder.pack(msg)
+            for link in self.links:
+                link.send(data)
+
+    def _for_us(self, msg) -> bool:
+        return msg.target_system in (0, self.system_id)
+
+    def _on_command(self, msg, link: GcsLink, address: Address) -> None:
+        if not self._for_us(msg) or msg.target_component not in (0, wire.AUTOPILOT_COMPONENT_ID):
+            return
+        request = request_from_message(msg, link, address)
+        self.vehicle_commands.after_ack = None
+        result, reason = self.commands.dispatch(request)
+        if reason and result != m.MAV_RESULT_ACCEPTED:
+            self.log(f"command {request.command} -> result {result}: {reason}")
+        link.send_to(self.encoder.pack(command_ack(request, result)), address)
+        if self.vehicle_commands.after_ack is not None:  # a requested message, after its ACK (PX4)
+            link.send_to(self.vehicle_commands.after_ack, address)
+            self.vehicle_commands.after_ack = None
+        self.send_events()
+
+    def _on_set_mode_message(self, msg, link: GcsLink, address: Address) -> None:
+        if not self._for_us(msg):
+            return
+        mode = FlightMode.from_custom_mode(msg.custom_mode)
+        if mode is not None:
+            self.commander.set_mode(self.sim_time, mode)
+            self.send_events()
+
+    def _on_setpoint(self, msg, link: GcsLink, address: Address) -> None:
+        state = self.commander.state
+        if not self._for_us(msg) or state is None:
+            return
+        ref = self.commander.last_reference
+        ref_pos = ref.position_m if ref is not None else state.position_m
+        setpoint, reason = decode_setpoint(msg, self.sim_time, state.position_m, state.euler_rad[2], ref_pos)
+        if setpoint is None:
+            self.statustext(m.MAV_SEVERITY_WARNING, f"setpoint refused: {reason}")
+            return
+        self.commander.offboard_setpoint(setpoint)
+
+    def _on_gcs_heartbeat(self, msg, link: GcsLink, address: Address) -> None:
+        if msg.type != m.MAV_TYPE_GCS:
+            return  # another vehicle or an onboard component: only ground stations count (link loss)
+        link.last_heartbeat_s = self.sim_time
+        self.commander.gcs_heartbeat(self.sim_time)
+        self.send_events()
+
+    def _on_timesync(self, msg, link: GcsLink, address: Address) -> None:
+        if msg.tc1 == 0:  # a request: answer with our (simulation) clock in ns
+            reply = m.MAVLink_timesync_message(int(self.sim_time * 1e9), msg.ts1)
+            link.send_to(self.encoder.pack(reply), address)
+
+    def _on_param_change(self, name: str, value: float) -> None:
+        """Gains take effect between two control steps (this runs between frames), no jump in
+        the integral action (Cascade.retune)."""
+        if name in self._gain_names:
+            try:
+                self.cascade.retune(controller_config_from_params(self.setup.controller, self.params))
+            except ValueError as exc:  # not reachable with the declared parameters; never crash
+                self.statustext(m.MAV_SEVERITY_CRITICAL, f"retune failed: {exc}")
+        if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_")):
+            for problem in consistency_problems(self.params):
+                self.statustext(
+                    m.MAV_SEVERITY_WARNING, f"parameters inconsistent (arming refused): {problem}"
+                )
+
+    # -- wall-clock housekeeping ----------------------------------------------------------------
+    def _housekeeping(self, now: float) -> None:
+        self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
+        self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
+        sim_loss_s = self.params["COM_SIM_LOSS_T"]
+        if self.linked and now - self.last_frame_wall <= sim_loss_s:
+            return
+        if self.linked and not self.sim_lost:
+            self.sim_lost = True
+            self._flying = False
+            self.commander.simulator_lost()  # no position: arming refused until frames resume
+            self.statustext(
+                m.MAV_SEVERITY_CRITICAL,
+                f"simulator lost: no sensor frame for {sim_loss_s:g} s (COM_SIM_LOSS_T); motors off",
+            )
+        if now >= self._next_wall_heartbeat:  # no frames: ground stations still see the vehicle
+            self._next_wall_heartbeat = now + WALL_HEARTBEAT_S
+            heartbeat = self.encoder.pack(telemetry.heartbeat(self.status))
+            sys_status = self.encoder.pack(telemetry.sys_status(self.status))
+            for link in self.links:
+                link.send(heartbeat)
+                link.send(sys_status)
+            self.missions.update(self.sim_time, force=True)
+        if now >= self._next_hil_hello:
+            # Say hello until frames flow: a (re)started simulator learns our address from it.
+            self._next_hil_hello = now + HIL_HELLO_S
+            self._out.append(Outgoing(HIL_LINK, None, self.encoder.pack(telemetry.heartbeat(self.status))))

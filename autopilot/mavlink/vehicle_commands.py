@@ -1,0 +1,117 @@
+"""The vehicle's MAV_CMDs (arming, takeoff, land, RTL, modes, message requests): wire -> commander.
+
+Each handler reads a :class:`~.commands.CommandRequest` as PX4 does and returns
+``(MAV_RESULT, reason)``; the dispatcher answers every command with a COMMAND_ACK. A message a
+command asks for (REQUEST_MESSAGE, GET_HOME_POSITION, AUTOPILOT_CAPABILITIES) is left in
+:attr:`VehicleCommands.after_ack` for the core to send right after the ACK, as PX4 does.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from ..commander.modes import FlightMode
+from . import telemetry
+from .codec import mavlink as m
+from .commands import CommandDispatcher, CommandRequest
+
+if TYPE_CHECKING:
+    from ..core import AutopilotCore
+
+FORCE_MAGIC = 21196  # param2 of ARM_DISARM that forces arming/disarming (PX4, MAVLink)
+UNDERGROUND_MARGIN_M = 10.0  # a takeoff "AMSL" this far below home is read as a height above home
+VERSION_1_0_0 = 0x01000000 | 0xFF  # major.minor.patch, FIRMWARE_VERSION_TYPE_OFFICIAL
+CAPABILITIES = (
+    m.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | m.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | m.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | m.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | m.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    | m.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | m.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+
+Result = tuple[int, str]
+
+
+class VehicleCommands:
+    def __init__(self, core: AutopilotCore) -> None:
+        self.core = core
+        self.after_ack: bytes | None = None
+
+    def register(self, commands: CommandDispatcher) -> None:
+        c = self.core.commander
+        sim_time = lambda: self.core.sim_time  # noqa: E731
+        commands.register(m.MAV_CMD_COMPONENT_ARM_DISARM, self.arm_disarm)
+        commands.register(m.MAV_CMD_NAV_TAKEOFF, self.takeoff)
+        commands.register(m.MAV_CMD_NAV_LAND, lambda r: c.land(sim_time()))
+        commands.register(m.MAV_CMD_NAV_RETURN_TO_LAUNCH, lambda r: c.return_to_launch(sim_time()))
+        commands.register(m.MAV_CMD_DO_SET_MODE, self.set_mode)
+        commands.register(m.MAV_CMD_SET_MESSAGE_INTERVAL, self.message_interval)
+        commands.register(m.MAV_CMD_REQUEST_MESSAGE, lambda r: self.send_requested(r, int(r.params[0])))
+        commands.register(
+            m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+            lambda r: self.send_requested(r, m.MAVLINK_MSG_ID_AUTOPILOT_VERSION),
+        )
+        commands.register(
+            m.MAV_CMD_GET_HOME_POSITION, lambda r: self.send_requested(r, m.MAVLINK_MSG_ID_HOME_POSITION)
+        )
+
+    def arm_disarm(self, r: CommandRequest) -> Result:
+        # MAVSDK sends param2 = NaN ("unset") with a plain arm; only 21196 means force.
+        force = r.params[1] == FORCE_MAGIC
+        commander, t = self.core.commander, self.core.sim_time
+        if r.params[0] >= 0.5:
+            return commander.arm(t, force)
+        return commander.disarm(t, force)
+
+    def takeoff(self, r: CommandRequest) -> Result:
+        """param7 is the altitude AMSL (PX4); NaN or 0 means MIS_TAKEOFF_ALT above home.
+
+        A value that would lie underground as AMSL (below the home altitude minus 10 m) is read as
+        a height above home instead: that is what ArduPilot-style clients (MAVProxy's ``takeoff
+        5``) send.
+        """
+        core = self.core
+        commander, t = core.commander, core.sim_time
+        altitude = r.params[6]
+        if not math.isfinite(altitude) or altitude == 0.0:
+            return commander.takeoff(t, None)
+        home_z = commander.home[2] if commander.home else 0.0
+        home_amsl = core.setup.sitl.home[2] + home_z
+        if altitude >= home_amsl - UNDERGROUND_MARGIN_M:
+            return commander.takeoff(t, altitude - home_amsl)
+        return commander.takeoff(t, altitude)
+
+    def set_mode(self, r: CommandRequest) -> Result:
+        base_mode = int(r.params[0])
+        if not base_mode & m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return m.MAV_RESULT_DENIED, "DO_SET_MODE needs MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (PX4 modes)"
+        mode = FlightMode.from_px4(int(r.params[1]), int(r.params[2]))
+        if mode is None:
+            return m.MAV_RESULT_DENIED, f"mode main={int(r.params[1])} sub={int(r.params[2])} not available"
+        return self.core.commander.set_mode(self.core.sim_time, mode)
+
+    def message_interval(self, r: CommandRequest) -> Result:
+        msg_id = int(r.params[0])
+        if r.link.streams.set_interval_us(msg_id, r.params[1], self.core.sim_time):
+            return m.MAV_RESULT_ACCEPTED, ""
+        return m.MAV_RESULT_DENIED, f"no stream for message {msg_id}"
+
+    def send_requested(self, r: CommandRequest, msg_id: int) -> Result:
+        core = self.core
+        if msg_id == m.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            msg = self.autopilot_version()
+        else:
+            msg = telemetry.build(msg_id, core.status)
+        if msg is None:
+            return m.MAV_RESULT_UNSUPPORTED, f"message {msg_id} cannot be sent"
+        self.after_ack = core.encoder.pack(msg)
+        return m.MAV_RESULT_ACCEPTED, ""
+
+    def autopilot_version(self):
+        uid = 0x5153000000000000 | self.core.system_id
+        return m.MAVLink_autopilot_version_message(
+            CAPABILITIES, VERSION_1_0_0, VERSION_1_0_0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid, [0] * 18
+        )

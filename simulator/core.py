@@ -1,0 +1,291 @@
+"""The whole simulator as a step machine: the plant's side of lockstep, without sockets or clocks.
+
+:class:`SimulatorCore` owns simulation time, the coupled plant, the disturbance schedule (and
+uploads to it), the sensor models, the frame encoder, the answer decoder and the emergency descent
+flown when the autopilot is lost. One lockstep period is two calls:
+
+1. :meth:`~SimulatorCore.begin_frame` ``() -> datagram``: the truth and sensor readings at the
+   frame's time ``t = k / control_hz`` as ONE datagram (HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY,
+   and HIL_GPS at the GPS rate, all stamped ``time_usec = round(k * 1e6 / control_hz)``); the
+   frame's truth row (with the disturbance applied at ``t``) is :attr:`~SimulatorCore.truth_row`;
+2. :meth:`~SimulatorCore.end_frame` ``(answer)``: apply the autopilot's HIL_ACTUATOR_CONTROLS for
+   that frame (zero unless armed, consistent and finite) or, while the autopilot is lost, the
+   emergency descent; then step the plant ``physics_hz / control_hz`` times by RK4, evaluating the
+   disturbance at every physics step.
+
+Between the two, whoever couples the core to an autopilot delivers the datagram and finds the
+answer (:meth:`~SimulatorCore.answer_to_frame` picks it out of any datagram): the simulator
+process over UDP with a wall-clock timeout and pacing (:mod:`simulator.app`), the in-process
+runner by calling the autopilot's core directly (:mod:`sitl.inprocess`). That is the one
+lockstep loop; both paths run it, so their trajectories are identical.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from quadcommon import wire
+from quadcommon.config import (
+    ScenarioConfig,
+    SitlConfig,
+    VehicleConfig,
+    apply_uncertainty,
+    load_scenario,
+    load_sitl,
+    load_vehicle,
+)
+
+from .dynamics.plant import make_plant
+from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
+from .environment.gust_upload import handle_gust_request
+from .mavlink.hil import ActuatorAnswer, ActuatorDecoder, HilFrameEncoder
+from .safety import MOTORS_OFF, emergency_descent, touched_down
+from .sensors import SensorConfig, SensorSuite, load_sensors
+from .truth_bus import truth_row
+
+Controls = tuple[float, float, float, float]
+
+
+class PlantDiverged(RuntimeError):
+    """The plant's state is no longer finite (the closed loop blew up)."""
+
+
+@dataclass(frozen=True)
+class SimulatorSetup:
+    """What one simulator is: configuration loaded and validated, nothing running."""
+
+    sitl: SitlConfig
+    scenario: ScenarioConfig
+    vehicle: VehicleConfig
+    sensors: SensorConfig
+    gusts: GustProfile  # applied from t = 0
+    instance: int = 0
+    nominal_plant: bool = False  # fly the Section II model (checks of the controllers' assumptions)
+
+    @classmethod
+    def load(
+        cls,
+        instance: int = 0,
+        scenario: str = "hover",
+        vehicle: str | None = None,
+        sitl_config: str | None = None,
+        sensors: str = "default",
+    ) -> SimulatorSetup:
+        """By names (config/...), as the command line gives them; ConfigError names file and key."""
+        scen = load_scenario(scenario)
+        return cls(
+            load_sitl(sitl_config), scen, load_vehicle(vehicle or scen.vehicle), load_sensors(sensors),
+            load_gust_profile(scen.gusts), instance,
+        )  # fmt: skip
+
+
+class SimulatorCore:
+    def __init__(self, setup: SimulatorSetup, log: Callable[[str], None] = lambda text: None) -> None:
+        self.setup = setup
+        self.log = log
+        rates = setup.sitl.rates
+        self.control_hz = rates.control_hz
+        self.physics_hz = rates.physics_hz
+        self.substeps = rates.physics_steps_per_control
+        self.dt_control = 1.0 / rates.control_hz
+        self.dt_physics = self.dt_control / self.substeps
+        self.usec_per_frame = 1e6 / rates.control_hz
+        self.gps_every = max(1, round(rates.control_hz / rates.gps_hz))
+        vehicle = setup.vehicle
+        self.wrench = vehicle.actuation.mode == "wrench"
+        self.plant_vehicle = apply_uncertainty(vehicle, setup.scenario)  # what is flown
+        if setup.nominal_plant:
+            self.plant_vehicle = as_nominal(self.plant_vehicle)
+        self.plant = make_plant(self.plant_vehicle, self.dt_physics)
+        self.plant.reset(setup.scenario.initial_position_m, setup.scenario.initial_euler_rad)
+        self.schedule = self._new_schedule(setup.gusts, 0.0)
+        self._pending_schedule: DisturbanceSchedule | None = None
+        self.sensors = SensorSuite(setup.sensors, setup.sitl.home[2])
+        self.encoder = HilFrameEncoder(wire.system_id(setup.instance), setup.sitl.home)
+        self.decoder = ActuatorDecoder()
+        self.k = 0  # the frame being flown
+        self.time_usec = 0
+        self.truth_row: tuple[float, ...] = ()
+        self.warnings: list[str] = []  # once each: for the shell's stderr
+        self._warned: set[str] = set()
+        # Autopilot lost: the emergency descent.
+        self.emergency = False
+        self.emergency_landed = False  # motors off for the rest of the outage
+        self._armed = False  # the armed bit of the last applied answer
+        self._lost_usec = 0  # the frame that was not answered
+
+    @property
+    def t(self) -> float:
+        """Simulation time of the current frame (s)."""
+        return self.k * self.dt_control
+
+    # -- the lockstep period --------------------------------------------------------------------
+    def begin_frame(self) -> bytes:
+        """Frame ``k``'s datagram; also sets :attr:`truth_row`. Raises PlantDiverged."""
+        if self._pending_schedule is not None:
+            self.schedule, self._pending_schedule = self._pending_schedule, None
+        k, t = self.k, self.k * self.dt_control
+        self.time_usec = time_usec = round(k * self.usec_per_frame)
+        truth = self.plant.truth()
+        p = truth.position_m
+        if not math.isfinite(p[0] + p[1] + p[2]):
+            raise PlantDiverged(f"the plant state is not finite at t={t:.3f} s")
+        force, torque, wind = self.schedule.evaluate(t)
+        sensors = self.sensors
+        gps = sensors.sample_gps(truth) if k % self.gps_every == 0 else None
+        self.truth_row = truth_row(t, truth, force, torque, wind)
+        return self.encoder.encode(time_usec, truth, sensors.sample(truth), wind, gps)
+
+    def answer_to_frame(self, datagram: bytes) -> ActuatorAnswer | None:
+        """The HIL_ACTUATOR_CONTROLS for the current frame in ``datagram``, else None (a heartbeat,
+        a late answer to an earlier frame, garbage)."""
+        answer = self.decoder.decode(datagram)
+        return answer if answer is not None and answer.time_usec == self.time_usec else None
+
+    def end_frame(self, answer: ActuatorAnswer | None) -> None:
+        """Apply ``answer`` (None: the emergency descent, while lost) and step the plant."""
+        plant = self.plant
+        if self.emergency or answer is None:
+            plant.set_actuator_controls(self._emergency_controls())
+        else:
+            plant.set_actuator_controls(self._controls(answer))
+        t, dt, evaluate = self.t, self.dt_physics, self.schedule.evaluate
+        for j in range(self.substeps):
+            force, torque, wind = evaluate(t + j * dt)
+            plant.set_disturbance(force, torque, wind)
+            plant.step()
+        self.k += 1
+
+    def _controls(self, answer: ActuatorAnswer) -> Controls:
+        """Zero unless armed, consistent with our actuation and finite."""
+        self._armed = answer.armed
+        if answer.wrench != self.wrench:
+            mode = "wrench" if answer.wrench else "rotors"
+            v = self.setup.vehicle
+            self._warn_once(
+                "actuation",
+                f"refusing HIL_ACTUATOR_CONTROLS: their flags say actuation '{mode}' but vehicle "
+                f"'{v.name}' has actuation '{v.actuation.mode}'; motors off. "
+                "Start both processes with the same --vehicle.",
+            )
+            return MOTORS_OFF
+        if not answer.lockstep:
+            self._warn_once("lockstep", "HIL_ACTUATOR_CONTROLS without the lockstep flag (bit 0); accepted")
+        if not answer.armed:
+            return MOTORS_OFF
+        c = answer.controls
+        if not math.isfinite(c[0] + c[1] + c[2] + c[3]):
+            self._warn_once("finite", f"non-finite actuator controls {c}; motors off for those frames")
+            return MOTORS_OFF
+        return c
+
+    def _warn_once(self, key: str, text: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            self.warnings.append(text)
+
+    # -- autopilot lost -------------------------------------------------------------------------
+    def autopilot_lost(self) -> None:
+        """The current frame got no answer in time: fly the emergency descent from now on."""
+        self.emergency = True
+        self._lost_usec = self.time_usec
+        truth = self.plant.truth()
+        if not self._armed or touched_down(truth):
+            self.emergency_landed = True
+            what = "disarmed" if not self._armed else "on the ground"
+            self.log(f"autopilot lost: vehicle {what}, motors off; waiting for the autopilot to answer again")
+        else:
+            self.emergency_landed = False
+            self.log(
+                f"autopilot lost: emergency descent from z={truth.position_m[2]:.2f} m at 0.5 m/s "
+                "(levelled; motors off on touchdown); waiting for the autopilot to answer again"
+            )
+
+    def answers_again(self, datagram: bytes) -> bool:
+        """While lost: True if ``datagram`` answers the missed frame or a later one (the autopilot
+        may be catching up on queued frames); lockstep then resumes from the next frame."""
+        answer = self.decoder.decode(datagram)
+        if answer is None or answer.time_usec < self._lost_usec:
+            return False
+        self.emergency = self.emergency_landed = False
+        self.log(f"link recovered: the autopilot answers again; resuming lockstep at t={self.t:.3f} s")
+        return True
+
+    def _emergency_controls(self) -> Controls:
+        if self.emergency_landed:
+            return MOTORS_OFF
+        truth = self.plant.truth()
+        if touched_down(truth):
+            self.emergency_landed = True
+            self.log(f"emergency descent: touchdown at t={self.t:.3f} s, motors off")
+            return MOTORS_OFF
+        return emergency_descent(truth, self.plant_vehicle).controls
+
+    # -- gusts ----------------------------------------------------------------------------------
+    def schedule_gust_profile(self, profile: GustProfile, start_time_s: float) -> None:
+        """Replace the disturbance schedule by ``profile`` from ``start_time_s`` (s, simulation).
+
+        Takes effect at the next frame boundary, so a frame's truth row and its physics steps
+        always see one schedule.
+        """
+        self._pending_schedule = self._new_schedule(profile, start_time_s)
+        self.log(f"gust profile uploaded: applies from t={start_time_s:.3f} s")
+
+    def upload_gusts(self, payload: bytes) -> tuple[bool, bytes]:
+        """A gust-profile upload request (``quadsitl/<N>/sim/gusts``, JSON; protocol in
+        :mod:`.environment.gust_upload`): validated, installed from its start time; the reply says
+        accepted with the absolute start time (and a warning for wind without drag), or why not."""
+        ok, reply, profile, start_s = handle_gust_request(payload, self.t, self.dt_physics)
+        if not ok:
+            return False, reply
+        self.schedule_gust_profile(profile, start_s)  # type: ignore[arg-type]
+        note = self.wind_warning(profile)  # type: ignore[arg-type]
+        if note:
+            reply = json.dumps({**json.loads(reply), "warning": note}).encode()
+        return True, reply
+
+    def wind_warning(self, profile: GustProfile) -> str | None:
+        """Wind acts through drag only: say so when this vehicle has none."""
+        has_wind = bool(profile.one_minus_cosine) or profile.dryden is not None
+        vehicle = self.setup.vehicle
+        if has_wind and not any(vehicle.plant.drag_coefficient_n_s_m):
+            return (
+                f"vehicle '{vehicle.name}' has zero drag (plant.drag_coefficient_n_s_m), so wind "
+                "gusts and turbulence have no effect; use a vehicle with drag, e.g. paper_quad_drag"
+            )
+        return None
+
+    def _new_schedule(self, profile: GustProfile, start_time_s: float) -> DisturbanceSchedule:
+        """The one place schedules are built: evaluated at every physics step, in non-decreasing
+        time (the Dryden turbulence samples at ``step_s`` and only runs forward)."""
+        return DisturbanceSchedule(profile, start_time_s, step_s=self.dt_physics)
+
+    def info(self) -> dict[str, Any]:
+        """What ``quadsitl/<N>/info`` answers (the shell adds its speed)."""
+        setup = self.setup
+        return {
+            "instance": setup.instance,
+            "vehicle": setup.vehicle.name,
+            "scenario": setup.scenario.name,
+            "actuation": setup.vehicle.actuation.mode,
+            "physics_hz": self.physics_hz,
+            "control_hz": self.control_hz,
+            "sim_time_s": self.t,
+        }
+
+
+def as_nominal(vehicle: VehicleConfig) -> VehicleConfig:
+    """The vehicle flown as the Section II model: no CoM offset, no crossed inertia, wrench."""
+    from dataclasses import replace
+
+    plant = replace(
+        vehicle.plant,
+        model="nominal",
+        com_offset_m=(0.0, 0.0, 0.0),
+        products_of_inertia_kg_m2=(0.0, 0.0, 0.0),
+    )
+    return replace(vehicle, plant=plant, actuation=replace(vehicle.actuation, mode="wrench"))
