@@ -71,10 +71,16 @@ class FastDecoder:
         self.unpacker = message_class.unpacker
         self.size = self.unpacker.size
         self.crc_extra = message_class.crc_extra
+        self._crc_extra = bytes((message_class.crc_extra,))
         self.slices = _flat_slices(message_class)  # where each field sits in unpack()'s tuple
 
     def unpack(self, frame: bytes) -> tuple:
         """The flat field tuple of one complete MAVLink 2 frame (CRC checked)."""
+        return self.unpacker.unpack_from(self.payload(frame))
+
+    def payload(self, frame: bytes) -> bytes:
+        """The checked payload of one complete MAVLink 2 frame, zero-padded to the full size (for
+        callers that unpack only the fields they need, with their own ``struct``)."""
         if len(frame) < _HEADER_LEN + 2 or frame[0] != _STX_V2:
             raise DecodeError("not a MAVLink 2 frame")
         length = frame[1]
@@ -85,14 +91,12 @@ class FastDecoder:
         msg_id = frame[7] | frame[8] << 8 | frame[9] << 16
         if msg_id != self.msg_id:
             raise DecodeError(f"message id {msg_id}, expected {self.msg_id}")
-        crc = mavlink.x25crc(frame[1:end])
-        crc.accumulate(bytes((self.crc_extra,)))
-        if crc.crc != frame[end] | frame[end + 1] << 8:
+        if _crc(frame[1:end] + self._crc_extra, 0xFFFF) != frame[end] | frame[end + 1] << 8:
             raise DecodeError(f"bad CRC in message {msg_id}")
         payload = frame[_HEADER_LEN:end]
         if length < self.size:  # MAVLink 2 drops trailing zero bytes: put them back
             payload = payload + bytes(self.size - length)
-        return self.unpacker.unpack_from(payload)
+        return payload
 
 
 def _flat_slices(message_class) -> dict[str, int | slice]:

@@ -174,38 +174,34 @@ def coriolis_times(inertia: Vector3, eta: Vector3, eta_dot: Vector3, v: Vector3)
 
 
 def coriolis_matrix_fast(inertia: Vector3, eta: Vector3, eta_dot: Vector3) -> Matrix3:
-    """``C(eta, eta_dot)`` of eq. (6), written out for the per-step path.
+    """``C(eta, eta_dot)`` of eq. (6), written out entry by entry for the per-step path.
 
-    Only dM/dphi and dM/dtheta are non-zero, so with ``Mdot = Pf a0 + Pt a1`` and
-    ``Pf``, ``Pt`` those partials, eq. (6) reads
-    ``c_kj = 1/2 [Mdot_kj + (Pf a)_k [j=0] + (Pt a)_k [j=1] - (Pf a)_j [k=0] - (Pt a)_j [k=1]]``.
-    :func:`coriolis_matrix` is the literal sum over Christoffel symbols it is tested against.
+    Only dM/dphi (entries p22, p23, p33) and dM/dtheta (t13, t23, t33) are non-zero (see
+    :func:`inertia_matrix_partials`); with ``Mdot = Pf a0 + Pt a1``, ``fa = Pf a``, ``ta = Pt a``
+    (a = eta_dot), eq. (6) reads ``c_kj = 1/2 [Mdot_kj + fa_k [j=0] + ta_k [j=1] - fa_j [k=0] -
+    ta_j [k=1]]``, expanded below. :func:`coriolis_matrix` is the literal sum over Christoffel
+    symbols it is tested against.
     """
-    Pf, Pt = inertia_matrix_partials(inertia, eta[0], eta[1])
+    Ixx, Iyy, Izz = inertia
+    phi, theta = eta[0], eta[1]
+    sf, cf = math.sin(phi), math.cos(phi)
+    st, ct = math.sin(theta), math.cos(theta)
+    d = Iyy - Izz
+    p22 = -2.0 * d * sf * cf
+    p23 = d * (cf * cf - sf * sf) * ct
+    p33 = 2.0 * d * sf * cf * ct * ct
+    t13 = -Ixx * ct
+    t23 = -d * sf * cf * st
+    t33 = 2.0 * st * ct * (Ixx - Iyy * sf * sf - Izz * cf * cf)
     a0, a1, a2 = eta_dot
-    # (Pf a) and (Pt a): partials times eta_dot.
-    fa = (
-        Pf[0][0] * a0 + Pf[0][1] * a1 + Pf[0][2] * a2,
-        Pf[1][0] * a0 + Pf[1][1] * a1 + Pf[1][2] * a2,
-        Pf[2][0] * a0 + Pf[2][1] * a1 + Pf[2][2] * a2,
+    fa1, fa2 = p22 * a1 + p23 * a2, p23 * a1 + p33 * a2
+    ta0, ta2 = t13 * a2, t13 * a0 + t23 * a1 + t33 * a2
+    m12 = p23 * a0 + t23 * a1  # Mdot_12 = Mdot_21
+    return (
+        (0.0, 0.5 * (ta0 - fa1), 0.5 * (t13 * a1 - fa2)),
+        (0.5 * (fa1 - ta0), 0.5 * p22 * a0, 0.5 * (m12 - ta2)),
+        (0.5 * (t13 * a1 + fa2), 0.5 * (m12 + ta2), 0.5 * (p33 * a0 + t33 * a1)),
     )
-    ta = (
-        Pt[0][0] * a0 + Pt[0][1] * a1 + Pt[0][2] * a2,
-        Pt[1][0] * a0 + Pt[1][1] * a1 + Pt[1][2] * a2,
-        Pt[2][0] * a0 + Pt[2][1] * a1 + Pt[2][2] * a2,
-    )
-    rows = []
-    for k in range(3):
-        pk, tk = Pf[k], Pt[k]
-        row = [pk[j] * a0 + tk[j] * a1 for j in range(3)]  # Mdot_kj
-        row[0] += fa[k]
-        row[1] += ta[k]
-        if k == 0:
-            row = [row[j] - fa[j] for j in range(3)]
-        elif k == 1:
-            row = [row[j] - ta[j] for j in range(3)]
-        rows.append((0.5 * row[0], 0.5 * row[1], 0.5 * row[2]))
-    return (rows[0], rows[1], rows[2])
 
 
 def matrix_times(A: Matrix3, v: Vector3) -> Vector3:

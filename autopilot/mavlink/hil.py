@@ -8,10 +8,11 @@ HIL_STATE_QUATERNION (position quantised to 1e-7 deg ~ 1 cm, velocity to 1 cm/s)
 
 from __future__ import annotations
 
+import struct
 from typing import NamedTuple
 
 from quadcommon import frames, wire
-from quadcommon.mavlink_fast import FastDecoder, split_frames
+from quadcommon.mavlink_fast import FastDecoder, FastEncoder, split_frames
 from quadcommon.rigid_body import (
     euler_from_quaternion,
     euler_rates_from_body_rates,
@@ -37,7 +38,10 @@ class Frame(NamedTuple):
 
 
 _ODOMETRY = FastDecoder(mavlink.MAVLink_odometry_message)
-_O = _ODOMETRY.slices
+# What the controllers need of ODOMETRY, in wire order: time_usec, x, y, z, q[4], vx, vy, vz, the
+# three rates (the first 60 bytes), then child_frame_id after the two covariance arrays.
+_ODOMETRY_STATE = struct.Struct("<Q13f")
+_ODOMETRY_CHILD_FRAME = 8 + 4 * (13 + 21 + 21) + 1
 
 
 def decode_frame(
@@ -52,15 +56,12 @@ def decode_frame(
     parts = dict(split_frames(datagram))
     raw = parts.get(_ID_ODOMETRY)
     if raw is not None and (use_odometry or _ID_STATE not in parts):
-        v = _ODOMETRY.unpack(raw)
+        payload = _ODOMETRY.payload(raw)
+        t, x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r = _ODOMETRY_STATE.unpack_from(payload)
         state = state_from_odometry_fields(
-            v[_O["q"]],
-            (v[_O["x"]], v[_O["y"]], v[_O["z"]]),
-            (v[_O["vx"]], v[_O["vy"]], v[_O["vz"]]),
-            (v[_O["rollspeed"]], v[_O["pitchspeed"]], v[_O["yawspeed"]]),
-            v[_O["child_frame_id"]],
+            (qw, qx, qy, qz), (x, y, z), (vx, vy, vz), (p, q, r), payload[_ODOMETRY_CHILD_FRAME]
         )
-        return Frame(v[_O["time_usec"]], state, None, None)
+        return Frame(t, state, None, None)
     raw = parts.get(_ID_STATE)
     if raw is None:
         return None
@@ -112,15 +113,25 @@ def state_from_hil_state(msg, home: tuple[float, float, float]) -> StateEstimate
 
 
 class ActuatorEncoder:
-    """HIL_ACTUATOR_CONTROLS for one lockstep answer."""
+    """HIL_ACTUATOR_CONTROLS for one lockstep answer (a FastEncoder: on the critical path), with
+    the sequence numbers of the autopilot's one encoder."""
 
     def __init__(self, encoder: Encoder, wrench: bool) -> None:
+        mav = encoder.mav
         self.encoder = encoder
-        self.flags = wire.HIL_FLAG_LOCKSTEP | (wire.HIL_FLAG_WRENCH if wrench else 0)
-        self._zeros = [0.0] * 12
+        message = mavlink.MAVLink_hil_actuator_controls_message
+        self._fast = FastEncoder(message, mav.srcSystem, mav.srcComponent)
+        slices = self._fast.slices
+        self._time, self._controls, self._mode = slices["time_usec"], slices["controls"], slices["mode"]
+        self._fast.values[slices["flags"]] = wire.HIL_FLAG_LOCKSTEP | (wire.HIL_FLAG_WRENCH if wrench else 0)
+        self._zeros = [0.0] * 16
 
     def encode(self, time_usec: int, controls: tuple[float, ...], armed: bool) -> bytes:
-        mode = _CUSTOM | (_ARMED if armed else 0)
-        values = [*controls[:4], *self._zeros] if armed else [0.0] * 16
-        msg = mavlink.MAVLink_hil_actuator_controls_message(time_usec, values, mode, self.flags)
-        return self.encoder.pack(msg)
+        v = self._fast.values
+        v[self._time] = time_usec
+        v[self._mode] = _CUSTOM | (_ARMED if armed else 0)
+        v[self._controls] = [*controls[:4], *self._zeros[4:]] if armed else self._zeros
+        mav = self.encoder.mav
+        data = self._fast.frame(mav.seq)
+        mav.seq = (mav.seq + 1) % 256
+        return data

@@ -151,12 +151,7 @@ class MissionService:
 
     def current_message(self):
         """MISSION_CURRENT now."""
-        mission = self.commander.mission
-        if mission is None:
-            return m.MAVLink_mission_current_message(0, NO_MISSION_TOTAL, MissionState.NO_MISSION, 0)
-        in_mission = self.commander.mode == FlightMode.AUTO_MISSION
-        mode = MISSION_MODE_ACTIVE if in_mission else MISSION_MODE_SUSPENDED
-        return m.MAVLink_mission_current_message(mission.current_seq, mission.count, int(mission.state), mode)
+        return m.MAVLink_mission_current_message(*self._current_key())
 
     def update(self, t: float, force: bool = False) -> None:
         """Send MISSION_ITEM_REACHED for newly reached items, and MISSION_CURRENT when it changed
@@ -165,12 +160,20 @@ class MissionService:
         if mission is not None:
             for seq in mission.drain_reached():
                 self._broadcast(m.MAVLink_mission_item_reached_message(seq))
-        msg = self.current_message()
-        key = (msg.seq, msg.total, msg.mission_state, msg.mission_mode)
+        key = self._current_key()
         if force or key != self._last_current or t >= self._next_current_s:
             self._last_current = key
             self._next_current_s = t + CURRENT_INTERVAL_S
-            self._broadcast(msg)
+            self._broadcast(self.current_message())
+
+    def _current_key(self) -> tuple[int, int, int, int]:
+        """What MISSION_CURRENT would say now (compared every frame: no message built for it)."""
+        mission = self.commander.mission
+        if mission is None:
+            return (0, NO_MISSION_TOTAL, int(MissionState.NO_MISSION), 0)
+        active = self.commander.mode == FlightMode.AUTO_MISSION
+        mode = MISSION_MODE_ACTIVE if active else MISSION_MODE_SUSPENDED
+        return (mission.current_seq, mission.count, int(mission.state), mode)
 
     def _broadcast(self, msg) -> None:
         data = self.encoder.pack(msg)

@@ -92,6 +92,8 @@ class Plant:
         self.inertia = ((Ixx, -Ixy, -Ixz), (-Ixy, Iyy, -Iyz), (-Ixz, -Iyz, Izz))
         self.inertia_inv = _inverse3(self.inertia)
         self.com_offset = plant.com_offset_m
+        # O is |r_G| from G at most: with G higher than this above z = 0, O is in the air.
+        self._ground_reach = math.sqrt(sum(c * c for c in plant.com_offset_m)) + 1e-3
         self.drag = plant.drag_coefficient_n_s_m
         self.ground_contact = plant.ground_contact
         self.thrust_max = act.thrust_max_n
@@ -276,20 +278,20 @@ class Plant:
         s = self.state
         h = self.dt
         h2 = 0.5 * h
+        # (zip without strict=: the lists have the state's length by construction, and the check
+        # doubles the cost of these comprehensions)
         k1 = f(s)
-        k2 = f([a + h2 * b for a, b in zip(s, k1, strict=True)])
-        k3 = f([a + h2 * b for a, b in zip(s, k2, strict=True)])
-        k4 = f([a + h * b for a, b in zip(s, k3, strict=True)])
+        k2 = f([a + h2 * b for a, b in zip(s, k1)])  # noqa: B905
+        k3 = f([a + h2 * b for a, b in zip(s, k2)])  # noqa: B905
+        k4 = f([a + h * b for a, b in zip(s, k3)])  # noqa: B905
         h6 = h / 6.0
-        s = [
-            a + h6 * (b1 + 2.0 * (b2 + b3) + b4) for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4, strict=True)
-        ]
+        s = [a + h6 * (b1 + 2.0 * (b2 + b3) + b4) for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4)]  # noqa: B905
         # Keep the quaternion on the unit sphere (RK4 drifts off it by O(h^5) per step).
         qw, qx, qy, qz = s[6], s[7], s[8], s[9]
         n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
         s[6], s[7], s[8], s[9] = qw * n, qx * n, qy * n, qz * n
         self.state = s
-        if self.ground_contact:
+        if self.ground_contact and s[2] < self._ground_reach:  # O may be at the ground only then
             self._resolve_ground_contact()
 
     def _resolve_ground_contact(self) -> None:
@@ -344,30 +346,36 @@ class Plant:
         )
 
     def truth(self) -> TruthState:
-        """Ground truth now (one extra derivative evaluation gives the accelerations)."""
+        """Ground truth now (one extra derivative evaluation gives the accelerations).
+
+        Written out component by component: it runs once per frame, on the lockstep path."""
         s = self.state
         ds = self._derivative(s)
         q = (s[6], s[7], s[8], s[9])
-        R = rotation_from_quaternion(*q)
+        (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = rotation_from_quaternion(*q)
         rx, ry, rz = self.com_offset
-        w = (s[10], s[11], s[12])
-        dw = (ds[10], ds[11], ds[12])
-        wxr = _cross(w, self.com_offset)
-        # a_O = a_G - R (w_dot x r + w x (w x r))
-        acc_rel = tuple(a + b for a, b in zip(_cross(dw, self.com_offset), _cross(w, wxr), strict=True))
-        Rr = _rotate(R, (rx, ry, rz))
-        Rwxr = _rotate(R, wxr)
-        Racc = _rotate(R, acc_rel)
-        pos = (s[0] - Rr[0], s[1] - Rr[1], s[2] - Rr[2])
-        vel = (s[3] - Rwxr[0], s[4] - Rwxr[1], s[5] - Rwxr[2])
-        acc = (ds[3] - Racc[0], ds[4] - Racc[1], ds[5] - Racc[2])
-        on_ground = self.on_ground()
+        p, qr, r = s[10], s[11], s[12]
+        dp, dq, dr = ds[10], ds[11], ds[12]
+        # w x r and (w_dot x r + w x (w x r)): the motion of O relative to G
+        cx, cy, cz = qr * rz - r * ry, r * rx - p * rz, p * ry - qr * rx
+        ax_ = dq * rz - dr * ry + (qr * cz - r * cy)
+        ay_ = dr * rx - dp * rz + (r * cx - p * cz)
+        az_ = dp * ry - dq * rx + (p * cy - qr * cx)
+        pos = (s[0] - (R00 * rx + R01 * ry + R02 * rz), s[1] - (R10 * rx + R11 * ry + R12 * rz),
+               s[2] - (R20 * rx + R21 * ry + R22 * rz))  # fmt: skip
+        vel = (s[3] - (R00 * cx + R01 * cy + R02 * cz), s[4] - (R10 * cx + R11 * cy + R12 * cz),
+               s[5] - (R20 * cx + R21 * cy + R22 * cz))  # fmt: skip
+        on_ground = self.ground_contact and pos[2] <= 1e-6 and abs(s[5]) < 1e-6
         if on_ground:
             acc = ZERO3
-        g = self.gravity
-        f_world = (acc[0], acc[1], acc[2] + g)
-        specific = _rotate_transpose(R, f_world)
-        euler = euler_from_rotation(R)
+        else:
+            acc = (ds[3] - (R00 * ax_ + R01 * ay_ + R02 * az_), ds[4] - (R10 * ax_ + R11 * ay_ + R12 * az_),
+                   ds[5] - (R20 * ax_ + R21 * ay_ + R22 * az_))  # fmt: skip
+        fx, fy, fz = acc[0], acc[1], acc[2] + self.gravity  # specific force, world; into the body: R^T
+        specific = (R00 * fx + R10 * fy + R20 * fz, R01 * fx + R11 * fy + R21 * fz,
+                    R02 * fx + R12 * fy + R22 * fz)  # fmt: skip
+        euler = euler_from_rotation(((R00, R01, R02), (R10, R11, R12), (R20, R21, R22)))
+        w = (p, qr, r)
         if self.rotor_mode:
             speeds = (s[13], s[14], s[15], s[16])
             sq = [x * x for x in speeds]

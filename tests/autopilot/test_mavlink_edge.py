@@ -223,3 +223,15 @@ def test_setpoint_sample_time_comes_from_time_boot_ms_on_our_clock():
     assert at(9_990, 10.0) == pytest.approx(9.99)  # sampled 10 ms before it arrived
     assert at(123_456_789, 10.0) == 10.0  # another clock (e.g. MAVSDK's uptime): arrival time
     assert at(0, 10.0) == 10.0
+
+
+def test_odometry_with_a_body_frame_twist_is_rotated_into_the_world():
+    """child_frame_id BODY_FRD: vx, vy, vz are in the body (MAVLink); the state is world velocity."""
+    enc = Encoder(1, 51)
+    q_ned = frames.quaternion_to_ned(quaternion_from_euler(0.0, 0.0, math.pi / 2))  # nose along +y (left)
+    odo = m.MAVLink_odometry_message(
+        7_000, m.MAV_FRAME_LOCAL_NED, m.MAV_FRAME_BODY_FRD, 0.0, 0.0, -1.0, list(q_ned),
+        2.0, 0.0, 0.0, 0.0, 0.0, 0.0, [math.nan] * 21, [math.nan] * 21, 0, m.MAV_ESTIMATOR_TYPE_MOCAP, 100,
+    )  # fmt: skip
+    frame = decode_frame(enc.pack(odo), new_parser(), HOME)
+    assert frame.state.velocity_m_s == pytest.approx((0.0, 2.0, 0.0), abs=1e-6)  # forward = world +y
