@@ -24,6 +24,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
         controllers=tuple(args.controllers),
         nominal_plant=args.nominal_plant,
         workers=args.workers,
+        duration_s=args.duration,
     )
     print(f"\nwrote {len(result.outputs)} files to {out}/:")
     print(f"  tables:  {out / 'tables.md'}  (+ table1_final_errors.csv, table2_ise.csv, table3_iadu.csv)")
@@ -178,6 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", nargs="+", default=["circle", "helix"])
     p.add_argument("--controllers", nargs="+", default=list(CONTROLLER_NAMES))
     p.add_argument("--workers", type=int, default=2, help="parallel runs (default 2)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="simulated seconds per run (default: the scenario's, 40 s in the paper)")  # fmt: skip
     p.set_defaults(func=_cmd_paper)
 
     p = sub.add_parser("run", help="one in-process run of a scenario")

@@ -33,6 +33,7 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
+from autopilot.commander.modes import FlightMode  # noqa: E402
 from autopilot.control.config import ControllerConfig  # noqa: E402
 from autopilot.core import AutopilotCore, AutopilotSetup  # noqa: E402
 from autopilot.mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing  # noqa: E402
@@ -294,6 +295,58 @@ def run_scenario(
     return flight_record(stack, scenario.name, controller.name, nominal=options.nominal_plant)
 
 
+def fly_mission_experiment(
+    scenario: ScenarioConfig,
+    controller: ControllerConfig,
+    options: RunOptions = RunOptions(),
+    start_time_s: float = 12.0,
+    rate_hz: float = 20.0,
+    margin_s: float = 1.0,
+) -> tuple[FlightRecord, float, Lockstep]:
+    """The paper's experiment as ``gcs_scripts/fly_paper.py`` flies it through the SITL, here on the
+    in-process stack (commander, mission protocol, timed curve, MAVLink encoding and all): the
+    scenario's trajectory uploaded as a timed mission by the upload script's own client (takeoff to
+    p_d(0), the curve from ``start_time_s`` after the mission start, land), the scenario's gust
+    profile anchored at the curve's t0, flown until disarmed. Returns the record over the curve
+    (time 0 = t0, the scenario's duration), t0 and the stack."""
+    import json
+
+    from gcs_scripts import upload_mission
+
+    sitl = load_sitl() if options.rates is None else replace(load_sitl(), rates=options.rates)
+    vehicle = load_vehicle(scenario.vehicle)
+    gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
+    sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors), GustProfile())
+    stack = Lockstep(sim, AutopilotSetup(sitl, vehicle, controller, default_remotes=False))
+    link = upload_mission.MissionLink(StackConnection(stack), 0)
+    link.wait_heartbeat(5.0)
+    trajectory = trajectory_from_spec(scenario.trajectory)
+    duration = options.duration_s if options.duration_s is not None else scenario.duration_s
+    height = trajectory.sample(0.0).position_m[2]
+    items = upload_mission.curve_items(trajectory, duration + margin_s, rate_hz, start_time_s,
+                                       takeoff_altitude_m=height, end="land")  # fmt: skip
+    link.upload(items)
+    link.arm()
+    link.set_mode("AUTO.MISSION")
+    auto_mission = float(FlightMode.AUTO_MISSION.custom_mode)
+    rows = stack.controller_rows
+    started = next(i for i, row in enumerate(rows) if row[-1] == auto_mission)
+    t0 = rows[started - 1][0] + start_time_s  # the executor started on the clock of the frame before
+    request = {"profile": _mapping(gusts), "start": {"at_s": t0}}
+    ok, reply = stack.sim.upload_gusts(json.dumps(request).encode())
+    if not ok:
+        raise RuntimeError(f"gust profile refused: {reply.decode()}")
+    upload_mission.fly(link, items, start_time_s + duration + 120.0)
+    record = flight_record(stack, scenario.name, controller.name).window(t0, t0 + duration, shift=True)
+    return record, t0, stack
+
+
+def _mapping(profile: GustProfile) -> dict:
+    from simulator.environment.gust_profile import profile_to_mapping
+
+    return profile_to_mapping(profile)
+
+
 def flight_record(stack: Lockstep, scenario: str, controller: str, nominal: bool = False) -> FlightRecord:
     """The rows a Lockstep recorded as a FlightRecord (truth joined with the controller's rows)."""
     truth = np.asarray(stack.truth_rows, dtype=float)
@@ -317,7 +370,7 @@ def flight_record(stack: Lockstep, scenario: str, controller: str, nominal: bool
         torque_euler_n_m=cols(ctrl, _C, "tau_phi_n_m", "tau_theta_n_m", "tau_psi_n_m"),
         disturbance_force_n=cols(truth, _T, "Ax_n", "Ay_n", "Az_n"),
         disturbance_torque_n_m=cols(truth, _T, "Ap_n_m", "Aq_n_m", "Ar_n_m"),
-        event_times_s=stack.sim.setup.gusts.event_times(),
+        event_times_s=[stack.sim.schedule.start_time_s + e for e in stack.sim.schedule.profile.event_times()],
         source="in-process (nominal plant)" if nominal else "in-process",
     )
 

@@ -37,12 +37,11 @@ class PaperResults:
     outputs: list[Path]
 
 
-def _run_one(args: tuple[str, str, bool]) -> tuple[str, str, FlightRecord, float]:
-    scenario, controller, nominal = args
+def run_job(args: tuple[str, str, bool, float | None]) -> tuple[str, str, FlightRecord, float]:
+    scenario, controller, nominal, duration = args
     start = time.perf_counter()
-    record = run_scenario(
-        load_scenario(scenario), load_controller(controller), RunOptions(nominal_plant=nominal)
-    )
+    options = RunOptions(nominal_plant=nominal, duration_s=duration)
+    record = run_scenario(load_scenario(scenario), load_controller(controller), options)
     return scenario, controller, record, time.perf_counter() - start
 
 
@@ -53,23 +52,24 @@ def run_paper(
     nominal_plant: bool = False,
     workers: int = 2,
     log=print,
+    duration_s: float | None = None,
 ) -> PaperResults:
     out_dir = Path(out_dir)
     (out_dir / "runs").mkdir(parents=True, exist_ok=True)
-    jobs = [(s, c, nominal_plant) for s in scenarios for c in controllers]
+    jobs = [(s, c, nominal_plant, duration_s) for s in scenarios for c in controllers]
     plant = "nominal Section II model" if nominal_plant else "coupled plant"
     log(f"flying {len(jobs)} runs in-process ({plant}, {workers} worker(s)) ...")
     records: dict[tuple[str, str], FlightRecord] = {}
     started = time.perf_counter()
     if workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            results = pool.map(_run_one, jobs)
+            results = pool.map(run_job, jobs)
             for done, (scenario, controller, record, seconds) in enumerate(results, 1):
                 records[(scenario, controller)] = record
                 _report(log, done, len(jobs), scenario, controller, record, seconds)
     else:
         for done, job in enumerate(jobs, 1):
-            scenario, controller, record, seconds = _run_one(job)
+            scenario, controller, record, seconds = run_job(job)
             records[(scenario, controller)] = record
             _report(log, done, len(jobs), scenario, controller, record, seconds)
     log(f"all runs done in {time.perf_counter() - started:.1f} s; writing tables and figures ...")

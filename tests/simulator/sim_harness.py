@@ -30,7 +30,7 @@ class SimProcess(Child):
         cmd = [sys.executable, "-u", "-m", "simulator", "--instance", str(instance), "--speed", speed, *args]
         super().__init__(f"simulator[{instance}]", cmd)
 
-    def terminate(self, timeout: float = 2.0, sig: int = signal.SIGTERM) -> int:
+    def terminate(self, timeout: float = 10.0, sig: int = signal.SIGTERM) -> int:
         """Send ``sig`` and wait for the exit code (LaunchError if it does not exit in time)."""
         self.signal(sig)
         return self.wait(timeout)

@@ -8,7 +8,8 @@ import pytest
 
 from quadcommon.config import load_vehicle
 from quadcommon.rigid_body import rotation_from_quaternion
-from simulator.dynamics.plant import NominalPlant, Plant
+from simulator.dynamics.nominal_plant import NominalPlant
+from simulator.dynamics.plant import Plant
 
 DT = 0.001
 

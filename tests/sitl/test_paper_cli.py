@@ -7,7 +7,8 @@ from sitl.cli import main
 
 
 def test_paper_command_writes_tables_figures_and_runs(tmp_path, capsys):
-    assert main(["paper", "--out", str(tmp_path), "--workers", "2"]) == 0
+    """The command's outputs, on short runs (the paper's pattern itself: test_inprocess.py)."""
+    assert main(["paper", "--out", str(tmp_path), "--workers", "2", "--duration", "6"]) == 0
     printed = capsys.readouterr().out
     assert "[6/6]" in printed and "tables.md" in printed
     expected_columns = {
@@ -23,7 +24,7 @@ def test_paper_command_writes_tables_figures_and_runs(tmp_path, capsys):
         assert keys == {(s, c) for s in ("circle", "helix") for c in ("intbs_nlhinf", "intbs", "bs_nlhinf")}
     with (tmp_path / "table1_final_errors.csv").open() as handle:
         finals = {(r["scenario"], r["controller"]): r for r in csv.DictReader(handle)}
-    assert all(abs(float(finals[("helix", "intbs_nlhinf")][a])) < 1e-3 for a in "xyz")
+    assert all(abs(float(finals[("helix", "intbs_nlhinf")][a])) < 0.05 for a in "xyz")
     md = (tmp_path / "tables.md").read_text()
     assert "0.0581" in md  # the paper's ISE x for IntBS-NLHinf stands beside ours
     for scenario in ("circle", "helix"):
@@ -32,4 +33,4 @@ def test_paper_command_writes_tables_figures_and_runs(tmp_path, capsys):
             assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     rec = FlightRecord.read_parquet(tmp_path / "runs" / "helix_bs_nlhinf.parquet")
     assert rec.controller == "bs_nlhinf" and rec.scenario == "helix"
-    assert abs(rec.time_s[-1] - 40.0) < 1e-9
+    assert abs(rec.time_s[-1] - 6.0) < 1e-9
