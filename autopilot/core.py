@@ -50,6 +50,7 @@ from .mavlink.hil import ActuatorEncoder, decode_frame
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.offboard import decode_setpoint
 from .mavlink.params import ParamService
+from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
 from .mission.service import MissionService
 from .params.definitions import (
@@ -152,6 +153,7 @@ class AutopilotCore:
         )
         self.links = [GcsLink(GCS_LINK, remotes[0], self._out), GcsLink(API_LINK, remotes[1], self._out)]
         self.faults = FaultLog(log, lambda text: self.statustext(m.MAV_SEVERITY_ERROR, text))
+        self.refusals = RefusalNotices(self.statustext, lambda: self.wall_now)
         self.dispatcher = MessageDispatcher(self.faults)
         self.commands = CommandDispatcher()
         clock = lambda: self.wall_now  # noqa: E731 - the services' wall clock is the caller's
@@ -383,7 +385,13 @@ class AutopilotCore:
             return
         request = request_from_message(msg, link, address)
         self.vehicle_commands.after_ack = None
-        result, reason = self.commands.dispatch(request)
+        known = request.command in self.commands.handlers  # an unknown one is UNSUPPORTED, not DENIED
+        problem = check_command(request.command, request.params) if known else None
+        if problem:
+            result, reason = m.MAV_RESULT_DENIED, f"command {request.command} refused: {problem}"
+            self.refusals(reason)
+        else:
+            result, reason = self.commands.dispatch(request)
         if reason and result != m.MAV_RESULT_ACCEPTED:
             self.log(f"command {request.command} -> result {result}: {reason}")
         link.send_to(self.encoder.pack(command_ack(request, result)), address)
@@ -407,8 +415,12 @@ class AutopilotCore:
         ref = self.commander.last_reference
         ref_pos = ref.position_m if ref is not None else state.position_m
         setpoint, reason = decode_setpoint(msg, self.sim_time, state.position_m, state.euler_rad[2], ref_pos)
+        if setpoint is not None and setpoint.position is not None:
+            home = self.commander.home or (0.0, 0.0, 0.0)
+            reason = reference_problem(setpoint.position, home, self.params.values) or ""
+            setpoint = None if reason else setpoint
         if setpoint is None:
-            self.statustext(m.MAV_SEVERITY_WARNING, f"setpoint refused: {reason}")
+            self.refusals(f"setpoint refused: {reason}")
             return
         self.commander.offboard_setpoint(setpoint)
 

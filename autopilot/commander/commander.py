@@ -526,7 +526,7 @@ class Commander:
         mission = self.mission
         if mission is None or mission.count == 0:
             return self._refuse(DENIED, "AUTO.MISSION refused: no mission loaded")
-        problem = check_mission(mission.items, mission.origin, self.limits())
+        problem = check_mission(mission.items, mission.origin, self.limits(), self.params.values)
         if problem is not None:
             return self._refuse(DENIED, f"AUTO.MISSION refused: {problem[1]}")
         return None

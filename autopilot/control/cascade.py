@@ -63,6 +63,8 @@ class Cascade:
             controller.tilt_max_rad,
         )  # fmt: skip
         self.rotational = rot_law(controller.rotational, nominal)
+        if hasattr(self.rotational, "set_integral_limit"):  # anti-windup at the actuators' limit
+            self.rotational.set_integral_limit(vehicle.actuation.torque_max_n_m)
         self.filter = SecondOrderFilter(controller.command_filter, dt, channels=2)
         self.allocator = Allocator(vehicle)
 

@@ -52,6 +52,14 @@ class TranslationalController:
         self.thrust_floor = 0.1 * nominal.mass_kg * nominal.gravity_m_s2
         self.set_tilt_max(tilt_max_rad)
 
+    def _limit_integrals(self) -> None:
+        """The law's anti-windup bound: horizontally what the tilt limit allows (g tan(tilt)),
+        vertically what the thrust allows above hover (U1_max / m - g)."""
+        if hasattr(self.law, "set_integral_limit"):
+            horizontal = self.gravity * math.tan(self.tilt_max_rad)
+            vertical = max(self.thrust_max / self.mass - self.gravity, 0.0)
+            self.law.set_integral_limit((horizontal, horizontal, vertical))
+
     @classmethod
     def for_gains(cls, gains, nominal: NominalModel, thrust_max_n: float, tilt_max_rad: float = 0.7):
         """The loop around the law that ``gains`` belong to (looked up by ``gains.law``)."""
@@ -78,10 +86,12 @@ class TranslationalController:
 
     def retune(self, gains) -> None:
         self.law.retune(gains)
+        self._limit_integrals()
 
     def set_tilt_max(self, tilt_max_rad: float) -> None:
         self.tilt_max_rad = tilt_max_rad
         self.sin_tilt_max = math.sin(tilt_max_rad)
+        self._limit_integrals()
 
     def reset(self) -> None:
         """Zero the law's integral states (on the ground, disarmed)."""
@@ -185,12 +195,29 @@ class BacksteppingLaw:
 
     def __init__(self, gains: BacksteppingGains, nominal: NominalModel | None = None) -> None:
         self.integral = [0.0, 0.0, 0.0]
+        self._a_max: Vector3 = (math.inf, math.inf, math.inf)
         self._set_gains(gains)
 
     def _set_gains(self, gains: BacksteppingGains) -> None:
         self.gains = gains
         c1, c2, k = gains.c1, gains.c2, gains.k_integral
         self._coef = [(c1[i], c2[i], k[i], 1.0 + c1[i] * c2[i], c1[i] + c2[i]) for i in range(3)]
+        w = self.integral_weights(gains)
+        self.integral_bound = tuple(self._a_max[i] / w[i] if w[i] > 0.0 else math.inf for i in range(3))
+
+    def set_integral_limit(self, acceleration_max: Vector3) -> None:
+        """Anti-windup: each integral state is held where its term of the commanded acceleration
+        is at most ``acceleration_max`` (m/s^2, per axis): what the vehicle can give at all."""
+        self._a_max = acceleration_max
+        self._set_gains(self.gains)
+
+    def _clamp_integral(self) -> None:
+        integral, bound = self.integral, self.integral_bound
+        for i in range(3):
+            if integral[i] > bound[i]:
+                integral[i] = bound[i]
+            elif integral[i] < -bound[i]:
+                integral[i] = -bound[i]
 
     def reset(self) -> None:
         self.integral = [0.0, 0.0, 0.0]

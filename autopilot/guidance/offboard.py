@@ -11,6 +11,14 @@ MAVLink edge (:mod:`autopilot.mavlink.offboard`):
   50 Hz stream gives the 500 Hz cascade a continuous reference;
 * velocity (+ acceleration) without position: the position reference integrates the velocity;
 * yaw: absolute, or a yaw rate integrated; when neither is given the yaw reference is kept.
+
+Bounded whatever arrives (PX4 does the same in its position controller): feedforward velocities
+are limited to ``MPC_XY_VEL_MAX`` / ``MPC_Z_VEL_MAX_UP`` / ``MPC_Z_VEL_MAX_DN`` and accelerations to
+``MPC_ACC_HOR``; a trajectory sample more than :data:`JUMP_M` from the reference flown so far is
+not followed at once but joined by a planned transition (within the same limits), and followed
+again once the reference is within that distance of it. So no setpoint makes the reference move
+faster than the limits allow. (Positions beyond ``NAV_REF_MAX_DIST`` never get here:
+:mod:`autopilot.mavlink.validation`.)
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ from .planner import Limits, transition
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
 _MAX_EXTRAPOLATION_S = 0.2
+JUMP_M = 0.5  # a trajectory sample this far from the reference is joined by a planned transition
 
 
 @dataclass(frozen=True)
@@ -46,6 +55,7 @@ class OffboardGuidance:
         self._target: tuple[Vector3, float] | None = None
         self._plan: Trajectory | None = None
         self._plan_start = 0.0
+        self._joining = False  # joining a trajectory stream that started too far away
 
     def update(self, setpoint: OffboardSetpoint) -> None:
         self.setpoint = setpoint
@@ -54,6 +64,7 @@ class OffboardGuidance:
         """Forget the plan (entering offboard again starts from the current reference)."""
         self._target = None
         self._plan = None
+        self._joining = False
 
     def reference(self, t: float, dt: float, previous: Reference) -> Reference:
         """The reference at time ``t``, continuing from ``previous`` (the last step's)."""
@@ -78,23 +89,47 @@ class OffboardGuidance:
                 return ref._replace(yaw_rad=yaw, yaw_rate_rad_s=yaw_rate, yaw_acceleration_rad_s2=0.0)
             return ref
 
-        self._plan = None
-        self._target = None
-        acc = sp.acceleration or ZERO3
+        acc = _limit_acceleration(sp.acceleration or ZERO3, self.limits)
         if sp.position is not None:
             tau = min(max(t - sp.time_s, 0.0), _MAX_EXTRAPOLATION_S)
-            vel = sp.velocity or ZERO3
+            vel = _limit_velocity(sp.velocity or ZERO3, self.limits)
             position = tuple(
                 p + v * tau + 0.5 * a * tau * tau for p, v, a in zip(sp.position, vel, acc, strict=True)
             )
             velocity = tuple(v + a * tau for v, a in zip(vel, acc, strict=True))
+            if self._joining or math.dist(position, previous.position_m) > JUMP_M:
+                return self._join(previous, position, yaw, dt)  # type: ignore[arg-type]
         elif sp.velocity is not None:
-            velocity = sp.velocity
+            velocity = _limit_velocity(sp.velocity, self.limits)
             position = tuple(p + v * dt for p, v in zip(previous.position_m, velocity, strict=True))
         else:  # acceleration only
             velocity = tuple(v + a * dt for v, a in zip(previous.velocity_m_s, acc, strict=True))
             position = tuple(p + v * dt for p, v in zip(previous.position_m, velocity, strict=True))
+        self._plan = None
+        self._target = None
         return Reference(position, velocity, acc, yaw, yaw_rate, 0.0)  # type: ignore[arg-type]
+
+    def _join(self, previous: Reference, position: Vector3, yaw: float, dt: float) -> Reference:
+        """One step of a transition from the reference flown so far towards a trajectory sample
+        too far to follow at once (replanned every step as the samples move on); following
+        resumes once the reference is within ``JUMP_M / 2`` of the sample."""
+        ref = transition(previous, position, self.limits, yaw).sample(dt)
+        self._joining = math.dist(ref.position_m, position) > 0.5 * JUMP_M
+        self._plan = self._target = None
+        return ref
+
+
+def _limit_velocity(v: Vector3, limits: Limits) -> Vector3:
+    """Horizontal speed at most ``speed_horizontal``; vertical within [-speed_down, speed_up]."""
+    h = math.hypot(v[0], v[1])
+    scale = limits.speed_horizontal / h if h > limits.speed_horizontal else 1.0
+    return (v[0] * scale, v[1] * scale, min(max(v[2], -limits.speed_down), limits.speed_up))
+
+
+def _limit_acceleration(a: Vector3, limits: Limits) -> Vector3:
+    norm = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    scale = limits.acceleration / norm if norm > limits.acceleration else 1.0
+    return (a[0] * scale, a[1] * scale, a[2] * scale)
 
 
 def _moved(old: tuple[Vector3, float], new: tuple[Vector3, float]) -> bool:

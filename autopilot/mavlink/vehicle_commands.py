@@ -1,9 +1,10 @@
 """The vehicle's MAV_CMDs (arming, takeoff, land, RTL, modes, message requests): wire -> commander.
 
-Each handler reads a :class:`~.commands.CommandRequest` as PX4 does and returns
-``(MAV_RESULT, reason)``; the dispatcher answers every command with a COMMAND_ACK. A message a
-command asks for (REQUEST_MESSAGE, GET_HOME_POSITION, AUTOPILOT_CAPABILITIES) is left in
-:attr:`VehicleCommands.after_ack` for the core to send right after the ACK, as PX4 does.
+Each handler reads a :class:`~.commands.CommandRequest` as PX4 does, its parameters already
+validated (:mod:`.validation`), and returns ``(MAV_RESULT, reason)``; the dispatcher answers every
+command with a COMMAND_ACK. A message a command asks for (REQUEST_MESSAGE, GET_HOME_POSITION,
+AUTOPILOT_CAPABILITIES) is left in :attr:`VehicleCommands.after_ack` for the core to send right
+after the ACK, as PX4 does.
 """
 
 from __future__ import annotations
@@ -15,11 +16,11 @@ from ..commander.modes import FlightMode
 from . import telemetry
 from .codec import mavlink as m
 from .commands import CommandDispatcher, CommandRequest
+from .validation import FORCE_MAGIC
 
 if TYPE_CHECKING:
     from ..core import AutopilotCore
 
-FORCE_MAGIC = 21196  # param2 of ARM_DISARM that forces arming/disarming (PX4, MAVLink)
 UNDERGROUND_MARGIN_M = 10.0  # a takeoff "AMSL" this far below home is read as a height above home
 VERSION_1_0_0 = 0x01000000 | 0xFF  # major.minor.patch, FIRMWARE_VERSION_TYPE_OFFICIAL
 CAPABILITIES = (
@@ -62,7 +63,7 @@ class VehicleCommands:
         # MAVSDK sends param2 = NaN ("unset") with a plain arm; only 21196 means force.
         force = r.params[1] == FORCE_MAGIC
         commander, t = self.core.commander, self.core.sim_time
-        if r.params[0] >= 0.5:
+        if r.params[0] == 1.0:  # MAV_BOOL, validated: 0 or 1
             return commander.arm(t, force)
         return commander.disarm(t, force)
 
@@ -85,12 +86,11 @@ class VehicleCommands:
         return commander.takeoff(t, altitude)
 
     def set_mode(self, r: CommandRequest) -> Result:
-        base_mode = int(r.params[0])
-        if not base_mode & m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return m.MAV_RESULT_DENIED, "DO_SET_MODE needs MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (PX4 modes)"
-        mode = FlightMode.from_px4(int(r.params[1]), int(r.params[2]))
+        # (validated: base mode with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, bytes; sub mode NaN = 0)
+        main, sub = int(r.params[1]), 0 if math.isnan(r.params[2]) else int(r.params[2])
+        mode = FlightMode.from_px4(main, sub)
         if mode is None:
-            return m.MAV_RESULT_DENIED, f"mode main={int(r.params[1])} sub={int(r.params[2])} not available"
+            return m.MAV_RESULT_DENIED, f"mode main={main} sub={sub} not available"
         return self.core.commander.set_mode(self.core.sim_time, mode)
 
     def message_interval(self, r: CommandRequest) -> Result:

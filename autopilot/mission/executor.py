@@ -39,10 +39,12 @@ the executor's state; split by item kind, each part would need all of it.)
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum, IntEnum
 from typing import NamedTuple
+
+import numpy as np
 
 from quadcommon.trajectories import (
     Hover,
@@ -55,6 +57,7 @@ from quadcommon.trajectories import (
 
 from ..guidance.planner import Limits, LineMove, transition
 from ..mavlink.codec import mavlink as m
+from ..mavlink.validation import reference_problem
 from .curve import GLOBAL_TOLERANCE_M, POSITION_TOLERANCE_M, TimedCurve
 from .items import ItemKind, MissionItem, PositionKind
 
@@ -232,12 +235,25 @@ def _resolution(block: Sequence[MissionItem]) -> tuple[float, float, float]:
 
 
 def check_mission(
-    items: Sequence[MissionItem], origin: tuple[float, float, float], limits: Limits
+    items: Sequence[MissionItem],
+    origin: tuple[float, float, float],
+    limits: Limits,
+    params: Mapping[str, float] | None = None,
 ) -> tuple[int, str] | None:
     """Whole-mission feasibility: None, or (MAV_MISSION_RESULT, reason) for the first problem.
 
-    Timed curves must stay within the vehicle's speed and acceleration limits (their speed is
-    set by their times, so they are refused rather than slowed down)."""
+    Every position within ``NAV_REF_MAX_DIST`` of home (the configured origin; the rule offboard
+    setpoints follow too, :func:`autopilot.mavlink.validation.reference_problem`). Timed curves
+    must stay within the vehicle's speed and acceleration limits (their speed is set by their
+    times, so they are refused rather than slowed down)."""
+    if params is not None:
+        for item in items:
+            if item.position is None or not item.position.horizontal_given:
+                continue
+            x, y, z = item.position.to_paper(origin, ZERO3)
+            problem = reference_problem((x, y, 0.0 if math.isnan(z) else z), ZERO3, params)
+            if problem:
+                return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
     seq = 0
     while seq < len(items):
         if items[seq].kind != ItemKind.TIMED:
@@ -245,12 +261,15 @@ def check_mission(
             continue
         first, last = _timed_block(items, seq)
         block = items[first : last + 1]
-        curve = TimedCurve(
-            [it.time_s for it in block],
-            [it.position.to_paper(origin, ZERO3) for it in block],
-            [None] * len(block),
-            tolerance_m=_resolution(block),
-        )
+        try:
+            curve = TimedCurve(
+                [it.time_s for it in block],
+                [it.position.to_paper(origin, ZERO3) for it in block],
+                [None] * len(block),
+                tolerance_m=_resolution(block),
+            )
+        except (ValueError, np.linalg.LinAlgError) as exc:  # e.g. samples no fit can pass through
+            return m.MAV_MISSION_INVALID_PARAM1, f"timed items {first}-{last}: no curve fits them ({exc})"
         vh, vup, vdown, acc = curve.peaks()
         checks = (
             (vh, limits.speed_horizontal, "horizontal speed", "m/s", "MPC_XY_VEL_MAX"),

@@ -70,7 +70,8 @@ FRAME_GLOBAL_RELATIVE_ALT_INT = m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT  # 6
 LOCAL_XY_SCALE = 1e-4  # MISSION_ITEM_INT x, y in local frames: metres * 1e4
 GLOBAL_XY_SCALE = 1e-7  # degrees * 1e7
 
-MAX_DISTANCE_M = 10_000.0  # items farther than this from the configured home are refused
+MAX_DISTANCE_M = 10_000.0  # sanity bound at parsing; NAV_REF_MAX_DIST is the rule (check_mission)
+MIN_TIMED_GAP_S = 1e-3  # consecutive timed items at least this far apart (a curve is fitted to them)
 MAX_ALTITUDE_M = 10_000.0  # |z| above this is refused
 MAX_TIME_S = 86_400.0  # hold times and timed-item times beyond a day are refused
 MAX_SPEED_M_S = 100.0
@@ -302,10 +303,12 @@ def parse_item(
             hold = _duration(p1, seq, "hold time", nan_ok=True)
             return MissionItem(seq, kind, wire, position, hold, radius, yaw)
         time_s = _duration(p1, seq, "time", nan_ok=False)
-        if previous is not None and previous.kind == ItemKind.TIMED and time_s <= previous.time_s:
+        after_timed = previous is not None and previous.kind == ItemKind.TIMED
+        if after_timed and time_s < previous.time_s + MIN_TIMED_GAP_S:
             raise _invalid(
                 m.MAV_MISSION_INVALID_PARAM1,
-                f"item {seq}: time {time_s:g} s not after the previous timed item's {previous.time_s:g} s",
+                f"item {seq}: time {time_s:g} s not at least {MIN_TIMED_GAP_S * 1e3:g} ms after the "
+                f"previous timed item's {previous.time_s:g} s",
             )
         return MissionItem(seq, kind, wire, position, 0.0, radius, yaw, time_s)
     if kind == ItemKind.LOITER_TIME:

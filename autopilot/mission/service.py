@@ -65,7 +65,7 @@ class MissionService:
             system_id,
             component_id,
             origin,
-            check=lambda items: check_mission(items, origin, commander.limits()),
+            check=lambda items: check_mission(items, origin, commander.limits(), commander.params.values),
         )
         self._peer: tuple[object, tuple[str, int]] | None = None  # the transfer client's link, address
         self._sim_time: Callable[[], float] = lambda: 0.0
@@ -82,6 +82,7 @@ class MissionService:
 
     # -- messages -------------------------------------------------------------------------------------
     def on_message(self, msg, link, address) -> None:
+        self.protocol.max_items = int(self.commander.params["MIS_ITEMS_MAX"])
         out = self.protocol.handle(msg, self.clock(), self._current_seq())
         if self.protocol.busy:
             self._peer = (link, address)

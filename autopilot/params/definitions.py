@@ -41,6 +41,22 @@ COMMANDER_PARAMS = (
     ParamSpec("RTL_RETURN_ALT", 5.0, 0.5, 150.0, unit="m", description="return altitude above home"),
     ParamSpec("NAV_ACC_RAD", 0.2, 0.01, 20.0, unit="m", description="waypoint acceptance radius"),
     ParamSpec(
+        "NAV_REF_MAX_DIST",
+        1000.0,
+        10.0,
+        10000.0,
+        unit="m",
+        description="offboard setpoints and mission items farther than this from home are refused",
+    ),
+    ParamSpec(
+        "MIS_ITEMS_MAX",
+        10000,
+        1,
+        50000,
+        kind=INT32,
+        description="largest mission accepted (items); more: MAV_MISSION_NO_SPACE",
+    ),
+    ParamSpec(
         "COM_OF_LOSS_T",
         1.0,
         0.1,

@@ -8,6 +8,7 @@ the nominal model: ``tau = M(eta) eta_cmd'' + C(eta, eta') eta'``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
@@ -71,6 +72,19 @@ class IntegralBacksteppingAttitude:
         self.c1, self.c2, self.lam = gains.c1, gains.c2, gains.k_integral
         self.inertia = nominal.inertia_kg_m2
         self.integral = [0.0, 0.0, 0.0]
+        self._torque_max: Vector3 = (math.inf, math.inf, math.inf)
+        self._bound_integral()
+
+    def set_integral_limit(self, torque_max: Vector3) -> None:
+        """Anti-windup: chi is held where its torque, ``I c2 lambda chi`` per axis near hover (the
+        integral term of eta_cmd'' through M), is at most ``torque_max`` (N m)."""
+        self._torque_max = torque_max
+        self._bound_integral()
+
+    def _bound_integral(self) -> None:
+        gains = [self.inertia[i] * self.c2[i] * self.lam[i] for i in range(3)]
+        tau = self._torque_max
+        self.integral_bound = tuple(tau[i] / g if g > 0.0 else math.inf for i, g in enumerate(gains))
 
     def reset(self) -> None:
         self.integral = [0.0, 0.0, 0.0]
@@ -96,6 +110,7 @@ class IntegralBacksteppingAttitude:
             self.integral[i] = self.integral[i] * old / new if new != 0.0 else 0.0
         self.gains = gains
         self.c1, self.c2, self.lam = tuple(gains.c1), tuple(c2), tuple(k_integral)
+        self._bound_integral()
 
     def update(
         self,
@@ -116,8 +131,10 @@ class IntegralBacksteppingAttitude:
             e2 = e_dot + c1 * e[i] + lam * chi
             accel_cmd.append(ref_accel[i] + (c1 * c1 - 1.0 - lam) * e[i] - (c1 + c2) * e2 + c1 * lam * chi)
         if integrate:
+            bound, integral = self.integral_bound, self.integral
             for i in range(3):
-                self.integral[i] += e[i] * dt
+                value = integral[i] + e[i] * dt
+                integral[i] = bound[i] if value > bound[i] else (-bound[i] if value < -bound[i] else value)
         M = inertia_matrix(self.inertia, euler[0], euler[1])
         Ma = matrix_times(M, tuple(accel_cmd))
         Ce = matrix_times(coriolis_matrix_fast(self.inertia, euler, euler_rates), euler_rates)

@@ -48,4 +48,6 @@ class IntegralFirstStep(BacksteppingLaw):
             out[i] = ref_acc[i] + (c1 * c1 - 1.0 - k) * e1[i] - c1_plus_c2 * e2 + c1 * k * chi
             if integrate:
                 integral[i] += e1[i] * dt
+        if integrate:
+            self._clamp_integral()  # anti-windup (BacksteppingLaw.set_integral_limit)
         return out

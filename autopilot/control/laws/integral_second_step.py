@@ -43,4 +43,6 @@ class IntegralSecondStep(BacksteppingLaw):
             out[i] = ref_acc[i] - k * integral[i] - one_plus_c1c2 * e1[i] - c1_plus_c2 * e1_dot[i]
             if integrate:
                 integral[i] += (e1_dot[i] + c1 * e1[i]) * dt
+        if integrate:
+            self._clamp_integral()  # anti-windup (BacksteppingLaw.set_integral_limit)
         return out

@@ -105,6 +105,19 @@ class NonlinearHinfAttitude:
         self.k_d = gains.k_d
         self.k_p = gains.k_p
         self.r_inv = 1.0 / gains.omega_u**2
+        self._bound_integral()
+
+    def set_integral_limit(self, torque_max: Vector3) -> None:
+        """Anti-windup: the integral of the attitude error is held where its torque,
+        ``w_u^-2 k_p int(eta~)`` per axis (the s term of the module docstring near hover), is at
+        most ``torque_max`` (N m): more than the actuators can give is never asked for."""
+        self._torque_max = torque_max
+        self._bound_integral()
+
+    def _bound_integral(self) -> None:
+        gain = self.r_inv * self.k_p
+        tau = getattr(self, "_torque_max", (math.inf, math.inf, math.inf))
+        self.integral_bound = tuple(tau[i] / gain if gain > 0.0 else math.inf for i in range(3))
 
     def reset(self) -> None:
         self.integral = [0.0, 0.0, 0.0]
@@ -181,8 +194,10 @@ class NonlinearHinfAttitude:
         C_s = matrix_times(C, s)
         r_inv = self.r_inv
         if integrate:
+            bound = self.integral_bound
             for i in range(3):
-                integral[i] += e[i] * dt
+                value = integral[i] + e[i] * dt
+                integral[i] = bound[i] if value > bound[i] else (-bound[i] if value < -bound[i] else value)
         return (
             Mv[0] + C_eta_dot[0] - C_s[0] - r_inv * s[0],
             Mv[1] + C_eta_dot[1] - C_s[1] - r_inv * s[1],
