@@ -12,7 +12,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,campaign,cluster]'
 	# MAVProxy without its GUI dependencies (wxPython, opencv, ...: ~1 GB); the tests drive it headless.
 	$(BIN)/python -m pip install --quiet --no-deps 'MAVProxy>=1.8'
 	@touch $(STAMP)
