@@ -140,30 +140,30 @@ _PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _max(a, b):
     """Python's ``max(a, b)``."""
     return b if b > a else a
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _min(a, b):
     """Python's ``min(a, b)``."""
     return b if b < a else a
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _clip(x, lo, hi):
     return _min(_max(x, lo), hi)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def wrap_pi(angle):
     """:func:`quadcommon.frames.wrap_pi` (Python's float ``%``: the sign of the divisor)."""
     return (angle + _PI) % _TWO_PI - _PI
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _f32(x):
     """Round to float32 and back, as a MAVLink float field does."""
     return np.float64(np.float32(x))
@@ -172,7 +172,7 @@ def _f32(x):
 # -------------------------------------------------------------------------------------------------
 # Rigid-body helpers (quadcommon.rigid_body)
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rotation_from_quaternion(w, x, y, z):
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
@@ -184,7 +184,7 @@ def rotation_from_quaternion(w, x, y, z):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def euler_from_rotation(R00, R10, R20, R21, R22):
     """ZYX Euler angles; theta in [-pi/2, pi/2] (eq. 2's R)."""
     sin_theta = -R20
@@ -192,7 +192,7 @@ def euler_from_rotation(R00, R10, R20, R21, R22):
     return (math.atan2(R21, R22), math.asin(sin_theta), math.atan2(R10, R00))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def quaternion_from_euler(phi, theta, psi):
     cf, sf = math.cos(0.5 * phi), math.sin(0.5 * phi)
     ct, st = math.cos(0.5 * theta), math.sin(0.5 * theta)
@@ -206,7 +206,7 @@ def quaternion_from_euler(phi, theta, psi):
     return (w, x, y, z)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def euler_rates_from_body_rates(phi, theta, p, q, r):
     """``eta_dot = W_eta^-1 omega`` (eq. 3)."""
     sf, cf = math.sin(phi), math.cos(phi)
@@ -214,7 +214,7 @@ def euler_rates_from_body_rates(phi, theta, p, q, r):
     return (p + sf * tt * q + cf * tt * r, cf * q - sf * r, (sf * q + cf * r) / ct)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def inertia_matrix(Ixx, Iyy, Izz, phi, theta):
     """``M(eta) = W^T J W`` of Section II: (m11, m13, m22, m23, m33); m12 = 0."""
     sf, cf = math.sin(phi), math.cos(phi)
@@ -226,7 +226,7 @@ def inertia_matrix(Ixx, Iyy, Izz, phi, theta):
     return (Ixx, m13, m22, m23, m33)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def coriolis_matrix(Ixx, Iyy, Izz, phi, theta, a0, a1, a2):
     """``C(eta, eta_dot)`` of eqs. (5)-(6) as ``coriolis_matrix_fast`` computes it (9 entries)."""
     sf, cf = math.sin(phi), math.cos(phi)
@@ -260,7 +260,7 @@ def coriolis_matrix(Ixx, Iyy, Izz, phi, theta, a0, a1, a2):
     return (c00, c01, c02, c10, c11, c12, c20, c21, c22)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def body_torque_from_euler_torque(phi, theta, a, b, c):
     """``tau_body = W_eta^-T tau_eta`` (eq. 4)."""
     sf, cf = math.sin(phi), math.cos(phi)
@@ -272,7 +272,7 @@ def body_torque_from_euler_torque(phi, theta, a, b, c):
     return (x0, x1, x2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def euler_torque_from_body_torque(phi, theta, x, y, z):
     """``tau_eta = W_eta^T tau_body``."""
     sf, cf = math.sin(phi), math.cos(phi)
@@ -283,7 +283,7 @@ def euler_torque_from_body_torque(phi, theta, x, y, z):
 # -------------------------------------------------------------------------------------------------
 # Plant (simulator.dynamics.plant.Plant)
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def derivative(s, out, P, u):
     """``state_dot`` of the coupled plant: Newton-Euler about G, thrust and torques at O."""
     vx, vy, vz = s[3], s[4], s[5]
@@ -361,7 +361,7 @@ def derivative(s, out, P, u):
         out[13], out[14], out[15], out[16] = dw1, dw2, dw3, dw4
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h):
     """One classical RK4 step with the inputs held, then the quaternion renormalised."""
     n = s.shape[0]
@@ -384,7 +384,7 @@ def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h):
     s[6], s[7], s[8], s[9] = qw * nq, qx * nq, qy * nq, qz * nq
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def ground_contact(s, P):
     """Keep O on or above z = 0 (``Plant._resolve_ground_contact``); True when it acted."""
     R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
@@ -411,7 +411,7 @@ def ground_contact(s, P):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def truth_of_O(s, P):
     """Position and velocity of O, quaternion, body rates (``Plant.kinematics`` / ``truth``)."""
     R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
@@ -435,7 +435,7 @@ def truth_of_O(s, P):
 # -------------------------------------------------------------------------------------------------
 # Reference and disturbances
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def trajectory(T, t):
     """``HarmonicTrajectory.sample`` / ``Hover.sample``: (p_d, p_d', p_d'', yaw)."""
     if T[T_KIND] != 0.0:
@@ -458,7 +458,7 @@ def trajectory(T, t):
     return (p0, p1, p2), (v0, v1, v2), (a0, a1, a2), T[T_YAW]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def disturbance(t, u, steps, ramps, gusts, dryden, S):
     """``DisturbanceSchedule.evaluate(t)`` (start time 0) into the held inputs ``u``.
 
@@ -524,7 +524,7 @@ def disturbance(t, u, steps, ramps, gusts, dryden, S):
 # -------------------------------------------------------------------------------------------------
 # Cascade (autopilot.control)
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def translational(C, integ, pos, vel, euler, rp, rv, ra, dt):
     """Outer loop (eqs. 24-29 and the IntBS / BS variants): U1, phi_r, theta_r, flags.
 
@@ -574,7 +574,7 @@ def translational(C, integ, pos, vel, euler, rp, rv, ra, dt):
     return thrust, roll_ref, pitch_ref, thrust_sat, tilt_lim
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def nlhinf(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
     """Nonlinear H-infinity attitude law, eqs. (43)-(44) as ``NonlinearHinfAttitude.update``."""
     k_d, k_p = C[C_KD], C[C_KP]
@@ -616,7 +616,7 @@ def nlhinf(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def intbs_attitude(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
     """IntBS attitude law (integral in the first step) on eq. (4), ``IntegralBacksteppingAttitude``."""
     e0 = euler[0] - ref[0]
@@ -654,7 +654,7 @@ def intbs_attitude(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
     return (Ma0 + Ce0, Ma1 + Ce1, Ma2 + Ce2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _largest_scale(b0, b1, b2, b3, d0, d1, d2, d3, lo, hi):
     """``allocation._largest_scale``: largest k in [0, 1] keeping every base + k delta in [lo, hi]."""
     k = 1.0
@@ -668,7 +668,7 @@ def _largest_scale(b0, b1, b2, b3, d0, d1, d2, d3, lo, hi):
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def allocate_rotors(C, thrust_n, tx, ty, tz, out4):
     """``Allocator.to_rotors``: normalised commands into ``out4``; returns (U1, tau, saturated)."""
     b, d, arm = C[C_AB], C[C_AD], C[C_AARM]
@@ -696,7 +696,7 @@ def allocate_rotors(C, thrust_n, tx, ty, tz, out4):
 # -------------------------------------------------------------------------------------------------
 # One flight
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def simulate(state0, P, C, T, S, steps_tab, ramps_tab, gusts_tab, dryden, record):  # noqa: C901
     """Fly one run from ``state0``; return the metrics row (layout ``M_*``).
 
