@@ -141,30 +141,30 @@ _TWO_PI = 2.0 * math.pi
 
 
 @njit(cache=True, error_model="numpy")
-def _max(a, b):
+def _max(a: float, b: float) -> float:
     """Python's ``max(a, b)``."""
     return b if b > a else a
 
 
 @njit(cache=True, error_model="numpy")
-def _min(a, b):
+def _min(a: float, b: float) -> float:
     """Python's ``min(a, b)``."""
     return b if b < a else a
 
 
 @njit(cache=True, error_model="numpy")
-def _clip(x, lo, hi):
+def _clip(x: float, lo: float, hi: float) -> float:
     return _min(_max(x, lo), hi)
 
 
 @njit(cache=True, error_model="numpy")
-def wrap_pi(angle):
+def wrap_pi(angle: float) -> float:
     """:func:`quadcommon.frames.wrap_pi` (Python's float ``%``: the sign of the divisor)."""
     return (angle + _PI) % _TWO_PI - _PI
 
 
 @njit(cache=True, error_model="numpy")
-def _f32(x):
+def _f32(x: float) -> float:
     """Round to float32 and back, as a MAVLink float field does."""
     return np.float64(np.float32(x))
 
@@ -173,7 +173,7 @@ def _f32(x):
 # Rigid-body helpers (quadcommon.rigid_body)
 # -------------------------------------------------------------------------------------------------
 @njit(cache=True, error_model="numpy")
-def rotation_from_quaternion(w, x, y, z):
+def rotation_from_quaternion(w: float, x: float, y: float, z: float) -> tuple[float, ...]:
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
@@ -185,7 +185,9 @@ def rotation_from_quaternion(w, x, y, z):
 
 
 @njit(cache=True, error_model="numpy")
-def euler_from_rotation(R00, R10, R20, R21, R22):
+def euler_from_rotation(
+    R00: float, R10: float, R20: float, R21: float, R22: float
+) -> tuple[float, float, float]:
     """ZYX Euler angles; theta in [-pi/2, pi/2] (eq. 2's R)."""
     sin_theta = -R20
     sin_theta = 1.0 if sin_theta > 1.0 else (-1.0 if sin_theta < -1.0 else sin_theta)
@@ -193,7 +195,7 @@ def euler_from_rotation(R00, R10, R20, R21, R22):
 
 
 @njit(cache=True, error_model="numpy")
-def quaternion_from_euler(phi, theta, psi):
+def quaternion_from_euler(phi: float, theta: float, psi: float) -> tuple[float, float, float, float]:
     cf, sf = math.cos(0.5 * phi), math.sin(0.5 * phi)
     ct, st = math.cos(0.5 * theta), math.sin(0.5 * theta)
     cp, sp = math.cos(0.5 * psi), math.sin(0.5 * psi)
@@ -207,7 +209,9 @@ def quaternion_from_euler(phi, theta, psi):
 
 
 @njit(cache=True, error_model="numpy")
-def euler_rates_from_body_rates(phi, theta, p, q, r):
+def euler_rates_from_body_rates(
+    phi: float, theta: float, p: float, q: float, r: float
+) -> tuple[float, float, float]:
     """``eta_dot = W_eta^-1 omega`` (eq. 3)."""
     sf, cf = math.sin(phi), math.cos(phi)
     ct, tt = math.cos(theta), math.tan(theta)
@@ -215,7 +219,7 @@ def euler_rates_from_body_rates(phi, theta, p, q, r):
 
 
 @njit(cache=True, error_model="numpy")
-def inertia_matrix(Ixx, Iyy, Izz, phi, theta):
+def inertia_matrix(Ixx: float, Iyy: float, Izz: float, phi: float, theta: float) -> tuple[float, ...]:
     """``M(eta) = W^T J W`` of Section II: (m11, m13, m22, m23, m33); m12 = 0."""
     sf, cf = math.sin(phi), math.cos(phi)
     st, ct = math.sin(theta), math.cos(theta)
@@ -227,7 +231,9 @@ def inertia_matrix(Ixx, Iyy, Izz, phi, theta):
 
 
 @njit(cache=True, error_model="numpy")
-def coriolis_matrix(Ixx, Iyy, Izz, phi, theta, a0, a1, a2):
+def coriolis_matrix(
+    Ixx: float, Iyy: float, Izz: float, phi: float, theta: float, a0: float, a1: float, a2: float
+) -> tuple[float, ...]:
     """``C(eta, eta_dot)`` of eqs. (5)-(6) as ``coriolis_matrix_fast`` computes it (9 entries)."""
     sf, cf = math.sin(phi), math.cos(phi)
     st, ct = math.sin(theta), math.cos(theta)
@@ -261,7 +267,9 @@ def coriolis_matrix(Ixx, Iyy, Izz, phi, theta, a0, a1, a2):
 
 
 @njit(cache=True, error_model="numpy")
-def body_torque_from_euler_torque(phi, theta, a, b, c):
+def body_torque_from_euler_torque(
+    phi: float, theta: float, a: float, b: float, c: float
+) -> tuple[float, float, float]:
     """``tau_body = W_eta^-T tau_eta`` (eq. 4)."""
     sf, cf = math.sin(phi), math.cos(phi)
     st, ct = math.sin(theta), math.cos(theta)
@@ -273,7 +281,9 @@ def body_torque_from_euler_torque(phi, theta, a, b, c):
 
 
 @njit(cache=True, error_model="numpy")
-def euler_torque_from_body_torque(phi, theta, x, y, z):
+def euler_torque_from_body_torque(
+    phi: float, theta: float, x: float, y: float, z: float
+) -> tuple[float, float, float]:
     """``tau_eta = W_eta^T tau_body``."""
     sf, cf = math.sin(phi), math.cos(phi)
     st, ct = math.sin(theta), math.cos(theta)
@@ -284,7 +294,7 @@ def euler_torque_from_body_torque(phi, theta, x, y, z):
 # Plant (simulator.dynamics.plant.Plant)
 # -------------------------------------------------------------------------------------------------
 @njit(cache=True, error_model="numpy")
-def derivative(s, out, P, u):
+def derivative(s: np.ndarray, out: np.ndarray, P: np.ndarray, u: np.ndarray) -> None:
     """``state_dot`` of the coupled plant: Newton-Euler about G, thrust and torques at O."""
     vx, vy, vz = s[3], s[4], s[5]
     qw, qx, qy, qz = s[6], s[7], s[8], s[9]
@@ -362,7 +372,17 @@ def derivative(s, out, P, u):
 
 
 @njit(cache=True, error_model="numpy")
-def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h):
+def rk4_step(
+    s: np.ndarray,
+    k1: np.ndarray,
+    k2: np.ndarray,
+    k3: np.ndarray,
+    k4: np.ndarray,
+    tmp: np.ndarray,
+    P: np.ndarray,
+    u: np.ndarray,
+    h: float,
+) -> None:
     """One classical RK4 step with the inputs held, then the quaternion renormalised."""
     n = s.shape[0]
     h2 = 0.5 * h
@@ -385,7 +405,7 @@ def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h):
 
 
 @njit(cache=True, error_model="numpy")
-def ground_contact(s, P):
+def ground_contact(s: np.ndarray, P: np.ndarray) -> bool:
     """Keep O on or above z = 0 (``Plant._resolve_ground_contact``); True when it acted."""
     R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
     rx, ry, rz = P[P_COM], P[P_COM + 1], P[P_COM + 2]
@@ -412,7 +432,7 @@ def ground_contact(s, P):
 
 
 @njit(cache=True, error_model="numpy")
-def truth_of_O(s, P):
+def truth_of_O(s: np.ndarray, P: np.ndarray) -> tuple:
     """Position and velocity of O, quaternion, body rates (``Plant.kinematics`` / ``truth``)."""
     R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
     rx, ry, rz = P[P_COM], P[P_COM + 1], P[P_COM + 2]
@@ -436,7 +456,7 @@ def truth_of_O(s, P):
 # Reference and disturbances
 # -------------------------------------------------------------------------------------------------
 @njit(cache=True, error_model="numpy")
-def trajectory(T, t):
+def trajectory(T: np.ndarray, t: float) -> tuple:
     """``HarmonicTrajectory.sample`` / ``Hover.sample``: (p_d, p_d', p_d'', yaw)."""
     if T[T_KIND] != 0.0:
         return (T[T_OFFSET], T[T_OFFSET + 1], T[T_OFFSET + 2]), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), T[T_YAW]
@@ -459,7 +479,15 @@ def trajectory(T, t):
 
 
 @njit(cache=True, error_model="numpy")
-def disturbance(t, u, steps, ramps, gusts, dryden, S):
+def disturbance(
+    t: float,
+    u: np.ndarray,
+    steps: np.ndarray,
+    ramps: np.ndarray,
+    gusts: np.ndarray,
+    dryden: np.ndarray,
+    S: np.ndarray,
+) -> None:
     """``DisturbanceSchedule.evaluate(t)`` (start time 0) into the held inputs ``u``.
 
     ``steps`` rows: channel, start, end, value; ``ramps``: channel, start, end, hold, value;
@@ -525,7 +553,17 @@ def disturbance(t, u, steps, ramps, gusts, dryden, S):
 # Cascade (autopilot.control)
 # -------------------------------------------------------------------------------------------------
 @njit(cache=True, error_model="numpy")
-def translational(C, integ, pos, vel, euler, rp, rv, ra, dt):
+def translational(
+    C: np.ndarray,
+    integ: np.ndarray,
+    pos: tuple,
+    vel: tuple,
+    euler: tuple,
+    rp: tuple,
+    rv: tuple,
+    ra: tuple,
+    dt: float,
+) -> tuple:
     """Outer loop (eqs. 24-29 and the IntBS / BS variants): U1, phi_r, theta_r, flags.
 
     Returns ``(thrust, roll_ref, pitch_ref, thrust_saturated, tilt_limited)``; advances ``integ``.
@@ -575,7 +613,16 @@ def translational(C, integ, pos, vel, euler, rp, rv, ra, dt):
 
 
 @njit(cache=True, error_model="numpy")
-def nlhinf(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
+def nlhinf(
+    C: np.ndarray,
+    integ: np.ndarray,
+    euler: tuple,
+    rates: tuple,
+    ref: tuple,
+    ref_rate: tuple,
+    ref_acc: tuple,
+    dt: float,
+) -> tuple[float, float, float]:
     """Nonlinear H-infinity attitude law, eqs. (43)-(44) as ``NonlinearHinfAttitude.update``."""
     k_d, k_p = C[C_KD], C[C_KP]
     Ixx, Iyy, Izz = C[C_INERTIA], C[C_INERTIA + 1], C[C_INERTIA + 2]
@@ -617,7 +664,16 @@ def nlhinf(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
 
 
 @njit(cache=True, error_model="numpy")
-def intbs_attitude(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
+def intbs_attitude(
+    C: np.ndarray,
+    integ: np.ndarray,
+    euler: tuple,
+    rates: tuple,
+    ref: tuple,
+    ref_rate: tuple,
+    ref_acc: tuple,
+    dt: float,
+) -> tuple[float, float, float]:
     """IntBS attitude law (integral in the first step) on eq. (4), ``IntegralBacksteppingAttitude``."""
     e0 = euler[0] - ref[0]
     e1 = euler[1] - ref[1]
@@ -655,7 +711,18 @@ def intbs_attitude(C, integ, euler, rates, ref, ref_rate, ref_acc, dt):
 
 
 @njit(cache=True, error_model="numpy")
-def _largest_scale(b0, b1, b2, b3, d0, d1, d2, d3, lo, hi):
+def _largest_scale(
+    b0: float,
+    b1: float,
+    b2: float,
+    b3: float,
+    d0: float,
+    d1: float,
+    d2: float,
+    d3: float,
+    lo: float,
+    hi: float,
+) -> float:
     """``allocation._largest_scale``: largest k in [0, 1] keeping every base + k delta in [lo, hi]."""
     k = 1.0
     for i in range(4):
@@ -669,7 +736,9 @@ def _largest_scale(b0, b1, b2, b3, d0, d1, d2, d3, lo, hi):
 
 
 @njit(cache=True, error_model="numpy")
-def allocate_rotors(C, thrust_n, tx, ty, tz, out4):
+def allocate_rotors(
+    C: np.ndarray, thrust_n: float, tx: float, ty: float, tz: float, out4: np.ndarray
+) -> tuple:
     """``Allocator.to_rotors``: normalised commands into ``out4``; returns (U1, tau, saturated)."""
     b, d, arm = C[C_AB], C[C_AD], C[C_AARM]
     lo, hi = C[C_SQMIN], C[C_SQMAX]
@@ -697,7 +766,18 @@ def allocate_rotors(C, thrust_n, tx, ty, tz, out4):
 # One flight
 # -------------------------------------------------------------------------------------------------
 @njit(cache=True, error_model="numpy")
-def simulate(state0, P, C, T, S, steps_tab, ramps_tab, gusts_tab, dryden, record):  # noqa: C901
+def simulate(  # noqa: C901
+    state0: np.ndarray,
+    P: np.ndarray,
+    C: np.ndarray,
+    T: np.ndarray,
+    S: np.ndarray,
+    steps_tab: np.ndarray,
+    ramps_tab: np.ndarray,
+    gusts_tab: np.ndarray,
+    dryden: np.ndarray,
+    record: np.ndarray,
+) -> np.ndarray:
     """Fly one run from ``state0``; return the metrics row (layout ``M_*``).
 
     Mirrors ``sitl.inprocess.run_scenario``: per control step k (t = k dt), read the state,

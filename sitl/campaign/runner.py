@@ -115,9 +115,10 @@ def run_campaign(
     missing = [r for r in range(spec.runs) if r not in done]
     tasks = chunks(missing, spec.chunk_runs)
     started = time.perf_counter()
-    # Compile (or load) the kernels here: forked workers inherit them, and a compile error
-    # shows up once, before any task is sent.
-    warm = warm_up() if missing else 0.0
+    # Compile (or load) the kernels here for local work: forked workers inherit them, and a
+    # compile error shows up once, before any task is sent. Dask workers compile their own.
+    local = executor is None and not scheduler
+    warm = warm_up() if missing and local else 0.0
     bar = _progress(spec.runs, len(done), progress)
     finished = len(done)
     kind = "in-process"

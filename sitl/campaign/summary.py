@@ -3,7 +3,8 @@
 Per controller: runs, failures and their reasons; for each index its median, 95th percentile and
 worst value over the runs that completed (a failed run stops early, so its indices are not
 comparable; failures are counted separately); which sampled parameters drive the worst runs
-(Spearman rank correlation with the position ISE, over completed runs) and the worst runs
+(Spearman rank correlation of the position ISE with each parameter or with its distance from
+its median, over completed runs) and the worst runs
 themselves with their parameters.
 
 Indices (CONTROL.md, Tables I-III): final position error (norm, mm), ISE of position (x + y + z,
@@ -91,6 +92,19 @@ def _stats(values: np.ndarray) -> tuple[float, float, float]:
     if values.size == 0:
         return math.nan, math.nan, math.nan
     return float(np.median(values)), float(np.percentile(values, 95)), float(np.max(values))
+
+
+def _driver(name: str, x: np.ndarray, y: np.ndarray) -> tuple[float, str, str] | None:
+    """How strongly parameter ``x`` drives index ``y``: Spearman's rho with x itself, or with its
+    distance from its median (an index that grows with |mass error| either way is U-shaped in x,
+    which a plain rank correlation misses). ``(|rho|, description, name)``."""
+    direct = _spearman(x, y)
+    spread = _spearman(np.abs(x - np.median(x)), y)
+    if not (math.isfinite(direct) or math.isfinite(spread)):
+        return None
+    if math.isfinite(spread) and (not math.isfinite(direct) or abs(spread) > abs(direct)):
+        return abs(spread), f"|{name} - {np.median(x):.3g}| (ρ = {spread:+.2f})", name
+    return abs(direct), f"{name} (ρ = {direct:+.2f})", name
 
 
 def _spearman(x: np.ndarray, y: np.ndarray) -> float:
@@ -193,13 +207,11 @@ def summary_markdown(
         if not sel.any() or not params:
             continue
         y = derived["ise_position"][sel]
-        rho = sorted(
-            ((abs(r), r, p) for p in params if math.isfinite(r := _spearman(pvals[p][sel], y))), reverse=True
-        )
-        top = ", ".join(f"{p} (ρ = {r:+.2f})" for _, r, p in rho[:3]) or "—"
+        ranked = sorted((d for p in params if (d := _driver(p, pvals[p][sel], y)) is not None), reverse=True)
+        top = ", ".join(text for _, text, _ in ranked[:3]) or "—"
         lines.append(f"- **{title(c)}**: Spearman correlation with the position ISE: {top}")
         order = np.argsort(-y)[:5]
-        shown = [p for _, _, p in rho[:4]]
+        shown = [p for _, _, p in ranked[:4]]
         cells = [
             f"run {int(runs_col[sel][i])}: ISE {_fmt(float(y[i]))}"
             + ("" if not shown else " (" + ", ".join(f"{p} {pvals[p][sel][i]:.4g}" for p in shown) + ")")

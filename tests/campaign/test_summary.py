@@ -74,3 +74,16 @@ def test_drivers_are_found_and_constants_ignored(tmp_path):
     masses = dict(zip(table.column("run").to_pylist(), table.column("mass_scale").to_pylist(), strict=True))
     assert masses[worst["intbs_nlhinf"]] == max(masses.values())  # largest ISE
     assert masses[worst["bs_nlhinf"]] > 1.25  # a failed run comes first
+
+
+def test_a_u_shaped_driver_is_found(tmp_path):
+    """An index that grows with |mass error| on both sides has no monotone rank correlation."""
+    table = _table()
+    names = table.column("controller").to_pylist()
+    mass = table.column("mass_scale").to_pylist()
+    old = table.column("ise_x").to_pylist()
+    ise = [(m - 1.0) ** 2 if n == "intbs" else v for n, m, v in zip(names, mass, old, strict=True)]
+    table = table.set_column(table.column_names.index("ise_x"), "ise_x", pa.array(ise))
+    spec = load_campaign(specs.write(tmp_path, specs.BOX, "box"))
+    line = next(x for x in summary_markdown(table, spec).splitlines() if x.startswith("- **IntBS**"))
+    assert line.split("position ISE: ")[1].startswith("|mass_scale - "), line
