@@ -220,7 +220,7 @@ def main() -> None:
     st, rp, gu, dw, win = eng.disturbance_tables(load_gust_profile(scenario.gusts), dtp, scenario.duration_s)
     flight = eng.Flight(
         s0, Pc, eng.controller_array(load_controller("intbs_nlhinf"), vehicle, 1.0 / rates.control_hz),
-        eng.trajectory_array(scenario.trajectory),
+        eng.reference_table(scenario.trajectory, rates, scenario.duration_s, True),
         eng.sim_array(rates, scenario.duration_s, True, eng.FailureLimits(), win), st, rp, gu, dw,
     )  # fmt: skip
     eng.fly(flight)

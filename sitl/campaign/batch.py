@@ -37,6 +37,14 @@ def _controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_c
     return eng.controller_array(controller, vehicle, dt_control)
 
 
+@functools.lru_cache(maxsize=8)
+def _reference(trajectory, rates, duration_s: float, wire: bool) -> np.ndarray:
+    # The same reference for every run of a campaign: sampled once per process.
+    table = eng.reference_table(trajectory, rates, duration_s, wire)
+    table.flags.writeable = False
+    return table
+
+
 def flights(spec: CampaignSpec, sample: RunSample) -> dict[str, eng.Flight]:
     """The packed flights of one sampled run, one per controller (same plant and disturbances)."""
     rates = spec.rates
@@ -48,7 +56,7 @@ def flights(spec: CampaignSpec, sample: RunSample) -> dict[str, eng.Flight]:
     )
     steps, ramps, gusts, dryden, window = eng.disturbance_tables(sample.gusts, dtp, spec.duration_s)
     S = eng.sim_array(rates, spec.duration_s, spec.wire_float32, spec.failure, window)
-    T = eng.trajectory_array(sc.trajectory)
+    T = _reference(sc.trajectory, rates, spec.duration_s, spec.wire_float32)
     return {
         c.name: eng.Flight(
             state0, P, _controller_array(c, spec.vehicle, dt_control), T, S, steps, ramps, gusts, dryden
@@ -95,6 +103,6 @@ def warm_up() -> float:
     steps, ramps, gusts, dryden, window = eng.disturbance_tables(GustProfile(), dtp, 0.004)
     C = _controller_array(load_controller("intbs_nlhinf"), vehicle, 1.0 / rates.control_hz)
     S = eng.sim_array(rates, 0.004, True, eng.FailureLimits(), window)
-    T = eng.trajectory_array(scenario.trajectory)
+    T = eng.reference_table(scenario.trajectory, rates, 0.004, True)
     eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden))
     return time.perf_counter() - start

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from autopilot.control.cascade import Cascade
-from autopilot.guidance.trajectories import Hover, trajectory_from_spec
+from autopilot.guidance.trajectories import trajectory_from_spec
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import ControllerConfig, Rates, TrajectorySpec, VehicleConfig
 from simulator.dynamics.plant import Plant
@@ -60,7 +60,7 @@ class Flight:
     state0: np.ndarray
     plant: np.ndarray
     controller: np.ndarray
-    trajectory: np.ndarray
+    reference: np.ndarray  # reference_table()
     sim: np.ndarray
     steps: np.ndarray
     ramps: np.ndarray
@@ -146,23 +146,27 @@ def controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_co
     return C
 
 
-def trajectory_array(spec: TrajectorySpec) -> np.ndarray:
-    """The analytic reference (layout ``T_*``), off the object :func:`trajectory_from_spec` builds."""
-    traj = trajectory_from_spec(spec)
-    T = np.zeros(lay.T_SIZE)
-    if isinstance(traj, Hover):
-        ref = traj.reference
-        T[lay.T_KIND] = 1.0
-        T[lay.T_OFFSET : lay.T_OFFSET + 3] = ref.position_m
-        T[lay.T_YAW] = ref.yaw_rad
-        return T
-    T[lay.T_OFFSET : lay.T_OFFSET + 3] = traj.offset
-    T[lay.T_AMPLITUDE : lay.T_AMPLITUDE + 3] = traj.amplitude
-    T[lay.T_PHASE : lay.T_PHASE + 3] = traj.phase
-    T[lay.T_RATE : lay.T_RATE + 3] = traj.rate
-    T[lay.T_W] = traj.w
-    T[lay.T_YAW] = traj.yaw
-    return T
+def reference_table(spec: TrajectorySpec, rates: Rates, duration_s: float, wire_float32: bool) -> np.ndarray:
+    """Row k: the reference the controller gets at control step k, from the project's trajectory.
+
+    Columns: p_d (3), p_d' (3), p_d'' (3), yaw, yaw', yaw'' (paper frames, SI). The time is
+    ``k dt`` in-process, and ``time_usec * 1e-6`` with ``time_usec = round(k * 1e6 / control_hz)``
+    through the wire (the autopilot reads its clock off the frame), as the two runners sample it.
+    The same for every run of a campaign, so it is sampled once per process.
+    """
+    trajectory = trajectory_from_spec(spec)
+    dt_control = 1.0 / rates.control_hz
+    usec_per_frame = 1e6 / rates.control_hz
+    steps = int(round(duration_s / dt_control))
+    table = np.empty((steps + 1, 12))
+    for k in range(steps + 1):
+        t = round(k * usec_per_frame) * 1e-6 if wire_float32 else k * dt_control
+        r = trajectory.sample(t)
+        table[k, 0:3] = r.position_m
+        table[k, 3:6] = r.velocity_m_s
+        table[k, 6:9] = r.acceleration_m_s2
+        table[k, 9:12] = (r.yaw_rad, r.yaw_rate_rad_s, r.yaw_acceleration_rad_s2)
+    return table
 
 
 def disturbance_tables(
@@ -245,7 +249,7 @@ def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | 
         flight.state0,
         flight.plant,
         flight.controller,
-        flight.trajectory,
+        flight.reference,
         flight.sim,
         flight.steps,
         flight.ramps,

@@ -114,15 +114,7 @@ from .layout import (
     S_MAX_TILT,
     S_STEPS,
     S_SUBSTEPS,
-    S_USEC_PER_FRAME,
     S_WIRE,
-    T_AMPLITUDE,
-    T_KIND,
-    T_OFFSET,
-    T_PHASE,
-    T_RATE,
-    T_W,
-    T_YAW,
     TLAW_BACKSTEPPING,
     TLAW_SECOND_STEP,
 )
@@ -159,8 +151,15 @@ def _clip(x: float, lo: float, hi: float) -> float:
 
 @njit(cache=True, error_model="numpy")
 def wrap_pi(angle: float) -> float:
-    """:func:`quadcommon.frames.wrap_pi` (Python's float ``%``: the sign of the divisor)."""
-    return (angle + _PI) % _TWO_PI - _PI
+    """:func:`quadcommon.frames.wrap_pi`, ``(angle + pi) % 2 pi - pi``, bit for bit.
+
+    For ``0 <= angle + pi < 2 pi`` Python's float ``%`` returns its left operand unchanged, so
+    the (costly) ``fmod`` is skipped there; elsewhere Python's ``%`` (sign of the divisor).
+    """
+    shifted = angle + _PI
+    if 0.0 <= shifted < _TWO_PI:
+        return shifted - _PI
+    return shifted % _TWO_PI - _PI
 
 
 @njit(cache=True, error_model="numpy")
@@ -449,35 +448,12 @@ def truth_of_O(s: np.ndarray, P: np.ndarray) -> tuple:
         s[5] - (R20 * cx + R21 * cy + R22 * cz),
     )
     euler = euler_from_rotation(R00, R10, R20, R21, R22)
-    return pos, vel, euler
+    return pos, vel, euler, R22
 
 
 # -------------------------------------------------------------------------------------------------
-# Reference and disturbances
+# Disturbances
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def trajectory(T: np.ndarray, t: float) -> tuple:
-    """``HarmonicTrajectory.sample`` / ``Hover.sample``: (p_d, p_d', p_d'', yaw)."""
-    if T[T_KIND] != 0.0:
-        return (T[T_OFFSET], T[T_OFFSET + 1], T[T_OFFSET + 2]), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), T[T_YAW]
-    w = T[T_W]
-    p0 = p1 = p2 = v0 = v1 = v2 = a0 = a1 = a2 = 0.0
-    for i in range(3):
-        arg = w * t + T[T_PHASE + i]
-        a = T[T_AMPLITUDE + i]
-        c, s = math.cos(arg), math.sin(arg)
-        pos = T[T_OFFSET + i] + a * c + T[T_RATE + i] * t
-        vel = -a * w * s + T[T_RATE + i]
-        acc = -a * w * w * c
-        if i == 0:
-            p0, v0, a0 = pos, vel, acc
-        elif i == 1:
-            p1, v1, a1 = pos, vel, acc
-        else:
-            p2, v2, a2 = pos, vel, acc
-    return (p0, p1, p2), (v0, v1, v2), (a0, a1, a2), T[T_YAW]
-
-
 @njit(cache=True, error_model="numpy")
 def disturbance(
     t: float,
@@ -770,7 +746,7 @@ def simulate(  # noqa: C901
     state0: np.ndarray,
     P: np.ndarray,
     C: np.ndarray,
-    T: np.ndarray,
+    ref: np.ndarray,
     S: np.ndarray,
     steps_tab: np.ndarray,
     ramps_tab: np.ndarray,
@@ -781,15 +757,16 @@ def simulate(  # noqa: C901
     """Fly one run from ``state0``; return the metrics row (layout ``M_*``).
 
     Mirrors ``sitl.inprocess.run_scenario``: per control step k (t = k dt), read the state,
-    sample the reference, run the cascade, record the row (``record`` when it has rows), then
-    hold the controls over ``substeps`` RK4 steps, evaluating the disturbance at every one.
+    take the reference (row k of ``ref``: p_d, p_d', p_d'', yaw, yaw', yaw'', sampled by the
+    project's own trajectory at the time the controller sees), run the cascade, record the row
+    (``record`` when it has rows), then hold the controls over ``substeps`` RK4 steps,
+    evaluating the disturbance at every one.
     """
     dt = S[S_DT_CONTROL]
     dt_phys = S[S_DT_PHYSICS]
     substeps = int(S[S_SUBSTEPS])
     steps = int(S[S_STEPS])
     wire = S[S_WIRE] != 0.0
-    usec_per_frame = S[S_USEC_PER_FRAME]
     max_pos_err, max_tilt, airborne_h = S[S_MAX_POS_ERR], S[S_MAX_TILT], S[S_AIRBORNE]
     do_record = record.shape[0] > 0
     rotor_plant = P[P_ROTOR_MODE] != 0.0
@@ -818,6 +795,9 @@ def simulate(  # noqa: C901
 
     metrics = np.zeros(M_SIZE)
     metrics[M_T_FAIL] = np.nan
+    # tilt = acos(R22) (the body z axis against the vertical): tracked as the smallest R22.
+    min_cos_tilt = 1.0
+    cos_max_tilt = math.cos(max_tilt)
     prev_sq = np.zeros(6)
     prev_u = np.zeros(4)
     airborne = False
@@ -826,7 +806,7 @@ def simulate(  # noqa: C901
     t = 0.0
     for k in range(steps + 1):
         t = k * dt
-        pos, vel, euler = truth_of_O(s, P)
+        pos, vel, euler, cos_tilt = truth_of_O(s, P)
         p_w, q_w, r_w = s[10], s[11], s[12]
         if wire:
             # ODOMETRY: float32 NED pose, NED velocity, FRD rates; the autopilot converts back.
@@ -836,12 +816,13 @@ def simulate(  # noqa: C901
             c_pos = (_f32(pos[0]), -_f32(-pos[1]), -_f32(-pos[2]))
             c_vel = (_f32(vel[0]), -_f32(-vel[1]), -_f32(-vel[2]))
             c_rates = euler_rates_from_body_rates(c_euler[0], c_euler[1], _f32(p_w), -_f32(-q_w), -_f32(-r_w))
-            t_ref = round(k * usec_per_frame) * 1e-6
         else:
             c_pos, c_vel, c_euler = pos, vel, euler
             c_rates = euler_rates_from_body_rates(euler[0], euler[1], p_w, q_w, r_w)
-            t_ref = t
-        rp, rv, ra, yaw = trajectory(T, t_ref)
+        rp = (ref[k, 0], ref[k, 1], ref[k, 2])
+        rv = (ref[k, 3], ref[k, 4], ref[k, 5])
+        ra = (ref[k, 6], ref[k, 7], ref[k, 8])
+        yaw, yaw_rate, yaw_acc = ref[k, 9], ref[k, 10], ref[k, 11]
 
         # -- cascade step (Cascade.step) --
         thrust, roll_r, pitch_r, thrust_sat, tilt_lim = translational(
@@ -860,8 +841,8 @@ def simulate(  # noqa: C901
         filt_y[1] = a00 * theta_d + a01 * theta_dd + a02 * pitch_r
         filt_yd[1] = a10 * theta_d + a11 * theta_dd + a12 * pitch_r
         eta_d = (phi_d, theta_d, yaw)
-        eta_d_dot = (phi_dd, theta_dd, 0.0)
-        eta_d_ddot = (phi_ddd, theta_ddd, 0.0)
+        eta_d_dot = (phi_dd, theta_dd, yaw_rate)
+        eta_d_ddot = (phi_ddd, theta_ddd, yaw_acc)
         if nlh:
             te0, te1, te2 = nlhinf(C, integ_r, c_euler, c_rates, eta_d, eta_d_dot, eta_d_ddot, dt_c)
         else:
@@ -918,10 +899,8 @@ def simulate(  # noqa: C901
         err = math.sqrt(sq0 + sq1 + sq2)
         if err > metrics[M_MAX_POS_ERR]:
             metrics[M_MAX_POS_ERR] = err
-        cos_tilt = math.cos(euler[0]) * math.cos(euler[1])
-        tilt = math.acos(_min(_max(cos_tilt, -1.0), 1.0))
-        if tilt > metrics[M_MAX_TILT]:
-            metrics[M_MAX_TILT] = tilt
+        if cos_tilt < min_cos_tilt:
+            min_cos_tilt = cos_tilt
         if pos[2] > airborne_h:
             airborne = True
         # -- failures end the run at this sample --
@@ -929,7 +908,7 @@ def simulate(  # noqa: C901
             fail = FAIL_NONFINITE
         elif err > max_pos_err:
             fail = FAIL_POSITION
-        elif tilt > max_tilt:
+        elif cos_tilt < cos_max_tilt:
             fail = FAIL_TILT
         elif touched:
             fail = FAIL_GROUND
@@ -962,6 +941,7 @@ def simulate(  # noqa: C901
             rk4_step(s, k1, k2, k3, k4, tmp, P, u, dt_phys)
             if P[P_GROUND] != 0.0 and ground_contact(s, P) and airborne:
                 touched = True
+    metrics[M_MAX_TILT] = math.acos(_min(_max(min_cos_tilt, -1.0), 1.0))
     metrics[M_FAIL] = fail
     metrics[M_T_END] = t
     return metrics

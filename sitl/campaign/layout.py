@@ -65,23 +65,13 @@ C_SIZE = 57
 TLAW_SECOND_STEP, TLAW_FIRST_STEP, TLAW_BACKSTEPPING = 0, 1, 2
 RLAW_NLHINF, RLAW_INTBS = 0, 1
 
-# -- trajectory (autopilot.guidance.trajectories: HarmonicTrajectory or Hover) ----------------------
-T_KIND = 0  # 0 harmonic, 1 hover
-T_OFFSET = 1  # 3 (hover: the position)
-T_AMPLITUDE = 4  # 3
-T_PHASE = 7  # 3
-T_RATE = 10  # 3
-T_W = 13
-T_YAW = 14
-T_SIZE = 15
-
 # -- simulation ----------------------------------------------------------------------------------
 S_DT_CONTROL = 0
 S_DT_PHYSICS = 1
 S_SUBSTEPS = 2
 S_STEPS = 3  # control steps; samples k = 0..steps
 S_WIRE = 4  # 1.0: float32 state and controls as on the MAVLink wire
-S_USEC_PER_FRAME = 5
+S_USEC_PER_FRAME = 5  # informational: the reference table is sampled on this clock
 S_MAX_POS_ERR = 6
 S_MAX_TILT = 7
 S_AIRBORNE = 8  # height of O above which the vehicle counts as airborne
