@@ -9,8 +9,10 @@ quantisation on. Everything a user's ``quadsitl campaign`` does is counted: spec
 the process pool, numba compilation, the flights, the Parquet parts and the final table.
 
 Measured twice, each in a fresh process: with an empty numba cache (compilation counted), then
-with the cache the first measurement left (what every later campaign pays). Last lines
-``name: value unit``.
+with the cache the first measurement left (what every later campaign pays). The machine is
+shared: the CPU seconds (this process and its workers) and the load average before each
+measurement are printed too, so a wall time taken under someone else's load can be read. Last
+lines ``name: value unit``.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -28,9 +31,16 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its waited-for children (the pool's workers)."""
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def child(args: argparse.Namespace) -> None:
     sys.path.insert(0, str(ROOT))
     start = time.perf_counter()
+    load_before = os.getloadavg()[0]
     from sitl.campaign.runner import run_campaign
     from sitl.campaign.spec import load_campaign
 
@@ -44,11 +54,15 @@ def child(args: argparse.Namespace) -> None:
         result = run_campaign(spec, out, workers=args.workers, progress=False)
     wall = time.perf_counter() - start
     failed = sum(result.table.column("failed").to_pylist())
-    print(
-        json.dumps(
-            {"wall_s": wall, "warm_up_s": result.warm_up_s, "rows": result.table.num_rows, "failed": failed}
-        )
-    )
+    report = {
+        "wall_s": wall,
+        "cpu_s": _cpu_s(),
+        "warm_up_s": result.warm_up_s,
+        "rows": result.table.num_rows,
+        "failed": failed,
+        "load_before": load_before,
+    }
+    print(json.dumps(report))
 
 
 def main() -> None:
@@ -79,7 +93,8 @@ def main() -> None:
             r = results[label]
             print(
                 f"{label} numba cache: {r['wall_s']:.1f} s wall for {r['rows']} runs "
-                f"({r['warm_up_s']:.1f} s of it compiling or loading the kernels; {r['failed']} failed)",
+                f"({r['warm_up_s']:.1f} s of it compiling or loading the kernels; {r['failed']} failed); "
+                f"{r['cpu_s']:.1f} CPU s in all; load average before {r['load_before']:.2f}",
                 flush=True,
             )
     physics_steps = args.runs * 40_000
@@ -92,6 +107,7 @@ def main() -> None:
     print(f"campaign_wall_time_warm_cache: {warm['wall_s']:.1f} s")
     print(f"numba_compile_time: {cold['warm_up_s']:.1f} s")
     print(f"numba_cache_load_time: {warm['warm_up_s']:.2f} s")
+    print(f"campaign_cpu_time_warm_cache: {warm['cpu_s']:.1f} s")
     print(f"campaign_vehicle_steps_per_s_warm: {physics_steps / warm['wall_s']:.3g} steps/s")
 
 

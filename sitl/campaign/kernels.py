@@ -25,7 +25,11 @@ the specification; the tests in ``tests/campaign/`` prove the agreement run for 
   variation), accumulated while flying.
 
 ``min(max(x, lo), hi)`` is spelled with :func:`_max` / :func:`_min`, which have Python's exact
-semantics (``max(a, b)`` is ``b if b > a else a``), NaN included.
+semantics (``max(a, b)`` is ``b if b > a else a``), NaN included. ``error_model="numpy"``: a
+float division by zero gives inf/NaN instead of raising ZeroDivisionError as the scalar code
+would, which spares a test on every division. The divisors are masses, time constants, clipped
+thrusts, cosines kept >= 1e-6, and cos(theta) in W_eta^-1, zero only at theta = +-pi/2 exactly
+(gimbal lock); a run there ends as "non-finite state" instead of an exception.
 """
 
 from __future__ import annotations
@@ -741,7 +745,9 @@ def allocate_rotors(
 # -------------------------------------------------------------------------------------------------
 # One flight
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
+# nogil: a Dask worker with several threads flies several runs at once (nothing here touches
+# Python objects).
+@njit(cache=True, error_model="numpy", nogil=True)
 def simulate(  # noqa: C901
     state0: np.ndarray,
     P: np.ndarray,

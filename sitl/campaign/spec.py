@@ -88,7 +88,7 @@ CAMPAIGN_DIR = CONFIG_DIR / "campaigns"
 MAX_RUNS = 1_000_000
 # Bumped whenever the kernels or the sampling change what a run produces (results on disk from
 # another version are then not mixed in on resume).
-ENGINE_VERSION = "campaign-engine-1"
+ENGINE_VERSION = "campaign-engine-2"
 MAX_TIME_S = 1e6
 
 
