@@ -131,3 +131,18 @@ def test_failed_runs_are_flagged_with_their_reason(tmp_path):
         else:
             assert not r["failed"] and r["failure"] == ""
             assert r["failure_time_s"] != r["failure_time_s"]  # NaN
+
+
+@pytest.mark.timeout(300)
+def test_threads_fly_in_parallel_and_agree(tmp_path):
+    """The kernel releases the GIL: a threaded executor (a Dask worker's default) gives the same table."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    spec = _spec(tmp_path)
+    alone = run_campaign(spec, tmp_path / "one", workers=1, progress=False)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        threaded = run_campaign(
+            replace(spec, chunk_runs=1), tmp_path / "threads", executor=pool, progress=False
+        )
+    assert threaded.executor == "ThreadPoolExecutor"
+    assert tables_equal(threaded.table, alone.table)
