@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import (
     ControllerConfig,
     VehicleConfig,
@@ -78,7 +79,7 @@ def run_chunk(spec: CampaignSpec, runs: Sequence[int]) -> list[dict[str, Any]]:
     return rows
 
 
-def fly_recorded(spec: CampaignSpec, run: int, controller: str):
+def fly_recorded(spec: CampaignSpec, run: int, controller: str) -> tuple[FlightRecord, dict[str, Any]]:
     """Re-fly one run with the time series recorded: a :class:`FlightRecord` (for figures)."""
     sample = sample_run(spec, run)
     flight = flights(spec, sample)[controller]

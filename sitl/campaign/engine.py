@@ -23,7 +23,7 @@ from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
 from simulator.environment.gust_profile import CHANNELS, GustProfile
 
-from . import layout as lay
+from . import kernels as lay
 
 Vector3 = tuple[float, float, float]
 
@@ -242,10 +242,9 @@ def dt_physics_of(rates: Rates) -> float:
 # -------------------------------------------------------------------------------------------------
 def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Fly one packed run: ``(metrics row, recorded rows or None)``."""
-    from .kernels import simulate  # numba compiles (or loads its cache) on first use
-
+    # numba compiles simulate (or loads it from its cache) on the first call in a process.
     rows = np.zeros((flight.samples if record else 0, lay.R_SIZE))
-    metrics = simulate(
+    metrics = lay.simulate(
         flight.state0,
         flight.plant,
         flight.controller,

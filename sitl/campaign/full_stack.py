@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import pyarrow as pa
+
 from .spec import CampaignSpec
 
 
@@ -23,7 +25,7 @@ class FullStackUnavailable(NotImplementedError):
     """The in-process full-stack runner the check needs has not landed yet."""
 
 
-def check(runs: Sequence[int], spec: CampaignSpec | None = None, table=None) -> None:
+def check(runs: Sequence[int], spec: CampaignSpec | None = None, table: pa.Table | None = None) -> None:
     """Fly ``runs`` through the in-process full stack and compare their indices with ``table``.
 
     Raises :class:`FullStackUnavailable` until the in-process full stack lands.

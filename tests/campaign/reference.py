@@ -27,7 +27,7 @@ from sitl.campaign.spec import CampaignSpec
 
 
 def fly_scalar(spec: CampaignSpec, sample: RunSample, controller: ControllerConfig, wire: bool) -> np.ndarray:
-    """Rows of ``sitl.campaign.layout.RECORD_COLUMNS`` (truth position/attitude, references, controls)."""
+    """Rows of ``sitl.campaign.kernels.RECORD_COLUMNS`` (truth position/attitude, references, controls)."""
     rates = spec.rates
     dt_control = 1.0 / rates.control_hz
     substeps = rates.physics_steps_per_control

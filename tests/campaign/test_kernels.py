@@ -13,7 +13,6 @@ from quadcommon.config import load_vehicle  # noqa: E402
 from simulator.dynamics.plant import Plant  # noqa: E402
 from sitl.campaign import engine as eng  # noqa: E402
 from sitl.campaign import kernels as ker  # noqa: E402
-from sitl.campaign import layout as lay  # noqa: E402
 
 RNG = np.random.default_rng(11)
 
@@ -115,9 +114,9 @@ def test_rotor_allocation_equals_allocator():
     vehicle = load_vehicle("paper_quad")
     vehicle = replace(vehicle, actuation=replace(vehicle.actuation, mode="rotors"))
     alloc = Allocator(vehicle)
-    C = np.zeros(lay.C_SIZE)
-    C[lay.C_AB], C[lay.C_AD], C[lay.C_AARM] = alloc.b, alloc.d, alloc.arm
-    C[lay.C_SQMIN], C[lay.C_SQMAX], C[lay.C_SPEED_MAX] = alloc.sq_min, alloc.sq_max, alloc.speed_max
+    C = np.zeros(ker.C_SIZE)
+    C[ker.C_AB], C[ker.C_AD], C[ker.C_AARM] = alloc.b, alloc.d, alloc.arm
+    C[ker.C_SQMIN], C[ker.C_SQMAX], C[ker.C_SPEED_MAX] = alloc.sq_min, alloc.sq_max, alloc.speed_max
     saturated = 0
     for _ in range(300):
         thrust = float(RNG.uniform(-2.0, 32.0))

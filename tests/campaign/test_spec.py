@@ -11,6 +11,8 @@ from sitl.campaign.spec import CAMPAIGN_DIR, load_campaign
 
 from . import specs
 
+pytestmark = pytest.mark.timeout(120)
+
 MINIMAL = """
 name = "t"
 scenario = "helix"

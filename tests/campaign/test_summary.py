@@ -12,6 +12,8 @@ from sitl.campaign.summary import derived_columns, summary_markdown, worst_runs
 
 from . import specs
 
+pytestmark = pytest.mark.timeout(120)
+
 
 def _table(n: int = 200) -> pa.Table:
     """A synthetic campaign table: the position ISE grows with the mass scale, not the inertia."""
