@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -556,7 +555,3 @@ def _read_dryden(sec: Section) -> DrydenSpec:
     sec.finish()
     return DrydenSpec(values)
 
-
-def read_spec_text(text: str) -> dict[str, Any]:
-    """The spec's TOML as a mapping (for tools that want the raw values)."""
-    return tomllib.loads(text)
