@@ -1,6 +1,7 @@
 # The two commands a newcomer types (README.md):
 #   make demo   set everything up (.venv) and run the main job: the paper's experiment in-process
-#               (out/paper) and through the SITL, three cascades, recorded and analysed (out/demo)
+#               (out/paper) and through the SITL, three cascades, recorded and analysed (out/demo),
+#               then a 200-run Monte Carlo campaign of the +-30 % box (out/campaign)
 #   make test   set everything up (.venv, test tools) and run lint + the test suite
 PYTHON ?= python3
 VENV   ?= .venv
@@ -12,7 +13,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,campaign,cluster]'
 	# MAVProxy without its GUI dependencies (wxPython, opencv, ...: ~1 GB); the tests drive it headless.
 	$(BIN)/python -m pip install --quiet --no-deps 'MAVProxy>=1.8'
 	@touch $(STAMP)
@@ -20,6 +21,9 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/quadsitl paper --out out/paper
 	$(BIN)/quadsitl demo --out out/demo
+	# Monte Carlo: the paper's +-30 % box, 200 runs x the three cascades (prints where the summary is)
+	rm -rf out/campaign
+	$(BIN)/quadsitl campaign paper_box --runs 200 --out out/campaign --no-progress
 
 paper: $(STAMP)
 	$(BIN)/quadsitl paper --out out/paper
@@ -33,6 +37,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/inprocess.py
+	$(BIN)/python benchmarks/campaign.py
 
 clean:
 	rm -rf out .pytest_cache .ruff_cache

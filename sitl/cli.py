@@ -2,6 +2,7 @@
 
 quadsitl paper [--out DIR] [--nominal-plant]      the paper's experiment, in-process
 quadsitl run SCENARIO [--controller NAME]          one in-process run
+quadsitl campaign SPEC [--runs N] [--out DIR]       Monte Carlo campaign (sitl/campaign/)
 """
 
 from __future__ import annotations
@@ -190,6 +191,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
     p.add_argument("--out", default=None, help="write the time series to this Parquet file")
     p.set_defaults(func=_cmd_run)
+
+    from .campaign.cli import add_campaign_parser  # issue 11: Monte Carlo campaigns
+
+    add_campaign_parser(sub)
     return parser
 
 

@@ -1,0 +1,103 @@
+"""The unit of work a campaign hands to an Executor: fly some runs, with every controller.
+
+:func:`run_chunk` is a plain top-level function of picklable arguments (the validated spec and
+a list of run indices) returning plain rows, so any ``concurrent.futures.Executor`` can run it:
+a local process pool or a Dask cluster (``Client.get_executor()``), on any machine with the
+package installed. A run's rows depend only on the spec and the run's index (see
+:mod:`.sampling`), never on the chunk it travels in.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from autopilot.control.config import ControllerConfig, load_controller
+from gcs_scripts.analysis.record import FlightRecord
+from quadcommon.config import VehicleConfig, load_scenario, load_sitl, load_vehicle
+from simulator.environment.gust_profile import GustProfile
+
+from . import engine as eng
+from .sampling import RunSample, sample_run
+from .spec import CampaignSpec
+
+
+@functools.lru_cache(maxsize=32)
+def _controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> np.ndarray:
+    # Building a Cascade runs scipy's expm for the command filter: once per process, not per run.
+    return eng.controller_array(controller, vehicle, dt_control)
+
+
+@functools.lru_cache(maxsize=8)
+def _reference(trajectory, rates, duration_s: float, wire: bool) -> np.ndarray:
+    # The same reference for every run of a campaign: sampled once per process.
+    table = eng.reference_table(trajectory, rates, duration_s, wire)
+    table.flags.writeable = False
+    return table
+
+
+def flights(spec: CampaignSpec, sample: RunSample) -> dict[str, eng.Flight]:
+    """The packed flights of one sampled run, one per controller (same plant and disturbances)."""
+    rates = spec.rates
+    dt_control = 1.0 / rates.control_hz
+    dtp = eng.dt_physics_of(rates)
+    sc = sample.scenario
+    state0, P = eng.initial_state(
+        sample.plant_vehicle, dtp, sc.initial_position_m, sc.initial_euler_rad, sample.initial_velocity_m_s
+    )
+    steps, ramps, gusts, dryden, window = eng.disturbance_tables(sample.gusts, dtp, spec.duration_s)
+    S = eng.sim_array(rates, spec.duration_s, spec.wire_float32, spec.failure, window)
+    T = _reference(sc.trajectory, rates, spec.duration_s, spec.wire_float32)
+    return {
+        c.name: eng.Flight(
+            state0, P, _controller_array(c, spec.vehicle, dt_control), T, S, steps, ramps, gusts, dryden
+        )
+        for c in spec.controllers
+    }
+
+
+def run_chunk(spec: CampaignSpec, runs: Sequence[int]) -> list[dict[str, Any]]:
+    """Fly ``runs`` with every controller of ``spec``: one row per (run, controller)."""
+    rows: list[dict[str, Any]] = []
+    for run in runs:
+        sample = sample_run(spec, int(run))
+        for name, flight in flights(spec, sample).items():
+            metrics, _ = eng.fly(flight)
+            rows.append(
+                {"run": int(run), "controller": name, **sample.parameters, **eng.metrics_dict(metrics)}
+            )
+    return rows
+
+
+def fly_recorded(spec: CampaignSpec, run: int, controller: str) -> tuple[FlightRecord, dict[str, Any]]:
+    """Re-fly one run with the time series recorded: a :class:`FlightRecord` (for figures)."""
+    sample = sample_run(spec, run)
+    flight = flights(spec, sample)[controller]
+    metrics, rows = eng.fly(flight, record=True)
+    record = eng.record_to_flight_record(
+        rows, f"{controller} (run {run})", spec.scenario.name, controller, sample.gusts.event_times()
+    )
+    return record, eng.metrics_dict(metrics)
+
+
+def warm_up() -> float:
+    """Compile the kernels (or load them from numba's cache) now; returns the seconds it took.
+
+    Flies a two-step hover: numba compiles ``simulate`` for the argument types on first call.
+    """
+    start = time.perf_counter()
+    vehicle = load_vehicle("paper_quad")
+    scenario = load_scenario("hover")
+    rates = load_sitl().rates
+    dtp = eng.dt_physics_of(rates)
+    state0, P = eng.initial_state(vehicle, dtp, scenario.initial_position_m, scenario.initial_euler_rad)
+    steps, ramps, gusts, dryden, window = eng.disturbance_tables(GustProfile(), dtp, 0.004)
+    C = _controller_array(load_controller("intbs_nlhinf"), vehicle, 1.0 / rates.control_hz)
+    S = eng.sim_array(rates, 0.004, True, eng.FailureLimits(), window)
+    T = eng.reference_table(scenario.trajectory, rates, 0.004, True)
+    eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden))
+    return time.perf_counter() - start

@@ -1,0 +1,108 @@
+"""``quadsitl campaign SPEC [--runs N] [--out DIR] [--workers K | --scheduler tcp://HOST:PORT]``.
+
+Kept here (not in ``sitl/cli.py``) so the main command line only registers the subcommand;
+nothing heavy (numba, Dask) is imported until the command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def add_campaign_parser(sub) -> None:
+    """Register ``campaign`` on the ``quadsitl`` subparsers."""
+    p = sub.add_parser(
+        "campaign",
+        help="Monte Carlo robustness campaign: many randomised runs, indices in Parquet, summary, figures",
+        description=(
+            "Fly a campaign spec (config/campaigns/NAME.toml or a path) with the batch engine: every run "
+            "with every controller, rows appended to Parquet as chunks finish (an interrupted campaign "
+            "resumes), then summary.md and figures/ in the output directory."
+        ),
+    )
+    p.add_argument("spec", help="campaign spec: a name in config/campaigns or a path")
+    p.add_argument("--runs", type=int, default=None, help="number of runs (default: the spec's)")
+    p.add_argument("--out", default=None, help="output directory (default: out/campaigns/<name>)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers", type=int, default=None, help="local worker processes (default: one per core)"
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="tcp://HOST:PORT",
+        help="run on a Dask cluster (dask scheduler + dask worker; needs quadsitl[cluster])",
+    )
+    p.add_argument(
+        "--full-stack",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also fly K sampled runs through the in-process full stack and compare (not available yet)",
+    )
+    p.add_argument("--no-figures", action="store_true", help="write the table and summary only")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_command)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        print("quadsitl campaign needs the batch engine: pip install 'quadsitl[campaign]' (numba, tqdm)",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    from . import full_stack
+    from .report import write_report
+    from .runner import run_campaign
+    from .spec import load_campaign
+    from .summary import summary_markdown
+
+    if args.workers is not None and args.workers < 1:
+        print(f"quadsitl campaign: --workers {args.workers} is invalid; allowed: >= 1", file=sys.stderr)
+        return 2
+    spec = load_campaign(args.spec, runs=args.runs)
+    if args.full_stack:
+        if not 0 < args.full_stack <= spec.runs:
+            print(f"quadsitl campaign: --full-stack {args.full_stack} is invalid; allowed: 1..{spec.runs}",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        try:  # fail before flying anything, not after
+            full_stack.check(list(range(args.full_stack)), spec)
+        except full_stack.FullStackUnavailable as exc:
+            print(f"quadsitl campaign: {exc}", file=sys.stderr)
+            return 2
+    for warning in spec.warnings:
+        print(f"quadsitl campaign: warning: {warning}", file=sys.stderr)
+    out = Path(args.out) if args.out else Path("out") / "campaigns" / spec.name
+    where = args.scheduler or f"{args.workers or 'one per core'} local worker(s)"
+    print(
+        f"campaign {spec.name}: {spec.runs} runs x {len(spec.controllers)} controllers "
+        f"({', '.join(spec.controller_names)}), scenario {spec.scenario.name}, seed {spec.seed}, "
+        f"wire float32 {'on' if spec.wire_float32 else 'off'}; {where}; results in {out}/",
+        flush=True,
+    )
+    result = run_campaign(
+        spec, out, workers=args.workers, scheduler=args.scheduler, progress=not args.no_progress
+    )
+    flown = f"{result.flown_runs} runs flown" + (
+        f", {result.skipped_runs} already done" if result.skipped_runs else ""
+    )
+    print(f"{flown} in {result.wall_s:.1f} s (kernels ready in {result.warm_up_s:.1f} s; {result.executor})")
+    if args.no_figures:
+        summary = out / "summary.md"
+        summary.write_text(summary_markdown(result.table, spec))
+        files = [summary]
+    else:
+        files = write_report(spec, result.table, out)
+    text = files[0].read_text()
+    start = text.index("## Headline")
+    end = text.index("\n## ", start + 3)
+    print(text[start:end].strip())
+    print(f"\nresults: {result.results_path}")
+    print(f"summary: {files[0]}")
+    if len(files) > 1:
+        print(f"figures: {out / 'figures'}/ ({len(files) - 1} files)")
+    return 0

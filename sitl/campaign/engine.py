@@ -1,0 +1,301 @@
+"""The batch engine: pack a run's configuration into flat arrays and fly it with the kernels.
+
+Every number the kernels use is read off the project's own objects, built the way the scalar
+runner builds them (a :class:`simulator.dynamics.plant.Plant`, a
+:class:`autopilot.control.cascade.Cascade`, the trajectory of :func:`trajectory_from_spec`, the
+gust profile's elements, the Dryden generator), so the batch engine and
+``sitl.inprocess.run_scenario`` fly the same parameters; :mod:`sitl.campaign.kernels` holds the
+equations (see its docstring for why a transcription and how it is tested).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from autopilot.control.cascade import Cascade
+from autopilot.control.config import ControllerConfig
+from gcs_scripts.analysis.record import FlightRecord
+from quadcommon.config import Rates, TrajectorySpec, VehicleConfig
+from quadcommon.trajectories import trajectory_from_spec
+from simulator.dynamics.plant import Plant
+from simulator.environment.dryden import DrydenWind
+from simulator.environment.gust_profile import CHANNELS, GustProfile
+
+from . import kernels as lay
+
+Vector3 = tuple[float, float, float]
+
+FAILURE_NAMES = {
+    lay.FAIL_NONE: "",
+    lay.FAIL_NONFINITE: "diverged: non-finite state",
+    lay.FAIL_POSITION: "diverged: position error above the limit",
+    lay.FAIL_TILT: "diverged: tilt above the limit",
+    lay.FAIL_GROUND: "crashed: ground contact after take-off",
+}
+
+# Names of the metric columns, in the order of the kernel's metrics row (layout M_*).
+METRIC_COLUMNS = (
+    "final_error_x_m", "final_error_y_m", "final_error_z_m",
+    "ise_x", "ise_y", "ise_z", "ise_phi", "ise_theta", "ise_psi",
+    "iadu_U1", "iadu_tau_phi", "iadu_tau_theta", "iadu_tau_psi",
+    "max_position_error_m", "max_tilt_rad", "time_saturated_s", "time_tilt_limited_s",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class FailureLimits:
+    """When a run counts as failed (it then stops at that sample)."""
+
+    max_position_error_m: float = 5.0
+    max_tilt_rad: float = 1.3
+    airborne_height_m: float = 0.05  # a ground contact after O rose above this is a crash
+
+
+@dataclass(frozen=True)
+class Flight:
+    """One run x controller, packed for :func:`sitl.campaign.kernels.simulate`."""
+
+    state0: np.ndarray
+    plant: np.ndarray
+    controller: np.ndarray
+    reference: np.ndarray  # reference_table()
+    sim: np.ndarray
+    steps: np.ndarray
+    ramps: np.ndarray
+    gusts: np.ndarray
+    dryden: np.ndarray
+
+    @property
+    def samples(self) -> int:
+        return int(self.sim[lay.S_STEPS]) + 1
+
+
+# -------------------------------------------------------------------------------------------------
+# Packing
+# -------------------------------------------------------------------------------------------------
+def plant_array(plant: Plant) -> np.ndarray:
+    """The true vehicle's constants as the kernels read them (layout ``P_*``)."""
+    P = np.zeros(lay.P_SIZE)
+    P[lay.P_MASS] = plant.mass
+    P[lay.P_GRAVITY] = plant.gravity
+    P[lay.P_J : lay.P_J + 9] = np.array(plant.inertia, dtype=float).ravel()
+    P[lay.P_K : lay.P_K + 9] = np.array(plant.inertia_inv, dtype=float).ravel()
+    P[lay.P_COM : lay.P_COM + 3] = plant.com_offset
+    P[lay.P_DRAG : lay.P_DRAG + 3] = plant.drag
+    P[lay.P_B], P[lay.P_D], P[lay.P_ARM] = plant.b, plant.d, plant.arm
+    P[lay.P_JR], P[lay.P_TAU] = plant.rotor_inertia, plant.rotor_tau
+    P[lay.P_WMIN], P[lay.P_WMAX] = plant.speed_min, plant.speed_max
+    P[lay.P_THRUST_MAX] = plant.thrust_max
+    P[lay.P_TORQUE_MAX : lay.P_TORQUE_MAX + 3] = plant.torque_max
+    P[lay.P_ROTOR_MODE] = 1.0 if plant.rotor_mode else 0.0
+    P[lay.P_GROUND] = 1.0 if plant.ground_contact else 0.0
+    P[lay.P_HAS_DRAG] = 1.0 if tuple(plant.drag) != (0.0, 0.0, 0.0) else 0.0
+    return P
+
+
+def initial_state(
+    plant_vehicle: VehicleConfig,
+    dt_physics: float,
+    position_m: Vector3,
+    euler_rad: Vector3,
+    velocity_m_s: Vector3 = (0.0, 0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(state0, P)``: the plant placed by :meth:`Plant.reset` and its constants."""
+    plant = Plant(plant_vehicle, dt_physics)
+    plant.reset(position_m, euler_rad, velocity_m_s)
+    return np.array(plant.state, dtype=float), plant_array(plant)
+
+
+def controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> np.ndarray:
+    """The cascade's gains as the kernels read them (layout ``C_*``), off a real :class:`Cascade`."""
+    cascade = Cascade(controller, vehicle, dt_control)
+    tr, rot, flt, alloc = cascade.translational, cascade.rotational, cascade.filter, cascade.allocator
+    C = np.zeros(lay.C_SIZE)
+    C[lay.C_TLAW] = {"integral_second_step": 0, "integral_first_step": 1, "backstepping": 2}[
+        controller.translational.law
+    ]
+    C[lay.C_RLAW] = 0 if controller.rotational.law == "nlhinf" else 1
+    C[lay.C_MASS], C[lay.C_GRAVITY] = tr.mass, tr.gravity
+    C[lay.C_THRUST_MAX], C[lay.C_THRUST_FLOOR], C[lay.C_SIN_TILT] = (
+        tr.thrust_max,
+        tr.thrust_floor,
+        tr.sin_tilt_max,
+    )
+    g = tr.gains
+    for i in range(3):
+        c1, c2 = g.c1[i], g.c2[i]
+        C[lay.C_C1 + i], C[lay.C_C2 + i], C[lay.C_KI + i] = c1, c2, g.k_integral[i]
+        # TranslationalController._set_gains: (1 + c1 c2, c1 + c2)
+        C[lay.C_ONE_C1C2 + i], C[lay.C_C1_C2 + i] = 1.0 + c1 * c2, c1 + c2
+    if controller.rotational.law == "nlhinf":
+        C[lay.C_KD], C[lay.C_KP], C[lay.C_RINV] = rot.k_d, rot.k_p, rot.r_inv
+    else:
+        C[lay.C_AC1 : lay.C_AC1 + 3] = rot.c1
+        C[lay.C_AC2 : lay.C_AC2 + 3] = rot.c2
+        C[lay.C_ALAM : lay.C_ALAM + 3] = rot.lam
+    C[lay.C_INERTIA : lay.C_INERTIA + 3] = rot.inertia
+    C[lay.C_WN2], C[lay.C_2ZW] = flt.wn2, flt.two_zeta_wn
+    # The exact ZOH discretisation SecondOrderFilter computed (scipy expm); one source for it.
+    C[lay.C_PHI : lay.C_PHI + 6] = np.array(flt._phi, dtype=float).ravel()
+    C[lay.C_AB], C[lay.C_AD], C[lay.C_AARM] = alloc.b, alloc.d, alloc.arm
+    C[lay.C_SQMIN], C[lay.C_SQMAX], C[lay.C_SPEED_MAX] = alloc.sq_min, alloc.sq_max, alloc.speed_max
+    C[lay.C_ATHRUST_MAX] = alloc.thrust_max
+    C[lay.C_ATORQUE_MAX : lay.C_ATORQUE_MAX + 3] = alloc.torque_max
+    C[lay.C_ROTOR_MODE] = 1.0 if cascade.rotor_mode else 0.0
+    C[lay.C_DT] = cascade.dt
+    C[lay.C_TBOUND : lay.C_TBOUND + 3] = tr.law.integral_bound
+    C[lay.C_RBOUND : lay.C_RBOUND + 3] = rot.integral_bound
+    return C
+
+
+def reference_table(spec: TrajectorySpec, rates: Rates, duration_s: float, wire_float32: bool) -> np.ndarray:
+    """Row k: the reference the controller gets at control step k, from the project's trajectory.
+
+    Columns: p_d (3), p_d' (3), p_d'' (3), yaw, yaw', yaw'' (paper frames, SI). The time is
+    ``k dt`` in-process, and ``time_usec * 1e-6`` with ``time_usec = round(k * 1e6 / control_hz)``
+    through the wire (the autopilot reads its clock off the frame), as the two runners sample it.
+    The same for every run of a campaign, so it is sampled once per process.
+    """
+    trajectory = trajectory_from_spec(spec)
+    dt_control = 1.0 / rates.control_hz
+    usec_per_frame = 1e6 / rates.control_hz
+    steps = int(round(duration_s / dt_control))
+    table = np.empty((steps + 1, 12))
+    for k in range(steps + 1):
+        t = round(k * usec_per_frame) * 1e-6 if wire_float32 else k * dt_control
+        r = trajectory.sample(t)
+        table[k, 0:3] = r.position_m
+        table[k, 3:6] = r.velocity_m_s
+        table[k, 6:9] = r.acceleration_m_s2
+        table[k, 9:12] = (r.yaw_rad, r.yaw_rate_rad_s, r.yaw_acceleration_rad_s2)
+    return table
+
+
+def disturbance_tables(
+    profile: GustProfile, dt_physics: float, duration_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[float, ...]]:
+    """Steps, ramps, 1-cos gusts, Dryden wind samples, and the Dryden window (S_DRYDEN_*).
+
+    Rows are built with the formulas of ``DisturbanceSchedule.__init__`` (start time 0); the
+    Dryden wind is drawn by the project's :class:`DrydenWind` at the physics step, one sample
+    per step index the run can reach.
+    """
+    index = {c: i for i, c in enumerate(CHANNELS)}
+    steps = np.array(
+        [(index[s.channel], s.start_s, s.end_s, s.value) for s in profile.steps], dtype=float
+    ).reshape(-1, 4)
+    ramps = np.array(
+        [(index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps], dtype=float
+    ).reshape(-1, 5)
+    gusts = np.array(
+        [
+            (g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s, *g.unit())
+            for g in profile.one_minus_cosine
+        ],
+        dtype=float,
+    ).reshape(-1, 7)
+    d = profile.dryden
+    if d is None:
+        return steps, ramps, gusts, np.zeros((1, 3)), (0.0, 0.0, math.inf, math.inf, dt_physics)
+    t0 = 0.0 + d.start_s
+    last = max(int(math.floor((duration_s + dt_physics - t0) / dt_physics + 0.5)) + 2, 1)
+    gen = DrydenWind(d, dt_physics)
+    wind = np.array([gen.at_step(n) for n in range(last)], dtype=float).reshape(-1, 3)
+    return steps, ramps, gusts, wind, (1.0, t0, d.start_s, d.end_s, dt_physics)
+
+
+def sim_array(
+    rates: Rates,
+    duration_s: float,
+    wire_float32: bool,
+    limits: FailureLimits,
+    dryden_window: tuple[float, ...],
+) -> np.ndarray:
+    """Timing, the wire switch and the failure limits (layout ``S_*``), as ``run_scenario`` times."""
+    dt_control = 1.0 / rates.control_hz
+    substeps = rates.physics_steps_per_control
+    S = np.zeros(lay.S_SIZE)
+    S[lay.S_DT_CONTROL] = dt_control
+    S[lay.S_DT_PHYSICS] = dt_control / substeps
+    S[lay.S_SUBSTEPS] = substeps
+    S[lay.S_STEPS] = int(round(duration_s / dt_control))
+    S[lay.S_WIRE] = 1.0 if wire_float32 else 0.0
+    S[lay.S_USEC_PER_FRAME] = 1e6 / rates.control_hz  # the simulator's time_usec per frame
+    S[lay.S_MAX_POS_ERR] = limits.max_position_error_m
+    S[lay.S_MAX_TILT] = limits.max_tilt_rad
+    S[lay.S_AIRBORNE] = limits.airborne_height_m
+    (
+        S[lay.S_DRYDEN_ON],
+        S[lay.S_DRYDEN_T0],
+        S[lay.S_DRYDEN_FROM],
+        S[lay.S_DRYDEN_UNTIL],
+        S[lay.S_DRYDEN_STEP],
+    ) = dryden_window
+    return S
+
+
+def dt_physics_of(rates: Rates) -> float:
+    """The physics step exactly as ``run_scenario`` computes it."""
+    return (1.0 / rates.control_hz) / rates.physics_steps_per_control
+
+
+# -------------------------------------------------------------------------------------------------
+# Flying
+# -------------------------------------------------------------------------------------------------
+def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Fly one packed run: ``(metrics row, recorded rows or None)``."""
+    # numba compiles simulate (or loads it from its cache) on the first call in a process.
+    rows = np.zeros((flight.samples if record else 0, lay.R_SIZE))
+    metrics = lay.simulate(
+        flight.state0,
+        flight.plant,
+        flight.controller,
+        flight.reference,
+        flight.sim,
+        flight.steps,
+        flight.ramps,
+        flight.gusts,
+        flight.dryden,
+        rows,
+    )
+    if not record:
+        return metrics, None
+    flown = int(round(metrics[lay.M_T_END] / flight.sim[lay.S_DT_CONTROL])) + 1
+    return metrics, rows[:flown]
+
+
+def record_to_flight_record(
+    rows: np.ndarray, label: str, scenario: str, controller: str, event_times: list[float]
+) -> FlightRecord:
+    """Recorded rows (``RECORD_COLUMNS``) as the analysis package's :class:`FlightRecord`."""
+    return FlightRecord(
+        label=label,
+        scenario=scenario,
+        controller=controller,
+        time_s=rows[:, 0].copy(),
+        position_m=rows[:, 1:4].copy(),
+        position_ref_m=rows[:, 4:7].copy(),
+        euler_rad=rows[:, 7:10].copy(),
+        euler_ref_rad=rows[:, 10:13].copy(),
+        thrust_n=rows[:, 13].copy(),
+        torque_euler_n_m=rows[:, 14:17].copy(),
+        disturbance_force_n=rows[:, 17:20].copy(),
+        disturbance_torque_n_m=rows[:, 20:23].copy(),
+        event_times_s=list(event_times),
+        source="campaign batch engine",
+    )
+
+
+def metrics_dict(metrics: np.ndarray) -> dict[str, float | bool | str]:
+    """A metrics row as named columns (plus the final-error norm and the failure reason)."""
+    out: dict[str, float | bool | str] = {name: float(metrics[i]) for i, name in enumerate(METRIC_COLUMNS)}
+    fx, fy, fz = out["final_error_x_m"], out["final_error_y_m"], out["final_error_z_m"]
+    out["final_error_m"] = math.sqrt(fx * fx + fy * fy + fz * fz)  # type: ignore[operator]
+    code = int(metrics[lay.M_FAIL])
+    out["failed"] = code != lay.FAIL_NONE
+    out["failure"] = FAILURE_NAMES[code]
+    out["failure_time_s"] = float(metrics[lay.M_T_FAIL])
+    return out

@@ -1,0 +1,162 @@
+"""Drawing one run of a campaign: the true plant, the initial state and the disturbance profile.
+
+Determinism: every quantity of every run has its own random stream,
+``SeedSequence(seed, spawn_key=(run, crc32(name)))``, so a run's values depend only on the spec's
+seed, the run's index and the quantity's name: not on how runs are chunked, which worker flies
+them, in which order, or which other quantities the spec randomises. (Same numpy version: numpy
+keeps ``SeedSequence`` and ``PCG64`` stable, and its distributions' streams across minor
+versions except for announced fixes.)
+
+The sampled vehicle is built the way the scalar runner builds its plant (``apply_uncertainty``
+on a scenario whose mass and inertia scales are the drawn ones), so ``sitl.inprocess.run_scenario``
+flies exactly the same numbers; rotor constants (``actuation = "rotors"``) are then scaled on the
+plant only (the allocator keeps the nominal ones).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from quadcommon.config import ScenarioConfig, VehicleConfig, apply_uncertainty
+from simulator.environment.gust_profile import GustProfile, gust_profile_from_mapping, profile_to_mapping
+
+from .spec import CampaignSpec, Distribution
+
+Vector3 = tuple[float, float, float]
+AXES = ("x", "y", "z")
+EULER = ("phi", "theta", "psi")
+PRODUCTS = ("xy", "xz", "yz")
+_KIND_PREFIX = {"step": "step", "ramp": "ramp", "one_minus_cosine": "gust"}
+
+
+@dataclass(frozen=True)
+class RunSample:
+    """Everything that makes run ``run`` what it is."""
+
+    run: int
+    parameters: dict[str, float]  # column name -> drawn value, in a fixed order
+    scenario: ScenarioConfig  # sampled initial state; mass/inertia scales as drawn (shared case)
+    vehicle: VehicleConfig  # nominal model + sampled structure (what run_scenario takes)
+    plant_vehicle: VehicleConfig  # the true plant flown (apply_uncertainty + rotor scaling)
+    initial_velocity_m_s: Vector3
+    gusts: GustProfile
+
+
+def stream(seed: int, run: int, name: str) -> np.random.Generator:
+    """The random stream of quantity ``name`` in run ``run``."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, zlib.crc32(name.encode()))))
+
+
+class _Draw:
+    def __init__(self, seed: int, run: int) -> None:
+        self.seed, self.run = seed, run
+        self.values: dict[str, float] = {}
+
+    def __call__(self, name: str, dist: Distribution) -> float:
+        value = dist.sample(stream(self.seed, self.run, name))
+        self.values[name] = value
+        return value
+
+    def vector(self, names: tuple[str, ...], dists: tuple[Distribution, ...]) -> Vector3:
+        return tuple(self(n, d) for n, d in zip(names, dists, strict=True))  # type: ignore[return-value]
+
+
+def sample_run(spec: CampaignSpec, run: int) -> RunSample:
+    """Draw run ``run`` of ``spec`` (0-based)."""
+    draw = _Draw(spec.seed, run)
+    pd = spec.plant
+    mass_scale = draw("mass_scale", pd.mass_scale)
+    if len(pd.inertia_scale) == 1:
+        shared = draw("inertia_scale", pd.inertia_scale[0])
+        axis_scales = (1.0, 1.0, 1.0)
+    else:
+        shared = 1.0
+        axis_scales = draw.vector(tuple(f"inertia_scale_{a}" for a in AXES), pd.inertia_scale)
+    com = draw.vector(tuple(f"com_offset_{a}_m" for a in AXES), pd.com_offset_m)
+    products = draw.vector(tuple(f"product_{p}_kg_m2" for p in PRODUCTS), pd.products_of_inertia_kg_m2)
+    rotor_scales = None
+    if spec.vehicle.actuation.mode == "rotors":
+        rotor_scales = (
+            draw("thrust_coefficient_scale", pd.thrust_coefficient_scale),
+            draw("drag_coefficient_scale", pd.drag_coefficient_scale),
+            draw("rotor_time_constant_scale", pd.rotor_time_constant_scale),
+        )
+    ini = spec.initial
+    dpos = draw.vector(tuple(f"position_offset_{a}_m" for a in AXES), ini.position_offset_m)
+    deul = draw.vector(tuple(f"euler_offset_{e}_rad" for e in EULER), ini.euler_offset_rad)
+    velocity = draw.vector(tuple(f"velocity_{a}_m_s" for a in AXES), ini.velocity_m_s)
+
+    base = spec.vehicle
+    inertia = base.plant.inertia_kg_m2
+    if len(pd.inertia_scale) == 3:
+        inertia = tuple(inertia[i] * axis_scales[i] for i in range(3))
+    vehicle = replace(
+        base,
+        plant=replace(
+            base.plant, inertia_kg_m2=inertia, com_offset_m=com, products_of_inertia_kg_m2=products
+        ),
+    )
+    s0 = spec.scenario
+    scenario = replace(
+        s0,
+        duration_s=spec.duration_s,
+        initial_position_m=tuple(s0.initial_position_m[i] + dpos[i] for i in range(3)),
+        initial_euler_rad=tuple(s0.initial_euler_rad[i] + deul[i] for i in range(3)),
+        mass_scale=mass_scale,
+        inertia_scale=shared,
+    )
+    plant_vehicle = apply_uncertainty(vehicle, scenario)
+    if rotor_scales is not None:
+        rot = plant_vehicle.rotors
+        plant_vehicle = replace(
+            plant_vehicle,
+            rotors=replace(
+                rot,
+                thrust_coefficient_n_s2=rot.thrust_coefficient_n_s2 * rotor_scales[0],
+                drag_coefficient_n_m_s2=rot.drag_coefficient_n_m_s2 * rotor_scales[1],
+                time_constant_s=rot.time_constant_s * rotor_scales[2],
+            ),
+        )
+    gusts = _sample_profile(spec, run, draw)
+    return RunSample(run, draw.values, scenario, vehicle, plant_vehicle, velocity, gusts)
+
+
+def _sample_profile(spec: CampaignSpec, run: int, draw: _Draw) -> GustProfile:
+    """The base profile plus the randomised elements, validated by the gust-profile parser."""
+    if not spec.elements and spec.dryden is None:
+        return spec.base_profile
+    mapping: dict[str, Any] = profile_to_mapping(spec.base_profile)
+    counters = {"step": 0, "ramp": 0, "one_minus_cosine": 0}
+    for element in spec.elements:
+        j = counters[element.kind]
+        counters[element.kind] += 1
+        prefix = f"{_KIND_PREFIX[element.kind]}{j}"
+        item: dict[str, Any] = {}
+        for key, value in element.values.items():
+            if isinstance(value, Distribution):
+                item[key] = draw(f"{prefix}_{key}", value)
+            elif isinstance(value, tuple):
+                item[key] = list(draw.vector(tuple(f"{prefix}_{key}_{a}" for a in AXES), value))
+            else:
+                item[key] = value  # channel, axis
+        mapping.setdefault(element.kind, []).append(item)
+    if spec.dryden is not None:
+        d: dict[str, Any] = {}
+        for key, value in spec.dryden.values.items():
+            if isinstance(value, Distribution):
+                d[key] = draw(f"dryden_{key}", value)
+            elif isinstance(value, tuple):
+                d[key] = list(draw.vector(tuple(f"dryden_{key}_{a}" for a in AXES), value))
+            elif key == "seed":
+                d[key] = (
+                    value if value is not None else int(stream(spec.seed, run, "dryden_seed").integers(2**31))
+                )
+                draw.values["dryden_seed"] = float(d[key])
+            else:
+                d[key] = value
+        mapping["dryden"] = d
+    return gust_profile_from_mapping(mapping, source=f"{spec.path} (run {run})", prefix="disturbances.")
