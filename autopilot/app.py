@@ -30,6 +30,7 @@ HOUSEKEEPING_S = 0.05
 SPIN_BELOW_GAP_S = 0.001  # frames closer than this (wall): spin-wait for the next one
 CONTROLLER_BATCH = 10  # controller rows per zenoh sample
 MAX_DATAGRAM = 65535
+MAX_GCS_PER_WAKEUP = 64  # ground-station datagrams handled before the HIL link is looked at again
 
 
 class Autopilot:
@@ -138,8 +139,11 @@ class Autopilot:
         return 0
 
     def _drain(self, link: int, sock) -> None:
-        core = self.core
-        while True:
+        """What waits on one socket. A ground-station link yields after MAX_GCS_PER_WAKEUP
+        datagrams, so a flood on it cannot hold back the next lockstep frame on the HIL link."""
+        core, hil_address = self.core, self.hil_address
+        budget = None if link == HIL_LINK else MAX_GCS_PER_WAKEUP
+        while budget is None or budget > 0:
             try:
                 data, address = sock.recvfrom(MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
@@ -148,12 +152,16 @@ class Autopilot:
                 continue  # ICMP unreachable from an earlier send (a peer not up yet): ignore
             now = time.monotonic()
             if link == HIL_LINK:
+                if address != hil_address:
+                    core.on_foreign_datagram("HIL datagram not from the simulator")
+                    continue
                 answer = core.on_hil_datagram(data, now)
                 if answer is not None:
                     self.send([Outgoing(HIL_LINK, None, answer)])  # first: the simulator waits
                 self.send(core.after_frame())
                 self._publish_rows()
             else:
+                budget -= 1
                 self.send(core.on_gcs_datagram(link, address, data, now))
 
 
@@ -165,8 +173,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--controller", default="intbs_nlhinf", help="cascade (config/controllers)")
     parser.add_argument("--vehicle", default="paper_quad", help="vehicle (config/vehicle)")
     parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
-    parser.add_argument("--autostart", metavar="SCENARIO", default=None,
-                        help="arm at t=0 and fly the scenario's trajectory (the paper's experiment)")
+    parser.add_argument(
+        "--autostart",
+        metavar="SCENARIO",
+        default=None,
+        help="arm at t=0 and fly the scenario's trajectory (the paper's experiment)",
+    )
     parser.add_argument("--state-source", choices=("odometry", "hil_state_quaternion"), default="odometry")
     parser.add_argument("--no-zenoh", action="store_true", help="do not publish controller internals")
     parser.add_argument("--quiet", action="store_true")

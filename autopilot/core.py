@@ -40,13 +40,13 @@ from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
 from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
-from .control.cascade import Cascade
+from .control.cascade import Cascade, StateEstimate
 from .control.config import ControllerConfig, load_controller
 from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
 from .mavlink.dispatch import FaultLog, MessageDispatcher
-from .mavlink.hil import ActuatorEncoder, decode_frame
+from .mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.offboard import decode_setpoint
 from .mavlink.params import ParamService
@@ -155,6 +155,7 @@ class AutopilotCore:
         self.faults = FaultLog(log, lambda text: self.statustext(m.MAV_SEVERITY_ERROR, text))
         self.refusals = RefusalNotices(self.statustext, lambda: self.wall_now)
         self.dispatcher = MessageDispatcher(self.faults)
+        self.dropped: dict[str, int] = {}  # datagrams the shell dropped before parsing, by reason
         self.commands = CommandDispatcher()
         clock = lambda: self.wall_now  # noqa: E731 - the services' wall clock is the caller's
         self.missions = MissionService(
@@ -203,7 +204,7 @@ class AutopilotCore:
         self.wall_now = now
         gcs = self.links[link]
         try:
-            messages = gcs.receive(data, address)
+            messages = gcs.receive(data, address, now)
         except Exception as exc:
             self.faults.record(f"{gcs.name} parser", exc, now)
             messages = []
@@ -238,7 +239,18 @@ class AutopilotCore:
             "mode": self.commander.mode.px4_name,
             "faults": dict(self.faults.counts),
             "received": dict(self.dispatcher.received),
+            "refused": dict(self.refusals.by_reason),
+            "dropped": {
+                **self.dropped,
+                **{f"{link.name} oversize": link.oversize for link in self.links if link.oversize},
+                **{f"{link.name} peers evicted": link.evicted for link in self.links if link.evicted},
+            },
+            "peers": {link.name: [f"{host}:{port}" for host, port in link.peers] for link in self.links},
         }
+
+    def on_foreign_datagram(self, what: str) -> None:
+        """Count a datagram the shell dropped before the core (``what`` names why)."""
+        self.dropped[what] = self.dropped.get(what, 0) + 1
 
     def _take(self) -> list[Outgoing]:
         out = self._out
@@ -250,7 +262,11 @@ class AutopilotCore:
 
     # -- frames ---------------------------------------------------------------------------------
     def _frame(self, data: bytes, now: float) -> bytes | None:
-        frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry)
+        try:
+            frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry)
+        except CorruptFrame:
+            self.on_foreign_datagram("HIL frame with a bad checksum")
+            return None  # the simulator resends a frame it gets no answer to
         if frame is None:
             return None  # a heartbeat from the simulator, or no state in it
         if frame.time_usec <= self.last_time_usec:
@@ -258,6 +274,17 @@ class AutopilotCore:
                 # The simulator resent a frame it got no answer to: the same answer again.
                 return self.actuators.encode(frame.time_usec, self._controls, self.commander.armed)
             self._simulator_restarted()
+        p, v, e, w = frame.state
+        total = p[0] + p[1] + p[2] + v[0] + v[1] + v[2] + e[0] + e[1] + e[2] + w[0] + w[1] + w[2]
+        if not math.isfinite(total):
+            # A broken simulator (or a forged frame): fly on the last good state for this frame.
+            self.on_foreign_datagram("HIL frame with a non-finite state")
+            if self.commander.state is None:
+                return self.actuators.encode(frame.time_usec, (0.0, 0.0, 0.0, 0.0), False)
+            c = self.commander.state
+            frame = frame._replace(
+                state=StateEstimate(c.position_m, c.velocity_m_s, c.euler_rad, c.euler_rates_rad_s)
+            )
         self.frame_gap_s = now - self.last_frame_wall
         self.last_frame_wall = now
         if not self.linked or self.sim_lost:
@@ -388,7 +415,8 @@ class AutopilotCore:
         known = request.command in self.commands.handlers  # an unknown one is UNSUPPORTED, not DENIED
         problem = check_command(request.command, request.params) if known else None
         if problem:
-            result, reason = m.MAV_RESULT_DENIED, f"command {request.command} refused: {problem}"
+            name = getattr(m.enums["MAV_CMD"].get(request.command), "name", f"command {request.command}")
+            result, reason = m.MAV_RESULT_DENIED, f"{name} refused: {problem}"
             self.refusals(reason)
         else:
             result, reason = self.commands.dispatch(request)
@@ -452,6 +480,8 @@ class AutopilotCore:
 
     # -- wall-clock housekeeping ----------------------------------------------------------------
     def _housekeeping(self, now: float) -> None:
+        for link in self.links:
+            link.expire(now)
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
         sim_loss_s = self.params["COM_SIM_LOSS_T"]

@@ -28,6 +28,12 @@ is ``ODOMETRY`` by default, ``HIL_STATE_QUATERNION`` on request (``[autopilot] s
 (``actuation = "wrench"``: U1/U1_max, then tau_x, tau_y, tau_z / tau_max in FRD body axes),
 clear = normalised rotor speeds Omega_i/Omega_max for rotors 1-4. The simulator refuses a frame
 whose bit 1 disagrees with its own vehicle config.
+
+Values on the wire: integer fields saturate at their type's range instead of failing to pack
+(a vehicle 10 000 km away is still reported, at the edge), NaN goes out as the field's
+"unknown" (0, or UINT16_MAX where MAVLink defines it) -- :func:`sat_i16`, :func:`sat_u16`,
+:func:`sat_i32`. Parsers read one datagram at a time (:func:`new_parser`, :func:`restart_parser`):
+a truncated frame cannot swallow the frames of the next datagram.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ from __future__ import annotations
 import select
 import time
 from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
 
 LOOPBACK = "127.0.0.1"
 
@@ -69,6 +77,74 @@ def spin_until_readable(sock, seconds: float) -> bool:
             return True
         if time.perf_counter() >= end:
             return False
+
+
+def sat_i16(x: float) -> int:
+    """An int16 field: saturated at +-32767, NaN as 0."""
+    if x != x:
+        return 0
+    return -32767 if x < -32767.0 else (32767 if x > 32767.0 else round(x))
+
+
+def sat_u16(x: float, top: int = 65534) -> int:
+    """A uint16 field: saturated at [0, ``top``] (65535 is MAVLink's "unknown"), NaN as 65535."""
+    if x != x:
+        return 65535
+    return 0 if x < 0.0 else (top if x > top else round(x))
+
+
+def sat_i32(x: float) -> int:
+    """An int32 field: saturated at +-2147483647, NaN as 0."""
+    if x != x:
+        return 0
+    return -2147483647 if x < -2147483647.0 else (2147483647 if x > 2147483647.0 else round(x))
+
+
+FLOAT32_MAX = 3.4028234663852886e38
+_INT_RANGES = {
+    "int8_t": (-(2**7), 2**7 - 1), "uint8_t": (0, 2**8 - 1), "int16_t": (-(2**15), 2**15 - 1),
+    "uint16_t": (0, 2**16 - 1), "int32_t": (-(2**31), 2**31 - 1), "uint32_t": (0, 2**32 - 1),
+    "int64_t": (-(2**63), 2**63 - 1), "uint64_t": (0, 2**64 - 1),
+}  # fmt: skip
+
+
+def _saturated(value, ftype: str):
+    if ftype == "float":
+        if value > FLOAT32_MAX:
+            return FLOAT32_MAX
+        return -FLOAT32_MAX if value < -FLOAT32_MAX else value
+    bounds = _INT_RANGES.get(ftype)
+    if bounds is None or not isinstance(value, int):
+        return value
+    return min(max(value, bounds[0]), bounds[1])
+
+
+def saturate_fields(message) -> None:
+    """Clamp every numeric field of a pymavlink message to its wire type's range, in place (the
+    fallback when packing overflows: floats to +-FLT_MAX, integers to their type's bounds)."""
+    for name, ftype in zip(message.fieldnames, message.fieldtypes, strict=True):
+        value = getattr(message, name)
+        if isinstance(value, list):
+            setattr(message, name, [_saturated(v, ftype) for v in value])
+        else:
+            setattr(message, name, _saturated(value, ftype))
+
+
+def new_parser() -> mavlink.MAVLink:
+    """A MAVLink 2 parser for incoming datagrams (``parse_buffer``) that turns garbage between
+    frames into BAD_DATA messages instead of raising."""
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    return parser
+
+
+def restart_parser(parser: mavlink.MAVLink) -> None:
+    """Forget a partial frame, as at the start of a datagram; counters and signing are kept
+    (pymavlink has no public reset: these are the fields its constructor sets)."""
+    parser.buf = bytearray()
+    parser.buf_index = 0
+    parser.expected_length = mavlink.HEADER_LEN_V1 + 2
+    parser.have_prefix_error = False
 
 
 def system_id(instance: int) -> int:

@@ -28,8 +28,6 @@ import time
 from array import array
 from typing import Any
 
-from pymavlink.dialects.v20 import common as mavlink
-
 from quadcommon import bus, wire
 from quadcommon.udp import PortInUse, bind_udp
 
@@ -129,10 +127,8 @@ class Simulator:
 
     # -- link -----------------------------------------------------------------------------------
     def _wait_for_link(self) -> bool:
-        """Block until a MAVLink datagram arrives; remember its sender. False if stopped first."""
+        """Block until the autopilot's first datagram; remember its sender. False if stopped first."""
         self.log(f"waiting for the autopilot on udp {wire.LOOPBACK}:{self.ports.hil}")
-        probe = mavlink.MAVLink(None)  # own parser: a stray datagram must not touch the lockstep one
-        probe.robust_parsing = True
         while self._running:
             try:
                 data, address = self.sock.recvfrom(MAX_DATAGRAM)
@@ -141,11 +137,7 @@ class Simulator:
                 continue
             except OSError:
                 continue
-            try:
-                messages = probe.parse_buffer(data) or []
-            except Exception:
-                messages = []
-            if any(msg.get_msgId() >= 0 for msg in messages):
+            if self.core.is_autopilot(data):  # a message from system 1 + N, component 1
                 self.peer = address
                 self.log(f"linked with autopilot at {address[0]}:{address[1]}")
                 return True
@@ -178,7 +170,8 @@ class Simulator:
 
     def _autopilot_answers_again(self) -> bool:
         """While lost: drain the socket without blocking; True once the autopilot answers again.
-        A datagram from a new address is a restarted autopilot saying hello: it becomes the peer."""
+        A message from this vehicle's autopilot at a new address is a restarted autopilot saying
+        hello: that address becomes the peer."""
         sock = self.sock
         for _ in range(MAX_DRAIN):
             if not select.select((sock,), (), (), 0.0)[0]:  # a socket with a timeout: ask first
@@ -190,8 +183,9 @@ class Simulator:
             except OSError:
                 continue  # ICMP unreachable from a send to the dead autopilot
             if address != self.peer:
-                self.peer = address
-                self.log(f"autopilot now at {address[0]}:{address[1]}")
+                if self.core.is_autopilot(data):  # a restarted autopilot; anyone else: ignored
+                    self.peer = address
+                    self.log(f"autopilot now at {address[0]}:{address[1]}")
             elif self.core.answers_again(data):
                 self.log(f"the outage lasted {time.perf_counter() - self._outage_wall:.1f} s (wall)")
                 return True

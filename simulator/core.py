@@ -38,6 +38,7 @@ from quadcommon.config import (
     load_sitl,
     load_vehicle,
 )
+from quadcommon.wire import new_parser, restart_parser
 
 from .dynamics.plant import make_plant
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
@@ -48,6 +49,7 @@ from .sensors import SensorConfig, SensorSuite, load_sensors
 from .truth_bus import truth_row
 
 Controls = tuple[float, float, float, float]
+MAX_HELLO_BYTES = 2048  # parsed of a would-be peer's datagram
 
 
 class PlantDiverged(RuntimeError):
@@ -107,6 +109,7 @@ class SimulatorCore:
         self.sensors = SensorSuite(setup.sensors, setup.sitl.home[2])
         self.encoder = HilFrameEncoder(wire.system_id(setup.instance), setup.sitl.home)
         self.decoder = ActuatorDecoder()
+        self._probe = new_parser()  # for is_autopilot: never touches the lockstep decoder
         self.k = 0  # the frame being flown
         self.time_usec = 0
         self.truth_row: tuple[float, ...] = ()
@@ -139,6 +142,21 @@ class SimulatorCore:
         gps = sensors.sample_gps(truth) if k % self.gps_every == 0 else None
         self.truth_row = truth_row(t, truth, force, torque, wind)
         return self.encoder.encode(time_usec, truth, sensors.sample(truth), wind, gps)
+
+    def is_autopilot(self, datagram: bytes) -> bool:
+        """True if ``datagram`` holds a valid MAVLink message from this vehicle's autopilot
+        (system 1 + N, component 1): only such a sender becomes the lockstep peer, so a stray
+        datagram to the HIL port cannot take the link over."""
+        probe = self._probe
+        restart_parser(probe)
+        try:
+            messages = probe.parse_buffer(datagram[:MAX_HELLO_BYTES]) or []
+        except Exception:  # pymavlink raises on some malformed frames even when robust
+            return False
+        ids = (wire.system_id(self.setup.instance), wire.AUTOPILOT_COMPONENT_ID)
+        return any(
+            msg.get_msgId() >= 0 and (msg.get_srcSystem(), msg.get_srcComponent()) == ids for msg in messages
+        )
 
     def answer_to_frame(self, datagram: bytes) -> ActuatorAnswer | None:
         """The HIL_ACTUATOR_CONTROLS for the current frame in ``datagram``, else None (a heartbeat,

@@ -141,6 +141,7 @@ class Lockstep:
         self.sim = SimulatorCore(simulator, log)
         self.autopilot = AutopilotCore(autopilot, log)
         self.stations: dict[tuple[str, int], GroundStation] = {}
+        self.observers: list[Callable[[Outgoing], None]] = []  # see every datagram the vehicle sends
         self.truth_rows: list[tuple[float, ...]] = []
         self.controller_rows: list[tuple[float, ...]] = []
         self.record_rows = True
@@ -163,13 +164,16 @@ class Lockstep:
         gcs = GroundStation(self, link, **ids)
         self.stations[gcs.address] = gcs
         if listen:
-            self.autopilot.links[link].peers.append(gcs.address)
+            self.autopilot.links[link].listen(gcs.address)
         return gcs
 
     def deliver(self, link: int, address: tuple[str, int], data: bytes) -> None:
         self._inbox.append((link, address, data))
 
     def _dispatch(self, out: list[Outgoing]) -> None:
+        for watch in self.observers:
+            for record in out:
+                watch(record)
         for link, address, data in out:
             if link == HIL_LINK:
                 continue  # hellos to the simulator: it is linked already

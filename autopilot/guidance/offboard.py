@@ -98,7 +98,7 @@ class OffboardGuidance:
             )
             velocity = tuple(v + a * tau for v, a in zip(vel, acc, strict=True))
             if self._joining or math.dist(position, previous.position_m) > JUMP_M:
-                return self._join(previous, position, yaw, dt)  # type: ignore[arg-type]
+                return self._join(t, previous, position, yaw)  # type: ignore[arg-type]
         elif sp.velocity is not None:
             velocity = _limit_velocity(sp.velocity, self.limits)
             position = tuple(p + v * dt for p, v in zip(previous.position_m, velocity, strict=True))
@@ -109,13 +109,22 @@ class OffboardGuidance:
         self._target = None
         return Reference(position, velocity, acc, yaw, yaw_rate, 0.0)  # type: ignore[arg-type]
 
-    def _join(self, previous: Reference, position: Vector3, yaw: float, dt: float) -> Reference:
-        """One step of a transition from the reference flown so far towards a trajectory sample
-        too far to follow at once (replanned every step as the samples move on); following
-        resumes once the reference is within ``JUMP_M / 2`` of the sample."""
-        ref = transition(previous, position, self.limits, yaw).sample(dt)
+    def _join(self, t: float, previous: Reference, position: Vector3, yaw: float) -> Reference:
+        """A planned transition from the reference flown so far towards a trajectory sample too
+        far to follow at once. The plan is kept while the samples stay within ``JUMP_M`` of its
+        target (replanned from the current reference when they move on); following resumes once
+        the reference is within ``JUMP_M / 2`` of the sample."""
+        target = (position, yaw)
+        if not self._joining or self._plan is None or self._target is None or (
+            math.dist(self._target[0], position) > JUMP_M
+        ):
+            self._target = target
+            self._plan = transition(previous, position, self.limits, yaw)
+            self._plan_start = t
+        ref = self._plan.sample(t - self._plan_start)
         self._joining = math.dist(ref.position_m, position) > 0.5 * JUMP_M
-        self._plan = self._target = None
+        if not self._joining:
+            self._plan = self._target = None
         return ref
 
 

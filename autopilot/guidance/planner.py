@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from quadcommon.trajectories import QuinticSegment, Reference, Trajectory
+from quadcommon.trajectories import PiecewiseTrajectory, QuinticSegment, Reference, Trajectory
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
@@ -122,10 +122,15 @@ class LineMove:
         )  # fmt: skip
 
 
-def transition(start: Reference, target: Vector3, limits: Limits, yaw: float | None = None) -> Trajectory:
+def transition(
+    start: Reference, target: Vector3, limits: Limits, yaw: float | None = None, brake_first: bool = True
+) -> Trajectory:
     """From the state of ``start`` to rest at ``target`` (quintic), within the limits.
 
-    At rest, a straight :class:`LineMove` is used (cruises where the quintic would not).
+    At rest, a straight :class:`LineMove` is used (cruises where the quintic would not). Moving,
+    a quintic within the limits is looked for; where none is (a far target: the quintic long
+    enough for the distance carries the start's acceleration for most of its duration and
+    overshoots), the vehicle brakes to rest first, then flies a LineMove.
     """
     yaw1 = start.yaw_rad if yaw is None else yaw
     moving = any(abs(v) > 1e-6 for v in start.velocity_m_s + start.acceleration_m_s2)
@@ -143,7 +148,11 @@ def transition(start: Reference, target: Vector3, limits: Limits, yaw: float | N
         if peak_v <= max(vmax, speed) * 1.05 and peak_a <= amax * 1.05:
             return seg
         T *= 1.25
-    return seg
+    if not brake_first:
+        return seg
+    brake = stop_from(start, limits)
+    rest = brake.sample(brake.duration_s)
+    return PiecewiseTrajectory([brake, LineMove(rest.position_m, target, limits, rest.yaw_rad, yaw1)])
 
 
 def stop_from(start: Reference, limits: Limits) -> Trajectory:
@@ -157,7 +166,7 @@ def stop_from(start: Reference, limits: Limits) -> Trajectory:
         p + (v / speed * stop_distance if speed > 0.0 else 0.0)
         for p, v in zip(start.position_m, start.velocity_m_s, strict=True)
     )
-    return transition(start, target, limits, start.yaw_rad)  # type: ignore[arg-type]
+    return transition(start, target, limits, start.yaw_rad, brake_first=False)  # type: ignore[arg-type]
 
 
 def _peaks(traj: Trajectory, duration: float, samples: int = 40) -> tuple[float, float]:

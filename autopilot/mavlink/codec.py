@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import struct
+
 from pymavlink.dialects.v20 import common as mavlink
 
-__all__ = ["mavlink", "Encoder", "new_parser"]
+from quadcommon.wire import new_parser, restart_parser, saturate_fields
+
+__all__ = ["mavlink", "Encoder", "new_parser", "restart_parser"]
 
 
 class Encoder:
@@ -14,13 +18,12 @@ class Encoder:
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
 
     def pack(self, message) -> bytes:
-        data = message.pack(self.mav)
+        """The frame; a field beyond its type's range (a vehicle 1e39 m away) goes out saturated
+        at the edge of the range (:func:`quadcommon.wire.saturate_fields`) instead of failing."""
+        try:
+            data = message.pack(self.mav)
+        except (OverflowError, struct.error):
+            saturate_fields(message)
+            data = message.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256  # pack() does not advance it; send() would
         return data
-
-
-def new_parser() -> mavlink.MAVLink:
-    """A parser for incoming datagrams (``parse_buffer``); robust to garbage between frames."""
-    parser = mavlink.MAVLink(None)
-    parser.robust_parsing = True
-    return parser

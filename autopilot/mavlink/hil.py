@@ -12,7 +12,7 @@ import struct
 from typing import NamedTuple
 
 from quadcommon import frames, wire
-from quadcommon.mavlink_fast import FastDecoder, FastEncoder, split_frames
+from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.rigid_body import (
     euler_from_quaternion,
     euler_rates_from_body_rates,
@@ -44,6 +44,10 @@ _ODOMETRY_STATE = struct.Struct("<Q13f")
 _ODOMETRY_CHILD_FRAME = 8 + 4 * (13 + 21 + 21) + 1
 
 
+class CorruptFrame(ValueError):
+    """The state message of a lockstep frame failed its checksum or could not be decoded."""
+
+
 def decode_frame(
     datagram: bytes, parser, home: tuple[float, float, float], use_odometry: bool = True
 ) -> Frame | None:
@@ -51,8 +55,15 @@ def decode_frame(
 
     Decodes (CRC checked) only the state message it needs: ODOMETRY (the fast decoder of
     :mod:`quadcommon.mavlink_fast`, it is on the lockstep critical path), or HIL_STATE_QUATERNION
-    (pymavlink) when asked to or when there is no ODOMETRY.
+    (pymavlink) when asked to or when there is no ODOMETRY. CorruptFrame if that message is bad.
     """
+    try:
+        return _decode_frame(datagram, parser, home, use_odometry)
+    except (DecodeError, mavlink.MAVError, struct.error) as exc:
+        raise CorruptFrame(str(exc)) from exc
+
+
+def _decode_frame(datagram: bytes, parser, home, use_odometry: bool) -> Frame | None:
     parts = dict(split_frames(datagram))
     raw = parts.get(_ID_ODOMETRY)
     if raw is not None and (use_odometry or _ID_STATE not in parts):

@@ -5,18 +5,34 @@ PX4 SITL has two: GCS (QGC, MAVProxy) and API (MAVSDK, scripts). Each sends to a
 sends is appended to the core's outbox as :class:`Outgoing` records; the process shell turns
 them into ``sendto`` calls on the link's socket, the in-process runner hands them to a scripted
 ground station.
+
+Anyone on the machine can send to a link, so what a datagram can cost is bounded here:
+
+* a datagram is parsed on its own (a UDP datagram carries whole frames): a truncated frame at
+  its end is dropped with it and cannot swallow the next sender's frames;
+* at most :data:`MAX_DATAGRAM_BYTES` of it are parsed (MAVLink senders put one frame of at most
+  280 bytes in a datagram; PX4 reads 1600); the rest is counted as oversize and dropped;
+* an address becomes a peer (is sent telemetry) only once it has sent one valid MAVLink message,
+  so garbage from a thousand ports costs no sends; a link keeps at most :data:`MAX_PEERS`, the
+  one heard from longest ago making room; a peer silent for :data:`PEER_EXPIRY_S` is dropped.
+  The default remote and the stations the in-process runner registers are never dropped.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
-from .codec import new_parser
+from .codec import new_parser, restart_parser
 from .telemetry import StreamTable
 
 Address = tuple[str, int]
 GCS_LINK, API_LINK, HIL_LINK = 0, 1, 2  # link numbers in Outgoing records
 LINK_NAMES = ("GCS", "API", "HIL")
+MAX_PEERS = 16  # addresses one link answers at once (QGC + MAVProxy + MAVSDK + scripts fit)
+PEER_EXPIRY_S = 30.0  # a peer silent this long (wall clock) is no longer sent telemetry
+MAX_DATAGRAM_BYTES = 2048  # parsed of one datagram; a longer one is cut (and counted)
+BAD_DATA = -1  # msg id of pymavlink's MAVLink_bad_data
 
 
 class Outgoing(NamedTuple):
@@ -32,10 +48,15 @@ class GcsLink:
         self.index = index
         self.name = LINK_NAMES[index]
         self.default_remote = default_remote
-        self.peers: list[Address] = [default_remote] if default_remote is not None else []
+        # address -> last time heard (s, the caller's clock); math.inf: never expires
+        self.peers: dict[Address, float] = {}
+        if default_remote is not None:
+            self.peers[default_remote] = math.inf
         self.parser = new_parser()
         self.streams = StreamTable()
         self.last_heartbeat_s: float | None = None  # simulation time of the last GCS heartbeat
+        self.oversize = 0  # datagrams cut at MAX_DATAGRAM_BYTES
+        self.evicted = 0  # peers dropped to make room for a new one
         self._outbox = outbox
 
     def send(self, data: bytes) -> None:
@@ -47,9 +68,40 @@ class GcsLink:
     def send_to(self, data: bytes, address: Address) -> None:
         self._outbox.append(Outgoing(self.index, address, data))
 
-    def receive(self, data: bytes, address: Address) -> list:
-        """The messages in one datagram from ``address`` (who becomes a peer); garbage parses to
-        BAD_DATA objects, which the dispatcher counts and drops."""
-        if address not in self.peers:
-            self.peers.append(address)
-        return self.parser.parse_buffer(data) or []
+    def listen(self, address: Address) -> None:
+        """Send to ``address`` from now on, whether it talks or not (a default remote)."""
+        self.peers[address] = math.inf
+
+    def receive(self, data: bytes, address: Address, now: float) -> list:
+        """The messages in one datagram from ``address``; garbage parses to BAD_DATA objects,
+        which the dispatcher counts and drops. A sender of one valid message becomes a peer."""
+        if len(data) > MAX_DATAGRAM_BYTES:
+            self.oversize += 1
+            data = data[:MAX_DATAGRAM_BYTES]
+        parser = self.parser
+        restart_parser(parser)  # a frame left incomplete by the last datagram ended with it
+        messages = parser.parse_buffer(data) or []
+        if any(msg.get_msgId() != BAD_DATA for msg in messages):
+            self._heard(address, now)
+        return messages
+
+    def expire(self, now: float) -> None:
+        """Drop peers silent for longer than PEER_EXPIRY_S."""
+        stale = [address for address, heard in self.peers.items() if now - heard > PEER_EXPIRY_S]
+        for address in stale:
+            del self.peers[address]
+
+    def _heard(self, address: Address, now: float) -> None:
+        peers = self.peers
+        heard = peers.get(address)
+        if heard is not None:
+            if heard != math.inf:
+                peers[address] = now
+            return
+        if len(peers) >= MAX_PEERS:
+            expiring = [(when, a) for a, when in peers.items() if when != math.inf]
+            if not expiring:
+                return  # all kept for good: the newcomer is answered directly, not streamed to
+            del peers[min(expiring)[1]]
+            self.evicted += 1
+        peers[address] = now

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from quadcommon import frames
 from quadcommon.rigid_body import quaternion_from_euler
 from quadcommon.trajectories import Reference
+from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
 from ..control.cascade import StateEstimate
 from .codec import mavlink
@@ -82,7 +83,7 @@ class VehicleStatus:
 
     @property
     def time_boot_ms(self) -> int:
-        return self.time_usec // 1000
+        return (self.time_usec // 1000) & 0xFFFFFFFF  # uint32: wraps after 49.7 days, as on PX4
 
 
 # -- message builders --------------------------------------------------------------------------------
@@ -152,7 +153,7 @@ def _geodetic(s: VehicleStatus, position_paper: Vector3):
 
 
 def _heading_cdeg(psi: float) -> int:
-    return int(round(math.degrees(frames.yaw_to_ned(psi)) * 100.0)) % 36000
+    return sat_i32(math.degrees(frames.yaw_to_ned(psi)) * 100.0) % 36000
 
 
 def global_position_int(s: VehicleStatus):
@@ -161,11 +162,11 @@ def global_position_int(s: VehicleStatus):
     home_alt = _geodetic(s, s.home_local)[2]
     return m.MAVLink_global_position_int_message(
         s.time_boot_ms,
-        int(round(lat * 1e7)),
-        int(round(lon * 1e7)),
-        int(round(alt * 1000)),
-        int(round((alt - home_alt) * 1000)),
-        *(int(round(v * 100)) for v in vel),
+        sat_i32(lat * 1e7),
+        sat_i32(lon * 1e7),
+        sat_i32(alt * 1000),
+        sat_i32((alt - home_alt) * 1000),
+        *(sat_i16(v * 100) for v in vel),
         _heading_cdeg(s.state.euler_rad[2]),
     )
 
@@ -174,16 +175,16 @@ def gps_raw_int(s: VehicleStatus):
     _, vel, _ = _ned_state(s)
     lat, lon, alt = _geodetic(s, s.state.position_m)
     speed = math.hypot(vel[0], vel[1])
-    cog = int(round(math.degrees(math.atan2(vel[1], vel[0])) * 100)) % 36000 if speed > 0.2 else 65535
+    cog = sat_i32(math.degrees(math.atan2(vel[1], vel[0])) * 100) % 36000 if speed > 0.2 else 65535
     return m.MAVLink_gps_raw_int_message(
         s.time_usec,
         m.GPS_FIX_TYPE_3D_FIX,
-        int(round(lat * 1e7)),
-        int(round(lon * 1e7)),
-        int(round(alt * 1000)),
+        sat_i32(lat * 1e7),
+        sat_i32(lon * 1e7),
+        sat_i32(alt * 1000),
         80,
         120,
-        int(round(speed * 100)),
+        sat_u16(speed * 100),
         cog,
         12,
     )
@@ -193,9 +194,9 @@ def home_position(s: VehicleStatus):
     lat, lon, alt = _geodetic(s, s.home_local)
     x, y, z = frames.vector_to_ned(s.home_local)
     return m.MAVLink_home_position_message(
-        int(round(lat * 1e7)),
-        int(round(lon * 1e7)),
-        int(round(alt * 1000)),
+        sat_i32(lat * 1e7),
+        sat_i32(lon * 1e7),
+        sat_i32(alt * 1000),
         x,
         y,
         z,
@@ -243,7 +244,7 @@ def _pwm(s: VehicleStatus) -> list[int]:
             values = [900, 1500, 1500, 1500]
     else:
         values = [1000 + 1000 * v for v in c] if s.armed else [900] * 4
-    return [int(round(v)) for v in values] + [0] * 4
+    return [sat_u16(v) for v in values] + [0] * 4
 
 
 def servo_output_raw(s: VehicleStatus):
@@ -259,7 +260,7 @@ def vfr_hud(s: VehicleStatus):
     _, vel, _ = _ned_state(s)
     speed = math.hypot(vel[0], vel[1])
     heading = _heading_cdeg(s.state.euler_rad[2]) // 100
-    throttle = int(round(100 * s.thrust_normalised)) if s.armed else 0
+    throttle = sat_u16(100 * s.thrust_normalised) if s.armed else 0
     return m.MAVLink_vfr_hud_message(speed, speed, heading, throttle, s.state.position_m[2], -vel[2])
 
 

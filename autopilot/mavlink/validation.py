@@ -22,6 +22,8 @@ a flood of bad commands cannot flood the ground stations in turn.
 from __future__ import annotations
 
 import math
+import re
+from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -32,6 +34,8 @@ ANNOUNCE_EVERY_S = 1.0
 MAX_MESSAGE_ID = (1 << 24) - 1  # MAVLink 2 message ids are 24 bits
 MAX_INTERVAL_US = 60e6  # SET_MESSAGE_INTERVAL: at most one message a minute (longer: disable it)
 FORCE_MAGIC = 21196.0  # ARM_DISARM param2: force (PX4, MAVLink)
+MAX_REASONS = 200  # distinct refusal reasons counted (RefusalNotices.by_reason)
+_NUMBER = re.compile(r"(?<![A-Za-z_\d])[-+]?(?:\d+\.?\d*(?:e[-+]?\d+)?|nan\b|inf\b)", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -125,9 +129,15 @@ class RefusalNotices:
         self.clock = clock
         self._last: dict[str, float] = {}
         self.refused = 0
+        self.by_reason: Counter[str] = Counter()  # the text with its numbers as '#' (bounded)
 
     def __call__(self, text: str, severity: int = m.MAV_SEVERITY_WARNING) -> None:
         self.refused += 1
+        reason = _NUMBER.sub("#", text)
+        if reason in self.by_reason or len(self.by_reason) < MAX_REASONS:
+            self.by_reason[reason] += 1
+        else:
+            self.by_reason["(other reasons)"] += 1
         now = self.clock()
         last = self._last.get(text)
         if last is not None and now - last < ANNOUNCE_EVERY_S:

@@ -38,6 +38,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
+from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
 from ..dynamics.plant import TruthState
 from ..sensors.models import GpsReading, SensorReadings
@@ -50,18 +51,6 @@ GPS_FIX_3D = 3
 _UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 _ID_CONTROLS = mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS
-
-
-def _i16(x: float) -> int:
-    return -32767 if x < -32767.0 else (32767 if x > 32767.0 else round(x))
-
-
-def _u16(x: float) -> int:
-    return 0 if x < 0.0 else (65534 if x > 65534.0 else round(x))
-
-
-def _i32(x: float) -> int:
-    return -2147483647 if x < -2147483647.0 else (2147483647 if x > 2147483647.0 else round(x))
 
 
 class HilFrameEncoder:
@@ -136,21 +125,24 @@ class HilFrameEncoder:
         to_mg = 1000.0 / STANDARD_GRAVITY_M_S2
         wx, wy, wz = wind_world_m_s
         w = truth.velocity_m_s
-        airspeed_cm_s = _u16(100.0 * math.sqrt((w[0] - wx) ** 2 + (w[1] - wy) ** 2 + (w[2] - wz) ** 2))
+        airspeed_cm_s = sat_u16(100.0 * math.sqrt((w[0] - wx) ** 2 + (w[1] - wy) ** 2 + (w[2] - wz) ** 2))
         v, i = self._state.values, self._h
         v[self._h_q] = q_ned
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]], v[i[12]], v[i[13]], v[i[14]]) = (
-            time_usec, *rates_frd, _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000.0),
-            _i16(vel_ned[0] * 100.0), _i16(vel_ned[1] * 100.0), _i16(vel_ned[2] * 100.0),
+            time_usec, *rates_frd, sat_i32(lat * 1e7), sat_i32(lon * 1e7), sat_i32(alt * 1000.0),
+            sat_i16(vel_ned[0] * 100.0), sat_i16(vel_ned[1] * 100.0), sat_i16(vel_ned[2] * 100.0),
             airspeed_cm_s, airspeed_cm_s,
-            _i16(f_frd[0] * to_mg), _i16(f_frd[1] * to_mg), _i16(f_frd[2] * to_mg),
+            sat_i16(f_frd[0] * to_mg), sat_i16(f_frd[1] * to_mg), sat_i16(f_frd[2] * to_mg),
         )  # fmt: skip
 
         v, i = self._odometry.values, self._o
         v[self._o_q] = q_ned
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]]) = (
-            time_usec, *pos_ned, *vel_ned, *rates_frd
+            time_usec,
+            *pos_ned,
+            *vel_ned,
+            *rates_frd,
         )
 
         datagram = self._frame(self._sensor) + self._frame(self._state) + self._frame(self._odometry)
@@ -168,10 +160,10 @@ class HilFrameEncoder:
         v, i = self._gps.values, self._g
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]]) = (
-            time_usec, _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000.0),
-            _u16(reading.eph_m * 100.0), _u16(reading.epv_m * 100.0),
-            _u16(100.0 * math.hypot(v_ned[0], v_ned[1])),
-            _i16(v_ned[0] * 100.0), _i16(v_ned[1] * 100.0), _i16(v_ned[2] * 100.0), cog,
+            time_usec, sat_i32(lat * 1e7), sat_i32(lon * 1e7), sat_i32(alt * 1000.0),
+            sat_u16(reading.eph_m * 100.0), sat_u16(reading.epv_m * 100.0),
+            sat_u16(100.0 * math.hypot(v_ned[0], v_ned[1])),
+            sat_i16(v_ned[0] * 100.0), sat_i16(v_ned[1] * 100.0), sat_i16(v_ned[2] * 100.0), cog,
             reading.satellites_visible,
         )  # fmt: skip
 

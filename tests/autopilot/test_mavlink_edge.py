@@ -7,7 +7,7 @@ import pytest
 from autopilot.control.cascade import StateEstimate
 from autopilot.mavlink import telemetry
 from autopilot.mavlink.codec import Encoder, mavlink, new_parser
-from autopilot.mavlink.hil import ActuatorEncoder, decode_frame
+from autopilot.mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
 from autopilot.mavlink.offboard import decode_setpoint
 from quadcommon import frames
 from quadcommon.rigid_body import quaternion_from_euler
@@ -209,7 +209,7 @@ def test_hil_state_quaternion_source_and_corruption():
     assert frame.state.euler_rad[2] == pytest.approx(0.5, abs=1e-6)
     data = bytearray(enc.pack(hsq))
     data[20] ^= 0xFF  # corrupt the payload: the CRC check refuses it
-    with pytest.raises(m.MAVError):
+    with pytest.raises(CorruptFrame):
         decode_frame(bytes(data), new_parser(), HOME)
     assert decode_frame(enc.pack(m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)), new_parser(), HOME) is None
 

@@ -193,7 +193,7 @@ class NonlinearHinfAttitude:
         C_eta_dot = matrix_times(C, euler_rates)
         C_s = matrix_times(C, s)
         r_inv = self.r_inv
-        if integrate:
+        if integrate and k_p != 0.0:  # omega3 = 0: no integral action, no state to grow
             bound = self.integral_bound
             for i in range(3):
                 value = integral[i] + e[i] * dt
