@@ -396,7 +396,7 @@ class AutopilotCore:
             self.log(f"command {request.command} -> result {result}: {reason}")
         link.send_to(self.encoder.pack(command_ack(request, result)), address)
         if self.vehicle_commands.after_ack is not None:  # a requested message, after its ACK (PX4)
-            link.send_to(self.vehicle_commands.after_ack, address)
+            link.send_to(self.encoder.pack(self.vehicle_commands.after_ack), address)
             self.vehicle_commands.after_ack = None
         self.send_events()
 
