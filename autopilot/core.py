@@ -50,6 +50,7 @@ from .mavlink.hil import ActuatorEncoder, decode_frame
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.offboard import decode_setpoint
 from .mavlink.params import ParamService
+from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
 from .mission.service import MissionService
@@ -79,6 +80,7 @@ class AutopilotSetup:
     use_odometry: bool = True  # the state from ODOMETRY (float32) or HIL_STATE_QUATERNION (1 cm)
     params_file: str | None = None  # params.toml: loaded at start if it exists, saved on change
     default_remotes: bool = True  # the GCS/API links send to 14550+N / 14540+N before anyone talks
+    signing: SigningOptions = SigningOptions()  # MAVLink 2 signing on the GCS links: key, state, wall clock
 
     @classmethod
     def load(
@@ -170,6 +172,10 @@ class AutopilotCore:
         self.param_service.register(self.dispatcher, self.commands)
         self.vehicle_commands = VehicleCommands(self)
         self.vehicle_commands.register(self.commands)
+        self.signing = Signing(setup.signing, self.encoder, self.links, self.statustext,
+                               lambda: self.commander.armed, self.system_id, log, setup.params_file,
+                               setup.instance)  # fmt: skip
+        self.signing.register(self.dispatcher)  # SETUP_SIGNING
         d = self.dispatcher
         d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
         d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
@@ -238,6 +244,7 @@ class AutopilotCore:
             "mode": self.commander.mode.px4_name,
             "faults": dict(self.faults.counts),
             "received": dict(self.dispatcher.received),
+            "signing": self.signing.info(),
         }
 
     def _take(self) -> list[Outgoing]:
@@ -454,6 +461,7 @@ class AutopilotCore:
     def _housekeeping(self, now: float) -> None:
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
+        self.signing.poll(now)  # wall clock -> timestamps, refusals announced, state saved
         sim_loss_s = self.params["COM_SIM_LOSS_T"]
         if self.linked and now - self.last_frame_wall <= sim_loss_s:
             return
@@ -476,4 +484,5 @@ class AutopilotCore:
         if now >= self._next_hil_hello:
             # Say hello until frames flow: a (re)started simulator learns our address from it.
             self._next_hil_hello = now + HIL_HELLO_S
-            self._out.append(Outgoing(HIL_LINK, None, self.encoder.pack(telemetry.heartbeat(self.status))))
+            hello = self.encoder.pack_unsigned(telemetry.heartbeat(self.status))  # HIL: never signed
+            self._out.append(Outgoing(HIL_LINK, None, hello))

@@ -18,6 +18,16 @@ class Encoder:
         self.mav.seq = (self.mav.seq + 1) % 256  # pack() does not advance it; send() would
         return data
 
+    def pack_unsigned(self, message) -> bytes:
+        """As :meth:`pack`, never signed, whatever ``mav.signing`` says (the HIL link's frames:
+        signing is for the ground-station links, :mod:`.signing`)."""
+        signing = self.mav.signing
+        sign, signing.sign_outgoing = signing.sign_outgoing, False
+        try:
+            return self.pack(message)
+        finally:
+            signing.sign_outgoing = sign
+
 
 def new_parser() -> mavlink.MAVLink:
     """A parser for incoming datagrams (``parse_buffer``); robust to garbage between frames."""
