@@ -27,15 +27,17 @@ fresh timestamp, and every frame the autopilot sends on those links is signed:
   autopilot signs with (:attr:`Signing.timestamp`, +1 per frame sent, as the spec says) and the
   newest time it knows of (:attr:`Signing.reference`: the wall clock the shell injects, the newest
   accepted incoming timestamp, SETUP_SIGNING's ``initial_timestamp``), which the one-minute rule
-  for new streams is measured against. They are kept apart because at ``--speed`` > 1 the
-  autopilot sends many more frames per wall second than a real vehicle, and its own counter runs
-  ahead of the clock: measured against it, a freshly started ground station would be refused.
+  for new streams is measured against. They are kept apart because the first runs ahead of time
+  on purpose: after a restart it resumes past the stored one, and without a wall clock (in-process)
+  it grows by one per frame sent; measured against it, a ground station whose timestamps follow
+  the wall clock could be refused.
 * **State** (:class:`SigningState`: key, both timestamps, the streams' newest timestamps) is kept in
   a JSON file written atomically (mode 0600), loaded at start: the timestamp the autopilot signs
-  with resumes 1 minute past the stored one (ArduPilot's rule, so a ground station that stayed
-  connected sees it grow), the streams resume where they were, so frames recorded before a restart
-  are refused after it. It is saved on every key change, every :data:`SAVE_EVERY_S` while it
-  changes, and when the process stops (:meth:`Signing.save`).
+  with resumes :data:`RESTART_MARGIN` past the stored one (ArduPilot's rule, with its margin
+  sized to what can be signed between two saves), so a ground station that stayed connected sees
+  it grow; the streams resume where they were, so frames recorded before a restart are refused
+  after it. It is saved on every key change, every :data:`SAVE_EVERY_S` while it changes (sooner
+  if the timestamp jumps), and when the process stops (:meth:`Signing.save`).
 
 The core reads no clock: the wall clock comes in through :attr:`SigningOptions.epoch_clock` (the
 process shell passes ``time.time``; in-process runs pass nothing, or a fake clock, and stay
@@ -65,9 +67,12 @@ from .codec import mavlink as m
 EPOCH_2015_S = 1420070400  # 2015-01-01 00:00:00 UTC, MAVLink signing's epoch (s since 1970)
 TICKS_PER_S = 100_000  # the timestamp's unit is 10 us
 NEW_STREAM_WINDOW = 60 * TICKS_PER_S  # a new stream may be this far behind the reference (the spec's minute)
-RESTART_MARGIN = 60 * TICKS_PER_S  # after a restart we sign on from this far past the stored timestamp
 TIMESTAMP_MAX = (1 << 48) - 1  # six bytes on the wire
 SAVE_EVERY_S = 10.0  # the state is saved at most this often while it changes (caller's clock)
+# After a restart we sign on from this far past the stored timestamp: twice what can be signed
+# between two saves (the wall clock moves SAVE_EVERY_S; frames add one tick each, far less; a
+# bigger jump is saved at once, see poll()). ArduPilot: saves every 30 s, resumes 60 s past.
+RESTART_MARGIN = int(2 * SAVE_EVERY_S * TICKS_PER_S)
 ANNOUNCE_EVERY_S = 10.0  # refusals are summed up in one STATUSTEXT at most this often
 MAX_STREAMS = 256  # streams remembered (only frames with a valid signature create one)
 LINK_ID = 0  # the link id of everything the autopilot signs (one stream for both GCS links)
@@ -417,7 +422,10 @@ class Signing:
                 self.statustext(m.MAV_SEVERITY_WARNING, text if n == 1 else f"{text} ({n}x)")
             self._unreported.clear()
             self._setup_notes.clear()
-        if self.enabled and (self._saved_at is None or now - self._saved_at >= SAVE_EVERY_S):
+        if not self.enabled:
+            return
+        jumped = self._saved is None or self.timestamp - self._saved[1] >= RESTART_MARGIN // 2
+        if jumped or self._saved_at is None or now - self._saved_at >= SAVE_EVERY_S:
             self._saved_at = now
             if self._snapshot() != self._saved:
                 self.save()

@@ -400,3 +400,16 @@ def test_info_is_json_and_never_holds_the_key(tmp_path):
     stack = signing_stack(tmp_path, key_file(tmp_path))
     text = json.dumps(stack.autopilot.info())
     assert KEY.hex() not in text and PASSPHRASE not in text
+
+
+def test_the_timestamp_follows_the_wall_clock_and_a_jump_is_saved_at_once(tmp_path):
+    stack = signing_stack(tmp_path, key_file(tmp_path))
+    stack.run_for(1.0)
+    core = stack.autopilot
+    now_ts = mavlink_timestamp(T0 + stack.t)
+    assert now_ts - sg.TICKS_PER_S < core.signing.timestamp <= now_ts + sg.TICKS_PER_S // 10  # ~ the clock
+    saved = sg.load_state(tmp_path / "signing.json").timestamp
+    core.setup.signing.epoch_clock.offset_s = 30.0  # the wall clock steps forward 30 s
+    stack.run_for(0.1)
+    assert core.signing.timestamp >= now_ts + 30 * sg.TICKS_PER_S
+    assert sg.load_state(tmp_path / "signing.json").timestamp > saved + 29 * sg.TICKS_PER_S  # not 10 s later
