@@ -63,6 +63,8 @@ from quadcommon.schema import ConfigError
 
 from .codec import Encoder
 from .codec import mavlink as m
+from .dispatch import MessageDispatcher
+from .links import Address, GcsLink
 
 EPOCH_2015_S = 1420070400  # 2015-01-01 00:00:00 UTC, MAVLink signing's epoch (s since 1970)
 TICKS_PER_S = 100_000  # the timestamp's unit is 10 us
@@ -245,7 +247,7 @@ class Signing:
         self,
         options: SigningOptions,
         encoder: Encoder,
-        links: Sequence,
+        links: Sequence[GcsLink],
         statustext: Callable[[int, str], None],
         armed: Callable[[], bool],
         system_id: int,
@@ -335,7 +337,7 @@ class Signing:
             self._raise_timestamp(self.reference)
 
     # -- incoming frames (called by pymavlink's decode) -----------------------------------------
-    def _check(self, link, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+    def _check(self, link: GcsLink, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
         """A signed frame: its signature valid and its timestamp fresh?"""
         key = self.key
         if key is None:  # not reachable: pymavlink asks only while a key is set
@@ -357,7 +359,7 @@ class Signing:
         self._raise_timestamp(timestamp)  # the spec: we send on from the newest timestamp seen
         return True
 
-    def _unsigned(self, link, mav, msg_id: int) -> bool:
+    def _unsigned(self, link: GcsLink, mav, msg_id: int) -> bool:
         """A frame without a valid signature: accepted only if it is on the accept-list."""
         reason = self._pending[link.index] or UNSIGNED
         self._pending[link.index] = None
@@ -371,10 +373,11 @@ class Signing:
         return False
 
     # -- SETUP_SIGNING ----------------------------------------------------------------------------
-    def register(self, dispatcher) -> None:
+    def register(self, dispatcher: MessageDispatcher) -> None:
+        """Handle SETUP_SIGNING."""
         dispatcher[m.MAVLINK_MSG_ID_SETUP_SIGNING] = self.on_setup_signing
 
-    def on_setup_signing(self, msg, link, address) -> None:
+    def on_setup_signing(self, msg, link: GcsLink, address: Address) -> None:
         """SETUP_SIGNING (256): a new key and initial timestamp, or (all-zero key, timestamp 0)
         signing off; only while disarmed. With signing on it arrives signed (it is not on the
         accept-list), so only a holder of the current key can change it."""
@@ -434,6 +437,7 @@ class Signing:
         return (self.key, self.timestamp, self.reference, tuple(sorted(self._streams.items())))
 
     def state(self) -> SigningState:
+        """What :meth:`save` writes."""
         return SigningState(self.key, self.timestamp, self.reference, dict(self._streams), self.key_source)
 
     def save(self) -> bool:
