@@ -12,6 +12,7 @@ Run: ``python -m autopilot --instance N --controller NAME --vehicle NAME``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import selectors
 import signal
@@ -25,6 +26,7 @@ from quadcommon.udp import PortInUse, bind_udp
 
 from .core import AutopilotCore, AutopilotSetup
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing
+from .mavlink.signing import SigningOptions
 
 HOUSEKEEPING_S = 0.05
 SPIN_BELOW_GAP_S = 0.001  # frames closer than this (wall): spin-wait for the next one
@@ -70,6 +72,7 @@ class Autopilot:
 
     def close(self) -> None:
         self._publish_rows(force=True)
+        self.core.signing.save()  # the newest signing timestamp, so a restart refuses older frames
         for sock in self.socks.values():
             sock.close()
         if self.session is not None:
@@ -185,10 +188,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--params", metavar="FILE", default=None,
                         help="parameter file (params.toml, NAME = value): loaded at start if it exists, "
                         "saved on every change and on MAV_CMD_PREFLIGHT_STORAGE")  # fmt: skip
+    parser.add_argument("--signing-key", metavar="FILE", default=None,
+                        help="MAVLink 2 signing on the GCS links with this key: one line, 64 hex digits "
+                        "or a passphrase (hashed as MAVProxy's 'signing setup PASSPHRASE')")  # fmt: skip
+    parser.add_argument("--signing-state", metavar="FILE", default=None,
+                        help="where the signing key and timestamps persist (default: signing-N.json "
+                        "beside --params, else beside --signing-key, else in memory)")  # fmt: skip
     args = parser.parse_args(argv)
     try:
         setup = AutopilotSetup.load(args.instance, args.controller, args.vehicle, args.sitl_config,
                                     args.autostart, args.state_source, args.params)  # fmt: skip
+        signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
+        setup = dataclasses.replace(setup, signing=signing)
         app = Autopilot(setup, zenoh=not args.no_zenoh, quiet=args.quiet)
         app.open()
     except (ConfigError, ValueError) as exc:

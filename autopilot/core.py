@@ -50,6 +50,7 @@ from .mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.offboard import decode_setpoint
 from .mavlink.params import ParamService
+from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
 from .mission.service import MissionService
@@ -79,6 +80,7 @@ class AutopilotSetup:
     use_odometry: bool = True  # the state from ODOMETRY (float32) or HIL_STATE_QUATERNION (1 cm)
     params_file: str | None = None  # params.toml: loaded at start if it exists, saved on change
     default_remotes: bool = True  # the GCS/API links send to 14550+N / 14540+N before anyone talks
+    signing: SigningOptions = SigningOptions()  # MAVLink 2 signing on the GCS links: key, state, wall clock
 
     @classmethod
     def load(
@@ -171,6 +173,10 @@ class AutopilotCore:
         self.param_service.register(self.dispatcher, self.commands)
         self.vehicle_commands = VehicleCommands(self)
         self.vehicle_commands.register(self.commands)
+        self.signing = Signing(setup.signing, self.encoder, self.links, self.statustext,
+                               lambda: self.commander.armed, self.system_id, log, setup.params_file,
+                               setup.instance)  # fmt: skip
+        self.signing.register(self.dispatcher)  # SETUP_SIGNING
         d = self.dispatcher
         d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
         d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
@@ -246,6 +252,7 @@ class AutopilotCore:
                 **{f"{link.name} peers evicted": link.evicted for link in self.links if link.evicted},
             },
             "peers": {link.name: [f"{host}:{port}" for host, port in link.peers] for link in self.links},
+            "signing": self.signing.info(),
         }
 
     def on_foreign_datagram(self, what: str) -> None:
@@ -424,7 +431,7 @@ class AutopilotCore:
             self.log(f"command {request.command} -> result {result}: {reason}")
         link.send_to(self.encoder.pack(command_ack(request, result)), address)
         if self.vehicle_commands.after_ack is not None:  # a requested message, after its ACK (PX4)
-            link.send_to(self.vehicle_commands.after_ack, address)
+            link.send_to(self.encoder.pack(self.vehicle_commands.after_ack), address)
             self.vehicle_commands.after_ack = None
         self.send_events()
 
@@ -484,6 +491,7 @@ class AutopilotCore:
             link.expire(now)
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
+        self.signing.poll(now)  # wall clock -> timestamps, refusals announced, state saved
         sim_loss_s = self.params["COM_SIM_LOSS_T"]
         if self.linked and now - self.last_frame_wall <= sim_loss_s:
             return
@@ -506,4 +514,5 @@ class AutopilotCore:
         if now >= self._next_hil_hello:
             # Say hello until frames flow: a (re)started simulator learns our address from it.
             self._next_hil_hello = now + HIL_HELLO_S
-            self._out.append(Outgoing(HIL_LINK, None, self.encoder.pack(telemetry.heartbeat(self.status))))
+            hello = self.encoder.pack_unsigned(telemetry.heartbeat(self.status))  # HIL: never signed
+            self._out.append(Outgoing(HIL_LINK, None, hello))

@@ -103,11 +103,16 @@ def _cmd_up(args: argparse.Namespace) -> int:
     load_scenario(args.scenario)
     load_vehicle(args.vehicle)
     params = [_params_file(args, args.instance + k, controller) for k in range(args.count)]
+    if args.signing_key:  # a bad key file fails here, before any process starts
+        from autopilot.mavlink.signing import read_key_file
+
+        read_key_file(args.signing_key)
     specs = [
         VehicleSpec(
             instance=args.instance + k, controller=args.controller, vehicle=args.vehicle,
             scenario=args.scenario, speed=args.speed, autostart=args.autostart,
             duration_s=args.duration, sitl_config=args.sitl_config, params_file=params[k],
+            signing_key_file=str(Path(args.signing_key).resolve()) if args.signing_key else None,
         )
         for k in range(args.count)
     ]  # fmt: skip
@@ -151,6 +156,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="autopilot parameter file (params.toml, NAME = value): loaded at start if it exists, "
         "saved on every change; with --count > 1 put {instance} in the path",
+    )
+    p.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        default=None,
+        help="MAVLink 2 signing on the GCS links: a file with the key (64 hex digits) or a passphrase "
+        "(as MAVProxy's 'signing setup PASSPHRASE'); state kept as signing-N.json beside --params, "
+        "else beside FILE",
     )
     p.set_defaults(func=_cmd_up)
 

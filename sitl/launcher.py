@@ -157,6 +157,7 @@ class VehicleSpec:
     duration_s: float | None = None  # simulator stops after this simulated time
     sitl_config: str | None = None
     params_file: str | None = None  # the autopilot's params.toml (--params): loaded, saved on change
+    signing_key_file: str | None = None  # MAVLink 2 signing key (--signing-key): hex key or passphrase
     extra_simulator_args: tuple[str, ...] = ()
     extra_autopilot_args: tuple[str, ...] = ()
 
@@ -174,6 +175,8 @@ class VehicleSpec:
             cmd += ["--autostart", self.scenario]
         if self.params_file:
             cmd += ["--params", self.params_file]
+        if self.signing_key_file:
+            cmd += ["--signing-key", self.signing_key_file]
         return cmd
 
     def _common(self) -> list[str]:

@@ -27,3 +27,14 @@ class Encoder:
             data = message.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256  # pack() does not advance it; send() would
         return data
+
+    def pack_unsigned(self, message) -> bytes:
+        """As :meth:`pack`, never signed, whatever ``mav.signing`` says (the HIL link's frames:
+        signing is for the ground-station links, :mod:`.signing`)."""
+        signing = self.mav.signing
+        sign, signing.sign_outgoing = signing.sign_outgoing, False
+        try:
+            return self.pack(message)
+        finally:
+            signing.sign_outgoing = sign
+

@@ -3,8 +3,9 @@
 Each handler reads a :class:`~.commands.CommandRequest` as PX4 does, its parameters already
 validated (:mod:`.validation`), and returns ``(MAV_RESULT, reason)``; the dispatcher answers every
 command with a COMMAND_ACK. A message a command asks for (REQUEST_MESSAGE, GET_HOME_POSITION,
-AUTOPILOT_CAPABILITIES) is left in :attr:`VehicleCommands.after_ack` for the core to send right
-after the ACK, as PX4 does.
+AUTOPILOT_CAPABILITIES) is left in :attr:`VehicleCommands.after_ack` for the core to pack and send
+right after the ACK, as PX4 does (packed after it: signed frames carry increasing timestamps, and a
+signing ground station refuses one older than the frame before).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ Result = tuple[int, str]
 class VehicleCommands:
     def __init__(self, core: AutopilotCore) -> None:
         self.core = core
-        self.after_ack: bytes | None = None
+        self.after_ack = None  # the message a command asked for (pymavlink), sent after its ACK
 
     def register(self, commands: CommandDispatcher) -> None:
         c = self.core.commander
@@ -107,7 +108,7 @@ class VehicleCommands:
             msg = telemetry.build(msg_id, core.status)
         if msg is None:
             return m.MAV_RESULT_UNSUPPORTED, f"message {msg_id} cannot be sent"
-        self.after_ack = core.encoder.pack(msg)
+        self.after_ack = msg
         return m.MAV_RESULT_ACCEPTED, ""
 
     def autopilot_version(self):
