@@ -3,7 +3,8 @@
 One thread, one loop. The simulator owns simulation time. Per control period it
 
 1. reads the plant's truth at frame time ``t = k / control_hz`` and the sensors' readings,
-2. sends ONE datagram (HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY, and HIL_GPS at the GPS rate,
+2. sends ONE datagram (HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY, and HIL_GPS when a fix is
+   delivered: the sensor profile's rate and latency, see :mod:`simulator.sensors`,
    all stamped ``time_usec = round(k * 1e6 / control_hz)``) to the autopilot,
 3. meanwhile (the autopilot is computing) appends the truth row to the zenoh batch and answers
    info queries,
@@ -79,7 +80,7 @@ class SimulatorOptions:
     speed: float | None = 1.0  # wall-clock pacing factor; None = as fast as lockstep allows
     duration_s: float | None = None  # stop after this much simulated time (None: until stopped)
     sitl_config: str | None = None
-    sensors: str = "default"  # config/sensors/NAME.toml
+    sensors: str | None = None  # config/sensors/NAME.toml; None: the scenario's profile
 
 
 class Simulator:
@@ -101,13 +102,14 @@ class Simulator:
         self.substeps = rates.physics_steps_per_control
         self.dt_control = 1.0 / rates.control_hz
         self.dt_physics = self.dt_control / self.substeps
-        self.gps_every = max(1, round(rates.control_hz / rates.gps_hz))
         self.plant_vehicle = apply_uncertainty(self.vehicle, scenario)  # what is flown (emergency law)
         self.plant = make_plant(self.plant_vehicle, self.dt_physics)
         self.plant.reset(scenario.initial_position_m, scenario.initial_euler_rad)
         self.schedule = self._new_schedule(load_gust_profile(scenario.gusts), 0.0)
         self._pending_schedule: DisturbanceSchedule | None = None
-        self.sensors = SensorSuite(load_sensors(options.sensors), sitl.home[2])
+        self.sensors = SensorSuite(
+            load_sensors(options.sensors or scenario.sensors), sitl.home[2], imu_rate_hz=rates.control_hz
+        )
         self.encoder = HilFrameEncoder(wire.system_id(options.instance), sitl.home)
         self.decoder = ActuatorDecoder()
         self.wrench = self.vehicle.actuation.mode == "wrench"
@@ -165,8 +167,12 @@ class Simulator:
         self.truth_stream = TruthStream(self.session, wire.zenoh_key(n, "truth"))
         self.info = InfoServer(self.session, wire.zenoh_key(n, "info"), self.describe)
         self.gusts = GustUploadServer(
-            self.session, wire.zenoh_key(n, "sim/gusts"), lambda: self.sim_time_s,
-            self._install_uploaded_gusts, self.dt_physics, self._wind_warning,
+            self.session,
+            wire.zenoh_key(n, "sim/gusts"),
+            lambda: self.sim_time_s,
+            self._install_uploaded_gusts,
+            self.dt_physics,
+            self._wind_warning,
         )
 
     def close(self) -> None:
@@ -414,7 +420,6 @@ class Simulator:
         perf_counter = time.perf_counter
         dt, dt_physics, substeps = self.dt_control, self.dt_physics, self.substeps
         usec_per_frame = 1e6 / self.control_hz
-        gps_every = self.gps_every
         speed = self.options.speed
         last_frame = (
             None if self.options.duration_s is None else round(self.options.duration_s / self.dt_control)
@@ -437,8 +442,8 @@ class Simulator:
                 print(f"simulator: the plant state is not finite at t={t:.3f} s; stopping", file=sys.stderr)
                 return 1
             force, torque, wind = schedule.evaluate(t)
-            gps = sensors.sample_gps(truth) if k % gps_every == 0 else None
-            datagram = encoder.encode(time_usec, truth, sensors.sample(truth), wind, gps)
+            frame = sensors.step(t, truth)
+            datagram = encoder.encode(time_usec, truth, frame.readings, wind, frame.gps)
             sent_at = perf_counter()
             send(datagram)
             self.frames_sent += 1
@@ -567,7 +572,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=_duration, default=None, help="stop after S simulated seconds")
     parser.add_argument("--config-dir", default=None, help="configuration directory (default: ./config)")
     parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
-    parser.add_argument("--sensors", default="default", help="sensor models (config/sensors)")
+    parser.add_argument(
+        "--sensors",
+        default=None,
+        help="sensor profile (config/sensors: ideal, mocap, gps); default: the scenario's",
+    )
     return parser
 
 

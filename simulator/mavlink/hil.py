@@ -9,9 +9,11 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
 
 * ``HIL_SENSOR``: specific force (m/s^2, FRD; -g on z at rest), body rates (rad/s, FRD),
   magnetic field (gauss, FRD), ``abs_pressure`` (hPa, ISA), ``diff_pressure`` 0 (no airspeed
-  sensor), ``pressure_alt`` (m AMSL), ``temperature`` (deg C); ``fields_updated = 0x1FFF``
-  (bits 0-12: accel, gyro, mag, abs/diff pressure, pressure altitude, temperature all fresh in
-  every frame, as PX4's Gazebo bridge sends them), ``id`` 0.
+  sensor), ``pressure_alt`` (m AMSL), ``temperature`` (deg C); ``fields_updated`` bits 0-12
+  (accel, gyro, mag, abs/diff pressure, pressure altitude, temperature): all set (0x1FFF) when
+  every sensor sampled this frame, as PX4's Gazebo bridge sends them; the magnetometer bits (6-8)
+  and the barometer bits (9, 11, 12) are cleared in frames where that sensor holds its last
+  sample (its rate below the frame rate), ``id`` 0.
 * ``HIL_STATE_QUATERNION`` (ground truth): attitude quaternion NED/FRD, body rates FRD,
   lat/lon (1e-7 deg) and alt (mm AMSL) of O from the local NED position about the configured
   home (:func:`quadcommon.frames.ned_to_geodetic`), velocity (cm/s, NED), specific force (mG, FRD,
@@ -22,7 +24,8 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
   in ``child_frame_id``; a world-frame twist is exact without a rotation on either side); the
   angular rates are body FRD (the only frame in which MAVLink carries rates). Covariances unknown
   (first element NaN), ``estimator_type = MAV_ESTIMATOR_TYPE_MOCAP``, ``quality = 100``.
-* ``HIL_GPS`` (at the GPS rate only): fix 3D, lat/lon/alt as above but from the (noisy) GPS
+* ``HIL_GPS`` (when a fix is delivered): the reading's fix type (3D, or 1 "no fix" in an
+  outage), lat/lon/alt as above but from the (noisy) GPS
   reading, eph/epv in cm (PX4 reads them as cm), ground speed and NED velocity (cm/s), course
   over ground (cdeg, [0, 36000)), satellites, ``id`` 0, ``yaw`` 0 (no heading from GPS).
 
@@ -46,6 +49,8 @@ Vector3 = tuple[float, float, float]
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # 1 G for the mG fields of HIL_STATE_QUATERNION
 FIELDS_UPDATED_ALL = 0x1FFF  # HIL_SENSOR_UPDATED_{X,Y,Z}{ACC,GYRO,MAG}, ABS/DIFF_PRESSURE, PRESSURE_ALT, TEMP
+FIELDS_MAG = 0x1C0  # bits 6-8
+FIELDS_BARO = 0x1A00  # bits 9 (abs pressure), 11 (pressure altitude), 12 (temperature)
 GPS_FIX_3D = 3
 _UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
@@ -115,6 +120,12 @@ class HilFrameEncoder:
 
         s = self._sensor
         s.time_usec = time_usec
+        updated = FIELDS_UPDATED_ALL
+        if not readings.mag_fresh:
+            updated &= ~FIELDS_MAG
+        if not readings.baro_fresh:
+            updated &= ~FIELDS_BARO
+        s.fields_updated = updated
         s.xacc, s.yacc, s.zacc = to_ned(readings.imu.specific_force_m_s2)
         s.xgyro, s.ygyro, s.zgyro = to_ned(readings.imu.angular_rate_rad_s)
         s.xmag, s.ymag, s.zmag = to_ned(readings.magnetic_field_gauss)
@@ -156,6 +167,7 @@ class HilFrameEncoder:
         lat, lon, alt = frames.ned_to_geodetic(p_ned[0], p_ned[1], p_ned[2], self.home)
         g = self._gps
         g.time_usec = time_usec
+        g.fix_type = reading.fix_type
         g.lat, g.lon, g.alt = _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000.0)
         g.eph, g.epv = _u16(reading.eph_m * 100.0), _u16(reading.epv_m * 100.0)
         g.vel = _u16(100.0 * math.hypot(v_ned[0], v_ned[1]))
