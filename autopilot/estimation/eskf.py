@@ -55,6 +55,7 @@ us as block-sparse plain-float code (the sparse blocks touch every row of P anyw
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -77,6 +78,7 @@ from .parameters import (
     EstimatorParams,
 )
 from .status import (
+    ESTIMATOR_ACCEL_ERROR,
     ESTIMATOR_ATTITUDE,
     ESTIMATOR_CONST_POS_MODE,
     ESTIMATOR_GPS_GLITCH,
@@ -129,6 +131,17 @@ REST_GYRO_RAD_S = 0.05  # alignment: at rest when |gyro| stays below this ...
 REST_ACCEL_M_S2 = 0.5  # ... and ||f| - g| below this
 GLITCH_FLAG_S = 1.0  # ESTIMATOR_GPS_GLITCH while a GPS position was gated out this recently
 MIN_VARIANCE = 1e-12  # floor of a scalar innovation variance (guards a degenerate P)
+# Bad vertical acceleration (PX4's bad_acc_vertical): vertical velocity and height innovations
+# both gated out with the same sign mean the accelerometer, not the aiding, is wrong. Then, for
+# BAD_ACCEL_HOLD_S, the vertical velocity gets PX4's BADACC_BIAS_PNOISE (4.9 m/s^2 per 10 ms
+# prediction, i.e. 0.49 m/s^2/sqrt(Hz)) and the z accelerometer bias a fast random walk, so the
+# aiding is accepted again and the new bias is learned instead of the filter diverging.
+BAD_ACCEL_VEL_DENSITY = 0.49  # m/s^2/sqrt(Hz)
+BAD_ACCEL_BIAS_RW = 0.1  # m/s^2/sqrt(s)
+BAD_ACCEL_HOLD_S = 1.0
+BAD_ACCEL_WINDOW_S = 1.0  # the mean of the normalised vertical innovations over this window ...
+BAD_ACCEL_MEAN = 1.5  # ... beyond this (4.7 sigma of the mean of 10 GPS fixes)
+BAD_ACCEL_MIN_SAMPLES = 8
 
 _Q_ID = (1.0, 0.0, 0.0, 0.0)
 _Z3 = (0.0, 0.0, 0.0)
@@ -200,6 +213,29 @@ def yaw_jacobian(q: Quaternion) -> Vector3:
     if d < 1e-9:  # pitch at +-90 deg: yaw undefined; fall back to the level-flight Jacobian
         return (0.0, 0.0, 1.0)
     return (-r00 * r20 / d, -r10 * r20 / d, 1.0)
+
+
+def mag_model(q: Quaternion, earth_field: Vector3, bias: Vector3) -> tuple[Vector3, tuple[Vector3, ...]]:
+    """Predicted body field ``R^T m_e + b_m`` and its Jacobian ``R^T [m_e]_x`` on the global
+    attitude error (``R <- (I + [dtheta]_x) R`` gives ``R^T m_e <- R^T m_e + R^T [m_e]_x dtheta``);
+    the Jacobian on ``b_m`` is the identity."""
+    r = rotation_matrix_rows(q)
+    ex, ey, ez = earth_field
+    pred = (
+        r[0] * ex + r[3] * ey + r[6] * ez + bias[0],
+        r[1] * ex + r[4] * ey + r[7] * ez + bias[1],
+        r[2] * ex + r[5] * ey + r[8] * ez + bias[2],
+    )
+    skew = ((0.0, -ez, ey), (ez, 0.0, -ex), (-ey, ex, 0.0))
+    H = tuple(
+        (
+            r[i] * skew[0][0] + r[3 + i] * skew[1][0] + r[6 + i] * skew[2][0],
+            r[i] * skew[0][1] + r[3 + i] * skew[1][1] + r[6 + i] * skew[2][1],
+            r[i] * skew[0][2] + r[3 + i] * skew[1][2] + r[6 + i] * skew[2][2],
+        )
+        for i in range(3)
+    )
+    return pred, H  # type: ignore[return-value]
 
 
 class ErrorStateEkf:
@@ -290,6 +326,12 @@ class ErrorStateEkf:
         self._last_h_aid_s = -1.0
         self._last_v_aid_s = -1.0
         self._last_gps_pos_s = -1.0
+        self._bad_accel_until_s = -math.inf
+        # Recent (time, normalised innovation) of the vertical sources the bad-accel check watches.
+        self._innovations: dict[int, deque] = {
+            id(self.sources[name]): deque(maxlen=256) for name in ("gps_vvel", "ev_hgt")
+        }
+        self.bad_accel_detections = 0
         self._next_mag_s = -math.inf  # fusion-rate limits (EKF2_MAG_RATE, EKF2_BARO_RATE)
         self._next_baro_s = -math.inf
 
@@ -406,6 +448,9 @@ class ErrorStateEkf:
         if abs(dt - self._q_dt) > 1e-9:  # time stamps jitter in the last bits: keep the cache
             self._set_process_noise(dt)
         P.flat[self._diag] += self._q_diag
+        if t < self._bad_accel_until_s:
+            P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
+            P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
         self.P = P
 
         # Delayed-state buffer.
@@ -738,6 +783,12 @@ class ErrorStateEkf:
                 if ratio > worst:
                     worst = ratio
             stats.test_ratio = worst
+            stats.innovation = innov
+            stats.normalized_innovation = innov / math.sqrt(max(d[k + len(group_rows) - 1] + r, MIN_VARIANCE))
+            stats.last_tested_s = now
+            window = self._innovations.get(id(stats))
+            if window is not None:
+                window.append((now, stats.normalized_innovation))
             if worst > 1.0:
                 stats.rejected += 1
                 stats.last_rejected_s = now
@@ -830,7 +881,8 @@ class ErrorStateEkf:
             if self._gps_usable(fix):
                 self._pending_gps = fix
             return
-        st_pos, st_hgt, st_vel = self.sources["gps_pos"], self.sources["gps_hgt"], self.sources["gps_vel"]
+        src = self.sources
+        st_pos, st_hgt, st_vel, st_vvel = src["gps_pos"], src["gps_hgt"], src["gps_vel"], src["gps_vvel"]
         if not self._gps_usable(fix):
             st_pos.check_rejected += 1
             return
@@ -857,17 +909,18 @@ class ErrorStateEkf:
         if p.gps_ctrl & GPS_CTRL_VPOS:
             groups.append((st_hgt, p.baro_gate, [((IP + 2, IV + 2), (1.0, -D), z[2] - pm[2], vv)]))
         if p.gps_ctrl & GPS_CTRL_VEL:
+            # Horizontal and vertical velocity gated apart (as PX4 does), so that a vertical
+            # accelerometer fault does not also cut the horizontal aiding.
             groups.append(
                 (
                     st_vel,
                     p.gps_vel_gate,
-                    [
-                        ((IV,), (1.0,), u[0] - vm[0], sv),
-                        ((IV + 1,), (1.0,), u[1] - vm[1], sv),
-                        ((IV + 2,), (1.0,), u[2] - vm[2], sv * 2.25),  # PX4: vertical velocity noise 1.5x
-                    ],
+                    [((IV,), (1.0,), u[0] - vm[0], sv), ((IV + 1,), (1.0,), u[1] - vm[1], sv)],
                 )
             )
+            groups.append(
+                (st_vvel, p.gps_vel_gate, [((IV + 2,), (1.0,), u[2] - vm[2], sv * 2.25)])
+            )  # PX4: 1.5x
         if not groups:
             return
         accepted = self._fuse(groups)
@@ -882,7 +935,10 @@ class ErrorStateEkf:
             elif stats is st_hgt and ok:
                 self._last_v_aid_s = now
             elif stats is st_vel and ok:
-                self._last_h_aid_s = self._last_v_aid_s = now
+                self._last_h_aid_s = now
+            elif stats is st_vvel and ok:
+                self._last_v_aid_s = now
+        self._check_vertical_accel()
 
     def _gps_usable(self, fix: GpsFix) -> bool:
         p = self.params
@@ -916,6 +972,7 @@ class ErrorStateEkf:
             [(stats, p.baro_gate, [((IP + 2, IV + 2, IBH), (1.0, -D, 1.0), innov, p.baro_noise_m**2)])]
         )[0]:
             self._last_v_aid_s = self.time_s
+        self._check_vertical_accel()
 
     def fuse_mag(self, sample: MagSample) -> None:
         """Magnetometer, at most EKF2_MAG_RATE: the 3-axis field ``m = R^T m_earth + b_m``
@@ -953,21 +1010,9 @@ class ErrorStateEkf:
             )
             self._fuse([(stats, p.heading_gate, [row])])
             return
-        r = rotation_matrix_rows(q)
-        ex, ey, ez = self.earth_field
-        bm = self._bm
-        # Predicted field R^T m_e + b_m, and its Jacobian R^T [m_e]_x on the global dtheta.
-        pred = (
-            r[0] * ex + r[3] * ey + r[6] * ez + bm[0],
-            r[1] * ex + r[4] * ey + r[7] * ez + bm[1],
-            r[2] * ex + r[5] * ey + r[8] * ez + bm[2],
-        )
-        skew = ((0.0, -ez, ey), (ez, 0.0, -ex), (-ey, ex, 0.0))
+        pred, H = mag_model(q, self.earth_field, self._bm)
         var = p.mag_noise_gauss**2
-        rows = []
-        for i in range(3):
-            hrow = tuple(r[i] * skew[0][j] + r[3 + i] * skew[1][j] + r[6 + i] * skew[2][j] for j in range(3))
-            rows.append(((ITH, ITH + 1, ITH + 2, IBM + i), (*hrow, 1.0), m[i] - pred[i], var))
+        rows = [((ITH, ITH + 1, ITH + 2, IBM + i), (*H[i], 1.0), m[i] - pred[i], var) for i in range(3)]
         self._fuse([(stats, p.mag_gate, rows)])
 
     def _mag_checks(self, stats: SourceStats, m: Vector3, q: Quaternion) -> bool:
@@ -1059,6 +1104,41 @@ class ErrorStateEkf:
                     self._maybe_reset_position(stats, current, (0, 1), var)
             elif stats is st_hgt and ok:
                 self._last_v_aid_s = now
+        self._check_vertical_accel()
+
+    def _check_vertical_accel(self) -> None:
+        """Bad vertical acceleration (PX4's bad_acc_vertical, made statistical): the mean of the
+        normalised vertical velocity innovations (GPS) over the last BAD_ACCEL_WINDOW_S is beyond
+        BAD_ACCEL_MEAN and the height innovation agrees in sign; or, without a velocity source,
+        the mean of the normalised vision height innovations is. For a consistent filter the
+        mean of n samples has a standard deviation 1/sqrt(n) (0.32 at 10 GPS fixes): by chance
+        the test fires about once in 10^5 windows; a vertical accelerometer fault (a bias step the
+        random-walk model cannot follow) trips it within about a second."""
+        src = self.sources
+        now = self.time_s
+        bad = False
+        for name in ("gps_vvel", "ev_hgt"):
+            st = src[name]
+            if st.last_tested_s != now:
+                continue
+            window = self._innovations[id(st)]
+            while window[0][0] < now - BAD_ACCEL_WINDOW_S:
+                window.popleft()
+            if len(window) < BAD_ACCEL_MIN_SAMPLES:
+                continue
+            mean = sum(z for _, z in window) / len(window)
+            if abs(mean) < BAD_ACCEL_MEAN:
+                continue
+            if name == "ev_hgt":
+                bad = True
+            else:
+                heights = [src[n] for n in ("gps_hgt", "baro") if src[n].last_tested_s >= 0.0]
+                latest = max(heights, key=lambda h: h.last_tested_s, default=None)
+                bad = latest is not None and latest.innovation * mean > 0.0
+        if bad:
+            if now >= self._bad_accel_until_s:
+                self.bad_accel_detections += 1
+            self._bad_accel_until_s = now + BAD_ACCEL_HOLD_S
 
     # ------------------------------------------------------------------------------------------
     # Outputs
@@ -1145,6 +1225,8 @@ class ErrorStateEkf:
             flags |= ESTIMATOR_VELOCITY_VERT | ESTIMATOR_POS_VERT_ABS
         if glitch:
             flags |= ESTIMATOR_GPS_GLITCH
+        if now < self._bad_accel_until_s:
+            flags |= ESTIMATOR_ACCEL_ERROR
         pos_ratio = max(src["gps_pos"].test_ratio, src["ev_pos"].test_ratio)
         vert_ratio = max(src["gps_hgt"].test_ratio, src["baro"].test_ratio, src["ev_hgt"].test_ratio)
         mag_ratio = max(src["mag"].test_ratio, src["heading"].test_ratio, src["ev_yaw"].test_ratio)
@@ -1154,7 +1236,7 @@ class ErrorStateEkf:
             reason == "",
             reason,
             flags,
-            src["gps_vel"].test_ratio,
+            max(src["gps_vel"].test_ratio, src["gps_vvel"].test_ratio),
             pos_ratio,
             vert_ratio,
             mag_ratio,

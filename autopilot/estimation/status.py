@@ -29,7 +29,18 @@ ESTIMATOR_GPS_GLITCH = 1024
 ESTIMATOR_ACCEL_ERROR = 2048
 
 # Names of the fused measurement kinds (keys of EstimatorStatus.sources).
-SOURCE_NAMES = ("gps_pos", "gps_hgt", "gps_vel", "baro", "mag", "heading", "ev_pos", "ev_hgt", "ev_yaw")
+SOURCE_NAMES = (
+    "gps_pos",
+    "gps_hgt",
+    "gps_vel",
+    "gps_vvel",
+    "baro",
+    "mag",
+    "heading",
+    "ev_pos",
+    "ev_hgt",
+    "ev_yaw",
+)
 
 
 class Estimate(NamedTuple):
@@ -58,6 +69,9 @@ class SourceStats:
     too_old: int = 0  # valid before the oldest buffered state
     skipped: int = 0  # not fused: above the kind's fusion rate (EKF2_MAG_RATE, EKF2_BARO_RATE)
     test_ratio: float = 0.0  # of the last sample tested
+    innovation: float = 0.0  # of the last sample tested (its last axis): measured - predicted
+    normalized_innovation: float = 0.0  # innovation / sqrt(S) of that axis
+    last_tested_s: float = -1.0
     last_fused_s: float = -1.0
     last_rejected_s: float = -1.0
     rejecting_since_s: float = -1.0  # start of the current run of gate rejections (-1: none)

@@ -29,6 +29,7 @@ from autopilot.estimation import (
 )
 from autopilot.guidance.trajectories import trajectory_from_spec
 from quadcommon.config import apply_uncertainty, load_controller, load_scenario, load_sitl, load_vehicle
+from quadcommon.rigid_body import rotation_from_quaternion
 from simulator.dynamics.plant import TruthState, make_plant
 from simulator.environment.gust_profile import DisturbanceSchedule, load_gust_profile
 from simulator.sensors import SensorConfig, SensorSuite
@@ -37,11 +38,9 @@ PRE_ROLL_S = 2.0  # held still at the start pose before the helix starts
 HOME_ALT_M = 488.0
 
 
-@functools.lru_cache(maxsize=4)
-def helix_truth(
-    duration_s: float = 40.0, pre_roll_s: float = PRE_ROLL_S
-) -> tuple[tuple[float, TruthState], ...]:
-    """``(t, truth)`` per control frame: ``pre_roll_s`` at rest, then the helix (t from 0)."""
+@functools.lru_cache(maxsize=2)
+def _helix_flight(duration_s: float) -> tuple[TruthState, tuple[TruthState, ...]]:
+    """The rest state at the start pose, and the plant's truth at frames 1..n of the helix."""
     scenario = load_scenario("helix")
     vehicle = load_vehicle(scenario.vehicle)
     rates = load_sitl().rates
@@ -52,40 +51,46 @@ def helix_truth(
     cascade = Cascade(load_controller("intbs_nlhinf"), vehicle, dt)
     trajectory = trajectory_from_spec(scenario.trajectory)
     schedule = DisturbanceSchedule(load_gust_profile(scenario.gusts), step_s=dt / substeps)
-
-    frames: list[tuple[float, TruthState]] = []
-    # The stand: at rest at the start pose, the accelerometer reads gravity only.
+    # On the stand: at rest at the start pose, the accelerometer reads gravity only.
     t0 = plant.truth()
-    n_pre = round(pre_roll_s / dt)
     g = vehicle.nominal.gravity_m_s2
-    from quadcommon.rigid_body import rotation_from_quaternion
-
     R = rotation_from_quaternion(*t0.quaternion)
-    f_rest = (R[2][0] * g, R[2][1] * g, R[2][2] * g)  # R^T (0, 0, g)
     rest = dataclasses.replace(
         t0,
         velocity_m_s=(0.0, 0.0, 0.0),
         acceleration_m_s2=(0.0, 0.0, 0.0),
         body_rates_rad_s=(0.0, 0.0, 0.0),
         euler_rates_rad_s=(0.0, 0.0, 0.0),
-        specific_force_body_m_s2=f_rest,
+        specific_force_body_m_s2=(R[2][0] * g, R[2][1] * g, R[2][2] * g),  # R^T (0, 0, g)
     )
-    for k in range(n_pre + 1):
-        frames.append((k * dt, rest))  # the last one at the release, t = pre_roll_s
-    # Released at t = pre_roll_s; each later frame samples the truth before the frame's command is
+    # Released at t = 0; each later frame samples the truth before that frame's command is
     # applied, as the SITL does (the first command acts over [0, dt]).
-    steps = round(duration_s / dt)
-    for k in range(steps + 1):
+    flight = []
+    for k in range(round(duration_s / dt) + 1):
         t = k * dt
         position, velocity, euler, euler_rates = plant.kinematics()
         out = cascade.step(StateEstimate(position, velocity, euler, euler_rates), trajectory.sample(t))
         if k > 0:
-            frames.append((pre_roll_s + t, plant.truth()))
+            flight.append(plant.truth())
         plant.set_actuator_controls(out.actuator_controls)
         for j in range(substeps):
             force, torque, wind = schedule.evaluate(t + j * dt / substeps)
             plant.set_disturbance(force, torque, wind)
             plant.step()
+    return rest, tuple(flight)
+
+
+@functools.lru_cache(maxsize=4)
+def helix_truth(
+    duration_s: float = 40.0, pre_roll_s: float = PRE_ROLL_S
+) -> tuple[tuple[float, TruthState], ...]:
+    """``(t, truth)`` per control frame: ``pre_roll_s`` held at rest, then the helix released at
+    ``t = pre_roll_s`` (the scenario's own time is ``t - pre_roll_s``)."""
+    rest, flight = _helix_flight(duration_s)
+    dt = 1.0 / load_sitl().rates.control_hz
+    n_pre = round(pre_roll_s / dt)
+    frames = [(k * dt, rest) for k in range(n_pre + 1)]  # the last one at the release
+    frames += [((n_pre + 1 + k) * dt, truth) for k, truth in enumerate(flight)]
     return tuple(frames)
 
 
@@ -147,8 +152,13 @@ def run_filter(
     until_s: float | None = None,
     status_every_s: float = 0.0,
     nees_every: int = 1,
+    reset_at_s: float | None = None,
 ) -> FilterRun:
-    """Replay ``truth`` through the sensors (seeded by ``sensors.seed``) and the filter."""
+    """Replay ``truth`` through the sensors (seeded by ``sensors.seed``) and the filter.
+
+    ``reset_at_s``: instead of the alignment, start the filter there with
+    :meth:`ErrorStateEkf.reset_to` on the true position, velocity and attitude (biases unknown:
+    zero, with their EKF2_*BIAS_INIT priors), e.g. in the air."""
     suite = SensorSuite(sensors, HOME_ALT_M, imu_rate_hz=500.0)
     for f in faults:
         suite.add_fault(f)
@@ -165,9 +175,15 @@ def run_filter(
             break
         frame = suite.step(t, tr)
         imu = frame.imu
-        ekf.predict(ImuSample(t, t - t_prev if t_prev is not None else 0.002, imu.angular_rate_rad_s,
-                              imu.specific_force_m_s2))  # fmt: skip
+        sample = ImuSample(t, t - t_prev if t_prev is not None else 0.002, imu.angular_rate_rad_s,
+                           imu.specific_force_m_s2)  # fmt: skip
         t_prev = t
+        if reset_at_s is not None and not ekf.initialised:
+            if t < reset_at_s:
+                continue
+            ekf.reset_to(sample, tr.position_m, tr.velocity_m_s, tr.quaternion, position_std_m=0.01)
+        else:
+            ekf.predict(sample)
         if frame.gps is not None:
             g = frame.gps
             ekf.fuse_gps(GpsFix(t, g.position_m, g.velocity_m_s, g.eph_m, g.epv_m, g.speed_accuracy_m_s,
