@@ -1,8 +1,10 @@
 """Error-state extended Kalman filter for an IMU-driven quadrotor (pure: no I/O, no clock).
 
 References: J. Solà, *Quaternion kinematics for the error-state Kalman filter*, arXiv:1711.02508
-(2017); equation numbers below are that version's, sections where a block of equations is meant.
-PX4's EKF2 for parameter names, defaults and the handling of gates, floors and checks.
+(2017): cited by section (§5 the ESKF for IMU-driven systems, §6 fusion with complementary
+sensors, §7 the variant with global angular errors used here) and by equation number where the
+number is unambiguous (eq. 269, the covariance prediction). PX4's EKF2 for parameter names,
+defaults and the handling of gates, floors and checks.
 
 Nominal state (paper frames: world x north / y west / z up, body front-left-up):
 ``p`` (m), ``v`` (m/s), ``q`` (body to world), gyro bias ``b_g`` (rad/s), accelerometer bias
@@ -25,31 +27,33 @@ Prediction, per IMU sample (the control rate), from ``t_{k-1}`` to ``t_k = t_{k-
   ``Q = diag(0, s_a^2 dt I, s_g^2 dt I, s_bg^2 dt I, s_ba^2 dt I, s_bm^2 dt I, s_bh^2 dt)`` from the
   noise densities (see :mod:`.parameters` for how PX4's figures become densities).
 
-Correction (Solà §6.1-6.3, §7.3): every measurement is fused as a sequence of scalar updates,
-``K = P h / S``, ``S = h^T P h + r``, with the covariance in Joseph form,
-``P <- (I - K h^T) P (I - K h^T)^T + r K K^T``, computed in O(n^2) as two rank-one products and a
-rank-one sum (the factorised form is kept, never the algebraically equal ``P - K h^T P``, so the
-update stays symmetric and positive for any gain). Each measurement first passes its innovation
-gate on the prior (a sample with ``innovation^2 > gate^2 S`` is rejected and counted; the axes of
-one sensor are gated together, as PX4 does). The accumulated error is then injected into the
-nominal state (§6.2, ``q <- Exp(dtheta) (x) q``) and the error reset with
-``P <- G P G^T``, ``G_theta = I + [dtheta/2]_x`` (§7.3.3, the global-error sign).
+Correction (Solà §6.1-6.3, §7.3): one measurement (all its axes) is one batch update,
+``K = P H^T S^-1``, ``S = H P H^T + R``, with the covariance in Joseph form,
+``P <- (I - K H) P (I - K H)^T + K R K^T`` (the factorised form, never the algebraically equal
+``P - K H P``, so the update stays symmetric and positive for any gain). First every group of
+axes (GPS horizontal position, GPS height, GPS horizontal velocity, ...) passes its innovation
+gate on the prior, as PX4 gates them: a group with ``innovation^2 > gate^2 S`` on any axis is
+rejected and counted. The error ``K y`` is then injected into the nominal state (§6.2,
+``q <- Exp(dtheta) (x) q``) and the error reset with ``P <- G P G^T``,
+``G_theta = I + [dtheta/2]_x`` (§7.3.3, the global-error sign; skipped below 1 mrad).
 
 Delayed measurements: after every prediction the nominal state is stored in a ring buffer
-(``EST_BUFFER_S`` of history). A sample valid at ``t_m = arrival - delay`` is compared with the
-buffered state at ``t_m`` (its innovation is the one the measurement really has), and its
-correction is applied to the current state with the current covariance, the measurement
-Jacobian carried to now to first order: for a position, ``dp(t_m) = dp - D dv`` with
-``D = t - t_m``. Corrections applied since ``t_m`` are added to the buffered state
-(cumulative-correction bookkeeping, so no sample is fused against a stale past). This is the
-"delayed-state buffer" of PX4's EKF2 without its delayed time horizon: one filter, one
-propagation, no output predictor; the neglected terms are of order ``D x (velocity and attitude
-uncertainty)``, well below the noise of the delayed sensors (mm for a 0.1 s GPS delay).
+(``RING`` IMU steps: 8 s at 500 Hz; the EKF2_*_DELAY parameters stop at 300 ms). A sample valid
+at ``t_m = arrival - delay`` is compared with the buffered state at ``t_m`` (its innovation is
+the one the measurement really has), and its correction is applied to the current state with the
+current covariance, the measurement Jacobian carried to now to first order: for a position,
+``dp(t_m) = dp - D dv`` with ``D = t - t_m``. Corrections applied since ``t_m`` are added to the
+buffered state (cumulative-correction bookkeeping, so no sample is fused against a stale past).
+This is the "delayed-state buffer" of PX4's EKF2 without its delayed time horizon: one filter,
+one propagation, no output predictor; the neglected terms are of order ``D x (velocity and
+attitude uncertainty)``, well below the noise of the delayed sensors (mm for a 0.1 s GPS delay).
 
 Hot path: the nominal state is plain floats (tuples), the 19x19 covariance a numpy array. Both
-were measured (``benchmarks/estimator.py``): the nominal propagation in floats costs ~4 us against
-~40 us with small numpy arrays, while ``F P F^T`` costs ~5 us as two numpy products against ~150
-us as block-sparse plain-float code (the sparse blocks touch every row of P anyway).
+choices are measured by ``benchmarks/estimator.py``: the position/velocity step costs ~8x more
+with small numpy arrays than in floats, while ``F P F^T`` costs ~6x more as block-sparse
+plain-float code than as two numpy products (the sparse blocks touch every row of P anyway).
+A prediction costs ~10 us, so the covariance is predicted at every IMU sample (PX4's 100 Hz
+down-sampling is not needed).
 """
 
 from __future__ import annotations
@@ -126,6 +130,8 @@ STATE_NAMES = (
 DEFAULT_EARTH_FIELD_WORLD_GAUSS: Vector3 = frames.vector_from_ned((0.21, 0.016, 0.43))  # type: ignore[assignment]
 """The simulator's default field (about Zurich's), in the paper's world frame."""
 
+RING = 4096  # delayed-state buffer, IMU steps (a power of two: the index wraps with a mask)
+RING_MASK = RING - 1
 MAX_IMU_DT_S = 0.1  # a longer gap is a lost link, not an interval to integrate across
 REST_GYRO_RAD_S = 0.05  # alignment: at rest when |gyro| stays below this ...
 REST_ACCEL_M_S2 = 0.5  # ... and ||f| - g| below this
@@ -148,7 +154,7 @@ _Z3 = (0.0, 0.0, 0.0)
 
 
 def quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
-    """Hamilton product ``a (x) b`` (Solà eq. 12)."""
+    """Hamilton product ``a (x) b`` (Solà §1.2.2)."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
     return (
@@ -160,7 +166,7 @@ def quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
 
 
 def quat_exp(rx: float, ry: float, rz: float) -> Quaternion:
-    """Quaternion of the rotation vector ``r`` (the exponential map, Solà §2.4 / eq. 101)."""
+    """Quaternion of the rotation vector ``r``: ``Exp(r) = [cos(|r|/2), sin(|r|/2) r/|r|]`` (Solà §1.3.4)."""
     th2 = rx * rx + ry * ry + rz * rz
     if th2 > 1e-12:
         th = math.sqrt(th2)
@@ -177,7 +183,7 @@ def quat_conjugate(q: Quaternion) -> Quaternion:
 
 
 def rotation_matrix_rows(q: Quaternion) -> tuple[float, ...]:
-    """Row-major entries of the body-to-world rotation of a unit quaternion (Solà eq. 115)."""
+    """Row-major entries of the body-to-world rotation matrix of a unit quaternion (Hamilton)."""
     w, x, y, z = q
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
@@ -249,7 +255,6 @@ class ErrorStateEkf:
         *,
         earth_field_world_gauss: Vector3 = DEFAULT_EARTH_FIELD_WORLD_GAUSS,
         gravity_m_s2: float = 9.81,
-        buffer_s: float = 0.5,
     ) -> None:
         self.params = params
         self.gravity = gravity_m_s2
@@ -258,10 +263,6 @@ class ErrorStateEkf:
         self._field_strength = math.sqrt(mx * mx + my * my + mz * mz)
         self._field_inclination = math.atan2(-mz, math.hypot(mx, my))  # positive: pointing down
         self._field_heading = math.atan2(my, mx)  # -declination in the paper's frame (z up)
-        self.buffer_s = buffer_s
-        max_delay = max(params.gps_delay_s, params.ev_delay_s, params.baro_delay_s, params.mag_delay_s)
-        if max_delay >= buffer_s:
-            raise ValueError(f"buffer_s = {buffer_s} s must exceed the largest sensor delay ({max_delay} s)")
 
         self.sources: dict[str, SourceStats] = {name: SourceStats() for name in SOURCE_NAMES}
         self.initialised = False
@@ -300,7 +301,7 @@ class ErrorStateEkf:
         self._q_diag = np.zeros(N)
 
         # Delayed-state ring buffer: (t, p, v, q, cp, cv, cq) per IMU step.
-        self._ring: list[tuple | None] = [None] * 4096
+        self._ring: list[tuple | None] = [None] * RING
         self._head = -1
         self._count = 0
         # Cumulative corrections (position, velocity, attitude) for the buffered states.
@@ -381,7 +382,7 @@ class ErrorStateEkf:
         n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
         w, x, y, z = w * n, x * n, y * n, z * n
         self._q = (w, x, y, z)
-        # Rotation of the new attitude (Solà eq. 115).
+        # Rotation matrix of the new attitude.
         xx, yy, zz = x * x, y * y, z * z
         xy, xz, yz = x * y, x * z, y * z
         wx, wy, wz = w * x, w * y, w * z
@@ -454,10 +455,10 @@ class ErrorStateEkf:
         self.P = P
 
         # Delayed-state buffer.
-        head = (self._head + 1) & 4095
+        head = (self._head + 1) & RING_MASK
         self._ring[head] = (t, self._p, self._v, self._q, self._cp, self._cv, self._cq)
         self._head = head
-        if self._count < 4096:
+        if self._count < RING:
             self._count += 1
 
     def _set_process_noise(self, dt: float) -> None:
@@ -721,16 +722,16 @@ class ErrorStateEkf:
         if k >= self._count:
             return None
         ring, head = self._ring, self._head
-        entry = ring[(head - k) & 4095]
+        entry = ring[(head - k) & RING_MASK]
         # The step is nearly uniform; walk at most a few entries to the nearest time.
         while entry[0] > t_m and k + 1 < self._count:
-            nxt = ring[(head - k - 1) & 4095]
+            nxt = ring[(head - k - 1) & RING_MASK]
             if abs(nxt[0] - t_m) >= abs(entry[0] - t_m):
                 break
             k += 1
             entry = nxt
         while entry[0] < t_m and k > 0:
-            nxt = ring[(head - k + 1) & 4095]
+            nxt = ring[(head - k + 1) & RING_MASK]
             if abs(nxt[0] - t_m) >= abs(entry[0] - t_m):
                 break
             k -= 1

@@ -43,6 +43,13 @@ def deg(rad: float) -> float:
     return math.degrees(rad)
 
 
+def test_exact_sensors_give_the_truth_back():
+    """Profile ideal (the paper's assumption): the filter itself adds no error worth the name."""
+    truth = helix_truth(40.0, 2.0)[: round((2.0 + 10.0) * 500)]
+    r = run_filter(truth, load_sensors("ideal"), load_estimator_params("ideal"), nees_every=25)
+    assert r.rms(r.pos_err, 2.0) < 1e-3 and r.rms(r.att_err, 2.0) < math.radians(0.01)
+
+
 def test_mocap_helix_within_millimetres(mocap_run):
     """Profile mocap: pose at 100 Hz, 1 mm and 0.002 rad noise, 10 ms latency; BMI088-class IMU."""
     r = mocap_run
