@@ -106,26 +106,9 @@ Quaternion = tuple[float, float, float, float]
 N = 19
 IP, IV, ITH, IBG, IBA, IBM, IBH = 0, 3, 6, 9, 12, 15, 18
 STATE_NAMES = (
-    "px",
-    "py",
-    "pz",
-    "vx",
-    "vy",
-    "vz",
-    "thx",
-    "thy",
-    "thz",
-    "bgx",
-    "bgy",
-    "bgz",
-    "bax",
-    "bay",
-    "baz",
-    "bmx",
-    "bmy",
-    "bmz",
-    "bh",
-)
+    "px", "py", "pz", "vx", "vy", "vz", "thx", "thy", "thz",
+    "bgx", "bgy", "bgz", "bax", "bay", "baz", "bmx", "bmy", "bmz", "bh",
+)  # fmt: skip
 
 DEFAULT_EARTH_FIELD_WORLD_GAUSS: Vector3 = frames.vector_from_ned((0.21, 0.016, 0.43))  # type: ignore[assignment]
 """The simulator's default field (about Zurich's), in the paper's world frame."""
@@ -417,34 +400,11 @@ class ErrorStateEkf:
         e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
         e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
         F.flat[self._f_idx] = (
-            dt,
-            dt,
-            dt,
-            mdz,
-            -mdy,
-            -mdz,
-            mdx,
-            mdy,
-            -mdx,
-            e00,
-            e01,
-            e02,
-            e10,
-            e11,
-            e12,
-            e20,
-            e21,
-            e22,
-            e00,
-            e01,
-            e02,
-            e10,
-            e11,
-            e12,
-            e20,
-            e21,
-            e22,
-        )
+            dt, dt, dt,
+            mdz, -mdy, -mdz, mdx, mdy, -mdx,
+            e00, e01, e02, e10, e11, e12, e20, e21, e22,
+            e00, e01, e02, e10, e11, e12, e20, e21, e22,
+        )  # fmt: skip
         P = F @ self.P @ F.T
         if abs(dt - self._q_dt) > 1e-9:  # time stamps jitter in the last bits: keep the cache
             self._set_process_noise(dt)
@@ -452,6 +412,8 @@ class ErrorStateEkf:
         if t < self._bad_accel_until_s:
             P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
             P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
+        if not self.imu_samples & 255:  # round-off makes F P F^T drift from symmetry: restore it
+            P = 0.5 * (P + P.T)
         self.P = P
 
         # Delayed-state buffer.
