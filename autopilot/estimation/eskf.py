@@ -50,7 +50,7 @@ attitude uncertainty)``, well below the noise of the delayed sensors (mm for a 0
 
 Hot path: the nominal state is plain floats (tuples), the 19x19 covariance a numpy array. Both
 choices are measured by ``benchmarks/estimator.py``: the position/velocity step costs ~8x more
-with small numpy arrays than in floats, while ``F P F^T`` costs ~6x more as block-sparse
+with small numpy arrays than in floats, while ``F P F^T`` costs ~10x more as block-sparse
 plain-float code than as two numpy products (the sparse blocks touch every row of P anyway).
 A prediction costs ~10 us, so the covariance is predicted at every IMU sample (PX4's 100 Hz
 down-sampling is not needed).

@@ -333,8 +333,8 @@ class SensorSuite:
             self._advance_gps_errors(t - self._t_gps)
         self._t_gps = t
         if self._fault_active("gps_outage", t):
-            last = self._last_fix
-            position = last.position_m if last is not None else truth.position_m
+            # No fix: the receiver repeats its last position (home before any), with no accuracy.
+            position = self._last_fix.position_m if self._last_fix is not None else _Z3
             return GpsReading(position, _Z3, 99.99, 99.99, 0, t, 99.99, GPS_FIX_NONE)
         e, u = self.gps_position_error, self.gps_velocity_error
         p, v = truth.position_m, truth.velocity_m_s

@@ -124,7 +124,7 @@ SEEDS = 20
 
 
 def test_filter_is_consistent_nees_over_20_seeds():
-    truth = helix_truth(40.0, 2.0)[: round((2.0 + 10.0) * 500)]  # 2 s on the stand, 10 s of helix
+    truth = helix_truth(40.0, 2.0)[: round((2.0 + 8.0) * 500)]  # 2 s on the stand, 8 s of helix
     base = load_sensors("gps")
     sensors = dataclasses.replace(
         base,
