@@ -212,6 +212,7 @@ class ScenarioConfig:
     inertia_scale: float
     gusts: str  # name or path of a gust profile; "" for none
     takeoff_altitude_m: float = field(default=2.5)
+    sensors: str = field(default="ideal")  # sensor profile (config/sensors/NAME.toml)
 
 
 def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
@@ -223,6 +224,7 @@ def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
     duration = root.number("duration_s", lo=0.0, lo_open=True, hi=3600.0, unit="s")
     gusts = root.string("gusts", "")
     takeoff_alt = root.number("takeoff_altitude_m", 2.5, lo=0.1, hi=100.0, unit="m")
+    sensors = root.string("sensors", "ideal")
 
     sec = root.section("trajectory")
     kind = sec.choice("kind", TRAJECTORY_KINDS)
@@ -272,6 +274,7 @@ def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
         inertia_scale,
         gusts,
         takeoff_alt,
+        sensors,
     )
 
 

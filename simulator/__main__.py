@@ -53,7 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=_duration, default=None, help="stop after S simulated seconds")
     parser.add_argument("--config-dir", default=None, help="configuration directory (default: ./config)")
     parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
-    parser.add_argument("--sensors", default="default", help="sensor models (config/sensors)")
+    parser.add_argument("--sensors", default=None,
+                        help="sensor profile: ideal, mocap, gps (config/sensors; default: the scenario's)")
     return parser
 
 

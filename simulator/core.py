@@ -75,13 +75,13 @@ class SimulatorSetup:
         scenario: str = "hover",
         vehicle: str | None = None,
         sitl_config: str | None = None,
-        sensors: str = "default",
+        sensors: str | None = None,
     ) -> SimulatorSetup:
         """By names (config/...), as the command line gives them; ConfigError names file and key."""
         scen = load_scenario(scenario)
         return cls(
-            load_sitl(sitl_config), scen, load_vehicle(vehicle or scen.vehicle), load_sensors(sensors),
-            load_gust_profile(scen.gusts), instance,
+            load_sitl(sitl_config), scen, load_vehicle(vehicle or scen.vehicle),
+            load_sensors(sensors or scen.sensors), load_gust_profile(scen.gusts), instance,
         )  # fmt: skip
 
 
@@ -96,7 +96,6 @@ class SimulatorCore:
         self.dt_control = 1.0 / rates.control_hz
         self.dt_physics = self.dt_control / self.substeps
         self.usec_per_frame = 1e6 / rates.control_hz
-        self.gps_every = max(1, round(rates.control_hz / rates.gps_hz))
         vehicle = setup.vehicle
         self.wrench = vehicle.actuation.mode == "wrench"
         self.plant_vehicle = apply_uncertainty(vehicle, setup.scenario)  # what is flown
@@ -106,7 +105,7 @@ class SimulatorCore:
         self.plant.reset(setup.scenario.initial_position_m, setup.scenario.initial_euler_rad)
         self.schedule = self._new_schedule(setup.gusts, 0.0)
         self._pending_schedule: DisturbanceSchedule | None = None
-        self.sensors = SensorSuite(setup.sensors, setup.sitl.home[2])
+        self.sensors = SensorSuite(setup.sensors, setup.sitl.home[2], imu_rate_hz=rates.control_hz)
         self.encoder = HilFrameEncoder(wire.system_id(setup.instance), setup.sitl.home)
         self.decoder = ActuatorDecoder()
         self._probe = new_parser()  # for is_autopilot: never touches the lockstep decoder
@@ -138,10 +137,9 @@ class SimulatorCore:
         if not math.isfinite(p[0] + p[1] + p[2]):
             raise PlantDiverged(f"the plant state is not finite at t={t:.3f} s")
         force, torque, wind = self.schedule.evaluate(t)
-        sensors = self.sensors
-        gps = sensors.sample_gps(truth) if k % self.gps_every == 0 else None
+        sensed = self.sensors.step(t, truth)
         self.truth_row = truth_row(t, truth, force, torque, wind)
-        return self.encoder.encode(time_usec, truth, sensors.sample(truth), wind, gps)
+        return self.encoder.encode(time_usec, truth, sensed.readings, wind, sensed.gps)
 
     def is_autopilot(self, datagram: bytes) -> bool:
         """True if ``datagram`` holds a valid MAVLink message from this vehicle's autopilot

@@ -253,7 +253,7 @@ class RunOptions:
     duration_s: float | None = None  # default: the scenario's
     rates: Rates | None = None  # default: config/sitl.toml
     gusts: GustProfile | None = None  # default: the scenario's profile
-    sensors: str = "default"  # config/sensors/NAME.toml
+    sensors: str | None = None  # config/sensors/NAME.toml; None: the scenario's profile
 
 
 def paper_stack(
@@ -270,7 +270,7 @@ def paper_stack(
     if options.nominal_plant:
         vehicle = as_nominal(vehicle)
     gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
-    sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors), gusts,
+    sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors or scenario.sensors), gusts,
                          nominal_plant=options.nominal_plant)  # fmt: skip
     ap = AutopilotSetup(sitl, vehicle, controller, autostart=trajectory_from_spec(scenario.trajectory),
                         default_remotes=False)  # fmt: skip
@@ -320,7 +320,8 @@ def fly_mission_experiment(
     sitl = load_sitl() if options.rates is None else replace(load_sitl(), rates=options.rates)
     vehicle = load_vehicle(scenario.vehicle)
     gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
-    sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors), GustProfile())
+    sensors = load_sensors(options.sensors or scenario.sensors)
+    sim = SimulatorSetup(sitl, scenario, vehicle, sensors, GustProfile())
     stack = Lockstep(sim, AutopilotSetup(sitl, vehicle, controller, default_remotes=False))
     link = upload_mission.MissionLink(StackConnection(stack), 0)
     link.wait_heartbeat(5.0)

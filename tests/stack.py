@@ -16,7 +16,7 @@ def make_stack(
     scenario: str = "hover",
     controller: str = "intbs_nlhinf",
     params_file: str | None = None,
-    sensors: str = "default",
+    sensors: str | None = None,
     vehicle: str | None = None,
     log=lambda text: None,
     **sitl_changes,

@@ -9,9 +9,11 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
 
 * ``HIL_SENSOR``: specific force (m/s^2, FRD; -g on z at rest), body rates (rad/s, FRD),
   magnetic field (gauss, FRD), ``abs_pressure`` (hPa, ISA), ``diff_pressure`` 0 (no airspeed
-  sensor), ``pressure_alt`` (m AMSL), ``temperature`` (deg C); ``fields_updated = 0x1FFF``
-  (bits 0-12: accel, gyro, mag, abs/diff pressure, pressure altitude, temperature all fresh in
-  every frame, as PX4's Gazebo bridge sends them), ``id`` 0.
+  sensor), ``pressure_alt`` (m AMSL), ``temperature`` (deg C); ``fields_updated`` bits 0-12
+  (accel, gyro, mag, abs/diff pressure, pressure altitude, temperature): all set (0x1FFF) when
+  every sensor sampled this frame, as PX4's Gazebo bridge sends them; the magnetometer bits (6-8)
+  and the barometer bits (9, 11, 12) are cleared in frames where that sensor holds its last
+  sample (its rate below the frame rate), ``id`` 0.
 * ``HIL_STATE_QUATERNION`` (ground truth): attitude quaternion NED/FRD, body rates FRD,
   lat/lon (1e-7 deg) and alt (mm AMSL) of O from the local NED position about the configured
   home (:func:`quadcommon.frames.ned_to_geodetic`), velocity (cm/s, NED), specific force (mG, FRD,
@@ -22,7 +24,8 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
   in ``child_frame_id``; a world-frame twist is exact without a rotation on either side); the
   angular rates are body FRD (the only frame in which MAVLink carries rates). Covariances unknown
   (first element NaN), ``estimator_type = MAV_ESTIMATOR_TYPE_MOCAP``, ``quality = 100``.
-* ``HIL_GPS`` (at the GPS rate only): fix 3D, lat/lon/alt as above but from the (noisy) GPS
+* ``HIL_GPS`` (when a fix is delivered): the reading's fix type (3D, or 1 "no fix" in an
+  outage), lat/lon/alt as above but from the (noisy) GPS
   reading, eph/epv in cm (PX4 reads them as cm), ground speed and NED velocity (cm/s), course
   over ground (cdeg, [0, 36000)), satellites, ``id`` 0, ``yaw`` 0 (no heading from GPS).
 
@@ -47,6 +50,8 @@ Vector3 = tuple[float, float, float]
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # 1 G for the mG fields of HIL_STATE_QUATERNION
 FIELDS_UPDATED_ALL = 0x1FFF  # HIL_SENSOR_UPDATED_{X,Y,Z}{ACC,GYRO,MAG}, ABS/DIFF_PRESSURE, PRESSURE_ALT, TEMP
+FIELDS_MAG = 0x1C0  # bits 6-8
+FIELDS_BARO = 0x1A00  # bits 9 (abs pressure), 11 (pressure altitude), 12 (temperature)
 GPS_FIX_3D = 3
 _UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
@@ -81,6 +86,7 @@ class HilFrameEncoder:
         # Where the per-frame fields sit in each flat list.
         self._s = _slots(self._sensor, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro",
                          "xmag", "ymag", "zmag", "abs_pressure", "pressure_alt", "temperature")  # fmt: skip
+        self._s_updated = _slots(self._sensor, "fields_updated")[0]
         self._h = _slots(self._state, "time_usec", "rollspeed", "pitchspeed", "yawspeed", "lat", "lon",
                          "alt", "vx", "vy", "vz", "ind_airspeed", "true_airspeed",
                          "xacc", "yacc", "zacc")  # fmt: skip
@@ -90,6 +96,7 @@ class HilFrameEncoder:
         self._o_q = self._odometry.slices["q"]
         self._g = _slots(self._gps, "time_usec", "lat", "lon", "alt", "eph", "epv", "vel", "vn", "ve", "vd",
                          "cog", "satellites_visible")  # fmt: skip
+        self._g_fix = _slots(self._gps, "fix_type")[0]
 
     def _frame(self, encoder: FastEncoder) -> bytes:
         data = encoder.frame(self.seq)
@@ -112,6 +119,12 @@ class HilFrameEncoder:
         vel_ned = to_ned(truth.velocity_m_s)
 
         v, i = self._sensor.values, self._s
+        updated = FIELDS_UPDATED_ALL
+        if not readings.mag_fresh:
+            updated &= ~FIELDS_MAG
+        if not readings.baro_fresh:
+            updated &= ~FIELDS_BARO
+        v[self._s_updated] = updated
         baro = readings.baro
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]], v[i[12]]) = (
@@ -158,6 +171,7 @@ class HilFrameEncoder:
         # Course over ground, 0 = north, clockwise (NED), in [0, 36000) cdeg.
         cog = round(math.degrees(math.atan2(v_ned[1], v_ned[0])) * 100.0) % 36000
         v, i = self._gps.values, self._g
+        v[self._g_fix] = reading.fix_type
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]]) = (
             time_usec, sat_i32(lat * 1e7), sat_i32(lon * 1e7), sat_i32(alt * 1000.0),

@@ -62,6 +62,31 @@ def test_gps_fix_fields():
     assert (g.fix_type, g.eph, g.epv, g.satellites_visible, g.yaw) == (3, 100, 100, 10, 0)
 
 
+def test_fields_updated_and_fix_type_follow_the_sensor_rates_and_outages():
+    """Between magnetometer/barometer samples their bits are cleared; in an outage HIL_GPS says no fix."""
+    config = replace(
+        EXACT,
+        magnetometer=replace(EXACT.magnetometer, rate_hz=100.0),
+        barometer=replace(EXACT.barometer, rate_hz=50.0),
+    )
+    suite = SensorSuite(config, HOME[2], imu_rate_hz=500.0)
+    suite.gps_outage(0.1, 1.0)
+    encoder = HilFrameEncoder(1, HOME)
+    truth = make_truth()
+    updated, fixes = [], []
+    for k in range(60):
+        frame = suite.step(k / 500.0, truth)
+        msgs = decode(encoder.encode(k * 2000, truth, frame.readings, gps=frame.gps))
+        updated.append(msgs["HIL_SENSOR"].fields_updated)
+        if "HIL_GPS" in msgs:
+            fixes.append(msgs["HIL_GPS"].fix_type)
+    assert updated[0] == 0x1FFF  # every sensor sampled at t = 0
+    assert updated[1] == 0x1FFF & ~0x1C0 & ~0x1A00  # IMU and differential pressure only
+    assert updated[5] == 0x1FFF & ~0x1A00  # magnetometer (100 Hz) fresh, barometer (50 Hz) held
+    assert updated[10] == 0x1FFF
+    assert fixes == [3, 1]  # t = 0 valid; t = 0.1 in the outage
+
+
 def test_wild_state_is_clamped_not_crashing():
     truth = replace(
         make_truth(),
