@@ -301,6 +301,18 @@ def launch_conflicts(specs: Sequence[VehicleSpec]) -> list[str]:
     return problems
 
 
+def _running_sharers(plan: _PortPlan, n: int, together: set[int]):
+    """(our role, other instance, its role, the port showing it runs) for every other instance
+    outside ``together`` that shares a port with ``n`` and is running now."""
+    for mine in plan.roles(n):
+        for m, theirs in plan.sharing(mine, n):
+            if m in together:
+                continue
+            running = next((r for r in plan.unique_own(m) if port_in_use(r.proto, r.port)), None)
+            if running is not None:
+                yield mine, m, theirs, running
+
+
 def check_ports(spec: VehicleSpec, launch: Sequence[VehicleSpec] = ()) -> wire.Ports:
     """Every port of ``spec``'s instance against what is running now (sockets bound and let go):
     its own ports must be free, and no other instance it shares a port with may be running (one
@@ -318,27 +330,36 @@ def check_ports(spec: VehicleSpec, launch: Sequence[VehicleSpec] = ()) -> wire.P
                 guess = f"is instance {m} running?" if theirs.own else f"a ground station of instance {m}?"
                 text += f"; it is also instance {m}'s {theirs.role} ({guess})"
             raise LaunchError(text)
-    for mine in roles:  # ports shared with another instance that is running now
-        for m, theirs in plan.sharing(mine, n):
-            if m in together:
-                continue
-            running = next((r for r in plan.unique_own(m) if port_in_use(r.proto, r.port)), None)
-            if running is None:
-                continue  # not running: e.g. a ground station listening on our client port
-            if theirs.own:  # our client port: our stream to it would reach instance m's process
-                effect = (
-                    f"instance {n}'s traffic for its {mine.role} would reach instance {m}'s {theirs.role}"
-                )
-            else:  # instance m's client port: its stream would reach our process
-                effect = (
-                    f"instance {m}'s traffic for its {theirs.role} would reach instance {n}'s {mine.role}"
-                )
-            raise LaunchError(
-                f"{_both(mine, n, theirs, m)}, and instance {m} looks running ({running.proto} "
-                f"{running.port}, its {running.role}, is in use): {effect}; stop instance {m} or choose "
-                f"another --instance ({plan.hint()})"
-            )
+    for mine, m, theirs, running in _running_sharers(plan, n, together):
+        if not mine.own and not theirs.own:
+            continue  # two client ports: a ground station there hears both (port_notes says so)
+        if theirs.own:  # our client port: our stream to it would reach instance m's process
+            effect = f"instance {n}'s traffic for its {mine.role} would reach instance {m}'s {theirs.role}"
+        else:  # instance m's client port: its stream would reach our process
+            effect = f"instance {m}'s traffic for its {theirs.role} would reach instance {n}'s {mine.role}"
+        raise LaunchError(
+            f"{_both(mine, n, theirs, m)}, and instance {m} looks running ({running.proto} "
+            f"{running.port}, its {running.role}, is in use): {effect}; stop instance {m} or choose "
+            f"another --instance ({plan.hint()})"
+        )
     return plan.ports(n)
+
+
+def port_notes(specs: Sequence[VehicleSpec]) -> list[str]:
+    """Client ports shared with another instance that is running (not one of ``specs``): allowed
+    (a ground station tells the vehicles apart by system id, as with PX4's one GCS port for every
+    instance), but a ground station there hears both vehicles, and two cannot listen on it."""
+    if not specs:
+        return []
+    plan, together = _PortPlan(specs[0]), {s.instance for s in specs}
+    return [
+        f"note: {_both(mine, spec.instance, theirs, m)} and instance {m} is running: a ground "
+        f"station on {mine.proto} {mine.port} hears both vehicles (sysid {wire.system_id(spec.instance)} "
+        f"and {wire.system_id(m)})"
+        for spec in specs
+        for mine, m, theirs, _ in _running_sharers(plan, spec.instance, together)
+        if not mine.own and not theirs.own
+    ]
 
 
 def check_launch(specs: Sequence[VehicleSpec], running: Sequence[VehicleSpec] = ()) -> dict[int, wire.Ports]:

@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import signal
 import sys
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -100,8 +101,20 @@ def _restarts(n: int) -> str:
     return f"{n} restart" + ("" if n == 1 else "s")
 
 
+_OUTPUT = threading.Lock()
+
+
+def write_line(text: str, error: bool = False) -> None:
+    """One whole line on stdout (stderr if ``error``), never interleaved with another thread's: the
+    children's output is echoed by reader threads while the supervisor reports."""
+    stream = sys.stderr if error else sys.stdout
+    with _OUTPUT:
+        stream.write(text + "\n")
+        stream.flush()
+
+
 def _say(text: str, error: bool = False) -> None:
-    print(f"quadsitl: {text}", file=sys.stderr if error else sys.stdout, flush=True)
+    write_line(f"quadsitl: {text}", error)
 
 
 @dataclass

@@ -19,14 +19,13 @@ could not start.
 from __future__ import annotations
 
 import signal
-import sys
 import threading
 from collections.abc import Sequence
 
 from quadcommon import wire
 
-from .launcher import Launcher, LaunchError, VehicleSpec
-from .supervise import RestartPolicy, Supervisor
+from .launcher import Launcher, LaunchError, VehicleSpec, port_notes
+from .supervise import RestartPolicy, Supervisor, write_line
 
 __all__ = ["LaunchError", "RestartPolicy", "VehicleSpec", "endpoints_banner", "run_up"]
 POLL_S = 0.1  # the foreground loop's period (wall): reaction time to a lost process and to Ctrl-C
@@ -50,7 +49,7 @@ def endpoints_banner(spec: VehicleSpec, ports: wire.Ports) -> str:
 
 
 def _echo(name: str, line: str) -> None:
-    print(f"[{name}] {line}", flush=True)
+    write_line(f"[{name}] {line}")
 
 
 def run_up(specs: Sequence[VehicleSpec], policy: RestartPolicy | None = None) -> int:
@@ -63,12 +62,12 @@ def run_up(specs: Sequence[VehicleSpec], policy: RestartPolicy | None = None) ->
     try:
         launcher.start_vehicles(specs)
     except LaunchError as exc:
-        print(f"quadsitl: {exc}", file=sys.stderr)
+        write_line(f"quadsitl: {exc}", error=True)
         return 2
-    for spec in specs:
-        print(endpoints_banner(spec, launcher.ports[spec.instance]), flush=True)
-    print(policy.describe(), flush=True)
-    print("  Ctrl-C stops every process.", flush=True)
+    for note in port_notes(specs):
+        write_line(f"quadsitl: {note}", error=True)
+    banner = [endpoints_banner(spec, launcher.ports[spec.instance]) for spec in specs]
+    write_line("\n".join([*banner, policy.describe(), "  Ctrl-C stops every process."]))
     supervisor = Supervisor(launcher, specs, policy)
     try:
         while not stop.wait(POLL_S):
@@ -76,7 +75,7 @@ def run_up(specs: Sequence[VehicleSpec], policy: RestartPolicy | None = None) ->
             if not supervisor.active:  # every run over (--duration), or nothing left to restart
                 break
     finally:
-        print("quadsitl: stopping ...", flush=True)
+        write_line("quadsitl: stopping ...")
         launcher.stop()
-        print("quadsitl: stopped", flush=True)
+        write_line("quadsitl: stopped")
     return 0 if supervisor.whole else 1

@@ -71,7 +71,11 @@ def gcs_for(instance: int) -> UdpGcs:
 
 
 def fresh(gcs: UdpGcs, kinds: tuple[str, ...], wall_s: float) -> None:
-    """Forget what was received and wait until each of ``kinds`` arrives again."""
+    """Forget what was received (and what is still queued: it may come from a process killed since)
+    and wait until each of ``kinds`` arrives again."""
+    for _ in range(100_000):  # bounded drain of the socket
+        if gcs.conn.recv_match(blocking=False) is None:
+            break
     for kind in kinds:
         gcs.last.pop(kind, None)
     gcs.wait(lambda g: all(k in g.last for k in kinds), 1e9, wall_s, f"fresh {kinds}")
