@@ -181,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=3,
         metavar="N",
-        help="restarts of one process per 60 s before it is left down (default 3)",
+        help="restarts of one process per 60 s before it is left down (default 3; 0 = --no-restart)",
     )
     p.set_defaults(func=_cmd_up)
 

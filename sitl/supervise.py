@@ -239,7 +239,8 @@ class VehicleSupervisor:
                          "keeps answering ground stations")  # fmt: skip
         if not self.policy.enabled:
             slot.state = GAVE_UP
-            self.say(f"not restarting {slot.name} (--no-restart); Ctrl-C stops", error=True)
+            survivor = "the survivor keeps running; " if other.state in (UP, LINKING) else ""
+            self.say(f"not restarting {slot.name} (--no-restart); {survivor}Ctrl-C stops", error=True)
         elif not self.policy.allows(slot.restarts, now):
             slot.state = GAVE_UP
             p = self.policy

@@ -195,7 +195,9 @@ def test_no_restart_leaves_the_lost_process_down():
     )
     rig.at(30.0)
     assert rig.spawned == [] and rig.sup.sim.state == GAVE_UP and rig.ap.alive
-    assert "not restarting simulator[80] (--no-restart); Ctrl-C stops" in rig.text()
+    assert (
+        "not restarting simulator[80] (--no-restart); the survivor keeps running; Ctrl-C stops" in rig.text()
+    )
     rig.ap.returncode = -signal.SIGKILL  # then the survivor dies too: nothing left
     rig.at(31.0)
     assert not rig.sup.active and rig.said[-1] == "vehicle 80 has no process left running"

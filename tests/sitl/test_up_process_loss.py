@@ -24,7 +24,7 @@ from pymavlink.dialects.v20 import common as m  # noqa: E402
 from quadcommon import wire  # noqa: E402
 from sitl.launcher import Child  # noqa: E402
 
-from .harness import UdpGcs  # noqa: E402
+from .harness import UdpGcs, ZenohTap  # noqa: E402
 from .test_up_cli import alive, children_of  # noqa: E402
 
 ARMED = m.MAV_MODE_FLAG_SAFETY_ARMED
@@ -140,6 +140,15 @@ def test_simulator_killed_the_autopilot_reports_it_lost_then_it_restarts_and_rel
         assert out.index("simulator lost: no sensor frame") < out.index(f"restarting simulator[{n}]")
         assert child_pid(up, "simulator") != old
         fresh(gcs, ("LOCAL_POSITION_NED",), 10.0)  # frames flow again: telemetry from the new run
+        # zenoh too: the autopilot's session found the new simulator's hub (controller rows flow).
+        tap = ZenohTap(n, "controller")
+        try:
+            deadline = time.monotonic() + 10.0
+            while len(tap.rows()) < 50:
+                assert time.monotonic() < deadline, "no controller rows on zenoh after the restart"
+                time.sleep(0.05)
+        finally:
+            tap.close()
     finally:
         gcs.close()
         code, _ = ctrl_c(up)
