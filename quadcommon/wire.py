@@ -12,6 +12,15 @@ API (MAVSDK, scripts)  14540 + N       script listens; autopilot sends from 1458
 zenoh                  7447 + N        simulator's session listens on tcp/127.0.0.1
 =====================  ==============  ==========================================================
 
+:func:`port_roles` lists them by role: *own* ports are bound by our two processes (HIL, the two
+autopilot links, zenoh), *client* ports are where ground stations listen (14550 + N, 14540 + N);
+a ground station binding its client port is normal. ``N`` is in [0, 99]. Because every port is a
+base + N, some of them meet across instances (:func:`overlapping_offsets`): with the default bases
+instance N's API client port 14540 + N is instance N - 10's GCS client port, instance N - 30's
+autopilot API link (14580 + N - 30) is instance N's GCS client port, and instance N - 40's is its
+API client port. Instances 10, 30 or 40 apart cannot run at the same time; the launcher refuses
+them (:func:`sitl.launcher.check_launch`).
+
 HIL lockstep frame: the simulator sends ONE UDP datagram per control period holding
 ``HIL_SENSOR``, ``HIL_STATE_QUATERNION``, ``ODOMETRY`` and, at the GPS rate, ``HIL_GPS``, all
 stamped with the same ``time_usec`` (simulation time since the simulator started, µs). The
@@ -41,6 +50,7 @@ from __future__ import annotations
 import select
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -52,6 +62,7 @@ GCS_LOCAL_BASE = 18570
 API_REMOTE_BASE = 14540
 API_LOCAL_BASE = 14580
 ZENOH_PORT_BASE = 7447
+INSTANCE_MIN, INSTANCE_MAX = 0, 99  # --instance N
 
 # MAVLink ids.
 AUTOPILOT_COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
@@ -170,8 +181,8 @@ def ports(
     zenoh_base: int = ZENOH_PORT_BASE,
 ) -> Ports:
     """Every port of vehicle ``instance`` (each base + N)."""
-    if not 0 <= instance <= 99:
-        raise ValueError(f"--instance must be in [0, 99], got {instance}")
+    if not INSTANCE_MIN <= instance <= INSTANCE_MAX:
+        raise ValueError(f"--instance must be in [{INSTANCE_MIN}, {INSTANCE_MAX}], got {instance}")
     n = instance
     return Ports(
         hil=hil_base + n,
@@ -181,6 +192,49 @@ def ports(
         api_local=API_LOCAL_BASE + (api_base - API_REMOTE_BASE) + n,
         zenoh=zenoh_base + n,
     )
+
+
+class PortRole(NamedTuple):
+    """One port of one instance: ``proto`` "UDP" or "TCP", who uses it (``role``), and whether our
+    processes bind it (``own``) or a ground station listens there (a client port)."""
+
+    proto: str
+    port: int
+    role: str
+    own: bool
+    field: str  # the Ports field it comes from
+
+
+_ROLES = {  # Ports field -> (protocol, role, own)
+    "hil": ("UDP", "simulator HIL link", True),
+    "gcs_local": ("UDP", "autopilot GCS link", True),
+    "api_local": ("UDP", "autopilot API link", True),
+    "zenoh": ("TCP", "simulator zenoh endpoint", True),
+    "gcs_remote": ("UDP", "GCS client port", False),
+    "api_remote": ("UDP", "API client port", False),
+}
+
+
+def port_roles(p: Ports, zenoh_listener: bool = True) -> tuple[PortRole, ...]:
+    """Every port of one instance by role: own ones first (bound by the simulator and the
+    autopilot), then the client ones (where QGC / MAVProxy and MAVSDK / API scripts listen).
+    ``zenoh_listener=False`` (a zenoh router is configured): the simulator binds no zenoh port."""
+    roles = [PortRole(proto, getattr(p, name), role, own, name)
+             for name, (proto, role, own) in _ROLES.items()]  # fmt: skip
+    if not zenoh_listener:
+        roles = [r for r in roles if r.field != "zenoh"]
+    return tuple(r for r in roles if r.own) + tuple(r for r in roles if not r.own)
+
+
+def overlapping_offsets(p: Ports) -> tuple[int, ...]:
+    """The instance differences d > 0 for which instances N and N + d share a port (any role,
+    same protocol); ``p`` gives the bases (any instance: every port is base + N)."""
+    by_proto: dict[str, list[int]] = {}
+    for r in port_roles(p):
+        by_proto.setdefault(r.proto, []).append(r.port)
+    span = INSTANCE_MAX - INSTANCE_MIN
+    found = {abs(a - b) for ports_ in by_proto.values() for a in ports_ for b in ports_}
+    return tuple(sorted(d for d in found if 0 < d <= span))
 
 
 def zenoh_key(instance: int, leaf: str) -> str:

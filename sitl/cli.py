@@ -94,10 +94,22 @@ def _params_file(args: argparse.Namespace, instance: int, controller) -> str | N
 
 def _cmd_up(args: argparse.Namespace) -> int:
     from autopilot.control.config import load_controller
+    from quadcommon import wire
     from quadcommon.config import load_scenario, load_vehicle
 
-    from .up import VehicleSpec, run_up
+    from .up import RestartPolicy, VehicleSpec, run_up
 
+    last = args.instance + args.count - 1
+    if args.count < 1 or not wire.INSTANCE_MIN <= args.instance <= last <= wire.INSTANCE_MAX:
+        lo, hi = wire.INSTANCE_MIN, wire.INSTANCE_MAX
+        print(f"quadsitl up: --instance {args.instance} --count {args.count}: instances must be in "
+              f"[{lo}, {hi}] (got {args.instance}..{last})", file=sys.stderr)  # fmt: skip
+        return 2
+    if args.max_restarts < 0:
+        print(f"quadsitl up: --max-restarts {args.max_restarts}: must be >= 0", file=sys.stderr)
+        return 2
+    restart = not args.no_restart and args.max_restarts > 0
+    policy = RestartPolicy(enabled=restart, max_restarts=args.max_restarts)
     # Validate names here so a typo fails before any process starts.
     controller = load_controller(args.controller)
     load_scenario(args.scenario)
@@ -116,7 +128,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
         )
         for k in range(args.count)
     ]  # fmt: skip
-    return run_up(specs)
+    return run_up(specs, policy)
 
 
 def _cmd_analyze(args: argparse.Namespace) -> int:
@@ -132,8 +144,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("up", help="start the SITL: simulator + autopilot, linked over MAVLink/UDP")
-    p.add_argument("--instance", type=int, default=0, help="first vehicle instance N (ports +N)")
-    p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1)")
+    p.add_argument(
+        "--instance",
+        type=int,
+        default=0,
+        help="first vehicle instance N, 0-99 (every port +N, sysid 1+N); instances 10, 30 or 40 apart "
+        "share ports (N's API client port 14540+N is N-10's GCS client port ...) and are refused together",
+    )
+    p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1; at most 10)")
     p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
     p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")
     p.add_argument("--vehicle", default="paper_quad")
@@ -164,6 +182,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="MAVLink 2 signing on the GCS links: a file with the key (64 hex digits) or a passphrase "
         "(as MAVProxy's 'signing setup PASSPHRASE'); state kept as signing-N.json beside --params, "
         "else beside FILE",
+    )
+    p.add_argument(
+        "--no-restart",
+        action="store_true",
+        help="a process that dies stays down (default: the survivor's failsafe acts, then the lost "
+        "process is restarted)",
+    )
+    p.add_argument(
+        "--max-restarts",
+        type=int,
+        default=3,
+        metavar="N",
+        help="restarts of one process per 60 s before it is left down (default 3; 0 = --no-restart)",
     )
     p.set_defaults(func=_cmd_up)
 

@@ -9,7 +9,16 @@ and a terminal's Ctrl-C reaches only the launcher, which stops them in order.
 
 A :class:`Launcher` owns its children (a context manager: leaving it stops them all) and knows
 how to start vehicles (:class:`VehicleSpec`: simulator + autopilot per instance, ports checked
-first, linked when the simulator says so).
+first, linked when the simulator says so) and how to start one again (:meth:`Launcher.respawn`,
+used by ``quadsitl up``'s supervisor, :mod:`sitl.supervise`).
+
+Ports (:func:`check_launch`, before anything starts): every port of an instance by role
+(:func:`quadcommon.wire.port_roles`: *own* ports bound by our processes, *client* ports where
+ground stations listen). Refused, naming both instances, the port and the roles: an own port in
+use; two instances of one launch sharing any port (own or client); a client port that is another
+instance's own port while that port is in use (that instance is running: our stream would reach
+its autopilot); an own port that is the client port of another instance that is running (its
+stream would reach ours). A ground station listening on a client port is normal, never an error.
 """
 
 from __future__ import annotations
@@ -64,7 +73,9 @@ class Child:
         self.cmd = list(cmd)
         self.echo = echo
         self.lines: deque[str] = deque(maxlen=MAX_LINES)
+        self.line_count = 0  # lines read so far (``lines`` keeps the last MAX_LINES of them)
         self._cond = threading.Condition()
+        self.started = time.monotonic()
         self.process = subprocess.Popen(
             self.cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             bufsize=1, preexec_fn=_die_with_parent,
@@ -76,11 +87,12 @@ class Child:
         assert self.process.stdout is not None
         for line in self.process.stdout:
             line = line.rstrip("\n")
+            if self.echo is not None:  # first: whatever a waiter prints because of it comes after
+                self.echo(self.name, line)
             with self._cond:
                 self.lines.append(line)
+                self.line_count += 1
                 self._cond.notify_all()
-            if self.echo is not None:
-                self.echo(self.name, line)
         with self._cond:
             self._cond.notify_all()
 
@@ -92,6 +104,17 @@ class Child:
     def tail(self, n: int = 40) -> str:
         with self._cond:
             return "\n".join(list(self.lines)[-n:])
+
+    def lines_since(self, count: int) -> tuple[list[str], int]:
+        """The lines read after the first ``count`` (those still kept) and the new count: a caller
+        scanning the output as it comes keeps the count and passes it back."""
+        with self._cond:
+            new = min(self.line_count - count, len(self.lines))
+            return (list(self.lines)[len(self.lines) - new :] if new > 0 else []), self.line_count
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
 
     @property
     def alive(self) -> bool:
@@ -189,36 +212,174 @@ class VehicleSpec:
                           cfg.zenoh_port_base)  # fmt: skip
 
 
-def check_port(port: int, kind: int, what: str, instance: int) -> None:
-    """Bind ``port`` on loopback and let go: in use -> LaunchError naming it and ``--instance``."""
+def port_in_use(proto: str, port: int) -> bool:
+    """Whether binding ``port`` on loopback fails with EADDRINUSE (``proto`` "UDP" or "TCP").
+
+    TCP binds with SO_REUSEADDR, as zenoh's own listener does: connections of a vehicle just
+    stopped linger in TIME_WAIT for a minute and must not count; a live listener still does."""
+    kind = socket.SOCK_STREAM if proto == "TCP" else socket.SOCK_DGRAM
     sock = socket.socket(socket.AF_INET, kind)
     if kind == socket.SOCK_STREAM:
-        # As zenoh's own listener does: connections of a vehicle just stopped linger in TIME_WAIT
-        # for a minute and must not block starting it again; a live listener still makes bind fail.
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((wire.LOOPBACK, port))
     except OSError as exc:
         if exc.errno == errno.EADDRINUSE:
-            proto = "TCP" if kind == socket.SOCK_STREAM else "UDP"
-            raise LaunchError(
-                f"{proto} port {port} ({what}) is already in use: another SITL with --instance "
-                f"{instance} may be running; stop it or choose another --instance"
-            ) from None
+            return True
         raise
     finally:
         sock.close()
+    return False
 
 
-def check_ports(spec: VehicleSpec) -> wire.Ports:
-    ports = spec.ports()
-    udp, n = socket.SOCK_DGRAM, spec.instance
-    check_port(ports.hil, udp, "simulator HIL link", n)
-    check_port(ports.gcs_local, udp, "autopilot GCS link", n)
-    check_port(ports.api_local, udp, "autopilot API link", n)
-    if not load_sitl(spec.sitl_config).zenoh_router:
-        check_port(ports.zenoh, socket.SOCK_STREAM, "simulator zenoh endpoint", n)
-    return ports
+def check_port(port: int, kind: int, what: str, instance: int) -> None:
+    """Bind ``port`` on loopback and let go: in use -> LaunchError naming it and ``--instance``."""
+    proto = "TCP" if kind == socket.SOCK_STREAM else "UDP"
+    if port_in_use(proto, port):
+        raise LaunchError(_in_use_text(proto, port, what, instance))
+
+
+def _in_use_text(proto: str, port: int, what: str, instance: int) -> str:
+    return (f"{proto} port {port} ({what}) is already in use: another SITL with --instance "
+            f"{instance} may be running; stop it or choose another --instance")  # fmt: skip
+
+
+class _PortPlan:
+    """The ports by role of every instance in [0, 99] under one sitl.toml (its bases)."""
+
+    def __init__(self, spec: VehicleSpec) -> None:
+        cfg = load_sitl(spec.sitl_config)
+        self.bases = (cfg.hil_port_base, cfg.gcs_port_base, cfg.api_port_base, cfg.zenoh_port_base)
+        self.zenoh_listener = not cfg.zenoh_router
+        self._roles: dict[int, tuple[wire.PortRole, ...]] = {}
+
+    def ports(self, n: int) -> wire.Ports:
+        return wire.ports(n, *self.bases)
+
+    def roles(self, n: int) -> tuple[wire.PortRole, ...]:
+        if n not in self._roles:
+            self._roles[n] = wire.port_roles(self.ports(n), self.zenoh_listener)
+        return self._roles[n]
+
+    def sharing(self, role: wire.PortRole, n: int) -> list[tuple[int, wire.PortRole]]:
+        """Every (other instance, its role) using the same protocol and port as ``role`` of ``n``."""
+        return [(m, r) for m in range(wire.INSTANCE_MIN, wire.INSTANCE_MAX + 1) if m != n
+                for r in self.roles(m) if (r.proto, r.port) == (role.proto, role.port)]  # fmt: skip
+
+    def unique_own(self, m: int) -> list[wire.PortRole]:
+        """``m``'s own ports that no other instance uses in any role: one of them in use means
+        instance ``m`` is running."""
+        return [r for r in self.roles(m) if r.own and not self.sharing(r, m)]
+
+    def hint(self) -> str:
+        apart = wire.overlapping_offsets(self.ports(0))
+        if not apart:
+            return f"--instance is {wire.INSTANCE_MIN}-{wire.INSTANCE_MAX}"
+        names = ", ".join(str(d) for d in apart[:-1]) + (" or " if len(apart) > 1 else "") + str(apart[-1])
+        return (
+            f"--instance is {wire.INSTANCE_MIN}-{wire.INSTANCE_MAX}; instances {names} apart share "
+            f"ports and cannot run at the same time: at most {apart[0]} vehicles per launch"
+        )
+
+
+def _both(port: wire.PortRole, n: int, other: wire.PortRole, m: int) -> str:
+    return f"{port.proto} {port.port}: instance {n}'s {port.role} is instance {m}'s {other.role}"
+
+
+def launch_conflicts(specs: Sequence[VehicleSpec]) -> list[str]:
+    """Ports shared by two instances of one launch (pure: no socket), one sentence each naming
+    the port, both instances and their roles; empty when they can run together."""
+    if not specs:
+        return []
+    plan = _PortPlan(specs[0])
+    instances = [spec.instance for spec in specs]
+    problems = [f"instance {n} is given twice" for n in sorted(set(instances)) if instances.count(n) > 1]
+    distinct = sorted(set(instances))
+    for i, low in enumerate(distinct):
+        for high in distinct[i + 1 :]:
+            for mine in plan.roles(high):
+                for theirs in plan.roles(low):
+                    if (mine.proto, mine.port) == (theirs.proto, theirs.port):
+                        problems.append(_both(mine, high, theirs, low))
+    return problems
+
+
+def _running_sharers(plan: _PortPlan, n: int, together: set[int]):
+    """(our role, other instance, its role, the port showing it runs) for every other instance
+    outside ``together`` that shares a port with ``n`` and is running now."""
+    for mine in plan.roles(n):
+        for m, theirs in plan.sharing(mine, n):
+            if m in together:
+                continue
+            running = next((r for r in plan.unique_own(m) if port_in_use(r.proto, r.port)), None)
+            if running is not None:
+                yield mine, m, theirs, running
+
+
+def check_ports(spec: VehicleSpec, launch: Sequence[VehicleSpec] = ()) -> wire.Ports:
+    """Every port of ``spec``'s instance against what is running now (sockets bound and let go):
+    its own ports must be free, and no other instance it shares a port with may be running (one
+    of that instance's ports no one else uses is in use). ``launch``: the instances started with
+    it (:func:`launch_conflicts` checks those). LaunchError naming the port, the roles and the
+    other instance. A client port in use with no such instance running is a ground station
+    listening there: normal."""
+    plan = _PortPlan(spec)
+    n, together = spec.instance, {s.instance for s in launch} | {spec.instance}
+    roles = plan.roles(n)
+    for mine in roles:  # own ports in use
+        if mine.own and port_in_use(mine.proto, mine.port):
+            text = _in_use_text(mine.proto, mine.port, mine.role, n)
+            for m, theirs in plan.sharing(mine, n):
+                guess = f"is instance {m} running?" if theirs.own else f"a ground station of instance {m}?"
+                text += f"; it is also instance {m}'s {theirs.role} ({guess})"
+            raise LaunchError(text)
+    for mine, m, theirs, running in _running_sharers(plan, n, together):
+        if not mine.own and not theirs.own:
+            continue  # two client ports: a ground station there hears both (port_notes says so)
+        if theirs.own:  # our client port: our stream to it would reach instance m's process
+            effect = f"instance {n}'s traffic for its {mine.role} would reach instance {m}'s {theirs.role}"
+        else:  # instance m's client port: its stream would reach our process
+            effect = f"instance {m}'s traffic for its {theirs.role} would reach instance {n}'s {mine.role}"
+        raise LaunchError(
+            f"{_both(mine, n, theirs, m)}, and instance {m} looks running ({running.proto} "
+            f"{running.port}, its {running.role}, is in use): {effect}; stop instance {m} or choose "
+            f"another --instance ({plan.hint()})"
+        )
+    return plan.ports(n)
+
+
+def port_notes(specs: Sequence[VehicleSpec]) -> list[str]:
+    """Client ports shared with another instance that is running (not one of ``specs``): allowed
+    (a ground station tells the vehicles apart by system id, as with PX4's one GCS port for every
+    instance), but a ground station there hears both vehicles, and two cannot listen on it."""
+    if not specs:
+        return []
+    plan, together = _PortPlan(specs[0]), {s.instance for s in specs}
+    return [
+        f"note: {_both(mine, spec.instance, theirs, m)} and instance {m} is running: a ground "
+        f"station on {mine.proto} {mine.port} hears both vehicles (sysid {wire.system_id(spec.instance)} "
+        f"and {wire.system_id(m)})"
+        for spec in specs
+        for mine, m, theirs, _ in _running_sharers(plan, spec.instance, together)
+        if not mine.own and not theirs.own
+    ]
+
+
+def check_launch(specs: Sequence[VehicleSpec], running: Sequence[VehicleSpec] = ()) -> dict[int, wire.Ports]:
+    """Every port of every instance of one launch, before anything starts: :func:`launch_conflicts`
+    over ``specs`` and the vehicles ``running`` from this launcher, then :func:`check_ports` for
+    each of ``specs``. The ports per instance; LaunchError (all the conflicts) otherwise."""
+    problems = launch_conflicts([*running, *specs])
+    if problems:
+        names = ", ".join(str(s.instance) for s in [*running, *specs])
+        shown = problems[:6] + ([f"... and {len(problems) - 6} more"] if len(problems) > 6 else [])
+        raise LaunchError(
+            f"instances {names} cannot run together: their ports overlap:\n  "
+            + "\n  ".join(shown)
+            + f"\n({_PortPlan(specs[0]).hint()})"
+        )
+    everyone = [*running, *specs]
+    return {spec.instance: check_ports(spec, everyone) for spec in specs}
 
 
 class Launcher:
@@ -228,6 +389,7 @@ class Launcher:
         self.echo = echo
         self.children: list[Child] = []
         self.ports: dict[int, wire.Ports] = {}
+        self.specs: dict[int, VehicleSpec] = {}
 
     def __enter__(self) -> Launcher:
         return self
@@ -242,8 +404,8 @@ class Launcher:
 
     def start_vehicles(self, specs: Sequence[VehicleSpec], link_timeout_s: float = 30.0) -> None:
         """Check every port, start simulator + autopilot per vehicle, wait until all are linked."""
-        for spec in specs:
-            self.ports[spec.instance] = check_ports(spec)
+        self.ports.update(check_launch(specs, list(self.specs.values())))
+        self.specs.update({spec.instance: spec for spec in specs})
         try:
             simulators = []
             for spec in specs:
@@ -271,6 +433,15 @@ class Launcher:
                                   f"{dead[0].tail(15)}")  # fmt: skip
             if time.monotonic() > deadline:
                 raise LaunchError(f"{simulator.name} did not link in time:\n{simulator.tail(15)}")
+
+    def respawn(self, old: Child, cmd: Sequence[str] | None = None) -> Child:
+        """Start ``old``'s command (or ``cmd``) again under the same name, in ``old``'s place (it
+        must have exited). Call from the thread that started the others: PR_SET_PDEATHSIG is
+        tied to the thread that forks."""
+        assert not old.alive, f"{old.name} is still running"
+        child = Child(old.name, old.cmd if cmd is None else cmd, echo=self.echo)
+        self.children[self.children.index(old)] = child
+        return child
 
     def child(self, name: str) -> Child:
         return next(c for c in self.children if c.name == name)

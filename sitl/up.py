@@ -1,24 +1,34 @@
 """``quadsitl up``: simulator + autopilot per vehicle as two OS processes, linked, in the foreground.
 
-Every port is checked first (a port in use is an error naming the port and ``--instance``); the
-processes start through the one launcher (:mod:`sitl.launcher`), which waits until each simulator
-reports its autopilot linked; the endpoints a ground station connects to are printed; Ctrl-C or
-SIGTERM stops everything (SIGTERM, then SIGKILL after a grace period). Children die with the
-launcher in any case (PR_SET_PDEATHSIG).
+Every port of every instance is checked first (:func:`sitl.launcher.check_launch`: a port in use,
+or two instances whose ports overlap, is an error naming the port, the roles and both instances;
+exit 2, nothing started); the processes start through the one launcher (:mod:`sitl.launcher`),
+which waits until each simulator reports its autopilot linked; the endpoints a ground station
+connects to and the restart policy are printed. A process that dies is handled by the
+supervisor (:mod:`sitl.supervise`): the survivor keeps running so that its failsafe acts, the loss
+is reported, and the lost process is restarted (unless ``--no-restart``; capped). A simulator
+that reaches ``--duration`` ends its vehicle's run normally. Ctrl-C or SIGTERM stops everything
+(SIGTERM, then SIGKILL after a grace period). Children die with the launcher in any case
+(PR_SET_PDEATHSIG).
+
+Exit status: 0 after Ctrl-C / SIGTERM or the end of ``--duration`` with every process there;
+1 when a process was lost and is still down at the end (or nothing was left running); 2 when it
+could not start.
 """
 
 from __future__ import annotations
 
 import signal
-import sys
 import threading
 from collections.abc import Sequence
 
 from quadcommon import wire
 
-from .launcher import Launcher, LaunchError, VehicleSpec
+from .launcher import Launcher, LaunchError, VehicleSpec, port_notes
+from .supervise import RestartPolicy, Supervisor, write_line
 
-__all__ = ["LaunchError", "VehicleSpec", "endpoints_banner", "run_up"]
+__all__ = ["LaunchError", "RestartPolicy", "VehicleSpec", "endpoints_banner", "run_up"]
+POLL_S = 0.1  # the foreground loop's period (wall): reaction time to a lost process and to Ctrl-C
 
 
 def endpoints_banner(spec: VehicleSpec, ports: wire.Ports) -> str:
@@ -39,11 +49,12 @@ def endpoints_banner(spec: VehicleSpec, ports: wire.Ports) -> str:
 
 
 def _echo(name: str, line: str) -> None:
-    print(f"[{name}] {line}", flush=True)
+    write_line(f"[{name}] {line}")
 
 
-def run_up(specs: Sequence[VehicleSpec]) -> int:
-    """Foreground ``quadsitl up``: until Ctrl-C / SIGTERM or a process exits."""
+def run_up(specs: Sequence[VehicleSpec], policy: RestartPolicy | None = None) -> int:
+    """Foreground ``quadsitl up``: until Ctrl-C / SIGTERM, the end of ``--duration`` or nothing left."""
+    policy = RestartPolicy() if policy is None else policy
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -51,23 +62,20 @@ def run_up(specs: Sequence[VehicleSpec]) -> int:
     try:
         launcher.start_vehicles(specs)
     except LaunchError as exc:
-        print(f"quadsitl: {exc}", file=sys.stderr)
+        write_line(f"quadsitl: {exc}", error=True)
         return 2
-    for spec in specs:
-        print(endpoints_banner(spec, launcher.ports[spec.instance]), flush=True)
-    print("  Ctrl-C stops every process.", flush=True)
-    code = 0
+    for note in port_notes(specs):
+        write_line(f"quadsitl: {note}", error=True)
+    banner = [endpoints_banner(spec, launcher.ports[spec.instance]) for spec in specs]
+    write_line("\n".join([*banner, policy.describe(), "  Ctrl-C stops every process."]))
+    supervisor = Supervisor(launcher, specs, policy)
     try:
-        while not stop.wait(0.2):
-            exited = launcher.first_exited()
-            if exited is not None:
-                rc = exited.returncode
-                if not (rc == 0 and exited.name.startswith("simulator")):  # --duration reached
-                    print(f"quadsitl: {exited.name} exited with code {rc}; stopping", file=sys.stderr)
-                    code = 1
+        while not stop.wait(POLL_S):
+            supervisor.poll()
+            if not supervisor.active:  # every run over (--duration), or nothing left to restart
                 break
     finally:
-        print("quadsitl: stopping ...", flush=True)
+        write_line("quadsitl: stopping ...")
         launcher.stop()
-        print("quadsitl: stopped", flush=True)
-    return code
+        write_line("quadsitl: stopped")
+    return 0 if supervisor.whole else 1

@@ -168,7 +168,7 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config):
     shared = None
     try:
         # The banner names each vehicle's endpoints: ports +N, sysid 1+N, its own zenoh keys.
-        text = "\n".join(output)
+        text = output.output
         for n in (FIRST, FIRST + 1):
             p = ports(n)
             assert f"vehicle {n} is up (MAVLink sysid {n + 1}," in text

@@ -1,12 +1,16 @@
-"""`quadsitl up` as a user runs it: banner with the endpoints, clean stop, no orphans, port clash."""
+"""`quadsitl up` as a user runs it: banner with the endpoints and the restart policy, clean stop, no
+orphans, port clashes (its own instance running; another instance sharing its ports, finding 11).
+Process loss under it: test_up_process_loss.py."""
 
 import os
 import re
 import signal
+import socket
 import sys
 import time
 from pathlib import Path
 
+from quadcommon import wire
 from sitl.launcher import Child
 
 INSTANCE = 9
@@ -53,6 +57,7 @@ def test_up_prints_endpoints_stops_cleanly_and_refuses_a_port_clash():
         assert f"vehicle {INSTANCE} is up (MAVLink sysid {INSTANCE + 1}" in text
         assert f"udp {14550 + INSTANCE}" in text and f"udpin://0.0.0.0:{14540 + INSTANCE}" in text
         assert f"tcp/127.0.0.1:{7447 + INSTANCE}" in text
+        assert "then the lost process is restarted (at most 3 restarts per 60 s; --no-restart" in text
         kids = children_of(up.process.pid)
         assert len(kids) == 2, kids  # simulator and autopilot
 
@@ -84,3 +89,27 @@ def test_up_leaves_no_orphan_when_the_launcher_is_killed():
     while any(alive(k) for k in kids) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not any(alive(k) for k in kids), "orphaned simulator or autopilot"
+
+
+def test_up_refuses_an_instance_whose_ports_a_running_instance_uses():
+    """Finding 11: instance 80's API client port 14620 is instance 40's autopilot API link. With
+    instance 40 running (its sockets bound here, as its processes would), instance 80 is refused
+    before anything starts, naming both instances, the port and the roles; so is a launch of 11."""
+    other = wire.ports(40)
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(3)]
+    try:
+        for sock, port in zip(socks, (other.hil, other.gcs_local, other.api_local), strict=True):
+            sock.bind((wire.LOOPBACK, port))
+        up = Child("quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", "80"])
+        assert up.wait(30.0) == 2
+    finally:
+        for sock in socks:
+            sock.close()
+    assert "UDP 14620: instance 80's API client port is instance 40's autopilot API link" in up.output
+    assert "instances 10, 30 or 40 apart share ports" in up.output
+    assert "[simulator[80]]" not in up.output and "[autopilot[80]]" not in up.output  # nothing started
+    many = Child(
+        "quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", "80", "--count", "11"]
+    )
+    assert many.wait(30.0) == 2
+    assert "UDP 14630: instance 90's API client port is instance 80's GCS client port" in many.output
