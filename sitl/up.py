@@ -237,9 +237,14 @@ def endpoints_banner(spec: VehicleSpec, ports: wire.Ports) -> str:
     )
 
 
-def run_up(specs: Sequence[VehicleSpec]) -> int:
-    """Foreground ``quadsitl up``: until Ctrl-C / SIGTERM or a process exits."""
+def run_up(specs: Sequence[VehicleSpec], view_port: int | None = None) -> int:
+    """Foreground ``quadsitl up``: until Ctrl-C / SIGTERM or a process exits.
+
+    ``view_port``: also start the live view (``--view``) on 127.0.0.1:``view_port`` once the
+    vehicles are linked (sitl/view_process.py), print its URL and stop it with the rest.
+    """
     sitl = Sitl(specs)
+    viewer = None
     stop = threading.Event()
 
     def on_signal(signum, frame):
@@ -248,12 +253,21 @@ def run_up(specs: Sequence[VehicleSpec]) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     try:
+        if view_port is not None:  # --view: its port is checked with the others, before any start
+            from .view_process import check_view_port, start_view
+
+            check_view_port(view_port)
         sitl.start()
+        if view_port is not None:
+            viewer = start_view([s.instance for s in specs], view_port, specs[0].sitl_config)
     except LaunchError as exc:
         print(f"quadsitl: {exc}", file=sys.stderr)
+        sitl.stop()
         return 2
     for spec in specs:
         print(endpoints_banner(spec, sitl.ports[spec.instance]), flush=True)
+    if viewer is not None:
+        print(f"  live view (browser)       : {viewer.url}", flush=True)
     print("  Ctrl-C stops every process.", flush=True)
     code = 0
     try:
@@ -268,6 +282,8 @@ def run_up(specs: Sequence[VehicleSpec]) -> int:
                 break
     finally:
         print("quadsitl: stopping ...", flush=True)
+        if viewer is not None:
+            viewer.stop()
         sitl.stop()
         print("quadsitl: stopped", flush=True)
     return code
