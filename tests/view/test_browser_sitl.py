@@ -265,7 +265,7 @@ def test_replay_of_the_flight_and_an_in_process_run_reaches_its_end(flight, tmp_
         state = view_state(page)
         assert state["replay"]["t"] == pytest.approx(state["replay"]["t1"])
         assert page.inner_text("#replay-state") == "ended"
-        assert page.inner_text(".card[data-id='0'] .armed") == "disarmed"  # the log ends on the ground
+        assert page.inner_text(".card[data-id='0'] .arm") == "disarmed"  # the log ends on the ground
         page.screenshot(path=str(ARTIFACTS / "replay_end.png"))
         page.fill("#slider", str((state["replay"]["t0"] + state["replay"]["t1"]) / 2))
         page.dispatch_event("#slider", "input")

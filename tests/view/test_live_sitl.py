@@ -143,3 +143,26 @@ def test_offboard_loss_shows_as_the_active_failsafe_until_the_pilot_takes_over(v
         ticker.stop()
         link.close()
         source.close()
+
+
+def test_two_vehicles_in_one_page_each_with_its_colour(vehicle):
+    """A second vehicle (instance 68) beside the first: one scene, one card and one colour each."""
+    from .helpers import ARTIFACTS, browser_page, served, view_state
+
+    second = 68
+    with Sitl([VehicleSpec(instance=second, speed="max", scenario="circle", autostart=True)], echo=False):
+        source = LiveSource([INSTANCE, second])
+        with served(source) as server, browser_page(server.url) as page:
+            page.wait_for_function(
+                "() => { const s = window.quadsitlView; return s.tracks.length === 2"
+                " && s.tracks.every(t => t.cols.t.length > 5 && t.obj.body.visible); }",
+                timeout=30000,
+            )
+            state = view_state(page)
+            colours = page.evaluate("() => window.quadsitlView.tracks.map(t => t.color)")
+            cards = page.locator(".card").all_inner_texts()
+            ARTIFACTS.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "live_two_vehicles.png"))
+    assert len(set(colours)) == 2
+    assert f"vehicle {INSTANCE}" in cards[0] and f"vehicle {second}" in cards[1]
+    assert all(n > 5 for n in state["samples"]) and state["errors"] == []

@@ -13,6 +13,7 @@ const params = new URLSearchParams(location.search);
 const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
 const FPS_3D = clamp(Number(params.get('fps')) || 30, 1, 60);
 const PLOT_HZ = clamp(Number(params.get('plot_hz')) || 10, 1, 30);
+const ANTIALIAS = params.get('aa') !== '0';
 const MAX_POINTS = 20000;            // per track and column (live: ~11 min at 30 Hz)
 const MAX_TEXTS = 200;
 const COLS = ['t', 'x', 'y', 'z', 'xr', 'yr', 'zr', 'phi', 'theta', 'psi', 'phir', 'thetar', 'psir',
@@ -81,7 +82,7 @@ function upper(arr, v) {
 // 3-D scene
 // ------------------------------------------------------------------------------------------
 const sceneEl = $('scene');
-const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+const renderer = new THREE.WebGLRenderer({ antialias: ANTIALIAS });
 renderer.setPixelRatio(1);   // CPU budget: no supersampling on high-DPI screens
 renderer.setClearColor(0xffffff);
 sceneEl.appendChild(renderer.domElement);
@@ -274,7 +275,7 @@ function fit() {
   const center = box.getCenter(new THREE.Vector3());
   const size = Math.max(box.getSize(new THREE.Vector3()).length(), 2);
   controls.target.copy(center);
-  camera.position.copy(center).add(new THREE.Vector3(-0.55, -0.8, 0.55).multiplyScalar(size * 1.1));
+  camera.position.copy(center).add(new THREE.Vector3(-0.55, -0.8, 0.5).multiplyScalar(size * 1.25));
   controls.update();
   state.dirty3d = true;
 }
@@ -339,7 +340,6 @@ function buildPlots() {
   plots = [];
   const host = $('plots');
   host.innerHTML = '';
-  const multi = state.tracks.length > 1;
   for (const def of PLOTS) {
     const div = document.createElement('div');
     div.className = 'plot';
@@ -350,7 +350,7 @@ function buildPlots() {
       def.s.forEach(([name, , opt], k) => {
         const ref = opt && opt.ref;
         series.push({
-          label: multi ? `${name} · ${tr.label}` : name,
+          label: name,    // the swatch's colour says which track (as in the scene and the cards)
           stroke: ref ? alpha(tr.color, 0.75) : tr.color,
           dash: ref ? opt.dash : DASH[k % DASH.length],
           width: ref ? opt.width : 1.5,
@@ -434,7 +434,7 @@ function buildCards() {
     card.style.borderLeftColor = tr.color;
     card.innerHTML = `<div class="name"></div><div class="grid">
       <span class="k">mode</span><span class="mode">–</span>
-      <span class="k">armed</span><span><span class="armed badge off">–</span></span>
+      <span class="k">armed</span><span><span class="arm badge off">–</span></span>
       <span class="k">landed</span><span class="landed">–</span>
       <span class="k">failsafe</span><span><span class="failsafe">none</span></span>
       <span class="k">t</span><span class="time">–</span>
@@ -462,9 +462,9 @@ function updateCards() {
     }
     const q = (s) => tr.card.querySelector(s);
     setText(q('.mode'), st.mode || (st.linked === false ? 'no MAVLink yet' : '–'));
-    const armed = q('.armed');
+    const armed = q('.arm');
     setText(armed, st.armed === null || st.armed === undefined ? '–' : st.armed ? 'ARMED' : 'disarmed');
-    armed.className = `armed badge ${st.armed ? 'armed' : 'off'}`;
+    armed.className = `arm badge ${st.armed ? 'armed' : 'off'}`;
     setText(q('.landed'), st.landed || '–');
     const fs = q('.failsafe');
     setText(fs, st.failsafe || 'none');
