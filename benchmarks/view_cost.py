@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import socket
 import statistics
 import subprocess
@@ -59,6 +60,38 @@ def sim_time(session, timeout_s: float = 5.0) -> float:
                 return float(json.loads(reply.ok.payload.to_bytes())["sim_time_s"])
         time.sleep(0.05)
     raise RuntimeError("the simulator did not answer its info query")
+
+
+def cpu_seconds(match) -> float:
+    """CPU time (user + system, s) of every process whose command line ``match`` accepts."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if match(cmdline):
+            total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
+def is_view(cmdline: str) -> bool:
+    return "-m gcs_scripts.view" in cmdline and f"--instance {INSTANCE}" in cmdline
+
+
+def is_chromium(cmdline: str) -> bool:
+    return cmdline.startswith(("/usr/lib/chromium/", "/usr/bin/chromium"))
+
+
+def is_sitl(cmdline: str) -> bool:
+    return f"--instance {INSTANCE}" in cmdline and ("-m simulator" in cmdline or "-m autopilot" in cmdline)
+
+
+WHO = {"sitl": is_sitl, "view": is_view, "chromium": is_chromium}
 
 
 def free_port() -> int:
@@ -127,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     ratios: dict[str, list[float]] = {"server": [], "page": []}
     rtf: dict[str, list[float]] = {"none": [], "server": [], "page": []}
     page_rates: list[float] = []
+    cpu = {c: {k: [] for k in WHO} for c in ("none", "server", "page")}
     with Sitl([spec], echo=False), sync_playwright() as pw:
         session = bus.open_peer(wire.ports(INSTANCE).zenoh)
         try:
@@ -140,13 +174,17 @@ def main(argv: list[str] | None = None) -> int:
                     try:
                         time.sleep(args.settle_s)
                         f0, s0, w0 = (view.frames() if view else 0), sim_time(session), time.monotonic()
+                        c0 = {k: cpu_seconds(m) for k, m in WHO.items()}
                         time.sleep(args.phase_s)
                         s1, w1 = sim_time(session), time.monotonic()
+                        c1 = {k: cpu_seconds(m) for k, m in WHO.items()}
                         f1 = view.frames() if view else 0
                     finally:
                         if view is not None:
                             view.close()
                     measured[condition].append((s1 - s0) / (w1 - w0))
+                    for k in WHO:
+                        cpu[condition][k].append(100.0 * (c1[k] - c0[k]) / (w1 - w0))
                     if condition == "page":
                         page_rates.append((f1 - f0) / (w1 - w0))
                 base = statistics.fmean(measured["none"])
@@ -168,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
         return f"{statistics.median(values):.1f} % (rounds: {', '.join(f'{v:.1f}' for v in values)})"
 
     print(f"speed {args.speed}, {args.rounds} rounds of none/server/page/none, {args.phase_s:g} s each")
+    for condition in ("none", "server", "page"):
+        parts = ", ".join(f"{k} {statistics.median(v):.1f} %" for k, v in cpu[condition].items())
+        print(f"CPU (% of one core, median) with {condition:>6}: {parts}")
     print(f"cost of the view server alone: {cost('server')}")
     print(f"cost of the view server with the page open: {cost('page')}")
     print(f"rtf_without_view: {statistics.median(rtf['none']):.3f} x")

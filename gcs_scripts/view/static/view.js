@@ -11,9 +11,26 @@ import { CSS2DRenderer, CSS2DObject } from 'three/addons/renderers/CSS2DRenderer
 
 const params = new URLSearchParams(location.search);
 const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
-const FPS_3D = clamp(Number(params.get('fps')) || 30, 1, 60);
-const PLOT_HZ = clamp(Number(params.get('plot_hz')) || 10, 1, 30);
-const ANTIALIAS = params.get('aa') !== '0';
+// Without a GPU (Chromium's SwiftShader, Mesa's llvmpipe) WebGL is drawn by the CPU, the one the
+// simulation needs: there the scene is drawn at 15 fps without antialiasing (measured in headless
+// Chromium on a 2-vCPU VM: 30 fps with antialiasing cost 70 % of a core, 15 fps without ~25 %).
+// ?fps=, ?aa=0|1, ?plot_hz=, ?ui_hz= override.
+function softwareGl() {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl2') || document.createElement('canvas').getContext('webgl');
+    const ext = gl && gl.getExtension('WEBGL_debug_renderer_info');
+    const name = ext ? String(gl.getParameter(ext.UNMASKED_RENDERER_WEBGL)) : '';
+    gl && gl.getExtension('WEBGL_lose_context')?.loseContext();
+    return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+  } catch (e) { return false; }
+}
+const SOFTWARE_GL = softwareGl();
+const FPS_3D = clamp(Number(params.get('fps')) || (SOFTWARE_GL ? 15 : 30), 1, 60);
+const PLOT_HZ = clamp(Number(params.get('plot_hz')) || (SOFTWARE_GL ? 5 : 10), 1, 30);
+const ANTIALIAS = params.has('aa') ? params.get('aa') !== '0' : !SOFTWARE_GL;
+// Text (cards, time, slider) at most UI_HZ times a second: each DOM change costs a style, layout
+// and paint pass, and at the display's 60 Hz those passes cost more CPU than the scene (measured).
+const UI_HZ = clamp(Number(params.get('ui_hz')) || 8, 1, 60);
 const MAX_POINTS = 20000;            // per track and column (live: ~11 min at 30 Hz)
 const MAX_TEXTS = 200;
 const COLS = ['t', 'x', 'y', 'z', 'xr', 'yr', 'zr', 'phi', 'theta', 'psi', 'phir', 'thetar', 'psir',
@@ -24,7 +41,8 @@ const SEVERITY = ['EMERGENCY', 'ALERT', 'CRITICAL', 'ERROR', 'WARNING', 'NOTICE'
 // What the browser tests read (window.quadsitlView): connection, rates, mode history, replay.
 const state = {
   kind: null, connected: false, messages: 0, frames: 0, rateHz: 0, frameTimes: [],
-  tracks: [], modeHistory: {}, windowS: 30, dirty3d: true, dirtyPlots: true,
+  drawing: { softwareGl: SOFTWARE_GL, fps3d: FPS_3D, plotHz: PLOT_HZ, uiHz: UI_HZ, antialias: ANTIALIAS },
+  tracks: [], modeHistory: {}, windowS: 30, dirty3d: true, dirtyPlots: true, dirtyUi: true,
   renders3d: 0, plotDraws: 0, errors: [],
   replay: { t: 0, t0: 0, t1: 0, playing: false, ended: false, speed: 1, lastTs: null, textsUpTo: -Infinity },
 };
@@ -540,11 +558,13 @@ function setReplayTime(t) {
   r.t = clamp(t, r.t0, r.t1);
   r.ended = r.t >= r.t1;
   if (r.t < prev || r.t - prev > 5) rebuildTextsUpTo(r.t); else appendTextsBetween(r.textsUpTo, r.t);
-  $('slider').value = String(r.t);
+  state.dirty3d = true; state.dirtyPlots = true; state.dirtyUi = true;
+}
+function updateReplayUi() {
+  const slider = $('slider');
+  if (document.activeElement !== slider) slider.value = String(r.t);   // not under the user's drag
   setText($('time'), `t = ${fmt(r.t, 2)} s of ${fmt(r.t0, 2)} … ${fmt(r.t1, 2)} s`);
   updateReplayState();
-  state.dirty3d = true; state.dirtyPlots = true;
-  updateCards();
 }
 function updateReplayState() {
   setText($('replay-state'), r.playing ? 'playing' : r.ended ? 'ended' : 'paused');
@@ -561,7 +581,11 @@ function advanceReplay(ts) {
   if (!r.playing) return;
   if (r.lastTs !== null) {
     const t = r.t + ((ts - r.lastTs) / 1000) * r.speed;
-    if (t >= r.t1) { r.playing = false; setReplayTime(r.t1); } else setReplayTime(t);
+    if (t >= r.t1) {
+      r.playing = false;
+      setReplayTime(r.t1);
+      updateReplayUi(); updateCards();   // the end, at once (not at the next UI tick)
+    } else setReplayTime(t);
   }
   r.lastTs = ts;
 }
@@ -633,7 +657,7 @@ function onFrame(m) {
     addText(tr, t, sev, text);
   }
   if (moved) { state.dirty3d = true; state.dirtyPlots = true; }
-  updateCards();
+  state.dirtyUi = true;
 }
 
 function connect() {
@@ -656,10 +680,16 @@ function connect() {
 // ------------------------------------------------------------------------------------------
 // Loop: draw what changed, at most FPS_3D / PLOT_HZ times a second
 // ------------------------------------------------------------------------------------------
-let last3d = -Infinity, lastPlots = -Infinity, lastRateLabel = -Infinity;
+let last3d = -Infinity, lastPlots = -Infinity, lastRateLabel = -Infinity, lastUi = -Infinity;
 function loop(ts) {
   requestAnimationFrame(loop);
   if (state.kind === 'replay') advanceReplay(ts);
+  if (state.dirtyUi && ts - lastUi >= 1000 / UI_HZ - 2) {
+    lastUi = ts;
+    state.dirtyUi = false;
+    if (state.kind === 'replay') updateReplayUi();
+    updateCards();
+  }
   if (state.dirty3d && ts - last3d >= 1000 / FPS_3D - 2) { last3d = ts; render3d(); }
   if (state.dirtyPlots && ts - lastPlots >= 1000 / PLOT_HZ - 2) { lastPlots = ts; drawPlots(); }
   if (ts - lastRateLabel > 500) {
