@@ -113,9 +113,9 @@ sceneEl.appendChild(labels.domElement);
 const scene = new THREE.Scene();
 const camera = new THREE.PerspectiveCamera(50, 1, 0.05, 500);
 camera.up.set(0, 0, 1);
-camera.position.set(-4.5, -6.5, 4.5);
+camera.position.set(-3.8, -6.0, 4.4);
 const controls = new OrbitControls(camera, renderer.domElement);
-controls.target.set(1, 1, 1.2);
+controls.target.set(1, 1, 1.3);
 controls.update();
 controls.addEventListener('change', () => { state.dirty3d = true; });
 scene.add(new THREE.AmbientLight(0xffffff, 0.7));
@@ -382,12 +382,13 @@ function buildPlots() {
     const u = new uPlot({
       title: def.title, width, height: 150, series,
       scales: { x: { time: false, range: (self, lo, hi) => xRange || [lo, hi] }, y: { range: yRange(def.span) } },
-      axes: [{ label: 't (s, simulation)', size: 34, labelSize: 14 }, { label: def.y, size: 52, labelSize: 14 }],
+      axes: [{ label: 't (s, simulation)', size: 34, labelSize: 14 }, { label: def.y, size: 56, labelSize: 14, space: 20 }],
       legend: { show: true },
       cursor: { sync: { key: 'quadsitl' } },
       hooks: { draw: [drawEvents] },
     }, [[]].concat(series.slice(1).map(() => [])), div);
     plots.push({ def, u, div });
+    state.plots = plots;   // for the tests (scales, series)
   }
   state.dirtyPlots = true;
 }
