@@ -86,6 +86,8 @@ class DisturbanceOnsets:
             time_s, d = time_s[1:], d[1:]
             if len(d) == 0:
                 return []
+        if not self._changing and (d == self._last).all():
+            return []  # the usual batch: the disturbance held constant throughout
         both = np.vstack([self._last[None, :], d])
         changed = np.any(both[1:] != both[:-1], axis=1)  # changed[k]: row k differs from the one before
         before = np.r_[self._changing, changed[:-1]]
@@ -101,6 +103,10 @@ class VehicleSampler:
     def __init__(self) -> None:
         self._truth = np.empty((0, len(TRUTH_FIELDS)))
         self._controller = np.empty((0, len(CONTROLLER_FIELDS)))
+        # Batches received since the last take(): joined once per tick, not once per batch (the
+        # per-call overhead of numpy, not the arithmetic, is what costs here).
+        self._pending_truth: list[np.ndarray] = []
+        self._pending_controller: list[np.ndarray] = []
         self._new = False
         self.onsets = DisturbanceOnsets()
         self.new_events: list[float] = []
@@ -108,25 +114,36 @@ class VehicleSampler:
         self.controller_rows = 0
 
     def add_truth(self, rows: np.ndarray) -> None:
-        if len(rows) == 0:
-            return
-        self.truth_rows += len(rows)
-        self.new_events.extend(self.onsets.add(rows[:, 0], rows[:, DISTURBANCE_COLUMNS]))
-        self._truth = np.vstack([self._truth, rows])[-KEEP_ROWS:]
-        self._new = True
+        if len(rows):
+            self._pending_truth.append(rows)
 
     def add_controller(self, rows: np.ndarray) -> None:
-        if len(rows) == 0:
-            return
-        self.controller_rows += len(rows)
-        self._controller = np.vstack([self._controller, rows])[-KEEP_ROWS:]
-        self._new = True
+        if len(rows):
+            self._pending_controller.append(rows)
+
+    def _merge(self) -> None:
+        if self._pending_truth:
+            rows = np.concatenate(self._pending_truth)
+            self._pending_truth = []
+            self.truth_rows += len(rows)
+            self.new_events.extend(self.onsets.add(rows[:, 0], rows[:, DISTURBANCE_COLUMNS]))
+            self._truth = np.concatenate([self._truth, rows[-KEEP_ROWS:]])[-KEEP_ROWS:]
+            self._new = True
+        if self._pending_controller:
+            rows = np.concatenate(self._pending_controller)
+            self._pending_controller = []
+            self.controller_rows += len(rows)
+            self._controller = np.concatenate([self._controller, rows[-KEEP_ROWS:]])[-KEEP_ROWS:]
+            self._new = True
 
     @property
     def latest_time_s(self) -> float | None:
+        if self._pending_truth:
+            return float(self._pending_truth[-1][-1, 0])
         return float(self._truth[-1, 0]) if len(self._truth) else None
 
     def take_events(self) -> list[float]:
+        self._merge()
         out, self.new_events = self.new_events, []
         return out
 
@@ -136,6 +153,7 @@ class VehicleSampler:
         It is the latest control step both streams have reached; without one (the controller's
         rows missing or far behind) the latest truth row, with unknown references.
         """
+        self._merge()
         if not self._new or len(self._truth) == 0:
             return None
         self._new = False
