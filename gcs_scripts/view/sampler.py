@@ -26,6 +26,7 @@ from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS
 _T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 _C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
 DISTURBANCE_COLUMNS = [_T[n] for n in ("Ax_n", "Ay_n", "Az_n", "Ap_n_m", "Aq_n_m", "Ar_n_m")]
+CONTROLLER_STALE_S = 0.25  # controller rows older than this (sim s): show the truth without references
 KEEP_ROWS = 256  # recent rows of each stream kept to find their latest common step (0.5 s at 500 Hz)
 
 
@@ -108,6 +109,7 @@ class VehicleSampler:
         self._pending_truth: list[np.ndarray] = []
         self._pending_controller: list[np.ndarray] = []
         self._new = False
+        self._last_key: int | None = None
         self.onsets = DisturbanceOnsets()
         self.new_events: list[float] = []
         self.truth_rows = 0
@@ -150,8 +152,9 @@ class VehicleSampler:
     def take(self) -> Sample | None:
         """The newest sample since the last call (None if no new row arrived).
 
-        It is the latest control step both streams have reached; without one (the controller's
-        rows missing or far behind) the latest truth row, with unknown references.
+        It is the latest control step both streams have reached, once; when the controller's rows
+        are missing or more than CONTROLLER_STALE_S behind (autopilot stopped), the latest truth
+        row with unknown references, so the vehicle never freezes on the page.
         """
         self._merge()
         if not self._new or len(self._truth) == 0:
@@ -162,8 +165,12 @@ class VehicleSampler:
             common, i_truth, i_ctrl = np.intersect1d(
                 _key(self._truth[:, 0]), _key(self._controller[:, 0]), return_indices=True
             )
-            if len(common):
+            if len(common) and truth[0] - self._truth[i_truth[-1], 0] <= CONTROLLER_STALE_S:
                 truth, ref = self._truth[i_truth[-1]], self._controller[i_ctrl[-1]]
+        key = int(_key(truth[0]))
+        if key == self._last_key:
+            return None  # that step was sent already (the other stream has not caught up yet)
+        self._last_key = key
         if ref is None:
             nan3 = [math.nan] * 3
             p_ref, eta_ref, u1, tau = nan3, nan3, math.nan, nan3

@@ -54,8 +54,8 @@ def test_sample_joins_truth_and_controller_of_the_same_step():
     assert sample.position_ref_m[0] == pytest.approx(ref_x(t), abs=1e-6)
     assert sample.thrust_n == pytest.approx(9.81 + math.sin(5 * t), abs=1e-5)
     assert s.take() is None  # nothing new since
-    s.add_truth(truth_rows(control_times(1.2, 5)))
-    assert s.take() is not None
+    s.add_controller(controller_rows(times[57:80]))
+    assert s.take().time_s == pytest.approx(times[79])
 
 
 def test_sample_without_controller_rows_has_unknown_references_and_valid_json():
@@ -79,3 +79,19 @@ def test_sampler_reports_each_onset_once():
     assert s.take_events() == pytest.approx([1.0, 2.0])
     assert s.take_events() == []
     assert len(DISTURBANCE_COLUMNS) == 6
+
+
+def test_each_step_is_sampled_once_and_a_stalled_controller_does_not_freeze_the_vehicle():
+    times = control_times(0.0, 400)
+    s = VehicleSampler()
+    s.add_truth(truth_rows(times[:20]))
+    s.add_controller(controller_rows(times[:10]))
+    first = s.take()
+    assert first.time_s == pytest.approx(times[9])
+    s.add_truth(truth_rows(times[20:30]))  # truth moves on, the controller not yet: nothing new to show
+    assert s.take() is None
+    s.add_controller(controller_rows(times[10:20]))
+    assert s.take().time_s == pytest.approx(times[19])
+    s.add_truth(truth_rows(times[30:400]))  # the autopilot stopped: 0.74 s of truth alone
+    alone = s.take()
+    assert alone.time_s == pytest.approx(times[-1]) and alone.position_ref_m == [None, None, None]
