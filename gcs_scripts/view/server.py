@@ -9,7 +9,8 @@ Live (``--instance N ...`` / ``--count K``): every ``1/rate`` wall seconds (``--
 30 Hz) each vehicle's zenoh streams and MAVLink socket are drained (:class:`.live.LiveVehicle`),
 and one JSON ``frame`` with the newest sample of each vehicle that moved, its status, the new
 disturbance onsets and STATUSTEXT goes to every page. Between ticks the process sleeps, niced
-(``os.nice(10)``), so on a 2-core machine it yields to the lockstep loop. A page that cannot keep
+(``os.nice(10)``, and ``SCHED_IDLE`` while the vehicles run more than 4x faster than real time:
+:class:`.live.CpuPriority`), so on a 2-core machine it yields to the lockstep loop. A page that cannot keep
 up skips frames (its socket's write buffer is checked first); it never slows the tick.
 
 Replay (``quadsitl view LOG [LOG ...]``): the logs are read once (:mod:`.replay`) and sent whole
@@ -17,8 +18,9 @@ when a page connects; the page plays them back itself (play/pause, speed, time s
 
 Messages (JSON text): ``{"type": "hello", "kind": "live"|"replay", "tracks": [...]}`` first,
 then (live) ``{"type": "frame", "seq", "wall", "v": [{"id", "s": sample|null, "st": status}],
-"events": [[id, t]], "texts": [[id, t, severity, text]]}`` and ``{"type": "tracks"}`` when a
-vehicle's description (controller, scenario) arrives.
+"events": [[id, t]], "texts": [[id, t, severity, text]], "rtf", "yielding"}`` (``rtf``: simulation
+seconds per wall second; ``yielding``: the view runs at SCHED_IDLE, see :class:`.live.CpuPriority`)
+and ``{"type": "tracks"}`` when a vehicle's description (controller, scenario) arrives.
 """
 
 from __future__ import annotations
@@ -59,13 +61,16 @@ class LiveSource:
 
     kind = "live"
 
-    def __init__(self, instances: Sequence[int], sitl_config: str | None = None) -> None:
+    def __init__(
+        self, instances: Sequence[int], sitl_config: str | None = None, adaptive: bool = False
+    ) -> None:
         from quadcommon.config import load_sitl
 
-        from .live import LiveVehicle
+        from .live import CpuPriority, LiveVehicle
 
         sitl = load_sitl(sitl_config)
         self.vehicles = [LiveVehicle(n, sitl) for n in instances]
+        self.priority = CpuPriority(enabled=adaptive)
         self.seq = 0
         self._last_sent = 0.0
         self._last_status: list[dict[str, Any] | None] = [None] * len(self.vehicles)
@@ -106,6 +111,8 @@ class LiveSource:
             entries.append({"id": i, "s": None if sample is None else sample.to_json(), "st": status})
             events += [[i, round(t, 6)] for t in v.sampler.take_events()]
             texts += [[i, round(t, 6), sev, text] for t, sev, text in v.telemetry.take_texts()]
+        times = [t for t in (v.sampler.latest_time_s for v in self.vehicles) if t is not None]
+        self.priority.update(wall, max(times) if times else None)
         if described:
             out.append({"type": "tracks", "tracks": self.tracks()})
         if changed or events or texts or wall - self._last_sent >= KEEPALIVE_WALL_S:
@@ -119,6 +126,8 @@ class LiveSource:
                     "v": entries,
                     "events": events,
                     "texts": texts,
+                    "rtf": None if self.priority.rtf is None else round(self.priority.rtf, 2),
+                    "yielding": self.priority.idle,
                 }
             )
         return out
@@ -367,7 +376,12 @@ def build_parser(prog: str = "quadsitl view") -> argparse.ArgumentParser:
         help="replay: time zero of each log: simulation time as recorded (default), its "
         "first sample, or the instant it armed (overlays runs started at different times)",
     )
-    parser.add_argument("--no-nice", action="store_true", help="keep the normal CPU priority")
+    parser.add_argument(
+        "--no-nice",
+        action="store_true",
+        help="keep the normal CPU priority (default: nice 10, and SCHED_IDLE while the vehicles run "
+        "more than 4x faster than real time)",
+    )
     return parser
 
 
@@ -406,7 +420,7 @@ def main(argv: list[str] | None = None, prog: str = "quadsitl view") -> int:
         if args.logs:
             source: LiveSource | ReplaySource = ReplaySource(args.logs, args.labels, args.align)
         else:
-            source = LiveSource(instances_from(args, parser), args.sitl_config)
+            source = LiveSource(instances_from(args, parser), args.sitl_config, adaptive=not args.no_nice)
         server = ViewServer(source, args.port, args.rate)
     except (ValueError, FileNotFoundError) as exc:
         print(f"quadsitl view: {exc}", file=sys.stderr)
@@ -452,7 +466,8 @@ async def _serve(server: ViewServer, args: argparse.Namespace) -> int:
         print(f"quadsitl view: {exc}", file=sys.stderr)
         return 2
     print(
-        f"quadsitl view: stopped ({server.frames_sent} frames sent, {server.frames_skipped} skipped)",
+        f"quadsitl view: stopped ({server.ticks} ticks, {server.frames_sent} frames sent, "
+        f"{server.frames_skipped} skipped)",
         flush=True,
     )
     return 0

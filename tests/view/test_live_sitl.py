@@ -166,3 +166,25 @@ def test_two_vehicles_in_one_page_each_with_its_colour(vehicle):
     assert len(set(colours)) == 2
     assert f"vehicle {INSTANCE}" in cards[0] and f"vehicle {second}" in cards[1]
     assert all(n > 5 for n in state["samples"]) and state["errors"] == []
+
+
+def test_cpu_priority_yields_only_while_the_simulation_runs_much_faster_than_real_time(monkeypatch):
+    from gcs_scripts.view.live import CpuPriority
+
+    policies: list[int] = []
+    p = CpuPriority(enabled=True)
+    monkeypatch.setattr(p, "_set", lambda policy: (policies.append(policy), setattr(p, "idle", policy != 0)))
+    wall, sim = 0.0, 0.0
+    for rtf, seconds in ((1.0, 6), (2.0, 6), (12.0, 6), (3.5, 6), (1.0, 6)):
+        for _ in range(int(seconds / 0.5)):
+            wall += 0.5
+            sim += 0.5 * rtf
+            p.update(wall, sim)
+    import os
+
+    assert policies == [os.SCHED_IDLE, os.SCHED_OTHER]  # into idle at 12x; 3.5x stays (hysteresis); out at 1x
+    assert p.rtf == pytest.approx(1.0)
+    off = CpuPriority(enabled=False)
+    for k in range(20):
+        off.update(k * 0.5, k * 6.0)
+    assert not off.idle and off.rtf == pytest.approx(12.0)

@@ -637,6 +637,7 @@ function onTracks(m) {
 
 function onFrame(m) {
   state.frames++;
+  state.rtf = m.rtf; state.yielding = m.yielding;
   const now = performance.now();
   state.frameTimes.push(now);
   while (state.frameTimes.length && now - state.frameTimes[0] > 2000) state.frameTimes.shift();
@@ -695,7 +696,10 @@ function loop(ts) {
   if (state.dirtyPlots && ts - lastPlots >= 1000 / PLOT_HZ - 2) { lastPlots = ts; drawPlots(); }
   if (ts - lastRateLabel > 500) {
     lastRateLabel = ts;
-    if (state.kind === 'live') setText($('rate'), `${fmt(state.rateHz, 1)} frames/s`);
+    if (state.kind === 'live') {
+      const speed = state.rtf ? ` · simulation at ${fmt(state.rtf, 1)}× real time` : '';
+      setText($('rate'), `${fmt(state.rateHz, 1)} frames/s${speed}${state.yielding ? ' (view yielding the CPU)' : ''}`);
+    }
     else if (state.kind === 'replay') setText($('rate'), '');
   }
 }
