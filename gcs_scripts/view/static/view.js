@@ -671,6 +671,7 @@ function connect() {
     if (m.type === 'hello') onHello(m);
     else if (m.type === 'tracks') onTracks(m);
     else if (m.type === 'frame') onFrame(m);
+    schedule();
   };
   ws.onclose = () => {
     state.connected = false;
@@ -680,36 +681,56 @@ function connect() {
 }
 
 // ------------------------------------------------------------------------------------------
-// Loop: draw what changed, at most FPS_3D / PLOT_HZ times a second
+// Loop: draw what changed, at most FPS_3D / PLOT_HZ / UI_HZ times a second, and only then: the
+// loop is scheduled on demand (a frame arrived, the user did something, a replay plays), not
+// at the display's 60 Hz, so an idle page costs nothing.
 // ------------------------------------------------------------------------------------------
 let last3d = -Infinity, lastPlots = -Infinity, lastRateLabel = -Infinity, lastUi = -Infinity;
+let pending = null;
+function schedule(delayMs = 0) {
+  if (pending !== null) return;
+  if (delayMs <= 0) { pending = 'frame'; requestAnimationFrame(loop); }
+  else pending = setTimeout(() => { pending = null; schedule(0); }, delayMs);
+}
+window.quadsitlSchedule = schedule;
+
 function loop(ts) {
-  requestAnimationFrame(loop);
+  pending = null;
   if (state.kind === 'replay') advanceReplay(ts);
-  if (state.dirtyUi && ts - lastUi >= 1000 / (state.yielding ? Math.min(UI_HZ, 4) : UI_HZ) - 2) {
+  // While the server says the simulation runs much faster than real time (a batch run, the view
+  // yielding the CPU to it), the page draws less often too: nobody follows 12x by eye.
+  const uiPeriod = 1000 / (state.yielding ? Math.min(UI_HZ, 4) : UI_HZ);
+  const period3d = 1000 / (state.yielding ? Math.min(FPS_3D, 5) : FPS_3D);
+  const periodPlots = 1000 / (state.yielding ? Math.min(PLOT_HZ, 2) : PLOT_HZ);
+  if (state.dirtyUi && ts - lastUi >= uiPeriod - 2) {
     lastUi = ts;
     state.dirtyUi = false;
     if (state.kind === 'replay') updateReplayUi();
     updateCards();
   }
-  // While the server says the simulation runs much faster than real time (a batch run, the view
-  // yielding the CPU to it), the page draws less often too: nobody follows 12x by eye.
-  const fps = state.yielding ? Math.min(FPS_3D, 5) : FPS_3D;
-  const plotHz = state.yielding ? Math.min(PLOT_HZ, 2) : PLOT_HZ;
-  if (state.dirty3d && ts - last3d >= 1000 / fps - 2) { last3d = ts; render3d(); }
-  if (state.dirtyPlots && ts - lastPlots >= 1000 / plotHz - 2) { lastPlots = ts; drawPlots(); }
-  if (ts - lastRateLabel > 500) {
+  if (state.dirty3d && ts - last3d >= period3d - 2) { last3d = ts; render3d(); }
+  if (state.dirtyPlots && ts - lastPlots >= periodPlots - 2) { lastPlots = ts; drawPlots(); }
+  if (state.kind === 'live' && ts - lastRateLabel >= 500) {
     lastRateLabel = ts;
-    if (state.kind === 'live') {
-      const speed = state.rtf ? ` · simulation at ${fmt(state.rtf, 1)}× real time` : '';
-      setText($('rate'), `${fmt(state.rateHz, 1)} frames/s${speed}${state.yielding ? ' (view yielding the CPU)' : ''}`);
-    }
-    else if (state.kind === 'replay') setText($('rate'), '');
-  }
+    const speed = state.rtf ? ` · simulation at ${fmt(state.rtf, 1)}× real time` : '';
+    setText($('rate'), `${fmt(state.rateHz, 1)} frames/s${speed}${state.yielding ? ' (view yielding the CPU)' : ''}`);
+  } else if (state.kind === 'replay') setText($('rate'), '');
+  let next = Infinity;
+  if (state.kind === 'replay' && r.playing) next = 0;
+  if (state.dirtyUi) next = Math.min(next, lastUi + uiPeriod - ts);
+  if (state.dirty3d) next = Math.min(next, last3d + period3d - ts);
+  if (state.dirtyPlots) next = Math.min(next, lastPlots + periodPlots - ts);
+  if (state.kind === 'live') next = Math.min(next, lastRateLabel + 500 - ts);
+  if (next < Infinity) schedule(Math.max(0, next));
 }
 
-window.addEventListener('resize', () => { resize3d(); resizePlots(); });
+// Everything that can change what is shown asks for a loop turn.
+for (const [el, ev] of [['play', 'click'], ['slider', 'input'], ['window', 'change'], ['speed', 'change'],
+  ['fit', 'click'], ['follow', 'change']]) $(el).addEventListener(ev, () => schedule());
+controls.addEventListener('change', () => schedule());
+
+window.addEventListener('resize', () => { resize3d(); resizePlots(); schedule(); });
 resize3d();
 buildPlots();
 connect();
-requestAnimationFrame(loop);
+schedule();
