@@ -88,3 +88,33 @@ def test_cli_port_in_use_is_an_error_naming_it(tmp_path, capsys):
         port = taken.getsockname()[1]
         assert main([str(log), "--port", str(port), "--no-nice"]) == 2
     assert f"TCP port {port} (127.0.0.1) is already in use" in capsys.readouterr().err
+
+
+def test_replay_page_shows_the_recorded_failsafe_and_modes_at_the_slider_time(tmp_path):
+    """The page's own reading of a recorded session (the JavaScript mirror of the failsafe rules)."""
+    from .helpers import browser_page
+
+    source = ReplaySource([str(_session(tmp_path))])
+    with served(source) as server, browser_page(server.url) as page:
+        page.wait_for_function("() => window.quadsitlView.kind === 'replay'", timeout=20000)
+
+        def at(t: float) -> tuple[str, str, str]:
+            page.fill("#slider", str(t))
+            page.dispatch_event("#slider", "input")
+            page.wait_for_function(
+                f"() => Math.abs(window.quadsitlView.replay.t - {t}) < 0.01 && !window.quadsitlView.dirtyUi",
+                timeout=5000,
+            )
+            page.wait_for_timeout(300)  # the cards follow at the page's text rate
+            card = ".card[data-id='0']"
+            return (
+                page.inner_text(f"{card} .mode"),
+                page.inner_text(f"{card} .arm"),
+                page.inner_text(f"{card} .failsafe"),
+            )
+
+        assert at(0.8) == ("AUTO.LOITER", "disarmed", "none")
+        assert at(3.9) == ("OFFBOARD", "ARMED", "offboard loss")
+        texts = page.locator("#texts li").all_inner_texts()
+        assert any("offboard setpoints lost" in t for t in texts)
+        assert page.errors == []
