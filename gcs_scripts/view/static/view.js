@@ -327,7 +327,7 @@ function alpha(hex, a) {
 }
 
 function drawEvents(u) {
-  const ctx = u.ctx, { left, top, width, height } = u.bbox;
+  const ctx = u.ctx, { top, height } = u.bbox;
   const tNow = state.kind === 'replay' ? state.replay.t : Infinity;
   ctx.save();
   ctx.lineWidth = 1;
@@ -341,7 +341,6 @@ function drawEvents(u) {
     }
   }
   ctx.restore();
-  void left; void width;
 }
 
 // y range: the data with 5 % margins, at least `span` wide (uPlot makes a flat 0 line 0..100).
@@ -388,7 +387,6 @@ function buildPlots() {
       hooks: { draw: [drawEvents] },
     }, [[]].concat(series.slice(1).map(() => [])), div);
     plots.push({ def, u, div });
-    state.plots = plots;   // for the tests (scales, series)
   }
   state.dirtyPlots = true;
 }
@@ -692,7 +690,6 @@ function schedule(delayMs = 0) {
   if (delayMs <= 0) { pending = 'frame'; requestAnimationFrame(loop); }
   else pending = setTimeout(() => { pending = null; schedule(0); }, delayMs);
 }
-window.quadsitlSchedule = schedule;
 
 function loop(ts) {
   pending = null;
