@@ -8,7 +8,9 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test paper lint bench clean
+VIEW_VENDOR := gcs_scripts/view/static/vendor/MANIFEST.json
+
+.PHONY: demo test paper lint bench clean view browser
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -18,7 +20,18 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --no-deps 'MAVProxy>=1.8'
 	@touch $(STAMP)
 
-demo: $(STAMP)
+# The live view's JavaScript (three.js, uPlot): pinned in gcs_scripts/view/package-lock.json, fetched
+# from the npm registry by `npm ci` once, then copied into static/vendor/; offline from then on.
+$(VIEW_VENDOR): gcs_scripts/view/package.json gcs_scripts/view/package-lock.json gcs_scripts/view/build.py | $(STAMP)
+	$(BIN)/python -m gcs_scripts.view.build
+
+view: $(STAMP) $(VIEW_VENDOR)
+
+# The view's browser tests drive Debian's Chromium through Playwright (never a downloaded browser).
+browser:
+	@command -v chromium >/dev/null || (apt-get update -qq && apt-get install -y -qq chromium)
+
+demo: $(STAMP) $(VIEW_VENDOR)
 	$(BIN)/quadsitl paper --out out/paper
 	$(BIN)/quadsitl demo --out out/demo
 	# Monte Carlo: the paper's +-30 % box, 200 runs x the three cascades (prints where the summary is)
@@ -31,7 +44,7 @@ paper: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-test: $(STAMP)
+test: $(STAMP) $(VIEW_VENDOR) browser
 	$(BIN)/ruff check .
 	$(BIN)/pytest -q
 

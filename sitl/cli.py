@@ -3,6 +3,7 @@
 quadsitl paper [--out DIR] [--nominal-plant]      the paper's experiment, in-process
 quadsitl run SCENARIO [--controller NAME]          one in-process run
 quadsitl campaign SPEC [--runs N] [--out DIR]       Monte Carlo campaign (sitl/campaign/)
+quadsitl view [--instance N ...] [LOG ...]         live view / replays in the browser
 """
 
 from __future__ import annotations
@@ -128,7 +129,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
         )
         for k in range(args.count)
     ]  # fmt: skip
-    return run_up(specs, policy)
+    return run_up(specs, policy, view_port=args.view_port if args.view else None)
 
 
 def _cmd_analyze(args: argparse.Namespace) -> int:
@@ -196,7 +197,17 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="restarts of one process per 60 s before it is left down (default 3; 0 = --no-restart)",
     )
+    p.add_argument("--view", action="store_true", help="also start the live view in the browser")
+    p.add_argument("--view-port", type=int, default=8080, help="the view's port on 127.0.0.1 (default 8080)")
     p.set_defaults(func=_cmd_up)
+
+    p = sub.add_parser(
+        "view",
+        help="live 3-D view and plots in the browser, or replays of logs (quadsitl view --help)",
+        add_help=False,
+    )
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=lambda a: __import__("gcs_scripts.view.server", fromlist=["main"]).main(a.rest))
 
     p = sub.add_parser("demo", help="the paper's helix through the SITL for the three cascades (make demo)")
     p.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
@@ -248,6 +259,10 @@ def main(argv: list[str] | None = None) -> int:
         from gcs_scripts.analysis.analyze import main as analyze_main
 
         return analyze_main(argv[1:], prog="quadsitl analyze")
+    if argv[:1] == ["view"]:  # its own parser too (gcs_scripts/view/server.py)
+        from gcs_scripts.view.server import main as view_main
+
+        return view_main(argv[1:], prog="quadsitl view")
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

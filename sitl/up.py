@@ -26,6 +26,7 @@ from quadcommon import wire
 
 from .launcher import Launcher, LaunchError, VehicleSpec, port_notes
 from .supervise import RestartPolicy, Supervisor, write_line
+from .view_process import check_view_port, start_view
 
 __all__ = ["LaunchError", "RestartPolicy", "VehicleSpec", "endpoints_banner", "run_up"]
 POLL_S = 0.1  # the foreground loop's period (wall): reaction time to a lost process and to Ctrl-C
@@ -52,21 +53,35 @@ def _echo(name: str, line: str) -> None:
     write_line(f"[{name}] {line}")
 
 
-def run_up(specs: Sequence[VehicleSpec], policy: RestartPolicy | None = None) -> int:
-    """Foreground ``quadsitl up``: until Ctrl-C / SIGTERM, the end of ``--duration`` or nothing left."""
+def run_up(
+    specs: Sequence[VehicleSpec], policy: RestartPolicy | None = None, view_port: int | None = None
+) -> int:
+    """Foreground ``quadsitl up``: until Ctrl-C / SIGTERM, the end of ``--duration`` or nothing left.
+
+    ``view_port``: also start the live view (``--view``) on 127.0.0.1:``view_port`` once the
+    vehicles are linked (:mod:`sitl.view_process`), print its URL and stop it with the rest.
+    """
     policy = RestartPolicy() if policy is None else policy
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     launcher = Launcher(echo=_echo)
+    view_url = None
     try:
+        if view_port is not None:  # --view: its port is checked with the others, before any start
+            check_view_port(view_port)
         launcher.start_vehicles(specs)
+        if view_port is not None:
+            _, view_url = start_view(launcher, [s.instance for s in specs], view_port, specs[0].sitl_config)
     except LaunchError as exc:
         write_line(f"quadsitl: {exc}", error=True)
+        launcher.stop()
         return 2
     for note in port_notes(specs):
         write_line(f"quadsitl: {note}", error=True)
     banner = [endpoints_banner(spec, launcher.ports[spec.instance]) for spec in specs]
+    if view_url is not None:
+        banner.append(f"  live view (browser)       : {view_url}")
     write_line("\n".join([*banner, policy.describe(), "  Ctrl-C stops every process."]))
     supervisor = Supervisor(launcher, specs, policy)
     try:
