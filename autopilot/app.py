@@ -20,7 +20,7 @@ import sys
 import time
 
 from quadcommon import bus, wire
-from quadcommon.bus_records import CONTROLLER_CODEC
+from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC
 from quadcommon.schema import ConfigError
 from quadcommon.udp import PortInUse, bind_udp
 
@@ -46,7 +46,7 @@ class Autopilot:
         self.use_zenoh = zenoh
         self.socks: dict[int, object] = {}
         self.selector = selectors.DefaultSelector()
-        self.session = self.controller_pub = self.info_queryable = None
+        self.session = self.controller_pub = self.estimator_pub = self.info_queryable = None
         self._running = True
 
     def log(self, text: str) -> None:
@@ -66,6 +66,7 @@ class Autopilot:
             n = self.core.setup.instance
             self.session = bus.open_peer(self.ports.zenoh, self.core.setup.sitl.zenoh_router)
             self.controller_pub = self.session.declare_publisher(wire.zenoh_key(n, "controller"))
+            self.estimator_pub = self.session.declare_publisher(wire.zenoh_key(n, "estimator"))
             self.info_queryable = self.session.declare_queryable(
                 wire.zenoh_key(n, "autopilot/info"), zenoh.handlers.FifoChannel(16)
             )
@@ -94,9 +95,12 @@ class Autopilot:
         if len(core.controller_rows) < (1 if force else CONTROLLER_BATCH):
             return
         rows = core.take_controller_rows()
+        estimates = core.take_estimator_rows()
         if self.controller_pub is not None:
             try:
                 self.controller_pub.put(CONTROLLER_CODEC.encode(rows))
+                if estimates:
+                    self.estimator_pub.put(ESTIMATOR_CODEC.encode(estimates))
             except Exception:
                 pass  # session closing under us at shutdown
 
@@ -182,7 +186,13 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="arm at t=0 and fly the scenario's trajectory (the paper's experiment)",
     )
-    parser.add_argument("--state-source", choices=("odometry", "hil_state_quaternion"), default="odometry")
+    parser.add_argument("--state-source", choices=("odometry", "hil_state_quaternion"), default="odometry",
+                        help="where the truth comes from (with --estimator truth)")  # fmt: skip
+    parser.add_argument("--estimator", choices=("truth", "ekf"), default="truth",
+                        help="fly on the simulator's truth (the paper's assumption) or on the EKF's estimate "
+                        "of the sensors (EKF2_EN; default: truth)")  # fmt: skip
+    parser.add_argument("--estimator-profile", default="default", metavar="NAME",
+                        help="config/estimator/NAME.toml: the EKF2_* values to start from (default: PX4's)")
     parser.add_argument("--no-zenoh", action="store_true", help="do not publish controller internals")
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--params", metavar="FILE", default=None,
@@ -197,7 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         setup = AutopilotSetup.load(args.instance, args.controller, args.vehicle, args.sitl_config,
-                                    args.autostart, args.state_source, args.params)  # fmt: skip
+                                    args.autostart, args.state_source, args.params, args.estimator,
+                                    args.estimator_profile)  # fmt: skip
         signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
         setup = dataclasses.replace(setup, signing=signing)
         app = Autopilot(setup, zenoh=not args.no_zenoh, quiet=args.quiet)

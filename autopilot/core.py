@@ -35,13 +35,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from quadcommon import wire
-from quadcommon.config import SitlConfig, VehicleConfig, load_scenario, load_sitl, load_vehicle
+from quadcommon.bus_records import ESTIMATOR_FIELDS
+from quadcommon.config import SitlConfig, VehicleConfig, config_path, load_scenario, load_sitl, load_vehicle
+from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
 from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
 from .control.cascade import Cascade, StateEstimate
 from .control.config import ControllerConfig, load_controller
+from .estimation.loop import EstimatorLoop
+from .estimation.parameters import estimator_params, load_estimator_params
 from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
@@ -66,6 +70,8 @@ m = mavlink
 WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)
 HIL_HELLO_S = 0.2  # heartbeat to the simulator until frames flow: it learns our address from it
 _NAN3 = (math.nan, math.nan, math.nan)
+ESTIMATORS = ("truth", "ekf")
+IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it (no alignment)
 
 
 @dataclass(frozen=True)
@@ -81,6 +87,8 @@ class AutopilotSetup:
     params_file: str | None = None  # params.toml: loaded at start if it exists, saved on change
     default_remotes: bool = True  # the GCS/API links send to 14550+N / 14540+N before anyone talks
     signing: SigningOptions = SigningOptions()  # MAVLink 2 signing on the GCS links: key, state, wall clock
+    estimator: str = "truth"  # "truth": fly on the simulator's state; "ekf": on the EKF (EKF2_EN)
+    estimator_profile: str = "default"  # config/estimator/NAME.toml: the EKF2_* values to start from
 
     @classmethod
     def load(
@@ -92,12 +100,18 @@ class AutopilotSetup:
         autostart: str | None = None,
         state_source: str = "odometry",
         params_file: str | None = None,
+        estimator: str = "truth",
+        estimator_profile: str = "default",
     ) -> AutopilotSetup:
         """By names (config/...), as the command line gives them; ConfigError names file and key."""
         trajectory = trajectory_from_spec(load_scenario(autostart).trajectory) if autostart else None
+        if estimator not in ESTIMATORS:
+            raise ConfigError(f"estimator {estimator!r}: one of {', '.join(ESTIMATORS)}")
+        load_estimator_params(estimator_profile)  # a bad profile fails here, naming file and key
         return cls(
             load_sitl(sitl_config), load_vehicle(vehicle), load_controller(controller), instance,
-            trajectory, state_source == "odometry", params_file,
+            trajectory, state_source == "odometry", params_file, estimator=estimator,
+            estimator_profile=estimator_profile,
         )  # fmt: skip
 
 
@@ -126,8 +140,10 @@ class AutopilotCore:
         self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
         self._statustext_id = 0
 
-        self.params = default_parameters(setup.controller, sitl.rates)
+        self.params = default_parameters(setup.controller, sitl.rates, estimator=True)
         self.params.values["MAV_SYS_ID"] = float(self.system_id)
+        self.params.values["EKF2_EN"] = 1.0 if setup.estimator == "ekf" else 0.0
+        load_params_file(config_path("estimator", setup.estimator_profile), self.params)
         if setup.params_file:
             from pathlib import Path
 
@@ -146,6 +162,9 @@ class AutopilotCore:
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
         self.status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
         self.hil_parser = new_parser()
+        self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
+        self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
+        self._switch_estimator()
 
         ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
         remotes = (
@@ -270,7 +289,8 @@ class AutopilotCore:
     # -- frames ---------------------------------------------------------------------------------
     def _frame(self, data: bytes, now: float) -> bytes | None:
         try:
-            frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry)
+            frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry,
+                                 sensors=self.estimator is not None)  # fmt: skip
         except CorruptFrame:
             self.on_foreign_datagram("HIL frame with a bad checksum")
             return None  # the simulator resends a frame it gets no answer to
@@ -314,17 +334,22 @@ class AutopilotCore:
         t = frame.time_usec * 1e-6
         self.sim_time = t
         self.last_time_usec = frame.time_usec
-        est = frame.state
         commander = self.commander
-        commander.update_state(
-            VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
-        )
+        if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:
+            est = self._estimate(t, frame)
+            frame = frame._replace(state=est)  # telemetry reports what the vehicle flies on
+        else:
+            est = frame.state
+        if est is not None:
+            commander.update_state(
+                VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
+            )
         if self.frames == 0 and self.setup.autostart is not None:
             commander.start_scenario(t, self.setup.autostart)
         self.frames += 1
         guidance = commander.step(t, self.dt)
         output = None
-        if guidance.motors == Motors.FLY:
+        if guidance.motors == Motors.FLY and est is not None:
             if not self._flying:
                 self.cascade.reset()
                 self._flying = True
@@ -337,6 +362,64 @@ class AutopilotCore:
         self._controls = controls
         self._frame_done = (frame, guidance, output)
         return self.actuators.encode(frame.time_usec, controls, commander.armed)
+
+    # -- the estimator ----------------------------------------------------------------------------
+    def _switch_estimator(self) -> None:
+        """Start or stop the EKF to follow EKF2_EN (only while disarmed: never in flight)."""
+        want = self.params.values["EKF2_EN"] == 1.0
+        if want == (self.estimator is not None) or self.commander.armed:
+            return
+        if want:
+            self.estimator = EstimatorLoop(estimator_params(self.params), self.dt,
+                                           self.setup.vehicle.nominal.gravity_m_s2)  # fmt: skip
+        else:
+            self.estimator = None
+            self.commander.estimator_problem = None
+        self.status.estimator = None
+        self.log(f"flying on {'the EKF estimate' if want else 'the simulator truth'} (EKF2_EN {int(want)})")
+
+    def _estimate(self, t: float, frame) -> StateEstimate | None:
+        """This frame's EKF estimate (None until it has aligned); the commander's pre-arm verdict."""
+        self._switch_estimator()
+        loop = self.estimator
+        if loop is None:  # EKF2_EN = 1 set in flight: the switch waits for the disarm
+            return frame.state
+        samples = frame.sensors
+        if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
+            self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
+            return None
+        if self.frames == 0 and frame.state.position_m[2] > IN_AIR_START_M:
+            loop.start_in_air(t, samples, frame.state)  # the paper's experiments start in the air
+            est = frame.state
+        else:
+            est = loop.step(t, samples)
+        self.commander.estimator_problem = loop.problem()
+        self.status.estimator = loop.last_status
+        self.status.imu = loop.last_imu
+        self._record_estimator(t, est, loop)
+        return est
+
+    def _record_estimator(self, t: float, est: StateEstimate | None, loop: EstimatorLoop) -> None:
+        """One ESTIMATOR_FIELDS row per frame (NaN until the filter has an estimate)."""
+        e, st, src = loop.ekf, loop.last_status, loop.ekf.sources
+        if st is None or est is None:
+            self.estimator_rows.append((t, *(math.nan,) * (len(ESTIMATOR_FIELDS) - 1)))
+            return
+        bg, ba = e.estimate_biases()
+        self.estimator_rows.append(
+            (t, *est.position_m, *est.velocity_m_s, *est.euler_rad, *bg, *ba,
+             st.pos_horiz_accuracy_m, st.pos_vert_accuracy_m, st.vel_accuracy_m_s, st.tilt_accuracy_rad,
+             st.yaw_accuracy_rad, st.vel_ratio, st.pos_horiz_ratio, st.pos_vert_ratio, st.mag_ratio,
+             src["gps_pos"].normalized_innovation, src["gps_vel"].normalized_innovation,
+             src["baro"].normalized_innovation, src["mag"].normalized_innovation,
+             src["ev_pos"].normalized_innovation, src["ev_yaw"].normalized_innovation,
+             float(st.flags), float(st.converged))
+        )  # fmt: skip
+
+    def take_estimator_rows(self) -> list[tuple[float, ...]]:
+        """The estimator rows of every frame since the last call (ESTIMATOR_FIELDS order)."""
+        rows, self.estimator_rows = self.estimator_rows, []
+        return rows
 
     def _bookkeeping(self, frame, guidance, output) -> None:
         t = self.sim_time
@@ -357,14 +440,14 @@ class AutopilotCore:
             s.home_local = c.home
         s.reference = guidance.reference
         s.controls = self._controls
-        s.armable = not c.armed and not c.in_air()
+        s.armable = not c.armed and not c.in_air() and c.estimator_problem is None
         s.geofence_enabled = self.params["GF_MAX_HOR_DIST"] > 0.0 or self.params["GF_MAX_VER_DIST"] > 0.0
         s.geofence_breached = c.failsafes.fence_breached
         if output is not None:
             s.euler_ref = output.euler_ref_rad
             s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n
         else:
-            s.euler_ref = (0.0, 0.0, frame.state.euler_rad[2])
+            s.euler_ref = (0.0, 0.0, frame.state.euler_rad[2] if frame.state is not None else 0.0)
             s.thrust_normalised = 0.0
 
     def _record_controller(self, t: float, guidance, output) -> None:
@@ -479,6 +562,8 @@ class AutopilotCore:
                 self.cascade.retune(controller_config_from_params(self.setup.controller, self.params))
             except ValueError as exc:  # not reachable with the declared parameters; never crash
                 self.statustext(m.MAV_SEVERITY_CRITICAL, f"retune failed: {exc}")
+        if name.startswith(("EKF2_", "EST_")) and self.estimator is not None:
+            self.estimator.ekf.set_params(estimator_params(self.params))
         if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_")):
             for problem in consistency_problems(self.params):
                 self.statustext(

@@ -1,8 +1,10 @@
-"""Row layouts published on zenoh: ground truth (simulator) and controller internals (autopilot).
+"""Row layouts published on zenoh: ground truth (simulator), controller internals and the
+estimator's state and health (autopilot, ``quadsitl/<N>/estimator``, only when it flies on its EKF).
 
 Payload of one zenoh sample = a batch of rows::
 
-    header  "<4sHH": magic (b"QST1" truth, b"QSC1" controller), row count, fields per row
+    header  "<4sHH": magic (b"QST1" truth, b"QSC1" controller, b"QSE1" estimator), row count,
+            fields per row
     rows    count x fields little-endian float64, in the field order below
 
 Paper frames (z up) and SI units; ``time_s`` is simulation time. Field names are the column names
@@ -19,6 +21,7 @@ import numpy as np
 
 TRUTH_MAGIC = b"QST1"
 CONTROLLER_MAGIC = b"QSC1"
+ESTIMATOR_MAGIC = b"QSE1"
 _HEADER = struct.Struct("<4sHH")
 
 TRUTH_FIELDS = (
@@ -47,6 +50,22 @@ CONTROLLER_FIELDS = (
     "phi_raw_rad", "theta_raw_rad",  # phi_r, theta_r from eq. 29, before the command filter
     "U1_n", "tau_phi_n_m", "tau_theta_n_m", "tau_psi_n_m",  # applied, Euler coordinates
     "armed", "custom_mode",
+)  # fmt: skip
+
+
+ESTIMATOR_FIELDS = (
+    "time_s",
+    "x_est_m", "y_est_m", "z_est_m",  # the estimate the controllers fly on (paper frames)
+    "vx_est_m_s", "vy_est_m_s", "vz_est_m_s",
+    "phi_est_rad", "theta_est_rad", "psi_est_rad",
+    "gyro_bias_x_rad_s", "gyro_bias_y_rad_s", "gyro_bias_z_rad_s",
+    "accel_bias_x_m_s2", "accel_bias_y_m_s2", "accel_bias_z_m_s2",
+    "pos_horiz_accuracy_m", "pos_vert_accuracy_m", "vel_accuracy_m_s", "tilt_accuracy_rad",
+    "yaw_accuracy_rad",  # 1-sigma from the covariance
+    "vel_ratio", "pos_horiz_ratio", "pos_vert_ratio", "mag_ratio",  # PX4's test ratios (<= 1 passes)
+    # normalised innovation (innovation / sqrt(S)) of the last sample of each kind
+    "innov_gps_pos", "innov_gps_vel", "innov_baro", "innov_mag", "innov_ev_pos", "innov_ev_yaw",
+    "flags", "converged",  # ESTIMATOR_STATUS_FLAGS; 1 when fit to arm on
 )  # fmt: skip
 
 
@@ -80,3 +99,4 @@ class RowCodec:
 
 TRUTH_CODEC = RowCodec(TRUTH_MAGIC, TRUTH_FIELDS)
 CONTROLLER_CODEC = RowCodec(CONTROLLER_MAGIC, CONTROLLER_FIELDS)
+ESTIMATOR_CODEC = RowCodec(ESTIMATOR_MAGIC, ESTIMATOR_FIELDS)

@@ -213,6 +213,24 @@ class ScenarioConfig:
     gusts: str  # name or path of a gust profile; "" for none
     takeoff_altitude_m: float = field(default=2.5)
     sensors: str = field(default="ideal")  # sensor profile (config/sensors/NAME.toml)
+    estimator: str = field(default="truth")  # what the autopilot flies on: "truth" or "ekf"
+
+
+def estimator_profile_for(sensors: str) -> str:
+    """The EKF profile that goes with a sensor profile (by name; an alias followed):
+    ``config/estimator/<sensors>.toml`` when there is one (tuned for those sensors), else
+    ``default`` (PX4's EKF2 defaults). A sensor file given by path gets ``default``."""
+    if "/" in sensors or sensors.endswith(".toml"):
+        return "default"
+    for _ in range(4):  # follow aliases (sensors/default.toml: alias = "ideal")
+        try:
+            root = load_toml(config_path("sensors", sensors))
+        except ConfigError:
+            break
+        if not root.has("alias"):
+            break
+        sensors = root.string("alias")
+    return sensors if (CONFIG_DIR / "estimator" / f"{sensors}.toml").exists() else "default"
 
 
 def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
@@ -225,6 +243,7 @@ def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
     gusts = root.string("gusts", "")
     takeoff_alt = root.number("takeoff_altitude_m", 2.5, lo=0.1, hi=100.0, unit="m")
     sensors = root.string("sensors", "ideal")
+    estimator = root.choice("estimator", ("truth", "ekf"), "truth")
 
     sec = root.section("trajectory")
     kind = sec.choice("kind", TRAJECTORY_KINDS)
@@ -275,6 +294,7 @@ def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
         gusts,
         takeoff_alt,
         sensors,
+        estimator,
     )
 
 

@@ -139,7 +139,7 @@ class SimulatorCore:
         force, torque, wind = self.schedule.evaluate(t)
         sensed = self.sensors.step(t, truth)
         self.truth_row = truth_row(t, truth, force, torque, wind)
-        return self.encoder.encode(time_usec, truth, sensed.readings, wind, sensed.gps)
+        return self.encoder.encode(time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision)
 
     def is_autopilot(self, datagram: bytes) -> bool:
         """True if ``datagram`` holds a valid MAVLink message from this vehicle's autopilot

@@ -27,6 +27,8 @@ def _cmd_paper(args: argparse.Namespace) -> int:
         nominal_plant=args.nominal_plant,
         workers=args.workers,
         duration_s=args.duration,
+        estimator=args.estimator,
+        sensors=args.sensors,
     )
     print(f"\nwrote {len(result.outputs)} files to {out}/:")
     print(f"  tables:  {out / 'tables.md'}  (+ table1_final_errors.csv, table2_ise.csv, table3_iadu.csv)")
@@ -45,7 +47,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     record = run_scenario(
         load_scenario(args.scenario),
         load_controller(args.controller),
-        RunOptions(nominal_plant=args.nominal_plant, duration_s=args.duration),
+        RunOptions(nominal_plant=args.nominal_plant, duration_s=args.duration, estimator=args.estimator,
+                   sensors=args.sensors),  # fmt: skip
     )
     ind = indices(record)
     e = ind.final_error_m
@@ -56,6 +59,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         path = record.write_parquet(args.out)
         print(f"time series written to {path}")
     return 0
+
+
+def _estimation_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--estimator", choices=("truth", "ekf"), default=None,
+                   help="what the autopilot flies on: the simulator's truth (the paper's assumption) or its "
+                   "EKF over the sensors (default: the scenario's, truth for the paper's)")  # fmt: skip
+    p.add_argument("--sensors", default=None, metavar="PROFILE",
+                   help="sensor profile: ideal, mocap, gps (config/sensors; default: the scenario's, ideal)")
 
 
 def _speed(text: str) -> str:
@@ -126,6 +137,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
             scenario=args.scenario, speed=args.speed, autostart=args.autostart,
             duration_s=args.duration, sitl_config=args.sitl_config, params_file=params[k],
             signing_key_file=str(Path(args.signing_key).resolve()) if args.signing_key else None,
+            sensors=args.sensors, estimator=args.estimator,
         )
         for k in range(args.count)
     ]  # fmt: skip
@@ -197,6 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="restarts of one process per 60 s before it is left down (default 3; 0 = --no-restart)",
     )
+    _estimation_arguments(p)
     p.add_argument("--view", action="store_true", help="also start the live view in the browser")
     p.add_argument("--view-port", type=int, default=8080, help="the view's port on 127.0.0.1 (default 8080)")
     p.set_defaults(func=_cmd_up)
@@ -237,6 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="parallel runs (default 2)")
     p.add_argument("--duration", type=float, default=None,
                    help="simulated seconds per run (default: the scenario's, 40 s in the paper)")  # fmt: skip
+    _estimation_arguments(p)
     p.set_defaults(func=_cmd_paper)
 
     p = sub.add_parser("run", help="one in-process run of a scenario")
@@ -245,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nominal-plant", action="store_true")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
     p.add_argument("--out", default=None, help="write the time series to this Parquet file")
+    _estimation_arguments(p)
     p.set_defaults(func=_cmd_run)
 
     from .campaign.cli import add_campaign_parser  # issue 11: Monte Carlo campaigns

@@ -39,7 +39,14 @@ from autopilot.core import AutopilotCore, AutopilotSetup  # noqa: E402
 from autopilot.mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing  # noqa: E402
 from gcs_scripts.analysis.record import FlightRecord  # noqa: E402
 from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS  # noqa: E402
-from quadcommon.config import Rates, ScenarioConfig, VehicleConfig, load_sitl, load_vehicle  # noqa: E402
+from quadcommon.config import (  # noqa: E402
+    Rates,
+    ScenarioConfig,
+    VehicleConfig,
+    estimator_profile_for,
+    load_sitl,
+    load_vehicle,
+)
 from quadcommon.trajectories import trajectory_from_spec  # noqa: E402
 from simulator.core import SimulatorCore, SimulatorSetup, as_nominal  # noqa: E402
 from simulator.environment.gust_profile import GustProfile, load_gust_profile  # noqa: E402
@@ -144,6 +151,7 @@ class Lockstep:
         self.observers: list[Callable[[Outgoing], None]] = []  # see every datagram the vehicle sends
         self.truth_rows: list[tuple[float, ...]] = []
         self.controller_rows: list[tuple[float, ...]] = []
+        self.estimator_rows: list[tuple[float, ...]] = []  # on the EKF: one per frame (ESTIMATOR_FIELDS)
         self.record_rows = True
         self.answer_frames = True  # False: the autopilot sees no frame (it is gone: the simulator
         # flies its emergency descent)
@@ -210,8 +218,12 @@ class Lockstep:
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
+            self.estimator_rows.extend(ap.take_estimator_rows())
+            if ap.estimator_rows:
+                self.estimator_rows.extend(ap.take_estimator_rows())
         else:
             ap.controller_rows.clear()
+            ap.estimator_rows.clear()
         sim.end_frame(answer)
         self.frames += 1
 
@@ -225,6 +237,7 @@ class Lockstep:
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
+            self.estimator_rows.extend(ap.take_estimator_rows())
 
     def run_until(
         self,
@@ -254,6 +267,7 @@ class RunOptions:
     rates: Rates | None = None  # default: config/sitl.toml
     gusts: GustProfile | None = None  # default: the scenario's profile
     sensors: str | None = None  # config/sensors/NAME.toml; None: the scenario's profile
+    estimator: str | None = None  # "truth" or "ekf" (the autopilot flies on its EKF); None: the scenario's
 
 
 def paper_stack(
@@ -272,8 +286,10 @@ def paper_stack(
     gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
     sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors or scenario.sensors), gusts,
                          nominal_plant=options.nominal_plant)  # fmt: skip
+    sensors = options.sensors or scenario.sensors
     ap = AutopilotSetup(sitl, vehicle, controller, autostart=trajectory_from_spec(scenario.trajectory),
-                        default_remotes=False)  # fmt: skip
+                        default_remotes=False, estimator=options.estimator or scenario.estimator,
+                        estimator_profile=estimator_profile_for(sensors))  # fmt: skip
     return Lockstep(sim, ap)
 
 
@@ -320,9 +336,12 @@ def fly_mission_experiment(
     sitl = load_sitl() if options.rates is None else replace(load_sitl(), rates=options.rates)
     vehicle = load_vehicle(scenario.vehicle)
     gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
-    sensors = load_sensors(options.sensors or scenario.sensors)
-    sim = SimulatorSetup(sitl, scenario, vehicle, sensors, GustProfile())
-    stack = Lockstep(sim, AutopilotSetup(sitl, vehicle, controller, default_remotes=False))
+    sensor_profile = options.sensors or scenario.sensors
+    sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(sensor_profile), GustProfile())
+    ap = AutopilotSetup(sitl, vehicle, controller, default_remotes=False,
+                        estimator=options.estimator or scenario.estimator,
+                        estimator_profile=estimator_profile_for(sensor_profile))  # fmt: skip
+    stack = Lockstep(sim, ap)
     link = upload_mission.MissionLink(StackConnection(stack), 0)
     link.wait_heartbeat(5.0)
     trajectory = trajectory_from_spec(scenario.trajectory)
@@ -377,7 +396,18 @@ def flight_record(stack: Lockstep, scenario: str, controller: str, nominal: bool
         disturbance_torque_n_m=cols(truth, _T, "Ap_n_m", "Aq_n_m", "Ar_n_m"),
         event_times_s=[stack.sim.schedule.start_time_s + e for e in stack.sim.schedule.profile.event_times()],
         source="in-process (nominal plant)" if nominal else "in-process",
+        estimator=_estimator_table(stack.estimator_rows, len(truth)),
     )
+
+
+def _estimator_table(rows: list[tuple[float, ...]], frames: int) -> np.ndarray | None:
+    """The EKF's rows (ESTIMATOR_FIELDS columns), one per frame; None when flown on truth."""
+    if not rows:
+        return None
+    table = np.asarray(rows, dtype=float)
+    if len(table) != frames:
+        raise RuntimeError(f"{frames} truth rows but {len(table)} estimator rows")
+    return table
 
 
 __all__ = [

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from quadcommon import wire
-from quadcommon.config import load_sitl
+from quadcommon.config import estimator_profile_for, load_scenario, load_sitl
 
 REPO = Path(__file__).resolve().parents[1]
 MAX_LINES = 2000  # kept per child (older lines are dropped)
@@ -181,6 +181,8 @@ class VehicleSpec:
     sitl_config: str | None = None
     params_file: str | None = None  # the autopilot's params.toml (--params): loaded, saved on change
     signing_key_file: str | None = None  # MAVLink 2 signing key (--signing-key): hex key or passphrase
+    sensors: str | None = None  # sensor profile (config/sensors); None: the scenario's
+    estimator: str | None = None  # "truth" or "ekf"; None: the scenario's
     extra_simulator_args: tuple[str, ...] = ()
     extra_autopilot_args: tuple[str, ...] = ()
 
@@ -189,6 +191,8 @@ class VehicleSpec:
                "--speed", self.speed, *self.extra_simulator_args]  # fmt: skip
         if self.duration_s is not None:
             cmd += ["--duration", str(self.duration_s)]
+        if self.sensors:
+            cmd += ["--sensors", self.sensors]
         return cmd
 
     def autopilot_command(self) -> list[str]:
@@ -200,7 +204,17 @@ class VehicleSpec:
             cmd += ["--params", self.params_file]
         if self.signing_key_file:
             cmd += ["--signing-key", self.signing_key_file]
+        estimator, profile = self.estimation()
+        if estimator != "truth":
+            cmd += ["--estimator", estimator, "--estimator-profile", profile]
         return cmd
+
+    def estimation(self) -> tuple[str, str]:
+        """(estimator, EKF profile): the spec's or its scenario's; the profile named after the
+        sensor profile (config/estimator/NAME.toml), else ``default``."""
+        scenario = load_scenario(self.scenario)
+        sensors = self.sensors or scenario.sensors
+        return self.estimator or scenario.estimator, estimator_profile_for(sensors)
 
     def _common(self) -> list[str]:
         common = ["--instance", str(self.instance), "--vehicle", self.vehicle]

@@ -37,10 +37,12 @@ class PaperResults:
     outputs: list[Path]
 
 
-def run_job(args: tuple[str, str, bool, float | None]) -> tuple[str, str, FlightRecord, float]:
-    scenario, controller, nominal, duration = args
+def run_job(args: tuple) -> tuple[str, str, FlightRecord, float]:
+    """One run: (scenario, controller, nominal, duration[, estimator, sensors])."""
+    scenario, controller, nominal, duration, *estimation = args
+    estimator, sensors = (estimation + [None, None])[:2]
     start = time.perf_counter()
-    options = RunOptions(nominal_plant=nominal, duration_s=duration)
+    options = RunOptions(nominal_plant=nominal, duration_s=duration, estimator=estimator, sensors=sensors)
     record = run_scenario(load_scenario(scenario), load_controller(controller), options)
     return scenario, controller, record, time.perf_counter() - start
 
@@ -53,11 +55,17 @@ def run_paper(
     workers: int = 2,
     log=print,
     duration_s: float | None = None,
+    estimator: str | None = None,
+    sensors: str | None = None,
 ) -> PaperResults:
+    """``estimator`` / ``sensors``: "ekf" flies every run on the autopilot's EKF over the
+    ``sensors`` profile (None: each scenario's own, the paper's truth and ideal sensors)."""
     out_dir = Path(out_dir)
     (out_dir / "runs").mkdir(parents=True, exist_ok=True)
-    jobs = [(s, c, nominal_plant, duration_s) for s in scenarios for c in controllers]
+    jobs = [(s, c, nominal_plant, duration_s, estimator, sensors) for s in scenarios for c in controllers]
     plant = "nominal Section II model" if nominal_plant else "coupled plant"
+    if estimator == "ekf":
+        plant += f", on the EKF over {sensors or 'the scenario'}'s sensors"
     log(f"flying {len(jobs)} runs in-process ({plant}, {workers} worker(s)) ...")
     records: dict[tuple[str, str], FlightRecord] = {}
     started = time.perf_counter()

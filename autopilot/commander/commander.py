@@ -115,6 +115,7 @@ class Commander:
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
         self.failsafes = FailsafeMonitor(params)
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
+        self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
         self._trajectory: Trajectory | None = None  # what the trajectory phases fly
         self._trajectory_start = 0.0
         self._after_trajectory: FlightMode | None = None  # a scenario's hand-over mode (None: none)
@@ -425,13 +426,16 @@ class Commander:
         state = self.state
         if state is None or not self.position_valid:
             # Not even a forced arm: without a state there is nothing to control.
-            return self._refuse(DENIED, "arming refused: no position (no sensor frames from the simulator)")
+            why = self.estimator_problem or "no sensor frames from the simulator"
+            return self._refuse(DENIED, f"arming refused: no position ({why})")
         if not force:  # the pre-arm checks (a forced arm skips them, as in PX4)
             if self.in_air() or math.hypot(*state.velocity_m_s) > 0.2:
                 return self._refuse(DENIED, "arming refused: vehicle not landed")
             if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
                 return self._refuse(DENIED, "arming refused: OFFBOARD without a setpoint stream")
-            problem = prearm_problem(self.params, state.position_m, self.home, self.position_valid)
+            problem = self.estimator_problem or prearm_problem(
+                self.params, state.position_m, self.home, self.position_valid
+            )
             if problem:
                 return self._refuse(DENIED, f"arming refused: {problem}")
         self._armed_at = t

@@ -319,6 +319,12 @@ class ErrorStateEkf:
         self._next_mag_s = -math.inf  # fusion-rate limits (EKF2_MAG_RATE, EKF2_BARO_RATE)
         self._next_baro_s = -math.inf
 
+    def set_params(self, params: EstimatorParams) -> None:
+        """New parameters from the next sample on (a PARAM_SET of an EKF2_* parameter): the
+        process noise is derived again; the state and covariance are kept."""
+        self.params = params
+        self._q_dt = -1.0
+
     # ------------------------------------------------------------------------------------------
     # Prediction
     # ------------------------------------------------------------------------------------------
@@ -1124,6 +1130,10 @@ class ErrorStateEkf:
             self._bm,
             self._bh,
         )
+
+    def estimate_biases(self) -> tuple[Vector3, Vector3]:
+        """The gyro and accelerometer bias estimates (cheaper than :meth:`estimate`)."""
+        return self._bg, self._ba
 
     def covariance(self) -> np.ndarray:
         """A copy of the 19x19 error-state covariance (order: :data:`STATE_NAMES`)."""

@@ -8,6 +8,7 @@ HIL_STATE_QUATERNION (position quantised to 1e-7 deg ~ 1 cm, velocity to 1 cm/s)
 
 from __future__ import annotations
 
+import math
 import struct
 from typing import NamedTuple
 
@@ -20,21 +21,35 @@ from quadcommon.rigid_body import (
 )
 
 from ..control.cascade import StateEstimate
+from ..estimation.measurements import GpsFix, VisionPose
 from .codec import Encoder, mavlink
 
+Vector3 = tuple[float, float, float]
 _ID_SENSOR = mavlink.MAVLINK_MSG_ID_HIL_SENSOR
 _ID_STATE = mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION
 _ID_ODOMETRY = mavlink.MAVLINK_MSG_ID_ODOMETRY
 _ID_GPS = mavlink.MAVLINK_MSG_ID_HIL_GPS
+_ID_VISION = mavlink.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 _CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
 
+class SensorSamples(NamedTuple):
+    """What an estimator reads of one lockstep frame, in the paper's frames and SI units; None
+    where the frame holds no new sample (the simulator's rates and latencies decide)."""
+
+    angular_rate_rad_s: Vector3  # body front-left-up
+    specific_force_m_s2: Vector3  # body front-left-up, +g upward at rest
+    mag_gauss: Vector3 | None  # body front-left-up; None unless fields_updated has the mag bits
+    baro_height_m: float | None  # pressure altitude (m AMSL); None unless fields_updated says fresh
+    gps: GpsFix | None  # HIL_GPS, relative to home
+    vision: VisionPose | None  # VISION_POSITION_ESTIMATE
+
+
 class Frame(NamedTuple):
     time_usec: int
-    state: StateEstimate  # paper frames
-    sensor: object | None  # the HIL_SENSOR message, when decoded (not needed by the controllers yet)
-    gps: object | None
+    state: StateEstimate  # paper frames: the truth (ODOMETRY or HIL_STATE_QUATERNION)
+    sensors: SensorSamples | None = None  # decoded when asked (decode_frame(..., sensors=True))
 
 
 _ODOMETRY = FastDecoder(mavlink.MAVLink_odometry_message)
@@ -49,35 +64,88 @@ class CorruptFrame(ValueError):
 
 
 def decode_frame(
-    datagram: bytes, parser, home: tuple[float, float, float], use_odometry: bool = True
+    datagram: bytes,
+    parser,
+    home: tuple[float, float, float],
+    use_odometry: bool = True,
+    sensors: bool = False,
 ) -> Frame | None:
     """The lockstep frame in one datagram, or None if it holds no state (e.g. a heartbeat).
 
     Decodes (CRC checked) only the state message it needs: ODOMETRY (the fast decoder of
     :mod:`quadcommon.mavlink_fast`, it is on the lockstep critical path), or HIL_STATE_QUATERNION
-    (pymavlink) when asked to or when there is no ODOMETRY. CorruptFrame if that message is bad.
+    (pymavlink) when asked to or when there is no ODOMETRY; with ``sensors`` also what an
+    estimator reads (:class:`SensorSamples`). CorruptFrame if one of those messages is bad.
     """
     try:
-        return _decode_frame(datagram, parser, home, use_odometry)
+        return _decode_frame(datagram, parser, home, use_odometry, sensors)
     except (DecodeError, mavlink.MAVError, struct.error) as exc:
         raise CorruptFrame(str(exc)) from exc
 
 
-def _decode_frame(datagram: bytes, parser, home, use_odometry: bool) -> Frame | None:
+def _decode_frame(datagram: bytes, parser, home, use_odometry: bool, sensors: bool) -> Frame | None:
     parts = dict(split_frames(datagram))
     raw = parts.get(_ID_ODOMETRY)
+    samples = _sensor_samples(parts, home) if sensors else None
     if raw is not None and (use_odometry or _ID_STATE not in parts):
         payload = _ODOMETRY.payload(raw)
         t, x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r = _ODOMETRY_STATE.unpack_from(payload)
         state = state_from_odometry_fields(
             (qw, qx, qy, qz), (x, y, z), (vx, vy, vz), (p, q, r), payload[_ODOMETRY_CHILD_FRAME]
         )
-        return Frame(t, state, None, None)
+        return Frame(t, state, samples)
     raw = parts.get(_ID_STATE)
     if raw is None:
         return None
     msg = parser.decode(bytearray(raw))
-    return Frame(msg.time_usec, state_from_hil_state(msg, home), None, None)
+    return Frame(msg.time_usec, state_from_hil_state(msg, home), samples)
+
+
+_SENSOR = FastDecoder(mavlink.MAVLink_hil_sensor_message)
+_GPS = FastDecoder(mavlink.MAVLink_hil_gps_message)
+_VISION = FastDecoder(mavlink.MAVLink_vision_position_estimate_message)
+_MAG_BITS = 0x1C0  # HIL_SENSOR fields_updated: x/y/z magnetometer
+_BARO_ALT_BIT = 0x800  # HIL_SENSOR fields_updated: pressure altitude
+
+
+def _fields(decoder: FastDecoder, raw: bytes, *names: str) -> list:
+    values = decoder.unpack(raw)
+    return [values[decoder.slices[name]] for name in names]
+
+
+def _sensor_samples(parts: dict, home) -> SensorSamples | None:
+    raw = parts.get(_ID_SENSOR)
+    if raw is None:
+        return None
+    ax, ay, az, gx, gy, gz, mx, my, mz, alt, updated = _fields(
+        _SENSOR, raw, "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag",
+        "pressure_alt", "fields_updated",
+    )  # fmt: skip
+    to_paper = frames.vector_from_ned
+    mag = to_paper((mx, my, mz)) if updated & _MAG_BITS == _MAG_BITS else None
+    baro = alt if updated & _BARO_ALT_BIT else None
+    gps = vision = None
+    raw = parts.get(_ID_GPS)
+    if raw is not None:
+        fix, lat, lon, alt_mm, eph, epv, vn, ve, vd, sats = _fields(
+            _GPS, raw, "fix_type", "lat", "lon", "alt", "eph", "epv", "vn", "ve", "vd", "satellites_visible"
+        )
+        ned = frames.geodetic_to_ned(lat * 1e-7, lon * 1e-7, alt_mm * 1e-3, home)
+        unknown = 65535
+        gps = GpsFix(
+            0.0, to_paper(ned), to_paper((vn * 0.01, ve * 0.01, vd * 0.01)),
+            eph * 0.01 if eph != unknown else 99.0, epv * 0.01 if epv != unknown else 99.0,
+            0.0, fix, sats,
+        )  # fmt: skip
+    raw = parts.get(_ID_VISION)
+    if raw is not None:
+        n, e, d, yaw, cov = _fields(_VISION, raw, "x", "y", "z", "yaw", "covariance")
+        pos_var, yaw_var = cov[0], cov[20]
+        vision = VisionPose(
+            0.0, to_paper((n, e, d)), frames.yaw_from_ned(yaw),
+            math.sqrt(pos_var) if pos_var > 0.0 else 0.0, math.sqrt(yaw_var) if yaw_var > 0.0 else 0.0,
+        )  # fmt: skip
+    return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision)
 
 
 def _attitude(q_ned, rates_frd):

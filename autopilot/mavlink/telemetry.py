@@ -17,6 +17,8 @@ from quadcommon.trajectories import Reference
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
 from ..control.cascade import StateEstimate
+from ..estimation.measurements import ImuSample
+from ..estimation.status import EstimatorStatus
 from .codec import mavlink
 
 m = mavlink
@@ -55,6 +57,9 @@ DEFAULT_RATES_HZ = {
     m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
     m.MAVLINK_MSG_ID_VFR_HUD: 4.0,
     m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.0,
+    m.MAVLINK_MSG_ID_ESTIMATOR_STATUS: 1.0,  # sent only when flying on the EKF
+    m.MAVLINK_MSG_ID_ODOMETRY: 0.0,  # on request (SET_MESSAGE_INTERVAL / REQUEST_MESSAGE)
+    m.MAVLINK_MSG_ID_HIGHRES_IMU: 0.0,  # on request, and only on the EKF
 }
 
 
@@ -79,6 +84,8 @@ class VehicleStatus:
     geofence_enabled: bool = False
     geofence_breached: bool = False
     flight_sw_version: int = 0x01000000
+    estimator: EstimatorStatus | None = None  # flying on the EKF: its last status (else None)
+    imu: ImuSample | None = None  # the EKF's last IMU sample (HIGHRES_IMU)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -99,6 +106,11 @@ def sys_status(s: VehicleStatus):
     health = SENSORS_PRESENT if s.armable or s.armed else SENSORS_PRESENT & ~m.MAV_SYS_STATUS_PREARM_CHECK
     if s.state is None:
         health &= ~(m.MAV_SYS_STATUS_SENSOR_GPS | m.MAV_SYS_STATUS_AHRS)
+    est = s.estimator
+    if est is not None and not est.converged:  # PX4: the AHRS bit follows the estimator's health
+        health &= ~(m.MAV_SYS_STATUS_AHRS | m.MAV_SYS_STATUS_PREARM_CHECK)
+        if est.dead_reckoning or est.gps_glitch:
+            health &= ~m.MAV_SYS_STATUS_SENSOR_GPS
     present = enabled = SENSORS_PRESENT
     if s.geofence_enabled:
         present |= m.MAV_SYS_STATUS_GEOFENCE
@@ -264,6 +276,48 @@ def vfr_hud(s: VehicleStatus):
     return m.MAVLink_vfr_hud_message(speed, speed, heading, throttle, s.state.position_m[2], -vel[2])
 
 
+def estimator_status(s: VehicleStatus):
+    """ESTIMATOR_STATUS of the EKF (PX4's fields: flags, test ratios, accuracies); None on truth."""
+    e = s.estimator
+    if e is None:
+        return None
+    f = _finite_or
+    return m.MAVLink_estimator_status_message(
+        s.time_usec, e.flags, f(e.vel_ratio), f(e.pos_horiz_ratio), f(e.pos_vert_ratio), f(e.mag_ratio),
+        0.0, 0.0, f(e.pos_horiz_accuracy_m, 1e3), f(e.pos_vert_accuracy_m, 1e3),
+    )  # fmt: skip
+
+
+def _finite_or(value: float, fallback: float = 0.0) -> float:
+    return value if math.isfinite(value) else fallback
+
+
+def odometry(s: VehicleStatus):
+    """The estimate as ODOMETRY (local NED, world-frame twist, FRD rates), on request."""
+    pos, vel, _ = _ned_state(s)
+    q = frames.quaternion_to_ned(quaternion_from_euler(*s.state.euler_rad))
+    p, qq, r = _body_rates_frd(s.state)
+    unknown = [math.nan] + [0.0] * 20
+    estimator = m.MAV_ESTIMATOR_TYPE_NAIVE if s.estimator is None else m.MAV_ESTIMATOR_TYPE_AUTOPILOT
+    return m.MAVLink_odometry_message(
+        s.time_usec, m.MAV_FRAME_LOCAL_NED, m.MAV_FRAME_LOCAL_NED, *pos, list(q), *vel, p, qq, r,
+        unknown, unknown, 0, estimator, 100,
+    )  # fmt: skip
+
+
+def highres_imu(s: VehicleStatus):
+    """The EKF's last IMU sample (FRD), on request; None on truth (no IMU is read then)."""
+    imu = s.imu
+    if imu is None:
+        return None
+    ax, ay, az = frames.vector_to_ned(imu.specific_force_m_s2)
+    gx, gy, gz = frames.vector_to_ned(imu.angular_rate_rad_s)
+    nan = math.nan
+    return m.MAVLink_highres_imu_message(  # specific force FRD: -g on z at rest, as HIL_SENSOR
+        s.time_usec, ax, ay, az, gx, gy, gz, nan, nan, nan, nan, nan, nan, nan, 0b111111, 0
+    )
+
+
 BUILDERS = {
     m.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
     m.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
@@ -279,6 +333,9 @@ BUILDERS = {
     m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: servo_output_raw,
     m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: actuator_output_status,
     m.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+    m.MAVLINK_MSG_ID_ESTIMATOR_STATUS: estimator_status,
+    m.MAVLINK_MSG_ID_ODOMETRY: odometry,
+    m.MAVLINK_MSG_ID_HIGHRES_IMU: highres_imu,
 }
 NEEDS_STATE = set(BUILDERS) - {
     m.MAVLINK_MSG_ID_HEARTBEAT,
@@ -287,6 +344,8 @@ NEEDS_STATE = set(BUILDERS) - {
     m.MAVLINK_MSG_ID_HOME_POSITION,
     m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,
     m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS,
+    m.MAVLINK_MSG_ID_ESTIMATOR_STATUS,
+    m.MAVLINK_MSG_ID_HIGHRES_IMU,
 }
 
 

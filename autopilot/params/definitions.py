@@ -170,15 +170,27 @@ def rate_params(rates: Rates) -> tuple[ParamSpec, ...]:
     )  # fmt: skip
 
 
+ESTIMATOR_SWITCH = ParamSpec(
+    "EKF2_EN", 0, 0, 1, kind=INT32,
+    description="1: fly on the EKF's estimate of HIL_SENSOR/HIL_GPS/vision; 0: on the simulator's "
+    "truth (the paper's assumption). A change takes effect while disarmed",
+)  # fmt: skip
+
+
 def default_parameters(
-    controller: ControllerConfig | None = None, rates: Rates | None = None
+    controller: ControllerConfig | None = None, rates: Rates | None = None, estimator: bool = False
 ) -> ParameterStore:
-    """Commander and failsafe parameters, plus the gains of ``controller`` and ``rates`` if given."""
+    """Commander and failsafe parameters, plus the gains of ``controller`` and ``rates`` if given,
+    and the estimator's (EKF2_EN and the EKF2_* of :mod:`autopilot.estimation.parameters`)."""
     specs = [*COMMANDER_PARAMS, *FAILSAFE_PARAMS]
     if controller is not None:
         specs += controller_params(controller)
     if rates is not None:
         specs += rate_params(rates)
+    if estimator:
+        from ..estimation.parameters import ESTIMATOR_PARAMS
+
+        specs += [ESTIMATOR_SWITCH, *ESTIMATOR_PARAMS]
     return ParameterStore(specs)
 
 

@@ -28,6 +28,8 @@ class FlightRecord:
     disturbance_torque_n_m: np.ndarray | None = None  # (N, 3) on Euler coordinates
     event_times_s: list[float] = field(default_factory=list)
     source: str = "in-process"
+    # Flown on the EKF: its rows (N, len(ESTIMATOR_FIELDS)), NaN before it had an estimate.
+    estimator: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.time_s)

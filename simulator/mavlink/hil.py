@@ -44,7 +44,7 @@ from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
 from ..dynamics.plant import TruthState
-from ..sensors.models import GpsReading, SensorReadings
+from ..sensors.models import GpsReading, SensorReadings, VisionReading
 
 Vector3 = tuple[float, float, float]
 
@@ -83,6 +83,10 @@ class HilFrameEncoder:
         self._odometry = FastEncoder(mavlink.MAVLink_odometry_message, *ids, odometry)
         gps = mavlink.MAVLink_hil_gps_message(0, GPS_FIX_3D, 0, 0, 0, 100, 100, 0, 0, 0, 0, 0, 10, 0, 0)
         self._gps = FastEncoder(mavlink.MAVLink_hil_gps_message, *ids, gps)
+        vision = mavlink.MAVLink_vision_position_estimate_message(0, *(0.0,) * 6, [0.0] * 21, 0)
+        self._vision = FastEncoder(mavlink.MAVLink_vision_position_estimate_message, *ids, vision)
+        self._v = _slots(self._vision, "usec", "x", "y", "z", "yaw")
+        self._v_cov = self._vision.slices["covariance"]
         # Where the per-frame fields sit in each flat list.
         self._s = _slots(self._sensor, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro",
                          "xmag", "ymag", "zmag", "abs_pressure", "pressure_alt", "temperature")  # fmt: skip
@@ -110,8 +114,10 @@ class HilFrameEncoder:
         readings: SensorReadings,
         wind_world_m_s: Vector3 = (0.0, 0.0, 0.0),
         gps: GpsReading | None = None,
+        vision: VisionReading | None = None,
     ) -> bytes:
-        """One datagram: HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``)."""
+        """One datagram: HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``,
+        + VISION_POSITION_ESTIMATE when ``vision``)."""
         to_ned = frames.vector_to_ned
         q_ned = frames.quaternion_to_ned(truth.quaternion)
         rates_frd = to_ned(truth.body_rates_rad_s)
@@ -162,7 +168,23 @@ class HilFrameEncoder:
         if gps is not None:
             self._fill_gps(time_usec, gps)
             datagram += self._frame(self._gps)
+        if vision is not None:
+            self._fill_vision(time_usec, vision)
+            datagram += self._frame(self._vision)
         return datagram
+
+    def _fill_vision(self, time_usec: int, reading: VisionReading) -> None:
+        """Position (NED) and yaw of the motion capture; its reported variances in the
+        covariance's upper triangle (x, y, z, roll, pitch, yaw: entries 0, 6, 11, 15, 18, 20;
+        roll and pitch are not measured: NaN, as MAVLink has it for unknown)."""
+        v, i = self._vision.values, self._v
+        n, e, d = frames.vector_to_ned(reading.position_m)
+        v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]] = time_usec, n, e, d, frames.yaw_to_ned(reading.yaw_rad)
+        cov = [0.0] * 21
+        cov[0] = cov[6] = cov[11] = reading.position_std_m**2
+        cov[15] = cov[18] = math.nan
+        cov[20] = reading.yaw_std_rad**2
+        v[self._v_cov] = cov
 
     def _fill_gps(self, time_usec: int, reading: GpsReading) -> None:
         p_ned = frames.vector_to_ned(reading.position_m)

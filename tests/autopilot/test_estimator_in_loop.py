@@ -1,0 +1,125 @@
+"""The autopilot flying on its own estimate (EKF2_EN = 1): the whole stack in-process, simulation
+time, seeded sensors. Arming waits for the filter and says why; telemetry reports the estimate;
+ESTIMATOR_STATUS and the SYS_STATUS health bits follow it; EKF2_EN switches only on the ground."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as m
+
+from autopilot.control.config import load_controller
+from autopilot.core import AutopilotSetup
+from simulator.core import SimulatorSetup
+from simulator.sensors import SensorFault
+from sitl.inprocess import Lockstep
+
+from ..sitl.test_params_failsafes import INT32, param_set
+from ..stack import Gcs, make_stack
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def ekf_stack(sensors: str) -> Lockstep:
+    sim = SimulatorSetup.load(scenario="hover", sensors=sensors)
+    ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller("intbs_nlhinf"), default_remotes=False,
+                        estimator="ekf", estimator_profile=sensors)  # fmt: skip
+    return Lockstep(sim, ap)
+
+
+def truth_position(stack: Lockstep) -> tuple[float, float, float]:
+    return stack.sim.plant.truth().position_m
+
+
+def arm(gcs: Gcs) -> int:
+    return gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result
+
+
+@pytest.mark.parametrize("sensors", ["gps", "mocap"])
+def test_arming_waits_for_the_filter_then_the_vehicle_flies_on_its_estimate(sensors):
+    stack = ekf_stack(sensors)
+    gcs = Gcs(stack)
+    gcs.wait(lambda g: "SYS_STATUS" in g.last, what="SYS_STATUS")
+    assert arm(gcs) == m.MAV_RESULT_DENIED  # aligning: no estimate yet, or not converged
+    gcs.wait(lambda g: "aligning" in "".join(g.statustext), sim_timeout=0.5, what="the reason")
+    assert "arming refused: no position (estimator not ready: aligning" in "".join(gcs.statustext)
+    assert not gcs.last["SYS_STATUS"].onboard_control_sensors_health & m.MAV_SYS_STATUS_AHRS
+    gcs.wait(lambda g: stack.autopilot.commander.estimator_problem is None, sim_timeout=20.0,
+             what="the filter converged")  # fmt: skip
+    gcs.last.pop("ESTIMATOR_STATUS", None)
+    gcs.wait(lambda g: "ESTIMATOR_STATUS" in g.last, sim_timeout=2.0, what="ESTIMATOR_STATUS")
+    status = gcs.last["ESTIMATOR_STATUS"]
+    assert status.flags & m.ESTIMATOR_ATTITUDE and status.flags & m.ESTIMATOR_POS_HORIZ_REL
+    gcs.last.pop("SYS_STATUS")
+    gcs.wait(lambda g: "SYS_STATUS" in g.last, what="SYS_STATUS")
+    assert gcs.last["SYS_STATUS"].onboard_control_sensors_health & m.MAV_SYS_STATUS_AHRS
+    assert arm(gcs) == m.MAV_RESULT_ACCEPTED
+    nan = math.nan
+    assert gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 488.0 + 2.0).result == 0
+    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last and g.position()[2] > 1.9, sim_timeout=20.0,
+             what="takeoff")  # fmt: skip
+    stack.run_for(3.0)
+    while gcs.conn.station.inbox:  # the telemetry of those 3 s, up to the last frame
+        gcs.poll()
+    reported = np.array(gcs.position())
+    truth = np.array(truth_position(stack))
+    estimate = np.array(stack.autopilot.commander.state.position_m)
+    assert np.allclose(reported, estimate, atol=0.02)  # telemetry is the estimate, not the truth
+    bound = 0.01 if sensors == "mocap" else 0.5
+    assert np.linalg.norm(truth - estimate) < bound
+    assert abs(truth[2] - 2.0) < bound + 0.05  # flown on the estimate, the truth holds the height
+
+
+def test_an_in_air_start_flies_the_paper_on_the_filter_from_the_first_frame():
+    sim = SimulatorSetup.load(scenario="helix", sensors="mocap")
+    ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller("intbs_nlhinf"), default_remotes=False,
+                        estimator="ekf", estimator_profile="mocap")  # fmt: skip
+    from quadcommon.config import load_scenario
+    from quadcommon.trajectories import trajectory_from_spec
+
+    ap = replace(ap, autostart=trajectory_from_spec(load_scenario("helix").trajectory))
+    stack = Lockstep(sim, ap)
+    stack.run_for(5.0)
+    rows = np.asarray(stack.estimator_rows)
+    truth = np.asarray(stack.truth_rows)
+    assert len(rows) == len(truth) and not np.isnan(rows[:, 1:4]).any()  # an estimate at every frame
+    error = rows[:, 1:4] - truth[:, 1:4]
+    assert np.abs(error).max() < 0.01
+
+
+def test_ekf2_en_takes_effect_only_while_disarmed():
+    stack = make_stack(sensors="gps")
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    ap = stack.autopilot
+    assert ap.estimator is None  # EKF2_EN = 0: the truth, the paper's assumption
+    assert arm(gcs) == m.MAV_RESULT_ACCEPTED
+    assert param_set(gcs, "EKF2_EN", 1, INT32).param_value != 0
+    stack.run_for(1.0)
+    assert ap.estimator is None  # armed: no switch
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 0).result == m.MAV_RESULT_ACCEPTED
+    stack.run_for(0.1)
+    assert ap.estimator is not None  # disarmed: the EKF starts (and must align before arming)
+    assert arm(gcs) == m.MAV_RESULT_DENIED
+
+
+def test_a_gps_glitch_is_rejected_in_flight_and_the_vehicle_holds():
+    stack = ekf_stack("gps")
+    gcs = Gcs(stack)
+    gcs.wait(lambda g: stack.autopilot.commander.estimator_problem is None, sim_timeout=20.0,
+             what="the filter converged")  # fmt: skip
+    assert arm(gcs) == m.MAV_RESULT_ACCEPTED
+    nan = math.nan
+    assert gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 488.0 + 2.0).result == 0
+    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last and g.position()[2] > 1.9, sim_timeout=20.0,
+             what="takeoff")  # fmt: skip
+    stack.run_for(2.0)
+    before = np.array(truth_position(stack))
+    stack.sim.sensors.add_fault(SensorFault("gps_glitch", stack.sim.t, 2.0, (10.0, 0.0, 0.0)))
+    stack.run_for(4.0)
+    after = np.array(truth_position(stack))
+    assert np.linalg.norm(after - before) < 0.5  # a 10 m jump for 2 s does not move the vehicle
+    assert stack.autopilot.estimator.ekf.sources["gps_pos"].rejected >= 10
