@@ -46,7 +46,7 @@ lint: $(STAMP)
 
 test: $(STAMP) $(VIEW_VENDOR) browser
 	$(BIN)/ruff check .
-	$(BIN)/pytest -q
+	$(BIN)/python -m tests.suite
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/inprocess.py

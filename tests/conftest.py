@@ -1,0 +1,49 @@
+"""Suite-wide wiring: the ``processes`` marker.
+
+The tests that start processes or bind the SITL's fixed ports (:data:`PROCESS_MODULES`) get the
+marker ``processes``. ``make test`` runs the suite as two pytest sessions side by side
+(:mod:`tests.suite`): ``-m processes`` (these, one after another: their instances were chosen not
+to collide with each other one at a time, and a lockstep pair of processes wants a core of its
+own) and ``-m "not processes"`` (in-process, in simulation time: the large majority). A plain
+``pytest`` runs everything in order.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+PROCESS_MODULES = {
+    "tests/compat/",  # MAVSDK, MAVProxy, several vehicles, signing with real clients
+    "tests/view/test_browser_sitl.py",
+    "tests/view/test_live_sitl.py",
+    "tests/view/test_server.py",
+    "tests/gcs_scripts/test_e2e_sitl.py",
+    "tests/gcs_scripts/test_record_process.py",
+    "tests/gcs_scripts/test_upload_gusts.py",
+    "tests/gcs_scripts/test_upload_gusts_zenoh.py",
+    "tests/gcs_scripts/test_upload_mission.py",
+    "tests/simulator/test_sim_cli.py",
+    "tests/simulator/test_sim_process.py",
+    "tests/sitl/test_hostile_udp.py",
+    "tests/sitl/test_launcher_ports.py",
+    "tests/sitl/test_paper_through_sitl.py",
+    "tests/sitl/test_params_failsafes.py",
+    "tests/sitl/test_signing_cli.py",
+    "tests/sitl/test_sitl_vs_inprocess.py",
+    "tests/sitl/test_up_cli.py",
+    "tests/sitl/test_up_process_loss.py",
+    "tests/campaign/test_dask.py",
+}
+
+
+def _uses_processes(nodeid: str) -> bool:
+    path = nodeid.split("::", 1)[0]
+    return any(path == entry or (entry.endswith("/") and path.startswith(entry)) for entry in PROCESS_MODULES)
+
+
+@pytest.hookimpl(tryfirst=True)  # before -m selects on the marker
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        if _uses_processes(item.nodeid):
+            item.add_marker(pytest.mark.processes)
+

@@ -1,0 +1,59 @@
+"""``make test``: the suite as two pytest sessions side by side, one per core.
+
+* ``-m processes``: the tests that start processes or bind the SITL's fixed ports, one after
+  another (see ``tests/conftest.py``);
+* ``-m "not processes"``: everything else, in-process and in simulation time.
+
+Each session's output goes to ``out/tests/<half>.log`` and is printed when it ends; the exit code
+is non-zero when either half fails (or is interrupted), and the wall time of each is reported.
+Extra arguments go to both sessions (``python -m tests.suite -x -k fuzz``).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HALVES = (("in-process", "not processes"), ("processes", "processes"))
+LOGS = Path("out/tests")
+
+
+def main(argv: list[str]) -> int:
+    LOGS.mkdir(parents=True, exist_ok=True)
+    started = time.monotonic()
+    runs = []
+    for name, selection in HALVES:
+        log = (LOGS / f"{name}.log").open("w")
+        cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", selection, *argv]
+        runs.append((name, log, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), cmd))
+    codes = {}
+    try:
+        pending = list(runs)
+        while pending:
+            for run in list(pending):
+                name, log, process, cmd = run
+                if process.poll() is None:
+                    continue
+                pending.remove(run)
+                log.close()
+                codes[name] = process.returncode
+                elapsed = time.monotonic() - started
+                args = " ".join(cmd[3:])
+                print(f"==== {name} tests ({args}): exit {process.returncode} after {elapsed:.0f} s")
+                print((LOGS / f"{name}.log").read_text(), flush=True)
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        for _, _, process, _ in runs:
+            process.terminate()
+        return 130
+    total = time.monotonic() - started
+    # pytest exit 5 = nothing collected (a selection that matches nothing): not a failure
+    failed = {name: code for name, code in codes.items() if code not in (0, 5)}
+    print(f"==== suite: {'FAILED ' + ', '.join(failed) if failed else 'passed'} in {total:.0f} s (wall)")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
