@@ -132,7 +132,7 @@ def bench_jax(state0, consts, batch, steps) -> tuple[float, float] | None:
 def _numba_loops():
     from numba import njit
 
-    from sitl.campaign.kernels import U_SIZE, U_TAU, U_THRUST, U_TORQUE, rk4_step
+    from simulator.dynamics.compiled import U_SIZE, U_TAU, U_THRUST, U_TORQUE, rk4_step
 
     @njit(cache=True)
     def per_run(state0, P, u, steps, runs):

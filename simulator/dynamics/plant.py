@@ -33,6 +33,7 @@ The per-step path uses plain floats (15x cheaper than small-array numpy here).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 from quadcommon.config import VehicleConfig
@@ -109,6 +110,7 @@ class Plant:
         self._derivative = self._make_derivative()
         self.state: list[float] = []
         self.reset(ZERO3, ZERO3)
+        self._compiled = _compiled_step(self)  # None: numba absent (or QUADSITL_PURE_PYTHON=1)
 
     # -- state ------------------------------------------------------------------------------------
     def reset(
@@ -269,7 +271,11 @@ class Plant:
         return derivative
 
     def step(self) -> None:
-        """Advance one physics step (classical RK4, inputs held)."""
+        """Advance one physics step (classical RK4, inputs held): compiled when numba is there
+        (:mod:`.compiled`, the same operations in the same order: bit for bit), else here."""
+        if self._compiled is not None:
+            self._compiled.step(self)
+            return
         f = self._derivative
         s = self.state
         h = self.dt
@@ -408,6 +414,18 @@ def make_plant(vehicle: VehicleConfig, physics_dt_s: float):
 
         return NominalPlant(vehicle, physics_dt_s)
     return Plant(vehicle, physics_dt_s)
+
+
+def _compiled_step(plant: Plant):
+    """The numba step for ``plant`` (:mod:`.compiled`), or None: numba is not installed (the
+    ``campaign`` extra brings it) or ``QUADSITL_PURE_PYTHON=1`` asks for the Python reference."""
+    if os.environ.get("QUADSITL_PURE_PYTHON") == "1":
+        return None
+    try:
+        from .compiled import CompiledStep
+    except ImportError:
+        return None
+    return CompiledStep(plant)
 
 
 # -- small helpers (off the RK4 path) -------------------------------------------------------------

@@ -20,6 +20,7 @@ from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import Rates, TrajectorySpec, VehicleConfig
 from quadcommon.trajectories import trajectory_from_spec
+from simulator.dynamics.compiled import plant_array
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
 from simulator.environment.gust_profile import CHANNELS, GustProfile
@@ -76,26 +77,6 @@ class Flight:
 # -------------------------------------------------------------------------------------------------
 # Packing
 # -------------------------------------------------------------------------------------------------
-def plant_array(plant: Plant) -> np.ndarray:
-    """The true vehicle's constants as the kernels read them (layout ``P_*``)."""
-    P = np.zeros(lay.P_SIZE)
-    P[lay.P_MASS] = plant.mass
-    P[lay.P_GRAVITY] = plant.gravity
-    P[lay.P_J : lay.P_J + 9] = np.array(plant.inertia, dtype=float).ravel()
-    P[lay.P_K : lay.P_K + 9] = np.array(plant.inertia_inv, dtype=float).ravel()
-    P[lay.P_COM : lay.P_COM + 3] = plant.com_offset
-    P[lay.P_DRAG : lay.P_DRAG + 3] = plant.drag
-    P[lay.P_B], P[lay.P_D], P[lay.P_ARM] = plant.b, plant.d, plant.arm
-    P[lay.P_JR], P[lay.P_TAU] = plant.rotor_inertia, plant.rotor_tau
-    P[lay.P_WMIN], P[lay.P_WMAX] = plant.speed_min, plant.speed_max
-    P[lay.P_THRUST_MAX] = plant.thrust_max
-    P[lay.P_TORQUE_MAX : lay.P_TORQUE_MAX + 3] = plant.torque_max
-    P[lay.P_ROTOR_MODE] = 1.0 if plant.rotor_mode else 0.0
-    P[lay.P_GROUND] = 1.0 if plant.ground_contact else 0.0
-    P[lay.P_HAS_DRAG] = 1.0 if tuple(plant.drag) != (0.0, 0.0, 0.0) else 0.0
-    return P
-
-
 def initial_state(
     plant_vehicle: VehicleConfig,
     dt_physics: float,

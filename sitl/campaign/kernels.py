@@ -12,7 +12,9 @@ the specification; the tests in ``tests/campaign/`` prove the agreement run for 
 
 * plant: :class:`simulator.dynamics.plant.Plant` (``_make_derivative``, ``step``,
   ``_resolve_ground_contact``, ``kinematics``): the coupled rigid body about G with forces at O
-  (CONTROL.md, "the more accurate plant"), RK4, quaternion renormalisation, ground contact;
+  (CONTROL.md, "the more accurate plant"), RK4, quaternion renormalisation, ground contact; its
+  compiled form lives with the plant (:mod:`simulator.dynamics.compiled`, which the simulator
+  itself runs) and is imported here;
 * disturbances: :class:`simulator.environment.gust_profile.DisturbanceSchedule.evaluate` (steps,
   ramps, 1-cos gusts, Dryden wind precomputed by the project's own generator);
 * cascade: :class:`autopilot.control.cascade.Cascade.step`: translational laws (eqs. 24-29 and
@@ -39,32 +41,65 @@ import math
 import numpy as np
 from numba import njit
 
+from simulator.dynamics.compiled import (  # the plant, compiled (see the cache note below)
+    P_GROUND,
+    P_ROTOR_MODE,
+    P_THRUST_MAX,
+    P_TORQUE_MAX,
+    P_WMAX,
+    P_WMIN,
+    U_FORCE,
+    U_ROTOR,
+    U_SIZE,
+    U_TAU,
+    U_THRUST,
+    U_TORQUE,
+    U_WIND,
+    _max,
+    _min,
+    euler_from_rotation,
+    ground_contact,
+    rk4_step,
+    rotation_from_quaternion,
+    truth_of_O,
+)  # fmt: skip
+
+
+def _forget_kernels_compiled_against_another_plant() -> None:
+    """numba keys a cached function on its own file only, but these kernels have the plant's
+    functions and constants (:mod:`simulator.dynamics.compiled`) compiled into them: when that
+    file changes, this file's cache entries are deleted before anything here compiles."""
+    import hashlib
+    import os
+    from pathlib import Path
+
+    import simulator.dynamics.compiled as plant_kernels
+
+    stamp = hashlib.sha256(Path(plant_kernels.__file__).read_bytes()).hexdigest()
+    here = Path(__file__).resolve()
+    caches = [here.parent / "__pycache__"]
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        caches.append(Path(os.environ["NUMBA_CACHE_DIR"]) / here.parent.relative_to(here.anchor))
+    for cache in caches:
+        marker = cache / f"{here.stem}.plant-sha256"
+        try:
+            if marker.exists() and marker.read_text() == stamp:
+                continue
+            for entry in [*cache.glob(f"{here.stem}.*.nbi"), *cache.glob(f"{here.stem}.*.nbc")]:
+                entry.unlink(missing_ok=True)
+            cache.mkdir(parents=True, exist_ok=True)
+            marker.write_text(stamp)
+        except OSError:
+            pass  # a read-only install: numba does not cache there either
+
+
+_forget_kernels_compiled_against_another_plant()
+
 # =================================================================================================
 # Where each number sits in the flat float64 arrays the kernels take (numba wants arrays). Kept in
 # this file on purpose: numba's cache is keyed on this file only, so a changed index here also
 # invalidates the compiled kernels (constants imported from another module would not).
 # =================================================================================================
-# -- plant (the true vehicle; read off a simulator.dynamics.plant.Plant instance) ------------------
-P_MASS = 0
-P_GRAVITY = 1
-P_J = 2  # 9 entries, inertia tensor about G, row-major
-P_K = 11  # 9 entries, its inverse (Plant.inertia_inv)
-P_COM = 20  # 3: r_G, CoM from O in the body frame
-P_DRAG = 23  # 3: linear drag per world axis
-P_B = 26  # thrust coefficient b
-P_D = 27  # reaction-torque coefficient d
-P_ARM = 28
-P_JR = 29  # rotor inertia
-P_TAU = 30  # rotor time constant
-P_WMIN = 31  # rotor speed limits
-P_WMAX = 32
-P_THRUST_MAX = 33
-P_TORQUE_MAX = 34  # 3
-P_ROTOR_MODE = 37  # 1.0 when actuation = "rotors"
-P_GROUND = 38  # 1.0 when ground contact is on
-P_HAS_DRAG = 39
-P_SIZE = 40
-
 # -- controller (read off an autopilot.control.cascade.Cascade instance) ---------------------------
 C_TLAW = 0  # 0 integral_second_step, 1 integral_first_step, 2 backstepping
 C_RLAW = 1  # 0 nlhinf, 1 integral_backstepping
@@ -144,29 +179,8 @@ RECORD_COLUMNS = (
 )  # fmt: skip
 R_SIZE = len(RECORD_COLUMNS)
 
-# Held plant inputs (zero-order hold over a physics step).
-U_THRUST = 0  # wrench: U1 (already saturated by the plant's set_wrench)
-U_TAU = 1  # 3: body torque
-U_ROTOR = 4  # 4: rotor speed commands (clipped)
-U_FORCE = 8  # 3: disturbance force, world
-U_TORQUE = 11  # 3: disturbance torque on the Euler coordinates (eq. 4)
-U_WIND = 14  # 3
-U_SIZE = 17
-
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
-
-
-@njit(cache=True, error_model="numpy")
-def _max(a: float, b: float) -> float:
-    """Python's ``max(a, b)``."""
-    return b if b > a else a
-
-
-@njit(cache=True, error_model="numpy")
-def _min(a: float, b: float) -> float:
-    """Python's ``min(a, b)``."""
-    return b if b < a else a
 
 
 @njit(cache=True, error_model="numpy")
@@ -196,42 +210,6 @@ def _f32(x: float) -> float:
 # -------------------------------------------------------------------------------------------------
 # Rigid-body helpers (quadcommon.rigid_body)
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def rotation_from_quaternion(w: float, x: float, y: float, z: float) -> tuple[float, ...]:
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return (
-        1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
-        2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
-        2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy),
-    )  # fmt: skip
-
-
-@njit(cache=True, error_model="numpy")
-def euler_from_rotation(
-    R00: float, R10: float, R20: float, R21: float, R22: float
-) -> tuple[float, float, float]:
-    """ZYX Euler angles; theta in [-pi/2, pi/2] (eq. 2's R)."""
-    sin_theta = -R20
-    sin_theta = 1.0 if sin_theta > 1.0 else (-1.0 if sin_theta < -1.0 else sin_theta)
-    return (math.atan2(R21, R22), math.asin(sin_theta), math.atan2(R10, R00))
-
-
-@njit(cache=True, error_model="numpy")
-def quaternion_from_euler(phi: float, theta: float, psi: float) -> tuple[float, float, float, float]:
-    cf, sf = math.cos(0.5 * phi), math.sin(0.5 * phi)
-    ct, st = math.cos(0.5 * theta), math.sin(0.5 * theta)
-    cp, sp = math.cos(0.5 * psi), math.sin(0.5 * psi)
-    w = cf * ct * cp + sf * st * sp
-    x = sf * ct * cp - cf * st * sp
-    y = cf * st * cp + sf * ct * sp
-    z = cf * ct * sp - sf * st * cp
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    return (w, x, y, z)
-
-
 @njit(cache=True, error_model="numpy")
 def euler_rates_from_body_rates(
     phi: float, theta: float, p: float, q: float, r: float
@@ -305,165 +283,6 @@ def euler_torque_from_body_torque(
 # -------------------------------------------------------------------------------------------------
 # Plant (simulator.dynamics.plant.Plant)
 # -------------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def derivative(s: np.ndarray, out: np.ndarray, P: np.ndarray, u: np.ndarray) -> None:
-    """``state_dot`` of the coupled plant: Newton-Euler about G, thrust and torques at O."""
-    vx, vy, vz = s[3], s[4], s[5]
-    qw, qx, qy, qz = s[6], s[7], s[8], s[9]
-    p, q, r = s[10], s[11], s[12]
-    R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(qw, qx, qy, qz)
-    rotor_mode = P[P_ROTOR_MODE] != 0.0
-    dw1 = dw2 = dw3 = dw4 = 0.0
-    if rotor_mode:
-        b, d, arm, Jr, tau_r = P[P_B], P[P_D], P[P_ARM], P[P_JR], P[P_TAU]
-        w1, w2, w3, w4 = s[13], s[14], s[15], s[16]
-        c1, c2, c3, c4 = u[U_ROTOR], u[U_ROTOR + 1], u[U_ROTOR + 2], u[U_ROTOR + 3]
-        dw1, dw2 = (c1 - w1) / tau_r, (c2 - w2) / tau_r
-        dw3, dw4 = (c3 - w3) / tau_r, (c4 - w4) / tau_r
-        s1, s2, s3, s4 = w1 * w1, w2 * w2, w3 * w3, w4 * w4
-        thrust = b * (s1 + s2 + s3 + s4)
-        omega_r = -w1 + w2 - w3 + w4
-        tx = arm * b * (s4 - s2) + Jr * omega_r * q
-        ty = arm * b * (s3 - s1) - Jr * omega_r * p
-        tz = d * (-s1 + s2 - s3 + s4) + Jr * (-dw1 + dw2 - dw3 + dw4)
-    else:
-        thrust = u[U_THRUST]
-        tx, ty, tz = u[U_TAU], u[U_TAU + 1], u[U_TAU + 2]
-
-    rx, ry, rz = P[P_COM], P[P_COM + 1], P[P_COM + 2]
-    tx -= ry * thrust
-    ty += rx * thrust
-
-    ap, aq, ar = u[U_TORQUE], u[U_TORQUE + 1], u[U_TORQUE + 2]
-    if ap != 0.0 or aq != 0.0 or ar != 0.0:
-        st = -R20
-        ct = math.sqrt(_max(1.0 - st * st, 1e-12))
-        sf, cf = R21 / ct, R22 / ct
-        rhs = (ar + st * ap) / ct
-        tx += ap
-        ty += cf * aq + sf * rhs
-        tz += -sf * aq + cf * rhs
-
-    J00, J01, J02, J10, J11, J12, J20, J21, J22 = (
-        P[P_J], P[P_J + 1], P[P_J + 2], P[P_J + 3], P[P_J + 4], P[P_J + 5], P[P_J + 6], P[P_J + 7], P[P_J + 8]
-    )  # fmt: skip
-    hx = J00 * p + J01 * q + J02 * r
-    hy = J10 * p + J11 * q + J12 * r
-    hz = J20 * p + J21 * q + J22 * r
-    ex = tx - (q * hz - r * hy)
-    ey = ty - (r * hx - p * hz)
-    ez = tz - (p * hy - q * hx)
-    K00, K01, K02, K10, K11, K12, K20, K21, K22 = (
-        P[P_K], P[P_K + 1], P[P_K + 2], P[P_K + 3], P[P_K + 4], P[P_K + 5], P[P_K + 6], P[P_K + 7], P[P_K + 8]
-    )  # fmt: skip
-    dp = K00 * ex + K01 * ey + K02 * ez
-    dq = K10 * ex + K11 * ey + K12 * ez
-    dr = K20 * ex + K21 * ey + K22 * ez
-
-    fx, fy, fz = u[U_FORCE], u[U_FORCE + 1], u[U_FORCE + 2]
-    fx += R02 * thrust
-    fy += R12 * thrust
-    fz += R22 * thrust
-    if P[P_HAS_DRAG] != 0.0:
-        kdx, kdy, kdz = P[P_DRAG], P[P_DRAG + 1], P[P_DRAG + 2]
-        cx, cy, cz = q * rz - r * ry, r * rx - p * rz, p * ry - q * rx
-        wnx, wny, wnz = u[U_WIND], u[U_WIND + 1], u[U_WIND + 2]
-        fx -= kdx * (vx - (R00 * cx + R01 * cy + R02 * cz) - wnx)
-        fy -= kdy * (vy - (R10 * cx + R11 * cy + R12 * cz) - wny)
-        fz -= kdz * (vz - (R20 * cx + R21 * cy + R22 * cz) - wnz)
-    m, g = P[P_MASS], P[P_GRAVITY]
-    out[0], out[1], out[2] = vx, vy, vz
-    out[3], out[4], out[5] = fx / m, fy / m, fz / m - g
-    out[6] = -0.5 * (qx * p + qy * q + qz * r)
-    out[7] = 0.5 * (qw * p + qy * r - qz * q)
-    out[8] = 0.5 * (qw * q + qz * p - qx * r)
-    out[9] = 0.5 * (qw * r + qx * q - qy * p)
-    out[10], out[11], out[12] = dp, dq, dr
-    if rotor_mode:
-        out[13], out[14], out[15], out[16] = dw1, dw2, dw3, dw4
-
-
-@njit(cache=True, error_model="numpy")
-def rk4_step(
-    s: np.ndarray,
-    k1: np.ndarray,
-    k2: np.ndarray,
-    k3: np.ndarray,
-    k4: np.ndarray,
-    tmp: np.ndarray,
-    P: np.ndarray,
-    u: np.ndarray,
-    h: float,
-) -> None:
-    """One classical RK4 step with the inputs held, then the quaternion renormalised."""
-    n = s.shape[0]
-    h2 = 0.5 * h
-    derivative(s, k1, P, u)
-    for i in range(n):
-        tmp[i] = s[i] + h2 * k1[i]
-    derivative(tmp, k2, P, u)
-    for i in range(n):
-        tmp[i] = s[i] + h2 * k2[i]
-    derivative(tmp, k3, P, u)
-    for i in range(n):
-        tmp[i] = s[i] + h * k3[i]
-    derivative(tmp, k4, P, u)
-    h6 = h / 6.0
-    for i in range(n):
-        s[i] = s[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
-    qw, qx, qy, qz = s[6], s[7], s[8], s[9]
-    nq = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    s[6], s[7], s[8], s[9] = qw * nq, qx * nq, qy * nq, qz * nq
-
-
-@njit(cache=True, error_model="numpy")
-def ground_contact(s: np.ndarray, P: np.ndarray) -> bool:
-    """Keep O on or above z = 0 (``Plant._resolve_ground_contact``); True when it acted."""
-    R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
-    rx, ry, rz = P[P_COM], P[P_COM + 1], P[P_COM + 2]
-    z_O = s[2] - (R20 * rx + R21 * ry + R22 * rz)
-    if z_O > 0.0:
-        return False
-    p, q, r = s[10], s[11], s[12]
-    cx, cy, cz = q * rz - r * ry, r * rx - p * rz, p * ry - q * rx
-    vz_O = s[5] - (R20 * cx + R21 * cy + R22 * cz)
-    if vz_O > 0.0:
-        return False
-    psi = math.atan2(R10, R00)
-    qw, qx, qy, qz = quaternion_from_euler(0.0, 0.0, psi)
-    L00, L01, L02, L10, L11, L12, L20, L21, L22 = rotation_from_quaternion(qw, qx, qy, qz)
-    x_O = s[0] - (R00 * rx + R01 * ry + R02 * rz)
-    y_O = s[1] - (R10 * rx + R11 * ry + R12 * rz)
-    s[0] = x_O + L00 * rx + L01 * ry + L02 * rz
-    s[1] = y_O + L10 * rx + L11 * ry + L12 * rz
-    s[2] = L20 * rx + L21 * ry + L22 * rz
-    s[3], s[4], s[5] = 0.0, 0.0, 0.0
-    s[6], s[7], s[8], s[9] = qw, qx, qy, qz
-    s[10], s[11], s[12] = 0.0, 0.0, 0.0
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def truth_of_O(s: np.ndarray, P: np.ndarray) -> tuple:
-    """Position and velocity of O, quaternion, body rates (``Plant.kinematics`` / ``truth``)."""
-    R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
-    rx, ry, rz = P[P_COM], P[P_COM + 1], P[P_COM + 2]
-    p, q, r = s[10], s[11], s[12]
-    cx, cy, cz = q * rz - r * ry, r * rx - p * rz, p * ry - q * rx
-    pos = (
-        s[0] - (R00 * rx + R01 * ry + R02 * rz),
-        s[1] - (R10 * rx + R11 * ry + R12 * rz),
-        s[2] - (R20 * rx + R21 * ry + R22 * rz),
-    )
-    vel = (
-        s[3] - (R00 * cx + R01 * cy + R02 * cz),
-        s[4] - (R10 * cx + R11 * cy + R12 * cz),
-        s[5] - (R20 * cx + R21 * cy + R22 * cz),
-    )
-    euler = euler_from_rotation(R00, R10, R20, R21, R22)
-    return pos, vel, euler, R22
-
-
 # -------------------------------------------------------------------------------------------------
 # Disturbances
 # -------------------------------------------------------------------------------------------------

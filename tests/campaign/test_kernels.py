@@ -9,7 +9,8 @@ pytest.importorskip("numba")
 
 from autopilot.control.allocation import Allocator  # noqa: E402
 from quadcommon import frames, rigid_body  # noqa: E402
-from quadcommon.config import load_vehicle
+from quadcommon.config import load_vehicle  # noqa: E402
+from simulator.dynamics import compiled as cp  # noqa: E402
 from simulator.dynamics.plant import Plant  # noqa: E402
 from sitl.campaign import engine as eng  # noqa: E402
 from sitl.campaign import kernels as ker  # noqa: E402
@@ -28,7 +29,8 @@ def _random_state(rotors: bool) -> list[float]:
 
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize("mode", ["wrench", "rotors"])
-def test_derivative_and_rk4_step_equal_the_plant(mode):
+def test_derivative_and_rk4_step_equal_the_plant(mode, monkeypatch):
+    monkeypatch.setenv("QUADSITL_PURE_PYTHON", "1")  # the reference: Plant's own Python step
     from dataclasses import replace
 
     vehicle = load_vehicle("paper_quad_drag")
@@ -51,17 +53,18 @@ def test_derivative_and_rk4_step_equal_the_plant(mode):
         u[ker.U_FORCE : ker.U_FORCE + 3], u[ker.U_TORQUE : ker.U_TORQUE + 3] = force, tq_eta
         u[ker.U_WIND : ker.U_WIND + 3] = wind
         out = np.zeros(len(s))
-        ker.derivative(np.array(s), out, P, u)
+        cp.derivative(np.array(s), out, P, u)
         assert out.tolist() == plant._derivative(s)
         arr = np.array(s)
         n = len(s)
-        ker.rk4_step(arr, *(np.empty(n) for _ in range(5)), P, u, 1e-3)
+        cp.rk4_step(arr, *(np.empty(n) for _ in range(5)), P, u, 1e-3)
         plant.step()
         assert arr.tolist() == plant.state
 
 
 @pytest.mark.timeout(120)
-def test_ground_contact_and_readout_equal_the_plant():
+def test_ground_contact_and_readout_equal_the_plant(monkeypatch):
+    monkeypatch.setenv("QUADSITL_PURE_PYTHON", "1")
     plant = Plant(load_vehicle("paper_quad"), 1e-3)
     P = eng.plant_array(plant)
     for _ in range(50):
@@ -70,11 +73,11 @@ def test_ground_contact_and_readout_equal_the_plant():
         s[5] = float(RNG.uniform(-1.0, 0.2))
         plant.state = list(s)
         pos, vel, euler, _ = plant.kinematics()
-        kpos, kvel, keuler, cos_tilt = ker.truth_of_O(np.array(s), P)
+        kpos, kvel, keuler, cos_tilt = cp.truth_of_O(np.array(s), P)
         assert (kpos, kvel, keuler) == (pos, vel, euler)
         assert cos_tilt == pytest.approx(math.cos(euler[0]) * math.cos(euler[1]), abs=1e-12)
         arr = np.array(s)
-        acted = ker.ground_contact(arr, P)
+        acted = cp.ground_contact(arr, P)
         plant._resolve_ground_contact()
         assert arr.tolist() == plant.state
         assert acted == (plant.state != s)
@@ -100,7 +103,7 @@ def test_rigid_body_helpers_equal_quadcommon():
         assert ker.euler_rates_from_body_rates(phi, theta, *rates) == rigid_body.euler_rates_from_body_rates(
             phi, theta, rates
         )
-        assert ker.quaternion_from_euler(phi, theta, psi) == rigid_body.quaternion_from_euler(phi, theta, psi)
+        assert cp.quaternion_from_euler(phi, theta, psi) == rigid_body.quaternion_from_euler(phi, theta, psi)
         angle = float(RNG.uniform(-20.0, 20.0))
         assert ker.wrap_pi(angle) == frames.wrap_pi(angle)
     for edge in (-math.pi, math.pi, 0.0, -0.0, 3 * math.pi, -3 * math.pi):
