@@ -67,6 +67,10 @@ class SimulatorSetup:
     gusts: GustProfile  # applied from t = 0
     instance: int = 0
     nominal_plant: bool = False  # fly the Section II model (checks of the controllers' assumptions)
+    # A campaign's run as drawn (sitl.campaign): the true plant (rotor constants the allocator does
+    # not know included) instead of apply_uncertainty(vehicle, scenario), and an initial velocity.
+    true_plant: VehicleConfig | None = None
+    initial_velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @classmethod
     def load(
@@ -98,11 +102,13 @@ class SimulatorCore:
         self.usec_per_frame = 1e6 / rates.control_hz
         vehicle = setup.vehicle
         self.wrench = vehicle.actuation.mode == "wrench"
-        self.plant_vehicle = apply_uncertainty(vehicle, setup.scenario)  # what is flown
+        self.plant_vehicle = setup.true_plant or apply_uncertainty(vehicle, setup.scenario)  # what is flown
         if setup.nominal_plant:
             self.plant_vehicle = as_nominal(self.plant_vehicle)
         self.plant = make_plant(self.plant_vehicle, self.dt_physics)
-        self.plant.reset(setup.scenario.initial_position_m, setup.scenario.initial_euler_rad)
+        self.plant.reset(
+            setup.scenario.initial_position_m, setup.scenario.initial_euler_rad, setup.initial_velocity_m_s
+        )
         self.schedule = self._new_schedule(setup.gusts, 0.0)
         self._pending_schedule: DisturbanceSchedule | None = None
         self.sensors = SensorSuite(setup.sensors, setup.sitl.home[2], imu_rate_hz=rates.control_hz)

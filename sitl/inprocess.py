@@ -268,6 +268,8 @@ class RunOptions:
     gusts: GustProfile | None = None  # default: the scenario's profile
     sensors: str | None = None  # config/sensors/NAME.toml; None: the scenario's profile
     estimator: str | None = None  # "truth" or "ekf" (the autopilot flies on its EKF); None: the scenario's
+    true_plant: VehicleConfig | None = None  # a campaign's drawn plant (else the scenario's uncertainty)
+    initial_velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def paper_stack(
@@ -285,7 +287,8 @@ def paper_stack(
         vehicle = as_nominal(vehicle)
     gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
     sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors or scenario.sensors), gusts,
-                         nominal_plant=options.nominal_plant)  # fmt: skip
+                         nominal_plant=options.nominal_plant, true_plant=options.true_plant,
+                         initial_velocity_m_s=options.initial_velocity_m_s)  # fmt: skip
     sensors = options.sensors or scenario.sensors
     ap = AutopilotSetup(sitl, vehicle, controller, autostart=trajectory_from_spec(scenario.trajectory),
                         default_remotes=False, estimator=options.estimator or scenario.estimator,

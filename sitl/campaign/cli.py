@@ -40,7 +40,8 @@ def add_campaign_parser(sub) -> None:
         type=int,
         default=0,
         metavar="K",
-        help="also fly K sampled runs through the in-process full stack and compare (not available yet)",
+        help="also fly K runs (spread over the campaign) through the whole in-process flight stack and "
+        "compare their indices with the batch engine's; exit 1 if any differs",
     )
     p.add_argument("--no-figures", action="store_true", help="write the table and summary only")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -64,14 +65,14 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"quadsitl campaign: --workers {args.workers} is invalid; allowed: >= 1", file=sys.stderr)
         return 2
     spec = load_campaign(args.spec, runs=args.runs)
+    check_runs: list[int] = []
     if args.full_stack:
-        if not 0 < args.full_stack <= spec.runs:
-            print(f"quadsitl campaign: --full-stack {args.full_stack} is invalid; allowed: 1..{spec.runs}",
-                  file=sys.stderr)  # fmt: skip
-            return 2
-        try:  # fail before flying anything, not after
-            full_stack.check(list(range(args.full_stack)), spec)
-        except full_stack.FullStackUnavailable as exc:
+        try:  # refuse before flying anything, not after
+            check_runs = full_stack.pick_runs(spec.runs, args.full_stack)
+            why = full_stack.refusal(spec)
+            if why:
+                raise full_stack.FullStackRefused(why)
+        except full_stack.FullStackRefused as exc:
             print(f"quadsitl campaign: {exc}", file=sys.stderr)
             return 2
     for warning in spec.warnings:
@@ -97,6 +98,19 @@ def run_command(args: argparse.Namespace) -> int:
         files = [summary]
     else:
         files = write_report(spec, result.table, out)
+    verdict = 0
+    if check_runs:
+        print(f"flying run(s) {', '.join(map(str, check_runs))} again through the full in-process stack ...",
+              flush=True)  # fmt: skip
+        results = full_stack.check(
+            spec, result.table, check_runs, progress=lambda text: print(text, flush=True)
+        )
+        with open(files[0], "a") as summary_file:
+            summary_file.write("\n" + full_stack.markdown(results, results[0].rel_tol))
+        differing = [r for r in results if not r.agrees]
+        print(f"full stack: {len(results) - len(differing)} of {len(results)} agree with the batch engine"
+              + (f"; {len(differing)} DIFFER (see {files[0]})" if differing else ""))  # fmt: skip
+        verdict = 1 if differing else 0
     text = files[0].read_text()
     start = text.index("## Headline")
     end = text.index("\n## ", start + 3)
@@ -105,4 +119,4 @@ def run_command(args: argparse.Namespace) -> int:
     print(f"summary: {files[0]}")
     if len(files) > 1:
         print(f"figures: {out / 'figures'}/ ({len(files) - 1} files)")
-    return 0
+    return verdict

@@ -39,11 +39,25 @@ def test_campaign_command_writes_table_summary_and_figures(tmp_path):
     assert again.returncode == 0 and "0 runs flown, 4 already done" in again.stdout
 
 
-def test_full_stack_says_it_is_not_there_yet(tmp_path):
+@pytest.mark.timeout(600)
+def test_full_stack_check_flies_runs_again_and_agrees(tmp_path):
+    spec = specs.write(tmp_path, specs.BOX, "box", duration=3.0)
+    out = tmp_path / "o"
+    done = _run(
+        str(spec), "--runs", "3", "--full-stack", "2", "--out", str(out), "--no-progress", "--no-figures"
+    )
+    assert done.returncode == 0, done.stderr + done.stdout
+    assert "flying run(s) 0, 2 again through the full in-process stack" in done.stdout
+    assert "full stack: 6 of 6 agree with the batch engine" in done.stdout
+    summary = (out / "summary.md").read_text()
+    assert "## Full-stack check" in summary and summary.count("| agrees |") == 6
+
+
+@pytest.mark.timeout(120)
+def test_full_stack_refuses_before_flying(tmp_path):
     spec = specs.write(tmp_path, specs.BOX, "box", duration=2.0)
-    done = _run(str(spec), "--runs", "2", "--full-stack", "1", "--out", str(tmp_path / "o"))
-    assert done.returncode == 2
-    assert "not available yet" in done.stderr and "in-process full-stack" in done.stderr
+    done = _run(str(spec), "--runs", "2", "--full-stack", "3", "--out", str(tmp_path / "o"))
+    assert done.returncode == 2 and "--full-stack 3 is invalid; allowed: 1..2" in done.stderr
     assert not (tmp_path / "o").exists()  # nothing was flown
 
 
