@@ -188,6 +188,7 @@ class AutopilotCore:
             self.params, self.encoder, self.links, self.statustext, self.system_id,
             wire.AUTOPILOT_COMPONENT_ID, setup.params_file,
             header=f"controller {setup.controller.name}, vehicle {setup.vehicle.name}", clock=clock,
+            refusals=self.refusals,
         )  # fmt: skip
         self.param_service.register(self.dispatcher, self.commands)
         self.vehicle_commands = VehicleCommands(self)

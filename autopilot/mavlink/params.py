@@ -141,8 +141,10 @@ class ParamService:
         header: str = "",
         *,
         clock: Callable[[], float],
+        refusals: Callable[[str], None] | None = None,
     ) -> None:
-        """``links`` = the GCS links (``send(data)``, ``send_to(data, address)``)."""
+        """``links`` = the GCS links (``send(data)``, ``send_to(data, address)``); ``refusals``: the
+        core's one refusal counter and announcer (its own rate-limited STATUSTEXT when None)."""
         self.store = store
         self.encoder = encoder
         self.links = links
@@ -152,6 +154,7 @@ class ParamService:
         self.storage_path = Path(storage_path) if storage_path else None
         self.header = header
         self.clock = clock
+        self.refusals = refusals
         self._streams: dict[tuple[int, tuple[str, int]], list] = {}  # -> [link, address, next index]
         self._last_refusal: tuple[str, float] = ("", -math.inf)
         self._autosave = True
@@ -228,6 +231,9 @@ class ParamService:
             link.send_to(data, address)
 
     def _refused(self, text: str) -> None:
+        if self.refusals is not None:
+            self.refusals(text)
+            return
         last_text, last_at = self._last_refusal
         now = self.clock()
         if text != last_text or now - last_at > REFUSAL_REPEAT_S:
