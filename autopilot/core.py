@@ -26,6 +26,10 @@ the core goes on (:mod:`.mavlink.dispatch`).
 The process shell (:mod:`autopilot.app`) owns the sockets, the selector and the pacing; the
 in-process runner (:mod:`sitl.inprocess`) couples this core with the simulator's through the same
 bytes.
+
+(~600 lines: the core is the autopilot's one composition point, wiring commander, guidance,
+missions, parameters, estimator, telemetry and signing to the links; the behaviour itself lives in
+those modules.)
 """
 
 from __future__ import annotations

@@ -32,6 +32,9 @@ float division by zero gives inf/NaN instead of raising ZeroDivisionError as the
 would, which spares a test on every division. The divisors are masses, time constants, clipped
 thrusts, cosines kept >= 1e-6, and cos(theta) in W_eta^-1, zero only at theta = +-pi/2 exactly
 (gimbal lock); a run there ends as "non-finite state" instead of an exception.
+
+(~800 lines in one file on purpose: numba's cache is keyed on this file, and the whole closed
+loop must be compiled together for the calls between kernels to inline.)
 """
 
 from __future__ import annotations
