@@ -36,6 +36,7 @@ if __package__ in (None, ""):
 import zenoh  # noqa: E402
 
 from quadcommon import bus, wire  # noqa: E402
+from quadcommon.cli_help import HelpFormatter  # noqa: E402
 
 DEFAULT_TIMEOUT_S = 3.0
 RETRY_PERIOD_S = 0.05  # a get that finds no queryable ends at once: try again until the deadline
@@ -169,9 +170,9 @@ class _Parser(argparse.ArgumentParser):
         self.exit(1, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "upload_gusts.py") -> argparse.ArgumentParser:
     parser = _Parser(
-        prog="upload_gusts.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument("file", type=Path, help="gust profile, .toml or .json")
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (ports +N), default 0")
@@ -188,8 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "upload_gusts.py") -> int:
+    args = build_parser(prog).parse_args(argv)
     try:
         wire.ports(args.instance)
         if not args.timeout > 0.0:
