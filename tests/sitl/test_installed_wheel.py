@@ -8,7 +8,7 @@ environment's site-packages to ``sys.path``. A plain path line in a ``.pth`` doe
 ``.pth`` files of that directory, so the editable install's finder (which would map the packages
 to this checkout) stays off; the checks below assert that every package comes from the venv. The
 wheel is built from a copy of the source tree (no stale ``build/`` of the checkout in it), with
-``--no-build-isolation`` (offline: setuptools is a dev dependency). SITL instance 16 only.
+``--no-build-isolation`` (offline: setuptools is a dev dependency). SITL instances 16 and 18 only.
 """
 
 from __future__ import annotations
@@ -24,9 +24,11 @@ from pathlib import Path
 import pytest
 
 from quadcommon import wire
+from sitl.launcher import Child
 
 REPO = Path(__file__).resolve().parents[2]
 INSTANCE = 16
+FLY_INSTANCE = 18
 SKIP = (".git", ".venv", "out", "runs", "build", "*.egg-info", "__pycache__", "node_modules",
         ".pytest_cache", ".ruff_cache", "tests", "benchmarks")  # fmt: skip
 
@@ -129,6 +131,23 @@ def test_up_links_and_stops_at_its_duration(installed):
     assert "simulator: linked with autopilot" in result.stdout
     assert "the simulator reached --duration 2 s" in result.stdout
     assert wire.ports(INSTANCE).hil == 4560 + INSTANCE
+
+
+@pytest.mark.timeout(120)
+def test_up_then_fly_setpoints_flies_the_square(installed):
+    """The README's first flight, as installed: ``quadsitl up`` and ``quadsitl fly setpoints``."""
+    n = str(FLY_INSTANCE)
+    up = Child("quadsitl up", [str(installed.bin / "quadsitl"), "up", "--instance", n, "--speed", "max"],
+               cwd=installed.empty, env=installed.env)  # fmt: skip
+    try:
+        up.wait_line("Ctrl-C stops", 40.0)
+        fly = installed.run("quadsitl", "fly", "setpoints", "--instance", n, timeout=90)
+        assert fly.returncode == 0, fly.stdout + fly.stderr
+        for k, corner in enumerate(("2.00, 0.00", "2.00, 2.00", "0.00, 2.00", "0.00, 0.00"), 1):
+            assert f"reached setpoint {k} ({corner}, 2.50)" in fly.stdout, fly.stdout
+        assert fly.stdout.rstrip().endswith("done")
+    finally:
+        up.stop(10.0)
 
 
 @pytest.mark.timeout(60)
