@@ -14,6 +14,13 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
         text = action.help or ""
         if "default" in text.lower() or not action.option_strings:
             return text
-        if action.default in (None, False, "") or action.default is argparse.SUPPRESS:
+        if not has_default_to_show(action):
             return text
         return f"{text} (default: %(default)s)" if text else "default: %(default)s"
+
+
+def has_default_to_show(action: argparse.Action) -> bool:
+    """Whether ``action``'s default is worth stating: not None, not a flag's False, not ""
+    (0 is: ``--instance`` defaults to 0)."""
+    default = action.default
+    return not (default is None or default is False or default is argparse.SUPPRESS or default == "")

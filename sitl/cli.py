@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1; at most 10)")
     p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
     p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")
-    p.add_argument("--vehicle", default="paper_quad")
+    p.add_argument("--vehicle", default="paper_quad", help="vehicle model and plant (config/vehicle)")
     p.add_argument(
         "--speed",
         type=_speed,
@@ -314,8 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="fly the nominal Section II model instead of the coupled plant",
     )
-    p.add_argument("--scenarios", nargs="+", default=["circle", "helix"])
-    p.add_argument("--controllers", nargs="+", default=list(CONTROLLER_NAMES))
+    p.add_argument("--scenarios", nargs="+", default=["circle", "helix"], help="scenarios (config/scenarios)")
+    p.add_argument("--controllers", nargs="+", default=list(CONTROLLER_NAMES), help="cascades to compare")
     p.add_argument("--workers", type=int, default=2, help="parallel runs (default 2)")
     p.add_argument("--duration", type=float, default=None,
                    help="simulated seconds per run (default: the scenario's, 40 s in the paper)")  # fmt: skip
@@ -324,8 +324,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("run", help="one in-process run of a scenario")
     p.add_argument("scenario", help="scenario name (config/scenarios) or path")
-    p.add_argument("--controller", default="intbs_nlhinf")
-    p.add_argument("--nominal-plant", action="store_true")
+    p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
+    p.add_argument("--nominal-plant", action="store_true",
+                   help="fly the nominal Section II model instead of the coupled plant")  # fmt: skip
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
     p.add_argument("--out", default=None, help="write the time series to this Parquet file")
     _estimation_arguments(p)

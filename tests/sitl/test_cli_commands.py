@@ -10,6 +10,7 @@ import importlib
 import pytest
 
 from quadcommon import config
+from quadcommon.cli_help import has_default_to_show
 from sitl import cli
 
 SCRIPTS = ["fly_setpoints", "fly_trajectory", "fly_paper", "upload_mission", "upload_gusts", "record"]
@@ -32,17 +33,32 @@ def _all_parsers():
 
 
 @pytest.mark.timeout(30)
-def test_every_option_with_a_default_says_it_in_its_help():
-    missing = []
+def test_every_option_has_help_and_says_its_default():
+    missing, silent = [], []
     for name, parser in _all_parsers():
         formatter = parser._get_formatter()
         for action in parser._actions:
-            if not action.option_strings or action.default in (None, False, "", argparse.SUPPRESS):
+            if not action.option_strings or action.help == argparse.SUPPRESS:
+                continue
+            if not action.help:
+                silent.append(f"{name} {action.option_strings[0]}")
+            if not has_default_to_show(action):
                 continue
             text = formatter._get_help_string(action) % {"default": action.default}
             if "default" not in text.lower():
                 missing.append(f"{name} {action.option_strings[0]}")
     assert not missing, missing
+    assert not silent, silent
+
+
+@pytest.mark.timeout(10)
+def test_a_default_of_zero_is_shown():
+    parser = argparse.ArgumentParser(formatter_class=cli.HelpFormatter)
+    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N")
+    parser.add_argument("--fast", action="store_true", help="go")
+    text = parser.format_help()
+    assert "vehicle instance N (default: 0)" in text
+    assert "go (default" not in text
 
 
 @pytest.mark.timeout(30)
