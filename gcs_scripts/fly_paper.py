@@ -43,15 +43,15 @@ from gcs_scripts.link import report as say  # noqa: E402
 from gcs_scripts.upload_gusts import NoSimulatorAnswer, upload_gusts  # noqa: E402
 from quadcommon import bus, wire  # noqa: E402
 from quadcommon.bus_records import CONTROLLER_CODEC  # noqa: E402
+from quadcommon.cli_help import HelpFormatter  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
 AUTO_MISSION = (4 << 16) | (4 << 24)
 CURVE_MARGIN_S = 1.0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "fly_paper.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="fly_paper.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
     parser.add_argument("--scenario", default="helix", help="paper scenario: helix (default) or circle")
@@ -72,7 +72,8 @@ def _start_recorder(instance: int, out: Path) -> subprocess.Popen:
     cmd = [
         sys.executable,
         "-u",
-        str(REPO / "gcs_scripts" / "record.py"),
+        "-m",
+        "gcs_scripts.record",
         "--instance",
         str(instance),
         "--out",
@@ -123,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     trajectory = trajectory_from_spec(scenario.trajectory)
     gusts = load_gust_profile_mapping(args.gusts or scenario.gusts) if (args.gusts or scenario.gusts) else {}
-    out = Path(args.out) if args.out else REPO / "runs" / time.strftime("paper_%Y%m%d_%H%M%S")
+    out = Path(args.out) if args.out else Path("runs") / time.strftime("paper_%Y%m%d_%H%M%S")
     out.parent.mkdir(parents=True, exist_ok=True)
     link = upload_mission.connect(None, args.instance)
     session = bus.open_peer(wire.ports(args.instance).zenoh)
@@ -182,8 +183,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "fly_paper.py") -> int:
+    args = build_parser(prog).parse_args(argv)
     if not (args.start_time >= 0 and args.rate > 0 and math.isfinite(args.start_time)):
         print("fly_paper: --start-time must be >= 0 and --rate > 0", file=sys.stderr)
         return 2

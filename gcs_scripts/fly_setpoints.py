@@ -34,6 +34,7 @@ if __package__ in (None, ""):
 
 from gcs_scripts import link as mavlink_link  # noqa: E402
 from gcs_scripts.link import Link, LinkError, PositionTarget, SetpointStream  # noqa: E402
+from quadcommon.cli_help import HelpFormatter  # noqa: E402
 
 Vector3 = tuple[float, float, float]
 DEFAULT_SQUARE: tuple[tuple[float, float, float, float | None], ...] = (
@@ -113,9 +114,9 @@ def parse_setpoints_text(text: str, source: str = "setpoints") -> list[Setpoint]
     return out
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "fly_setpoints.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="fly_setpoints.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
     parser.add_argument(
@@ -145,9 +146,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, list[Setpoint]]:
+def parse_args(
+    argv: list[str] | None = None, prog: str = "fly_setpoints.py"
+) -> tuple[argparse.Namespace, list[Setpoint]]:
     """Arguments and the setpoints they name (the default square when none are given)."""
-    parser = build_parser()
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
     try:
         if args.setpoints_file is not None:
@@ -306,8 +309,8 @@ def run(args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
         link.close()
 
 
-def main(argv: list[str] | None = None) -> int:
-    args, setpoints = parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "fly_setpoints.py") -> int:
+    args, setpoints = parse_args(argv, prog)
     return run(args, setpoints)
 
 

@@ -38,6 +38,7 @@ if __package__ in (None, ""):
 
 from gcs_scripts import link as mavlink_link  # noqa: E402
 from gcs_scripts.link import Link, LinkError, PositionTarget, SetpointStream  # noqa: E402
+from quadcommon.cli_help import HelpFormatter  # noqa: E402
 from quadcommon.config import ScenarioConfig, config_path, load_scenario  # noqa: E402
 from quadcommon.schema import ConfigError  # noqa: E402
 from quadcommon.trajectories import Reference, Trajectory, trajectory_from_spec  # noqa: E402
@@ -51,9 +52,9 @@ T0_LEAD_S = 0.1  # t0 is planned this far ahead (sim s) ...
 T0_LEAD_GUSTS_S = 1.0  # ... or this far with a gust upload (done within it even at max speed)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "fly_trajectory.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="fly_trajectory.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
     parser.add_argument("--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14540+N)")
@@ -84,8 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, ScenarioConfig]:
-    parser = build_parser()
+def parse_args(
+    argv: list[str] | None = None, prog: str = "fly_trajectory.py"
+) -> tuple[argparse.Namespace, ScenarioConfig]:
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
     try:
         scenario = load_scenario(args.scenario)
@@ -322,8 +325,8 @@ def run(args: argparse.Namespace, scenario: ScenarioConfig) -> int:
             args.zenoh.close()
 
 
-def main(argv: list[str] | None = None) -> int:
-    args, scenario = parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "fly_trajectory.py") -> int:
+    args, scenario = parse_args(argv, prog)
     return run(args, scenario)
 
 

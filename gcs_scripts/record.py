@@ -48,6 +48,7 @@ from gcs_scripts.session_log import (  # noqa: E402
 from gcs_scripts.tlog import TlogWriter  # noqa: E402
 from quadcommon import bus, wire  # noqa: E402
 from quadcommon.bus_records import CONTROLLER_CODEC, TRUTH_CODEC  # noqa: E402
+from quadcommon.cli_help import HelpFormatter  # noqa: E402
 from quadcommon.config import load_sitl  # noqa: E402
 
 mavutil = mavlink_link.mavutil
@@ -316,9 +317,9 @@ def default_out() -> Path:
     return Path("runs") / time.strftime("%Y%m%d-%H%M%S")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "record.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="record.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
     parser.add_argument(
@@ -336,8 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+def main(argv: list[str] | None = None, prog: str = "record.py") -> int:
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
     if not 0 <= args.instance <= 99:
         parser.error(f"--instance must be in [0, 99], got {args.instance}")

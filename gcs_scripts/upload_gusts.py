@@ -1,15 +1,18 @@
 """Upload a gust profile to a running simulator over zenoh (``quadsitl/<N>/sim/gusts``).
 
-    python gcs_scripts/upload_gusts.py FILE.toml|FILE.json [--instance N]
+    quadsitl gusts upload NAME|FILE.toml|FILE.json [--instance N]
         [--start-at S | --start-after S | --now] [--timeout 3] [--router ENDPOINT]
+    (or python gcs_scripts/upload_gusts.py ... from a checkout)
 
-The file holds a gust profile in the schema of ``config/gusts/*.toml`` (TOML, or the same
-structure as a JSON object). It is only parsed here: the simulator validates it and is the
-authority. Start: ``--start-at S`` at simulation time S (s; not in the simulator's past),
-``--start-after S`` S seconds of simulation time after the simulator receives it, ``--now``
-(default). The uploaded profile REPLACES the active one (the previous upload, or the scenario's
-start-up profile such as the paper's steps); to combine disturbances put all elements in one
-file. Protocol: :mod:`simulator.environment.gust_upload`.
+A NAME is a shipped profile (``config/gusts/NAME.toml``) or one in your configuration directory
+(``--config-dir``, ``QUADSITL_CONFIG_DIR``). The file holds a gust profile in the schema of
+``config/gusts/*.toml`` (TOML, or the same structure as a JSON object). It is only parsed here:
+the simulator validates it and is the authority. Start: ``--start-at S`` at simulation time S
+(s; not in the simulator's past), ``--start-after S`` S seconds of simulation time after the
+simulator receives it, ``--now`` (default). The uploaded profile REPLACES the active one (the
+previous upload, or the scenario's start-up profile such as the paper's steps); to combine
+disturbances put all elements in
+one file. Protocol: :mod:`simulator.environment.gust_upload`.
 
 Exit status: 0 accepted (prints the start time and the simulator's summary); 1 rejected (prints
 the simulator's exact validation message), also for an unreadable file or bad arguments;
@@ -36,6 +39,7 @@ if __package__ in (None, ""):
 import zenoh  # noqa: E402
 
 from quadcommon import bus, wire  # noqa: E402
+from quadcommon.cli_help import HelpFormatter  # noqa: E402
 
 DEFAULT_TIMEOUT_S = 3.0
 RETRY_PERIOD_S = 0.05  # a get that finds no queryable ends at once: try again until the deadline
@@ -48,6 +52,20 @@ class NoSimulatorAnswer(TimeoutError):
 
 class ProfileFileError(ValueError):
     """The profile file cannot be read or parsed."""
+
+
+def profile_path(text: str | Path) -> Path:
+    """A file as given, or a gust profile's name looked up in the configuration directories."""
+    path = Path(text)
+    if path.exists() or path.suffix or len(path.parts) > 1:
+        return path
+    from quadcommon.config import config_path
+    from quadcommon.schema import ConfigError
+
+    try:
+        return config_path("gusts", str(text))
+    except ConfigError as exc:
+        raise ProfileFileError(str(exc)) from None
 
 
 def load_profile_file(path: str | Path) -> dict[str, Any]:
@@ -169,11 +187,11 @@ class _Parser(argparse.ArgumentParser):
         self.exit(1, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "upload_gusts.py") -> argparse.ArgumentParser:
     parser = _Parser(
-        prog="upload_gusts.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
-    parser.add_argument("file", type=Path, help="gust profile, .toml or .json")
+    parser.add_argument("file", help="gust profile: a name (config/gusts, or yours) or a .toml/.json file")
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (ports +N), default 0")
     when = parser.add_mutually_exclusive_group()
     when.add_argument("--start-at", type=float, metavar="S", help="start at simulation time S (s)")
@@ -188,13 +206,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "upload_gusts.py") -> int:
+    args = build_parser(prog).parse_args(argv)
     try:
         wire.ports(args.instance)
         if not args.timeout > 0.0:
             raise ValueError(f"--timeout must be > 0 s, got {args.timeout:g}")
-        profile = load_profile_file(args.file)
+        profile = load_profile_file(profile_path(args.file))
         start = start_spec(args.start_at, args.start_after)
         answer = upload_gusts(profile, args.instance, start, args.timeout, router=args.router)
     except (ProfileFileError, ValueError) as exc:

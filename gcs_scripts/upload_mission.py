@@ -63,6 +63,7 @@ if __package__ in (None, ""):
 from gcs_scripts import link as mavlink_link  # noqa: E402  (sets MAVLINK20 before pymavlink)
 from gcs_scripts.link import Link, LinkError, LinkTimeout  # noqa: E402
 from quadcommon import frames  # noqa: E402
+from quadcommon.cli_help import HelpFormatter  # noqa: E402
 
 mavutil = mavlink_link.mavutil
 m = mavutil.mavlink
@@ -510,9 +511,9 @@ def fly(link: MissionLink, items: Sequence[Item], timeout_s: float) -> None:
 
 
 # -- command line -------------------------------------------------------------------------------------
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "upload_mission.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="upload_mission.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("file", nargs="?", help="mission file (.waypoints/.txt QGC WPL 110, .toml, .json)")
@@ -553,8 +554,8 @@ def build_items(args: argparse.Namespace) -> list[Item]:
     return read_mission_file(args.file, args.skip_first)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "upload_mission.py") -> int:
+    args = build_parser(prog).parse_args(argv)
     items: list[Item] = []
     if not (args.download or args.clear):
         try:

@@ -11,14 +11,23 @@ Files and what they hold:
 
 Gust profiles (``config/gusts/``) are read by :mod:`simulator.environment.gust_profile`.
 
-Every loader accepts a bare name (looked up in the config directory) or a path. Values are
-validated at load; errors name file, key, value and the allowed range (see :mod:`.schema`).
+Every loader accepts a bare name or a path. A name is looked up in the configuration
+directories, first match wins (:func:`config_dirs`): the user's own, from ``--config-dir`` on the
+command line and ``QUADSITL_CONFIG_DIR`` (several joined by ``:``), then the shipped defaults
+(:data:`SHIPPED_CONFIG_DIR`: ``config/`` of the checkout, or the installed package
+``quadsitl_config``, which is that same directory mapped into the wheel). A user's directory holds
+only what it changes (``scenarios/mine.toml``); ``quadsitl config copy DIR`` writes the defaults out
+for editing. Values are validated at load; errors name file, key, value and the allowed range (see
+:mod:`.schema`).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
+import shutil
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -26,23 +35,117 @@ from .schema import ConfigError, Section, load_toml
 
 Vector3 = tuple[float, float, float]
 
-CONFIG_DIR = Path(os.environ.get("QUADSITL_CONFIG_DIR", Path(__file__).resolve().parents[1] / "config"))
+CONFIG_ENV = "QUADSITL_CONFIG_DIR"  # the user's configuration directories, joined by os.pathsep
+SHIPPED_PACKAGE = "quadsitl_config"  # config/ as installed (pyproject.toml: package-dir)
+
+
+def _shipped_config_dir() -> Path:
+    """``config/`` beside the packages in a checkout, else the installed ``quadsitl_config``."""
+    checkout = Path(__file__).resolve().parents[1] / "config"
+    if (checkout / "sitl.toml").is_file():
+        return checkout
+    spec = importlib.util.find_spec(SHIPPED_PACKAGE)
+    if spec is not None and spec.submodule_search_locations:
+        for location in spec.submodule_search_locations:
+            if (Path(location) / "sitl.toml").is_file():
+                return Path(location)
+    return checkout  # neither: every lookup fails and its error says where it looked
+
+
+SHIPPED_CONFIG_DIR = _shipped_config_dir()
+CONFIG_DIR = SHIPPED_CONFIG_DIR  # the shipped defaults (kept under this name for existing callers)
+
+
+def config_dirs(environ: Mapping[str, str] | None = None) -> tuple[Path, ...]:
+    """The directories a name is looked up in, first match wins: those in ``QUADSITL_CONFIG_DIR``
+    (``--config-dir`` puts its directory first there), then the shipped defaults. A directory
+    in the variable that does not exist is a :class:`ConfigError` naming it."""
+    environ = os.environ if environ is None else environ
+    dirs: list[Path] = []
+    for text in environ.get(CONFIG_ENV, "").split(os.pathsep):
+        if not text.strip():
+            continue
+        path = Path(text).expanduser()
+        if not path.is_dir():
+            raise ConfigError(f"{CONFIG_ENV}: {text} is not a directory")
+        dirs.append(path)
+    dirs.append(SHIPPED_CONFIG_DIR)
+    unique: list[Path] = []
+    for d in dirs:
+        if d.resolve() not in {u.resolve() for u in unique}:
+            unique.append(d)
+    return tuple(unique)
+
+
+def with_config_dir(directory: str | Path, environ: Mapping[str, str]) -> dict[str, str]:
+    """``environ`` with ``directory`` first in ``QUADSITL_CONFIG_DIR`` (child processes inherit
+    it); a directory that does not exist is a :class:`ConfigError`."""
+    path = Path(directory).expanduser()
+    if not path.is_dir():
+        raise ConfigError(f"--config-dir {directory} is not a directory")
+    rest = environ.get(CONFIG_ENV, "")
+    return {**environ, CONFIG_ENV: os.pathsep.join([str(path.resolve()), *([rest] if rest else [])])}
+
+
+def available_names(kind: str, dirs: tuple[Path, ...] | None = None) -> list[str]:
+    """The names of ``kind`` (``scenarios``, ``gusts``, ...) found in any configuration directory."""
+    dirs = config_dirs() if dirs is None else dirs
+    return sorted({p.stem for d in dirs for p in (d / kind).glob("*.toml")})
 
 
 def config_path(kind: str, name_or_path: str | Path) -> Path:
-    """Resolve ``name_or_path``: an existing path, or ``CONFIG_DIR/kind/NAME.toml``."""
+    """Resolve ``name_or_path``: an existing path, or ``DIR/kind/NAME.toml`` in the first of
+    :func:`config_dirs` that has it. A name found nowhere is a :class:`ConfigError` listing every
+    place looked in and the names there are."""
     candidate = Path(name_or_path)
     if candidate.suffix == ".toml" or candidate.exists():
         if not candidate.exists():
             raise ConfigError(f"{candidate}: file not found")
         return candidate
-    path = CONFIG_DIR / kind / f"{name_or_path}.toml"
-    if not path.exists():
-        available = sorted(p.stem for p in (CONFIG_DIR / kind).glob("*.toml"))
-        raise ConfigError(
-            f"no {kind} named '{name_or_path}' (looked for {path}); available: {', '.join(available)}"
-        )
-    return path
+    return find_config(kind, str(name_or_path))
+
+
+def find_config(kind: str, name: str) -> Path:
+    """``DIR/kind/NAME.toml`` in the first of :func:`config_dirs` that has it (a name only)."""
+    dirs = config_dirs()
+    looked = [d / kind / f"{name}.toml" for d in dirs]
+    for path in looked:
+        if path.is_file():
+            return path
+    available = available_names(kind, dirs)
+    what = kind or "file"
+    raise ConfigError(
+        f"no {what} named '{name}' (looked for {', '.join(map(str, looked))}); "
+        f"available: {', '.join(available) or 'none'}"
+    )
+
+
+def shipped_files() -> list[Path]:
+    """The shipped configuration files, relative to :data:`SHIPPED_CONFIG_DIR` (TOML only)."""
+    return sorted(p.relative_to(SHIPPED_CONFIG_DIR) for p in SHIPPED_CONFIG_DIR.rglob("*.toml"))
+
+
+def copy_shipped_config(target: str | Path, force: bool = False) -> list[Path]:
+    """Write the shipped configuration into ``target`` (created) for editing; the files written.
+    Without ``force`` nothing is written when any of them exists already (a :class:`ConfigError`
+    names them)."""
+    target = Path(target).expanduser()
+    if target.exists() and not target.is_dir():
+        raise ConfigError(f"{target}: exists and is not a directory")
+    files = shipped_files()
+    if not files:
+        raise ConfigError(f"no shipped configuration found (looked in {SHIPPED_CONFIG_DIR})")
+    existing = [target / f for f in files if (target / f).exists()]
+    if existing and not force:
+        more = f" and {len(existing) - 5} more" if len(existing) > 5 else ""
+        shown = ", ".join(map(str, existing[:5])) + more
+        raise ConfigError(f"{shown}: already there; nothing written (--force overwrites)")
+    written = []
+    for f in files:
+        (target / f).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(SHIPPED_CONFIG_DIR / f, target / f)
+        written.append(target / f)
+    return written
 
 
 # --------------------------------------------------------------------------------------------
@@ -230,7 +333,11 @@ def estimator_profile_for(sensors: str) -> str:
         if not root.has("alias"):
             break
         sensors = root.string("alias")
-    return sensors if (CONFIG_DIR / "estimator" / f"{sensors}.toml").exists() else "default"
+    try:
+        config_path("estimator", sensors)
+    except ConfigError:
+        return "default"
+    return sensors
 
 
 def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
@@ -353,7 +460,7 @@ def load_rates(sec: Section) -> Rates:
 
 
 def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
-    path = config_path("", name_or_path) if name_or_path else CONFIG_DIR / "sitl.toml"
+    path = config_path("", name_or_path) if name_or_path else find_config("", "sitl")
     root = load_toml(path)
     sec = root.section("rates", optional=True)
     rates = load_rates(sec)

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import signal
 import sys
-from pathlib import Path
 
 from quadcommon import wire
 from quadcommon.schema import ConfigError
@@ -51,7 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--speed", type=_speed, default=1.0, help="wall-clock pacing: a factor (1 = real time) or 'max'"
     )
     parser.add_argument("--duration", type=_duration, default=None, help="stop after S simulated seconds")
-    parser.add_argument("--config-dir", default=None, help="configuration directory (default: ./config)")
+    parser.add_argument("--config-dir", default=None,
+                        help="a directory of your own configuration, looked in before the shipped one "
+                        "(also QUADSITL_CONFIG_DIR)")  # fmt: skip
     parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
     parser.add_argument("--sensors", default=None,
                         help="sensor profile: ideal, mocap, gps (config/sensors; default: the scenario's)")
@@ -63,11 +65,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.config_dir is not None:
         import quadcommon.config as qconfig
 
-        config_dir = Path(args.config_dir)
-        if not config_dir.is_dir():
-            print(f"simulator: --config-dir {config_dir} is not a directory", file=sys.stderr)
+        try:  # first in QUADSITL_CONFIG_DIR: names are looked up there, then in the shipped files
+            os.environ.update(qconfig.with_config_dir(args.config_dir, os.environ))
+        except ConfigError as exc:
+            print(f"simulator: {exc}", file=sys.stderr)
             return 2
-        qconfig.CONFIG_DIR = config_dir  # config_path() reads it at call time
     try:
         setup = SimulatorSetup.load(
             args.instance, args.scenario, args.vehicle, args.sitl_config, args.sensors

@@ -1,19 +1,82 @@
 """The ``quadsitl`` command line (the composition root's entry point).
 
+quadsitl up [--instance N] [--scenario NAME]       the SITL: simulator + autopilot over MAVLink/UDP
 quadsitl paper [--out DIR] [--nominal-plant]      the paper's experiment, in-process
 quadsitl run SCENARIO [--controller NAME]          one in-process run
 quadsitl campaign SPEC [--runs N] [--out DIR]       Monte Carlo campaign (sitl/campaign/)
 quadsitl view [--instance N ...] [LOG ...]         live view / replays in the browser
+quadsitl fly setpoints|trajectory|paper ...        fly a running SITL (gcs_scripts/fly_*.py)
+quadsitl mission upload|download|clear ...         the mission protocol (gcs_scripts/upload_mission.py)
+quadsitl gusts upload PROFILE ...                  disturbances (gcs_scripts/upload_gusts.py)
+quadsitl record [--out DIR/NAME] ...               record a session (gcs_scripts/record.py)
+quadsitl config copy DIR [--force]                 write the shipped configuration out for editing
+
+Configuration names (scenarios, vehicles, gusts, ...) are looked up in --config-dir DIR, then in
+the directories of QUADSITL_CONFIG_DIR (joined by ':'), then in the shipped configuration.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from importlib import metadata
 from pathlib import Path
 
 from autopilot.control.config import CONTROLLER_NAMES
+from quadcommon.cli_help import HelpFormatter
 from quadcommon.schema import ConfigError
+
+# The ground-station scripts as subcommands: (group, name) -> module of gcs_scripts with
+# main(argv, prog) and the arguments put before the user's (the same flags as the script).
+DELEGATED: dict[tuple[str, str], tuple[str, tuple[str, ...], str]] = {
+    ("fly", "setpoints"): ("fly_setpoints", (), "fly setpoints (default: a square) in OFFBOARD"),
+    ("fly", "trajectory"): ("fly_trajectory", (), "fly a scenario's trajectory as streamed setpoints"),
+    ("fly", "paper"): ("fly_paper", (), "the paper's curve as a TIMED mission, recorded"),
+    ("mission", "upload"): ("upload_mission", (), "upload a mission file or --curve (and --fly it)"),
+    ("mission", "download"): ("upload_mission", ("--download",), "print or --save the vehicle's mission"),
+    ("mission", "clear"): ("upload_mission", ("--clear",), "clear the vehicle's mission"),
+    ("gusts", "upload"): ("upload_gusts", (), "send a gust profile to the simulator (zenoh)"),
+}
+RECORD_MODULE = "record"
+GROUP_HELP = {
+    "fly": "fly a running SITL: setpoints, trajectory, paper (quadsitl fly NAME --help)",
+    "mission": "the vehicle's mission: upload, download, clear (quadsitl mission NAME --help)",
+    "gusts": "disturbances: upload a gust profile to the simulator (quadsitl gusts upload --help)",
+}
+
+
+def version() -> str:
+    try:
+        return metadata.version("quadsitl")
+    except metadata.PackageNotFoundError:  # a checkout run without installing it
+        return "unknown (not installed)"
+
+
+def _delegate(module: str, argv: list[str], prog: str) -> int:
+    main = __import__(f"gcs_scripts.{module}", fromlist=["main"]).main
+    return main(argv, prog=prog)
+
+
+class _Parser(argparse.ArgumentParser):
+    """Every subcommand's parser: its help lists the defaults (:class:`HelpFormatter`)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
+def _cmd_config(args: argparse.Namespace) -> int:
+    from quadcommon.config import config_dirs, copy_shipped_config
+
+    if args.action == "copy":
+        written = copy_shipped_config(args.dir, force=args.force)
+        print(f"wrote {len(written)} files to {args.dir}/ (edit them; use them with "
+              f"--config-dir {args.dir} or QUADSITL_CONFIG_DIR={args.dir})")  # fmt: skip
+        return 0
+    for d in config_dirs():  # "where": the directories looked in, first match wins
+        print(d)
+    return 0
 
 
 def _cmd_paper(args: argparse.Namespace) -> int:
@@ -151,10 +214,16 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="quadsitl", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    parser = argparse.ArgumentParser(prog="quadsitl", description=__doc__, formatter_class=HelpFormatter)
+    parser.add_argument("--version", action="version", version=f"quadsitl {version()}")
+    parser.add_argument(
+        "--config-dir",
+        metavar="DIR",
+        default=None,
+        help="your own configuration directory, looked in before QUADSITL_CONFIG_DIR and the shipped "
+        "files (a scenario of your own: DIR/scenarios/NAME.toml); quadsitl config copy DIR starts one",
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     p = sub.add_parser("up", help="start the SITL: simulator + autopilot, linked over MAVLink/UDP")
     p.add_argument(
@@ -167,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1; at most 10)")
     p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
     p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")
-    p.add_argument("--vehicle", default="paper_quad")
+    p.add_argument("--vehicle", default="paper_quad", help="vehicle model and plant (config/vehicle)")
     p.add_argument(
         "--speed",
         type=_speed,
@@ -245,8 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="fly the nominal Section II model instead of the coupled plant",
     )
-    p.add_argument("--scenarios", nargs="+", default=["circle", "helix"])
-    p.add_argument("--controllers", nargs="+", default=list(CONTROLLER_NAMES))
+    p.add_argument("--scenarios", nargs="+", default=["circle", "helix"], help="scenarios (config/scenarios)")
+    p.add_argument("--controllers", nargs="+", default=list(CONTROLLER_NAMES), help="cascades to compare")
     p.add_argument("--workers", type=int, default=2, help="parallel runs (default 2)")
     p.add_argument("--duration", type=float, default=None,
                    help="simulated seconds per run (default: the scenario's, 40 s in the paper)")  # fmt: skip
@@ -255,8 +324,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("run", help="one in-process run of a scenario")
     p.add_argument("scenario", help="scenario name (config/scenarios) or path")
-    p.add_argument("--controller", default="intbs_nlhinf")
-    p.add_argument("--nominal-plant", action="store_true")
+    p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
+    p.add_argument("--nominal-plant", action="store_true",
+                   help="fly the nominal Section II model instead of the coupled plant")  # fmt: skip
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
     p.add_argument("--out", default=None, help="write the time series to this Parquet file")
     _estimation_arguments(p)
@@ -265,11 +335,60 @@ def build_parser() -> argparse.ArgumentParser:
     from .campaign.cli import add_campaign_parser  # issue 11: Monte Carlo campaigns
 
     add_campaign_parser(sub)
+
+    for group, text in GROUP_HELP.items():  # parsed in main(); these parsers give --help and errors
+        p = sub.add_parser(group, help=text)
+        names = p.add_subparsers(dest="name", required=True, metavar="NAME")
+        for (g, name), (module, _, about) in DELEGATED.items():
+            if g == group:
+                q = names.add_parser(name, help=f"{about} (gcs_scripts/{module}.py)", add_help=False)
+                q.add_argument("rest", nargs=argparse.REMAINDER)
+    p = sub.add_parser("record", help="record a session: tlog + Parquet (quadsitl record --help)",
+                       add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+
+    p = sub.add_parser("config", help="the configuration: copy the shipped files out, or list where names "
+                       "are looked up")  # fmt: skip
+    actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    q = actions.add_parser("copy", help="write the shipped configuration into DIR for editing")
+    q.add_argument("dir", metavar="DIR", help="directory to write into (created)")
+    q.add_argument("--force", action="store_true", help="overwrite files that are there already")
+    actions.add_parser("where", help="the directories a name is looked up in, first match wins")
+    p.set_defaults(func=_cmd_config)
     return parser
+
+
+def _split_config_dir(argv: list[str]) -> tuple[str | None, list[str]]:
+    """``--config-dir DIR`` (or ``=DIR``) before the command, and the rest."""
+    directory = None
+    while argv:
+        if argv[0] == "--config-dir" and len(argv) > 1:
+            directory, argv = argv[1], argv[2:]
+        elif argv[0].startswith("--config-dir="):
+            directory, argv = argv[0].split("=", 1)[1], argv[1:]
+        else:
+            break
+    return directory, argv
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    directory, argv = _split_config_dir(list(argv))
+    try:
+        if directory is not None:  # in the environment: the processes `up` starts look there too
+            from quadcommon.config import with_config_dir
+
+            os.environ.update(with_config_dir(directory, os.environ))
+        return _dispatch(argv)
+    except ConfigError as exc:
+        print(f"quadsitl: configuration error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("quadsitl: interrupted", file=sys.stderr)
+        return 130
+
+
+def _dispatch(argv: list[str]) -> int:
     if argv[:1] == ["analyze"]:  # its own parser (options such as --help pass through)
         from gcs_scripts.analysis.analyze import main as analyze_main
 
@@ -278,15 +397,13 @@ def main(argv: list[str] | None = None) -> int:
         from gcs_scripts.view.server import main as view_main
 
         return view_main(argv[1:], prog="quadsitl view")
+    if argv[:1] == ["record"]:
+        return _delegate(RECORD_MODULE, argv[1:], "quadsitl record")
+    if tuple(argv[:2]) in DELEGATED:
+        module, before, _ = DELEGATED[(argv[0], argv[1])]
+        return _delegate(module, [*before, *argv[2:]], f"quadsitl {argv[0]} {argv[1]}")
     args = build_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except ConfigError as exc:
-        print(f"quadsitl: configuration error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("quadsitl: interrupted", file=sys.stderr)
-        return 130
+    return args.func(args)
 
 
 if __name__ == "__main__":

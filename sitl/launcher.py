@@ -65,7 +65,7 @@ class Child:
         self,
         name: str,
         cmd: Sequence[str],
-        cwd: Path | str | None = REPO,
+        cwd: Path | str | None = None,  # the launcher's: relative paths mean what the user meant
         env: dict[str, str] | None = None,
         echo: Callable[[str, str], None] | None = None,
     ) -> None:

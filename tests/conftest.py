@@ -25,6 +25,7 @@ PROCESS_MODULES = {
     "tests/simulator/test_sim_cli.py",
     "tests/simulator/test_sim_process.py",
     "tests/sitl/test_hostile_udp.py",
+    "tests/sitl/test_installed_wheel.py",
     "tests/sitl/test_launcher_ports.py",
     "tests/sitl/test_paper_through_sitl.py",
     "tests/sitl/test_params_failsafes.py",

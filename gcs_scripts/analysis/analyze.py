@@ -26,6 +26,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from quadcommon.cli_help import HelpFormatter
+
 from .figures import paper_figures
 from .log_reader import Window, read_session
 from .metrics import indices
@@ -138,7 +140,7 @@ def analyze(
 
 def build_parser(prog: str = "quadsitl analyze") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument(
         "logs", nargs="+", help="session .parquet, NAME.parts/ directory, or in-process .parquet"

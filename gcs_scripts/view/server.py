@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from quadcommon import wire
+from quadcommon.cli_help import HelpFormatter
 
 from . import build as vendor_build
 
@@ -337,6 +338,7 @@ def build_parser(prog: str = "quadsitl view") -> argparse.ArgumentParser:
         prog=prog,
         description="Live 3-D view and time plots of running vehicles in the browser, or replays of "
         "recorded logs (served on 127.0.0.1).",
+        formatter_class=HelpFormatter,
     )
     parser.add_argument(
         "logs",

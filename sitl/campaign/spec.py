@@ -51,10 +51,11 @@ from typing import Any
 
 from autopilot.control.config import ControllerConfig, load_controller
 from quadcommon.config import (
-    CONFIG_DIR,
+    SHIPPED_CONFIG_DIR,
     Rates,
     ScenarioConfig,
     VehicleConfig,
+    config_path,
     load_rates,
     load_scenario,
     load_sitl,
@@ -85,7 +86,7 @@ from simulator.environment.gust_profile import (
 
 from .engine import FailureLimits
 
-CAMPAIGN_DIR = CONFIG_DIR / "campaigns"
+CAMPAIGN_DIR = SHIPPED_CONFIG_DIR / "campaigns"  # the shipped campaigns
 MAX_RUNS = 1_000_000
 # Bumped whenever the kernels or the sampling change what a run produces (results on disk from
 # another version are then not mixed in on resume).
@@ -299,19 +300,8 @@ class CampaignSpec:
 
 
 def campaign_path(name_or_path: str | Path) -> Path:
-    """A path, or ``config/campaigns/NAME.toml``."""
-    candidate = Path(name_or_path)
-    if candidate.suffix == ".toml" or candidate.exists():
-        if not candidate.exists():
-            raise ConfigError(f"{candidate}: file not found")
-        return candidate
-    path = CAMPAIGN_DIR / f"{name_or_path}.toml"
-    if not path.exists():
-        available = sorted(p.stem for p in CAMPAIGN_DIR.glob("*.toml"))
-        raise ConfigError(
-            f"no campaign named '{name_or_path}' (looked for {path}); available: {', '.join(available)}"
-        )
-    return path
+    """A path, or ``campaigns/NAME.toml`` in the configuration directories."""
+    return config_path("campaigns", name_or_path)
 
 
 def load_campaign(name_or_path: str | Path, runs: int | None = None) -> CampaignSpec:

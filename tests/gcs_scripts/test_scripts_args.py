@@ -192,3 +192,14 @@ def test_record_paths_and_default_url(tmp_path: Path) -> None:
     args = record.build_parser().parse_args(["--instance", "2", "--duration", "30", "--until-disarmed"])
     assert args.duration == 30.0 and args.until_disarmed
     assert str(record.default_out()).startswith("runs/")
+
+
+@pytest.mark.timeout(10)
+def test_upload_gusts_takes_a_profile_name_or_a_file(tmp_path):
+    from gcs_scripts import upload_gusts as ug
+    from quadcommon.config import SHIPPED_CONFIG_DIR
+
+    assert ug.profile_path("mixed") == SHIPPED_CONFIG_DIR / "gusts" / "mixed.toml"
+    assert ug.profile_path(tmp_path / "mine.json") == tmp_path / "mine.json"  # a file, read later
+    with pytest.raises(ug.ProfileFileError, match=r"no gusts named 'nosuch'.*available: .*mixed"):
+        ug.profile_path("nosuch")

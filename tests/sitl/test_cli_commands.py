@@ -1,0 +1,144 @@
+"""The ``quadsitl`` command line as installed users see it (in-process, no SITL started): the
+ground-station scripts as subcommands with their own flags, --version, --config-dir, ``config
+copy``, help that states defaults, configuration errors without a traceback."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+import pytest
+
+from quadcommon import config
+from quadcommon.cli_help import has_default_to_show
+from sitl import cli
+
+SCRIPTS = ["fly_setpoints", "fly_trajectory", "fly_paper", "upload_mission", "upload_gusts", "record"]
+
+
+def _parsers(parser: argparse.ArgumentParser, name: str):
+    yield name, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub_name, sub in action.choices.items():
+                yield from _parsers(sub, f"{name} {sub_name}")
+
+
+def _all_parsers():
+    yield from _parsers(cli.build_parser(), "quadsitl")
+    for module in SCRIPTS:
+        yield module, importlib.import_module(f"gcs_scripts.{module}").build_parser()
+    yield "quadsitl analyze", importlib.import_module("gcs_scripts.analysis.analyze").build_parser()
+    yield "quadsitl view", importlib.import_module("gcs_scripts.view.server").build_parser("quadsitl view")
+
+
+@pytest.mark.timeout(30)
+def test_every_option_has_help_and_says_its_default():
+    missing, silent = [], []
+    for name, parser in _all_parsers():
+        formatter = parser._get_formatter()
+        for action in parser._actions:
+            if not action.option_strings or action.help == argparse.SUPPRESS:
+                continue
+            if not action.help:
+                silent.append(f"{name} {action.option_strings[0]}")
+            if not has_default_to_show(action):
+                continue
+            text = formatter._get_help_string(action) % {"default": action.default}
+            if "default" not in text.lower():
+                missing.append(f"{name} {action.option_strings[0]}")
+    assert not missing, missing
+    assert not silent, silent
+
+
+@pytest.mark.timeout(10)
+def test_a_default_of_zero_is_shown():
+    parser = argparse.ArgumentParser(formatter_class=cli.HelpFormatter)
+    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N")
+    parser.add_argument("--fast", action="store_true", help="go")
+    text = parser.format_help()
+    assert "vehicle instance N (default: 0)" in text
+    assert "go (default" not in text
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize(
+    ("argv", "module", "forwarded"),
+    [
+        (["fly", "setpoints", "--instance", "16"], "fly_setpoints", ["--instance", "16"]),
+        (["fly", "trajectory", "--scenario", "helix"], "fly_trajectory", ["--scenario", "helix"]),
+        (["fly", "paper", "--rate", "5"], "fly_paper", ["--rate", "5"]),
+        (["mission", "upload", "m.toml", "--fly"], "upload_mission", ["m.toml", "--fly"]),
+        (["mission", "download", "--save", "x"], "upload_mission", ["--download", "--save", "x"]),
+        (["mission", "clear"], "upload_mission", ["--clear"]),
+        (["gusts", "upload", "mixed", "--now"], "upload_gusts", ["mixed", "--now"]),
+        (["record", "--duration", "3"], "record", ["--duration", "3"]),
+    ],
+)
+def test_subcommands_delegate_to_the_scripts_with_their_flags(monkeypatch, argv, module, forwarded):
+    calls = []
+    mod = importlib.import_module(f"gcs_scripts.{module}")
+    monkeypatch.setattr(mod, "main", lambda a, prog: calls.append((a, prog)) or 7)
+    assert cli.main(argv) == 7
+    assert calls == [(forwarded, "quadsitl " + " ".join(argv[: 1 if argv[0] == "record" else 2]))]
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize(
+    "argv", [["fly", "setpoints"], ["fly", "paper"], ["mission", "download"], ["gusts", "upload"], ["record"]]
+)
+def test_subcommand_help_is_the_scripts_under_the_new_name(capsys, argv):
+    with pytest.raises(SystemExit) as info:
+        cli.main([*argv, "--help"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: quadsitl {' '.join(argv)} ")
+    assert "--instance" in out and "(default" in out
+
+
+@pytest.mark.timeout(30)
+def test_unknown_subcommand_is_a_usage_error(capsys):
+    with pytest.raises(SystemExit) as info:
+        cli.main(["fly", "loops"])
+    assert info.value.code == 2
+    assert "invalid choice: 'loops'" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(30)
+def test_version(capsys):
+    with pytest.raises(SystemExit) as info:
+        cli.main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"quadsitl {cli.version()}"
+
+
+@pytest.mark.timeout(30)
+def test_config_copy_writes_then_refuses_then_forces(tmp_path, capsys):
+    target = tmp_path / "cfg"
+    assert cli.main(["config", "copy", str(target)]) == 0
+    assert (target / "scenarios" / "circle.toml").is_file()
+    assert (target / "sitl.toml").is_file()
+    assert cli.main(["config", "copy", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert "already there; nothing written (--force overwrites)" in err and "Traceback" not in err
+    assert cli.main(["config", "copy", str(target), "--force"]) == 0
+
+
+@pytest.mark.timeout(30)
+def test_config_dir_overlays_and_a_missing_name_lists_the_places(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv(config.CONFIG_ENV, raising=False)
+    monkeypatch.setattr(cli.os, "environ", dict(cli.os.environ))  # --config-dir writes the environment
+    mine = tmp_path / "mine"
+    (mine / "scenarios").mkdir(parents=True)
+    assert cli.main(["--config-dir", str(mine), "run", "nosuch", "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("quadsitl: configuration error: no scenarios named 'nosuch'")
+    assert str(mine.resolve() / "scenarios" / "nosuch.toml") in err
+    assert str(config.SHIPPED_CONFIG_DIR / "scenarios" / "nosuch.toml") in err
+    assert "available: circle, helix, hover" in err
+
+
+@pytest.mark.timeout(30)
+def test_config_dir_that_does_not_exist(tmp_path, capsys):
+    assert cli.main(["--config-dir", str(tmp_path / "nope"), "config", "where"]) == 2
+    assert "is not a directory" in capsys.readouterr().err
