@@ -12,7 +12,7 @@ VIEW_VENDOR := gcs_scripts/view/static/vendor/MANIFEST.json
 
 .PHONY: demo test paper lint bench clean view browser
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml setup.py
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,campaign,cluster]'
