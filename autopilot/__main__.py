@@ -1,7 +1,78 @@
-"""``python -m autopilot``: the flight-controller process (see autopilot/app.py)."""
+"""``python -m autopilot``: the flight-controller process (autopilot/app.py), its command line."""
 
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import signal
 import sys
+import time
 
-from .app import main
+from quadcommon import bus
+from quadcommon.schema import ConfigError
+from quadcommon.udp import PortInUse
 
-sys.exit(main())
+from .app import Autopilot
+from .core import AutopilotSetup
+from .mavlink.signing import SigningOptions
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m autopilot", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (ports +N, sysid 1+N)")
+    parser.add_argument("--controller", default="intbs_nlhinf", help="cascade (config/controllers)")
+    parser.add_argument("--vehicle", default="paper_quad", help="vehicle (config/vehicle)")
+    parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
+    parser.add_argument(
+        "--autostart",
+        metavar="SCENARIO",
+        default=None,
+        help="arm at t=0 and fly the scenario's trajectory (the paper's experiment)",
+    )
+    parser.add_argument("--state-source", choices=("odometry", "hil_state_quaternion"), default="odometry",
+                        help="where the truth comes from (with --estimator truth)")  # fmt: skip
+    parser.add_argument("--estimator", choices=("truth", "ekf"), default="truth",
+                        help="fly on the simulator's truth (the paper's assumption) or on the EKF's estimate "
+                        "of the sensors (EKF2_EN; default: truth)")  # fmt: skip
+    parser.add_argument("--estimator-profile", default="default", metavar="NAME",
+                        help="config/estimator/NAME.toml: the EKF2_* values to start from (default: PX4's)")
+    parser.add_argument("--no-zenoh", action="store_true", help="do not publish controller internals")
+    parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--params", metavar="FILE", default=None,
+                        help="parameter file (params.toml, NAME = value): loaded at start if it exists, "
+                        "saved on every change and on MAV_CMD_PREFLIGHT_STORAGE")  # fmt: skip
+    parser.add_argument("--signing-key", metavar="FILE", default=None,
+                        help="MAVLink 2 signing on the GCS links with this key: one line, 64 hex digits "
+                        "or a passphrase (hashed as MAVProxy's 'signing setup PASSPHRASE')")  # fmt: skip
+    parser.add_argument("--signing-state", metavar="FILE", default=None,
+                        help="where the signing key and timestamps persist (default: signing-N.json "
+                        "beside --params, else beside --signing-key, else in memory)")  # fmt: skip
+    args = parser.parse_args(argv)
+    try:
+        setup = AutopilotSetup.load(args.instance, args.controller, args.vehicle, args.sitl_config,
+                                    args.autostart, args.state_source, args.params, args.estimator,
+                                    args.estimator_profile)  # fmt: skip
+        signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
+        setup = dataclasses.replace(setup, signing=signing)
+        app = Autopilot(setup, zenoh=not args.no_zenoh, quiet=args.quiet)
+        app.open()
+    except (ConfigError, ValueError) as exc:
+        print(f"autopilot: {exc}", file=sys.stderr)
+        return 2
+    except (PortInUse, bus.BusError) as exc:
+        print(f"autopilot: {exc}; is another vehicle running with --instance {args.instance}? "
+              "(pick another --instance)", file=sys.stderr)  # fmt: skip
+        return 2
+    signal.signal(signal.SIGTERM, app.stop)
+    signal.signal(signal.SIGINT, app.stop)
+    try:
+        return app.run()
+    finally:
+        app.close()
+        print("autopilot: stopped", flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -4,7 +4,7 @@ socket is bound or process started. (The processes themselves: tests/compat/test
 
 from __future__ import annotations
 
-from autopilot import app
+from autopilot.__main__ import main as autopilot_main
 from sitl import cli
 from sitl.launcher import VehicleSpec
 
@@ -19,7 +19,7 @@ def test_vehicle_spec_passes_the_key_file_to_the_autopilot():
 def test_a_bad_key_file_stops_the_start_naming_file_and_reason(tmp_path, capsys):
     bad = tmp_path / "key.txt"
     bad.write_text("two words\n")
-    assert app.main(["--instance", "70", "--no-zenoh", "--quiet", "--signing-key", str(bad)]) == 2
+    assert autopilot_main(["--instance", "70", "--no-zenoh", "--quiet", "--signing-key", str(bad)]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "one word" in err
     assert cli.main(["up", "--instance", "70", "--signing-key", str(bad)]) == 2
