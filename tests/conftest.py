@@ -37,9 +37,22 @@ PROCESS_MODULES = {
 }
 
 
-def _uses_processes(nodeid: str) -> bool:
+# Of those, the client-compatibility tests (marker ``compat`` too): they run on a port block of their
+# own (tests/compat/vehicles.py: PX4 instances 100-119) or in a network namespace of their own, and
+# mostly wait on real clients paced to the wall clock, so tests/suite.py runs them as a third session
+# beside the other two. test_signing_processes.py stays with the others: it uses instances 70-72 of
+# the normal block, as tests/sitl/test_signing_cli.py does.
+COMPAT_MODULES = {"tests/compat/"}
+NOT_COMPAT = {"tests/compat/test_signing_processes.py"}
+
+
+def _listed(nodeid: str, entries: set[str]) -> bool:
     path = nodeid.split("::", 1)[0]
-    return any(path == entry or (entry.endswith("/") and path.startswith(entry)) for entry in PROCESS_MODULES)
+    return any(path == entry or (entry.endswith("/") and path.startswith(entry)) for entry in entries)
+
+
+def _uses_processes(nodeid: str) -> bool:
+    return _listed(nodeid, PROCESS_MODULES)
 
 
 @pytest.hookimpl(tryfirst=True)  # before -m selects on the marker
@@ -47,4 +60,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if _uses_processes(item.nodeid):
             item.add_marker(pytest.mark.processes)
+            if _listed(item.nodeid, COMPAT_MODULES) and not _listed(item.nodeid, NOT_COMPAT):
+                item.add_marker(pytest.mark.compat)
 

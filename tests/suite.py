@@ -1,12 +1,14 @@
-"""``make test``: the suite as two pytest sessions side by side, one per core.
+"""``make test``: the suite as three pytest sessions side by side.
 
-* ``-m processes``: the tests that start processes or bind the SITL's fixed ports, one after
-  another (see ``tests/conftest.py``);
-* ``-m "not processes"``: everything else, in-process and in simulation time.
+* ``-m "not processes"``: in-process and in simulation time, the large majority (CPU-bound);
+* ``-m "processes and not compat"``: the tests that start processes or bind the SITL's fixed
+  ports, one after another (see ``tests/conftest.py``);
+* ``-m compat``: MAVSDK and MAVProxy against real vehicles, on a port block of their own, one
+  after another (mostly waiting on clients paced to the wall clock).
 
-Each session's output goes to ``out/tests/<half>.log`` and is printed when it ends; the exit code
-is non-zero when either half fails (or is interrupted), and the wall time of each is reported.
-Extra arguments go to both sessions (``python -m tests.suite -x -k fuzz``).
+Each session's output goes to ``out/tests/<session>.log`` and is printed when it ends; the exit code
+is non-zero when any session fails (or is interrupted), and the wall time of each is reported.
+Extra arguments go to every session (``python -m tests.suite -x -k fuzz``).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-HALVES = (("in-process", "not processes"), ("processes", "processes"))
+HALVES = (("in-process", "not processes"), ("processes", "processes and not compat"), ("compat", "compat"))
 LOGS = Path("out/tests")
 
 
