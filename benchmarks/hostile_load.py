@@ -12,7 +12,10 @@ the autopilot's GCS port:
   must each be refused or ignored, from 300 source ports);
 * ``flood``: the same, flat out (as fast as one Python sender goes, 1,000 source ports).
 
-The control step's latency is the simulator's HIL round trip (frame sent -> its
+At ``--speed 1`` the real-time factor is measured from "linked" to the simulator's exit, start-up
+and shutdown of a 10 s run included (~0.95 when nothing is wrong); the pacer's re-anchors (frames
+that missed their wall-clock slot, after which pacing restarts from now) say whether real time
+was kept. The control step's latency is the simulator's HIL round trip (frame sent -> its
 HIL_ACTUATOR_CONTROLS received: the autopilot's whole frame, GCS traffic it had to drain first
 included), median and p99. The traffic processes run on the same 2 cores as the SITL, so part of
 any slowdown is CPU contention, not the autopilot's own work; the ratios against ``quiet`` in one
@@ -33,6 +36,7 @@ from sitl.launcher import LINKED, Child, Launcher, VehicleSpec
 
 INSTANCE = 94
 RTT = re.compile(r"HIL round trip median (\d+) us, p99 (\d+) us")
+REANCHORS = re.compile(r"(\d+) re-anchors")
 TRAFFIC = {
     "quiet": [],
     "load": [["load", "--clients", "8"]],
@@ -41,7 +45,7 @@ TRAFFIC = {
 }
 
 
-def run_once(traffic: list[list[str]], duration: float, speed: str) -> tuple[float, int, int, list[str]]:
+def run_once(traffic: list[list[str]], duration: float, speed: str) -> tuple[float, int, int, int, list[str]]:
     spec = VehicleSpec(instance=INSTANCE, scenario="circle", speed=speed, autostart=True, duration_s=duration,
                        extra_autopilot_args=("--quiet",))  # fmt: skip
     clients: list[Child] = []
@@ -59,11 +63,12 @@ def run_once(traffic: list[list[str]], duration: float, speed: str) -> tuple[flo
         sim.wait(600.0)
         elapsed = time.perf_counter() - start
         match = RTT.search(sim.output)
+        late = REANCHORS.search(sim.output)
         for client in clients:
             client.stop()
         notes = [line for c in clients for line in c.output.splitlines()[:1]]
     median, p99 = (int(match.group(1)), int(match.group(2))) if match else (0, 0)
-    return duration / elapsed, median, p99, notes
+    return duration / elapsed, median, p99, int(late.group(1)) if late else -1, notes
 
 
 def main() -> None:
@@ -76,14 +81,17 @@ def main() -> None:
     results = {}
     for speed, duration in (("1", args.paced_duration), ("max", args.duration)):
         for name, traffic in TRAFFIC.items():
-            rtf, median, p99, notes = run_once(traffic, duration, speed)
-            results[speed, name] = (rtf, median, p99)
+            rtf, median, p99, late, notes = run_once(traffic, duration, speed)
+            results[speed, name] = (rtf, median, p99, late)
             print(f"speed {speed:3s} {name:8s}: {rtf:5.2f}x real time, HIL round trip median {median} us, "
-                  f"p99 {p99} us" + (f"  [{'; '.join(notes)}]" if notes else ""), flush=True)  # fmt: skip
+                  f"p99 {p99} us, {late} pacer re-anchors"
+                  + (f"  [{'; '.join(notes)}]" if notes else ""), flush=True)  # fmt: skip
     print()
-    for (speed, name), (rtf, _median, p99) in results.items():
+    for (speed, name), (rtf, _median, p99, late) in results.items():
         tag = "paced" if speed == "1" else "max"
         print(f"sitl_rtf_{tag}_{name}: {rtf:.2f} x")
+        if tag == "paced":
+            print(f"pacer_reanchors_paced_{name}: {late} frames")
         print(f"control_step_latency_p99_{tag}_{name}: {p99} us")
         if name != "quiet":
             print(f"rtf_ratio_{tag}_{name}_vs_quiet: {rtf / results[speed, 'quiet'][0]:.2f}")
