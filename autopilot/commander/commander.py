@@ -378,6 +378,8 @@ class Commander:
         elif phase == Phase.MISSION:
             assert self.mission is not None
             out = self.mission.step(t, state.position_m)
+            for severity, text in self.mission.drain_notices():
+                self._event(severity, text)
             if out.action == MissionAction.LAND:  # the mission's LAND item: mode stays AUTO.MISSION
                 self._fire(t, Event.MISSION_LAND)
                 return None

@@ -96,7 +96,7 @@ def test_download_returns_the_upload_exactly(proto):
 @pytest.mark.parametrize(
     "bad, result",
     [
-        (item(1, command=m.MAV_CMD_DO_MOUNT_CONTROL, frame=m.MAV_FRAME_MISSION), m.MAV_MISSION_UNSUPPORTED),
+        (item(1, command=m.MAV_CMD_DO_SET_HOME, frame=m.MAV_FRAME_MISSION), m.MAV_MISSION_UNSUPPORTED),
         (item(1, frame=m.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT), m.MAV_MISSION_UNSUPPORTED_FRAME),
         (item(1, frame=m.MAV_FRAME_BODY_FRD), m.MAV_MISSION_UNSUPPORTED_FRAME),
         (item(1, p=(-1.0, 0.0, 0.0, 0.0)), m.MAV_MISSION_INVALID_PARAM1),
