@@ -32,7 +32,7 @@ from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
 from ..params.store import ParameterStore
-from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, prearm_problem
+from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, fence_excess, prearm_problem
 from .modes import FlightMode, LandedState
 from .transitions import AFTER, ASKED, DESCENDING, FLYING, ON_GROUND, REFUSALS, TABLE, Event, Phase, lookup
 
@@ -279,6 +279,30 @@ class Commander:
         ends, hold in ``then`` (None: keep sampling its end)."""
         return self._fire(t, Event.SCENARIO, trajectory=trajectory, then=then)
 
+    def reposition(
+        self,
+        t: float,
+        target: Vector3,
+        speed_m_s: float | None = None,
+        yaw_rad: float | None = None,
+        change_mode: bool = True,
+    ) -> Outcome:
+        """MAV_CMD_DO_REPOSITION: fly to ``target`` (paper frame, m) at ``speed_m_s`` (None: the
+        default, at most MPC_XY_VEL_MAX) turning to ``yaw_rad`` (None: keep), then hold there. Without
+        ``change_mode`` (param2 bit 0) it is only accepted while already holding (PX4)."""
+        if not change_mode and not (self.phase == Phase.HOLD and self.mode == FlightMode.AUTO_LOITER):
+            return self._refuse(
+                DENIED, f"reposition refused: in {self.mode.px4_name}, not hold (param2 bit 0 switches)"
+            )
+        return self._fire(t, Event.REPOSITION, target=target, speed_m_s=speed_m_s, yaw_rad=yaw_rad)
+
+    def target_problem(self, target: Vector3) -> str | None:
+        """Why a point the vehicle is asked to fly to (paper frame, m) breaks the geofence, or None."""
+        if self.home is None:
+            return None
+        excess, what = fence_excess(self.params, target, self.home)
+        return f"outside the geofence: {what}" if excess > 0.0 else None
+
     # -- missions ------------------------------------------------------------------------------------
     def set_mission(self, t: float, mission: MissionExecutor | None) -> None:
         """A new stored mission (upload accepted) or none (cleared); flying the old one: hold."""
@@ -480,6 +504,22 @@ class Commander:
     def _act_plan_hold(self, t: float, **_) -> None:
         assert self.state is not None
         self._fly(t, stop_from(self.last_or_measured(self.state), self.limits()))
+
+    def _act_plan_reposition(
+        self, t: float, target: Vector3, speed_m_s: float | None, yaw_rad: float | None, **_
+    ) -> None:
+        assert self.state is not None
+        limits = self.limits()
+        if speed_m_s is not None:
+            limits = replace(limits, speed_horizontal=min(limits.speed_horizontal, speed_m_s))
+        start = self.last_or_measured(self.state)
+        brake = stop_from(start, limits)
+        p = brake.sample(brake.duration_s).position_m
+        yaw0 = start.yaw_rad
+        yaw1 = yaw0 if yaw_rad is None else yaw_rad
+        self._fly(t, PiecewiseTrajectory([brake, LineMove(p, target, limits, yaw0, yaw1)]))
+        distance = math.dist(p, target)
+        self._event(SEVERITY_INFO, f"repositioning {distance:.1f} m at {limits.speed_horizontal:.1f} m/s")
 
     def _act_plan_landing(self, t: float, **_) -> None:
         """Brake, then aim far below the ground: the descent goes on at the landing speed until
