@@ -31,6 +31,7 @@ from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
+from ..mission.plans import Geofence
 from ..params.store import ParameterStore
 from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, fence_excess, prearm_problem
 from .modes import FlightMode, LandedState
@@ -113,6 +114,7 @@ class Commander:
         self.offboard = OffboardGuidance(self.limits())
         self.last_reference: Reference | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
+        self.rally_points: list[tuple[float, float]] = []  # uploaded rally points (paper x, y, m)
         self.failsafes = FailsafeMonitor(params)
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
@@ -300,8 +302,16 @@ class Commander:
         """Why a point the vehicle is asked to fly to (paper frame, m) breaks the geofence, or None."""
         if self.home is None:
             return None
-        excess, what = fence_excess(self.params, target, self.home)
+        excess, what = fence_excess(self.params, target, self.home, self.failsafes.geofence)
         return f"outside the geofence: {what}" if excess > 0.0 else None
+
+    def set_geofence(self, geofence: Geofence | None) -> None:
+        """The uploaded geofence plan (None or no areas: only the GF_MAX_* limits)."""
+        self.failsafes.geofence = geofence if geofence is not None and geofence.areas else None
+
+    def set_rally_points(self, points: list[tuple[float, float]]) -> None:
+        """Rally points (paper frame x, y, m): RTL goes to the nearest one when closer than home."""
+        self.rally_points = list(points)
 
     # -- missions ------------------------------------------------------------------------------------
     def set_mission(self, t: float, mission: MissionExecutor | None) -> None:
@@ -460,7 +470,7 @@ class Commander:
             if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
                 return self._refuse(DENIED, "arming refused: OFFBOARD without a setpoint stream")
             problem = self.estimator_problem or prearm_problem(
-                self.params, state.position_m, self.home, self.position_valid
+                self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence
             )
             if problem:
                 return self._refuse(DENIED, f"arming refused: {problem}")
@@ -546,14 +556,21 @@ class Commander:
         brake = stop_from(start, limits)
         p = brake.sample(brake.duration_s).position_m
         climb_to = (p[0], p[1], altitude)
-        above_home = (home[0], home[1], altitude)
+        # PX4 (RTL_TYPE 0): to the closest of home and the rally points, horizontally.
+        destination, where = (home[0], home[1]), "launch"
+        best = math.hypot(p[0] - home[0], p[1] - home[1])
+        for k, rally in enumerate(self.rally_points):
+            d = math.hypot(p[0] - rally[0], p[1] - rally[1])
+            if d < best:
+                destination, where, best = rally, f"rally point {k}", d
+        above_home = (destination[0], destination[1], altitude)
         pieces = [
             brake,
             LineMove(p, climb_to, limits, yaw, yaw),
             LineMove(climb_to, above_home, limits, yaw, yaw),
         ]
         self._fly(t, PiecewiseTrajectory(pieces))
-        self._event(SEVERITY_INFO, f"returning to launch at {altitude - home[2]:.1f} m")
+        self._event(SEVERITY_INFO, f"returning to {where} at {altitude - home[2]:.1f} m")
 
     def _act_touchdown(self, t: float, **_) -> None:
         self._touchdown_at = t

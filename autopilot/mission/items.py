@@ -159,6 +159,11 @@ class ItemKind(Enum):
     TIMED = "timed"
     JUMP = "jump"
     PAYLOAD = "payload"  # camera, gimbal, ROI, gripper, winch: a no-op on this vehicle
+    # geofence and rally plans (autopilot.mission.plans)
+    FENCE_POLYGON = "fence_polygon"
+    FENCE_CIRCLE = "fence_circle"
+    FENCE_RETURN_POINT = "fence_return_point"
+    RALLY_POINT = "rally_point"
 
 
 class PositionKind(Enum):
