@@ -65,6 +65,7 @@ RETRY_S = 0.5
 MAX_RETRIES = 5
 DOWNLOAD_TIMEOUT_S = 5.0
 MAX_ITEMS = 10_000  # 1000 s of a timed curve sampled at 10 Hz
+MAX_PLAN_ITEMS = 256  # fence and rally items (the fence is checked every control step)
 
 MISSION = m.MAV_MISSION_TYPE_MISSION
 FENCE = m.MAV_MISSION_TYPE_FENCE
@@ -253,11 +254,10 @@ class MissionProtocol:
         self._idle()  # a repeated COUNT from the uploading client restarts its upload
         self._type = mission_type
         name = _PLAN_NAMES[mission_type]
-        if msg.count > self.max_items:
+        limit = self.max_items if mission_type == MISSION else min(self.max_items, MAX_PLAN_ITEMS)
+        if msg.count > limit:
             out.replies.append(self._ack(sender, m.MAV_MISSION_NO_SPACE, mission_type))
-            out.notices.append(
-                (SEVERITY_WARNING, f"{name} of {msg.count} items refused: at most {self.max_items}")
-            )
+            out.notices.append((SEVERITY_WARNING, f"{name} of {msg.count} items refused: at most {limit}"))
             return
         if msg.count == 0:
             self._store(mission_type, Mission(), out)

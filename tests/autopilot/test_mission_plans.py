@@ -173,3 +173,9 @@ def test_geofence_geometry_inclusion_union_and_exclusions():
     assert excess(0.0, 30.0) == pytest.approx(20.0, abs=0.01)
     only_exclusion = _fence([fitem(0, m.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, 2.0, 0.0, 0.0)])
     assert only_exclusion.excess((10.0, 0.0, 1.0))[0] < 0.0 < only_exclusion.excess((0.5, 0.0, 1.0))[0]
+
+
+def test_a_fence_of_too_many_items_gets_no_space(proto):
+    out = proto.handle(arrive(m.MAVLink_mission_count_message(SYS, COMP, 257, FENCE)), 0.0)
+    assert acks(out) == [m.MAV_MISSION_NO_SPACE] and out.replies[0].mission_type == FENCE
+    assert proto.state == TransferState.IDLE
