@@ -20,6 +20,17 @@ $(STAMP): pyproject.toml setup.py
 	$(BIN)/python -m pip install --quiet --no-deps 'MAVProxy>=1.8'
 	@touch $(STAMP)
 
+# MAVSDK-Python 3 (the gRPC API most PX4 users' scripts are written for) in a venv of its own: its
+# mavsdk_server binary ships inside the PyPI wheel. tests/compat/test_mavsdk3.py runs it.
+MAVSDK3 := .venv-mavsdk3/.installed
+$(MAVSDK3):
+	@test -x .venv-mavsdk3/bin/python || $(PYTHON) -m venv .venv-mavsdk3
+	.venv-mavsdk3/bin/python -m pip install --quiet 'mavsdk==3.15.3'
+	@touch $(MAVSDK3)
+
+.PHONY: mavsdk3
+mavsdk3 .venv-mavsdk3: $(MAVSDK3)
+
 # The live view's JavaScript (three.js, uPlot): pinned in gcs_scripts/view/package-lock.json, fetched
 # from the npm registry by `npm ci` once, then copied into static/vendor/; offline from then on.
 $(VIEW_VENDOR): gcs_scripts/view/package.json gcs_scripts/view/package-lock.json gcs_scripts/view/build.py | $(STAMP)
@@ -44,7 +55,7 @@ paper: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-test: $(STAMP) $(VIEW_VENDOR) browser
+test: $(STAMP) $(VIEW_VENDOR) browser $(MAVSDK3)
 	$(BIN)/ruff check .
 	$(BIN)/python -m tests.suite
 

@@ -14,6 +14,7 @@ import pytest
 
 PROCESS_MODULES = {
     "tests/compat/",  # MAVSDK, MAVProxy, several vehicles, signing with real clients
+    "tests/compat/test_mavsdk3.py",  # MAVSDK-Python 3 + quadsitl up in a network namespace
     "tests/view/test_browser_sitl.py",
     "tests/view/test_live_sitl.py",
     "tests/view/test_server.py",

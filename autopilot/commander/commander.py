@@ -31,8 +31,9 @@ from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
+from ..mission.plans import Geofence
 from ..params.store import ParameterStore
-from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, prearm_problem
+from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, fence_excess, prearm_problem
 from .modes import FlightMode, LandedState
 from .transitions import AFTER, ASKED, DESCENDING, FLYING, ON_GROUND, REFUSALS, TABLE, Event, Phase, lookup
 
@@ -113,6 +114,7 @@ class Commander:
         self.offboard = OffboardGuidance(self.limits())
         self.last_reference: Reference | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
+        self.rally_points: list[tuple[float, float]] = []  # uploaded rally points (paper x, y, m)
         self.failsafes = FailsafeMonitor(params)
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
@@ -279,6 +281,38 @@ class Commander:
         ends, hold in ``then`` (None: keep sampling its end)."""
         return self._fire(t, Event.SCENARIO, trajectory=trajectory, then=then)
 
+    def reposition(
+        self,
+        t: float,
+        target: Vector3,
+        speed_m_s: float | None = None,
+        yaw_rad: float | None = None,
+        change_mode: bool = True,
+    ) -> Outcome:
+        """MAV_CMD_DO_REPOSITION: fly to ``target`` (paper frame, m) at ``speed_m_s`` (None: the
+        default, at most MPC_XY_VEL_MAX) turning to ``yaw_rad`` (None: keep), then hold there. Without
+        ``change_mode`` (param2 bit 0) it is only accepted while already holding (PX4)."""
+        if not change_mode and not (self.phase == Phase.HOLD and self.mode == FlightMode.AUTO_LOITER):
+            return self._refuse(
+                DENIED, f"reposition refused: in {self.mode.px4_name}, not hold (param2 bit 0 switches)"
+            )
+        return self._fire(t, Event.REPOSITION, target=target, speed_m_s=speed_m_s, yaw_rad=yaw_rad)
+
+    def target_problem(self, target: Vector3) -> str | None:
+        """Why a point the vehicle is asked to fly to (paper frame, m) breaks the geofence, or None."""
+        if self.home is None:
+            return None
+        excess, what = fence_excess(self.params, target, self.home, self.failsafes.geofence)
+        return f"outside the geofence: {what}" if excess > 0.0 else None
+
+    def set_geofence(self, geofence: Geofence | None) -> None:
+        """The uploaded geofence plan (None or no areas: only the GF_MAX_* limits)."""
+        self.failsafes.geofence = geofence if geofence is not None and geofence.areas else None
+
+    def set_rally_points(self, points: list[tuple[float, float]]) -> None:
+        """Rally points (paper frame x, y, m): RTL goes to the nearest one when closer than home."""
+        self.rally_points = list(points)
+
     # -- missions ------------------------------------------------------------------------------------
     def set_mission(self, t: float, mission: MissionExecutor | None) -> None:
         """A new stored mission (upload accepted) or none (cleared); flying the old one: hold."""
@@ -378,6 +412,8 @@ class Commander:
         elif phase == Phase.MISSION:
             assert self.mission is not None
             out = self.mission.step(t, state.position_m)
+            for severity, text in self.mission.drain_notices():
+                self._event(severity, text)
             if out.action == MissionAction.LAND:  # the mission's LAND item: mode stays AUTO.MISSION
                 self._fire(t, Event.MISSION_LAND)
                 return None
@@ -434,7 +470,7 @@ class Commander:
             if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
                 return self._refuse(DENIED, "arming refused: OFFBOARD without a setpoint stream")
             problem = self.estimator_problem or prearm_problem(
-                self.params, state.position_m, self.home, self.position_valid
+                self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence
             )
             if problem:
                 return self._refuse(DENIED, f"arming refused: {problem}")
@@ -479,6 +515,22 @@ class Commander:
         assert self.state is not None
         self._fly(t, stop_from(self.last_or_measured(self.state), self.limits()))
 
+    def _act_plan_reposition(
+        self, t: float, target: Vector3, speed_m_s: float | None, yaw_rad: float | None, **_
+    ) -> None:
+        assert self.state is not None
+        limits = self.limits()
+        if speed_m_s is not None:
+            limits = replace(limits, speed_horizontal=min(limits.speed_horizontal, speed_m_s))
+        start = self.last_or_measured(self.state)
+        brake = stop_from(start, limits)
+        p = brake.sample(brake.duration_s).position_m
+        yaw0 = start.yaw_rad
+        yaw1 = yaw0 if yaw_rad is None else yaw_rad
+        self._fly(t, PiecewiseTrajectory([brake, LineMove(p, target, limits, yaw0, yaw1)]))
+        distance = math.dist(p, target)
+        self._event(SEVERITY_INFO, f"repositioning {distance:.1f} m at {limits.speed_horizontal:.1f} m/s")
+
     def _act_plan_landing(self, t: float, **_) -> None:
         """Brake, then aim far below the ground: the descent goes on at the landing speed until
         touchdown is detected."""
@@ -504,14 +556,21 @@ class Commander:
         brake = stop_from(start, limits)
         p = brake.sample(brake.duration_s).position_m
         climb_to = (p[0], p[1], altitude)
-        above_home = (home[0], home[1], altitude)
+        # PX4 (RTL_TYPE 0): to the closest of home and the rally points, horizontally.
+        destination, where = (home[0], home[1]), "launch"
+        best = math.hypot(p[0] - home[0], p[1] - home[1])
+        for k, rally in enumerate(self.rally_points):
+            d = math.hypot(p[0] - rally[0], p[1] - rally[1])
+            if d < best:
+                destination, where, best = rally, f"rally point {k}", d
+        above_home = (destination[0], destination[1], altitude)
         pieces = [
             brake,
             LineMove(p, climb_to, limits, yaw, yaw),
             LineMove(climb_to, above_home, limits, yaw, yaw),
         ]
         self._fly(t, PiecewiseTrajectory(pieces))
-        self._event(SEVERITY_INFO, f"returning to launch at {altitude - home[2]:.1f} m")
+        self._event(SEVERITY_INFO, f"returning to {where} at {altitude - home[2]:.1f} m")
 
     def _act_touchdown(self, t: float, **_) -> None:
         self._touchdown_at = t

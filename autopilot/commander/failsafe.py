@@ -12,7 +12,9 @@ Each failsafe is a parameter with PX4's name, values and default:
   ``GF_MAX_VER_DIST`` (0 disables either; both 0 by default, as PX4) -> ``GF_ACTION`` (0 none,
   1 warning, 2 hold (PX4's default), 3 return, 5 land). A breach latches: the action is taken once,
   and the fence re-arms only when the vehicle is back inside by a margin (hysteresis, so holding at
-  the boundary does not retrigger every step).
+  the boundary does not retrigger every step). An uploaded geofence plan (inclusion/exclusion
+  polygons and circles, :class:`autopilot.mission.plans.Geofence`) counts the same way: the worst
+  excess of all decides, so a breach of any of them acts by ``GF_ACTION``.
 * Offboard setpoint loss (``COM_OF_LOSS_T``) and simulator loss (``COM_SIM_LOSS_T``) live in the
   commander and the process shell respectively.
 
@@ -25,6 +27,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from ..mission.plans import Geofence
 from ..params.definitions import (
     DLL_HOLD,
     DLL_LAND,
@@ -50,9 +53,12 @@ class FailsafeAction(NamedTuple):
     text: str  # for STATUSTEXT (the commander adds what it does)
 
 
-def fence_excess(params: ParameterStore, position: Vector3, home: Vector3) -> tuple[float, str]:
-    """How far outside the geofence ``position`` is (m, <= 0 inside) and a description."""
-    worst, what = -math.inf, ""
+def fence_excess(
+    params: ParameterStore, position: Vector3, home: Vector3, geofence: Geofence | None = None
+) -> tuple[float, str]:
+    """How far outside the geofence ``position`` is (m, <= 0 inside) and a description: the
+    ``GF_MAX_*`` limits around ``home`` and the uploaded ``geofence`` plan, the worst of them."""
+    worst, what = geofence.excess(position) if geofence is not None else (-math.inf, "")
     limit = params["GF_MAX_HOR_DIST"]
     if limit > 0.0:
         d = math.hypot(position[0] - home[0], position[1] - home[1])
@@ -80,6 +86,7 @@ class FailsafeMonitor:
         self.link_lost = False  # a loss was announced and no heartbeat came since
         self._link_acted = False  # the loss action was taken for this loss
         self.fence_breached = False  # latched until back inside by the margin
+        self.geofence: Geofence | None = None  # the uploaded geofence plan (None: none)
 
     def gcs_heartbeat(self, t: float) -> list[str]:
         """A ground station's HEARTBEAT at ``t``; returns messages to announce (link regained)."""
@@ -111,7 +118,7 @@ class FailsafeMonitor:
                     )
                 )
         if home is not None and flying:
-            excess, what = fence_excess(p, position, home)
+            excess, what = fence_excess(p, position, home, self.geofence)
             if excess > 0.0 and not self.fence_breached:
                 self.fence_breached = True
                 gf_action = _GF_ACTIONS.get(int(p["GF_ACTION"]))
@@ -123,7 +130,11 @@ class FailsafeMonitor:
 
 
 def prearm_problem(
-    params: ParameterStore, position: Vector3 | None, home: Vector3 | None, position_valid: bool
+    params: ParameterStore,
+    position: Vector3 | None,
+    home: Vector3 | None,
+    position_valid: bool,
+    geofence: Geofence | None = None,
 ) -> str | None:
     """Why arming must be refused (beyond "not landed", which the commander checks), or None.
 
@@ -137,7 +148,7 @@ def prearm_problem(
     if problems:
         return "bad parameters: " + "; ".join(problems)
     if home is not None:
-        excess, what = fence_excess(params, position, home)
+        excess, what = fence_excess(params, position, home, geofence)
         if excess > 0.0:
             return f"outside the geofence: {what}"
     return None

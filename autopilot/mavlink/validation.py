@@ -88,6 +88,12 @@ COMMAND_RULES: dict[int, tuple[Param, ...]] = {
     m.MAV_CMD_REQUEST_MESSAGE: (Param(1, "message id", 0.0, MAX_MESSAGE_ID, integer=True),),
     m.MAV_CMD_MISSION_START: (Param(1, "first item", **_SEQ), Param(2, "last item", **_SEQ)),
     m.MAV_CMD_DO_SET_MISSION_CURRENT: (Param(1, "item", -1.0, 65535.0, integer=True, nan_ok=True),),
+    m.MAV_CMD_DO_REPOSITION: (
+        Param(1, "ground speed (m/s; -1 default)", -1.0, 100.0, nan_ok=True),
+        Param(2, "flags (bit 0: change mode)", **_BYTE, nan_ok=True),
+        Param(4, "yaw (deg; NaN keep)", -360.0, 360.0, nan_ok=True),
+        Param(7, "altitude (m; NaN keep)", -1000.0, 10000.0, nan_ok=True),
+    ),
     m.MAV_CMD_PREFLIGHT_STORAGE: (Param(1, "parameter storage action", values=(0.0, 1.0, 2.0, 4.0)),),
 }
 

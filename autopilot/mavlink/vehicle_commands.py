@@ -13,15 +13,24 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from quadcommon import frames
+
 from ..commander.modes import FlightMode
 from . import telemetry
 from .codec import mavlink as m
 from .commands import CommandDispatcher, CommandRequest
-from .validation import FORCE_MAGIC
+from .validation import FORCE_MAGIC, reference_problem
 
 if TYPE_CHECKING:
     from ..core import AutopilotCore
 
+INT32_MAX = 2**31 - 1  # COMMAND_INT x/y "unset" (MAVLink)
+REPOSITION_FRAMES = {  # COMMAND_INT frame -> altitude relative to home?
+    m.MAV_FRAME_GLOBAL: False,
+    m.MAV_FRAME_GLOBAL_INT: False,
+    m.MAV_FRAME_GLOBAL_RELATIVE_ALT: True,
+    m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: True,
+}
 UNDERGROUND_MARGIN_M = 10.0  # a takeoff "AMSL" this far below home is read as a height above home
 VERSION_1_0_0 = 0x01000000 | 0xFF  # major.minor.patch, FIRMWARE_VERSION_TYPE_OFFICIAL
 CAPABILITIES = (
@@ -50,6 +59,7 @@ class VehicleCommands:
         commands.register(m.MAV_CMD_NAV_LAND, lambda r: c.land(sim_time()))
         commands.register(m.MAV_CMD_NAV_RETURN_TO_LAUNCH, lambda r: c.return_to_launch(sim_time()))
         commands.register(m.MAV_CMD_DO_SET_MODE, self.set_mode)
+        commands.register(m.MAV_CMD_DO_REPOSITION, self.reposition)
         commands.register(m.MAV_CMD_SET_MESSAGE_INTERVAL, self.message_interval)
         commands.register(m.MAV_CMD_REQUEST_MESSAGE, lambda r: self.send_requested(r, int(r.params[0])))
         commands.register(
@@ -85,6 +95,57 @@ class VehicleCommands:
         if altitude >= home_amsl - UNDERGROUND_MARGIN_M:
             return commander.takeoff(t, altitude - home_amsl)
         return commander.takeoff(t, altitude)
+
+    def reposition(self, r: CommandRequest) -> Result:
+        """MAV_CMD_DO_REPOSITION (PX4's reading): param1 ground speed (-1/NaN: default), param2 bit 0
+        switch to hold, param4 yaw (deg, NaN: keep), param5/6 latitude/longitude (NaN, or INT32_MAX in
+        COMMAND_INT: keep), param7 altitude (NaN: keep). COMMAND_LONG and COMMAND_INT in the global
+        frames (AMSL or relative to home); anything else, out of range, too far (NAV_REF_MAX_DIST) or
+        outside the geofence is DENIED with the reason."""
+        core = self.core
+        commander = core.commander
+        p = r.params
+        if r.frame is None:
+            relative, lat, lon = False, p[4], p[5]
+        elif r.frame in REPOSITION_FRAMES:
+            relative = REPOSITION_FRAMES[r.frame]
+            lat = math.nan if p[4] == INT32_MAX else p[4] * 1e-7
+            lon = math.nan if p[5] == INT32_MAX else p[5] * 1e-7
+        else:
+            return self._refuse(f"reposition refused: frame {r.frame} (global frames only)")
+        if math.isnan(lat) != math.isnan(lon):
+            return self._refuse("reposition refused: latitude and longitude must both be given")
+        if not (math.isnan(lat) or -90.0 <= lat <= 90.0) or not (math.isnan(lon) or -180.0 <= lon <= 180.0):
+            return self._refuse(f"reposition refused: latitude {lat:g}, longitude {lon:g} invalid")
+        state = commander.state
+        if state is None or commander.home is None:
+            return self._refuse("reposition refused: no position")
+        ref = commander.last_reference
+        here = ref.position_m if ref is not None else state.position_m
+        origin = core.setup.sitl.home
+        if math.isnan(lat):
+            x, y = here[0], here[1]
+        else:
+            x, y, _ = frames.vector_from_ned(frames.geodetic_to_ned(lat, lon, origin[2], origin))
+        altitude = p[6]
+        if math.isnan(altitude):
+            z = here[2]
+        else:
+            z = commander.home[2] + altitude if relative else altitude - origin[2]
+        target = (x, y, z)
+        problem = reference_problem(target, commander.home, core.params.values)
+        problem = problem or commander.target_problem(target)
+        if problem:
+            return self._refuse(f"reposition refused: {problem}")
+        speed = None if math.isnan(p[0]) or p[0] <= 0.0 else p[0]
+        yaw = None if math.isnan(p[3]) else frames.wrap_pi(frames.yaw_from_ned(math.radians(p[3])))
+        change_mode = not math.isnan(p[1]) and bool(int(p[1]) & m.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE)
+        return commander.reposition(core.sim_time, target, speed, yaw, change_mode)
+
+    def _refuse(self, reason: str) -> Result:
+        """DENIED, with the reason as a STATUSTEXT too (rate-limited per reason)."""
+        self.core.refusals(reason)
+        return m.MAV_RESULT_DENIED, reason
 
     def set_mode(self, r: CommandRequest) -> Result:
         # (validated: base mode with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, bytes; sub mode NaN = 0)

@@ -27,7 +27,11 @@ DO_CHANGE_SPEED for every later leg):
   reached when the reference passes its time (a moving curve does not wait for the vehicle);
 * land: fly to above the land point, then the commander lands (mode stays AUTO.MISSION); the item
   is reached at touchdown. Return to launch: reached at once, then the commander returns (AUTO.RTL);
-* after the last item the vehicle holds (mode stays AUTO.MISSION, mission state COMPLETE).
+* after the last item the vehicle holds (mode stays AUTO.MISSION, mission state COMPLETE);
+* payload items (camera, gimbal, ROI, ...) are reached at once and do nothing (one STATUSTEXT per
+  run of the mission says so); DO_JUMP jumps to its target while it has repeats left (counted per
+  run of the mission, as PX4), else it is passed. A loop over items that take no time is refused
+  at upload; a jump chain that still takes none holds after ``MAX_INSTANT_ITEMS``.
 
 An item with ``autocontinue = 0`` is reached and then held until the ground station sets the
 current item (MISSION_SET_CURRENT) or restarts the mission.
@@ -65,7 +69,9 @@ Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
 AT_REST = 1e-6  # |v|, |a| below this: the reference is at rest
 LIMIT_TOLERANCE = 1.05  # sampled peaks may exceed a limit by this factor (as the planner)
+MAX_INSTANT_ITEMS = 100_000  # items that take no time processed in a row before the mission holds
 JERK_LIMIT_M_S3 = 5.0  # approach quintics: PX4's MPC_JERK_AUTO is 4; the S-curve moves stay below 4
+NO_PAYLOAD_TEXT = "mission: no gimbal/camera on this vehicle, payload items skipped"
 
 
 class MissionState(IntEnum):
@@ -234,6 +240,12 @@ def _resolution(block: Sequence[MissionItem]) -> tuple[float, float, float]:
     return GLOBAL_TOLERANCE_M
 
 
+_TAKES_TIME = frozenset(
+    (ItemKind.TAKEOFF, ItemKind.WAYPOINT, ItemKind.LOITER_TIME, ItemKind.DELAY, ItemKind.LAND,
+     ItemKind.TIMED, ItemKind.RETURN_TO_LAUNCH)
+)  # fmt: skip
+
+
 def check_mission(
     items: Sequence[MissionItem],
     origin: tuple[float, float, float],
@@ -254,6 +266,20 @@ def check_mission(
             problem = reference_problem((x, y, 0.0 if math.isnan(z) else z), ZERO3, params)
             if problem:
                 return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
+    for item in items:
+        if item.kind != ItemKind.JUMP:
+            continue
+        if item.jump_target >= len(items):
+            return (
+                m.MAV_MISSION_INVALID_PARAM1,
+                f"item {item.seq}: jump target {item.jump_target} not in the mission of {len(items)}",
+            )
+        loop = items[item.jump_target : item.seq]
+        if item.jump_repeats and loop and not any(it.kind in _TAKES_TIME for it in loop):
+            return (
+                m.MAV_MISSION_INVALID_PARAM1,
+                f"item {item.seq}: jump back to {item.jump_target} loops over no item that moves or waits",
+            )
     seq = 0
     while seq < len(items):
         if items[seq].kind != ItemKind.TIMED:
@@ -309,10 +335,21 @@ class MissionExecutor:
         self._pending: MissionAction = MissionAction.NONE
         self._speeds: dict[int, float | None] = {1: None, 2: None, 3: None}
         self._held = Reference(ZERO3, ZERO3, ZERO3)
+        self._jumps: dict[int, int] = {}  # DO_JUMP seq -> jumps done in this run of the mission
+        self._payload_noted = False  # the "no payload" STATUSTEXT went out in this run
+        self._notices: list[tuple[int, str]] = []
 
     @property
     def count(self) -> int:
         return len(self.items)
+
+    def _note(self, severity: int, text: str) -> None:
+        self._notices.append((severity, text))
+
+    def drain_notices(self) -> list[tuple[int, str]]:
+        """STATUSTEXTs (severity, text) the mission raised since the last call."""
+        notices, self._notices = self._notices, []
+        return notices
 
     def drain_reached(self) -> list[int]:
         """Items reached since the last call, in order (each reported once)."""
@@ -342,6 +379,8 @@ class MissionExecutor:
             self.current_seq = 0
         if self.state in (MissionState.NOT_STARTED, MissionState.COMPLETE):
             self._mission_t0 = t
+            self._jumps = {}
+            self._payload_noted = False
         self.state = MissionState.ACTIVE
         self._ctx = context
         self._on_ground = on_ground
@@ -462,9 +501,15 @@ class MissionExecutor:
         assert ctx is not None
         self._arrived_at = None
         self._held = start
+        budget = MAX_INSTANT_ITEMS
         while True:
             seq = self.current_seq
             if seq >= self.count:
+                self._finish(t, start)
+                return
+            budget -= 1
+            if budget < 0:  # jumps among items that take no time (the upload check catches most)
+                self._note(m.MAV_SEVERITY_CRITICAL, "mission: jump loop without movement, holding")
                 self._finish(t, start)
                 return
             item = self.items[seq]
@@ -474,6 +519,22 @@ class MissionExecutor:
                 self._apply_speed(item)
                 self._reach(seq)
                 self.current_seq += 1
+                continue
+            if kind == ItemKind.PAYLOAD:
+                if not self._payload_noted:
+                    self._payload_noted = True
+                    self._note(m.MAV_SEVERITY_INFO, NO_PAYLOAD_TEXT)
+                self._reach(seq)
+                self.current_seq += 1
+                continue
+            if kind == ItemKind.JUMP:
+                done = self._jumps.get(seq, 0)
+                self._reach(seq)
+                if done < item.jump_repeats:
+                    self._jumps[seq] = done + 1
+                    self.current_seq = item.jump_target
+                else:
+                    self.current_seq += 1
                 continue
             if kind == ItemKind.RETURN_TO_LAUNCH:
                 self._reach(seq)

@@ -24,7 +24,25 @@ NAV_RETURN_TO_LAUNCH     20     return home and land (the vehicle switches to AU
 WAYPOINT_USER_1          31000  TIMED trajectory sample: be at x, y, z at p1 seconds after the
                                 mission started; p4 yaw (deg, NaN: keep); consecutive timed
                                 items form one curve, interpolated by a C4 spline in time
+DO_JUMP                  177    p1 target item (seq), p2 repeat count (>= 0): jump back (or
+                                forward) that many times, then go on with the next item (PX4)
+payload items            below  stored and downloaded as uploaded, flown as no-ops (this
+                                vehicle has no gimbal, camera, gripper or winch): one
+                                STATUSTEXT per mission run says so
 =======================  =====  ==========================================================
+
+Payload items (the ones PX4's mission parser accepts without the payload being present):
+DO_CONTROL_VIDEO 200, DO_DIGICAM_CONTROL 203, DO_MOUNT_CONFIGURE 204, DO_MOUNT_CONTROL 205,
+DO_SET_CAM_TRIGG_DIST 206, DO_GRIPPER 211, DO_SET_CAM_TRIGG_INTERVAL 214, OBLIQUE_SURVEY 260,
+SET_CAMERA_MODE 530, SET_CAMERA_FOCUS 532, SET_CAMERA_SOURCE 534, DO_GIMBAL_MANAGER_PITCHYAW 1000,
+DO_GIMBAL_MANAGER_CONFIGURE 1001, IMAGE_START_CAPTURE 2000, IMAGE_STOP_CAPTURE 2001,
+DO_TRIGGER_CONTROL 2003, VIDEO_START_CAPTURE 2500, VIDEO_STOP_CAPTURE 2501, DO_WINCH 42600, and the
+region-of-interest items DO_SET_ROI_WPNEXT_OFFSET 196, DO_SET_ROI_NONE 197, DO_SET_ROI_LOCATION 195
+and NAV_ROI 80 / DO_SET_ROI 201 (p1 = MAV_ROI_NONE, WPNEXT, WPINDEX or, in a global frame,
+LOCATION; other ROI modes: ``INVALID_PARAM1``, as PX4). Their parameters must be finite or NaN
+(infinite: ``INVALID_PARAMn``); ROI positions are checked as positions. PX4's parser refuses
+SET_CAMERA_ZOOM (531) in a mission, and so does this one. PX4 items that are not payload
+(DO_SET_HOME, DO_LAND_START, CONDITION_*, DO_SET_ACTUATOR, DO_VTOL_TRANSITION, ...) stay refused.
 
 Frames for items with a position: ``MAV_FRAME_GLOBAL(_INT)`` (z above mean sea level),
 ``MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT)`` (z above the vehicle's home) and ``MAV_FRAME_LOCAL_NED``
@@ -59,6 +77,23 @@ CMD_NAV_TAKEOFF = m.MAV_CMD_NAV_TAKEOFF  # 22
 CMD_NAV_DELAY = m.MAV_CMD_NAV_DELAY  # 93
 CMD_DO_CHANGE_SPEED = m.MAV_CMD_DO_CHANGE_SPEED  # 178
 CMD_TIMED = m.MAV_CMD_WAYPOINT_USER_1  # 31000: the timed trajectory item
+CMD_DO_JUMP = m.MAV_CMD_DO_JUMP  # 177
+CMD_DO_SET_ROI_LOCATION = m.MAV_CMD_DO_SET_ROI_LOCATION  # 195
+ROI_MODE_COMMANDS = frozenset((m.MAV_CMD_NAV_ROI, m.MAV_CMD_DO_SET_ROI))  # 80, 201: p1 = MAV_ROI
+# Accepted, stored and flown as no-ops (no payload on this vehicle); see the module docstring.
+PAYLOAD_COMMANDS = frozenset(
+    (
+        m.MAV_CMD_DO_CONTROL_VIDEO, m.MAV_CMD_DO_DIGICAM_CONTROL, m.MAV_CMD_DO_MOUNT_CONFIGURE,
+        m.MAV_CMD_DO_MOUNT_CONTROL, m.MAV_CMD_DO_SET_CAM_TRIGG_DIST, m.MAV_CMD_DO_GRIPPER,
+        m.MAV_CMD_DO_SET_CAM_TRIGG_INTERVAL, m.MAV_CMD_OBLIQUE_SURVEY, m.MAV_CMD_SET_CAMERA_MODE,
+        m.MAV_CMD_SET_CAMERA_FOCUS, m.MAV_CMD_SET_CAMERA_SOURCE, m.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+        m.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE, m.MAV_CMD_IMAGE_START_CAPTURE, m.MAV_CMD_IMAGE_STOP_CAPTURE,
+        m.MAV_CMD_DO_TRIGGER_CONTROL, m.MAV_CMD_VIDEO_START_CAPTURE, m.MAV_CMD_VIDEO_STOP_CAPTURE,
+        m.MAV_CMD_DO_WINCH, m.MAV_CMD_DO_SET_ROI_WPNEXT_OFFSET, m.MAV_CMD_DO_SET_ROI_NONE,
+        CMD_DO_SET_ROI_LOCATION, *ROI_MODE_COMMANDS,
+    )
+)  # fmt: skip
+MAX_JUMP_REPEATS = 10_000
 
 FRAME_GLOBAL = m.MAV_FRAME_GLOBAL  # 0
 FRAME_LOCAL_NED = m.MAV_FRAME_LOCAL_NED  # 1
@@ -122,6 +157,13 @@ class ItemKind(Enum):
     LAND = "land"
     RETURN_TO_LAUNCH = "return_to_launch"
     TIMED = "timed"
+    JUMP = "jump"
+    PAYLOAD = "payload"  # camera, gimbal, ROI, gripper, winch: a no-op on this vehicle
+    # geofence and rally plans (autopilot.mission.plans)
+    FENCE_POLYGON = "fence_polygon"
+    FENCE_CIRCLE = "fence_circle"
+    FENCE_RETURN_POINT = "fence_return_point"
+    RALLY_POINT = "rally_point"
 
 
 class PositionKind(Enum):
@@ -177,6 +219,8 @@ class MissionItem:
     speed_channel: int = 0  # CHANGE_SPEED: 1 horizontal, 2 climb, 3 descent
     speed_m_s: float | None = None  # CHANGE_SPEED: new speed; None: back to the default
     speed_unchanged: bool = False  # CHANGE_SPEED with speed -1
+    jump_target: int = 0  # JUMP: the item to jump to
+    jump_repeats: int = 0  # JUMP: how many times
 
     @property
     def autocontinue(self) -> bool:
@@ -201,6 +245,8 @@ _KINDS = {
     CMD_NAV_LAND: ItemKind.LAND,
     CMD_NAV_RETURN_TO_LAUNCH: ItemKind.RETURN_TO_LAUNCH,
     CMD_TIMED: ItemKind.TIMED,
+    CMD_DO_JUMP: ItemKind.JUMP,
+    **{command: ItemKind.PAYLOAD for command in PAYLOAD_COMMANDS},
 }
 _POSITIONAL = {ItemKind.TAKEOFF, ItemKind.WAYPOINT, ItemKind.LOITER_TIME, ItemKind.LAND, ItemKind.TIMED}
 _POSITION_FRAMES = {
@@ -283,6 +329,8 @@ def parse_item(
     kind = _KINDS.get(wire.command)
     if kind is None:
         raise _invalid(m.MAV_MISSION_UNSUPPORTED, f"item {seq}: command {wire.command} not supported")
+    if kind == ItemKind.PAYLOAD:
+        return _payload(wire, origin)
     frames_ok = _POSITION_FRAMES if kind in _POSITIONAL else _ANY_FRAMES
     if wire.frame not in frames_ok:
         raise _invalid(
@@ -332,4 +380,49 @@ def parse_item(
         if not (math.isfinite(p2) and 0.0 < p2 <= MAX_SPEED_M_S):
             raise _invalid(m.MAV_MISSION_INVALID_PARAM2, f"item {seq}: speed {p2} m/s")
         return MissionItem(seq, kind, wire, speed_channel=channel, speed_m_s=float(p2))
+    if kind == ItemKind.JUMP:
+        target, repeats = wire.param1, wire.param2
+        if not (math.isfinite(target) and target == int(target) and 0 <= target < MAX_ITEMS_SEQ):
+            raise _invalid(m.MAV_MISSION_INVALID_PARAM1, f"item {seq}: jump target {target} not an item")
+        if int(target) == seq:
+            raise _invalid(m.MAV_MISSION_INVALID_PARAM1, f"item {seq}: jump to itself")
+        if not (math.isfinite(repeats) and repeats == int(repeats) and 0 <= repeats <= MAX_JUMP_REPEATS):
+            raise _invalid(
+                m.MAV_MISSION_INVALID_PARAM2,
+                f"item {seq}: jump repeat count {repeats} not an integer in [0, {MAX_JUMP_REPEATS}]",
+            )
+        return MissionItem(seq, kind, wire, jump_target=int(target), jump_repeats=int(repeats))
     return MissionItem(seq, kind, wire)  # RETURN_TO_LAUNCH: no parameters
+
+
+MAX_ITEMS_SEQ = 65_535  # a seq is uint16; the whole-mission check asks for a target in the mission
+_PARAM_RESULTS = (
+    m.MAV_MISSION_INVALID_PARAM1, m.MAV_MISSION_INVALID_PARAM2, m.MAV_MISSION_INVALID_PARAM3,
+    m.MAV_MISSION_INVALID_PARAM4,
+)  # fmt: skip
+_ROI_MODES_MISSION_FRAME = (m.MAV_ROI_NONE, m.MAV_ROI_WPNEXT, m.MAV_ROI_WPINDEX)
+
+
+def _payload(wire: WireItem, origin: tuple[float, float, float]) -> MissionItem:
+    """A payload item: stored as received, flown as a no-op; refused as PX4 refuses it."""
+    seq = wire.seq
+    for i, value in enumerate((wire.param1, wire.param2, wire.param3, wire.param4)):
+        if math.isinf(value):
+            raise _invalid(_PARAM_RESULTS[i], f"item {seq}: param{i + 1} is {value}")
+    global_frame = wire.frame in _POSITION_FRAMES and wire.frame != FRAME_LOCAL_NED
+    if wire.command == CMD_DO_SET_ROI_LOCATION or (
+        wire.command in ROI_MODE_COMMANDS and global_frame and wire.param1 == m.MAV_ROI_LOCATION
+    ):
+        if not global_frame:
+            raise _invalid(
+                m.MAV_MISSION_UNSUPPORTED_FRAME, f"item {seq}: a region of interest needs a global frame"
+            )
+        _position(wire, ItemKind.WAYPOINT, origin)  # validated; not kept: nothing flies to it
+        return MissionItem(seq, ItemKind.PAYLOAD, wire)
+    if wire.command in ROI_MODE_COMMANDS and wire.param1 not in _ROI_MODES_MISSION_FRAME:
+        raise _invalid(m.MAV_MISSION_INVALID_PARAM1, f"item {seq}: ROI mode {wire.param1} not supported")
+    if wire.frame not in _ANY_FRAMES:
+        raise _invalid(m.MAV_MISSION_UNSUPPORTED_FRAME, f"item {seq}: frame {wire.frame} not supported")
+    if math.isinf(wire.z):
+        raise _invalid(m.MAV_MISSION_INVALID_PARAM7, f"item {seq}: param7 is {wire.z}")
+    return MissionItem(seq, ItemKind.PAYLOAD, wire)

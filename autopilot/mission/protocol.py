@@ -43,9 +43,12 @@ Download (vehicle -> ground station)::
 
 Other messages: ``MISSION_CLEAR_ALL`` (ACK ``ACCEPTED``; ``DENIED`` while another client uploads),
 ``MISSION_SET_CURRENT`` (no ACK by the spec: the shell broadcasts MISSION_CURRENT, or a
-STATUSTEXT if ``seq`` is not in the mission). Geofence and rally plans are not stored: their
-download answers ``MISSION_COUNT(0)``, an empty upload or a clear is accepted, a non-empty upload
-is answered ``MAV_MISSION_UNSUPPORTED``. Messages addressed to another system are ignored.
+STATUSTEXT if ``seq`` is not in the mission). Messages addressed to another system are ignored.
+
+Geofence and rally plans (``mission_type`` FENCE / RALLY, :mod:`.plans`) go through the same
+transfers, each stored on its own: upload (validated item by item, then the fence's polygons as a
+whole), download (exactly as uploaded), ``MISSION_CLEAR_ALL`` of that type (``ALL`` clears the
+three); a new one replaces the old only when accepted. One transfer at a time, of any type.
 """
 
 from __future__ import annotations
@@ -56,14 +59,19 @@ from enum import Enum
 
 from ..mavlink.codec import mavlink as m
 from .items import ItemRejected, MissionItem, WireItem, parse_item
+from .plans import check_fence, parse_fence_item, parse_rally_item
 
 RETRY_S = 0.5
 MAX_RETRIES = 5
 DOWNLOAD_TIMEOUT_S = 5.0
 MAX_ITEMS = 10_000  # 1000 s of a timed curve sampled at 10 Hz
+MAX_PLAN_ITEMS = 256  # fence and rally items (the fence is checked every control step)
 
 MISSION = m.MAV_MISSION_TYPE_MISSION
-_OTHER_PLANS = (m.MAV_MISSION_TYPE_FENCE, m.MAV_MISSION_TYPE_RALLY)
+FENCE = m.MAV_MISSION_TYPE_FENCE
+RALLY = m.MAV_MISSION_TYPE_RALLY
+PLAN_TYPES = (MISSION, FENCE, RALLY)
+_PLAN_NAMES = {MISSION: "mission", FENCE: "geofence", RALLY: "rally points"}
 _COMPONENTS = (0, m.MAV_COMP_ID_MISSIONPLANNER)  # besides our own component id (as PX4)
 
 SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_INFO = (
@@ -100,6 +108,8 @@ class Output:
     replies: list = field(default_factory=list)  # pymavlink messages, to the sender / partner
     notices: list[tuple[int, str]] = field(default_factory=list)  # STATUSTEXT (severity, text)
     mission: Mission | None = None  # a new stored mission (upload accepted, or cleared)
+    fence: Mission | None = None  # a new stored geofence plan (upload accepted, or cleared)
+    rally: Mission | None = None  # new stored rally points (upload accepted, or cleared)
     set_current: int | None = None  # MISSION_SET_CURRENT asked for this (valid) item
 
 
@@ -128,8 +138,9 @@ class MissionProtocol:
         self.max_retries = max_retries
         self.download_timeout_s = download_timeout_s
         self.max_items = max_items
-        self.mission = Mission()
+        self.plans: dict[int, Mission] = {t: Mission() for t in PLAN_TYPES}
         self.state = TransferState.IDLE
+        self._type = MISSION  # the mission_type of the transfer under way (or the last one)
         self.partner: tuple[int, int] = (0, 0)  # (system, component) of the transfer's client
         self._count = 0
         self._expected = 0
@@ -182,7 +193,7 @@ class MissionProtocol:
                 self._retries += 1
                 self._request(now, out)
             else:
-                out.replies.append(self._ack(self.partner, m.MAV_MISSION_OPERATION_CANCELLED))
+                out.replies.append(self._ack(self.partner, m.MAV_MISSION_OPERATION_CANCELLED, self._type))
                 out.notices.append(
                     (
                         SEVERITY_CRITICAL,
@@ -204,6 +215,23 @@ class MissionProtocol:
         return out
 
     @property
+    def mission(self) -> Mission:
+        return self.plans[MISSION]
+
+    @mission.setter
+    def mission(self, value: Mission) -> None:
+        self.plans[MISSION] = value
+
+    def _store(self, mission_type: int, plan: Mission, out: Output) -> None:
+        self.plans[mission_type] = plan
+        if mission_type == MISSION:
+            out.mission = plan
+        elif mission_type == FENCE:
+            out.fence = plan
+        else:
+            out.rally = plan
+
+    @property
     def busy(self) -> bool:
         return self.state != TransferState.IDLE
 
@@ -220,28 +248,20 @@ class MissionProtocol:
             out.replies.append(self._ack(sender, m.MAV_MISSION_ERROR, mission_type))
             out.notices.append((SEVERITY_WARNING, "mission upload refused: a download is in progress"))
             return
-        if mission_type in _OTHER_PLANS:
-            result = m.MAV_MISSION_ACCEPTED if msg.count == 0 else m.MAV_MISSION_UNSUPPORTED
-            if msg.count:
-                out.notices.append(
-                    (SEVERITY_WARNING, f"mission type {mission_type} (fence/rally) not supported")
-                )
-            out.replies.append(self._ack(sender, result, mission_type))
-            return
-        if mission_type != MISSION:
+        if mission_type not in PLAN_TYPES:
             out.replies.append(self._ack(sender, m.MAV_MISSION_INVALID, mission_type))
             return
         self._idle()  # a repeated COUNT from the uploading client restarts its upload
-        if msg.count > self.max_items:
-            out.replies.append(self._ack(sender, m.MAV_MISSION_NO_SPACE))
-            out.notices.append(
-                (SEVERITY_WARNING, f"mission of {msg.count} items refused: at most {self.max_items}")
-            )
+        self._type = mission_type
+        name = _PLAN_NAMES[mission_type]
+        limit = self.max_items if mission_type == MISSION else min(self.max_items, MAX_PLAN_ITEMS)
+        if msg.count > limit:
+            out.replies.append(self._ack(sender, m.MAV_MISSION_NO_SPACE, mission_type))
+            out.notices.append((SEVERITY_WARNING, f"{name} of {msg.count} items refused: at most {limit}"))
             return
         if msg.count == 0:
-            self.mission = Mission()
-            out.mission = self.mission
-            out.replies.append(self._ack(sender, m.MAV_MISSION_ACCEPTED))
+            self._store(mission_type, Mission(), out)
+            out.replies.append(self._ack(sender, m.MAV_MISSION_ACCEPTED, mission_type))
             return
         self.state = TransferState.RECEIVING
         self.partner = sender
@@ -259,7 +279,7 @@ class MissionProtocol:
             done = self._completed_upload
             if self.state == TransferState.IDLE and done == (sender, msg.seq):
                 # The last item again: our ACCEPTED was lost. Repeat it (as PX4).
-                out.replies.append(self._ack(sender, m.MAV_MISSION_ACCEPTED))
+                out.replies.append(self._ack(sender, m.MAV_MISSION_ACCEPTED, self._type))
             else:
                 out.replies.append(
                     self._ack(sender, m.MAV_MISSION_ERROR, getattr(msg, "mission_type", MISSION))
@@ -268,7 +288,7 @@ class MissionProtocol:
                     (SEVERITY_WARNING, f"mission item {msg.seq} ignored: no upload in progress")
                 )
             return
-        if getattr(msg, "mission_type", MISSION) != MISSION:
+        if getattr(msg, "mission_type", MISSION) != self._type:
             self._fail(m.MAV_MISSION_ERROR, f"item {msg.seq} has mission type {msg.mission_type}", out)
             return
         self._last_received = now
@@ -279,7 +299,12 @@ class MissionProtocol:
         wire = WireItem.from_message(msg)
         previous = self._received[-1] if self._received else None
         try:
-            item = parse_item(wire, self.origin, previous)
+            if self._type == FENCE:
+                item = parse_fence_item(wire, self.origin)
+            elif self._type == RALLY:
+                item = parse_rally_item(wire, self.origin)
+            else:
+                item = parse_item(wire, self.origin, previous)
         except ItemRejected as exc:
             self._fail(exc.result, exc.reason, out)
             return
@@ -292,14 +317,19 @@ class MissionProtocol:
             self._request(now, out)
             return
         items = tuple(self._received)
-        problem = self.check(items) if self.check is not None else None
+        if self._type == MISSION:
+            problem = self.check(items) if self.check is not None else None
+        elif self._type == FENCE:
+            problem = check_fence(items)
+        else:
+            problem = None
         if problem is not None:
             self._fail(problem[0], problem[1], out)
             return
-        self.mission = Mission(items, max(self._current_flag, 0))
-        out.mission = self.mission
-        out.replies.append(self._ack(self.partner, m.MAV_MISSION_ACCEPTED))
-        out.notices.append((SEVERITY_INFO, f"mission of {len(items)} items accepted"))
+        current = max(self._current_flag, 0) if self._type == MISSION else 0
+        self._store(self._type, Mission(items, current), out)
+        out.replies.append(self._ack(self.partner, m.MAV_MISSION_ACCEPTED, self._type))
+        out.notices.append((SEVERITY_INFO, f"{_PLAN_NAMES[self._type]} of {len(items)} items accepted"))
         self._completed_upload = (self.partner, self._count - 1)
         self._idle()
 
@@ -313,21 +343,19 @@ class MissionProtocol:
             self._idle()
 
     def _request(self, now: float, out: Output) -> None:
-        out.replies.append(m.MAVLink_mission_request_int_message(*self.partner, self._expected, MISSION))
+        out.replies.append(m.MAVLink_mission_request_int_message(*self.partner, self._expected, self._type))
         self._last_sent = now
 
     def _fail(self, result: int, reason: str, out: Output) -> None:
-        out.replies.append(self._ack(self.partner, result))
-        out.notices.append((SEVERITY_CRITICAL, f"mission rejected: {reason}; previous mission kept"))
+        name = _PLAN_NAMES[self._type]
+        out.replies.append(self._ack(self.partner, result, self._type))
+        out.notices.append((SEVERITY_CRITICAL, f"{name} rejected: {reason}; previous {name} kept"))
         self._idle()
 
     # -- download -------------------------------------------------------------------------------
     def _on_request_list(self, msg, sender, now: float, out: Output) -> None:
         mission_type = getattr(msg, "mission_type", MISSION)
-        if mission_type in _OTHER_PLANS:
-            out.replies.append(m.MAVLink_mission_count_message(*sender, 0, mission_type))
-            return
-        if mission_type != MISSION:
+        if mission_type not in PLAN_TYPES:
             out.replies.append(self._ack(sender, m.MAV_MISSION_INVALID, mission_type))
             return
         if self.state == TransferState.RECEIVING:
@@ -336,9 +364,10 @@ class MissionProtocol:
         if self.state == TransferState.SENDING and not self._all_sent and sender != self.partner:
             out.notices.append((SEVERITY_WARNING, "mission download ignored: another download in progress"))
             return
-        count = self.mission.count
-        out.replies.append(m.MAVLink_mission_count_message(*sender, count, MISSION))
+        count = self.plans[mission_type].count
+        out.replies.append(m.MAVLink_mission_count_message(*sender, count, mission_type))
         self._idle()
+        self._type = mission_type
         if count:
             self.state = TransferState.SENDING
             self.partner = sender
@@ -346,30 +375,34 @@ class MissionProtocol:
 
     def _on_request(self, msg, sender, now: float, current_seq: int, out: Output) -> None:
         mission_type = getattr(msg, "mission_type", MISSION)
-        if mission_type != MISSION:
+        if mission_type not in PLAN_TYPES:
             return
+        plan = self.plans[mission_type]
         seq = msg.seq
         if self.state == TransferState.RECEIVING:
             out.notices.append((SEVERITY_WARNING, "mission item request ignored: an upload is in progress"))
             return
-        if self.state == TransferState.IDLE or sender != self.partner:
+        if self.state == TransferState.IDLE or sender != self.partner or mission_type != self._type:
             # Outside a download PX4 ignores requests; answering a valid one is harmless and
             # helps a client that re-requests after we timed it out.
-            if 0 <= seq < self.mission.count:
-                out.replies.append(self._item_message(seq, sender, current_seq))
+            if 0 <= seq < plan.count:
+                out.replies.append(self._item_message(plan, mission_type, seq, sender, current_seq))
             return
         self._last_received = now
-        if not 0 <= seq < self.mission.count:
-            out.replies.append(self._ack(sender, m.MAV_MISSION_INVALID_SEQUENCE))
-            out.notices.append((SEVERITY_WARNING, f"mission item {seq} requested: not in the mission"))
+        if not 0 <= seq < plan.count:
+            out.replies.append(self._ack(sender, m.MAV_MISSION_INVALID_SEQUENCE, mission_type))
+            out.notices.append(
+                (SEVERITY_WARNING, f"{_PLAN_NAMES[mission_type]} item {seq} requested: not in the plan")
+            )
             self._idle()
             return
-        out.replies.append(self._item_message(seq, sender, current_seq))
-        if seq == self.mission.count - 1:
+        out.replies.append(self._item_message(plan, mission_type, seq, sender, current_seq))
+        if seq == plan.count - 1:
             self._all_sent = True
 
-    def _item_message(self, seq: int, to, current_seq: int):
-        return self.mission.items[seq].wire.to_message(*to, current=1 if seq == current_seq else 0)
+    def _item_message(self, plan: Mission, mission_type: int, seq: int, to, current_seq: int):
+        current = 1 if mission_type == MISSION and seq == current_seq else 0
+        return plan.items[seq].wire.to_message(*to, current=current)
 
     def _on_ack(self, msg, sender, out: Output) -> None:
         if sender != self.partner:
@@ -389,14 +422,13 @@ class MissionProtocol:
             out.replies.append(self._ack(sender, m.MAV_MISSION_DENIED, mission_type))
             out.notices.append((SEVERITY_WARNING, "mission clear refused: an upload is in progress"))
             return
-        if mission_type not in (MISSION, m.MAV_MISSION_TYPE_ALL, *_OTHER_PLANS):
+        if mission_type not in (m.MAV_MISSION_TYPE_ALL, *PLAN_TYPES):
             out.replies.append(self._ack(sender, m.MAV_MISSION_INVALID, mission_type))
             return
         self._idle()
-        if mission_type in (MISSION, m.MAV_MISSION_TYPE_ALL):
-            self.mission = Mission()
-            out.mission = self.mission
-            self._completed_upload = None
+        for plan_type in PLAN_TYPES if mission_type == m.MAV_MISSION_TYPE_ALL else (mission_type,):
+            self._store(plan_type, Mission(), out)
+        self._completed_upload = None
         out.replies.append(self._ack(sender, m.MAV_MISSION_ACCEPTED, mission_type))
 
     def _on_set_current(self, seq: int, out: Output) -> None:

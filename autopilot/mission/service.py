@@ -23,6 +23,7 @@ from ..mavlink.codec import Encoder
 from ..mavlink.codec import mavlink as m
 from ..mavlink.commands import CommandDispatcher, CommandRequest
 from .executor import MissionExecutor, MissionState, check_mission
+from .plans import Geofence, rally_points
 from .protocol import MissionProtocol, Output
 
 MESSAGE_IDS = (
@@ -109,6 +110,12 @@ class MissionService:
                 MissionExecutor(mission.items, self.origin, mission.current_seq) if mission.count else None
             )
             self.commander.set_mission(t, executor)
+        if out.fence is not None:
+            self.commander.set_geofence(Geofence.from_items(out.fence.items, self.origin))
+        if out.rally is not None:
+            home = self.commander.home or (0.0, 0.0, 0.0)
+            points = rally_points(out.rally.items, self.origin, home)
+            self.commander.set_rally_points([(x, y) for x, y, _ in points])
         if out.set_current is not None:
             self.commander.mission_set_current(t, out.set_current)
         self._drain_commander_events()

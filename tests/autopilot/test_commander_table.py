@@ -136,6 +136,7 @@ class Flight:
                 E.DISARM: {"force": True, "why": "disarmed"},
                 E.HOLD: {"mode": HOLD_ASKED},
                 E.SCENARIO: {"trajectory": Hover((0.0, 0.0, 1.5), 0.0, 1.0), "then": SCENARIO_THEN},
+                E.REPOSITION: {"target": (1.0, 0.0, 2.0), "speed_m_s": None, "yaw_rad": None},
             }.get(event, {})
             if self.feed_setpoints:  # a fresh setpoint: OFFBOARD needs a stream
                 c.offboard_setpoint(OffboardSetpoint(self.t, position=(0.0, 0.0, 2.5)))

@@ -343,6 +343,13 @@ def _waypoints(home_lat: float, home_lon: float) -> list[tuple[float, float, flo
     return [(3.0, 0.0, 3.0), (3.0, 3.0, 3.0), (0.0, 3.0, 3.5)]
 
 
+CAMERA_ACTIONS = (
+    MissionItem.CameraAction.TAKE_PHOTO,
+    MissionItem.CameraAction.START_VIDEO,
+    MissionItem.CameraAction.STOP_VIDEO,
+)
+
+
 async def flow_mission(system, args) -> None:
     """Upload, download, start, progress to finished; then return to launch (lands, disarms)."""
     tel, action, mission = TelemetryAsync(system), ActionAsync(system), MissionAsync(system)
@@ -363,9 +370,11 @@ async def flow_mission(system, args) -> None:
                     relative_altitude_m=alt,
                     speed_m_s=1.5 if k == 1 else nan,  # adds a DO_CHANGE_SPEED item
                     is_fly_through=False,
-                    gimbal_pitch_deg=nan,
-                    gimbal_yaw_deg=nan,
-                    camera_action=MissionItem.CameraAction.NONE,
+                    # MAVSDK's mission example: gimbal angles and camera actions (gimbal manager and
+                    # capture items; the vehicle has neither and flies them as no-ops, as PX4)
+                    gimbal_pitch_deg=-45.0 if k == 0 else nan,
+                    gimbal_yaw_deg=0.0 if k == 0 else nan,
+                    camera_action=CAMERA_ACTIONS[k],
                     loiter_time_s=1.0 if k == 2 else nan,  # adds a NAV_DELAY item
                     camera_photo_interval_s=nan,
                     acceptance_radius_m=0.3,
@@ -477,6 +486,8 @@ def _position(p) -> dict:
 
 def _item(i: MissionItem) -> dict:
     return {
+        "gimbal_pitch": i.gimbal_pitch_deg,
+        "camera": i.camera_action.name,
         "lat": i.latitude_deg,
         "lon": i.longitude_deg,
         "alt": i.relative_altitude_m,

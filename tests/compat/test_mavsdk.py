@@ -126,9 +126,11 @@ def test_mission_upload_download_fly_and_return(compat_sitl_config):
         assert math.dist((got["lat"], got["lon"]), (sent["lat"], sent["lon"])) < 1e-6
         assert abs(got["alt"] - sent["alt"]) < 1e-3
         assert got["fly_through"] == sent["fly_through"]
+        assert got["camera"] == sent["camera"]  # gimbal and camera items came back
         for key in ("speed", "loiter_s", "acceptance_m"):  # float32 on the wire; None = NaN (unset)
             expected = None if sent[key] is None else pytest.approx(sent[key], rel=1e-6)
             assert got[key] == expected, (key, got, sent)
+    assert down["items"][0]["gimbal_pitch"] == pytest.approx(-45.0)
 
     end = result.event("mission_end")
     assert end["finished"] is True

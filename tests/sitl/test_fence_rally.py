@@ -1,0 +1,116 @@
+"""Geofence and rally plans on the wire, in simulation time (the whole stack in-process): an
+uploaded inclusion fence is enforced (breach -> GF_ACTION), DO_REPOSITION outside it is refused,
+and RTL goes to the nearest rally point when it is closer than home, as PX4 does."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from pymavlink.dialects.v20 import common as m
+
+from autopilot.commander.modes import FlightMode
+from quadcommon import frames
+
+from ..stack import Gcs, make_stack
+from .test_params_failsafes import INT32, param_set, take_off, texts, wait_sim
+from .test_reposition import HOME, command_int, wait_at
+
+FENCE, RALLY = m.MAV_MISSION_TYPE_FENCE, m.MAV_MISSION_TYPE_RALLY
+RTL = FlightMode.AUTO_RTL.custom_mode
+
+
+def at(north: float, east: float) -> tuple[int, int]:
+    lat, lon, _ = frames.ned_to_geodetic(north, east, 0.0, HOME)
+    return round(lat * 1e7), round(lon * 1e7)
+
+
+def plan_item(seq, command, p1, north, east, mission_type, z=0.0):
+    x, y = at(north, east)
+    return (seq, m.MAV_FRAME_GLOBAL_INT, command, 0, 1, p1, 0.0, 0.0, 0.0, x, y, z, mission_type)
+
+
+def upload_plan(gcs: Gcs, items, mission_type) -> int:
+    """The mission protocol from the ground station's side; returns the MISSION_ACK type."""
+    gcs.conn.mav.mission_count_send(gcs.system_id, 1, len(items), mission_type)
+    result = {}
+
+    def step(g: Gcs) -> bool:
+        msg = g.poll()
+        if msg is None:
+            return False
+        if msg.get_type() == "MISSION_REQUEST_INT" and msg.mission_type == mission_type:
+            g.conn.mav.mission_item_int_send(g.system_id, 1, *items[msg.seq])
+        elif msg.get_type() == "MISSION_ACK" and msg.mission_type == mission_type:
+            result["ack"] = msg.type
+        return "ack" in result
+
+    end = gcs.sim_time + 5.0
+    while gcs.sim_time < end and not step(gcs):
+        pass
+    assert "ack" in result, "no MISSION_ACK"
+    return result["ack"]
+
+
+@pytest.fixture
+def vehicle():
+    stack = make_stack()
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    yield stack, gcs
+    gcs.close()
+
+
+@pytest.mark.timeout(120)
+def test_fence_breach_returns_to_the_nearest_rally_point(vehicle):
+    stack, gcs = vehicle
+    rally = [
+        plan_item(k, m.MAV_CMD_NAV_RALLY_POINT, 0.0, n, e, RALLY, 10.0)
+        for k, (n, e) in enumerate([(-30, 0), (9, 4)])
+    ]
+    assert upload_plan(gcs, rally, RALLY) == m.MAV_MISSION_ACCEPTED
+    take_off(gcs, 2.0)
+    x, y = at(8.0, 0.0)
+    assert command_int(gcs, m.MAV_FRAME_GLOBAL_INT, (-1, 1, 0, math.nan), x, y, 490.0).result == 0
+    wait_at(gcs, frames.vector_from_ned((8.0, 0.0, -2.0)), 0.1, sim_timeout=20.0)
+    # An inclusion circle of 5 m about home, uploaded while the vehicle is 8 m out: breach at once.
+    param_set(gcs, "GF_ACTION", 3, INT32)  # return
+    fence = [plan_item(0, m.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, 5.0, 0.0, 0.0, FENCE)]
+    assert upload_plan(gcs, fence, FENCE) == m.MAV_MISSION_ACCEPTED
+    gcs.wait(lambda g: g.custom_mode == RTL, sim_timeout=2.0, what="RTL")
+    wait_sim(gcs, 0.2)
+    assert "m outside the fence's inclusion area: returning" in texts(gcs)
+    assert "returning to rally point 1" in texts(gcs)
+    # Lands at the rally point (9 m north, 4 m east), not at home.
+    gcs.wait(lambda g: not g.armed, sim_timeout=40.0, what="landed and disarmed")
+    north, east, _ = frames.vector_to_ned(gcs.position())
+    assert math.hypot(north - 9.0, east - 4.0) < 0.3
+
+
+@pytest.mark.timeout(120)
+def test_reposition_outside_the_uploaded_fence_is_refused_and_an_exclusion_counts(vehicle):
+    stack, gcs = vehicle
+    square = [(-10, -10), (10, -10), (10, 10), (-10, 10)]
+    fence = [
+        *(
+            plan_item(k, m.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, 4.0, n, e, FENCE)
+            for k, (n, e) in enumerate(square)
+        ),
+        plan_item(4, m.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, 2.0, 6.0, 0.0, FENCE),
+    ]
+    assert upload_plan(gcs, fence, FENCE) == m.MAV_MISSION_ACCEPTED
+    take_off(gcs, 2.0)
+    for north, east in ((15.0, 0.0), (6.0, 0.5)):  # outside the square; inside the exclusion
+        x, y = at(north, east)
+        ack = command_int(gcs, m.MAV_FRAME_GLOBAL_INT, (-1, 1, 0, math.nan), x, y, 490.0)
+        assert ack.result == m.MAV_RESULT_DENIED
+    wait_sim(gcs, 0.1)
+    assert "outside the fence's inclusion area" in texts(gcs) and "inside an exclusion area" in texts(gcs)
+    x, y = at(3.0, 5.0)
+    assert command_int(gcs, m.MAV_FRAME_GLOBAL_INT, (-1, 1, 0, math.nan), x, y, 490.0).result == 0
+    wait_at(gcs, frames.vector_from_ned((3.0, 5.0, -2.0)), 0.1, sim_timeout=20.0)
+    # Cleared: the same point is accepted.
+    gcs.conn.mav.mission_clear_all_send(gcs.system_id, 1, FENCE)
+    wait_sim(gcs, 0.2)
+    x, y = at(15.0, 0.0)
+    assert command_int(gcs, m.MAV_FRAME_GLOBAL_INT, (-1, 1, 0, math.nan), x, y, 490.0).result == 0
