@@ -6,10 +6,15 @@ For each control rate (250, 500, 1000 Hz; physics 1 kHz) it starts the simulator
 time from "linked" to the simulator's exit; the simulator reports the HIL round trip (frame
 sent -> matching HIL_ACTUATOR_CONTROLS received) per frame: median and p99.
 
-Run: ``.venv/bin/python benchmarks/sitl_rtf.py [--duration 40] [--rates 250 500 1000] [--profile]``.
-``--profile`` also runs both processes under cProfile at 500 Hz and prints where the time goes.
-The machine is shared and noisy: compare the rates with each other, measured in one run.
-Last lines: ``name: value unit``.
+Run: ``.venv/bin/python benchmarks/sitl_rtf.py [--duration 40] [--rates 250 500 1000] [--profile]
+[--estimator truth ekf] [--sensors mocap] [--instance N]``.
+``--estimator``: what the autopilot flies on, one run per rate for each (truth, its EKF over the
+``--sensors`` profile; default: truth only), so the cost of the EKF is a ratio within one run.
+Besides the wall time, the CPU time of both processes (user + system, start-up included) per
+simulated second is reported: on a shared machine it moves less than the wall time.
+``--profile`` also runs both processes under cProfile at 500 Hz (with the last ``--estimator``)
+and prints where the time goes. The machine is shared and noisy: compare the rates with each
+other, measured in one run. Last lines: ``name: value unit``.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from __future__ import annotations
 import argparse
 import pstats
 import re
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -36,16 +42,30 @@ def sitl_toml(directory: Path, control_hz: int) -> Path:
     return path
 
 
-def run_once(config: Path, duration: float, profile_dir: Path | None = None) -> tuple[float, int, int]:
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run_once(
+    config: Path,
+    duration: float,
+    profile_dir: Path | None = None,
+    estimator: str = "truth",
+    sensors: str | None = None,
+    instance: int = INSTANCE,
+) -> tuple[float, int, int, float]:
     """One SITL run through the project's launcher; (wall seconds from linked to the end, RTT median
-    and p99 in µs as the simulator reports them)."""
+    and p99 in µs as the simulator reports them, CPU seconds of both processes)."""
     def profiled(spec_cmd: list[str], name: str) -> list[str]:
         if profile_dir is None:
             return spec_cmd
         return [spec_cmd[0], "-u", "-m", "cProfile", "-o", str(profile_dir / f"{name}.prof"), *spec_cmd[2:]]
 
-    spec = VehicleSpec(instance=INSTANCE, scenario="circle", speed="max", autostart=True, duration_s=duration,
-                       sitl_config=str(config), extra_autopilot_args=("--quiet",))  # fmt: skip
+    spec = VehicleSpec(instance=instance, scenario="circle", speed="max", autostart=True, duration_s=duration,
+                       sitl_config=str(config), extra_autopilot_args=("--quiet",), estimator=estimator,
+                       sensors=sensors if estimator == "ekf" else None)  # fmt: skip
+    cpu_before = _children_cpu_s()
     with Launcher() as launcher:
         sim = launcher.spawn("simulator", profiled(spec.simulator_command(), "simulator"))
         sim.wait_line("waiting for the autopilot", 30.0)
@@ -56,7 +76,7 @@ def run_once(config: Path, duration: float, profile_dir: Path | None = None) -> 
         elapsed = time.perf_counter() - start
         match = RTT.search(sim.output)
     rtt = (int(match.group(1)), int(match.group(2))) if match else (0, 0)
-    return elapsed, *rtt
+    return elapsed, *rtt, _children_cpu_s() - cpu_before
 
 
 def print_profile(path: Path, title: str, top: int = 14) -> None:
@@ -72,26 +92,39 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--rates", type=int, nargs="+", default=[250, 500, 1000])
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--estimator", nargs="+", choices=("truth", "ekf"), default=["truth"])
+    parser.add_argument("--sensors", default="mocap", help="sensor profile of the EKF runs (default mocap)")
+    parser.add_argument("--instance", type=int, default=INSTANCE, help=f"SITL instance (default {INSTANCE})")
     args = parser.parse_args()
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmpdir = Path(tmp)
         for rate in args.rates:
-            elapsed, median, p99 = run_once(sitl_toml(tmpdir, rate), args.duration)
-            results[rate] = (args.duration / elapsed, median, p99)
-            print(
-                f"{rate:5d} Hz control: {args.duration:.0f} s simulated in {elapsed:.2f} s wall "
-                f"({args.duration / elapsed:.1f}x), HIL round trip median {median} us, p99 {p99} us"
-            )
+            for estimator in args.estimator:
+                elapsed, median, p99, cpu = run_once(
+                    sitl_toml(tmpdir, rate), args.duration, None, estimator, args.sensors, args.instance
+                )
+                results[rate, estimator] = (args.duration / elapsed, median, p99, cpu / args.duration)
+                on = "truth" if estimator == "truth" else f"ekf+{args.sensors}"
+                print(
+                    f"{rate:5d} Hz control on {on}: {args.duration:.0f} s simulated in {elapsed:.2f} s wall "
+                    f"({args.duration / elapsed:.1f}x), CPU {cpu:.1f} s, HIL round trip median {median} us, "
+                    f"p99 {p99} us",
+                    flush=True,
+                )
         if args.profile:
-            run_once(sitl_toml(tmpdir, 500), min(args.duration, 20.0), tmpdir)
+            profile_s = min(args.duration, 20.0)
+            last = args.estimator[-1]
+            run_once(sitl_toml(tmpdir, 500), profile_s, tmpdir, last, args.sensors, args.instance)
             print_profile(tmpdir / "simulator.prof", "simulator")
             print_profile(tmpdir / "autopilot.prof", "autopilot")
     print()
-    for rate, (rtf, median, p99) in results.items():
-        print(f"sitl_rtf_{rate}hz: {rtf:.1f} x")
-        print(f"hil_rtt_median_{rate}hz: {median} us")
-        print(f"hil_rtt_p99_{rate}hz: {p99} us")
+    for (rate, estimator), (rtf, median, p99, cpu_per_s) in results.items():
+        suffix = "" if estimator == "truth" else "_ekf"
+        print(f"sitl_rtf_{rate}hz{suffix}: {rtf:.1f} x")
+        print(f"cpu_per_sim_s_{rate}hz{suffix}: {cpu_per_s:.3f} s")
+        print(f"hil_rtt_median_{rate}hz{suffix}: {median} us")
+        print(f"hil_rtt_p99_{rate}hz{suffix}: {p99} us")
 
 
 if __name__ == "__main__":

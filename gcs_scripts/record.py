@@ -2,7 +2,8 @@
 
 Listens like a ground station (default ``udpin:127.0.0.1:14550+N``, QGroundControl's port) and
 subscribes to the vehicle's zenoh bus (``quadsitl/N/truth`` from the simulator,
-``quadsitl/N/controller`` from the autopilot; their ``info`` queryables give the metadata).
+``quadsitl/N/controller`` from the autopilot and, when it flies on its EKF,
+``quadsitl/N/estimator``; their ``info`` queryables give the metadata).
 Writes, for ``--out DIR/NAME`` (default ``runs/<timestamp>``):
 
 * ``NAME.tlog``: every MAVLink message received on the link, stamped with the wall clock
@@ -12,7 +13,8 @@ Writes, for ``--out DIR/NAME`` (default ``runs/<timestamp>``):
   deleted. If the recorder dies, the parts stay readable (``quadsitl analyze NAME.parts``).
 
 The table has one row per control step: ``time_s`` (simulation time), the truth and controller
-columns (paper frames: x north, y left, z up; joined exactly on time_s) and ``mav_*`` columns
+columns (paper frames: x north, y left, z up; joined exactly on time_s), the estimator columns
+(``x_est_m``..., only in a session flown with ``--estimator ekf``; joined the same way) and ``mav_*`` columns
 (MAVLink as received: NED/FRD; joined as of time_s: the latest sample at or before each row).
 The schema metadata (``quadsitl.session``, JSON) holds instance, scenario, controller, vehicle,
 rates, the two info answers, the recording's start simulation time and the STATUSTEXT events.
@@ -47,7 +49,7 @@ from gcs_scripts.session_log import (  # noqa: E402
 )
 from gcs_scripts.tlog import TlogWriter  # noqa: E402
 from quadcommon import bus, wire  # noqa: E402
-from quadcommon.bus_records import CONTROLLER_CODEC, TRUTH_CODEC  # noqa: E402
+from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC, TRUTH_CODEC  # noqa: E402
 from quadcommon.cli_help import HelpFormatter  # noqa: E402
 from quadcommon.config import load_sitl  # noqa: E402
 
@@ -130,6 +132,7 @@ class Recorder:
         self.session: Any = None
         self.truth_sub: Any = None
         self.controller_sub: Any = None
+        self.estimator_sub: Any = None
         self.tlog: TlogWriter | None = None
         self.parts: PartWriter | None = None
         self.stop_reason = ""
@@ -163,6 +166,9 @@ class Recorder:
         self.controller_sub = self.session.declare_subscriber(
             wire.zenoh_key(n, "controller"), zenoh.handlers.FifoChannel(8192)
         )
+        self.estimator_sub = self.session.declare_subscriber(
+            wire.zenoh_key(n, "estimator"), zenoh.handlers.FifoChannel(8192)
+        )
         self.tlog = TlogWriter(self.tlog_path)
         self.parts = PartWriter(self.parts_dir)
 
@@ -195,6 +201,7 @@ class Recorder:
             "rows": a.rows_emitted,
             "truth_rows": a.truth.count,
             "controller_rows": a.controller.count,
+            "estimator_rows": a.estimator.count,
             "mavlink_messages": a.mav_messages,
             "recording_end_sim_time_s": a.latest_time_s,
             "complete": final,
@@ -285,6 +292,7 @@ class Recorder:
             wall = time.monotonic()
             n = self._drain_zenoh(self.truth_sub, TRUTH_CODEC, a.add_truth, wall)
             n += self._drain_zenoh(self.controller_sub, CONTROLLER_CODEC, a.add_controller, wall)
+            n += self._drain_zenoh(self.estimator_sub, ESTIMATOR_CODEC, a.add_estimator, wall)
             n += self._drain_mavlink(wall)
             for name, request in (("simulator", self.truth_info), ("autopilot", self.autopilot_info)):
                 if request.poll(self.session, wall):

@@ -9,6 +9,10 @@ with synthetic data). One row per control step:
 * truth columns (:data:`~quadcommon.bus_records.TRUTH_FIELDS`) and controller columns
   (:data:`~quadcommon.bus_records.CONTROLLER_FIELDS`): the paper's frames (world x north,
   y left, z up; body front-left-up), SI units, names as on the bus.
+* estimator columns (:data:`~quadcommon.bus_records.ESTIMATOR_FIELDS`, ``x_est_m``...), only
+  in a session whose autopilot flew on its EKF (``quadsitl/N/estimator``): joined exactly on
+  ``time_s`` like the controller's; a session flown on truth has no such columns at all (the
+  table then is exactly what older readers know).
 * ``mav_*`` columns: MAVLink telemetry AS RECEIVED (NED world, FRD body; SI units after the
   edge scaling, e.g. mm -> m, 1e7 deg -> deg), joined AS OF the row time: the latest sample
   stamped at or before the row (``time_boot_ms``/``time_usec`` = simulation time). Messages
@@ -40,7 +44,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS
+from quadcommon.bus_records import CONTROLLER_FIELDS, ESTIMATOR_FIELDS, TRUTH_FIELDS
 
 METADATA_KEY = b"quadsitl.session"
 FORMAT = "quadsitl.session/1"
@@ -240,14 +244,17 @@ MAV_GROUP_BY_MESSAGE = {g.message: g for g in MAV_GROUPS}
 
 TRUTH_COLUMNS = TRUTH_FIELDS[1:]  # without time_s
 CONTROLLER_COLUMNS = CONTROLLER_FIELDS[1:]
+ESTIMATOR_COLUMNS = ESTIMATOR_FIELDS[1:]
 
 
-def column_names() -> list[str]:
-    """Every column of the session table, in order."""
+def column_names(estimator: bool = False) -> list[str]:
+    """Every column of the session table, in order (``estimator``: of a session flown on the EKF)."""
     names = ["time_s", *TRUTH_COLUMNS, *CONTROLLER_COLUMNS]
     for g in MAV_GROUPS:
         names.append(g.time_column)
         names.extend(c.name for c in g.columns)
+    if estimator:
+        names.extend(ESTIMATOR_COLUMNS)
     return names
 
 
@@ -257,6 +264,8 @@ def column_descriptions() -> dict[str, str]:
         out[name] = "ground truth (simulator, zenoh), paper frames, SI"
     for name in CONTROLLER_COLUMNS:
         out[name] = "controller internals (autopilot, zenoh), paper frames, SI"
+    for name in ESTIMATOR_COLUMNS:
+        out[name] = "the autopilot's EKF (zenoh; only when flown on it), paper frames, SI"
     for g in MAV_GROUPS:
         out[g.time_column] = f"stamp of the {g.message} sample used, simulation s"
         out.update({c.name: c.description for c in g.columns})
@@ -264,6 +273,12 @@ def column_descriptions() -> dict[str, str]:
 
 
 SCHEMA = pa.schema([pa.field(name, pa.float64()) for name in column_names()])
+# A session flown on the EKF: the same columns and the estimator's after them.
+SCHEMA_WITH_ESTIMATOR = pa.schema([pa.field(name, pa.float64()) for name in column_names(estimator=True)])
+
+
+def schema_for(has_estimator: bool) -> pa.Schema:
+    return SCHEMA_WITH_ESTIMATOR if has_estimator else SCHEMA
 
 
 # --------------------------------------------------------------------------------------------
@@ -348,8 +363,10 @@ class SessionAssembler:
         self.started_wall = wall
         self.truth = _Rows(len(TRUTH_FIELDS))
         self.controller = _Rows(len(CONTROLLER_FIELDS))
+        self.estimator = _Rows(len(ESTIMATOR_FIELDS))
         self.mav = {g.name: _MavSeries(len(g.columns)) for g in MAV_GROUPS}
         self.truth_stream, self.controller_stream, self.mav_stream = _Stream(), _Stream(), _Stream()
+        self.estimator_stream = _Stream()  # only ever advances when the autopilot flies on its EKF
         self._pending_untimed: list[tuple[MavGroup, tuple[float, ...]]] = []
         self.first_key: int | None = None
         self.latest_key: int | None = None
@@ -383,6 +400,20 @@ class SessionAssembler:
             self.controller_stream.saw(key, wall)
             self._saw_time(int(time_key(rows[0, 0])))
             self._saw_time(key)
+
+    def add_estimator(self, rows: np.ndarray, wall: float) -> None:
+        """A decoded ESTIMATOR_CODEC batch, (n, len(ESTIMATOR_FIELDS))."""
+        if len(rows):
+            self.estimator.add(rows)
+            key = int(time_key(rows[-1, 0]))
+            self.estimator_stream.saw(key, wall)
+            self._saw_time(int(time_key(rows[0, 0])))
+            self._saw_time(key)
+
+    @property
+    def has_estimator(self) -> bool:
+        """Estimator rows have arrived: from then on every table handed out has their columns."""
+        return self.estimator_stream.latest_key is not None
 
     def _stamp(self, group: MavGroup, msg: Any) -> int | None:
         if group.stamp == "time_boot_ms":
@@ -444,19 +475,12 @@ class SessionAssembler:
 
     def watermark(self, wall: float) -> int | None:
         """The latest key every live stream has reached (None: nothing is safe to hand out)."""
-        live = [
-            s.latest_key
-            for s in (self.truth_stream, self.controller_stream, self.mav_stream)
-            if s.live(wall) and s.latest_key is not None
-        ]
+        streams = (self.truth_stream, self.controller_stream, self.estimator_stream, self.mav_stream)
+        live = [s.latest_key for s in streams if s.live(wall) and s.latest_key is not None]
         if live:
             return min(live)
         # Every stream silent for a while (paused simulation): what arrived is complete.
-        known = [
-            s.latest_key
-            for s in (self.truth_stream, self.controller_stream, self.mav_stream)
-            if s.latest_key is not None
-        ]
+        known = [s.latest_key for s in streams if s.latest_key is not None]
         return max(known) if known else None
 
     def take(self, wall: float, final: bool = False) -> pa.Table | None:
@@ -470,8 +494,13 @@ class SessionAssembler:
             return None
         truth_keys, truth_rows = self.truth.split(watermark)
         ctrl_keys, ctrl_rows = self.controller.split(watermark)
-        keys = np.union1d(truth_keys, ctrl_keys)
-        zenoh_seen = self.truth_stream.latest_key is not None or self.controller_stream.latest_key is not None
+        est_keys, est_rows = self.estimator.split(watermark)
+        keys = np.union1d(np.union1d(truth_keys, ctrl_keys), est_keys)
+        zenoh_seen = (
+            self.truth_stream.latest_key is not None
+            or self.controller_stream.latest_key is not None
+            or self.has_estimator
+        )
         if not zenoh_seen and (final or wall - self.started_wall > NO_ZENOH_FALLBACK_WALL_S):
             # A session without the zenoh bus: one row per LOCAL_POSITION_NED sample.
             local_keys, _ = self.mav["local"].arrays()
@@ -489,6 +518,10 @@ class SessionAssembler:
         cv = exact_join(ctrl_keys, ctrl_rows, keys)
         for i, name in enumerate(CONTROLLER_COLUMNS, start=1):
             cols[name] = cv[:, i]
+        if self.has_estimator:
+            ev = exact_join(est_keys, est_rows, keys)
+            for i, name in enumerate(ESTIMATOR_COLUMNS, start=1):
+                cols[name] = ev[:, i]
         for g in MAV_GROUPS:
             mkeys, mvalues = self.mav[g.name].arrays()
             stamped = np.column_stack([mkeys * 1e-6, mvalues])  # the stamp rides along as column 0
@@ -501,7 +534,7 @@ class SessionAssembler:
             series.prune(last)
         self.emitted_until = last if self.emitted_until is None else max(self.emitted_until, last)
         self.rows_emitted += len(keys)
-        return pa.Table.from_pydict(cols, schema=SCHEMA)
+        return pa.Table.from_pydict(cols, schema=schema_for(self.has_estimator))
 
 
 # --------------------------------------------------------------------------------------------
@@ -534,6 +567,13 @@ class PartWriter:
         return path
 
 
+def _conform(table: pa.Table, schema: pa.Schema) -> pa.Table:
+    """``table`` with exactly ``schema``'s columns, in order; the ones it lacks NaN."""
+    nan = pa.chunked_array([pa.array(np.full(table.num_rows, np.nan), type=pa.float64())])
+    columns = [table.column(n) if n in table.column_names else nan for n in schema.names]
+    return pa.Table.from_arrays(columns, names=schema.names).cast(schema)
+
+
 def part_paths(parts_dir: Path) -> list[Path]:
     return sorted(Path(parts_dir).glob(PART_GLOB))
 
@@ -542,18 +582,17 @@ def merge_parts(parts_dir: Path, out_path: Path, metadata: dict[str, Any], remov
     """Stream every part into ``out_path`` (one row group per part), then delete the parts.
 
     The merged file is complete before the parts go: it is written under a temporary name and
-    renamed. Memory use is one part at a time.
+    renamed. Memory use is one part at a time. When any part has the estimator's columns the
+    merged file has them, NaN in the rows of parts written before its first rows arrived.
     """
     out_path = Path(out_path)
     tmp = out_path.with_name(out_path.name + ".tmp")
-    schema = SCHEMA.with_metadata({METADATA_KEY: json.dumps(metadata).encode()})
     parts = part_paths(parts_dir)
+    full = schema_for(any(ESTIMATOR_COLUMNS[0] in pq.read_schema(part).names for part in parts))
+    schema = full.with_metadata({METADATA_KEY: json.dumps(metadata).encode()})
     with pq.ParquetWriter(tmp, schema) as writer:
         for part in parts:
-            table = pq.read_table(part)
-            writer.write_table(
-                table.select(SCHEMA.names).cast(SCHEMA).replace_schema_metadata(schema.metadata)
-            )
+            writer.write_table(_conform(pq.read_table(part), full).replace_schema_metadata(schema.metadata))
     os.replace(tmp, out_path)
     if remove:
         for part in parts:
@@ -589,7 +628,8 @@ def read_session_table(path: str | Path) -> tuple[pa.Table, dict[str, Any]]:
             raise FileNotFoundError(f"{p}: no {PART_GLOB} files")
         tables = [pq.read_table(part) for part in parts]
         meta_raw = (tables[-1].schema.metadata or {}).get(METADATA_KEY, b"{}")
-        table = pa.concat_tables([t.replace_schema_metadata(None) for t in tables])
+        full = schema_for(any(ESTIMATOR_COLUMNS[0] in t.column_names for t in tables))
+        table = pa.concat_tables([_conform(t, full) for t in tables])
     else:
         table = pq.read_table(p)
         meta_raw = (table.schema.metadata or {}).get(METADATA_KEY, b"{}")

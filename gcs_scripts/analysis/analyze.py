@@ -7,7 +7,10 @@ recorder that died, or an in-process run's Parquet file) this builds a FlightRec
 * ``comparison.md``: the runs (source, scenario, controller, window, samples) and one table of
   final errors, ISE and IADU with a column per run (:func:`tables.comparison_markdown`);
 * ``comparison_{path3d,position,position_error,orientation,controls}.png``: the paper's figures
-  with the runs overlaid (:func:`figures.paper_figures`; the first run's reference is drawn).
+  with the runs overlaid (:func:`figures.paper_figures`; the first run's reference is drawn);
+* for runs flown on the EKF (estimator columns in the log): a table of estimation RMS errors in
+  ``comparison.md`` and ``comparison_estimate_{position_error,attitude_error,test_ratios}.png``
+  (estimate − truth with the filter's ±3σ; :mod:`~gcs_scripts.analysis.estimation`).
 
 ``--t0 S [S ...]`` and ``--duration S`` select a window of simulation time (one t0 for every
 log, or one per log) and shift it to start at 0, so a trajectory flown through the SITL from
@@ -28,7 +31,8 @@ from pathlib import Path
 
 from quadcommon.cli_help import HelpFormatter
 
-from .figures import paper_figures
+from .estimation import estimation_markdown, estimation_stats
+from .figures import estimation_figures, paper_figures
 from .log_reader import Window, read_session
 from .metrics import indices
 from .record import FlightRecord
@@ -132,9 +136,12 @@ def analyze(
         _runs_markdown(records, windows),
         table,
     ]
+    stats = {rec.label: s for rec in records if (s := estimation_stats(rec)) is not None}
+    if stats:
+        text += ["", estimation_markdown(stats)]
     md_path = out / "comparison.md"
     md_path.write_text("\n".join(text))
-    figures = paper_figures(records, out, FIGURE_PREFIX)
+    figures = paper_figures(records, out, FIGURE_PREFIX) + estimation_figures(records, out, FIGURE_PREFIX)
     return [md_path, *figures]
 
 

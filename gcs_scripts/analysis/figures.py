@@ -118,3 +118,65 @@ def paper_figures(records: Sequence[FlightRecord], out_dir: Path, prefix: str) -
         ),
     ]
     return paths
+
+
+def estimation_figures(records: Sequence[FlightRecord], out_dir: Path, prefix: str) -> list[Path]:
+    """Estimate vs truth of the runs flown on the EKF: position error with the filter's ±3σ,
+    attitude error, innovation test ratios. None when no run has estimator rows."""
+    from .estimation import RATIOS, estimation_errors
+
+    runs = [(rec, e) for rec in records if (e := estimation_errors(rec)) is not None]
+    if not runs:
+        return []
+    out_dir = Path(out_dir)
+    scenario = runs[0][0].scenario
+    paths: list[Path] = []
+
+    fig, axes = plt.subplots(3, 1, figsize=(7.5, 6.3), sharex=True)
+    for i, (ax, axis) in enumerate(zip(axes, "xyz", strict=True)):
+        for rec, e in runs:
+            (line,) = ax.plot(e.time_s, 1e3 * e.position_m[:, i], linewidth=0.8, label=_label(rec))
+            band = 3e3 * e.position_sigma_m[:, i]
+            if not np.isnan(band).all():
+                ax.fill_between(e.time_s, -band, band, color=line.get_color(), alpha=0.15, linewidth=0)
+        first = runs[0][0]
+        _mark_events(ax, [t for t in first.event_times_s if first.time_s[0] <= t <= first.time_s[-1]])
+        ax.set_ylabel(f"ê_{axis} (mm)")
+        ax.grid(True, linewidth=0.3)
+    axes[0].set_title(f"{scenario}: position estimate − truth (band: the filter's ±3σ)")
+    axes[0].legend(loc="best", fontsize=7, ncol=4)
+    axes[-1].set_xlabel("time (s)")
+    fig.tight_layout()
+    paths.append(out_dir / f"{prefix}_estimate_position_error.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(3, 1, figsize=(7.5, 6.3), sharex=True)
+    for i, (ax, angle) in enumerate(zip(axes, ("φ", "θ", "ψ"), strict=True)):
+        for rec, e in runs:
+            ax.plot(e.time_s, np.degrees(e.euler_rad[:, i]), linewidth=0.8, label=_label(rec))
+        ax.set_ylabel(f"ê_{angle} (deg)")
+        ax.grid(True, linewidth=0.3)
+    axes[0].set_title(f"{scenario}: attitude estimate − truth")
+    axes[0].legend(loc="best", fontsize=7, ncol=4)
+    axes[-1].set_xlabel("time (s)")
+    fig.tight_layout()
+    paths.append(out_dir / f"{prefix}_estimate_attitude_error.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(len(RATIOS), 1, figsize=(7.5, 1.8 * len(RATIOS) + 0.6), sharex=True)
+    for ax, name in zip(axes, RATIOS, strict=True):
+        for rec, e in runs:
+            ax.plot(e.time_s, e.ratios[name], linewidth=0.8, label=_label(rec))
+        ax.axhline(1.0, color="r", linestyle="--", linewidth=0.8)  # above: rejected
+        ax.set_ylabel(name, fontsize=8)
+        ax.grid(True, linewidth=0.3)
+    axes[0].set_title(f"{scenario}: innovation test ratios (> 1: rejected)")
+    axes[0].legend(loc="best", fontsize=7, ncol=4)
+    axes[-1].set_xlabel("time (s)")
+    fig.tight_layout()
+    paths.append(out_dir / f"{prefix}_estimate_test_ratios.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+    return paths

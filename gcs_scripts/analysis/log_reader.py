@@ -9,7 +9,9 @@ runs can be compared.
 * references, U1 and tau (Euler coordinates): the controller's own record (``x_ref_m``...,
   ``phi_ref_rad``..., ``U1_n``, ``tau_phi_n_m``...);
 * disturbances: the truth's applied force/torque (``Ax_n``..., ``Ap_n_m``...); event times are
-  the instants where the applied disturbance changes (the first sample of each change).
+  the instants where the applied disturbance changes (the first sample of each change);
+* the estimate (a session flown with ``--estimator ekf``): the estimator's columns
+  (``x_est_m``...) as ``FlightRecord.estimator``, NaN where the filter had none.
 
 Only rows with all of these are kept (on the ground before arming the controller publishes no
 reference). A window ``(t0, duration)`` trims to ``[t0, t0 + duration]`` and shifts time so it
@@ -27,7 +29,7 @@ import pyarrow.parquet as pq
 
 from gcs_scripts.session_log import read_session_table, resolve_session_path, time_key
 
-from .record import FlightRecord
+from .record import ESTIMATOR_COLUMNS, FlightRecord
 
 Window = tuple[
     float | None, float | None
@@ -114,7 +116,9 @@ def read_session(
     missing = [c for c in ("time_s", *REQUIRED) if c not in table.column_names]
     if missing:
         raise ValueError(f"{resolved}: not a quadsitl session log (missing columns {', '.join(missing)})")
-    wanted = ["time_s", *REQUIRED, *(c for c in DISTURBANCE if c in table.column_names)]
+    has_estimator = all(c in table.column_names for c in ESTIMATOR_COLUMNS)
+    estimator_cols = ESTIMATOR_COLUMNS if has_estimator else ()
+    wanted = ["time_s", *REQUIRED, *(c for c in DISTURBANCE if c in table.column_names), *estimator_cols]
     cols = coalesce_duplicate_times({c: table.column(c).to_numpy(zero_copy_only=False) for c in wanted})
     complete = np.all([~np.isnan(cols[c]) for c in REQUIRED], axis=0)
     in_window, t0 = _window_mask(cols["time_s"], window)
@@ -151,6 +155,7 @@ def read_session(
         disturbance_torque_n_m=torque,
         event_times_s=disturbance_events(time_s, both),
         source=f"sitl log {resolved}" + ("" if window is None else f" from t0={t0:g} s"),
+        estimator=np.column_stack([time_s, stack(*ESTIMATOR_COLUMNS)]) if has_estimator else None,
     )
 
 

@@ -11,6 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from quadcommon.bus_records import ESTIMATOR_FIELDS
+
+ESTIMATOR_COLUMNS = ESTIMATOR_FIELDS[1:]  # the estimator's columns in a Parquet file (time_s is shared)
+
 
 @dataclass
 class FlightRecord:
@@ -45,6 +49,11 @@ class FlightRecord:
                 raise ValueError(f"FlightRecord.{name} has shape {value.shape}, expected ({n}, 3)")
         if self.thrust_n.shape != (n,):
             raise ValueError(f"FlightRecord.thrust_n has shape {self.thrust_n.shape}, expected ({n},)")
+        if self.estimator is not None and self.estimator.shape != (n, len(ESTIMATOR_FIELDS)):
+            raise ValueError(
+                f"FlightRecord.estimator has shape {self.estimator.shape}, "
+                f"expected ({n}, {len(ESTIMATOR_FIELDS)})"
+            )
 
     @property
     def position_error_m(self) -> np.ndarray:
@@ -94,6 +103,9 @@ class FlightRecord:
         if self.disturbance_torque_n_m is not None:
             for i, name in enumerate(("Ap", "Aq", "Ar")):
                 cols[f"{name}_n_m"] = self.disturbance_torque_n_m[:, i]
+        if self.estimator is not None:  # flown on truth: no estimator columns at all
+            for i, name in enumerate(ESTIMATOR_COLUMNS, start=1):
+                cols[name] = self.estimator[:, i]
         return cols
 
     def write_parquet(self, path) -> Path:
@@ -123,6 +135,10 @@ class FlightRecord:
         def optional(*names):
             return stack(*names) if all(n in cols for n in names) else None
 
+        estimator = optional(*ESTIMATOR_COLUMNS)
+        if estimator is not None:  # its time is the record's (one estimator row per frame)
+            estimator = np.column_stack([np.asarray(cols["time_s"], dtype=float), estimator])
+
         return cls(
             label=meta.get("label", meta.get("controller", "")),
             scenario=meta.get("scenario", ""),
@@ -138,6 +154,7 @@ class FlightRecord:
             disturbance_torque_n_m=optional("Ap_n_m", "Aq_n_m", "Ar_n_m"),
             event_times_s=list(meta.get("event_times_s", [])),
             source=meta.get("source", ""),
+            estimator=estimator,
         )
 
     @classmethod

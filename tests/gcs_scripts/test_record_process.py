@@ -3,7 +3,9 @@
 The test plays both SITL processes: it opens the simulator's zenoh hub (truth + controller
 batches, the two info queryables) and sends MAVLink 2 telemetry from the autopilot's GCS port
 (18570+N) to the recorder (14550+N). One recorder is killed with SIGKILL mid-run: the parts it
-wrote must be readable. Another stops by itself (--until-disarmed) and merges its parts.
+wrote must be readable. Another stops by itself (--until-disarmed) and merges its parts. A third
+plays an autopilot flying on its EKF (estimator batches on ``quadsitl/N/estimator``): the merged
+file has the estimate beside the truth.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from gcs_scripts import session_log as sl
 from gcs_scripts.analysis.log_reader import read_session
 from gcs_scripts.link import mavutil
 from quadcommon import bus, wire
-from quadcommon.bus_records import CONTROLLER_CODEC, TRUTH_CODEC
+from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC, ESTIMATOR_FIELDS, TRUTH_CODEC
 from sitl.launcher import Child, python_script
 
 from .helpers import Vehicle, control_times, controller_rows, ref_x, truth_rows
@@ -36,12 +38,15 @@ AP_INFO = {"instance": 0, "controller": "intbs_nlhinf", "vehicle": "paper_quad",
 class FakeSitl:
     """The simulator's zenoh hub and the autopilot's GCS link, as the test's puppets."""
 
-    def __init__(self, instance: int) -> None:
+    def __init__(self, instance: int, estimator: bool = False) -> None:
         self.instance = instance
         ports = wire.ports(instance)
         self.session = bus.open_hub(ports.zenoh)
         self.truth_pub = self.session.declare_publisher(wire.zenoh_key(instance, "truth"))
         self.ctrl_pub = self.session.declare_publisher(wire.zenoh_key(instance, "controller"))
+        self.est_pub = (
+            self.session.declare_publisher(wire.zenoh_key(instance, "estimator")) if estimator else None
+        )
         self.queryables = [
             (self.session.declare_queryable(wire.zenoh_key(instance, "info"), zenoh.handlers.FifoChannel(8)),
              dict(SIM_INFO, instance=instance)),
@@ -76,6 +81,11 @@ class FakeSitl:
         self.k += 10
         self.truth_pub.put(TRUTH_CODEC.encode(truth_rows(times).tolist()))
         self.ctrl_pub.put(CONTROLLER_CODEC.encode(controller_rows(times).tolist()))
+        if self.est_pub is not None:  # the estimate: truth + 1 mm in x
+            est = np.zeros((len(times), len(ESTIMATOR_FIELDS)))
+            est[:, 0] = times
+            est[:, ESTIMATOR_FIELDS.index("x_est_m")] = np.sin(times) + 0.001
+            self.est_pub.put(ESTIMATOR_CODEC.encode(est.tolist()))
         t = float(times[-1])
         x = round(t, 3) * 10.0
         self.send(self.vehicle.local_position(t, x=x))
@@ -96,8 +106,9 @@ def _start_recorder(instance: int, out: Path, *extra: str) -> Child:
 
 def _wait_matching(sitl: FakeSitl, proc: Child) -> None:
     deadline = time.monotonic() + 8.0
+    pubs = [p for p in (sitl.truth_pub, sitl.ctrl_pub, sitl.est_pub) if p is not None]
     while time.monotonic() < deadline:
-        if sitl.truth_pub.matching_status.matching and sitl.ctrl_pub.matching_status.matching:
+        if all(p.matching_status.matching for p in pubs):
             return
         assert proc.alive, proc.output
         time.sleep(0.01)
@@ -202,3 +213,35 @@ def test_recorder_stops_after_disarm_and_merges(tmp_path: Path) -> None:
     assert [s[2] for s in meta["statustext"]] == ["landed: disarmed"]
     assert cols["mav_armed"][-1] == 0.0 and np.nanmax(cols["mav_armed"]) == 1.0
     assert meta["truth_rows"] == table.num_rows
+
+
+@pytest.mark.timeout(30)
+def test_recorder_stores_the_estimate_beside_the_truth(tmp_path: Path) -> None:
+    instance = 23
+    out = tmp_path / "ekf"
+    sitl = FakeSitl(instance, estimator=True)
+    proc = _start_recorder(instance, out, "--until-disarmed")
+    try:
+        _wait_matching(sitl, proc)
+        for _ in range(3):
+            sitl.send(sitl.vehicle.heartbeat(armed=False))
+        for _ in range(100):  # 2 s of simulation time, armed
+            sitl.step(armed=True)
+            time.sleep(0.002)
+        deadline = time.monotonic() + 8.0
+        while proc.alive and time.monotonic() < deadline:
+            sitl.step(armed=False)
+            time.sleep(0.002)
+        assert proc.wait(10.0) == 0, proc.output
+    finally:
+        _stop(proc)
+        sitl.close()
+    table, meta = sl.read_session_table(tmp_path / "ekf.parquet")
+    cols = {n: table.column(n).to_numpy() for n in table.column_names}
+    _check_rows(cols, sitl)
+    have = ~np.isnan(cols["x_est_m"])
+    assert have.mean() > 0.99  # nothing lost on loopback
+    np.testing.assert_allclose(cols["x_est_m"][have] - cols["x_m"][have], 0.001, atol=1e-9)
+    assert meta["estimator_rows"] == have.sum()
+    record = read_session(tmp_path / "ekf.parquet")
+    assert record.estimator is not None and len(record.estimator) == len(record.time_s)

@@ -169,6 +169,6 @@ def test_parts_merge_and_read_back(tmp_path: Path) -> None:
 
 def test_column_descriptions_cover_every_column_and_name_the_frames() -> None:
     desc = sl.column_descriptions()
-    assert set(desc) == set(sl.column_names())
+    assert set(desc) == set(sl.column_names(estimator=True))
     assert "NED" in desc["mav_local_z_m"] and "paper" in desc["z_m"]
     assert sl.column_names()[: len(TRUTH_FIELDS)] == list(TRUTH_FIELDS)
