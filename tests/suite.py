@@ -3,8 +3,10 @@
 * ``-m "not processes"``: in-process and in simulation time, the large majority (CPU-bound);
 * ``-m "processes and not compat"``: the tests that start processes or bind the SITL's fixed
   ports, one after another (see ``tests/conftest.py``);
-* ``-m compat``: MAVSDK and MAVProxy against real vehicles, on a port block of their own, one
-  after another (mostly waiting on clients paced to the wall clock).
+* ``-m compat``: MAVSDK and MAVProxy against real vehicles, one after another (mostly waiting on
+  clients paced to the wall clock), in a network namespace of its own (``unshare -n`` with only
+  loopback up: its port block overlaps other instances' ports, e.g. 14640 is instance 60's API
+  link). Where no namespace can be made, these run in the processes session instead.
 
 Each session's output goes to ``out/tests/<session>.log`` and is printed when it ends; the exit code
 is non-zero when any session fails (or is interrupted), and the wall time of each is reported.
@@ -18,17 +20,35 @@ import sys
 import time
 from pathlib import Path
 
-HALVES = (("in-process", "not processes"), ("processes", "processes and not compat"), ("compat", "compat"))
 LOGS = Path("out/tests")
+# In a new network namespace: bring its loopback up, then run the command given after it.
+NAMESPACE = ["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$0" "$@"']
+
+
+def namespace_available() -> bool:
+    try:
+        probe = subprocess.run([*NAMESPACE, "true"], capture_output=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return probe.returncode == 0
+
+
+def sessions() -> list[tuple[str, str, list[str]]]:
+    """(name, marker selection, command prefix) of each pytest session."""
+    if namespace_available():
+        return [("in-process", "not processes", []), ("processes", "processes and not compat", []),
+                ("compat", "compat", NAMESPACE)]  # fmt: skip
+    return [("in-process", "not processes", []), ("processes", "processes", [])]
 
 
 def main(argv: list[str]) -> int:
     LOGS.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     runs = []
-    for name, selection in HALVES:
+    for name, selection, prefix in sessions():
         log = (LOGS / f"{name}.log").open("w")
-        cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", selection, *argv]
+        pytest = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", selection, *argv]
+        cmd = [*prefix, *pytest]
         runs.append((name, log, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), cmd))
     codes = {}
     try:
@@ -42,7 +62,7 @@ def main(argv: list[str]) -> int:
                 log.close()
                 codes[name] = process.returncode
                 elapsed = time.monotonic() - started
-                args = " ".join(cmd[3:])
+                args = " ".join(cmd[cmd.index("pytest") + 1 :])
                 print(f"==== {name} tests ({args}): exit {process.returncode} after {elapsed:.0f} s")
                 print((LOGS / f"{name}.log").read_text(), flush=True)
             time.sleep(0.2)
