@@ -40,6 +40,20 @@ class WatchedGcs(UdpGcs):
             self.heartbeat_times.append(self.sim_time)
         return msg
 
+    def command(self, command: int, *params: float, timeout: float = 2.0, attempts: int = 5):
+        """COMMAND_LONG resent with ``confirmation`` + 1 until ACKed, as ground stations do: under a
+        flood the kernel drops datagrams from the full socket buffer, the pilot's among them."""
+        p = list(params) + [0.0] * (7 - len(params))
+        for confirmation in range(attempts):
+            self.acks.clear()
+            self.conn.mav.command_long_send(self.system_id, 1, command, confirmation, *p)
+            try:
+                self.wait(lambda g: any(a.command == command for a in g.acks), 1e9, timeout, f"ACK {command}")
+            except AssertionError:
+                continue
+            return next(a for a in self.acks if a.command == command)
+        raise AssertionError(f"no COMMAND_ACK for command {command} after {attempts} attempts")
+
     def stream_setpoint_until(self, predicate, what: str, sim_timeout: float = 25.0) -> None:
         start = self.sim_time
         while self.sim_time - start < sim_timeout:
