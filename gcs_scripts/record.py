@@ -74,43 +74,6 @@ class RecorderOptions:
     part_interval_s: float = PART_INTERVAL_WALL_S
 
 
-class _InfoRequest:
-    """A zenoh get polled without blocking, repeated until one answer arrives."""
-
-    def __init__(self, key: str) -> None:
-        self.key = key
-        self.handler: Any = None
-        self.next_try = 0.0
-        self.answer: dict[str, Any] | None = None
-
-    def poll(self, session: Any, wall: float) -> bool:
-        """True when the answer has just arrived."""
-        import zenoh
-
-        if self.answer is not None:
-            return False
-        if self.handler is None:
-            if wall < self.next_try:
-                return False
-            self.next_try = wall + INFO_RETRY_WALL_S
-            self.handler = session.get(self.key, handler=zenoh.handlers.FifoChannel(4), timeout=1.0)
-        try:
-            reply = self.handler.try_recv()
-        except zenoh.ZError:  # the get ended without an answer: nobody there yet
-            self.handler = None
-            return False
-        if reply is None:
-            return False
-        self.handler = None
-        if reply.ok is None:
-            return False
-        try:
-            self.answer = json.loads(reply.ok.payload.to_bytes())
-        except ValueError:
-            return False
-        return True
-
-
 class Recorder:
     def __init__(self, options: RecorderOptions) -> None:
         self.options = options
@@ -126,8 +89,9 @@ class Recorder:
         self.parquet_path = out.with_name(out.name + ".parquet")
         self.parts_dir = out.with_name(out.name + ".parts")
         self.assembler = SessionAssembler(wire.system_id(options.instance), wall=time.monotonic())
-        self.truth_info = _InfoRequest(wire.zenoh_key(options.instance, "info"))
-        self.autopilot_info = _InfoRequest(wire.zenoh_key(options.instance, "autopilot/info"))
+        n = options.instance
+        self.truth_info = bus.InfoQuery(wire.zenoh_key(n, "info"), INFO_RETRY_WALL_S)
+        self.autopilot_info = bus.InfoQuery(wire.zenoh_key(n, "autopilot/info"), INFO_RETRY_WALL_S)
         self.conn: Any = None
         self.session: Any = None
         self.truth_sub: Any = None

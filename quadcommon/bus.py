@@ -91,3 +91,40 @@ def wait_matching(publisher: zenoh.Publisher, timeout_s: float) -> bool:
             return True
         time.sleep(0.002)
     return False
+
+
+class InfoQuery:
+    """A zenoh ``get`` of an ``info`` queryable, polled without blocking and repeated every
+    ``retry_wall_s`` until one answer (JSON) arrives; used by the recorder and the live view."""
+
+    def __init__(self, key: str, retry_wall_s: float = 1.0) -> None:
+        self.key = key
+        self.retry_wall_s = retry_wall_s
+        self.answer: dict | None = None
+        self._handler = None
+        self._next_try = 0.0
+
+    def poll(self, session: zenoh.Session | None, wall: float) -> bool:
+        """True when the answer has just arrived."""
+        if self.answer is not None or session is None:
+            return False
+        if self._handler is None:
+            if wall < self._next_try:
+                return False
+            self._next_try = wall + self.retry_wall_s
+            self._handler = session.get(self.key, handler=zenoh.handlers.FifoChannel(4), timeout=1.0)
+        try:
+            reply = self._handler.try_recv()
+        except zenoh.ZError:  # the get ended without an answer: nobody there yet
+            self._handler = None
+            return False
+        if reply is None:
+            return False
+        self._handler = None
+        if reply.ok is None:
+            return False
+        try:
+            self.answer = json.loads(reply.ok.payload.to_bytes())
+        except ValueError:
+            return False
+        return True

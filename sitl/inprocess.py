@@ -219,8 +219,6 @@ class Lockstep:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
             self.estimator_rows.extend(ap.take_estimator_rows())
-            if ap.estimator_rows:
-                self.estimator_rows.extend(ap.take_estimator_rows())
         else:
             ap.controller_rows.clear()
             ap.estimator_rows.clear()

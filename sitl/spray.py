@@ -25,7 +25,6 @@ import math
 import os
 import random
 import signal
-import socket
 import struct
 import sys
 import threading
@@ -37,6 +36,7 @@ os.environ.setdefault("MAVLINK_DIALECT", "common")
 from pymavlink.dialects.v20 import common as m  # noqa: E402
 
 from quadcommon import wire  # noqa: E402
+from quadcommon.udp import bind_udp  # noqa: E402
 
 LOOPBACK = "127.0.0.1"
 HOSTILE_KINDS = (
@@ -167,12 +167,7 @@ def hostile(port: int, system_id: int, datagrams: int, sources: int, rate_hz: fl
     """Send ``datagrams`` hostile datagrams to ``127.0.0.1:port`` from ``sources`` source ports, at
     most ``rate_hz`` per second (0: as fast as possible), for at most ``seconds``; counts by kind."""
     traffic = HostileTraffic(seed, system_id)
-    socks = []
-    for _ in range(sources):
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.bind((LOOPBACK, 0))
-        s.setblocking(False)
-        socks.append(s)
+    socks = [bind_udp(0, "spray source") for _ in range(sources)]  # non-blocking, 127.0.0.1
     start = time.monotonic()
     try:
         for k in range(datagrams):
@@ -206,12 +201,7 @@ def load(port: int, system_id: int, clients: int, seconds: float, interval_us: f
     """``clients`` ground stations on ``127.0.0.1:port``, each asking for :data:`STREAMS` every
     ``interval_us`` and reading everything for ``seconds``; returns the messages received."""
     mav = m.MAVLink(None, srcSystem=255, srcComponent=190)
-    socks = []
-    for _ in range(clients):
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.bind((LOOPBACK, 0))
-        s.setblocking(False)
-        socks.append(s)
+    socks = [bind_udp(0, "load client") for _ in range(clients)]  # non-blocking, 127.0.0.1
 
     def send_all(data: bytes) -> None:
         for s in socks:

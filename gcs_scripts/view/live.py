@@ -20,7 +20,6 @@ Everything is polled from the view's tick (:meth:`LiveVehicle.poll`); nothing bl
 
 from __future__ import annotations
 
-import json
 import os
 import socket
 import time
@@ -43,43 +42,6 @@ MAX_SAMPLES_PER_POLL = 4096
 RING_CAPACITY = 512  # zenoh batches kept between two ticks (~0.8 s at --speed max)
 
 
-class InfoQuery:
-    """A zenoh ``get`` polled without blocking, repeated until one answer arrives."""
-
-    def __init__(self, key: str) -> None:
-        self.key = key
-        self.answer: dict[str, Any] | None = None
-        self._handler: Any = None
-        self._next_try = 0.0
-
-    def poll(self, session: Any, wall: float) -> bool:
-        """True when the answer has just arrived."""
-        import zenoh
-
-        if self.answer is not None or session is None:
-            return False
-        if self._handler is None:
-            if wall < self._next_try:
-                return False
-            self._next_try = wall + INFO_RETRY_WALL_S
-            self._handler = session.get(self.key, handler=zenoh.handlers.FifoChannel(4), timeout=1.0)
-        try:
-            reply = self._handler.try_recv()
-        except zenoh.ZError:  # the get ended without an answer: nobody there yet
-            self._handler = None
-            return False
-        if reply is None:
-            return False
-        self._handler = None
-        if reply.ok is None:
-            return False
-        try:
-            self.answer = json.loads(reply.ok.payload.to_bytes())
-        except ValueError:
-            return False
-        return True
-
-
 class LiveVehicle:
     """Vehicle ``instance``: its zenoh streams and its MAVLink telemetry, sampled for the page."""
 
@@ -93,8 +55,8 @@ class LiveVehicle:
         self.autopilot_address = (wire.LOOPBACK, self.ports.gcs_local)
         self.sampler = VehicleSampler()
         self.telemetry = VehicleTelemetry()
-        self.sim_info = InfoQuery(wire.zenoh_key(instance, "info"))
-        self.autopilot_info = InfoQuery(wire.zenoh_key(instance, "autopilot/info"))
+        self.sim_info = bus.InfoQuery(wire.zenoh_key(instance, "info"), INFO_RETRY_WALL_S)
+        self.autopilot_info = bus.InfoQuery(wire.zenoh_key(instance, "autopilot/info"), INFO_RETRY_WALL_S)
         self.session: Any = None
         self.truth_sub: Any = None
         self.controller_sub: Any = None

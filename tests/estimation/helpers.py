@@ -28,6 +28,7 @@ from autopilot.estimation import (
     MagSample,
     VisionPose,
 )
+from autopilot.estimation.eskf import quat_multiply
 from quadcommon.config import apply_uncertainty, load_scenario, load_sitl, load_vehicle
 from quadcommon.rigid_body import rotation_from_quaternion
 from quadcommon.trajectories import trajectory_from_spec
@@ -95,20 +96,9 @@ def helix_truth(
     return tuple(frames)
 
 
-def quat_mul(a, b):
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
 def attitude_error(q_true, q_est) -> tuple[float, float, float]:
     """``dtheta`` with ``q_true = Exp(dtheta) (x) q_est`` (the filter's global error), rad."""
-    w, x, y, z = quat_mul(q_true, (q_est[0], -q_est[1], -q_est[2], -q_est[3]))
+    w, x, y, z = quat_multiply(q_true, (q_est[0], -q_est[1], -q_est[2], -q_est[3]))
     if w < 0.0:
         w, x, y, z = -w, -x, -y, -z
     s = math.sqrt(x * x + y * y + z * z)

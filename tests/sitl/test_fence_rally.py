@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.commander.modes import FlightMode
 from quadcommon import frames
 
-from ..stack import Gcs, make_stack
+from ..stack import Gcs
 from .test_params_failsafes import INT32, param_set, take_off, texts, wait_sim
 from .test_reposition import HOME, command_int, wait_at
 
@@ -50,15 +50,6 @@ def upload_plan(gcs: Gcs, items, mission_type) -> int:
         pass
     assert "ack" in result, "no MISSION_ACK"
     return result["ack"]
-
-
-@pytest.fixture
-def vehicle():
-    stack = make_stack()
-    gcs = Gcs(stack)
-    gcs.wait_heartbeat()
-    yield stack, gcs
-    gcs.close()
 
 
 @pytest.mark.timeout(120)

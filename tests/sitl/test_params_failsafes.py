@@ -101,15 +101,6 @@ def wait_sim(gcs: Gcs, seconds: float, link: dict | None = None, feed=None) -> N
     gcs.wait(done, sim_timeout=seconds + 5, what=f"{seconds} s of simulation")
 
 
-@pytest.fixture
-def vehicle():
-    stack = make_stack()
-    gcs = Gcs(stack)
-    gcs.wait_heartbeat()
-    yield stack, gcs
-    gcs.close()
-
-
 def push_now(stack, mapping: dict) -> float:
     """The gust profile ``mapping`` from the next frame on (as an upload with ``--now``); its start."""
     start = stack.t + stack.sim.dt_control

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.commander.modes import FlightMode
 from quadcommon import frames
 
-from ..stack import Gcs, make_stack
+from ..stack import Gcs
 from .test_params_failsafes import param_set, take_off, texts, wait_sim
 
 HOME = (47.397742, 8.545594, 488.0)  # config/sitl.toml [home]
@@ -36,15 +36,6 @@ def command_int(gcs: Gcs, frame: int, params, x: int, y: int, z: float, sim_time
 
 def wait_at(gcs: Gcs, target, within: float, sim_timeout: float):
     gcs.wait(lambda g: math.dist(g.position(), target) < within, sim_timeout, f"at {target}")
-
-
-@pytest.fixture
-def vehicle():
-    stack = make_stack()
-    gcs = Gcs(stack)
-    gcs.wait_heartbeat()
-    yield stack, gcs
-    gcs.close()
 
 
 @pytest.mark.timeout(120)
