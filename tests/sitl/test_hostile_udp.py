@@ -1,15 +1,17 @@
 """Issue 9's real-socket check: a vehicle flown over UDP by one ground station while another
-client (``python -m sitl.spray hostile``, its own process, 300 source ports) sprays datagrams at
-the same GCS port that must each be refused or ignored. The flight goes as commanded (takeoff,
-offboard to a point, land there), telemetry keeps flowing (heartbeat gaps in simulation time),
-both processes survive, and the autopilot's info counts what it refused and dropped with no
-handler fault. Instance 93. The real-time factor under such traffic: benchmarks/hostile_load.py.
+client (``python -m sitl.spray hostile``, its own process, 1,000 datagrams a second from 300
+source ports) sprays datagrams at the same GCS port that must each be refused or ignored. The
+flight goes as commanded (takeoff, offboard to a point, land there), telemetry keeps flowing
+(heartbeat gaps in simulation time), both processes survive, and the autopilot's info counts what
+it refused and dropped with no handler fault. Instance 93. The real-time factor under such
+traffic, and under a flood: benchmarks/hostile_load.py.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 import time
 
@@ -54,6 +56,17 @@ class WatchedGcs(UdpGcs):
             return next(a for a in self.acks if a.command == command)
         raise AssertionError(f"no COMMAND_ACK for command {command} after {attempts} attempts")
 
+    def start_offboard(self, attempts: int = 5):
+        """OFFBOARD as MAVSDK's offboard.start() does it: setpoints streamed first (0.3 s of
+        simulation), then the mode; again if refused (the flood can cost the stream datagrams)."""
+        for _ in range(attempts):
+            start = self.sim_time
+            self.stream_setpoint_until(lambda g, t0=start: g.sim_time - t0 > 0.3, "0.3 s of setpoints")
+            ack = self.command(m.MAV_CMD_DO_SET_MODE, 1, 6, 0)
+            if ack.result == m.MAV_RESULT_ACCEPTED:
+                return ack
+        return ack
+
     def stream_setpoint_until(self, predicate, what: str, sim_timeout: float = 25.0) -> None:
         start = self.sim_time
         while self.sim_time - start < sim_timeout:
@@ -83,7 +96,7 @@ def test_a_flight_under_a_hostile_spray_goes_as_commanded():
         gcs = WatchedGcs(ports.gcs_remote, wire.system_id(INSTANCE))
         session = bus.open_peer(ports.zenoh)
         spray = Child("spray", [sys.executable, "-u", "-m", "sitl.spray", "hostile", "--instance",
-                                str(INSTANCE), "--datagrams", "36000", "--sources", "300", "--rate", "3000",
+                                str(INSTANCE), "--datagrams", "12000", "--sources", "300", "--rate", "1000",
                                 "--seconds", "12"])  # fmt: skip
         try:
             gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last, what="telemetry")
@@ -91,17 +104,15 @@ def test_a_flight_under_a_hostile_spray_goes_as_commanded():
             ack = gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, 488.0 + 2.0)
             assert ack.result == m.MAV_RESULT_ACCEPTED
             gcs.wait(lambda g: g.position()[2] > 1.95, sim_timeout=15, what="takeoff")
-            for _ in range(10):
-                gcs.send_position_setpoint(*TARGET)
-                gcs.poll()
-            assert gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 6, 0).result == m.MAV_RESULT_ACCEPTED
+            assert gcs.start_offboard().result == m.MAV_RESULT_ACCEPTED
             gcs.stream_setpoint_until(lambda g: math.dist(g.position(), TARGET) < 0.05, "reach the target")
             ack = gcs.command(m.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
             assert ack.result == m.MAV_RESULT_ACCEPTED
             gcs.wait(lambda g: g.last["HEARTBEAT"].base_mode & m.MAV_MODE_FLAG_SAFETY_ARMED == 0,
                      sim_timeout=20, what="landed and disarmed")  # fmt: skip
             assert spray.wait(30.0) == 0, spray.tail()
-            assert "sent 36000 hostile datagrams" in spray.output or "hostile datagrams" in spray.output
+            sent = re.search(r"sent (\d+) hostile datagrams", spray.output)
+            assert sent and int(sent.group(1)) >= 5000, spray.tail()
             x, y, z = gcs.position()
             assert math.dist((x, y), TARGET[:2]) < 0.1 and abs(z) < 0.05, (x, y, z)
             gaps = [b - a for a, b in zip(gcs.heartbeat_times, gcs.heartbeat_times[1:], strict=False)]
