@@ -56,6 +56,7 @@ from .mavlink.commands import CommandDispatcher, command_ack, request_from_messa
 from .mavlink.dispatch import FaultLog, MessageDispatcher
 from .mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
+from .mavlink.manual import decode_sticks
 from .mavlink.offboard import decode_setpoint
 from .mavlink.params import ParamService
 from .mavlink.signing import Signing, SigningOptions
@@ -205,6 +206,7 @@ class AutopilotCore:
         d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
         d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
         d[m.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED] = self._on_setpoint
+        d[m.MAVLINK_MSG_ID_MANUAL_CONTROL] = self._on_manual_control
         d[m.MAVLINK_MSG_ID_SET_MODE] = self._on_set_mode_message
         d[m.MAVLINK_MSG_ID_HEARTBEAT] = self._on_gcs_heartbeat
         d[m.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
@@ -546,6 +548,16 @@ class AutopilotCore:
             self.refusals(f"setpoint refused: {reason}")
             return
         self.commander.offboard_setpoint(setpoint)
+
+    def _on_manual_control(self, msg, link: GcsLink, address: Address) -> None:
+        """The sticks (flown in POSCTL, :mod:`autopilot.guidance.manual`)."""
+        if msg.target not in (0, self.system_id):
+            return
+        sticks, reason = decode_sticks(msg, self.sim_time)
+        if sticks is None:
+            self.refusals(f"sticks refused: {reason}")
+            return
+        self.commander.manual_sticks(sticks)
 
     def _on_gcs_heartbeat(self, msg, link: GcsLink, address: Address) -> None:
         if msg.type != m.MAV_TYPE_GCS:

@@ -53,6 +53,14 @@ def yaw_from_ned(yaw_ned: float) -> float:
     return -yaw_ned
 
 
+def sticks_from_frd(
+    forward: float, right: float, throttle: float, yaw_clockwise: float
+) -> tuple[float, float, float, float]:
+    """MANUAL_CONTROL's stick axes (x forward, y right, z thrust up, r yaw clockwise seen from
+    above: the FRD body axes) to the paper's body axes (forward, left, up, yaw counter-clockwise)."""
+    return (forward, -right, throttle, -yaw_clockwise)
+
+
 def quaternion_to_ned(q: Quaternion) -> Quaternion:
     """Attitude quaternion (w, x, y, z) from the paper's frames to NED/FRD."""
     return (q[0], q[1], -q[2], -q[3])

@@ -28,6 +28,7 @@ from typing import NamedTuple
 
 from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
 
+from ..guidance.manual import ManualGuidance, ManualLimits, Sticks
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
@@ -112,6 +113,7 @@ class Commander:
         self.state: VehicleState | None = None
         self.events: list[tuple[int, str]] = []
         self.offboard = OffboardGuidance(self.limits())
+        self.manual = ManualGuidance()  # POSCTL's sticks
         self.last_reference: Reference | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
         self.rally_points: list[tuple[float, float]] = []  # uploaded rally points (paper x, y, m)
@@ -152,6 +154,18 @@ class Commander:
             speed_down=p["MPC_Z_VEL_MAX_DN"],
             acceleration=p["MPC_ACC_HOR"],
             yaw_rate=p["MPC_YAWRAUTO_MAX"],
+        )
+
+    def manual_limits(self) -> ManualLimits:
+        p = self.params
+        return ManualLimits(
+            speed_horizontal=p["MPC_VEL_MANUAL"],
+            speed_up=p["MPC_Z_VEL_MAX_UP"],
+            speed_down=p["MPC_Z_VEL_MAX_DN"],
+            acceleration=p["MPC_ACC_HOR"],
+            yaw_rate=math.radians(p["MPC_MAN_Y_MAX"]),
+            deadzone=p["MPC_HOLD_DZ"],
+            loss_s=p["COM_RC_LOSS_T"],
         )
 
     def in_air(self) -> bool:
@@ -334,6 +348,10 @@ class Commander:
             return self._refuse(DENIED, f"set current mission item refused: no item {seq}")
         return self._fire(t, Event.SET_CURRENT)
 
+    def manual_sticks(self, sticks: Sticks) -> None:
+        """A MANUAL_CONTROL: flown in POSCTL once deflected (kept otherwise, as PX4 keeps RC)."""
+        self.manual.update(sticks)
+
     def offboard_setpoint(self, setpoint: OffboardSetpoint) -> None:
         self.offboard.update(setpoint)
         times = self._setpoint_times
@@ -421,6 +439,13 @@ class Commander:
                 self._fire(t, Event.MISSION_RTL)
                 return None
             reference = out.reference
+        elif phase == Phase.HOLD and self.mode == FlightMode.POSCTL and self.manual.engage_if_moved(
+            t, limits := self.manual_limits()
+        ):
+            was_lost = self.manual.lost
+            reference = self.manual.reference(t, dt, self.last_reference or _at_rest(state), limits)
+            if self.manual.lost and not was_lost:
+                self._event(SEVERITY_WARNING, "manual control lost: sticks centred, holding position")
         else:
             assert self._trajectory is not None
             local = t - self._trajectory_start
@@ -513,6 +538,7 @@ class Commander:
 
     def _act_plan_hold(self, t: float, **_) -> None:
         assert self.state is not None
+        self.manual.reset()  # POSCTL: the stop plan flies until the sticks move
         self._fly(t, stop_from(self.last_or_measured(self.state), self.limits()))
 
     def _act_plan_reposition(

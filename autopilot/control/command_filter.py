@@ -8,7 +8,6 @@ for a reference held over the control step (zero-order hold), so it is stable at
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import expm
 
 from .config import CommandFilter
 
@@ -32,6 +31,8 @@ class SecondOrderFilter:
         self.two_zeta_wn = 2.0 * zeta * wn
         # Augmented continuous system [y, y', r]' with r constant over the step.
         A = np.array([[0.0, 1.0, 0.0], [-self.wn2, -self.two_zeta_wn, self.wn2], [0.0, 0.0, 0.0]])
+        from scipy.linalg import expm  # here: importing scipy.linalg costs every process start ~0.2 s
+
         Phi = expm(A * self.dt)
         # Plain floats for the per-step path.
         self._phi = tuple(tuple(float(v) for v in row) for row in Phi[:2])

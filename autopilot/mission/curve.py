@@ -18,7 +18,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.interpolate import CubicSpline, make_interp_spline, make_lsq_spline
 
 from quadcommon.trajectories import Reference
 
@@ -49,6 +48,10 @@ def fit_curve(
 ):
     """A spline through ``values`` (n x 4: x, y, z, unwrapped yaw) at ``times`` (s, increasing),
     within ``tolerance_m`` (per axis, m) of every sample; callable as ``spline(t, nu)``."""
+    # Imported here: scipy.interpolate costs ~0.6 s of every autopilot start, and only a timed
+    # mission's upload needs it.
+    from scipy.interpolate import CubicSpline, make_interp_spline, make_lsq_spline
+
     n = len(times)
     if n < 6:
         return CubicSpline(times, values, bc_type="natural")

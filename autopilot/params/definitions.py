@@ -38,6 +38,14 @@ COMMANDER_PARAMS = (
     ParamSpec("MPC_TKO_SPEED", 1.0, 0.1, 5.0, unit="m/s", description="takeoff climb speed"),
     ParamSpec("MPC_LAND_SPEED", 0.7, 0.1, 3.0, unit="m/s", description="landing descent speed"),
     ParamSpec("MPC_YAWRAUTO_MAX", 1.0, 0.1, 6.0, unit="rad/s", description="yaw rate limit"),
+    # POSCTL on the sticks (MANUAL_CONTROL): autopilot/guidance/manual.py. PX4's names and units;
+    # MPC_VEL_MANUAL defaults to this project's MPC_XY_VEL_MAX (PX4: 10 m/s).
+    ParamSpec("MPC_VEL_MANUAL", 2.0, 0.1, 20.0, unit="m/s", description="POSCTL speed at full stick"),
+    ParamSpec("MPC_MAN_Y_MAX", 150.0, 1.0, 400.0, unit="deg/s", description="POSCTL yaw rate at full stick"),
+    ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 0.9, description="stick deadzone (fraction of full deflection)"),
+    ParamSpec(
+        "COM_RC_LOSS_T", 0.5, 0.1, 35.0, unit="s", description="sticks older than this read as centred (hold)"
+    ),
     ParamSpec("RTL_RETURN_ALT", 5.0, 0.5, 150.0, unit="m", description="return altitude above home"),
     ParamSpec("NAV_ACC_RAD", 0.2, 0.01, 20.0, unit="m", description="waypoint acceptance radius"),
     ParamSpec(

@@ -74,7 +74,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import linalg, signal
 
 from quadcommon.schema import Section
 
@@ -215,6 +214,9 @@ class _DiscreteFilter:
     """One shaping filter discretised (ZOH) for unit-normal samples; gain sqrt(pi/dt) folded in."""
 
     def __init__(self, num: list[float], den: list[float], dt_s: float) -> None:
+        from scipy import signal  # here, not at the top: importing scipy.signal costs ~1 s of
+        # every simulator start, and only Dryden turbulence needs it
+
         A, B, C, D = signal.tf2ss(num, den)
         Ad, Bd = zoh(A, B, dt_s)
         Cd, Dd = C, D
@@ -229,6 +231,8 @@ class _DiscreteFilter:
 
     def stationary_covariance(self) -> np.ndarray:
         """State covariance P = Ad P Ad^T + Bd Bd^T of the filter driven by unit-normal samples."""
+        from scipy import linalg
+
         return linalg.solve_discrete_lyapunov(self.Ad, self.Bd @ self.Bd.T)
 
     def set_state(self, x0: np.ndarray) -> None:
@@ -248,6 +252,8 @@ class _DiscreteFilter:
         self.zi = np.array([sum(a[j] * y[i - j] for j in range(i + 1)) for i in range(self.order)])
 
     def run(self, noise: np.ndarray) -> np.ndarray:
+        from scipy import signal  # imported already by __init__: a dictionary lookup
+
         out, self.zi = signal.lfilter(self.b, self.a, noise, zi=self.zi)
         return out
 

@@ -193,7 +193,17 @@ async def manual_control(drone: System) -> None:
     except Exception as exc:  # noqa: BLE001 (reported, the test decides)
         outcome = f"{type(exc).__name__}: {exc}"
     mode = await first(drone.telemetry.flight_mode())
-    emit("manual_control", outcome=outcome, mode=str(mode))
+    # The example's inputs: (pitch, roll, throttle, yaw) at 10 Hz; full pitch forward flies north.
+    start = (await first(drone.telemetry.position_velocity_ned())).position
+    for _ in range(20):
+        await drone.manual_control.set_manual_control_input(1.0, 0.0, 0.5, 0.0)
+        await asyncio.sleep(0.1)
+    for _ in range(20):
+        await drone.manual_control.set_manual_control_input(0.0, 0.0, 0.5, 0.0)
+        await asyncio.sleep(0.1)
+    end = (await first(drone.telemetry.position_velocity_ned())).position
+    emit("manual_control", outcome=outcome, mode=str(mode), north_moved=end.north_m - start.north_m,
+         east_moved=end.east_m - start.east_m)  # fmt: skip
 
 
 async def land(drone: System) -> None:

@@ -77,6 +77,7 @@ def test_mavsdk_python3_examples_fly_in_a_loopback_only_namespace(tmp_path):
     assert by_name["offboard"]["velocity_north"] > 0.9
     assert by_name["mission_raw"]["total"] == 2
     assert by_name["manual_control"]["mode"] == "POSCTL"
+    assert by_name["manual_control"]["north_moved"] > 1.0 > abs(by_name["manual_control"]["east_moved"])
     assert by_name["land"]["disarmed"]
     steps = {e["step"]: e["wall_s"] for e in events if e["event"] == "step_time"}
     print(f"MAVSDK-Python 3 flows: {wall:.1f} s wall in all; per step: {steps}")
