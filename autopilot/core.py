@@ -62,6 +62,7 @@ from .mavlink.params import ParamService
 from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
+from .mission import curve
 from .mission.service import MissionService
 from .params.definitions import (
     consistency_problems,
@@ -124,6 +125,7 @@ class AutopilotCore:
     def __init__(self, setup: AutopilotSetup, log: Callable[[str], None] = lambda text: None) -> None:
         self.setup = setup
         self.log = log
+        curve.preload()  # before the first frame, not at a timed-mission upload in flight
         sitl = setup.sitl
         self.system_id = wire.system_id(setup.instance)
         self.dt = 1.0 / sitl.rates.control_hz
@@ -598,8 +600,10 @@ class AutopilotCore:
         if self.linked and now - self.last_frame_wall <= sim_loss_s:
             return
         if self.linked and not self.sim_lost:
+            # The cascade keeps its state: in lockstep the plant has not moved either, so frames that
+            # resume after a stall (a loaded machine) continue the same flight, as in-process. A
+            # restarted simulator shows as time going backwards (_simulator_restarted: disarm).
             self.sim_lost = True
-            self._flying = False
             self.commander.simulator_lost()  # no position: arming refused until frames resume
             self.statustext(
                 m.MAV_SEVERITY_CRITICAL,

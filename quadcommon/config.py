@@ -36,6 +36,10 @@ from .schema import ConfigError, Section, load_toml
 Vector3 = tuple[float, float, float]
 
 CONFIG_ENV = "QUADSITL_CONFIG_DIR"  # the user's configuration directories, joined by os.pathsep
+# Overrides [lockstep] spin_s of sitl.toml for every process started with it in the environment:
+# on a machine with fewer free cores than lockstep processes (several vehicles, a test suite beside
+# other jobs) a busy-waiting process takes the core its peer needs; 0 turns the spin off there.
+SPIN_ENV = "QUADSITL_LOCKSTEP_SPIN_S"
 SHIPPED_PACKAGE = "quadsitl_config"  # config/ as installed (pyproject.toml: package-dir)
 
 
@@ -459,6 +463,17 @@ def load_rates(sec: Section) -> Rates:
     return rates
 
 
+def _spin_from_environment(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 <= value <= 0.05:
+        raise ConfigError(f"environment variable {SPIN_ENV}: {text!r} is not a number of seconds in "
+                          "[0, 0.05]")  # fmt: skip
+    return value
+
+
 def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
     path = config_path("", name_or_path) if name_or_path else find_config("", "sitl")
     root = load_toml(path)
@@ -486,4 +501,6 @@ def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
     spin = sec.number("spin_s", 0.002, lo=0.0, hi=0.05, unit="s")
     sec.finish()
     root.finish()
+    if os.environ.get(SPIN_ENV):
+        spin = _spin_from_environment(os.environ[SPIN_ENV])
     return SitlConfig(rates, hil, gcs, api, home, zenoh_port, router, timeout, spin)

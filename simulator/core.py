@@ -41,6 +41,7 @@ from quadcommon.config import (
 from quadcommon.wire import new_parser, restart_parser
 
 from .dynamics.plant import make_plant
+from .environment import dryden
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
 from .environment.gust_upload import handle_gust_request
 from .mavlink.hil import ActuatorAnswer, ActuatorDecoder, HilFrameEncoder
@@ -93,6 +94,7 @@ class SimulatorCore:
     def __init__(self, setup: SimulatorSetup, log: Callable[[str], None] = lambda text: None) -> None:
         self.setup = setup
         self.log = log
+        dryden.preload()  # before the first frame, not at a gust upload in flight
         rates = setup.sitl.rates
         self.control_hz = rates.control_hz
         self.physics_hz = rates.physics_hz

@@ -38,13 +38,15 @@ PROCESS_MODULES = {
 }
 
 
-# Of those, the client-compatibility tests (marker ``compat`` too): they run on a port block of their
-# own (tests/compat/vehicles.py: PX4 instances 100-119) or in a network namespace of their own, and
-# mostly wait on real clients paced to the wall clock, so tests/suite.py runs them as a third session
-# beside the other two. test_signing_processes.py stays with the others: it uses instances 70-72 of
-# the normal block, as tests/sitl/test_signing_cli.py does.
-COMPAT_MODULES = {"tests/compat/"}
-NOT_COMPAT = {"tests/compat/test_signing_processes.py"}
+# Of those, the third session's (marker ``compat``, tests/suite.py): it runs in a network namespace
+# of its own (``unshare -n``), so its ports never meet the other sessions' and its tests may use any
+# instance. In it: the client-compatibility tests (MAVSDK, MAVProxy, several vehicles: they mostly
+# wait on real clients paced to the wall clock; their port block is PX4's instances 100-119,
+# tests/compat/vehicles.py) and, to balance the sessions' wall times (measured: the process session
+# was the longest by ~150 s), signing with real clients (instances 70-72) and the view's tests on a
+# live SITL (instances 65-69). Without namespaces they all run in the process session.
+COMPAT_MODULES = {"tests/compat/", "tests/view/test_browser_sitl.py", "tests/view/test_live_sitl.py"}
+NOT_COMPAT: set[str] = set()
 
 
 def _listed(nodeid: str, entries: set[str]) -> bool:

@@ -41,6 +41,12 @@ def _lsq_knots(times: np.ndarray, spacing: float, k: int) -> np.ndarray | None:
     return np.r_[[times[0]] * (k + 1), inner, [times[-1]] * (k + 1)]
 
 
+def preload() -> None:
+    """Import scipy.interpolate now (~0.6 s): before the first frame, not in the lockstep loop at
+    the first timed-mission upload."""
+    import scipy.interpolate  # noqa: F401
+
+
 def fit_curve(
     times: np.ndarray,
     values: np.ndarray,

@@ -292,6 +292,12 @@ class CompiledStep:
         self.k1, self.k2, self.k3, self.k4, self.tmp = (np.zeros(n) for _ in range(5))
         self.u = np.zeros(U_SIZE)
         self.reach = plant._ground_reach
+        # Load (or compile) the kernels now, on scratch buffers: their first call costs ~1 s (more
+        # when compiling), which in the middle of lockstep the autopilot would see as a simulator
+        # stall (COM_SIM_LOSS_T), and ground_contact is first called at touchdown.
+        scratch = np.array(plant.state, dtype=float)
+        rk4_step(scratch, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, self.u, plant.dt)
+        ground_contact(scratch, self.P)
 
     def step(self, plant) -> None:
         s, u = self.s, self.u

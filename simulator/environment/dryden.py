@@ -210,6 +210,14 @@ def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarr
     return E[:n, :n], E[:n, n:]
 
 
+def preload() -> None:
+    """Import the scipy parts the filters use, now: a process that may build a Dryden wind while it
+    flies (a gust upload) must not stall its lockstep loop ~1 s on the import (the autopilot would
+    see a simulator stall). Not at this module's import: a command line refused at its arguments
+    starts in a fraction of that."""
+    from scipy import linalg, signal  # noqa: F401
+
+
 class _DiscreteFilter:
     """One shaping filter discretised (ZOH) for unit-normal samples; gain sqrt(pi/dt) folded in."""
 

@@ -44,7 +44,7 @@ def _gap(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("run", [0, 3])
+@pytest.mark.parametrize("run", [0])  # one drawn run x three cascades x 40 s (wire off: another)
 def test_wire_on_equals_run_scenario(tmp_path, run):
     spec = load_campaign(specs.write(tmp_path, specs.BOX, "box"))
     assert spec.wire_float32
@@ -81,7 +81,7 @@ def test_wire_on_equals_run_scenario(tmp_path, run):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("run", [1, 4])
+@pytest.mark.parametrize("run", [4])
 def test_wire_off_equals_the_direct_coupling(tmp_path, run):
     spec = replace(load_campaign(specs.write(tmp_path, specs.BOX, "box")), wire_float32=False)
     sample = sample_run(spec, run)

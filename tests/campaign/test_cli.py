@@ -18,6 +18,18 @@ def _run(*args, timeout=600):
     return subprocess.run([QUADSITL, "campaign", *args], capture_output=True, text=True, timeout=timeout)
 
 
+def _main(capsys, *args) -> tuple[int, str, str]:
+    """``quadsitl campaign ARGS`` in this process (the refusals: no need to start one)."""
+    from sitl.cli import main
+
+    try:
+        code = main(["campaign", *args])
+    except SystemExit as exc:  # argparse's own refusals
+        code = exc.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
 @pytest.mark.timeout(600)
 def test_campaign_command_writes_table_summary_and_figures(tmp_path):
     spec = specs.write(tmp_path, specs.BOX, "box", duration=8.0)
@@ -54,19 +66,15 @@ def test_full_stack_check_flies_runs_again_and_agrees(tmp_path):
 
 
 @pytest.mark.timeout(120)
-def test_full_stack_refuses_before_flying(tmp_path):
+def test_full_stack_refuses_before_flying(tmp_path, capsys):
     spec = specs.write(tmp_path, specs.BOX, "box", duration=2.0)
-    done = _run(str(spec), "--runs", "2", "--full-stack", "3", "--out", str(tmp_path / "o"))
-    assert done.returncode == 2 and "--full-stack 3 is invalid; allowed: 1..2" in done.stderr
+    code, _, err = _main(capsys, str(spec), "--runs", "2", "--full-stack", "3", "--out", str(tmp_path / "o"))
+    assert code == 2 and "--full-stack 3 is invalid; allowed: 1..2" in err
     assert not (tmp_path / "o").exists()  # nothing was flown
 
 
-def test_a_bad_spec_stops_with_file_key_value_and_range(tmp_path):
+def test_a_bad_spec_stops_with_file_key_value_and_range(tmp_path, capsys):
     path = specs.write(tmp_path, specs.BOX.replace("[0.7, 1.3] }}\ninertia", "[0.2, 1.3] }}\ninertia"), "bad")
-    done = _run(str(path), "--out", str(tmp_path / "o"))
-    assert done.returncode == 2
-    assert (
-        str(path) in done.stderr
-        and "'plant.mass_scale.uniform[0]'" in done.stderr
-        and "[0.5, 2]" in done.stderr
-    )
+    code, _, err = _main(capsys, str(path), "--out", str(tmp_path / "o"))
+    assert code == 2
+    assert str(path) in err and "'plant.mass_scale.uniform[0]'" in err and "[0.5, 2]" in err

@@ -90,3 +90,16 @@ def test_uncertainty_scales_plant_only():
     assert scaled.plant.mass_kg == pytest.approx(0.74 * 1.3)
     assert scaled.plant.inertia_kg_m2 == pytest.approx((0.0052, 0.0052, 0.01092))
     assert scaled.nominal == vehicle.nominal
+
+
+def test_the_lockstep_spin_is_overridden_by_the_environment_and_checked(monkeypatch):
+    monkeypatch.setenv(config.SPIN_ENV, "0")
+    assert config.load_sitl().lockstep_spin_s == 0.0
+    monkeypatch.setenv(config.SPIN_ENV, "0.001")
+    assert config.load_sitl().lockstep_spin_s == 0.001
+    for bad in ("fast", "-1", "nan", "1"):
+        monkeypatch.setenv(config.SPIN_ENV, bad)
+        with pytest.raises(ConfigError, match=f"QUADSITL_LOCKSTEP_SPIN_S: '{bad}'"):
+            config.load_sitl()
+    monkeypatch.delenv(config.SPIN_ENV)
+    assert config.load_sitl().lockstep_spin_s == 0.002  # config/sitl.toml
