@@ -43,7 +43,7 @@ the executor's state; split by item kind, each part would need all of it.)
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum, IntEnum
 from typing import NamedTuple
@@ -251,21 +251,32 @@ def check_mission(
     origin: tuple[float, float, float],
     limits: Limits,
     params: Mapping[str, float] | None = None,
+    fence: Callable[[Vector3], str | None] | None = None,
+    home_local: Vector3 = ZERO3,
 ) -> tuple[int, str] | None:
     """Whole-mission feasibility: None, or (MAV_MISSION_RESULT, reason) for the first problem.
 
     Every position within ``NAV_REF_MAX_DIST`` of home (the configured origin; the rule offboard
-    setpoints follow too, :func:`autopilot.mavlink.validation.reference_problem`). Timed curves
-    must stay within the vehicle's speed and acceleration limits (their speed is set by their
-    times, so they are refused rather than slowed down)."""
-    if params is not None:
+    setpoints follow too, :func:`autopilot.mavlink.validation.reference_problem`), and, given
+    ``fence`` (why a paper-frame point breaks the geofence, or None), inside the geofence as it is
+    at upload (PX4's feasibility check; relative altitudes above ``home_local``, an item without
+    altitude checked at the ground). Timed curves must stay within the vehicle's speed and
+    acceleration limits (their speed is set by their times, so they are refused rather than
+    slowed down)."""
+    if params is not None or fence is not None:
         for item in items:
             if item.position is None or not item.position.horizontal_given:
                 continue
-            x, y, z = item.position.to_paper(origin, ZERO3)
-            problem = reference_problem((x, y, 0.0 if math.isnan(z) else z), ZERO3, params)
-            if problem:
-                return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
+            if params is not None:
+                x, y, z = item.position.to_paper(origin, ZERO3)
+                problem = reference_problem((x, y, 0.0 if math.isnan(z) else z), ZERO3, params)
+                if problem:
+                    return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
+            if fence is not None:
+                x, y, z = item.position.to_paper(origin, home_local)
+                problem = fence((x, y, home_local[2] if math.isnan(z) else z))
+                if problem:
+                    return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
     for item in items:
         if item.kind != ItemKind.JUMP:
             continue

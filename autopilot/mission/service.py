@@ -66,7 +66,9 @@ class MissionService:
             system_id,
             component_id,
             origin,
-            check=lambda items: check_mission(items, origin, commander.limits(), commander.params.values),
+            check=lambda items: check_mission(items, origin, commander.limits(), commander.params.values,
+                                              fence=commander.target_problem,
+                                              home_local=commander.home or (0.0, 0.0, 0.0)),
         )
         self._peer: tuple[object, tuple[str, int]] | None = None  # the transfer client's link, address
         self._sim_time: Callable[[], float] = lambda: 0.0

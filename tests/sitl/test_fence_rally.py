@@ -105,3 +105,24 @@ def test_reposition_outside_the_uploaded_fence_is_refused_and_an_exclusion_count
     wait_sim(gcs, 0.2)
     x, y = at(15.0, 0.0)
     assert command_int(gcs, m.MAV_FRAME_GLOBAL_INT, (-1, 1, 0, math.nan), x, y, 490.0).result == 0
+
+
+@pytest.mark.timeout(120)
+def test_a_mission_is_checked_against_the_fence_at_upload(vehicle):
+    stack, gcs = vehicle
+    MISSION = m.MAV_MISSION_TYPE_MISSION
+    fence = [plan_item(0, m.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, 10.0, 0.0, 0.0, FENCE)]
+    assert upload_plan(gcs, fence, FENCE) == m.MAV_MISSION_ACCEPTED
+
+    def mission(*points):  # relative altitude 3 m
+        frame, waypoint = m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, m.MAV_CMD_NAV_WAYPOINT
+        return [(k, frame, waypoint, 0, 1, 0.0, 0.0, 0.0, math.nan, *at(n, e), 3.0, MISSION)
+                for k, (n, e) in enumerate(points)]  # fmt: skip
+
+    assert upload_plan(gcs, mission((3.0, 0.0), (12.0, 0.0)), MISSION) == m.MAV_MISSION_INVALID_PARAM5_X
+    wait_sim(gcs, 0.2)
+    assert "mission rejected: item 1: outside the geofence" in texts(gcs)
+    assert upload_plan(gcs, mission((3.0, 0.0), (0.0, 6.0)), MISSION) == m.MAV_MISSION_ACCEPTED
+    # and the vertical limit, relative to home
+    param_set(gcs, "GF_MAX_VER_DIST", 2.0)
+    assert upload_plan(gcs, mission((3.0, 0.0)), MISSION) == m.MAV_MISSION_INVALID_PARAM5_X
