@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from quadcommon import wire
-from quadcommon.config import estimator_profile_for, load_scenario, load_sitl
+from quadcommon.config import SPIN_ENV, estimator_profile_for, load_scenario, load_sitl
 
 REPO = Path(__file__).resolve().parents[1]
 MAX_LINES = 2000  # kept per child (older lines are dropped)
@@ -71,6 +71,7 @@ class Child:
     ) -> None:
         self.name = name
         self.cmd = list(cmd)
+        self.env = env
         self.echo = echo
         self.lines: deque[str] = deque(maxlen=MAX_LINES)
         self.line_count = 0  # lines read so far (``lines`` keeps the last MAX_LINES of them)
@@ -396,6 +397,17 @@ def check_launch(specs: Sequence[VehicleSpec], running: Sequence[VehicleSpec] = 
     return {spec.instance: check_ports(spec, everyone) for spec in specs}
 
 
+def spin_environment(vehicles: int, environ: dict[str, str] | None = None, cores: int | None = None):
+    """The children's environment with the lockstep spin off when the vehicles' processes (two each)
+    outnumber the cores: a busy-waiting process would take the core its peer needs (README,
+    "Several vehicles"); None (inherit) otherwise, or when the user set the spin already."""
+    environ = dict(os.environ) if environ is None else environ
+    cores = cores if cores is not None else (os.cpu_count() or 1)
+    if SPIN_ENV in environ or 2 * vehicles <= cores:
+        return None
+    return {**environ, SPIN_ENV: "0"}
+
+
 class Launcher:
     """Children started together and stopped together; leaving the ``with`` block stops them."""
 
@@ -420,12 +432,16 @@ class Launcher:
         """Check every port, start simulator + autopilot per vehicle, wait until all are linked."""
         self.ports.update(check_launch(specs, list(self.specs.values())))
         self.specs.update({spec.instance: spec for spec in specs})
+        env = spin_environment(len(self.specs))
+        if env is not None and self.echo is not None:
+            self.echo("quadsitl", f"{2 * len(self.specs)} lockstep processes on {os.cpu_count()} cores: "
+                      f"they block instead of busy-waiting for each other ({SPIN_ENV}=0)")  # fmt: skip
         try:
             simulators = []
             for spec in specs:
                 n = spec.instance
-                simulators.append(self.spawn(f"simulator[{n}]", spec.simulator_command()))
-                self.spawn(f"autopilot[{n}]", spec.autopilot_command())
+                simulators.append(self.spawn(f"simulator[{n}]", spec.simulator_command(), env=env))
+                self.spawn(f"autopilot[{n}]", spec.autopilot_command(), env=env)
             deadline = time.monotonic() + link_timeout_s
             for simulator in simulators:
                 self.wait_linked(simulator, deadline)
@@ -453,7 +469,7 @@ class Launcher:
         must have exited). Call from the thread that started the others: PR_SET_PDEATHSIG is
         tied to the thread that forks."""
         assert not old.alive, f"{old.name} is still running"
-        child = Child(old.name, old.cmd if cmd is None else cmd, echo=self.echo)
+        child = Child(old.name, old.cmd if cmd is None else cmd, env=old.env, echo=self.echo)
         self.children[self.children.index(old)] = child
         return child
 
