@@ -557,6 +557,33 @@ class Commander:
         distance = math.dist(p, target)
         self._event(SEVERITY_INFO, f"repositioning {distance:.1f} m at {limits.speed_horizontal:.1f} m/s")
 
+    def _act_plan_climb_reposition(
+        self, t: float, target: Vector3, speed_m_s: float | None, yaw_rad: float | None, **_
+    ) -> Outcome | None:
+        """Armed on the ground (PX4): climb straight up to the target's altitude (MIS_TAKEOFF_ALT
+        above home if the target keeps the ground's) at MPC_TKO_SPEED, then fly there and hold."""
+        state = self.state
+        assert state is not None and self.home is not None
+        altitude = target[2] - self.home[2]
+        if altitude < 0.2:  # "keep the altitude" on the ground: the takeoff altitude
+            altitude = self.params["MIS_TAKEOFF_ALT"]
+        if altitude > 1000.0:
+            return self._refuse(DENIED, f"reposition refused: altitude {altitude:.2f} m out of range")
+        target = (target[0], target[1], self.home[2] + altitude)
+        climb = replace(self.limits(), speed_up=self.params["MPC_TKO_SPEED"])
+        across = self.limits()
+        if speed_m_s is not None:
+            across = replace(across, speed_horizontal=min(across.speed_horizontal, speed_m_s))
+        here = _at_rest(state).position_m
+        top = (here[0], here[1], target[2])
+        yaw0 = state.euler_rad[2]
+        yaw1 = yaw0 if yaw_rad is None else yaw_rad
+        self._fly(t, PiecewiseTrajectory([LineMove(here, top, climb, yaw0, yaw0),
+                                          LineMove(top, target, across, yaw0, yaw1)]))  # fmt: skip
+        self._event(SEVERITY_INFO, f"taking off to {altitude:.2f} m, then repositioning "
+                                   f"{math.dist(top, target):.1f} m")  # fmt: skip
+        return None
+
     def _act_plan_landing(self, t: float, **_) -> None:
         """Brake, then aim far below the ground: the descent goes on at the landing speed until
         touchdown is detected."""

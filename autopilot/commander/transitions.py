@@ -120,6 +120,7 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
     (ARMED,                   E.SELECT_TAKEOFF,    P.TAKEOFF,     M.AUTO_TAKEOFF,  "plan_takeoff"),
     (FLYING,                  E.HOLD,              P.HOLD,        ASKED,           "plan_hold"),
     (FLYING,                  E.REPOSITION,        P.HOLD,        M.AUTO_LOITER,   "plan_reposition"),
+    (ON_GROUND,               E.REPOSITION,        P.TAKEOFF,     M.AUTO_LOITER,   "plan_climb_reposition"),
     (_but(FLYING, *DESCENDING), E.LAND,            P.LAND,        M.AUTO_LAND,     "plan_landing"),
     (DESCENDING,              E.LAND,              P.LAND,        M.AUTO_LAND,     None),
     (_but(FLYING, P.RTL, P.RTL_LAND), E.RTL,       P.RTL,         M.AUTO_RTL,      "plan_return"),
@@ -151,7 +152,7 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
 # Commands refused where the table has no row, and why (anything else: "not possible now").
 REFUSALS: dict[Event, str] = {
     E.TAKEOFF: "takeoff refused: arm first",
-    E.REPOSITION: "reposition refused: not flying (take off first)",
+    E.REPOSITION: "reposition refused: disarmed (arm first)",
     E.SET_CURRENT: "",  # not flying the mission: the current item is just stored
     E.MISSION_REPLACED: "",  # not flying the mission: the new one is just stored
 }

@@ -115,3 +115,33 @@ def test_reposition_refusals_say_why(vehicle):
     wait_sim(gcs, 0.1)
     assert "not hold" in texts(gcs)
     assert math.hypot(*gcs.position()[:2]) < 0.2
+
+
+@pytest.mark.timeout(120)
+def test_armed_on_the_ground_it_takes_off_first_then_flies_there_and_holds(vehicle):
+    stack, gcs = vehicle
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    lat, lon = latlon(4.0, -2.0)
+    ack = command_int(gcs, m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, (-1, 1, 0, NAN), round(lat * 1e7),
+                      round(lon * 1e7), 3.0)  # fmt: skip
+    assert ack.result == m.MAV_RESULT_ACCEPTED
+    # straight up first (PX4: a reposition while landed takes off to its altitude)
+    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last and g.position()[2] > 2.0, sim_timeout=10.0,
+             what="climbing")  # fmt: skip
+    north, east, _ = frames.vector_to_ned(gcs.position())
+    assert math.hypot(north, east) < 0.3
+    target = frames.vector_from_ned((4.0, -2.0, -3.0))
+    wait_at(gcs, target, 0.1, sim_timeout=20.0)
+    wait_sim(gcs, 2.0)
+    assert math.dist(gcs.position(), target) < 0.1 and gcs.custom_mode == LOITER
+    assert "taking off to 3.00 m, then repositioning" in texts(gcs)
+    # landed, armed again: altitude NaN (keep) means the takeoff altitude
+    gcs.command(m.MAV_CMD_NAV_LAND, 0, 0, 0, NAN, NAN, NAN, NAN)
+    gcs.wait(lambda g: not g.armed, sim_timeout=30.0, what="landed and disarmed")
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    lat, lon = latlon(0.0, 0.0)
+    ack = command_int(gcs, m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, (-1, 1, 0, NAN), round(lat * 1e7),
+                      round(lon * 1e7), NAN)  # fmt: skip
+    assert ack.result == m.MAV_RESULT_ACCEPTED
+    param = stack.autopilot.params["MIS_TAKEOFF_ALT"]
+    wait_at(gcs, (0.0, 0.0, param), 0.1, sim_timeout=25.0)
