@@ -160,9 +160,8 @@ class AutopilotCore:
         for problem in consistency_problems(self.params):
             log(f"warning: parameters inconsistent (arming refused until fixed): {problem}")
         self.commander = Commander(self.params)
-        self.cascade = Cascade(
-            controller_config_from_params(setup.controller, self.params), setup.vehicle, self.dt
-        )
+        gains = controller_config_from_params(setup.controller, self.params)
+        self.cascade = Cascade(gains, setup.vehicle, self.dt, compiled=True)
         self._gain_names = {spec.name for spec in controller_params(setup.controller)}
         self.params.on_change(self._on_param_change)
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)

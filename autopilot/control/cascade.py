@@ -50,7 +50,15 @@ class CascadeOutput(NamedTuple):
 
 
 class Cascade:
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> None:
+    """``compiled=True``: step with :mod:`.compiled` where it can (numba installed, the built-in laws,
+    wrench actuation, integrating), bit for bit the same as the Python laws; the autopilot asks
+    for it. The laws' state then lives in the kernel's arrays between steps and is copied back to
+    the Python law objects before anything else reads or changes them (retune, reset, a
+    non-integrating step)."""
+
+    def __init__(
+        self, controller: ControllerConfig, vehicle: VehicleConfig, dt: float, compiled: bool = False
+    ) -> None:
         self.config = controller
         self.name = controller.name
         self.dt = dt
@@ -67,6 +75,7 @@ class Cascade:
             self.rotational.set_integral_limit(vehicle.actuation.torque_max_n_m)
         self.filter = SecondOrderFilter(controller.command_filter, dt, channels=2)
         self.allocator = Allocator(vehicle)
+        self._kernel = _CompiledCascade.for_cascade(self) if compiled else None
 
     def retune(self, controller: ControllerConfig) -> None:
         """Switch to the gains of ``controller`` (same laws) between two steps.
@@ -75,6 +84,9 @@ class Cascade:
         output is unchanged at the moment of the change (no jump in U1 or tau from the integrals);
         the command filter keeps its state. Laws cannot change in flight (ValueError).
         """
+        kernel = self._kernel
+        if kernel is not None:
+            kernel.pull(self)
         old = self.config
         if (
             controller.translational.law != old.translational.law
@@ -86,14 +98,32 @@ class Cascade:
         self.rotational.retune(controller.rotational)
         self.filter.retune(controller.command_filter)
         self.config = controller
+        if kernel is not None:
+            kernel.push(self, new_gains=True)
 
     def reset(self) -> None:
         """Zero every integral and re-initialise the command filter (disarmed / on the ground)."""
         self.translational.reset()
         self.rotational.reset()
         self.filter.reset()
+        if self._kernel is not None:
+            self._kernel.push(self)
 
     def step(self, state: StateEstimate, ref: Reference, integrate: bool = True) -> CascadeOutput:
+        kernel = self._kernel
+        if kernel is None:
+            return self._step(state, ref, integrate)
+        if integrate:
+            out = kernel.step(state, ref)
+            if out is not None:
+                return out
+        kernel.pull(self)
+        out = self._step(state, ref, integrate)
+        kernel.push(self)
+        return out
+
+    def _step(self, state: StateEstimate, ref: Reference, integrate: bool) -> CascadeOutput:
+        """The specification: the Python laws, one step."""
         dt = self.dt
         euler = state.euler_rad
         outer = self.translational.update(
@@ -136,3 +166,88 @@ class Cascade:
             roll_pitch_raw_rad=raw,
             acceleration_cmd_m_s2=outer.acceleration_cmd_m_s2,
         )
+
+
+_ZERO4 = (0.0, 0.0, 0.0, 0.0)
+
+
+class _CompiledCascade:
+    """The kernel's arrays for one Cascade (:func:`.compiled.cascade_step`) and the copies of the
+    laws' state between them and the Python law objects."""
+
+    @classmethod
+    def for_cascade(cls, cascade: Cascade) -> _CompiledCascade | None:
+        """None where the Python laws fly: numba absent, QUADSITL_PURE_PYTHON=1, a law the kernels
+        do not have (the registry's), the rotor actuation."""
+        if cascade.rotor_mode:
+            return None
+        try:
+            from . import compiled
+        except ImportError:  # numba is in the campaign extra
+            return None
+        if not compiled.enabled() or not compiled.supports(cascade):
+            return None
+        return cls(cascade, compiled)
+
+    def __init__(self, cascade: Cascade, compiled) -> None:
+        import numpy as np
+
+        self._compiled = compiled
+        self.C = compiled.controller_array(cascade)
+        self.integ_t, self.integ_r, self.filt = np.zeros(3), np.zeros(3), np.zeros(compiled.F_SIZE)
+        self.stale = False  # the arrays are ahead of the Python laws
+        self.last_state: tuple[Vector3, Vector3] | None = None
+        # Load (or compile) the kernel now, on scratch arrays, not at the first step in flight; a
+        # call with other argument types (an int among the floats) then takes the Python laws
+        # instead of compiling in the middle of a flight.
+        z3 = (0.0, 0.0, 0.0)
+        compiled.cascade_step(self.C.copy(), np.zeros(3), np.zeros(3), np.zeros(compiled.F_SIZE),
+                              z3, z3, z3, z3, z3, z3, z3, 0.0, 0.0, 0.0)  # fmt: skip
+        compiled.cascade_step.disable_compile()
+        self._step = compiled.cascade_step
+        self.push(cascade)
+
+    def push(self, cascade: Cascade, new_gains: bool = False) -> None:
+        """The Python laws' state (and, after a retune, their gains) into the arrays."""
+        if new_gains:
+            self.C = self._compiled.controller_array(cascade)
+        self.integ_t[:] = cascade.translational.law.integral
+        self.integ_r[:] = cascade.rotational.integral
+        f = cascade.filter
+        self.filt[0:2] = f.value
+        self.filt[2:4] = f.rate
+        self.filt[4] = 1.0 if f.initialised else 0.0
+        self.stale = False
+
+    def pull(self, cascade: Cascade) -> None:
+        """The arrays' state back into the Python laws (before they are read or changed)."""
+        if not self.stale:
+            return
+        cascade.translational.law.integral = self.integ_t.tolist()
+        rot = cascade.rotational
+        if rot.NAME == "nlhinf" and rot.k_p == 0.0:  # the Python law does not integrate then
+            rot.integral = [0.0, 0.0, 0.0]
+        else:
+            rot.integral = self.integ_r.tolist()
+        if self.last_state is not None and hasattr(rot, "_last_state"):
+            rot._last_state = self.last_state
+        f = cascade.filter
+        f.value, f.rate, f.initialised = self.filt[0:2].tolist(), self.filt[2:4].tolist(), self.filt[4] == 1.0
+        self.stale = False
+
+    def step(self, state: StateEstimate, ref: Reference) -> CascadeOutput | None:
+        """One integrating step in the kernel; None if its arguments are not all floats."""
+        try:
+            o = self._step(self.C, self.integ_t, self.integ_r, self.filt, state.position_m,
+                           state.velocity_m_s, state.euler_rad, state.euler_rates_rad_s, ref.position_m,
+                           ref.velocity_m_s, ref.acceleration_m_s2, ref.yaw_rad, ref.yaw_rate_rad_s,
+                           ref.yaw_acceleration_rad_s2)  # fmt: skip
+        except TypeError:
+            return None
+        self.stale = True
+        self.last_state = (state.euler_rad, state.euler_rates_rad_s)
+        return CascadeOutput(
+            o[0], (o[1], o[2], o[3]), (o[4], o[5], o[6]), (o[7], o[8], o[9], o[10]), _ZERO4,
+            (o[11], o[12], ref.yaw_rad), (o[13], o[14], ref.yaw_rate_rad_s), (o[15], o[16]),
+            (o[17], o[18], o[19]),
+        )  # fmt: skip

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from autopilot.control import compiled as compiled_cascade
 from autopilot.control.cascade import Cascade
 from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
@@ -92,44 +93,7 @@ def initial_state(
 
 def controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> np.ndarray:
     """The cascade's gains as the kernels read them (layout ``C_*``), off a real :class:`Cascade`."""
-    cascade = Cascade(controller, vehicle, dt_control)
-    tr, rot, flt, alloc = cascade.translational, cascade.rotational, cascade.filter, cascade.allocator
-    C = np.zeros(lay.C_SIZE)
-    C[lay.C_TLAW] = {"integral_second_step": 0, "integral_first_step": 1, "backstepping": 2}[
-        controller.translational.law
-    ]
-    C[lay.C_RLAW] = 0 if controller.rotational.law == "nlhinf" else 1
-    C[lay.C_MASS], C[lay.C_GRAVITY] = tr.mass, tr.gravity
-    C[lay.C_THRUST_MAX], C[lay.C_THRUST_FLOOR], C[lay.C_SIN_TILT] = (
-        tr.thrust_max,
-        tr.thrust_floor,
-        tr.sin_tilt_max,
-    )
-    g = tr.gains
-    for i in range(3):
-        c1, c2 = g.c1[i], g.c2[i]
-        C[lay.C_C1 + i], C[lay.C_C2 + i], C[lay.C_KI + i] = c1, c2, g.k_integral[i]
-        # TranslationalController._set_gains: (1 + c1 c2, c1 + c2)
-        C[lay.C_ONE_C1C2 + i], C[lay.C_C1_C2 + i] = 1.0 + c1 * c2, c1 + c2
-    if controller.rotational.law == "nlhinf":
-        C[lay.C_KD], C[lay.C_KP], C[lay.C_RINV] = rot.k_d, rot.k_p, rot.r_inv
-    else:
-        C[lay.C_AC1 : lay.C_AC1 + 3] = rot.c1
-        C[lay.C_AC2 : lay.C_AC2 + 3] = rot.c2
-        C[lay.C_ALAM : lay.C_ALAM + 3] = rot.lam
-    C[lay.C_INERTIA : lay.C_INERTIA + 3] = rot.inertia
-    C[lay.C_WN2], C[lay.C_2ZW] = flt.wn2, flt.two_zeta_wn
-    # The exact ZOH discretisation SecondOrderFilter computed (scipy expm); one source for it.
-    C[lay.C_PHI : lay.C_PHI + 6] = np.array(flt._phi, dtype=float).ravel()
-    C[lay.C_AB], C[lay.C_AD], C[lay.C_AARM] = alloc.b, alloc.d, alloc.arm
-    C[lay.C_SQMIN], C[lay.C_SQMAX], C[lay.C_SPEED_MAX] = alloc.sq_min, alloc.sq_max, alloc.speed_max
-    C[lay.C_ATHRUST_MAX] = alloc.thrust_max
-    C[lay.C_ATORQUE_MAX : lay.C_ATORQUE_MAX + 3] = alloc.torque_max
-    C[lay.C_ROTOR_MODE] = 1.0 if cascade.rotor_mode else 0.0
-    C[lay.C_DT] = cascade.dt
-    C[lay.C_TBOUND : lay.C_TBOUND + 3] = tr.law.integral_bound
-    C[lay.C_RBOUND : lay.C_RBOUND + 3] = rot.integral_bound
-    return C
+    return compiled_cascade.controller_array(Cascade(controller, vehicle, dt_control))
 
 
 def reference_table(spec: TrajectorySpec, rates: Rates, duration_s: float, wire_float32: bool) -> np.ndarray:

@@ -19,7 +19,9 @@ the specification; the tests in ``tests/campaign/`` prove the agreement run for 
   ramps, 1-cos gusts, Dryden wind precomputed by the project's own generator);
 * cascade: :class:`autopilot.control.cascade.Cascade.step`: translational laws (eqs. 24-29 and
   the IntBS / BS variants), the command filter, NLHinf (eqs. 43-44, M and C of eqs. 4-6) or the
-  IntBS attitude law, ``W_eta^-T`` (eq. 3-4) and the wrench saturation or rotor allocation;
+  IntBS attitude law, ``W_eta^-T`` (eq. 3-4) and the wrench saturation or rotor allocation; their
+  compiled form lives with the cascade (:mod:`autopilot.control.compiled`, which the autopilot
+  itself runs) and is imported here;
 * the wire (switch ``S_WIRE``): ODOMETRY's float32 pose, velocity and rates, the autopilot's
   quaternion -> Euler and body rates -> Euler rates (``autopilot.mavlink.hil``), and the float32
   controls of HIL_ACTUATOR_CONTROLS;
@@ -44,6 +46,25 @@ import math
 import numpy as np
 from numba import njit
 
+from autopilot.control.compiled import (  # the cascade, compiled (what the autopilot flies)
+    C_2ZW,
+    C_ATHRUST_MAX,
+    C_ATORQUE_MAX,
+    C_DT,
+    C_PHI,
+    C_RLAW,
+    C_ROTOR_MODE,
+    C_WN2,
+    RLAW_NLHINF,
+    allocate_rotors,
+    body_torque_from_euler_torque,
+    euler_rates_from_body_rates,
+    euler_torque_from_body_torque,
+    intbs_attitude,
+    nlhinf,
+    translational,
+    wrap_pi,
+)
 from simulator.dynamics.compiled import (  # the plant, compiled (see the cache note below)
     P_GROUND,
     P_ROTOR_MODE,
@@ -69,16 +90,21 @@ from simulator.dynamics.compiled import (  # the plant, compiled (see the cache 
 
 
 def _forget_kernels_compiled_against_another_plant() -> None:
-    """numba keys a cached function on its own file only, but these kernels have the plant's
-    functions and constants (:mod:`simulator.dynamics.compiled`) compiled into them: when that
-    file changes, this file's cache entries are deleted before anything here compiles."""
+    """numba keys a cached function on its own file only, but these kernels have the plant's and
+    the cascade's functions and constants (:mod:`simulator.dynamics.compiled`,
+    :mod:`autopilot.control.compiled`) compiled into them: when either file changes, this file's
+    cache entries are deleted before anything here compiles."""
     import hashlib
     import os
     from pathlib import Path
 
+    import autopilot.control.compiled as cascade_kernels
     import simulator.dynamics.compiled as plant_kernels
 
-    stamp = hashlib.sha256(Path(plant_kernels.__file__).read_bytes()).hexdigest()
+    digest = hashlib.sha256()
+    for module in (plant_kernels, cascade_kernels):
+        digest.update(Path(module.__file__).read_bytes())
+    stamp = digest.hexdigest()
     here = Path(__file__).resolve()
     caches = [here.parent / "__pycache__"]
     if os.environ.get("NUMBA_CACHE_DIR"):
@@ -103,45 +129,6 @@ _forget_kernels_compiled_against_another_plant()
 # this file on purpose: numba's cache is keyed on this file only, so a changed index here also
 # invalidates the compiled kernels (constants imported from another module would not).
 # =================================================================================================
-# -- controller (read off an autopilot.control.cascade.Cascade instance) ---------------------------
-C_TLAW = 0  # 0 integral_second_step, 1 integral_first_step, 2 backstepping
-C_RLAW = 1  # 0 nlhinf, 1 integral_backstepping
-C_MASS = 2  # nominal mass
-C_GRAVITY = 3
-C_THRUST_MAX = 4
-C_THRUST_FLOOR = 5
-C_SIN_TILT = 6
-C_C1 = 7  # 3
-C_C2 = 10  # 3
-C_KI = 13  # 3
-C_ONE_C1C2 = 16  # 3: 1 + c1 c2
-C_C1_C2 = 19  # 3: c1 + c2
-C_KD = 22  # NLHinf k_d
-C_KP = 23  # NLHinf k_p
-C_RINV = 24  # NLHinf 1 / omega_u^2
-C_AC1 = 25  # 3: IntBS attitude c1
-C_AC2 = 28  # 3
-C_ALAM = 31  # 3
-C_INERTIA = 34  # 3: nominal Ixx, Iyy, Izz
-C_WN2 = 37  # command filter
-C_2ZW = 38
-C_PHI = 39  # 6: a00, a01, a02, a10, a11, a12
-C_AB = 45  # allocator b, d, arm
-C_AD = 46
-C_AARM = 47
-C_SQMIN = 48
-C_SQMAX = 49
-C_SPEED_MAX = 50
-C_ATHRUST_MAX = 51
-C_ATORQUE_MAX = 52  # 3
-C_ROTOR_MODE = 55
-C_DT = 56
-C_TBOUND = 57  # 3: anti-windup bound of the translational integrals (law.integral_bound)
-C_RBOUND = 60  # 3: anti-windup bound of the attitude integrals
-C_SIZE = 63
-
-TLAW_SECOND_STEP, TLAW_FIRST_STEP, TLAW_BACKSTEPPING = 0, 1, 2
-RLAW_NLHINF, RLAW_INTBS = 0, 1
 
 # -- simulation ----------------------------------------------------------------------------------
 S_DT_CONTROL = 0
@@ -182,105 +169,11 @@ RECORD_COLUMNS = (
 )  # fmt: skip
 R_SIZE = len(RECORD_COLUMNS)
 
-_PI = math.pi
-_TWO_PI = 2.0 * math.pi
-
-
-@njit(cache=True, error_model="numpy")
-def _clip(x: float, lo: float, hi: float) -> float:
-    return _min(_max(x, lo), hi)
-
-
-@njit(cache=True, error_model="numpy")
-def wrap_pi(angle: float) -> float:
-    """:func:`quadcommon.frames.wrap_pi`, ``(angle + pi) % 2 pi - pi``, bit for bit.
-
-    For ``0 <= angle + pi < 2 pi`` Python's float ``%`` returns its left operand unchanged, so
-    the (costly) ``fmod`` is skipped there; elsewhere Python's ``%`` (sign of the divisor).
-    """
-    shifted = angle + _PI
-    if 0.0 <= shifted < _TWO_PI:
-        return shifted - _PI
-    return shifted % _TWO_PI - _PI
-
 
 @njit(cache=True, error_model="numpy")
 def _f32(x: float) -> float:
     """Round to float32 and back, as a MAVLink float field does."""
     return np.float64(np.float32(x))
-
-
-# -------------------------------------------------------------------------------------------------
-# Rigid-body helpers (quadcommon.rigid_body)
-# -------------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def euler_rates_from_body_rates(
-    phi: float, theta: float, p: float, q: float, r: float
-) -> tuple[float, float, float]:
-    """``eta_dot = W_eta^-1 omega`` (eq. 3)."""
-    sf, cf = math.sin(phi), math.cos(phi)
-    ct, tt = math.cos(theta), math.tan(theta)
-    return (p + sf * tt * q + cf * tt * r, cf * q - sf * r, (sf * q + cf * r) / ct)
-
-
-@njit(cache=True, error_model="numpy")
-def inertia_matrix(Ixx: float, Iyy: float, Izz: float, phi: float, theta: float) -> tuple[float, ...]:
-    """``M(eta) = W^T J W`` of Section II: (m11, m13, m22, m23, m33); m12 = 0."""
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
-    m13 = -Ixx * st
-    m22 = Iyy * cf * cf + Izz * sf * sf
-    m23 = (Iyy - Izz) * sf * cf * ct
-    m33 = Ixx * st * st + Iyy * sf * sf * ct * ct + Izz * cf * cf * ct * ct
-    return (Ixx, m13, m22, m23, m33)
-
-
-@njit(cache=True, error_model="numpy")
-def coriolis_matrix(
-    Ixx: float, Iyy: float, Izz: float, phi: float, theta: float, a0: float, a1: float, a2: float
-) -> tuple[float, ...]:
-    """``C(eta, eta_dot)`` of eqs. (5)-(6) as ``coriolis_matrix_fast`` computes it (9 entries)."""
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
-    d = Iyy - Izz
-    p22 = -2.0 * d * sf * cf
-    p23 = d * (cf * cf - sf * sf) * ct
-    p33 = 2.0 * d * sf * cf * ct * ct
-    t13 = -Ixx * ct
-    t23 = -d * sf * cf * st
-    t33 = 2.0 * st * ct * (Ixx - Iyy * sf * sf - Izz * cf * cf)
-    # The same expressions, in the same order, as quadcommon.rigid_body.coriolis_matrix_fast.
-    fa1, fa2 = p22 * a1 + p23 * a2, p23 * a1 + p33 * a2
-    ta0, ta2 = t13 * a2, t13 * a0 + t23 * a1 + t33 * a2
-    m12 = p23 * a0 + t23 * a1
-    c00, c01, c02 = 0.0, 0.5 * (ta0 - fa1), 0.5 * (t13 * a1 - fa2)
-    c10, c11, c12 = 0.5 * (fa1 - ta0), 0.5 * p22 * a0, 0.5 * (m12 - ta2)
-    c20, c21, c22 = 0.5 * (t13 * a1 + fa2), 0.5 * (m12 + ta2), 0.5 * (p33 * a0 + t33 * a1)
-    return (c00, c01, c02, c10, c11, c12, c20, c21, c22)
-
-
-@njit(cache=True, error_model="numpy")
-def body_torque_from_euler_torque(
-    phi: float, theta: float, a: float, b: float, c: float
-) -> tuple[float, float, float]:
-    """``tau_body = W_eta^-T tau_eta`` (eq. 4)."""
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
-    x0 = a
-    rhs = (c + st * x0) / ct
-    x1 = cf * b + sf * rhs
-    x2 = -sf * b + cf * rhs
-    return (x0, x1, x2)
-
-
-@njit(cache=True, error_model="numpy")
-def euler_torque_from_body_torque(
-    phi: float, theta: float, x: float, y: float, z: float
-) -> tuple[float, float, float]:
-    """``tau_eta = W_eta^T tau_body``."""
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
-    return (x, cf * y - sf * z, -st * x + sf * ct * y + cf * ct * z)
 
 
 # -------------------------------------------------------------------------------------------------
@@ -358,237 +251,6 @@ def disturbance(
     u[U_FORCE], u[U_FORCE + 1], u[U_FORCE + 2] = v0, v1, v2
     u[U_TORQUE], u[U_TORQUE + 1], u[U_TORQUE + 2] = v3, v4, v5
     u[U_WIND], u[U_WIND + 1], u[U_WIND + 2] = wx, wy, wz
-
-
-# -------------------------------------------------------------------------------------------------
-# Cascade (autopilot.control)
-# -------------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def translational(
-    C: np.ndarray,
-    integ: np.ndarray,
-    pos: tuple,
-    vel: tuple,
-    euler: tuple,
-    rp: tuple,
-    rv: tuple,
-    ra: tuple,
-    dt: float,
-) -> tuple:
-    """Outer loop (eqs. 24-29 and the IntBS / BS variants): U1, phi_r, theta_r, flags.
-
-    Returns ``(thrust, roll_ref, pitch_ref, thrust_saturated, tilt_limited)``; advances ``integ``.
-    """
-    law = int(C[C_TLAW])
-    a_0 = a_1 = a_2 = 0.0
-    for i in range(3):
-        c1, k = C[C_C1 + i], C[C_KI + i]
-        one_plus_c1c2, c1_plus_c2 = C[C_ONE_C1C2 + i], C[C_C1_C2 + i]
-        e1 = pos[i] - rp[i]
-        e1_dot = vel[i] - rv[i]
-        if law == TLAW_SECOND_STEP:
-            acc = ra[i] - k * integ[i] - one_plus_c1c2 * e1 - c1_plus_c2 * e1_dot
-            integ[i] += (e1_dot + c1 * e1) * dt
-        elif law == TLAW_BACKSTEPPING:
-            acc = ra[i] - one_plus_c1c2 * e1 - c1_plus_c2 * e1_dot
-        else:
-            chi = integ[i]
-            e2 = e1_dot + c1 * e1 + k * chi
-            acc = ra[i] + (c1 * c1 - 1.0 - k) * e1 - c1_plus_c2 * e2 + c1 * k * chi
-            integ[i] += e1 * dt
-        if i == 0:
-            a_0 = acc
-        elif i == 1:
-            a_1 = acc
-        else:
-            a_2 = acc
-    if law != TLAW_BACKSTEPPING:  # anti-windup, as BacksteppingLaw._clamp_integral
-        for i in range(3):
-            bound = C[C_TBOUND + i]
-            if integ[i] > bound:
-                integ[i] = bound
-            elif integ[i] < -bound:
-                integ[i] = -bound
-    phi, theta, psi = euler[0], euler[1], euler[2]
-    m = C[C_MASS]
-    thrust_max = C[C_THRUST_MAX]
-    tilt = math.cos(phi) * math.cos(theta)
-    thrust = m * (C[C_GRAVITY] + a_2) / _max(tilt, 0.1)
-    thrust_sat = thrust < 0.0 or thrust > thrust_max
-    thrust = _min(_max(thrust, 0.0), thrust_max)
-    divisor = _max(thrust, C[C_THRUST_FLOOR])
-    u_x = m * a_0 / divisor
-    u_y = m * a_1 / divisor
-    sp, cp = math.sin(psi), math.cos(psi)
-    limit = C[C_SIN_TILT]
-    arg = sp * u_x - cp * u_y
-    tilt_lim = arg < -limit or arg > limit
-    roll_ref = math.asin(_min(_max(arg, -limit), limit))
-    arg = (cp * u_x + sp * u_y) / math.cos(roll_ref)
-    tilt_lim = tilt_lim or arg < -limit or arg > limit
-    pitch_ref = math.asin(_min(_max(arg, -limit), limit))
-    return thrust, roll_ref, pitch_ref, thrust_sat, tilt_lim
-
-
-@njit(cache=True, error_model="numpy")
-def _clamped(value: float, bound: float) -> float:
-    return bound if value > bound else (-bound if value < -bound else value)
-
-
-@njit(cache=True, error_model="numpy")
-def _integrate_clamped(
-    integ: np.ndarray, e0: float, e1: float, e2: float, dt: float, b0: float, b1: float, b2: float
-) -> None:
-    """The attitude laws' integral step with their anti-windup bound (value, then clamp)."""
-    integ[0] = _clamped(integ[0] + e0 * dt, b0)
-    integ[1] = _clamped(integ[1] + e1 * dt, b1)
-    integ[2] = _clamped(integ[2] + e2 * dt, b2)
-
-
-@njit(cache=True, error_model="numpy")
-def nlhinf(
-    C: np.ndarray,
-    integ: np.ndarray,
-    euler: tuple,
-    rates: tuple,
-    ref: tuple,
-    ref_rate: tuple,
-    ref_acc: tuple,
-    dt: float,
-) -> tuple[float, float, float]:
-    """Nonlinear H-infinity attitude law, eqs. (43)-(44) as ``NonlinearHinfAttitude.update``."""
-    k_d, k_p = C[C_KD], C[C_KP]
-    Ixx, Iyy, Izz = C[C_INERTIA], C[C_INERTIA + 1], C[C_INERTIA + 2]
-    e0 = euler[0] - ref[0]
-    e1 = euler[1] - ref[1]
-    e2 = wrap_pi(euler[2] - ref[2])
-    ed0 = rates[0] - ref_rate[0]
-    ed1 = rates[1] - ref_rate[1]
-    ed2 = rates[2] - ref_rate[2]
-    s0 = ed0 + k_d * e0 + k_p * integ[0]
-    s1 = ed1 + k_d * e1 + k_p * integ[1]
-    s2 = ed2 + k_d * e2 + k_p * integ[2]
-    m11, m13, m22, m23, m33 = inertia_matrix(Ixx, Iyy, Izz, euler[0], euler[1])
-    v0 = ref_acc[0] - k_d * ed0 - k_p * e0
-    v1 = ref_acc[1] - k_d * ed1 - k_p * e1
-    v2 = ref_acc[2] - k_d * ed2 - k_p * e2
-    Mv0 = m11 * v0 + 0.0 * v1 + m13 * v2
-    Mv1 = 0.0 * v0 + m22 * v1 + m23 * v2
-    Mv2 = m13 * v0 + m23 * v1 + m33 * v2
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = coriolis_matrix(
-        Ixx, Iyy, Izz, euler[0], euler[1], rates[0], rates[1], rates[2]
-    )
-    w0, w1, w2 = rates[0], rates[1], rates[2]
-    Ce0 = c00 * w0 + c01 * w1 + c02 * w2
-    Ce1 = c10 * w0 + c11 * w1 + c12 * w2
-    Ce2 = c20 * w0 + c21 * w1 + c22 * w2
-    Cs0 = c00 * s0 + c01 * s1 + c02 * s2
-    Cs1 = c10 * s0 + c11 * s1 + c12 * s2
-    Cs2 = c20 * s0 + c21 * s1 + c22 * s2
-    r_inv = C[C_RINV]
-    _integrate_clamped(integ, e0, e1, e2, dt, C[C_RBOUND], C[C_RBOUND + 1], C[C_RBOUND + 2])
-    return (
-        Mv0 + Ce0 - Cs0 - r_inv * s0,
-        Mv1 + Ce1 - Cs1 - r_inv * s1,
-        Mv2 + Ce2 - Cs2 - r_inv * s2,
-    )
-
-
-@njit(cache=True, error_model="numpy")
-def intbs_attitude(
-    C: np.ndarray,
-    integ: np.ndarray,
-    euler: tuple,
-    rates: tuple,
-    ref: tuple,
-    ref_rate: tuple,
-    ref_acc: tuple,
-    dt: float,
-) -> tuple[float, float, float]:
-    """IntBS attitude law (integral in the first step) on eq. (4), ``IntegralBacksteppingAttitude``."""
-    e0 = euler[0] - ref[0]
-    e1 = euler[1] - ref[1]
-    e2 = wrap_pi(euler[2] - ref[2])
-    acc0 = acc1 = acc2 = 0.0
-    for i in range(3):
-        c1, c2, lam = C[C_AC1 + i], C[C_AC2 + i], C[C_ALAM + i]
-        chi = integ[i]
-        e = e0 if i == 0 else (e1 if i == 1 else e2)
-        e_dot = rates[i] - ref_rate[i]
-        e2_ = e_dot + c1 * e + lam * chi
-        acc = ref_acc[i] + (c1 * c1 - 1.0 - lam) * e - (c1 + c2) * e2_ + c1 * lam * chi
-        if i == 0:
-            acc0 = acc
-        elif i == 1:
-            acc1 = acc
-        else:
-            acc2 = acc
-    _integrate_clamped(integ, e0, e1, e2, dt, C[C_RBOUND], C[C_RBOUND + 1], C[C_RBOUND + 2])
-    Ixx, Iyy, Izz = C[C_INERTIA], C[C_INERTIA + 1], C[C_INERTIA + 2]
-    m11, m13, m22, m23, m33 = inertia_matrix(Ixx, Iyy, Izz, euler[0], euler[1])
-    Ma0 = m11 * acc0 + 0.0 * acc1 + m13 * acc2
-    Ma1 = 0.0 * acc0 + m22 * acc1 + m23 * acc2
-    Ma2 = m13 * acc0 + m23 * acc1 + m33 * acc2
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = coriolis_matrix(
-        Ixx, Iyy, Izz, euler[0], euler[1], rates[0], rates[1], rates[2]
-    )
-    w0, w1, w2 = rates[0], rates[1], rates[2]
-    Ce0 = c00 * w0 + c01 * w1 + c02 * w2
-    Ce1 = c10 * w0 + c11 * w1 + c12 * w2
-    Ce2 = c20 * w0 + c21 * w1 + c22 * w2
-    return (Ma0 + Ce0, Ma1 + Ce1, Ma2 + Ce2)
-
-
-@njit(cache=True, error_model="numpy")
-def _largest_scale(
-    b0: float,
-    b1: float,
-    b2: float,
-    b3: float,
-    d0: float,
-    d1: float,
-    d2: float,
-    d3: float,
-    lo: float,
-    hi: float,
-) -> float:
-    """``allocation._largest_scale``: largest k in [0, 1] keeping every base + k delta in [lo, hi]."""
-    k = 1.0
-    for i in range(4):
-        b = b0 if i == 0 else (b1 if i == 1 else (b2 if i == 2 else b3))
-        dl = d0 if i == 0 else (d1 if i == 1 else (d2 if i == 2 else d3))
-        if dl > 0.0 and b + dl > hi:
-            k = _min(k, _max(hi - b, 0.0) / dl)
-        elif dl < 0.0 and b + dl < lo:
-            k = _min(k, _max(b - lo, 0.0) / -dl)
-    return k
-
-
-@njit(cache=True, error_model="numpy")
-def allocate_rotors(
-    C: np.ndarray, thrust_n: float, tx: float, ty: float, tz: float, out4: np.ndarray
-) -> tuple:
-    """``Allocator.to_rotors``: normalised commands into ``out4``; returns (U1, tau, saturated)."""
-    b, d, arm = C[C_AB], C[C_AD], C[C_AARM]
-    lo, hi = C[C_SQMIN], C[C_SQMAX]
-    raw = thrust_n / (4.0 * b)
-    base = _min(_max(raw, lo), hi)
-    sat = raw < lo or raw > hi
-    r0, r1, r2, r3 = -ty / (2.0 * arm * b), -tx / (2.0 * arm * b), ty / (2.0 * arm * b), tx / (2.0 * arm * b)
-    y0, y1, y2, y3 = -tz / (4.0 * d), tz / (4.0 * d), -tz / (4.0 * d), tz / (4.0 * d)
-    k_rp = _largest_scale(base, base, base, base, r0, r1, r2, r3, lo, hi)
-    p0, p1, p2, p3 = base + k_rp * r0, base + k_rp * r1, base + k_rp * r2, base + k_rp * r3
-    k_yaw = _largest_scale(p0, p1, p2, p3, y0, y1, y2, y3, lo, hi)
-    s1 = _min(_max(p0 + k_yaw * y0, lo), hi)
-    s2 = _min(_max(p1 + k_yaw * y1, lo), hi)
-    s3 = _min(_max(p2 + k_yaw * y2, lo), hi)
-    s4 = _min(_max(p3 + k_yaw * y3, lo), hi)
-    sat = sat or k_rp < 1.0 or k_yaw < 1.0
-    top = C[C_SPEED_MAX]
-    out4[0], out4[1] = math.sqrt(s1) / top, math.sqrt(s2) / top
-    out4[2], out4[3] = math.sqrt(s3) / top, math.sqrt(s4) / top
-    thrust = b * (s1 + s2 + s3 + s4)
-    return thrust, arm * b * (s4 - s2), arm * b * (s3 - s1), d * (-s1 + s2 - s3 + s4), sat
 
 
 # -------------------------------------------------------------------------------------------------
@@ -680,7 +342,7 @@ def simulate(  # noqa: C901
         yaw, yaw_rate, yaw_acc = ref[k, 9], ref[k, 10], ref[k, 11]
 
         # -- cascade step (Cascade.step) --
-        thrust, roll_r, pitch_r, thrust_sat, tilt_lim = translational(
+        thrust, roll_r, pitch_r, thrust_sat, tilt_lim, _, _, _ = translational(
             C, integ_t, c_pos, c_vel, c_euler, rp, rv, ra, dt_c
         )
         if not filt_ready:

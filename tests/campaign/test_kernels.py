@@ -7,6 +7,7 @@ import pytest
 
 pytest.importorskip("numba")
 
+from autopilot.control import compiled as cc  # noqa: E402
 from autopilot.control.allocation import Allocator  # noqa: E402
 from quadcommon import frames, rigid_body  # noqa: E402
 from quadcommon.config import load_vehicle  # noqa: E402
@@ -90,24 +91,24 @@ def test_rigid_body_helpers_equal_quadcommon():
         phi, theta, psi = (float(v) for v in RNG.uniform(-1.2, 1.2, size=3))
         rates = tuple(float(v) for v in RNG.normal(size=3))
         M = rigid_body.inertia_matrix(inertia, phi, theta)
-        assert ker.inertia_matrix(*inertia, phi, theta) == (M[0][0], M[0][2], M[1][1], M[1][2], M[2][2])
+        assert cc.inertia_matrix(*inertia, phi, theta) == (M[0][0], M[0][2], M[1][1], M[1][2], M[2][2])
         C = rigid_body.coriolis_matrix_fast(inertia, (phi, theta, psi), rates)
-        assert ker.coriolis_matrix(*inertia, phi, theta, *rates) == tuple(v for row in C for v in row)
+        assert cc.coriolis_matrix(*inertia, phi, theta, *rates) == tuple(v for row in C for v in row)
         tau = tuple(float(v) for v in RNG.normal(size=3))
-        assert ker.body_torque_from_euler_torque(
+        assert cc.body_torque_from_euler_torque(
             phi, theta, *tau
         ) == rigid_body.body_torque_from_euler_torque(phi, theta, tau)
-        assert ker.euler_torque_from_body_torque(
+        assert cc.euler_torque_from_body_torque(
             phi, theta, *tau
         ) == rigid_body.euler_torque_from_body_torque(phi, theta, tau)
-        assert ker.euler_rates_from_body_rates(phi, theta, *rates) == rigid_body.euler_rates_from_body_rates(
+        assert cc.euler_rates_from_body_rates(phi, theta, *rates) == rigid_body.euler_rates_from_body_rates(
             phi, theta, rates
         )
         assert cp.quaternion_from_euler(phi, theta, psi) == rigid_body.quaternion_from_euler(phi, theta, psi)
         angle = float(RNG.uniform(-20.0, 20.0))
-        assert ker.wrap_pi(angle) == frames.wrap_pi(angle)
+        assert cc.wrap_pi(angle) == frames.wrap_pi(angle)
     for edge in (-math.pi, math.pi, 0.0, -0.0, 3 * math.pi, -3 * math.pi):
-        assert ker.wrap_pi(edge) == frames.wrap_pi(edge)
+        assert cc.wrap_pi(edge) == frames.wrap_pi(edge)
 
 
 @pytest.mark.timeout(120)
@@ -117,16 +118,16 @@ def test_rotor_allocation_equals_allocator():
     vehicle = load_vehicle("paper_quad")
     vehicle = replace(vehicle, actuation=replace(vehicle.actuation, mode="rotors"))
     alloc = Allocator(vehicle)
-    C = np.zeros(ker.C_SIZE)
-    C[ker.C_AB], C[ker.C_AD], C[ker.C_AARM] = alloc.b, alloc.d, alloc.arm
-    C[ker.C_SQMIN], C[ker.C_SQMAX], C[ker.C_SPEED_MAX] = alloc.sq_min, alloc.sq_max, alloc.speed_max
+    C = np.zeros(cc.C_SIZE)
+    C[cc.C_AB], C[cc.C_AD], C[cc.C_AARM] = alloc.b, alloc.d, alloc.arm
+    C[cc.C_SQMIN], C[cc.C_SQMAX], C[cc.C_SPEED_MAX] = alloc.sq_min, alloc.sq_max, alloc.speed_max
     saturated = 0
     for _ in range(300):
         thrust = float(RNG.uniform(-2.0, 32.0))
         tau = tuple(float(v) for v in RNG.normal(scale=0.3, size=3))
         ref = alloc.to_rotors(thrust, tau)
         out = np.zeros(4)
-        U1, t0, t1, t2, sat = ker.allocate_rotors(C, thrust, *tau, out)
+        U1, t0, t1, t2, sat = cc.allocate_rotors(C, thrust, *tau, out)
         assert (U1, (t0, t1, t2)) == (ref.thrust_n, ref.torque_body_n_m)
         assert tuple(out) == ref.normalised
         saturated += sat
