@@ -81,3 +81,17 @@ def test_yaw_is_filled_forward_and_interpolated_across_the_wrap():
     assert curve.sample(0.0).yaw_rad == pytest.approx(1.0, abs=1e-3)
     mid = curve.sample(1.75)  # between 3.1 and -3.1 the short way, through pi
     assert abs(abs(mid.yaw_rad) - math.pi) < 0.1 and mid.yaw_rate_rad_s > 0.0
+
+
+@pytest.mark.parametrize("count", [4, 12, 400])  # natural cubic; quintic interpolant; least squares
+def test_the_per_piece_polynomials_are_the_spline_to_rounding(count):
+    times = np.linspace(0.0, 20.0, count)
+    positions = [(math.sin(0.3 * t), math.cos(0.2 * t), 1.0 + 0.05 * t) for t in times]
+    curve = TimedCurve(times, positions, [0.01 * t for t in times])
+    for tau in list(np.linspace(0.0, 20.0, 997)) + list(np.linspace(20.0, 0.0, 13)):  # forth and back
+        ref = curve.sample(float(tau))
+        p, v, a = curve._p(tau), curve._v(tau), curve._a(tau)
+        assert np.allclose(ref.position_m, p[:3], rtol=0.0, atol=1e-12)
+        assert np.allclose(ref.velocity_m_s, v[:3], rtol=0.0, atol=1e-11)
+        assert np.allclose(ref.acceleration_m_s2, a[:3], rtol=0.0, atol=1e-10)
+        assert ref.yaw_rate_rad_s == pytest.approx(float(v[3]), abs=1e-11)
