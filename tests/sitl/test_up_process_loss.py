@@ -220,4 +220,8 @@ def test_reaching_duration_is_a_normal_end_not_a_loss():
         up.stop()
     assert code == 0, up.tail()
     assert "quadsitl: vehicle 85: the simulator reached --duration 0.5 s" in up.output
-    assert " lost: " not in up.output and "restarting" not in up.output
+    # The launcher counts no loss and restarts nothing. (The autopilot itself may note "simulator
+    # lost" when the simulator's shutdown after its final frame, closing its zenoh session, takes
+    # longer than COM_SIM_LOSS_T on a loaded machine: seen once in the suite.)
+    assert "simulator[85] lost" not in up.output and "autopilot[85] lost" not in up.output
+    assert "restarting" not in up.output
