@@ -25,6 +25,9 @@ from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing
 HOUSEKEEPING_S = 0.05
 SPIN_BELOW_GAP_S = 0.001  # frames closer than this (wall): spin-wait for the next one
 CONTROLLER_BATCH = 10  # controller rows per zenoh sample
+# Wall seconds the first rows wait for a subscriber declared before this process started (a
+# recorder) to be discovered, so that none of its rows is lost; then they flow regardless.
+SUBSCRIBER_GRACE_S = 1.0
 MAX_DATAGRAM = 65535
 # Ground-station datagrams handled per link and lockstep frame (and per housekeeping tick while no
 # frame comes): 4,000 a simulated second per link at 500 Hz, far above any client's needs. A flood
@@ -47,6 +50,7 @@ class Autopilot:
         self.hil_only = selectors.DefaultSelector()  # while the GCS links' budgets are spent
         self.gcs_budget: dict[int, int] = {}
         self.session = self.controller_pub = self.estimator_pub = self.info_queryable = None
+        self._hold_rows_until: float | None = None  # the first rows wait for a subscriber (below)
         self._running = True
 
     def log(self, text: str) -> None:
@@ -70,6 +74,7 @@ class Autopilot:
             n = self.core.setup.instance
             self.session = bus.open_peer(self.ports.zenoh, self.core.setup.sitl.zenoh_router)
             self.controller_pub = self.session.declare_publisher(wire.zenoh_key(n, "controller"))
+            self._hold_rows_until = time.monotonic() + SUBSCRIBER_GRACE_S
             self.estimator_pub = self.session.declare_publisher(wire.zenoh_key(n, "estimator"))
             self.info_queryable = self.session.declare_queryable(
                 wire.zenoh_key(n, "autopilot/info"), zenoh.handlers.FifoChannel(16)
@@ -98,6 +103,10 @@ class Autopilot:
         core = self.core
         if len(core.controller_rows) < (1 if force else CONTROLLER_BATCH):
             return
+        if self._hold_rows_until is not None and not force:
+            if not bus.publisher_matched(self.controller_pub) and time.monotonic() < self._hold_rows_until:
+                return  # keep them (the core buffers): a subscriber may still be being discovered
+            self._hold_rows_until = None
         rows = core.take_controller_rows()
         estimates = core.take_estimator_rows()
         if self.controller_pub is not None:

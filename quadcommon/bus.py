@@ -83,11 +83,19 @@ def open_peer(hub_port: int, router: str = "") -> zenoh.Session:
         raise BusError(f"cannot open a zenoh session towards port {hub_port}: {exc}") from None
 
 
+def publisher_matched(publisher: zenoh.Publisher) -> bool:
+    """True once ``publisher`` has a matching subscriber (its samples reach someone)."""
+    try:
+        return bool(publisher.matching_status.matching)
+    except Exception:  # a session closing under us
+        return False
+
+
 def wait_matching(publisher: zenoh.Publisher, timeout_s: float) -> bool:
     """Wait until ``publisher`` has a matching subscriber (so the first samples are not lost)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if publisher.matching_status.matching:
+        if publisher_matched(publisher):
             return True
         time.sleep(0.002)
     return False

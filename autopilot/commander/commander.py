@@ -114,6 +114,7 @@ class Commander:
         self.events: list[tuple[int, str]] = []
         self.offboard = OffboardGuidance(self.limits())
         self.manual = ManualGuidance()  # POSCTL's sticks
+        self._manual_limits = self.manual_limits()  # rebuilt when a parameter changes, not per step
         self.last_reference: Reference | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
         self.rally_points: list[tuple[float, float]] = []  # uploaded rally points (paper x, y, m)
@@ -235,6 +236,7 @@ class Commander:
 
     def _on_param_change(self, name: str, value: float) -> None:
         self.offboard.limits = self.limits()
+        self._manual_limits = self.manual_limits()
 
     # -- commands ----------------------------------------------------------------------------------
     def update_state(self, state: VehicleState) -> None:
@@ -440,10 +442,11 @@ class Commander:
                 return None
             reference = out.reference
         elif phase == Phase.HOLD and self.mode == FlightMode.POSCTL and self.manual.engage_if_moved(
-            t, limits := self.manual_limits()
+            t, self._manual_limits
         ):
             was_lost = self.manual.lost
-            reference = self.manual.reference(t, dt, self.last_reference or _at_rest(state), limits)
+            previous = self.last_reference or _at_rest(state)
+            reference = self.manual.reference(t, dt, previous, self._manual_limits)
             if self.manual.lost and not was_lost:
                 self._event(SEVERITY_WARNING, "manual control lost: sticks centred, holding position")
         else:

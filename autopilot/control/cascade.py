@@ -197,9 +197,9 @@ class _CompiledCascade:
         self.integ_t, self.integ_r, self.filt = np.zeros(3), np.zeros(3), np.zeros(compiled.F_SIZE)
         self.stale = False  # the arrays are ahead of the Python laws
         self.last_state: tuple[Vector3, Vector3] | None = None
-        # Load (or compile) the kernel now, on scratch arrays, not at the first step in flight; a
-        # call with other argument types (an int among the floats) then takes the Python laws
-        # instead of compiling in the middle of a flight.
+        # Load (or compile) the kernel now, on scratch arrays, not at the first step in flight; then
+        # no compiling in the middle of a flight: numba converts what it can to this signature (an
+        # int among the floats), and anything it cannot takes the Python laws (TypeError).
         z3 = (0.0, 0.0, 0.0)
         compiled.cascade_step(self.C.copy(), np.zeros(3), np.zeros(3), np.zeros(compiled.F_SIZE),
                               z3, z3, z3, z3, z3, z3, z3, 0.0, 0.0, 0.0)  # fmt: skip
@@ -236,7 +236,7 @@ class _CompiledCascade:
         self.stale = False
 
     def step(self, state: StateEstimate, ref: Reference) -> CascadeOutput | None:
-        """One integrating step in the kernel; None if its arguments are not all floats."""
+        """One integrating step in the kernel; None if numba cannot take its arguments."""
         try:
             o = self._step(self.C, self.integ_t, self.integ_r, self.filt, state.position_m,
                            state.velocity_m_s, state.euler_rad, state.euler_rates_rad_s, ref.position_m,

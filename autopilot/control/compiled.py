@@ -414,6 +414,55 @@ F_Y, F_YD, F_READY, F_SIZE = 0, 2, 4, 5  # filter state: y (2: roll, pitch), y' 
 
 
 @njit(cache=True, error_model="numpy")
+def command_filter(C: np.ndarray, filt: np.ndarray, roll_r: float, pitch_r: float) -> tuple:
+    """``SecondOrderFilter.outputs`` then ``advance`` for (phi_r, theta_r): returns phi_d, theta_d,
+    their rates and their accelerations; advances ``filt`` (layout ``F_*``)."""
+    if filt[F_READY] == 0.0:  # SecondOrderFilter.outputs: start at the reference, at rest
+        filt[F_Y], filt[F_Y + 1] = roll_r, pitch_r
+        filt[F_YD], filt[F_YD + 1] = 0.0, 0.0
+        filt[F_READY] = 1.0
+    phi_d, theta_d = filt[F_Y], filt[F_Y + 1]
+    phi_dd, theta_dd = filt[F_YD], filt[F_YD + 1]
+    wn2, two_zeta_wn = C[C_WN2], C[C_2ZW]
+    phi_ddd = wn2 * (roll_r - phi_d) - two_zeta_wn * phi_dd
+    theta_ddd = wn2 * (pitch_r - theta_d) - two_zeta_wn * theta_dd
+    a00, a01, a02 = C[C_PHI], C[C_PHI + 1], C[C_PHI + 2]
+    a10, a11, a12 = C[C_PHI + 3], C[C_PHI + 4], C[C_PHI + 5]
+    filt[F_Y] = a00 * phi_d + a01 * phi_dd + a02 * roll_r
+    filt[F_YD] = a10 * phi_d + a11 * phi_dd + a12 * roll_r
+    filt[F_Y + 1] = a00 * theta_d + a01 * theta_dd + a02 * pitch_r
+    filt[F_YD + 1] = a10 * theta_d + a11 * theta_dd + a12 * pitch_r
+    return phi_d, theta_d, phi_dd, theta_dd, phi_ddd, theta_ddd
+
+
+@njit(cache=True, error_model="numpy")
+def attitude_torque(
+    C: np.ndarray, integ_r: np.ndarray, euler: tuple, rates: tuple, eta_d: tuple, eta_d_dot: tuple,
+    eta_d_ddot: tuple, dt: float,
+) -> tuple[float, float, float]:
+    """The attitude law's tau_eta (NLHinf or IntBS, advancing ``integ_r``) as a body torque."""
+    if int(C[C_RLAW]) == RLAW_NLHINF:
+        te0, te1, te2 = nlhinf(C, integ_r, euler, rates, eta_d, eta_d_dot, eta_d_ddot, dt)
+    else:
+        te0, te1, te2 = intbs_attitude(C, integ_r, euler, rates, eta_d, eta_d_dot, eta_d_ddot, dt)
+    return body_torque_from_euler_torque(euler[0], euler[1], te0, te1, te2)
+
+
+@njit(cache=True, error_model="numpy")
+def saturate_wrench(C: np.ndarray, thrust: float, tb0: float, tb1: float, tb2: float) -> tuple:
+    """``Allocator.saturate_wrench`` + ``wrench_to_normalised``: (U1, tau_body, saturated, the four
+    normalised controls)."""
+    athrust_max = C[C_ATHRUST_MAX]
+    atm0, atm1, atm2 = C[C_ATORQUE_MAX], C[C_ATORQUE_MAX + 1], C[C_ATORQUE_MAX + 2]
+    thrust_a = _min(_max(thrust, 0.0), athrust_max)
+    ta0 = _min(_max(tb0, -atm0), atm0)
+    ta1 = _min(_max(tb1, -atm1), atm1)
+    ta2 = _min(_max(tb2, -atm2), atm2)
+    sat = tb0 < -atm0 or tb0 > atm0 or tb1 < -atm1 or tb1 > atm1 or tb2 < -atm2 or tb2 > atm2
+    return thrust_a, ta0, ta1, ta2, sat, thrust_a / athrust_max, ta0 / atm0, ta1 / atm1, ta2 / atm2
+
+
+@njit(cache=True, error_model="numpy")
 def cascade_step(
     C: np.ndarray,
     integ_t: np.ndarray,
@@ -435,39 +484,13 @@ def cascade_step(
     4 controls, eta_d roll/pitch, their rates, phi_r, theta_r, the commanded accelerations)."""
     dt = C[C_DT]
     thrust, roll_r, pitch_r, _, _, a_0, a_1, a_2 = translational(C, integ_t, pos, vel, euler, rp, rv, ra, dt)
-    if filt[F_READY] == 0.0:  # SecondOrderFilter.outputs: start at the reference, at rest
-        filt[F_Y], filt[F_Y + 1] = roll_r, pitch_r
-        filt[F_YD], filt[F_YD + 1] = 0.0, 0.0
-        filt[F_READY] = 1.0
-    phi_d, theta_d = filt[F_Y], filt[F_Y + 1]
-    phi_dd, theta_dd = filt[F_YD], filt[F_YD + 1]
-    wn2, two_zeta_wn = C[C_WN2], C[C_2ZW]
-    phi_ddd = wn2 * (roll_r - phi_d) - two_zeta_wn * phi_dd
-    theta_ddd = wn2 * (pitch_r - theta_d) - two_zeta_wn * theta_dd
-    a00, a01, a02 = C[C_PHI], C[C_PHI + 1], C[C_PHI + 2]
-    a10, a11, a12 = C[C_PHI + 3], C[C_PHI + 4], C[C_PHI + 5]
-    filt[F_Y] = a00 * phi_d + a01 * phi_dd + a02 * roll_r
-    filt[F_YD] = a10 * phi_d + a11 * phi_dd + a12 * roll_r
-    filt[F_Y + 1] = a00 * theta_d + a01 * theta_dd + a02 * pitch_r
-    filt[F_YD + 1] = a10 * theta_d + a11 * theta_dd + a12 * pitch_r
-    eta_d = (phi_d, theta_d, yaw)
-    eta_d_dot = (phi_dd, theta_dd, yaw_rate)
+    phi_d, theta_d, phi_dd, theta_dd, phi_ddd, theta_ddd = command_filter(C, filt, roll_r, pitch_r)
+    eta_d, eta_d_dot = (phi_d, theta_d, yaw), (phi_dd, theta_dd, yaw_rate)
     eta_d_ddot = (phi_ddd, theta_ddd, yaw_acc)
-    if int(C[C_RLAW]) == RLAW_NLHINF:
-        te0, te1, te2 = nlhinf(C, integ_r, euler, rates, eta_d, eta_d_dot, eta_d_ddot, dt)
-    else:
-        te0, te1, te2 = intbs_attitude(C, integ_r, euler, rates, eta_d, eta_d_dot, eta_d_ddot, dt)
-    phi, theta = euler[0], euler[1]
-    tb0, tb1, tb2 = body_torque_from_euler_torque(phi, theta, te0, te1, te2)
-    athrust_max = C[C_ATHRUST_MAX]
-    atm0, atm1, atm2 = C[C_ATORQUE_MAX], C[C_ATORQUE_MAX + 1], C[C_ATORQUE_MAX + 2]
-    thrust_a = _min(_max(thrust, 0.0), athrust_max)
-    ta0 = _min(_max(tb0, -atm0), atm0)
-    ta1 = _min(_max(tb1, -atm1), atm1)
-    ta2 = _min(_max(tb2, -atm2), atm2)
-    tq0, tq1, tq2 = euler_torque_from_body_torque(phi, theta, ta0, ta1, ta2)
-    return (thrust_a, tq0, tq1, tq2, ta0, ta1, ta2,
-            thrust_a / athrust_max, ta0 / atm0, ta1 / atm1, ta2 / atm2,
+    tb0, tb1, tb2 = attitude_torque(C, integ_r, euler, rates, eta_d, eta_d_dot, eta_d_ddot, dt)
+    thrust_a, ta0, ta1, ta2, _, c0, c1, c2, c3 = saturate_wrench(C, thrust, tb0, tb1, tb2)
+    tq0, tq1, tq2 = euler_torque_from_body_torque(euler[0], euler[1], ta0, ta1, ta2)
+    return (thrust_a, tq0, tq1, tq2, ta0, ta1, ta2, c0, c1, c2, c3,
             phi_d, theta_d, phi_dd, theta_dd, roll_r, pitch_r, a_0, a_1, a_2)  # fmt: skip
 
 

@@ -47,21 +47,15 @@ import numpy as np
 from numba import njit
 
 from autopilot.control.compiled import (  # the cascade, compiled (what the autopilot flies)
-    C_2ZW,
-    C_ATHRUST_MAX,
-    C_ATORQUE_MAX,
     C_DT,
-    C_PHI,
-    C_RLAW,
     C_ROTOR_MODE,
-    C_WN2,
-    RLAW_NLHINF,
+    F_SIZE,
     allocate_rotors,
-    body_torque_from_euler_torque,
+    attitude_torque,
+    command_filter,
     euler_rates_from_body_rates,
     euler_torque_from_body_torque,
-    intbs_attitude,
-    nlhinf,
+    saturate_wrench,
     translational,
     wrap_pi,
 )
@@ -288,7 +282,6 @@ def simulate(  # noqa: C901
     do_record = record.shape[0] > 0
     rotor_plant = P[P_ROTOR_MODE] != 0.0
     rotor_ctrl = C[C_ROTOR_MODE] != 0.0
-    nlh = int(C[C_RLAW]) == RLAW_NLHINF
 
     n = state0.shape[0]
     s = state0.copy()
@@ -297,17 +290,10 @@ def simulate(  # noqa: C901
     controls = np.zeros(4)
     integ_t = np.zeros(3)
     integ_r = np.zeros(3)
-    filt_y = np.zeros(2)
-    filt_yd = np.zeros(2)
-    filt_ready = False
-    a00, a01, a02 = C[C_PHI], C[C_PHI + 1], C[C_PHI + 2]
-    a10, a11, a12 = C[C_PHI + 3], C[C_PHI + 4], C[C_PHI + 5]
-    wn2, two_zeta_wn = C[C_WN2], C[C_2ZW]
+    filt = np.zeros(F_SIZE)  # the command filter (layout F_*)
     dt_c = C[C_DT]
     plant_thrust_max = P[P_THRUST_MAX]
     ptm0, ptm1, ptm2 = P[P_TORQUE_MAX], P[P_TORQUE_MAX + 1], P[P_TORQUE_MAX + 2]
-    atm0, atm1, atm2 = C[C_ATORQUE_MAX], C[C_ATORQUE_MAX + 1], C[C_ATORQUE_MAX + 2]
-    athrust_max = C[C_ATHRUST_MAX]
     wmin, wmax = P[P_WMIN], P[P_WMAX]
 
     metrics = np.zeros(M_SIZE)
@@ -345,37 +331,16 @@ def simulate(  # noqa: C901
         thrust, roll_r, pitch_r, thrust_sat, tilt_lim, _, _, _ = translational(
             C, integ_t, c_pos, c_vel, c_euler, rp, rv, ra, dt_c
         )
-        if not filt_ready:
-            filt_y[0], filt_y[1] = roll_r, pitch_r
-            filt_yd[0], filt_yd[1] = 0.0, 0.0
-            filt_ready = True
-        phi_d, theta_d = filt_y[0], filt_y[1]
-        phi_dd, theta_dd = filt_yd[0], filt_yd[1]
-        phi_ddd = wn2 * (roll_r - phi_d) - two_zeta_wn * phi_dd
-        theta_ddd = wn2 * (pitch_r - theta_d) - two_zeta_wn * theta_dd
-        filt_y[0] = a00 * phi_d + a01 * phi_dd + a02 * roll_r
-        filt_yd[0] = a10 * phi_d + a11 * phi_dd + a12 * roll_r
-        filt_y[1] = a00 * theta_d + a01 * theta_dd + a02 * pitch_r
-        filt_yd[1] = a10 * theta_d + a11 * theta_dd + a12 * pitch_r
-        eta_d = (phi_d, theta_d, yaw)
-        eta_d_dot = (phi_dd, theta_dd, yaw_rate)
+        phi_d, theta_d, phi_dd, theta_dd, phi_ddd, theta_ddd = command_filter(C, filt, roll_r, pitch_r)
+        eta_d, eta_d_dot = (phi_d, theta_d, yaw), (phi_dd, theta_dd, yaw_rate)
         eta_d_ddot = (phi_ddd, theta_ddd, yaw_acc)
-        if nlh:
-            te0, te1, te2 = nlhinf(C, integ_r, c_euler, c_rates, eta_d, eta_d_dot, eta_d_ddot, dt_c)
-        else:
-            te0, te1, te2 = intbs_attitude(C, integ_r, c_euler, c_rates, eta_d, eta_d_dot, eta_d_ddot, dt_c)
+        tb0, tb1, tb2 = attitude_torque(C, integ_r, c_euler, c_rates, eta_d, eta_d_dot, eta_d_ddot, dt_c)
         phi_c, theta_c = c_euler[0], c_euler[1]
-        tb0, tb1, tb2 = body_torque_from_euler_torque(phi_c, theta_c, te0, te1, te2)
         if rotor_ctrl:
             thrust_a, ta0, ta1, ta2, sat = allocate_rotors(C, thrust, tb0, tb1, tb2, controls)
         else:
-            thrust_a = _min(_max(thrust, 0.0), athrust_max)
-            ta0 = _min(_max(tb0, -atm0), atm0)
-            ta1 = _min(_max(tb1, -atm1), atm1)
-            ta2 = _min(_max(tb2, -atm2), atm2)
-            sat = tb0 < -atm0 or tb0 > atm0 or tb1 < -atm1 or tb1 > atm1 or tb2 < -atm2 or tb2 > atm2
-            controls[0] = thrust_a / athrust_max
-            controls[1], controls[2], controls[3] = ta0 / atm0, ta1 / atm1, ta2 / atm2
+            thrust_a, ta0, ta1, ta2, sat, c0, c1, c2, c3 = saturate_wrench(C, thrust, tb0, tb1, tb2)
+            controls[0], controls[1], controls[2], controls[3] = c0, c1, c2, c3
         sat = sat or thrust_sat
         tq0, tq1, tq2 = euler_torque_from_body_torque(phi_c, theta_c, ta0, ta1, ta2)
 

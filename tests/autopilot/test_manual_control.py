@@ -10,23 +10,24 @@ from autopilot.commander.modes import FlightMode
 from autopilot.guidance.manual import ManualGuidance, ManualLimits, Sticks
 from quadcommon.trajectories import Reference
 
+from ..sitl.test_params_failsafes import take_off
 from ..stack import Gcs, make_stack
 
 POSCTL = FlightMode.POSCTL.custom_mode
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-def flying_in_posctl(yaw_deg: float = 0.0):
+def airborne():
+    """A vehicle holding at 2.5 m in AUTO.LOITER (the takeoff the failsafe tests use)."""
     stack = make_stack()
     gcs = Gcs(stack)
     gcs.wait_heartbeat()
-    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
-    gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
-    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last and g.position()[2] > 2.45, sim_timeout=15,
-             what="at the takeoff altitude")  # fmt: skip
-    if yaw_deg:
-        assert gcs.command(m.MAV_CMD_CONDITION_YAW, yaw_deg, 0, 0, 0).result == m.MAV_RESULT_ACCEPTED
-        stack.run_for(3.0)
+    take_off(gcs, 2.5)
+    return stack, gcs
+
+
+def flying_in_posctl():
+    stack, gcs = airborne()
     assert gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 3, 0).result == m.MAV_RESULT_ACCEPTED  # POSCTL
     gcs.wait(lambda g: g.custom_mode == POSCTL, sim_timeout=2.0, what="POSCTL in the heartbeat")
     stack.run_for(2.0)
@@ -92,13 +93,7 @@ def test_stale_sticks_read_as_centred_and_the_vehicle_says_so_once():
 
 
 def test_sticks_outside_posctl_are_kept_but_not_flown():
-    stack = make_stack()
-    gcs = Gcs(stack)
-    gcs.wait_heartbeat()
-    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
-    gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
-    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last and g.position()[2] > 2.45, sim_timeout=15,
-             what="at the takeoff altitude")  # fmt: skip
+    stack, gcs = airborne()
     stack.run_for(2.0)  # AUTO.LOITER
     held = truth(stack).position_m
     hold_sticks(stack, gcs, 2.0, x=1000)
