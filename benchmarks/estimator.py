@@ -5,9 +5,10 @@ sensor models' own samples (profiles ``gps`` and ``mocap``) of a vehicle held at
 simulated seconds, generated before timing; the filter (``autopilot.estimation``) is then fed
 exactly as the autopilot feeds it, each call timed. Reports the best of N runs per figure (the
 machine is shared: the best run is the least disturbed). Also measured, in the same run, why the
-hot path is written as it is: the covariance prediction ``F P F^T`` as numpy products (what the
-filter does) against a block-sparse plain-float version written out below, and the nominal
-propagation in plain floats against small numpy arrays. Last lines: ``name: value unit``.
+hot path is written as it is: the covariance prediction ``F P F^T`` as the compiled kernel (what
+the filter runs with numba), as numpy products (its fallback) and as a block-sparse plain-float
+version written out below; the whole filter per control step on the kernels and on the numpy
+products; and the nominal propagation in plain floats against small numpy arrays. Last lines: ``name: value unit``.
 """
 
 from __future__ import annotations
@@ -74,11 +75,13 @@ def make_inputs(profile: str, seconds: float) -> list:
     return frames
 
 
-def feed(profile: str, frames: list) -> tuple[dict[str, float], dict[str, int], float, int]:
+def feed(profile: str, frames: list, compiled: bool = True) -> tuple[dict[str, float], dict[str, int], float, int]:
     """Feed one run; per-kind total seconds and counts of the calls that fused or gated a sample
     (after the alignment; a sample skipped by a fusion-rate limit is not counted), and the
-    total over the control steps."""
+    total over the control steps. ``compiled=False``: the numpy products instead of the kernels."""
     ekf = ErrorStateEkf(load_estimator_params(profile))
+    if not compiled:
+        ekf._kernels = None
     methods = {
         "predict": ekf.predict, "gps": ekf.fuse_gps, "baro": ekf.fuse_baro, "mag": ekf.fuse_mag,
         "vision": ekf.fuse_vision,
@@ -210,6 +213,12 @@ def main() -> None:
         figures[f"estimator_step_{profile}"] = best_step
         for kind, us in best_kind.items():
             figures.setdefault(f"estimator_{kind}", us)
+        if ErrorStateEkf()._kernels is not None:  # the same run on the numpy products
+            step_numpy = min(
+                (lambda r: r[2] / r[3] * 1e6)(feed(profile, frames, compiled=False)) for _ in range(args.repeat)
+            )
+            print(f"{profile}: per control step on the numpy products {step_numpy:.1f} us")
+            figures[f"estimator_step_{profile}_numpy"] = step_numpy
 
     # The hot-path choices, measured in this run.
     n = 19
@@ -231,6 +240,14 @@ def main() -> None:
     ref[0:3, 3:6] = np.eye(3) * 0.002
     ref[3:6, 6:9], ref[3:6, 12:15], ref[6:9, 9:12] = S, B, B
     assert np.allclose(np.array(covariance_plain(Pl, 0.002, S, B, ql)), ref @ P @ ref.T + np.diag(q))
+    kernel_us = math.nan
+    if ekf._kernels is not None:  # the compiled kernel on the same F (R = -B / dt; S = -[m dt]_x)
+        Pk, scratch, dt = P.copy(), np.empty((n, n)), 0.002
+        R = [[-b / dt for b in row] for row in B]
+        args_k = (0, 3, 6, 9, 12, dt, S[1][2], S[2][0], S[0][1], *R[0], *R[1], *R[2], q)
+        ekf._kernels.predict_covariance(Pk, scratch, *args_k)
+        assert np.allclose(Pk, ref @ P @ ref.T + np.diag(q), rtol=1e-12, atol=1e-18)
+        kernel_us = best_us(lambda: ekf._kernels.predict_covariance(Pk, scratch, *args_k), 5000, args.repeat)
     p3, v3, f3, g3 = np.zeros(3), np.ones(3), np.array([0.1, 0.2, 9.8]), np.array([0.0, 0.0, 9.81])
     R3 = np.eye(3)
     nominal_np_us = best_us(lambda: nominal_numpy(p3, v3, R3, f3, g3, 0.002), 20000, args.repeat)
@@ -241,13 +258,15 @@ def main() -> None:
         args.repeat,
     )
     print(
-        f"F P F^T: numpy {numpy_us:.1f} us vs block-sparse plain floats {plain_us:.1f} us "
+        f"F P F^T: compiled kernel {kernel_us:.1f} us vs numpy {numpy_us:.1f} us "
+        f"vs block-sparse plain floats {plain_us:.1f} us "
         f"({plain_us / numpy_us:.0f}x); nominal p, v step: numpy {nominal_np_us:.1f} us vs floats "
         f"{nominal_fl_us:.1f} us ({nominal_np_us / nominal_fl_us:.0f}x)"
     )
     print()
     for name, value in figures.items():
         print(f"{name}: {value:.1f} us")
+    print(f"covariance_prediction_compiled: {kernel_us:.1f} us")
     print(f"covariance_prediction_numpy: {numpy_us:.1f} us")
     print(f"covariance_prediction_plain_floats: {plain_us:.1f} us")
     print(f"nominal_pv_step_numpy: {nominal_np_us:.1f} us")

@@ -67,6 +67,7 @@ class Simulator:
         self.frames_sent = 0
         self.pacer: Pacer | None = None
         self.work_s = self.wait_s = 0.0  # wall time per frame: own work, waiting for the autopilot
+        self.loop_start = self.loop_s = 0.0  # the frame loop's wall time (linked to the last frame)
         self.round_trips = array("d")  # HIL round trip per frame (wall s); bounded memory
         self._outage_wall = 0.0
 
@@ -200,6 +201,14 @@ class Simulator:
         perf_counter = time.perf_counter
         last_frame = None if self.duration_s is None else round(self.duration_s / core.dt_control)
         pacer = self.pacer = Pacer(self.speed, self.log, lambda: self._running)
+        self.loop_start = perf_counter()
+        try:
+            return self._loop(core, sock, append_truth, last_frame, pacer)
+        finally:
+            self.loop_s = perf_counter() - self.loop_start
+
+    def _loop(self, core, sock, append_truth, last_frame, pacer) -> int:
+        perf_counter = time.perf_counter
         while self._running:
             start = perf_counter()
             try:
@@ -246,6 +255,9 @@ class Simulator:
             f"{1e6 * self.work_s / n:.0f} us own work, {1e6 * self.wait_s / n:.0f} us waiting for the "
             f"autopilot; {self.pacer.overruns if self.pacer else 0} re-anchors)"
         )
+        if self.loop_s > 0.0:
+            t = self.core.t
+            text += f"; {t:.3f} s simulated in {self.loop_s:.3f} s of frame loop ({t / self.loop_s:.1f}x)"
         if self.round_trips:
             rtt = sorted(self.round_trips)
             median, p99 = rtt[len(rtt) // 2], rtt[min(int(0.99 * len(rtt)), len(rtt) - 1)]

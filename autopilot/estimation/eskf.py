@@ -284,6 +284,8 @@ class ErrorStateEkf:
         self._f_idx = np.array(f_idx)
         self._diag = np.arange(N) * (N + 1)
         self._I = np.eye(N)
+        self._kernels = _compiled_kernels()  # None: the numpy products (see .compiled)
+        self._scratch = np.empty((N, N))
         self._q_dt = -1.0
         self._q_diag = np.zeros(N)
 
@@ -316,8 +318,8 @@ class ErrorStateEkf:
         self._last_gps_pos_s = -1.0
         self._bad_accel_until_s = -math.inf
         # Recent (time, normalised innovation) of the vertical sources the bad-accel check watches.
-        self._innovations: dict[int, deque] = {
-            id(self.sources[name]): deque(maxlen=256) for name in ("gps_vvel", "ev_hgt")
+        self._innovations: dict[int, _Window] = {
+            id(self.sources[name]): _Window(256) for name in ("gps_vvel", "ev_hgt")
         }
         self.bad_accel_detections = 0
         self._next_mag_s = -math.inf  # fusion-rate limits (EKF2_MAG_RATE, EKF2_BARO_RATE)
@@ -404,26 +406,32 @@ class ErrorStateEkf:
         self._rate = (gx - bgx, gy - bgy, gz - bgz)
 
         # Covariance, eq. 269: P <- F P F^T + Q.
-        F = self._F
         mdx, mdy, mdz = mx * dt, my * dt, mz * dt
-        e00, e01, e02 = -r00 * dt, -r01 * dt, -r02 * dt
-        e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
-        e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
-        F.flat[self._f_idx] = (
-            dt, dt, dt,
-            mdz, -mdy, -mdz, mdx, mdy, -mdx,
-            e00, e01, e02, e10, e11, e12, e20, e21, e22,
-            e00, e01, e02, e10, e11, e12, e20, e21, e22,
-        )  # fmt: skip
-        P = F @ self.P @ F.T
         if abs(dt - self._q_dt) > 1e-9:  # time stamps jitter in the last bits: keep the cache
             self._set_process_noise(dt)
-        P.flat[self._diag] += self._q_diag
+        if self._kernels is not None:
+            P = self.P
+            self._kernels.predict_covariance(P, self._scratch, IP, IV, ITH, IBG, IBA, dt, mdx, mdy, mdz,
+                                             r00, r01, r02, r10, r11, r12, r20, r21, r22,
+                                             self._q_diag)  # fmt: skip
+        else:
+            F = self._F
+            e00, e01, e02 = -r00 * dt, -r01 * dt, -r02 * dt
+            e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
+            e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
+            F.flat[self._f_idx] = (
+                dt, dt, dt,
+                mdz, -mdy, -mdz, mdx, mdy, -mdx,
+                e00, e01, e02, e10, e11, e12, e20, e21, e22,
+                e00, e01, e02, e10, e11, e12, e20, e21, e22,
+            )  # fmt: skip
+            P = F @ self.P @ F.T
+            P.flat[self._diag] += self._q_diag
         if t < self._bad_accel_until_s:
             P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
             P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
-        if not self.imu_samples & 255:  # round-off makes F P F^T drift from symmetry: restore it
-            P = 0.5 * (P + P.T)
+        if self._kernels is None and not self.imu_samples & 255:
+            P = 0.5 * (P + P.T)  # round-off makes F P F^T drift from symmetry (the kernel mirrors)
         self.P = P
 
         # Delayed-state buffer.
@@ -742,9 +750,15 @@ class ErrorStateEkf:
         for k, (idx, h, _, _) in enumerate(rows):
             for i, hi in zip(idx, h, strict=True):
                 H[k, i] = hi
-        PHt = self.P @ H.T
-        S = H @ PHt
-        d = S.diagonal().tolist()
+        kernels = self._kernels
+        if kernels is not None:
+            prior = np.empty(m)
+            kernels.prior_variances(self.P, H, prior)
+            d = prior.tolist()
+        else:
+            PHt = self.P @ H.T
+            S = H @ PHt
+            d = S.diagonal().tolist()
         now = self.time_s
         keep: list[int] = []
         results: list[bool] = []
@@ -776,6 +790,14 @@ class ErrorStateEkf:
                 results.append(True)
             k += len(group_rows)
         if not keep:
+            return results
+        if kernels is not None:
+            if len(keep) < m:
+                H = H[keep]
+            dx = np.empty(N)
+            kernels.joseph_update(self.P, H, np.array([rows[i][3] for i in keep]),
+                                  np.array([rows[i][2] for i in keep]), dx)  # fmt: skip
+            self._inject(dx)
             return results
         if len(keep) < m:
             H = H[keep]
@@ -1095,11 +1117,10 @@ class ErrorStateEkf:
             if st.last_tested_s != now:
                 continue
             window = self._innovations[id(st)]
-            while window[0][0] < now - BAD_ACCEL_WINDOW_S:
-                window.popleft()
+            window.drop_before(now - BAD_ACCEL_WINDOW_S)
             if len(window) < BAD_ACCEL_MIN_SAMPLES:
                 continue
-            mean = sum(z for _, z in window) / len(window)
+            mean = window.mean()
             if abs(mean) < BAD_ACCEL_MEAN:
                 continue
             if name == "ev_hgt":
@@ -1228,6 +1249,58 @@ class ErrorStateEkf:
             self.imu_samples,
             self.imu_dt_rejected,
         )
+
+
+class _Window:
+    """Recent ``(time, value)`` samples (at most ``size``) and their running sum, so that the mean
+    over the window costs O(1) per fusion instead of a pass over up to ``size`` samples; the sum
+    is recomputed exactly every ``size`` appends, so its round-off cannot build up."""
+
+    def __init__(self, size: int) -> None:
+        self.samples: deque[tuple[float, float]] = deque()
+        self.size = size
+        self.total = 0.0
+        self._appends = 0
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def append(self, sample: tuple[float, float]) -> None:
+        samples = self.samples
+        if len(samples) >= self.size:
+            self.total -= samples.popleft()[1]
+        samples.append(sample)
+        self.total += sample[1]
+        self._appends += 1
+        if self._appends >= self.size:
+            self._appends = 0
+            self.total = math.fsum(z for _, z in samples)
+
+    def drop_before(self, t: float) -> None:
+        samples = self.samples
+        while samples and samples[0][0] < t:
+            self.total -= samples.popleft()[1]
+
+    def mean(self) -> float:
+        return self.total / len(self.samples)
+
+
+_KERNELS_LOADED: list = []
+
+
+def _compiled_kernels():
+    """:mod:`.compiled` (its kernels loaded once per process), or None: numba is not installed
+    (the ``campaign`` extra) or ``QUADSITL_PURE_PYTHON=1``."""
+    try:
+        from . import compiled
+    except ImportError:
+        return None
+    if not compiled.enabled():
+        return None
+    if not _KERNELS_LOADED:
+        compiled.warm_up()
+        _KERNELS_LOADED.append(compiled)
+    return compiled
 
 
 def _inverse_spd(S: np.ndarray) -> np.ndarray:

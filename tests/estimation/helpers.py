@@ -216,8 +216,18 @@ def run_filter(
         bge.append(e[9:12])
         bae.append(e[12:15])
         sig.append(np.sqrt(np.diag(P)))
-        nees.append(float(e @ np.linalg.solve(P, e)))
+        nees.append(float(e @ _solve_covariance(P, e)))
     return FilterRun(
         np.array(ts), np.array(pe), np.array(ve), np.array(ae), np.array(bge), np.array(bae), np.array(sig),
         np.array(nees), np.array(gps_err).reshape(-1, 3), np.array(gps_t), converged_t, ekf, suite, statuses,
     )  # fmt: skip
+
+
+def _solve_covariance(P: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """``P^-1 e``; for a singular P (a direction known exactly: after alignment on exact sensors,
+    the tilt and the accelerometer bias it was measured with) the pseudo-inverse, whose NEES
+    counts only the directions that have an uncertainty."""
+    try:
+        return np.linalg.solve(P, e)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(P, hermitian=True) @ e

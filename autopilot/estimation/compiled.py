@@ -1,0 +1,213 @@
+"""The filter's covariance arithmetic compiled with numba (``cache=True``): what
+:class:`~.eskf.ErrorStateEkf` runs per IMU sample and per fusion when numba is installed (the
+``campaign`` extra) and ``QUADSITL_PURE_PYTHON`` is not ``1``; without it the filter does the same
+products with numpy (the reference).
+
+Why: with estimation in the loop the filter was the largest single cost of an autopilot frame
+(~60 us of ~200 us on the paper's helix with ``mocap``, timers around each call of the in-process
+run), and most of it was numpy's call overhead on 19x19 and 19xm operands: a prediction made ~8
+numpy calls, a fusion ~20. Here each is one call, and the arithmetic uses the structure the
+numpy products ignore:
+
+* :func:`predict_covariance` is eq. 269, ``P <- F P F^T + Q``, with ``F = I + E`` and ``E``'s 27
+  non-zero entries (``F_pv``, ``F_v theta``, ``F_v ba``, ``F_theta bg``; see :mod:`.eskf`):
+  ``A = P + E P`` row by row, then ``A + A E^T`` column by column, the upper triangle mirrored;
+* :func:`joseph_update` is the batch update in Joseph form, factorised as the filter specifies it,
+  ``P <- (I - K H) P (I - K H)^T + K R K^T``: ``(I - K H) P = P - K (H P)``, then
+  ``X (I - K H)^T = X - (X H^T) K^T``, with ``K = P H^T S^-1`` through a Cholesky factor of ``S``
+  (symmetric positive definite: ``R > 0``); the upper triangle is computed and mirrored, so the
+  covariance stays exactly symmetric.
+
+The same products in another order of floating-point operations: equal to the numpy path to
+round-off (~1e-16 relative; ``tests/estimation/test_compiled_filter.py`` over whole flights). Block
+offsets come in as arguments (the layout lives in :mod:`.eskf` alone).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, error_model="numpy")
+def predict_covariance(P, A, ip, iv, ith, ibg, iba, dt, mdx, mdy, mdz,
+                       r00, r01, r02, r10, r11, r12, r20, r21, r22, q_diag):  # fmt: skip
+    """``P <- F P F^T + diag(q_diag)`` in place (``A``: an N x N scratch array).
+
+    ``F = I + E``: ``E[p_i, v_i] = dt``; ``E[v, theta] = -[m dt]_x`` with ``m dt = (mdx, mdy,
+    mdz)`` the mean world specific force times dt; ``E[v, ba] = E[theta, bg] = -R dt``."""
+    n = P.shape[0]
+    e00, e01, e02 = -r00 * dt, -r01 * dt, -r02 * dt
+    e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
+    e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
+    # A = F P: only the position, velocity and attitude rows change.
+    for j in range(n):
+        for i in range(n):
+            A[i, j] = P[i, j]
+        t0, t1, t2 = P[ith, j], P[ith + 1, j], P[ith + 2, j]
+        a0, a1, a2 = P[iba, j], P[iba + 1, j], P[iba + 2, j]
+        g0, g1, g2 = P[ibg, j], P[ibg + 1, j], P[ibg + 2, j]
+        A[ip, j] = P[ip, j] + dt * P[iv, j]
+        A[ip + 1, j] = P[ip + 1, j] + dt * P[iv + 1, j]
+        A[ip + 2, j] = P[ip + 2, j] + dt * P[iv + 2, j]
+        A[iv, j] = P[iv, j] + (mdz * t1 - mdy * t2) + (e00 * a0 + e01 * a1 + e02 * a2)
+        A[iv + 1, j] = P[iv + 1, j] + (mdx * t2 - mdz * t0) + (e10 * a0 + e11 * a1 + e12 * a2)
+        A[iv + 2, j] = P[iv + 2, j] + (mdy * t0 - mdx * t1) + (e20 * a0 + e21 * a1 + e22 * a2)
+        A[ith, j] = t0 + (e00 * g0 + e01 * g1 + e02 * g2)
+        A[ith + 1, j] = t1 + (e10 * g0 + e11 * g1 + e12 * g2)
+        A[ith + 2, j] = t2 + (e20 * g0 + e21 * g1 + e22 * g2)
+    # P = A F^T: the same combinations of A's columns; the upper triangle, then mirrored.
+    for i in range(n):
+        t0, t1, t2 = A[i, ith], A[i, ith + 1], A[i, ith + 2]
+        a0, a1, a2 = A[i, iba], A[i, iba + 1], A[i, iba + 2]
+        g0, g1, g2 = A[i, ibg], A[i, ibg + 1], A[i, ibg + 2]
+        for j in range(i, n):
+            P[i, j] = A[i, j]
+        # Column j of the result for the changed columns (only those with j >= i are kept).
+        c_p0 = A[i, ip] + dt * A[i, iv]
+        c_p1 = A[i, ip + 1] + dt * A[i, iv + 1]
+        c_p2 = A[i, ip + 2] + dt * A[i, iv + 2]
+        c_v0 = A[i, iv] + (mdz * t1 - mdy * t2) + (e00 * a0 + e01 * a1 + e02 * a2)
+        c_v1 = A[i, iv + 1] + (mdx * t2 - mdz * t0) + (e10 * a0 + e11 * a1 + e12 * a2)
+        c_v2 = A[i, iv + 2] + (mdy * t0 - mdx * t1) + (e20 * a0 + e21 * a1 + e22 * a2)
+        c_t0 = t0 + (e00 * g0 + e01 * g1 + e02 * g2)
+        c_t1 = t1 + (e10 * g0 + e11 * g1 + e12 * g2)
+        c_t2 = t2 + (e20 * g0 + e21 * g1 + e22 * g2)
+        if ip >= i:
+            P[i, ip] = c_p0
+        if ip + 1 >= i:
+            P[i, ip + 1] = c_p1
+        if ip + 2 >= i:
+            P[i, ip + 2] = c_p2
+        if iv >= i:
+            P[i, iv] = c_v0
+        if iv + 1 >= i:
+            P[i, iv + 1] = c_v1
+        if iv + 2 >= i:
+            P[i, iv + 2] = c_v2
+        if ith >= i:
+            P[i, ith] = c_t0
+        if ith + 1 >= i:
+            P[i, ith + 1] = c_t1
+        if ith + 2 >= i:
+            P[i, ith + 2] = c_t2
+        P[i, i] += q_diag[i]
+        for j in range(i + 1, n):
+            P[j, i] = P[i, j]
+
+
+@njit(cache=True, error_model="numpy")
+def prior_variances(P, H, out):
+    """``out[k] = H_k P H_k^T`` for each row ``H_k`` of ``H`` (m x N): the gates' variances."""
+    m, n = H.shape
+    for k in range(m):
+        s = 0.0
+        for i in range(n):
+            hi = H[k, i]
+            if hi != 0.0:
+                row = 0.0
+                for j in range(n):
+                    row += P[i, j] * H[k, j]
+                s += hi * row
+        out[k] = s
+
+
+@njit(cache=True, error_model="numpy")
+def joseph_update(P, H, r, y, dx):
+    """One batch update of ``P`` (in place, Joseph form, see the module) for the rows ``H`` (m x N)
+    with noise variances ``r`` and innovations ``y``; the error ``K y`` into ``dx`` (N)."""
+    m, n = H.shape
+    PHt = np.empty((n, m))
+    for i in range(n):
+        for k in range(m):
+            s = 0.0
+            for j in range(n):
+                s += P[i, j] * H[k, j]
+            PHt[i, k] = s
+    # S = H P H^T + R and its Cholesky factor L (S = L L^T).
+    S = np.empty((m, m))
+    for a in range(m):
+        for b in range(m):
+            s = 0.0
+            for j in range(n):
+                s += H[a, j] * PHt[j, b]
+            S[a, b] = s
+        S[a, a] += r[a]
+    L = np.zeros((m, m))
+    for a in range(m):
+        for b in range(a + 1):
+            s = S[a, b]
+            for c in range(b):
+                s -= L[a, c] * L[b, c]
+            if a == b:
+                L[a, a] = np.sqrt(s)
+            else:
+                L[a, b] = s / L[b, b]
+    # K = P H^T S^-1: row i of K solves S k = (P H^T)_i.
+    K = np.empty((n, m))
+    z = np.empty(m)
+    for i in range(n):
+        for a in range(m):
+            s = PHt[i, a]
+            for c in range(a):
+                s -= L[a, c] * z[c]
+            z[a] = s / L[a, a]
+        for a in range(m - 1, -1, -1):
+            s = z[a]
+            for c in range(a + 1, m):
+                s -= L[c, a] * K[i, c]
+            K[i, a] = s / L[a, a]
+    for i in range(n):
+        s = 0.0
+        for k in range(m):
+            s += K[i, k] * y[k]
+        dx[i] = s
+    # X = (I - K H) P = P - K (H P); H P = (P H^T)^T only for an exactly symmetric P, so computed.
+    HP = np.empty((m, n))
+    for k in range(m):
+        for j in range(n):
+            s = 0.0
+            for i in range(n):
+                s += H[k, i] * P[i, j]
+            HP[k, j] = s
+    X = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            s = P[i, j]
+            for k in range(m):
+                s -= K[i, k] * HP[k, j]
+            X[i, j] = s
+    # P = X (I - K H)^T + K R K^T = X - (X H^T) K^T + K R K^T, upper triangle then mirrored.
+    XHt = np.empty((n, m))
+    for i in range(n):
+        for k in range(m):
+            s = 0.0
+            for j in range(n):
+                s += X[i, j] * H[k, j]
+            XHt[i, k] = s
+    for i in range(n):
+        for j in range(i, n):
+            s = X[i, j]
+            for k in range(m):
+                s += K[j, k] * (K[i, k] * r[k] - XHt[i, k])
+            P[i, j] = s
+            P[j, i] = s
+
+
+def enabled() -> bool:
+    """The compiled path is on unless ``QUADSITL_PURE_PYTHON=1`` (the numpy reference)."""
+    return os.environ.get("QUADSITL_PURE_PYTHON", "") != "1"
+
+
+def warm_up() -> None:
+    """Load (or compile) the kernels now, on scratch arrays, not at the first sample in flight."""
+    n, m = 19, 2
+    P, A = np.eye(n), np.empty((n, n))
+    H = np.zeros((m, n))
+    H[0, 0] = H[1, 1] = 1.0
+    predict_covariance(P, A, 0, 3, 6, 9, 12, 0.002, 0.0, 0.0, 0.0,
+                       1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, np.zeros(n))  # fmt: skip
+    prior_variances(P, H, np.empty(m))
+    joseph_update(P, H, np.ones(m), np.zeros(m), np.empty(n))
