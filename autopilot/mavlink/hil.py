@@ -108,28 +108,34 @@ _MAG_BITS = 0x1C0  # HIL_SENSOR fields_updated: x/y/z magnetometer
 _BARO_ALT_BIT = 0x800  # HIL_SENSOR fields_updated: pressure altitude
 
 
-def _fields(decoder: FastDecoder, raw: bytes, *names: str) -> list:
+def _where(decoder: FastDecoder, *names: str) -> tuple:
+    """Where ``names`` sit in the decoder's flat field tuple (looked up once, not per frame)."""
+    return tuple(decoder.slices[name] for name in names)
+
+
+def _fields(decoder: FastDecoder, raw: bytes, where: tuple) -> list:
     values = decoder.unpack(raw)
-    return [values[decoder.slices[name]] for name in names]
+    return [values[i] for i in where]
+
+
+_SENSOR_FIELDS = _where(_SENSOR, "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag",
+                        "pressure_alt", "fields_updated")  # fmt: skip
+_GPS_FIELDS = _where(_GPS, "fix_type", "lat", "lon", "alt", "eph", "epv", "vn", "ve", "vd", "satellites_visible")
+_VISION_FIELDS = _where(_VISION, "x", "y", "z", "yaw", "covariance")
 
 
 def _sensor_samples(parts: dict, home) -> SensorSamples | None:
     raw = parts.get(_ID_SENSOR)
     if raw is None:
         return None
-    ax, ay, az, gx, gy, gz, mx, my, mz, alt, updated = _fields(
-        _SENSOR, raw, "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag",
-        "pressure_alt", "fields_updated",
-    )  # fmt: skip
+    ax, ay, az, gx, gy, gz, mx, my, mz, alt, updated = _fields(_SENSOR, raw, _SENSOR_FIELDS)
     to_paper = frames.vector_from_ned
     mag = to_paper((mx, my, mz)) if updated & _MAG_BITS == _MAG_BITS else None
     baro = alt if updated & _BARO_ALT_BIT else None
     gps = vision = None
     raw = parts.get(_ID_GPS)
     if raw is not None:
-        fix, lat, lon, alt_mm, eph, epv, vn, ve, vd, sats = _fields(
-            _GPS, raw, "fix_type", "lat", "lon", "alt", "eph", "epv", "vn", "ve", "vd", "satellites_visible"
-        )
+        fix, lat, lon, alt_mm, eph, epv, vn, ve, vd, sats = _fields(_GPS, raw, _GPS_FIELDS)
         ned = frames.geodetic_to_ned(lat * 1e-7, lon * 1e-7, alt_mm * 1e-3, home)
         unknown = 65535
         gps = GpsFix(
@@ -139,7 +145,7 @@ def _sensor_samples(parts: dict, home) -> SensorSamples | None:
         )  # fmt: skip
     raw = parts.get(_ID_VISION)
     if raw is not None:
-        n, e, d, yaw, cov = _fields(_VISION, raw, "x", "y", "z", "yaw", "covariance")
+        n, e, d, yaw, cov = _fields(_VISION, raw, _VISION_FIELDS)
         pos_var, yaw_var = cov[0], cov[20]
         vision = VisionPose(
             0.0, to_paper((n, e, d)), frames.yaw_from_ned(yaw),

@@ -376,6 +376,7 @@ class StreamTable:
     def __init__(self) -> None:
         self.interval_s: dict[int, float] = {}
         self.next_due: dict[int, float] = {}
+        self._earliest = 0.0  # min(next_due): most frames nothing is due and due() returns at once
         for msg_id, hz in DEFAULT_RATES_HZ.items():
             self.set_rate(msg_id, hz)
 
@@ -386,6 +387,7 @@ class StreamTable:
         else:
             self.interval_s[msg_id] = 1.0 / hz
             self.next_due[msg_id] = now
+            self._earliest = min(self._earliest, now)
 
     def set_interval_us(self, msg_id: int, interval_us: float, now: float) -> bool:
         """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, >0 interval (µs)."""
@@ -403,14 +405,19 @@ class StreamTable:
         """Every stream due now: the simulation clock started again (a restarted simulator)."""
         for msg_id in self.next_due:
             self.next_due[msg_id] = 0.0
+        self._earliest = 0.0
 
     def due(self, now: float) -> list[int]:
         """Message ids due at ``now``; their next due times advance by one interval."""
+        if now + 1e-9 < self._earliest:
+            return []
         ready = []
-        for msg_id, due in self.next_due.items():
+        next_due = self.next_due
+        for msg_id, due in next_due.items():
             if now + 1e-9 >= due:
                 ready.append(msg_id)
                 interval = self.interval_s[msg_id]
                 nxt = due + interval
-                self.next_due[msg_id] = nxt if nxt > now else now + interval
+                next_due[msg_id] = nxt if nxt > now else now + interval
+        self._earliest = min(next_due.values(), default=math.inf)
         return ready
