@@ -261,45 +261,6 @@ def truth_of_O(s: np.ndarray, P: np.ndarray) -> tuple:
     return pos, vel, euler, R22
 
 
-@njit(cache=True, error_model="numpy")
-def truth_kernel(s: np.ndarray, ds: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple:
-    """``Plant.truth``'s kinematics of O, its operations in the same order: position, velocity,
-    acceleration (world), ZYX Euler angles, their rates, the specific force (body), on-ground
-    flag (1.0 / 0.0); one derivative evaluation with the inputs held (``ds`` its scratch)."""
-    derivative(s, ds, P, u)
-    R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
-    rx, ry, rz = P[P_COM], P[P_COM + 1], P[P_COM + 2]
-    p, qr, r = s[10], s[11], s[12]
-    dp, dq, dr = ds[10], ds[11], ds[12]
-    cx, cy, cz = qr * rz - r * ry, r * rx - p * rz, p * ry - qr * rx
-    ax_ = dq * rz - dr * ry + (qr * cz - r * cy)
-    ay_ = dr * rx - dp * rz + (r * cx - p * cz)
-    az_ = dp * ry - dq * rx + (p * cy - qr * cx)
-    px = s[0] - (R00 * rx + R01 * ry + R02 * rz)
-    py = s[1] - (R10 * rx + R11 * ry + R12 * rz)
-    pz = s[2] - (R20 * rx + R21 * ry + R22 * rz)
-    vx = s[3] - (R00 * cx + R01 * cy + R02 * cz)
-    vy = s[4] - (R10 * cx + R11 * cy + R12 * cz)
-    vz = s[5] - (R20 * cx + R21 * cy + R22 * cz)
-    on_ground = P[P_GROUND] == 1.0 and pz <= 1e-6 and abs(s[5]) < 1e-6
-    if on_ground:
-        accx, accy, accz = 0.0, 0.0, 0.0
-    else:
-        accx = ds[3] - (R00 * ax_ + R01 * ay_ + R02 * az_)
-        accy = ds[4] - (R10 * ax_ + R11 * ay_ + R12 * az_)
-        accz = ds[5] - (R20 * ax_ + R21 * ay_ + R22 * az_)
-    fx, fy, fz = accx, accy, accz + P[P_GRAVITY]
-    phi, theta, psi = euler_from_rotation(R00, R10, R20, R21, R22)
-    sf, cf = math.sin(phi), math.cos(phi)
-    ct, tt = math.cos(theta), math.tan(theta)
-    return (
-        px, py, pz, vx, vy, vz, accx, accy, accz, phi, theta, psi,
-        p + sf * tt * qr + cf * tt * r, cf * qr - sf * r, (sf * qr + cf * r) / ct,
-        R00 * fx + R10 * fy + R20 * fz, R01 * fx + R11 * fy + R21 * fz, R02 * fx + R12 * fy + R22 * fz,
-        1.0 if on_ground else 0.0,
-    )  # fmt: skip
-
-
 def plant_array(plant) -> np.ndarray:
     """The parameter array ``P`` of a :class:`~.plant.Plant` (the true vehicle)."""
     P = np.zeros(P_SIZE)
@@ -337,7 +298,6 @@ class CompiledStep:
         scratch = np.array(plant.state, dtype=float)
         rk4_step(scratch, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, self.u, plant.dt)
         ground_contact(scratch, self.P)
-        truth_kernel(scratch, self.k1, self.P, self.u)
 
     def _load(self, plant) -> None:
         """The plant's state list and held inputs into the arrays (one conversion each)."""
@@ -348,11 +308,6 @@ class CompiledStep:
         else:
             self.u[:] = (plant.thrust_cmd, *plant.torque_cmd, 0.0, 0.0, 0.0, 0.0, *plant.force_dist,
                          *plant.torque_dist_eta, *plant.wind)  # fmt: skip
-
-    def truth(self, plant) -> tuple:
-        """:func:`truth_kernel` of the plant now."""
-        self._load(plant)
-        return truth_kernel(self.s, self.k1, self.P, self.u)
 
     def step(self, plant) -> None:
         self._load(plant)

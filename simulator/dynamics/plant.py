@@ -350,10 +350,7 @@ class Plant:
     def truth(self) -> TruthState:
         """Ground truth now (one extra derivative evaluation gives the accelerations).
 
-        Written out component by component: it runs once per frame, on the lockstep path
-        (compiled, :func:`.compiled.truth_kernel`, when the step is: the same operations)."""
-        if self._compiled is not None:
-            return self._compiled_truth()
+        Written out component by component: it runs once per frame, on the lockstep path."""
         s = self.state
         ds = self._derivative(s)
         q = (s[6], s[7], s[8], s[9])
@@ -406,37 +403,6 @@ class Plant:
             thrust_n=thrust,
             torque_body_n_m=torque,
             on_ground=on_ground,
-        )
-
-
-    def _compiled_truth(self) -> TruthState:
-        v = self._compiled.truth(self)
-        s = self.state
-        if self.rotor_mode:
-            speeds = (s[13], s[14], s[15], s[16])
-            sq = [x * x for x in speeds]
-            thrust = self.b * sum(sq)
-            torque = (
-                self.arm * self.b * (sq[3] - sq[1]),
-                self.arm * self.b * (sq[2] - sq[0]),
-                self.d * (-sq[0] + sq[1] - sq[2] + sq[3]),
-            )
-        else:
-            speeds = (0.0, 0.0, 0.0, 0.0)
-            thrust, torque = self.thrust_cmd, self.torque_cmd
-        return TruthState(
-            position_m=v[0:3],
-            velocity_m_s=v[3:6],
-            acceleration_m_s2=v[6:9],
-            quaternion=(s[6], s[7], s[8], s[9]),
-            euler_rad=v[9:12],
-            body_rates_rad_s=(s[10], s[11], s[12]),
-            euler_rates_rad_s=v[12:15],
-            specific_force_body_m_s2=v[15:18],
-            rotor_speeds_rad_s=speeds,
-            thrust_n=thrust,
-            torque_body_n_m=torque,
-            on_ground=v[18] == 1.0,
         )
 
 
