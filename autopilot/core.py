@@ -145,6 +145,7 @@ class AutopilotCore:
         self._flying = False
         self._controls = (0.0, 0.0, 0.0, 0.0)
         self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
+        self._estimator_done: tuple | None = None  # (t, estimate, loop) of the frame, for its row
         self._statustext_id = 0
 
         self.params = default_parameters(setup.controller, sitl.rates, estimator=True)
@@ -404,7 +405,7 @@ class AutopilotCore:
         self.commander.estimator_problem = loop.problem()
         self.status.estimator = loop.last_status
         self.status.imu = loop.last_imu
-        self._record_estimator(t, est, loop)
+        self._estimator_done = (t, est, loop)  # its row is written after the answer is out
         return est
 
     def _record_estimator(self, t: float, est: StateEstimate | None, loop: EstimatorLoop) -> None:
@@ -431,6 +432,9 @@ class AutopilotCore:
 
     def _bookkeeping(self, frame, guidance, output) -> None:
         t = self.sim_time
+        if self._estimator_done is not None:
+            self._record_estimator(*self._estimator_done)
+            self._estimator_done = None
         self._update_status(frame, guidance, output)
         self._record_controller(t, guidance, output)
         self._send_telemetry(t)

@@ -8,7 +8,8 @@ machine is shared: the best run is the least disturbed). Also measured, in the s
 hot path is written as it is: the covariance prediction ``F P F^T`` as the compiled kernel (what
 the filter runs with numba), as numpy products (its fallback) and as a block-sparse plain-float
 version written out below; the whole filter per control step on the kernels and on the numpy
-products; and the nominal propagation in plain floats against small numpy arrays. Last lines: ``name: value unit``.
+products; and the nominal propagation in plain floats against small numpy arrays.
+Last lines: ``name: value unit``.
 """
 
 from __future__ import annotations
@@ -75,7 +76,9 @@ def make_inputs(profile: str, seconds: float) -> list:
     return frames
 
 
-def feed(profile: str, frames: list, compiled: bool = True) -> tuple[dict[str, float], dict[str, int], float, int]:
+def feed(
+    profile: str, frames: list, compiled: bool = True
+) -> tuple[dict[str, float], dict[str, int], float, int]:
     """Feed one run; per-kind total seconds and counts of the calls that fused or gated a sample
     (after the alignment; a sample skipped by a fusion-rate limit is not counted), and the
     total over the control steps. ``compiled=False``: the numpy products instead of the kernels."""
@@ -214,9 +217,8 @@ def main() -> None:
         for kind, us in best_kind.items():
             figures.setdefault(f"estimator_{kind}", us)
         if ErrorStateEkf()._kernels is not None:  # the same run on the numpy products
-            step_numpy = min(
-                (lambda r: r[2] / r[3] * 1e6)(feed(profile, frames, compiled=False)) for _ in range(args.repeat)
-            )
+            runs = [feed(profile, frames, compiled=False) for _ in range(args.repeat)]
+            step_numpy = min(step_total / steps * 1e6 for _, _, step_total, steps in runs)
             print(f"{profile}: per control step on the numpy products {step_numpy:.1f} us")
             figures[f"estimator_step_{profile}_numpy"] = step_numpy
 

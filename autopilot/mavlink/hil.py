@@ -120,7 +120,8 @@ def _fields(decoder: FastDecoder, raw: bytes, where: tuple) -> list:
 
 _SENSOR_FIELDS = _where(_SENSOR, "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag",
                         "pressure_alt", "fields_updated")  # fmt: skip
-_GPS_FIELDS = _where(_GPS, "fix_type", "lat", "lon", "alt", "eph", "epv", "vn", "ve", "vd", "satellites_visible")
+_GPS_FIELDS = _where(_GPS, "fix_type", "lat", "lon", "alt", "eph", "epv", "vn", "ve", "vd",
+                     "satellites_visible")  # fmt: skip
 _VISION_FIELDS = _where(_VISION, "x", "y", "z", "yaw", "covariance")
 
 
