@@ -401,7 +401,7 @@ class AutopilotCore:
             loop.start_in_air(t, samples, frame.state)  # the paper's experiments start in the air
             est = frame.state
         else:
-            est = loop.step(t, samples)
+            est = loop.predict(t, samples)  # the frame's aiding is fused after the answer
         self.commander.estimator_problem = loop.problem()
         self.status.estimator = loop.last_status
         self.status.imu = loop.last_imu
@@ -433,8 +433,10 @@ class AutopilotCore:
     def _bookkeeping(self, frame, guidance, output) -> None:
         t = self.sim_time
         if self._estimator_done is not None:
-            self._record_estimator(*self._estimator_done)
+            t_est, est, loop = self._estimator_done
             self._estimator_done = None
+            loop.fuse()  # this frame's aiding, now that the answer is out (see estimation/loop.py)
+            self._record_estimator(t_est, loop.estimate() if est is not None else None, loop)
         self._update_status(frame, guidance, output)
         self._record_controller(t, guidance, output)
         self._send_telemetry(t)

@@ -14,6 +14,15 @@ first frame (its truth) with the filter's initial uncertainties, used once, at f
 The pre-arm verdict (:meth:`EstimatorLoop.problem`) is the filter's ``converged`` / ``reason``,
 refreshed every :data:`STATUS_EVERY` frames (the full status costs ~40 us; the verdict changes
 on the scale of seconds).
+
+In the autopilot a frame is split in two around its answer: :meth:`EstimatorLoop.predict` (the
+IMU sample: the state the controllers fly on this frame) before the actuator controls go out,
+:meth:`EstimatorLoop.fuse` (the aiding that came with the frame) after, so the fusions (~60 us
+for a vision sample) are off the lockstep's critical path and their correction reaches the
+controllers one frame (2 ms at 500 Hz) later. The filter itself runs exactly as in :meth:`step`
+(predict, then that frame's measurements); only the controllers read it before the fusions.
+PX4's controllers see a correction later still: through EKF2's output predictor, over
+EKF2_TAU_POS / EKF2_TAU_VEL (0.25 s), from a filter running on a delayed time horizon.
 """
 
 from __future__ import annotations
@@ -38,16 +47,37 @@ class EstimatorLoop:
         self._frames = 0
         self.last_status: EstimatorStatus | None = None
         self.last_imu: ImuSample | None = None
+        self._pending: SensorSamples | None = None  # the aiding of the last predict(), not yet fused
 
     def step(self, t: float, samples: SensorSamples) -> StateEstimate | None:
         """Predict with this frame's IMU sample, fuse what arrived; the estimate, or None while
         the filter is not initialised."""
-        ekf = self.ekf
+        self.predict(t, samples)
+        self.fuse()
+        return self.estimate()
+
+    def predict(self, t: float, samples: SensorSamples) -> StateEstimate | None:
+        """Predict with this frame's IMU sample (after fusing a previous frame's aiding if
+        :meth:`fuse` was not called for it); the estimate now, before this frame's aiding, or
+        None while the filter is not initialised. The aiding waits for :meth:`fuse`."""
+        if self._pending is not None:
+            self.fuse()
         dt = self.dt if self._last_t is None else t - self._last_t
         self._last_t = t
         imu = ImuSample(t, dt, samples.angular_rate_rad_s, samples.specific_force_m_s2)
         self.last_imu = imu
-        ekf.predict(imu)
+        self.ekf.predict(imu)
+        self._pending = samples
+        if self.last_status is None:  # the first sample: a verdict from the start (aligning)
+            self.last_status = self.ekf.status()
+        return self.estimate()
+
+    def fuse(self) -> None:
+        """Fuse the aiding that came with the frame of the last :meth:`predict`, in PX4's order."""
+        samples, self._pending = self._pending, None
+        if samples is None:
+            return
+        ekf, t = self.ekf, self._last_t
         if samples.mag_gauss is not None:
             ekf.fuse_mag(MagSample(t, samples.mag_gauss))
         if samples.baro_height_m is not None:
@@ -59,6 +89,10 @@ class EstimatorLoop:
         self._frames += 1
         if self.last_status is None or self._frames % STATUS_EVERY == 0:
             self.last_status = ekf.status()
+
+    def estimate(self) -> StateEstimate | None:
+        """The filter's estimate now, or None while it is not initialised."""
+        ekf = self.ekf
         if not ekf.initialised:
             return None
         e = ekf.estimate()
@@ -69,6 +103,7 @@ class EstimatorLoop:
         alignment possible); see the module."""
         imu = ImuSample(t, self.dt, samples.angular_rate_rad_s, samples.specific_force_m_s2)
         self.last_imu = imu
+        self._pending = None
         self.ekf.reset_to(imu, pose.position_m, pose.velocity_m_s, quaternion_from_euler(*pose.euler_rad),
                           baro_height_m=samples.baro_height_m)  # fmt: skip
         self._last_t = t
