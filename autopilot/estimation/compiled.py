@@ -9,6 +9,8 @@ run), and most of it was numpy's call overhead on 19x19 and 19xm operands: a pre
 numpy calls, a fusion ~20. Here each is one call, and the arithmetic uses the structure the
 numpy products ignore:
 
+* :func:`predict_step` is a whole prediction (the nominal state in the filter's order of
+  operations, then the covariance): one call per IMU sample;
 * :func:`predict_covariance` is eq. 269, ``P <- F P F^T + Q``, with ``F = I + E`` and ``E``'s 27
   non-zero entries (``F_pv``, ``F_v theta``, ``F_v ba``, ``F_theta bg``; see :mod:`.eskf`):
   ``A = P + E P`` row by row, then ``A + A E^T`` column by column, the upper triangle mirrored;
@@ -25,6 +27,7 @@ offsets come in as arguments (the layout lives in :mod:`.eskf` alone).
 
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -96,6 +99,55 @@ def predict_covariance(P, A, ip, iv, ith, ibg, iba, dt, mdx, mdy, mdz,
         P[i, i] += q_diag[i]
         for j in range(i + 1, n):
             P[j, i] = P[i, j]
+
+
+@njit(cache=True, error_model="numpy")
+def predict_step(P, A, q_diag, ip, iv, ith, ibg, iba, dt, g,
+                 gx, gy, gz, fx, fy, fz, pgx, pgy, pgz, bgx, bgy, bgz, bax, bay, baz,
+                 qw, qx, qy, qz, a0x, a0y, a0z, px, py, pz, vx, vy, vz):  # fmt: skip
+    """One prediction, :meth:`~.eskf.ErrorStateEkf.predict` transcribed in the same order of
+    floating-point operations: the nominal state from the trapezoid of the previous and this IMU
+    sample (``g*``, ``f*``: this sample; ``pg*``: the previous rate; ``a0*``: the previous world
+    specific force), then :func:`predict_covariance`. Returns the new ``(q, p, v, a1)``, 13 floats
+    (``a1``: this sample's world specific force)."""
+    h = 0.5 * dt
+    rx = (gx + pgx) * h - bgx * dt
+    ry = (gy + pgy) * h - bgy * dt
+    rz = (gz + pgz) * h - bgz * dt
+    th2 = rx * rx + ry * ry + rz * rz
+    if th2 > 1e-12:
+        th = math.sqrt(th2)
+        s = math.sin(0.5 * th) / th
+        dw = math.cos(0.5 * th)
+    else:
+        s = 0.5 - th2 / 48.0
+        dw = 1.0 - th2 / 8.0
+    dx, dy, dz = rx * s, ry * s, rz * s
+    w = qw * dw - qx * dx - qy * dy - qz * dz
+    x = qw * dx + qx * dw + qy * dz - qz * dy
+    y = qw * dy - qx * dz + qy * dw + qz * dx
+    z = qw * dz + qx * dy - qy * dx + qz * dw
+    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w * n, x * n, y * n, z * n
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    r00, r01, r02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
+    r10, r11, r12 = 2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)
+    r20, r21, r22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
+    ux, uy, uz = fx - bax, fy - bay, fz - baz
+    a1x = r00 * ux + r01 * uy + r02 * uz
+    a1y = r10 * ux + r11 * uy + r12 * uz
+    a1z = r20 * ux + r21 * uy + r22 * uz
+    dt2 = dt * dt
+    npx = px + vx * dt + (a0x / 3.0 + a1x / 6.0) * dt2
+    npy = py + vy * dt + (a0y / 3.0 + a1y / 6.0) * dt2
+    npz = pz + vz * dt + (a0z / 3.0 + a1z / 6.0 - 0.5 * g) * dt2
+    mx, my, mz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
+    nvx, nvy, nvz = vx + mx * dt, vy + my * dt, vz + (mz - g) * dt
+    predict_covariance(P, A, ip, iv, ith, ibg, iba, dt, mx * dt, my * dt, mz * dt,
+                       r00, r01, r02, r10, r11, r12, r20, r21, r22, q_diag)  # fmt: skip
+    return (w, x, y, z, npx, npy, npz, nvx, nvy, nvz, a1x, a1y, a1z)
 
 
 @njit(cache=True, error_model="numpy")
@@ -209,5 +261,7 @@ def warm_up() -> None:
     H[0, 0] = H[1, 1] = 1.0
     predict_covariance(P, A, 0, 3, 6, 9, 12, 0.002, 0.0, 0.0, 0.0,
                        1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, np.zeros(n))  # fmt: skip
+    predict_step(P, A, np.zeros(n), 0, 3, 6, 9, 12, 0.002, 9.81, *(0.0,) * 15,
+                 1.0, 0.0, 0.0, 0.0, *(0.0,) * 9)  # fmt: skip
     prior_variances(P, H, np.empty(m))
     joseph_update(P, H, np.ones(m), np.zeros(m), np.empty(n))

@@ -357,6 +357,20 @@ class ErrorStateEkf:
         pgx, pgy, pgz = self._prev_rate
         bgx, bgy, bgz = self._bg
         bax, bay, baz = self._ba
+        if abs(dt - self._q_dt) > 1e-9:  # time stamps jitter in the last bits: keep the cache
+            self._set_process_noise(dt)
+        kernels = self._kernels
+        if kernels is not None:  # the same prediction, compiled (.compiled.predict_step)
+            out = kernels.predict_step(self.P, self._scratch, self._q_diag, IP, IV, ITH, IBG, IBA, dt,
+                                       self.gravity, gx, gy, gz, fx, fy, fz, pgx, pgy, pgz, bgx, bgy, bgz,
+                                       bax, bay, baz, *self._q, *self._prev_acc_world, *self._p,
+                                       *self._v)  # fmt: skip
+            self._q, self._p, self._v, self._prev_acc_world = out[0:4], out[4:7], out[7:10], out[10:13]
+            self._prev_rate = (gx, gy, gz)
+            self._prev_force = (fx, fy, fz)
+            self._rate = (gx - bgx, gy - bgy, gz - bgz)
+            self._finish_prediction(t, dt, self.P)
+            return
         # Attitude: the mean bias-corrected rate over the step (trapezoid), body-frame increment.
         h = 0.5 * dt
         rx = (gx + pgx) * h - bgx * dt
@@ -409,33 +423,28 @@ class ErrorStateEkf:
 
         # Covariance, eq. 269: P <- F P F^T + Q.
         mdx, mdy, mdz = mx * dt, my * dt, mz * dt
-        if abs(dt - self._q_dt) > 1e-9:  # time stamps jitter in the last bits: keep the cache
-            self._set_process_noise(dt)
-        if self._kernels is not None:
-            P = self.P
-            self._kernels.predict_covariance(P, self._scratch, IP, IV, ITH, IBG, IBA, dt, mdx, mdy, mdz,
-                                             r00, r01, r02, r10, r11, r12, r20, r21, r22,
-                                             self._q_diag)  # fmt: skip
-        else:
-            F = self._F
-            e00, e01, e02 = -r00 * dt, -r01 * dt, -r02 * dt
-            e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
-            e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
-            F.flat[self._f_idx] = (
-                dt, dt, dt,
-                mdz, -mdy, -mdz, mdx, mdy, -mdx,
-                e00, e01, e02, e10, e11, e12, e20, e21, e22,
-                e00, e01, e02, e10, e11, e12, e20, e21, e22,
-            )  # fmt: skip
-            P = F @ self.P @ F.T
-            P.flat[self._diag] += self._q_diag
+        F = self._F
+        e00, e01, e02 = -r00 * dt, -r01 * dt, -r02 * dt
+        e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
+        e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
+        F.flat[self._f_idx] = (
+            dt, dt, dt,
+            mdz, -mdy, -mdz, mdx, mdy, -mdx,
+            e00, e01, e02, e10, e11, e12, e20, e21, e22,
+            e00, e01, e02, e10, e11, e12, e20, e21, e22,
+        )  # fmt: skip
+        P = F @ self.P @ F.T
+        P.flat[self._diag] += self._q_diag
+        if not self.imu_samples & 255:
+            P = 0.5 * (P + P.T)  # round-off makes F P F^T drift from symmetry (the kernel mirrors)
+        self._finish_prediction(t, dt, P)
+
+    def _finish_prediction(self, t: float, dt: float, P: np.ndarray) -> None:
+        """The bad-vertical-acceleration noise, the covariance, the delayed-state buffer."""
         if t < self._bad_accel_until_s:
             P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
             P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
-        if self._kernels is None and not self.imu_samples & 255:
-            P = 0.5 * (P + P.T)  # round-off makes F P F^T drift from symmetry (the kernel mirrors)
         self.P = P
-
         # Delayed-state buffer.
         head = (self._head + 1) & RING_MASK
         self._ring[head] = (t, self._p, self._v, self._q, self._cp, self._cv, self._cq)

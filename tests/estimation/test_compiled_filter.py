@@ -36,3 +36,25 @@ def test_compiled_filter_equals_the_numpy_products(profile, monkeypatch):
     assert np.abs(compiled.pos_err - reference.pos_err).max() < 1e-9  # m
     assert np.abs(compiled.att_err - reference.att_err).max() < 1e-9  # rad
     assert np.allclose(compiled.sigma, reference.sigma, rtol=1e-8, atol=0.0)
+
+
+def test_one_compiled_prediction_is_the_python_nominal_step_bit_for_bit():
+    """predict_step transcribes the nominal propagation in the same order of operations: the same
+    floats; the covariance to round-off."""
+    from autopilot.estimation import ImuSample
+
+    from .test_eskf import filter_at
+
+    compiled, imu = filter_at()
+    reference, _ = filter_at()
+    reference._kernels = None
+    rng = np.random.default_rng(5)
+    for k in range(1, 200):
+        gyro, force = tuple(rng.normal(0.0, 0.5, 3)), tuple(rng.normal((0.0, 0.0, 9.8), 0.5))
+        step = ImuSample(k * 0.002, 0.002, gyro, force)
+        compiled.predict(step)
+        reference.predict(step)
+        assert (compiled._p, compiled._v, compiled._q) == (reference._p, reference._v, reference._q), k
+        assert compiled._prev_acc_world == reference._prev_acc_world and compiled._rate == reference._rate
+    assert np.allclose(compiled.P, reference.P, rtol=1e-12, atol=1e-18)
+    assert not np.array_equal(compiled.P, np.zeros_like(compiled.P))
