@@ -44,6 +44,9 @@ class SensorSamples(NamedTuple):
     baro_height_m: float | None  # pressure altitude (m AMSL); None unless fields_updated says fresh
     gps: GpsFix | None  # HIL_GPS, relative to home
     vision: VisionPose | None  # VISION_POSITION_ESTIMATE
+    # What the edge refused of this frame (a non-finite value: never fed to the filter), by name:
+    # "imu" (then the two IMU vectors are not to be used), "mag", "baro", "vision".
+    refused: tuple[str, ...] = ()
 
 
 class Frame(NamedTuple):
@@ -131,8 +134,17 @@ def _sensor_samples(parts: dict, home) -> SensorSamples | None:
         return None
     ax, ay, az, gx, gy, gz, mx, my, mz, alt, updated = _fields(_SENSOR, raw, _SENSOR_FIELDS)
     to_paper = frames.vector_from_ned
+    refused: list[str] = []
     mag = to_paper((mx, my, mz)) if updated & _MAG_BITS == _MAG_BITS else None
     baro = alt if updated & _BARO_ALT_BIT else None
+    if not math.isfinite(ax + ay + az + gx + gy + gz):
+        refused.append("imu")
+    if mag is not None and not math.isfinite(mx + my + mz):
+        mag = None
+        refused.append("mag")
+    if baro is not None and not math.isfinite(baro):
+        baro = None
+        refused.append("baro")
     gps = vision = None
     raw = parts.get(_ID_GPS)
     if raw is not None:
@@ -148,11 +160,15 @@ def _sensor_samples(parts: dict, home) -> SensorSamples | None:
     if raw is not None:
         n, e, d, yaw, cov = _fields(_VISION, raw, _VISION_FIELDS)
         pos_var, yaw_var = cov[0], cov[20]
-        vision = VisionPose(
-            0.0, to_paper((n, e, d)), frames.yaw_from_ned(yaw),
-            math.sqrt(pos_var) if pos_var > 0.0 else 0.0, math.sqrt(yaw_var) if yaw_var > 0.0 else 0.0,
-        )  # fmt: skip
-    return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision)
+        if math.isfinite(n + e + d + yaw):
+            vision = VisionPose(
+                0.0, to_paper((n, e, d)), frames.yaw_from_ned(yaw),
+                math.sqrt(pos_var) if pos_var > 0.0 else 0.0, math.sqrt(yaw_var) if yaw_var > 0.0 else 0.0,
+            )  # fmt: skip
+        else:
+            refused.append("vision")
+    return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision,
+                         tuple(refused))  # fmt: skip
 
 
 def _attitude(q_ned, rates_frd):

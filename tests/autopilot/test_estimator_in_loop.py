@@ -123,3 +123,46 @@ def test_a_gps_glitch_is_rejected_in_flight_and_the_vehicle_holds():
     after = np.array(truth_position(stack))
     assert np.linalg.norm(after - before) < 0.5  # a 10 m jump for 2 s does not move the vehicle
     assert stack.autopilot.estimator.ekf.sources["gps_pos"].rejected >= 10
+
+
+def test_non_finite_sensor_samples_are_refused_at_the_edge_and_the_flight_goes_on(monkeypatch):
+    """A broken simulator sends NaN in HIL_SENSOR's IMU for 5 frames, then NaN compass, baro and
+    vision samples for 0.1 s: none reaches the filter (each counted), the estimate stays finite
+    and the vehicle flies the helix on as if nothing happened (a NaN once in the filter is there
+    for good: before this test, the vehicle fell)."""
+    from quadcommon.config import load_scenario
+    from quadcommon.trajectories import trajectory_from_spec
+
+    sim = SimulatorSetup.load(scenario="helix", sensors="mocap")
+    ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller("intbs_nlhinf"), default_remotes=False,
+                        estimator="ekf", estimator_profile="mocap")  # fmt: skip
+    stack = Lockstep(sim, replace(ap, autostart=trajectory_from_spec(load_scenario("helix").trajectory)))
+    stack.run_for(2.0)
+    suite, nan = stack.sim.sensors, math.nan
+    imu, magnetometer, barometer = suite._imu, suite._magnetometer, suite._barometer
+    vision = suite._vision_pose
+    monkeypatch.setattr(suite, "_imu", lambda truth, t: imu(truth, t)._replace(
+        specific_force_m_s2=(nan, 0.0, 9.8)))  # fmt: skip
+    stack.run_for(0.01)  # 5 frames
+    monkeypatch.setattr(suite, "_imu", imu)
+    monkeypatch.setattr(suite, "_magnetometer", lambda truth, t: (nan, 0.2, 0.4))
+    monkeypatch.setattr(suite, "_barometer", lambda truth, t: barometer(truth, t)._replace(
+        pressure_altitude_m=math.inf))  # fmt: skip
+    monkeypatch.setattr(suite, "_vision_pose", lambda truth, t, rng: vision(truth, t, rng)._replace(
+        position_m=(nan, 0.0, 1.0)))  # fmt: skip
+    stack.run_for(0.1)
+    for name, original in (("_magnetometer", magnetometer), ("_barometer", barometer),
+                           ("_vision_pose", vision)):  # fmt: skip
+        monkeypatch.setattr(suite, name, original)
+    stack.run_for(2.0)
+    dropped = stack.autopilot.dropped
+    assert dropped["HIL frame with a non-finite imu sample"] == 5
+    assert dropped["HIL frame with a non-finite vision sample"] >= 9  # 100 Hz
+    assert dropped["HIL frame with a non-finite mag sample"] >= 1
+    assert dropped["HIL frame with a non-finite baro sample"] >= 1
+    rows, truth = np.asarray(stack.estimator_rows), np.asarray(stack.truth_rows)
+    assert len(rows) == len(truth) and np.isfinite(rows[:, 1:10]).all()
+    assert np.abs(rows[:, 1:4] - truth[:, 1:4]).max() < 0.01  # the estimate never left the truth
+    ref = np.asarray(stack.controller_rows)[-1, 1:4]
+    assert np.linalg.norm(truth[-1, 1:4] - ref) < 0.01  # still on the helix
+    assert not stack.autopilot.faults.counts
