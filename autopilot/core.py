@@ -397,15 +397,11 @@ class AutopilotCore:
         if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
             self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
             return None
-        if samples.refused:
-            for name in samples.refused:  # never fed to the filter
-                self.on_foreign_datagram(f"HIL frame with a non-finite {name} sample")
-            if "imu" in samples.refused:  # no prediction, no fusion this frame: fly on the filter
-                est = loop.estimate()  # as it is (the next sample integrates across the gap)
-                self.commander.estimator_problem = loop.problem()
-                self._estimator_done = (t, est, loop)
-                return est
-        if self.frames == 0 and frame.state.position_m[2] > IN_AIR_START_M:
+        for name in samples.refused:  # never fed to the filter
+            self.on_foreign_datagram(f"HIL frame with a non-finite {name} sample")
+        if "imu" in samples.refused:  # no prediction, no fusion this frame: fly on the filter as
+            est = loop.estimate()  # it is (the next sample integrates across the gap)
+        elif self.frames == 0 and frame.state.position_m[2] > IN_AIR_START_M:
             loop.start_in_air(t, samples, frame.state)  # the paper's experiments start in the air
             est = frame.state
         else:

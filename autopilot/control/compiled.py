@@ -154,6 +154,20 @@ def coriolis_matrix(
 
 
 @njit(cache=True, error_model="numpy")
+def _inertia_times(m11: float, m13: float, m22: float, m23: float, m33: float,
+                   x0: float, x1: float, x2: float) -> tuple[float, float, float]:  # fmt: skip
+    """``M(eta) x`` with :func:`inertia_matrix`'s entries (m12 = 0, written as the Python laws do)."""
+    return (m11 * x0 + 0.0 * x1 + m13 * x2, 0.0 * x0 + m22 * x1 + m23 * x2, m13 * x0 + m23 * x1 + m33 * x2)
+
+
+@njit(cache=True, error_model="numpy")
+def _times3(c00: float, c01: float, c02: float, c10: float, c11: float, c12: float, c20: float, c21: float,
+            c22: float, x0: float, x1: float, x2: float) -> tuple[float, float, float]:  # fmt: skip
+    """A 3x3 matrix (row-major entries) times ``x``."""
+    return (c00 * x0 + c01 * x1 + c02 * x2, c10 * x0 + c11 * x1 + c12 * x2, c20 * x0 + c21 * x1 + c22 * x2)
+
+
+@njit(cache=True, error_model="numpy")
 def body_torque_from_euler_torque(
     phi: float, theta: float, a: float, b: float, c: float
 ) -> tuple[float, float, float]:
@@ -283,23 +297,14 @@ def nlhinf(
     s0 = ed0 + k_d * e0 + k_p * integ[0]
     s1 = ed1 + k_d * e1 + k_p * integ[1]
     s2 = ed2 + k_d * e2 + k_p * integ[2]
-    m11, m13, m22, m23, m33 = inertia_matrix(Ixx, Iyy, Izz, euler[0], euler[1])
+    M = inertia_matrix(Ixx, Iyy, Izz, euler[0], euler[1])
     v0 = ref_acc[0] - k_d * ed0 - k_p * e0
     v1 = ref_acc[1] - k_d * ed1 - k_p * e1
     v2 = ref_acc[2] - k_d * ed2 - k_p * e2
-    Mv0 = m11 * v0 + 0.0 * v1 + m13 * v2
-    Mv1 = 0.0 * v0 + m22 * v1 + m23 * v2
-    Mv2 = m13 * v0 + m23 * v1 + m33 * v2
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = coriolis_matrix(
-        Ixx, Iyy, Izz, euler[0], euler[1], rates[0], rates[1], rates[2]
-    )
-    w0, w1, w2 = rates[0], rates[1], rates[2]
-    Ce0 = c00 * w0 + c01 * w1 + c02 * w2
-    Ce1 = c10 * w0 + c11 * w1 + c12 * w2
-    Ce2 = c20 * w0 + c21 * w1 + c22 * w2
-    Cs0 = c00 * s0 + c01 * s1 + c02 * s2
-    Cs1 = c10 * s0 + c11 * s1 + c12 * s2
-    Cs2 = c20 * s0 + c21 * s1 + c22 * s2
+    Mv0, Mv1, Mv2 = _inertia_times(*M, v0, v1, v2)
+    Cm = coriolis_matrix(Ixx, Iyy, Izz, euler[0], euler[1], rates[0], rates[1], rates[2])
+    Ce0, Ce1, Ce2 = _times3(*Cm, rates[0], rates[1], rates[2])
+    Cs0, Cs1, Cs2 = _times3(*Cm, s0, s1, s2)
     r_inv = C[C_RINV]
     _integrate_clamped(integ, e0, e1, e2, dt, C[C_RBOUND], C[C_RBOUND + 1], C[C_RBOUND + 2])
     return (
@@ -340,17 +345,9 @@ def intbs_attitude(
             acc2 = acc
     _integrate_clamped(integ, e0, e1, e2, dt, C[C_RBOUND], C[C_RBOUND + 1], C[C_RBOUND + 2])
     Ixx, Iyy, Izz = C[C_INERTIA], C[C_INERTIA + 1], C[C_INERTIA + 2]
-    m11, m13, m22, m23, m33 = inertia_matrix(Ixx, Iyy, Izz, euler[0], euler[1])
-    Ma0 = m11 * acc0 + 0.0 * acc1 + m13 * acc2
-    Ma1 = 0.0 * acc0 + m22 * acc1 + m23 * acc2
-    Ma2 = m13 * acc0 + m23 * acc1 + m33 * acc2
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = coriolis_matrix(
-        Ixx, Iyy, Izz, euler[0], euler[1], rates[0], rates[1], rates[2]
-    )
-    w0, w1, w2 = rates[0], rates[1], rates[2]
-    Ce0 = c00 * w0 + c01 * w1 + c02 * w2
-    Ce1 = c10 * w0 + c11 * w1 + c12 * w2
-    Ce2 = c20 * w0 + c21 * w1 + c22 * w2
+    Ma0, Ma1, Ma2 = _inertia_times(*inertia_matrix(Ixx, Iyy, Izz, euler[0], euler[1]), acc0, acc1, acc2)
+    Cm = coriolis_matrix(Ixx, Iyy, Izz, euler[0], euler[1], rates[0], rates[1], rates[2])
+    Ce0, Ce1, Ce2 = _times3(*Cm, rates[0], rates[1], rates[2])
     return (Ma0 + Ce0, Ma1 + Ce1, Ma2 + Ce2)
 
 

@@ -27,6 +27,7 @@ offsets come in as arguments (the layout lives in :mod:`.eskf` alone).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -35,67 +36,42 @@ from numba import njit
 
 
 @njit(cache=True, error_model="numpy")
+def _transition_rows(S, D, ip, iv, ith, ibg, iba, dt, mdx, mdy, mdz,
+                     e00, e01, e02, e10, e11, e12, e20, e21, e22):  # fmt: skip
+    """``D = F S`` for ``F = I + E`` (see :func:`predict_covariance`; ``e = -R dt``): only the
+    position, velocity and attitude rows of ``S`` change."""
+    rows, cols = S.shape
+    for j in range(cols):
+        for i in range(rows):
+            D[i, j] = S[i, j]
+        t0, t1, t2 = S[ith, j], S[ith + 1, j], S[ith + 2, j]
+        a0, a1, a2 = S[iba, j], S[iba + 1, j], S[iba + 2, j]
+        g0, g1, g2 = S[ibg, j], S[ibg + 1, j], S[ibg + 2, j]
+        D[ip, j] = S[ip, j] + dt * S[iv, j]
+        D[ip + 1, j] = S[ip + 1, j] + dt * S[iv + 1, j]
+        D[ip + 2, j] = S[ip + 2, j] + dt * S[iv + 2, j]
+        D[iv, j] = S[iv, j] + (mdz * t1 - mdy * t2) + (e00 * a0 + e01 * a1 + e02 * a2)
+        D[iv + 1, j] = S[iv + 1, j] + (mdx * t2 - mdz * t0) + (e10 * a0 + e11 * a1 + e12 * a2)
+        D[iv + 2, j] = S[iv + 2, j] + (mdy * t0 - mdx * t1) + (e20 * a0 + e21 * a1 + e22 * a2)
+        D[ith, j] = t0 + (e00 * g0 + e01 * g1 + e02 * g2)
+        D[ith + 1, j] = t1 + (e10 * g0 + e11 * g1 + e12 * g2)
+        D[ith + 2, j] = t2 + (e20 * g0 + e21 * g1 + e22 * g2)
+
+
+@njit(cache=True, error_model="numpy")
 def predict_covariance(P, A, ip, iv, ith, ibg, iba, dt, mdx, mdy, mdz,
                        r00, r01, r02, r10, r11, r12, r20, r21, r22, q_diag):  # fmt: skip
     """``P <- F P F^T + diag(q_diag)`` in place (``A``: an N x N scratch array).
 
     ``F = I + E``: ``E[p_i, v_i] = dt``; ``E[v, theta] = -[m dt]_x`` with ``m dt = (mdx, mdy,
-    mdz)`` the mean world specific force times dt; ``E[v, ba] = E[theta, bg] = -R dt``."""
+    mdz)`` the mean world specific force times dt; ``E[v, ba] = E[theta, bg] = -R dt``. Computed
+    as ``A = F P``, then ``F A^T`` (= ``F P F^T`` for the symmetric P), its upper triangle
+    mirrored."""
     n = P.shape[0]
-    e00, e01, e02 = -r00 * dt, -r01 * dt, -r02 * dt
-    e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
-    e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
-    # A = F P: only the position, velocity and attitude rows change.
-    for j in range(n):
-        for i in range(n):
-            A[i, j] = P[i, j]
-        t0, t1, t2 = P[ith, j], P[ith + 1, j], P[ith + 2, j]
-        a0, a1, a2 = P[iba, j], P[iba + 1, j], P[iba + 2, j]
-        g0, g1, g2 = P[ibg, j], P[ibg + 1, j], P[ibg + 2, j]
-        A[ip, j] = P[ip, j] + dt * P[iv, j]
-        A[ip + 1, j] = P[ip + 1, j] + dt * P[iv + 1, j]
-        A[ip + 2, j] = P[ip + 2, j] + dt * P[iv + 2, j]
-        A[iv, j] = P[iv, j] + (mdz * t1 - mdy * t2) + (e00 * a0 + e01 * a1 + e02 * a2)
-        A[iv + 1, j] = P[iv + 1, j] + (mdx * t2 - mdz * t0) + (e10 * a0 + e11 * a1 + e12 * a2)
-        A[iv + 2, j] = P[iv + 2, j] + (mdy * t0 - mdx * t1) + (e20 * a0 + e21 * a1 + e22 * a2)
-        A[ith, j] = t0 + (e00 * g0 + e01 * g1 + e02 * g2)
-        A[ith + 1, j] = t1 + (e10 * g0 + e11 * g1 + e12 * g2)
-        A[ith + 2, j] = t2 + (e20 * g0 + e21 * g1 + e22 * g2)
-    # P = A F^T: the same combinations of A's columns; the upper triangle, then mirrored.
+    e = (-r00 * dt, -r01 * dt, -r02 * dt, -r10 * dt, -r11 * dt, -r12 * dt, -r20 * dt, -r21 * dt, -r22 * dt)
+    _transition_rows(P, A, ip, iv, ith, ibg, iba, dt, mdx, mdy, mdz, *e)
+    _transition_rows(A.T, P, ip, iv, ith, ibg, iba, dt, mdx, mdy, mdz, *e)
     for i in range(n):
-        t0, t1, t2 = A[i, ith], A[i, ith + 1], A[i, ith + 2]
-        a0, a1, a2 = A[i, iba], A[i, iba + 1], A[i, iba + 2]
-        g0, g1, g2 = A[i, ibg], A[i, ibg + 1], A[i, ibg + 2]
-        for j in range(i, n):
-            P[i, j] = A[i, j]
-        # Column j of the result for the changed columns (only those with j >= i are kept).
-        c_p0 = A[i, ip] + dt * A[i, iv]
-        c_p1 = A[i, ip + 1] + dt * A[i, iv + 1]
-        c_p2 = A[i, ip + 2] + dt * A[i, iv + 2]
-        c_v0 = A[i, iv] + (mdz * t1 - mdy * t2) + (e00 * a0 + e01 * a1 + e02 * a2)
-        c_v1 = A[i, iv + 1] + (mdx * t2 - mdz * t0) + (e10 * a0 + e11 * a1 + e12 * a2)
-        c_v2 = A[i, iv + 2] + (mdy * t0 - mdx * t1) + (e20 * a0 + e21 * a1 + e22 * a2)
-        c_t0 = t0 + (e00 * g0 + e01 * g1 + e02 * g2)
-        c_t1 = t1 + (e10 * g0 + e11 * g1 + e12 * g2)
-        c_t2 = t2 + (e20 * g0 + e21 * g1 + e22 * g2)
-        if ip >= i:
-            P[i, ip] = c_p0
-        if ip + 1 >= i:
-            P[i, ip + 1] = c_p1
-        if ip + 2 >= i:
-            P[i, ip + 2] = c_p2
-        if iv >= i:
-            P[i, iv] = c_v0
-        if iv + 1 >= i:
-            P[i, iv + 1] = c_v1
-        if iv + 2 >= i:
-            P[i, iv + 2] = c_v2
-        if ith >= i:
-            P[i, ith] = c_t0
-        if ith + 1 >= i:
-            P[i, ith + 1] = c_t1
-        if ith + 2 >= i:
-            P[i, ith + 2] = c_t2
         P[i, i] += q_diag[i]
         for j in range(i + 1, n):
             P[j, i] = P[i, j]
@@ -253,8 +229,10 @@ def enabled() -> bool:
     return os.environ.get("QUADSITL_PURE_PYTHON", "") != "1"
 
 
+@functools.cache
 def warm_up() -> None:
-    """Load (or compile) the kernels now, on scratch arrays, not at the first sample in flight."""
+    """Load (or compile) the kernels now, on scratch arrays, not at the first sample in flight
+    (once per process)."""
     n, m = 19, 2
     P, A = np.eye(n), np.empty((n, n))
     H = np.zeros((m, n))

@@ -1296,9 +1296,6 @@ class _Window:
         return self.total / len(self.samples)
 
 
-_KERNELS_LOADED: list = []
-
-
 def _compiled_kernels():
     """:mod:`.compiled` (its kernels loaded once per process), or None: numba is not installed
     (the ``campaign`` extra) or ``QUADSITL_PURE_PYTHON=1``."""
@@ -1308,9 +1305,7 @@ def _compiled_kernels():
         return None
     if not compiled.enabled():
         return None
-    if not _KERNELS_LOADED:
-        compiled.warm_up()
-        _KERNELS_LOADED.append(compiled)
+    compiled.warm_up()
     return compiled
 
 
