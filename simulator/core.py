@@ -41,7 +41,6 @@ from quadcommon.config import (
 from quadcommon.wire import new_parser, restart_parser
 
 from .dynamics.plant import make_plant
-from .environment import dryden
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
 from .environment.gust_upload import handle_gust_request
 from .mavlink.hil import ActuatorAnswer, ActuatorDecoder, HilFrameEncoder
@@ -94,7 +93,6 @@ class SimulatorCore:
     def __init__(self, setup: SimulatorSetup, log: Callable[[str], None] = lambda text: None) -> None:
         self.setup = setup
         self.log = log
-        dryden.preload()  # before the first frame, not at a gust upload in flight
         rates = setup.sitl.rates
         self.control_hz = rates.control_hz
         self.physics_hz = rates.physics_hz
@@ -178,10 +176,7 @@ class SimulatorCore:
         else:
             plant.set_actuator_controls(self._controls(answer))
         t, dt, evaluate = self.t, self.dt_physics, self.schedule.evaluate
-        for j in range(self.substeps):
-            force, torque, wind = evaluate(t + j * dt)
-            plant.set_disturbance(force, torque, wind)
-            plant.step()
+        plant.advance([evaluate(t + j * dt) for j in range(self.substeps)])
         self.k += 1
 
     def _controls(self, answer: ActuatorAnswer) -> Controls:

@@ -263,6 +263,69 @@ def truth_of_O(s: np.ndarray, P: np.ndarray) -> tuple:
     return pos, vel, euler, R22
 
 
+@njit(cache=True, error_model="numpy")
+def truth_kernel(s: np.ndarray, ds: np.ndarray, P: np.ndarray, u: np.ndarray) -> tuple:
+    """``Plant.truth``'s kinematics of O, its operations in the same order: position, velocity,
+    acceleration (world), ZYX Euler angles, their rates, the specific force (body), on-ground
+    flag (1.0 / 0.0); one derivative evaluation with the inputs ``u`` held (``ds`` its scratch)."""
+    derivative(s, ds, P, u)
+    R00, R01, R02, R10, R11, R12, R20, R21, R22 = rotation_from_quaternion(s[6], s[7], s[8], s[9])
+    rx, ry, rz = P[P_COM], P[P_COM + 1], P[P_COM + 2]
+    p, qr, r = s[10], s[11], s[12]
+    dp, dq, dr = ds[10], ds[11], ds[12]
+    cx, cy, cz = qr * rz - r * ry, r * rx - p * rz, p * ry - qr * rx
+    ax_ = dq * rz - dr * ry + (qr * cz - r * cy)
+    ay_ = dr * rx - dp * rz + (r * cx - p * cz)
+    az_ = dp * ry - dq * rx + (p * cy - qr * cx)
+    px = s[0] - (R00 * rx + R01 * ry + R02 * rz)
+    py = s[1] - (R10 * rx + R11 * ry + R12 * rz)
+    pz = s[2] - (R20 * rx + R21 * ry + R22 * rz)
+    vx = s[3] - (R00 * cx + R01 * cy + R02 * cz)
+    vy = s[4] - (R10 * cx + R11 * cy + R12 * cz)
+    vz = s[5] - (R20 * cx + R21 * cy + R22 * cz)
+    on_ground = P[P_GROUND] == 1.0 and pz <= 1e-6 and abs(s[5]) < 1e-6
+    if on_ground:
+        accx, accy, accz = 0.0, 0.0, 0.0
+    else:
+        accx = ds[3] - (R00 * ax_ + R01 * ay_ + R02 * az_)
+        accy = ds[4] - (R10 * ax_ + R11 * ay_ + R12 * az_)
+        accz = ds[5] - (R20 * ax_ + R21 * ay_ + R22 * az_)
+    fx, fy, fz = accx, accy, accz + P[P_GRAVITY]
+    phi, theta, psi = euler_from_rotation(R00, R10, R20, R21, R22)
+    sf, cf = math.sin(phi), math.cos(phi)
+    ct, tt = math.cos(theta), math.tan(theta)
+    return (
+        (px, py, pz), (vx, vy, vz), (accx, accy, accz), (phi, theta, psi),
+        (p + sf * tt * qr + cf * tt * r, cf * qr - sf * r, (sf * qr + cf * r) / ct),
+        (R00 * fx + R10 * fy + R20 * fz, R01 * fx + R11 * fy + R21 * fz, R02 * fx + R12 * fy + R22 * fz),
+        on_ground,
+    )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def advance_kernel(
+    s: np.ndarray,
+    k1: np.ndarray,
+    k2: np.ndarray,
+    k3: np.ndarray,
+    k4: np.ndarray,
+    tmp: np.ndarray,
+    P: np.ndarray,
+    U: np.ndarray,
+    h: float,
+    reach: float,
+) -> tuple:
+    """``Plant.advance``: one RK4 step per row of ``U`` (the inputs held over that step), the
+    ground contact resolved after each as ``Plant.step`` does, then the truth read-out at the end
+    (:func:`truth_kernel`, inputs of the last step held): a lockstep frame's plant in one call."""
+    ground = P[P_GROUND] != 0.0
+    for j in range(U.shape[0]):
+        rk4_step(s, k1, k2, k3, k4, tmp, P, U[j], h)
+        if ground and s[2] < reach:  # O may be at the ground only then
+            ground_contact(s, P)
+    return truth_kernel(s, k1, P, U[U.shape[0] - 1])
+
+
 def plant_array(plant) -> np.ndarray:
     """The parameter array ``P`` of a :class:`~.plant.Plant` (the true vehicle)."""
     P = np.zeros(P_SIZE)
@@ -300,6 +363,9 @@ class CompiledStep:
         scratch = np.array(plant.state, dtype=float)
         rk4_step(scratch, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, self.u, plant.dt)
         ground_contact(scratch, self.P)
+        self._rows = np.zeros((1, U_SIZE))
+        advance_kernel(scratch, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, self._rows, plant.dt,
+                       self.reach)  # fmt: skip
 
     def step(self, plant) -> None:
         s = self.s
@@ -315,3 +381,24 @@ class CompiledStep:
         if plant.ground_contact and s[2] < self.reach:  # O may be at the ground only then
             ground_contact(s, self.P)
         plant.state = s.tolist()
+
+    def advance(self, plant, disturbances) -> tuple:
+        """``Plant.advance``: the steps and the truth read-out in one :func:`advance_kernel` call
+        (the state and all held inputs in one conversion each); the state list written back."""
+        s = self.s
+        s[:] = plant.state
+        if plant.rotor_mode:
+            held = (0.0, 0.0, 0.0, 0.0, *plant.rotor_cmd)
+        else:
+            held = (plant.thrust_cmd, *plant.torque_cmd, 0.0, 0.0, 0.0, 0.0)
+        flat: list[float] = []
+        for force, torque, wind in disturbances:
+            flat += (*held, *force, *torque, *wind)
+        rows = self._rows
+        if rows.shape[0] != len(disturbances):
+            rows = self._rows = np.zeros((len(disturbances), U_SIZE))
+        rows.reshape(-1)[:] = flat
+        truth = advance_kernel(s, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, rows, plant.dt,
+                               self.reach)  # fmt: skip
+        plant.state = s.tolist()
+        return truth

@@ -51,7 +51,9 @@ class NominalPlant:
     set_wrench = Plant.set_wrench
     set_actuator_controls = Plant.set_actuator_controls
     set_disturbance = Plant.set_disturbance
+    advance = Plant.advance  # step by step: no compiled path here
     rotor_mode = False
+    _compiled = None
 
     def set_rotor_commands(self, speeds_rad_s: tuple[float, float, float, float]) -> None:
         raise ValueError("the nominal plant has no rotors")

@@ -10,7 +10,6 @@ the autopilot knows; the filter subtracts its EKF2_*_DELAY), and returns errors 
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -57,8 +56,7 @@ def _helix_flight(duration_s: float) -> tuple[TruthState, tuple[TruthState, ...]
     t0 = plant.truth()
     g = vehicle.nominal.gravity_m_s2
     R = rotation_from_quaternion(*t0.quaternion)
-    rest = dataclasses.replace(
-        t0,
+    rest = t0._replace(
         velocity_m_s=(0.0, 0.0, 0.0),
         acceleration_m_s2=(0.0, 0.0, 0.0),
         body_rates_rad_s=(0.0, 0.0, 0.0),

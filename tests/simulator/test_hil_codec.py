@@ -88,8 +88,7 @@ def test_fields_updated_and_fix_type_follow_the_sensor_rates_and_outages():
 
 
 def test_wild_state_is_clamped_not_crashing():
-    truth = replace(
-        make_truth(),
+    truth = make_truth()._replace(
         velocity_m_s=(1e4, -1e4, 5e3),
         specific_force_body_m_s2=(1e5, 0.0, -1e5),
     )
