@@ -39,8 +39,8 @@ band-limited white noise held over one step dt with variance pi / dt: samples
 e_k sqrt(pi / dt), e_k ~ N(0, 1). The test suite checks the resulting sigma_u, sigma_v, sigma_w
 and the correlation times.
 
-Discretisation (once, at construction): each H is converted to state space
-(``scipy.signal.tf2ss``) and discretised with a zero-order hold at the step dt (exact for noise
+Discretisation (once, at construction): each H is converted to state space (:func:`tf2ss`,
+scipy's realisation) and discretised with a zero-order hold at the step dt (exact for noise
 held over the step): the exponential of the augmented matrix [[A, B], [0, 0]] dt, computed here
 by scaling and squaring of its Taylor series in numpy. ``scipy.signal.cont2discrete`` computes
 the same (the tests compare both), but its ``scipy.linalg.expm`` took 8 ms per 3x3 call on the
@@ -48,10 +48,14 @@ project's 2-vCPU machines (scipy's bundled OpenBLAS threading; numpy's small mat
 which would stall the simulator's loop for ~40 ms when an upload installs a profile.
 
 Generation: the noise is drawn in blocks of ``BLOCK_SIZE`` samples
-(``numpy.random.Generator(PCG64(seed))``, rows u, v, w) and filtered with
-``scipy.signal.lfilter``, carrying the filter state from block to block; the world-frame wind of
+(``numpy.random.Generator(PCG64(seed))``, rows u, v, w) and filtered (:func:`lfilter`, scipy's
+transposed direct form II), carrying the filter state from block to block; the world-frame wind of
 a whole block is precomputed, so one step costs a list lookup. The stationary warm start draws
 the state from the solution of the discrete Lyapunov equation P = Ad P Ad^T + Bd Bd^T.
+
+No scipy here (numpy only, each function tested against scipy's): ``scipy.signal`` and
+``scipy.linalg`` cost ~1 s of CPU to import, which every simulator start paid so that a Dryden
+upload in flight would not stall the lockstep loop on the import.
 
 Axes: u (longitudinal) along the horizontal mean wind when there is one (|mean_xy| >= 0.1 m/s),
 world x otherwise (a hover in still air: the turbulence is swept along x); v lateral, to the
@@ -210,27 +214,98 @@ def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarr
     return E[:n, :n], E[:n, n:]
 
 
-def preload() -> None:
-    """Import the scipy parts the filters use, now: a process that may build a Dryden wind while it
-    flies (a gust upload) must not stall its lockstep loop ~1 s on the import (the autopilot would
-    see a simulator stall). Not at this module's import: a command line refused at its arguments
-    starts in a fraction of that."""
-    from scipy import linalg, signal  # noqa: F401
+def tf2ss(num: list[float], den: list[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A single-input single-output transfer function ``num / den`` (highest power first, proper) in
+    state space, controller canonical form: ``scipy.signal.tf2ss``'s realisation (tested against it).
+
+    Here rather than scipy's: importing ``scipy.signal`` costs ~0.8 s of CPU, which every simulator
+    start paid so that a Dryden upload in flight would not stall its loop on the import."""
+    den_a = np.asarray(den, dtype=float)
+    num_a = np.asarray(num, dtype=float)
+    if den_a.ndim != 1 or den_a.size == 0 or den_a[0] == 0.0 or num_a.size > den_a.size:
+        raise ValueError(f"transfer function {num}/{den}: need a proper one with den[0] != 0")
+    num_a = np.concatenate([np.zeros(den_a.size - num_a.size), num_a]) / den_a[0]
+    den_a = den_a / den_a[0]
+    n = den_a.size - 1
+    D = np.array([[num_a[0]]])
+    if n == 0:
+        return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), D
+    A = np.zeros((n, n))
+    A[0, :] = -den_a[1:]
+    A[1:, :-1] = np.eye(n - 1)
+    B = np.zeros((n, 1))
+    B[0, 0] = 1.0
+    C = (num_a[1:] - num_a[0] * den_a[1:]).reshape(1, n)
+    return A, B, C, D
+
+
+def ss2tf(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(num, den)`` of a single-input single-output state-space system, as ``scipy.signal.ss2tf``
+    computes them: ``den`` the characteristic polynomial of A, ``num = poly(A - B C) + (D - 1) den``."""
+    den = np.poly(A)
+    num = np.poly(A - B @ C) + (D.item() - 1.0) * den
+    return num, den
+
+
+def lfilter(b: np.ndarray, a: np.ndarray, x: np.ndarray, zi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``scipy.signal.lfilter(b, a, x, zi=zi)`` for one channel (transposed direct form II, ``a[0]``
+    normalised, ``b`` and ``a`` of one length): the output and the final state. In plain floats:
+    the Dryden filters are of order 1 and 2, and a block of 1024 samples costs well under a ms."""
+    a0 = float(a[0])
+    bs = [float(v) / a0 for v in b]
+    as_ = [float(v) / a0 for v in a]
+    if len(bs) != len(as_) or len(zi) != len(bs) - 1:
+        raise ValueError("lfilter: b, a of one length and zi of that length - 1")
+    z = [float(v) for v in zi]
+    out = []
+    append = out.append
+    if len(z) == 1:
+        b0, b1, a1 = bs[0], bs[1], as_[1]
+        z0 = z[0]
+        for xk in x.tolist():
+            y = z0 + b0 * xk
+            z0 = b1 * xk - a1 * y
+            append(y)
+        z = [z0]
+    elif len(z) == 2:
+        b0, b1, b2, a1, a2 = bs[0], bs[1], bs[2], as_[1], as_[2]
+        z0, z1 = z
+        for xk in x.tolist():
+            y = z0 + b0 * xk
+            z0 = z1 + b1 * xk - a1 * y
+            z1 = b2 * xk - a2 * y
+            append(y)
+        z = [z0, z1]
+    else:  # any order (not a Dryden filter)
+        n = len(z)
+        for xk in x.tolist():
+            y = z[0] + bs[0] * xk
+            for i in range(n - 1):
+                z[i] = z[i + 1] + bs[i + 1] * xk - as_[i + 1] * y
+            z[n - 1] = bs[n] * xk - as_[n] * y
+            append(y)
+    return np.array(out), np.array(z)
+
+
+def solve_discrete_lyapunov(A: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """P with ``P = A P A^T + Q`` (A stable), by the Kronecker form ``(I - A (x) A) vec P = vec Q``:
+    exact for the 1x1 and 2x2 systems of the Dryden filters (``scipy.linalg``'s would cost its
+    import, ~0.3 s)."""
+    n = A.shape[0]
+    vec = np.linalg.solve(np.eye(n * n) - np.kron(A, A), Q.reshape(n * n))
+    return vec.reshape(n, n)
 
 
 class _DiscreteFilter:
     """One shaping filter discretised (ZOH) for unit-normal samples; gain sqrt(pi/dt) folded in."""
 
     def __init__(self, num: list[float], den: list[float], dt_s: float) -> None:
-        from scipy import signal  # here, not at the top: importing scipy.signal costs ~1 s of
-        # every simulator start, and only Dryden turbulence needs it
-
-        A, B, C, D = signal.tf2ss(num, den)
+        A, B, C, D = tf2ss(num, den)
         Ad, Bd = zoh(A, B, dt_s)
         Cd, Dd = C, D
         # Band-limited white noise of one-sided PSD 1 (intensity pi) held over dt: variance pi/dt.
         Bd = Bd * math.sqrt(math.pi / dt_s)
-        b, a = signal.ss2tf(Ad, Bd, Cd, Dd)
+        b, a = ss2tf(Ad, Bd, Cd, Dd)
         self.Ad, self.Bd, self.Cd = Ad, Bd, Cd
         self.b = np.asarray(b, dtype=float).ravel()
         self.a = np.asarray(a, dtype=float).ravel()
@@ -239,9 +314,7 @@ class _DiscreteFilter:
 
     def stationary_covariance(self) -> np.ndarray:
         """State covariance P = Ad P Ad^T + Bd Bd^T of the filter driven by unit-normal samples."""
-        from scipy import linalg
-
-        return linalg.solve_discrete_lyapunov(self.Ad, self.Bd @ self.Bd.T)
+        return solve_discrete_lyapunov(self.Ad, self.Bd @ self.Bd.T)
 
     def set_state(self, x0: np.ndarray) -> None:
         """Start ``lfilter`` from state-space state ``x0``: match the first ``order`` outputs.
@@ -260,9 +333,7 @@ class _DiscreteFilter:
         self.zi = np.array([sum(a[j] * y[i - j] for j in range(i + 1)) for i in range(self.order)])
 
     def run(self, noise: np.ndarray) -> np.ndarray:
-        from scipy import signal  # imported already by __init__: a dictionary lookup
-
-        out, self.zi = signal.lfilter(self.b, self.a, noise, zi=self.zi)
+        out, self.zi = lfilter(self.b, self.a, noise, self.zi)
         return out
 
 
@@ -271,8 +342,8 @@ class DrydenWind:
 
     ``dt_s`` is the step the simulator evaluates the disturbance at (the physics step, 1 ms by
     default): each step gets a fresh sample. ``block_size`` trades the cost of one block (drawn
-    and filtered with numpy/scipy, ~0.1 ms for 1024 samples) against its latency spike; the
-    per-step cost is a list lookup either way.
+    with numpy and filtered in plain floats, ~1 ms for 1024 samples) against its latency spike;
+    the per-step cost is a list lookup either way.
     """
 
     def __init__(self, params: DrydenTurbulence, dt_s: float = 1e-3, block_size: int = BLOCK_SIZE) -> None:

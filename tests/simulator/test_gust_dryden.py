@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from scipy import signal
 
+from simulator.environment import dryden
 from simulator.environment.dryden import (
     FT,
     DrydenTurbulence,
@@ -230,3 +233,46 @@ def test_step_too_coarse_for_the_time_constants_is_refused() -> None:
         check_step(params, 0.01)
     with pytest.raises(ValueError, match="too coarse"):
         DrydenWind(params, 0.01)
+
+
+def test_the_numpy_filter_design_and_filtering_are_scipys() -> None:
+    """dryden.tf2ss / ss2tf / lfilter / solve_discrete_lyapunov (numpy only, so that a simulator
+    start does not import scipy.signal) against scipy's, on the Dryden filters and beyond."""
+    from scipy import linalg
+
+    rng = np.random.default_rng(5)
+    shapes = dryden.shaping_filters(DrydenTurbulence(7.7, 2.5, seed=0).scales(), 15.0)
+    for num, den in [*shapes, ([1.0, 2.0, 3.0], [2.0, 0.5, 0.3, 0.1])]:
+        mine, ref = dryden.tf2ss(num, den), signal.tf2ss(num, den)
+        for a, b in zip(mine, ref, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-15, atol=0.0)
+        Ad, Bd = dryden.zoh(mine[0], mine[1], DT)
+        b_mine, a_mine = dryden.ss2tf(Ad, Bd, mine[2], mine[3])
+        b_ref, a_ref = signal.ss2tf(Ad, Bd, mine[2], mine[3])
+        np.testing.assert_allclose(b_mine, b_ref.ravel(), rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(a_mine, a_ref, rtol=1e-13, atol=1e-15)
+        x, zi = rng.standard_normal(3000), rng.standard_normal(len(a_ref) - 1)
+        y_mine, z_mine = dryden.lfilter(b_ref.ravel(), a_ref, x, zi)
+        y_ref, z_ref = signal.lfilter(b_ref.ravel(), a_ref, x, zi=zi)
+        np.testing.assert_allclose(y_mine, y_ref, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(z_mine, z_ref, rtol=1e-9, atol=1e-12)
+        Q = Bd @ Bd.T
+        reference = linalg.solve_discrete_lyapunov(Ad, Q)
+        np.testing.assert_allclose(dryden.solve_discrete_lyapunov(Ad, Q), reference, rtol=1e-9, atol=1e-15)
+
+
+def test_a_simulator_starts_without_importing_scipy_signal() -> None:
+    """What the filters cost every start before (~0.8 s of CPU): scipy.signal stays out of a
+    simulator core, Dryden turbulence included. (scipy.linalg comes with numba, for its BLAS.)"""
+    code = (
+        "import sys\n"
+        "from simulator.core import SimulatorCore, SimulatorSetup\n"
+        "from simulator.environment.gust_profile import load_gust_profile\n"
+        "from dataclasses import replace\n"
+        "s = SimulatorSetup.load(scenario='hover')\n"
+        "core = SimulatorCore(replace(s, gusts=load_gust_profile('dryden_light')))\n"
+        "core.begin_frame(); core.end_frame(None)\n"
+        "print(sorted(m for m in sys.modules if m.startswith('scipy.signal')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
