@@ -150,6 +150,12 @@ def run(args: argparse.Namespace) -> int:
             raise LinkError("mission download differs from the upload: " + "; ".join(problems[:3]))
         say(link, f"mission uploaded and verified: {len(items)} items")
         recorder = _start_recorder(args.instance, out)
+        # Read what queued while the recorder started (at 20x real time, seconds of simulated
+        # telemetry) before arming: else the arm's ACK waits behind it, the mode follows only that
+        # much later, and the vehicle may disarm first (COM_DISARM_PRFLT, 10 s of simulation).
+        for _ in range(100):
+            if link.poll() == 0:
+                break
         link.arm()
         link.set_mode("AUTO.MISSION")
         start = _mission_start_time(session, args.instance, 30.0)
