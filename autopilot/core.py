@@ -167,7 +167,8 @@ class AutopilotCore:
         self.params.on_change(self._on_param_change)
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
-        self.status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
+        self._status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
+        self._status_of: tuple | None = None  # (frame, guidance, output) not yet in _status
         self.hil_parser = new_parser()
         self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
@@ -384,7 +385,7 @@ class AutopilotCore:
         else:
             self.estimator = None
             self.commander.estimator_problem = None
-        self.status.estimator = None
+        self._status.estimator = None
         self.log(f"flying on {'the EKF estimate' if want else 'the simulator truth'} (EKF2_EN {int(want)})")
 
     def _estimate(self, t: float, frame) -> StateEstimate | None:
@@ -407,8 +408,8 @@ class AutopilotCore:
         else:
             est = loop.predict(t, samples)  # the frame's aiding is fused after the answer
         self.commander.estimator_problem = loop.problem()
-        self.status.estimator = loop.last_status
-        self.status.imu = loop.last_imu
+        self._status.estimator = loop.last_status
+        self._status.imu = loop.last_imu
         self._estimator_done = (t, est, loop)  # its row is written after the answer is out
         return est
 
@@ -441,14 +442,24 @@ class AutopilotCore:
             self._estimator_done = None
             loop.fuse()  # this frame's aiding, now that the answer is out (see estimation/loop.py)
             self._record_estimator(t_est, loop.estimate() if est is not None else None, loop)
-        self._update_status(frame, guidance, output)
+        self._status_of = (frame, guidance, output)  # brought into the status when it is read
         self._record_controller(t, guidance, output)
         self._send_telemetry(t)
         self.missions.update(t)  # MISSION_CURRENT, MISSION_ITEM_REACHED
         self.send_events()
 
+    @property
+    def status(self) -> telemetry.VehicleStatus:
+        """What telemetry reports: the latest frame and the commander now. Refreshed when read
+        (a stream due, a requested message, a heartbeat), not at every frame: most frames send
+        nothing."""
+        if self._status_of is not None:
+            self._update_status(*self._status_of)
+            self._status_of = None
+        return self._status
+
     def _update_status(self, frame, guidance, output) -> None:
-        s, c = self.status, self.commander
+        s, c = self._status, self.commander
         s.time_usec = frame.time_usec
         s.state = frame.state
         s.armed = c.armed
@@ -459,7 +470,8 @@ class AutopilotCore:
         s.reference = guidance.reference
         s.controls = self._controls
         s.armable = not c.armed and not c.in_air() and c.estimator_problem is None
-        s.geofence_enabled = self.params["GF_MAX_HOR_DIST"] > 0.0 or self.params["GF_MAX_VER_DIST"] > 0.0
+        values = self.params.values
+        s.geofence_enabled = values["GF_MAX_HOR_DIST"] > 0.0 or values["GF_MAX_VER_DIST"] > 0.0
         s.geofence_breached = c.failsafes.fence_breached
         if output is not None:
             s.euler_ref = output.euler_ref_rad
@@ -491,7 +503,7 @@ class AutopilotCore:
                 continue
             for msg_id in link.streams.due(t):
                 if msg_id not in cache:
-                    msg = telemetry.build(msg_id, self.status)
+                    msg = telemetry.build(msg_id, self.status)  # (refreshes the status)
                     cache[msg_id] = self.encoder.pack(msg) if msg is not None else None
                 data = cache[msg_id]
                 if data is not None:

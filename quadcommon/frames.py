@@ -14,6 +14,7 @@ Scaled integers (mm, cdeg, 1e7 deg) are the concern of the MAVLink modules, not 
 
 from __future__ import annotations
 
+import functools
 import math
 
 Vector3 = tuple[float, float, float]
@@ -76,6 +77,14 @@ def wrap_pi(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+@functools.lru_cache(maxsize=64)
+def _home_terms(lat0_deg: float, lon0_deg: float) -> tuple[float, float, float]:
+    """``(lon0 rad, sin lat0, cos lat0)`` of a home: the same for every point of a flight (the
+    simulator converts its state at every frame)."""
+    lat0_r = math.radians(lat0_deg)
+    return math.radians(lon0_deg), math.sin(lat0_r), math.cos(lat0_r)
+
+
 def ned_to_geodetic(
     north_m: float, east_m: float, down_m: float, home: tuple[float, float, float]
 ) -> tuple[float, float, float]:
@@ -85,14 +94,13 @@ def ned_to_geodetic(
     millimetres over the few kilometres a SITL flies.
     """
     lat0, lon0, alt0 = home
-    lat0_r, lon0_r = math.radians(lat0), math.radians(lon0)
     x_rad = north_m / EARTH_RADIUS_M
     y_rad = east_m / EARTH_RADIUS_M
     c = math.hypot(x_rad, y_rad)
     if c == 0.0:
         return (lat0, lon0, alt0 - down_m)
     sin_c, cos_c = math.sin(c), math.cos(c)
-    sin_lat0, cos_lat0 = math.sin(lat0_r), math.cos(lat0_r)
+    lon0_r, sin_lat0, cos_lat0 = _home_terms(lat0, lon0)
     lat = math.asin(cos_c * sin_lat0 + (x_rad * sin_c * cos_lat0) / c)
     lon = lon0_r + math.atan2(y_rad * sin_c, c * cos_lat0 * cos_c - x_rad * sin_lat0 * sin_c)
     return (math.degrees(lat), math.degrees(lon), alt0 - down_m)

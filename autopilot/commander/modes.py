@@ -34,10 +34,10 @@ class FlightMode(Enum):
     AUTO_LAND = (MAIN_AUTO, SUB_LAND)
     OFFBOARD = (MAIN_OFFBOARD, 0)
 
-    @property
-    def custom_mode(self) -> int:
-        main, sub = self.value
-        return (main << 16) | (sub << 24)
+    def __init__(self, main: int, sub: int) -> None:
+        # A plain attribute, computed once: telemetry and the controller rows read it every frame
+        # (an Enum property costs ~0.2 us a read).
+        self.custom_mode: int = (main << 16) | (sub << 24)
 
     @property
     def px4_name(self) -> str:

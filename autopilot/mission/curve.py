@@ -158,9 +158,14 @@ class _Pieces:
             [[float(v) for v in coefficients[:, i, ch]] for ch in range(coefficients.shape[2])]
             for i in range(coefficients.shape[1])
         ]
+        # The same coefficients by power: one (c_x, c_y, c_z, c_yaw) tuple per power, so that one
+        # pass of Horner's scheme serves the four channels (a loop per channel costs twice as much).
+        self._by_power = [list(zip(*piece, strict=True)) for piece in self.pieces]
+        if any(len(piece) != 4 for piece in self.pieces):
+            raise ValueError("a timed curve has four channels (x, y, z, yaw)")
         self._last = 0
 
-    def evaluate(self, tau: float) -> tuple[list[float], list[float], list[float]]:
+    def evaluate(self, tau: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """(p, p', p'') per channel at ``tau`` (within the breakpoints)."""
         breaks, i, last = self.breaks, self._last, len(self.pieces) - 1
         while i < last and tau >= breaks[i + 1]:
@@ -169,17 +174,25 @@ class _Pieces:
             i -= 1
         self._last = i
         dx = tau - breaks[i]
-        p, v, a = [], [], []
-        for coefficients in self.pieces[i]:
-            value, first, half_second = coefficients[0], 0.0, 0.0
-            for c in coefficients[1:]:
-                half_second = half_second * dx + first
-                first = first * dx + value
-                value = value * dx + c
-            p.append(value)
-            v.append(first)
-            a.append(2.0 * half_second)
-        return p, v, a
+        powers = self._by_power[i]
+        # Per channel: value, first, half_second = c[0], 0, 0; then for each further c:
+        # half_second = half_second dx + first; first = first dx + value; value = value dx + c.
+        p0, p1, p2, p3 = powers[0]
+        v0 = v1 = v2 = v3 = h0 = h1 = h2 = h3 = 0.0
+        for c0, c1, c2, c3 in powers[1:]:
+            h0 = h0 * dx + v0
+            v0 = v0 * dx + p0
+            p0 = p0 * dx + c0
+            h1 = h1 * dx + v1
+            v1 = v1 * dx + p1
+            p1 = p1 * dx + c1
+            h2 = h2 * dx + v2
+            v2 = v2 * dx + p2
+            p2 = p2 * dx + c2
+            h3 = h3 * dx + v3
+            v3 = v3 * dx + p3
+            p3 = p3 * dx + c3
+        return (p0, p1, p2, p3), (v0, v1, v2, v3), (2.0 * h0, 2.0 * h1, 2.0 * h2, 2.0 * h3)
 
 
 def _wrap(angle: float) -> float:
