@@ -65,8 +65,17 @@ def rotation_from_quaternion(w: float, x: float, y: float, z: float) -> Matrix3:
 
 
 def euler_from_quaternion(w: float, x: float, y: float, z: float) -> Vector3:
-    """ZYX Euler angles ``(phi, theta, psi)`` of a unit quaternion."""
-    return euler_from_rotation(rotation_from_quaternion(w, x, y, z))
+    """ZYX Euler angles ``(phi, theta, psi)`` of a unit quaternion: ``euler_from_rotation`` of
+    ``rotation_from_quaternion``, the five entries it reads computed alone (the same operations,
+    so the same bits; it runs at every frame)."""
+    xx, yy, zz = x * x, y * y, z * z
+    r00 = 1.0 - 2.0 * (yy + zz)
+    r10 = 2.0 * (x * y + w * z)
+    sin_theta = -(2.0 * (x * z - w * y))
+    sin_theta = 1.0 if sin_theta > 1.0 else (-1.0 if sin_theta < -1.0 else sin_theta)
+    r21 = 2.0 * (y * z + w * x)
+    r22 = 1.0 - 2.0 * (xx + yy)
+    return (math.atan2(r21, r22), math.asin(sin_theta), math.atan2(r10, r00))
 
 
 def euler_rate_matrix(phi: float, theta: float) -> Matrix3:

@@ -303,21 +303,13 @@ def truth_kernel(s: np.ndarray, ds: np.ndarray, P: np.ndarray, u: np.ndarray) ->
 
 
 @njit(cache=True, error_model="numpy")
-def advance_kernel(
-    s: np.ndarray,
-    k1: np.ndarray,
-    k2: np.ndarray,
-    k3: np.ndarray,
-    k4: np.ndarray,
-    tmp: np.ndarray,
-    P: np.ndarray,
-    U: np.ndarray,
-    h: float,
-    reach: float,
-) -> tuple:
+def advance_kernel(work: np.ndarray, P: np.ndarray, U: np.ndarray, h: float, reach: float) -> tuple:
     """``Plant.advance``: one RK4 step per row of ``U`` (the inputs held over that step), the
     ground contact resolved after each as ``Plant.step`` does, then the truth read-out at the end
-    (:func:`truth_kernel`, inputs of the last step held): a lockstep frame's plant in one call."""
+    (:func:`truth_kernel`, inputs of the last step held): a lockstep frame's plant in one call.
+    ``work``'s rows: the state (in and out), then the RK4 scratch k1..k4 and tmp (one array: each
+    array argument costs its own unboxing per call)."""
+    s, k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4], work[5]
     ground = P[P_GROUND] != 0.0
     for j in range(U.shape[0]):
         rk4_step(s, k1, k2, k3, k4, tmp, P, U[j], h)
@@ -364,8 +356,10 @@ class CompiledStep:
         rk4_step(scratch, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, self.u, plant.dt)
         ground_contact(scratch, self.P)
         self._rows = np.zeros((1, U_SIZE))
-        advance_kernel(scratch, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, self._rows, plant.dt,
-                       self.reach)  # fmt: skip
+        self._rows_flat = self._rows.reshape(-1)
+        self._work = np.zeros((6, n))  # advance_kernel's state and scratch
+        self._work[0] = scratch
+        advance_kernel(self._work, self.P, self._rows, plant.dt, self.reach)
 
     def step(self, plant) -> None:
         s = self.s
@@ -385,7 +379,7 @@ class CompiledStep:
     def advance(self, plant, disturbances) -> tuple:
         """``Plant.advance``: the steps and the truth read-out in one :func:`advance_kernel` call
         (the state and all held inputs in one conversion each); the state list written back."""
-        s = self.s
+        s = self._work[0]
         s[:] = plant.state
         if plant.rotor_mode:
             held = (0.0, 0.0, 0.0, 0.0, *plant.rotor_cmd)
@@ -394,11 +388,10 @@ class CompiledStep:
         flat: list[float] = []
         for force, torque, wind in disturbances:
             flat += (*held, *force, *torque, *wind)
-        rows = self._rows
-        if rows.shape[0] != len(disturbances):
-            rows = self._rows = np.zeros((len(disturbances), U_SIZE))
-        rows.reshape(-1)[:] = flat
-        truth = advance_kernel(s, self.k1, self.k2, self.k3, self.k4, self.tmp, self.P, rows, plant.dt,
-                               self.reach)  # fmt: skip
+        if self._rows.shape[0] != len(disturbances):
+            self._rows = np.zeros((len(disturbances), U_SIZE))
+            self._rows_flat = self._rows.reshape(-1)  # a view: filled in one conversion
+        self._rows_flat[:] = flat
+        truth = advance_kernel(self._work, self.P, self._rows, plant.dt, self.reach)
         plant.state = s.tolist()
         return truth

@@ -35,7 +35,6 @@ from collections import deque
 from typing import NamedTuple
 
 from quadcommon.frames import wrap_pi
-from quadcommon.rigid_body import rotation_from_quaternion
 
 from ..dynamics.plant import TruthState
 from .config import SensorConfig, SensorFault
@@ -307,13 +306,17 @@ class SensorSuite:
         return (v[0] + bias[0], v[1] + bias[1], v[2] + bias[2])
 
     def _magnetometer(self, truth: TruthState, t: float) -> Vector3:
-        # Earth field into the body: R^T b_world (R maps body to world).
-        R = rotation_from_quaternion(*truth.quaternion)
+        # Earth field into the body: R^T b_world (R maps body to world; rotation_from_quaternion's
+        # entries written out, the same operations: the magnetometer may sample every frame).
+        w, x, y, z = truth.quaternion
+        xx, yy, zz = x * x, y * y, z * z
+        xy, xz, yz = x * y, x * z, y * z
+        wx, wy, wz = w * x, w * y, w * z
         bx, by, bz = self._field
         field_body = (
-            R[0][0] * bx + R[1][0] * by + R[2][0] * bz,
-            R[0][1] * bx + R[1][1] * by + R[2][1] * bz,
-            R[0][2] * bx + R[1][2] * by + R[2][2] * bz,
+            (1.0 - 2.0 * (yy + zz)) * bx + 2.0 * (xy + wz) * by + 2.0 * (xz - wy) * bz,
+            2.0 * (xy - wz) * bx + (1.0 - 2.0 * (xx + zz)) * by + 2.0 * (yz + wx) * bz,
+            2.0 * (xz + wy) * bx + 2.0 * (yz - wx) * by + (1.0 - 2.0 * (xx + yy)) * bz,
         )
         bias = self.mag_bias
         if self.faults:
