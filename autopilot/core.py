@@ -497,11 +497,14 @@ class AutopilotCore:
         )
 
     def _send_telemetry(self, t: float) -> None:
-        cache: dict[int, bytes | None] = {}
+        cache: dict[int, bytes | None] = {}  # one message built per frame for every link
         for link in self.links:
             if not link.peers:
                 continue
-            for msg_id in link.streams.due(t):
+            due = link.streams.due(t)
+            if not due:  # most frames
+                continue
+            for msg_id in due:
                 if msg_id not in cache:
                     msg = telemetry.build(msg_id, self.status)  # (refreshes the status)
                     cache[msg_id] = self.encoder.pack(msg) if msg is not None else None
@@ -512,6 +515,8 @@ class AutopilotCore:
     # -- ground stations ------------------------------------------------------------------------
     def send_events(self) -> None:
         """The commander's queued events as STATUSTEXT."""
+        if not self.commander.events:  # (every frame asks)
+            return
         for severity, text in self.commander.drain_events():
             self.statustext(severity, text)
 

@@ -124,7 +124,12 @@ class FastEncoder:
     the ``template`` message given at construction (or zero).
     """
 
-    def __init__(self, message_class, system_id: int, component_id: int, template=None) -> None:
+    def __init__(
+        self, message_class, system_id: int, component_id: int, template=None,
+        constant_from: int | None = None,
+    ) -> None:  # fmt: skip
+        """``constant_from``: the flat values from this index on never change (ODOMETRY's 42
+        covariance entries and frame ids): packed once, only the values before it at each frame."""
         self.msg_id = message_class.id
         self.packer = message_class.unpacker
         self.slices = _flat_slices(message_class)
@@ -138,12 +143,38 @@ class FastEncoder:
             else:
                 flat.extend(value[:length])
         self.values = flat
+        self._prefix: struct.Struct | None = None
+        self._tail = b""
+        if constant_from is not None:
+            # The wire format's codes, one per flat value ("<" then e.g. "Q16f42f..." expanded).
+            codes = [c for n, c in _codes(self.packer.format)]
+            if len(codes) != len(flat) or not 0 < constant_from <= len(flat):
+                raise ValueError(f"constant_from {constant_from} outside the {len(flat)} values")
+            self._prefix = struct.Struct("<" + "".join(codes[:constant_from]))
+            self._tail = struct.pack("<" + "".join(codes[constant_from:]), *flat[constant_from:])
+            self.values = flat[:constant_from]
 
     def frame(self, seq: int) -> bytes:
         """The MAVLink 2 frame of :attr:`values` with sequence number ``seq`` (0-255)."""
-        payload = self.packer.pack(*self.values).rstrip(b"\0") or b"\0"
+        if self._prefix is None:
+            payload = self.packer.pack(*self.values).rstrip(b"\0") or b"\0"
+        else:
+            payload = (self._prefix.pack(*self.values) + self._tail).rstrip(b"\0") or b"\0"
         system_id, component_id, id_low, id_high = self._ids
         body = _HEADER_V2.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, id_low, id_high)
         body += payload
         crc = _crc(body[1:] + self._crc_extra, 0xFFFF)
         return body + bytes((crc & 0xFF, crc >> 8))
+
+
+def _codes(fmt: str) -> list[tuple[int, str]]:
+    """``struct`` format ``"<Q3f2B"`` -> one (index, code) per value: Q, f, f, f, B, B."""
+    out: list[tuple[int, str]] = []
+    count = ""
+    for char in fmt.lstrip("<>=!@"):
+        if char.isdigit():
+            count += char
+            continue
+        out.extend((len(out) + k, char) for k in range(int(count or "1")))
+        count = ""
+    return out

@@ -362,6 +362,10 @@ class MissionExecutor:
         notices, self._notices = self._notices, []
         return notices
 
+    def has_reached(self) -> bool:
+        """Items reached and not yet drained (checked every frame; draining allocates)."""
+        return bool(self._reached)
+
     def drain_reached(self) -> list[int]:
         """Items reached since the last call, in order (each reported once)."""
         reached, self._reached = self._reached, []

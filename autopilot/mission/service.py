@@ -167,7 +167,7 @@ class MissionService:
         """Send MISSION_ITEM_REACHED for newly reached items, and MISSION_CURRENT when it changed
         or is due (every second of ``t``, the simulation time)."""
         mission = self.commander.mission
-        if mission is not None:
+        if mission is not None and mission.has_reached():
             for seq in mission.drain_reached():
                 self._broadcast(m.MAVLink_mission_item_reached_message(seq))
         key = self._current_key()

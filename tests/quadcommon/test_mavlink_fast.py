@@ -105,3 +105,29 @@ def test_fast_encoder_frames_exactly_what_pymavlink_packs(seed):
         expected = bytes(msg.pack(mav))
         fast = FastEncoder(type(msg), 7, 51, template=msg)
         assert fast.frame(mav.seq) == expected, msg.get_type()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_fast_encoder_with_a_constant_tail_frames_what_pymavlink_packs(seed):
+    """ODOMETRY as the simulator frames it: the covariances and frame ids packed once
+    (``constant_from``), the pose and twist refilled per frame; the bytes are pymavlink's."""
+    from quadcommon.mavlink_fast import FastEncoder, _flat_slices
+
+    rng = random.Random(seed)
+    template = random_odometry(rng)
+    covariance_at = _flat_slices(m.MAVLink_odometry_message)["pose_covariance"].start
+    fast = FastEncoder(m.MAVLink_odometry_message, 7, 51, template=template, constant_from=covariance_at)
+    assert len(fast.values) == covariance_at
+    for _ in range(20):
+        msg = random_odometry(rng)
+        msg.pose_covariance, msg.velocity_covariance = template.pose_covariance, template.velocity_covariance
+        msg.frame_id, msg.child_frame_id = template.frame_id, template.child_frame_id
+        msg.reset_counter, msg.estimator_type, msg.quality = (
+            template.reset_counter, template.estimator_type, template.quality
+        )
+        fast.values[:] = FastEncoder(m.MAVLink_odometry_message, 7, 51, template=msg).values[:covariance_at]
+        mav = m.MAVLink(None, srcSystem=7, srcComponent=51)
+        mav.seq = rng.randrange(256)
+        assert fast.frame(mav.seq) == bytes(msg.pack(mav))
+    with pytest.raises(ValueError, match="constant_from"):
+        FastEncoder(m.MAVLink_odometry_message, 7, 51, template=template, constant_from=10_000)
