@@ -47,6 +47,10 @@ PROCESS_MODULES = {
 # live SITL (instances 65-69). Without namespaces they all run in the process session.
 COMPAT_MODULES = {"tests/compat/", "tests/view/test_browser_sitl.py", "tests/view/test_live_sitl.py"}
 NOT_COMPAT: set[str] = set()
+# Of the compat tests, MAVSDK's (marker ``mavsdk``) run in a fourth session, in a namespace of its
+# own too: they wait on real clients paced to the wall clock (~100 s of the ~220 s the compat session
+# took alone, measured), so two namespaces side by side halve that wait for a little more CPU.
+MAVSDK_MODULES = {"tests/compat/test_mavsdk.py", "tests/compat/test_mavsdk3.py"}
 
 
 def _listed(nodeid: str, entries: set[str]) -> bool:
@@ -65,4 +69,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.processes)
             if _listed(item.nodeid, COMPAT_MODULES) and not _listed(item.nodeid, NOT_COMPAT):
                 item.add_marker(pytest.mark.compat)
+                if _listed(item.nodeid, MAVSDK_MODULES):
+                    item.add_marker(pytest.mark.mavsdk)
 

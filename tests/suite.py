@@ -1,21 +1,24 @@
-"""``make test``: the suite as three pytest sessions side by side.
+"""``make test``: the suite as four pytest sessions side by side.
 
 * ``-m "not processes"``: in-process and in simulation time, the large majority (CPU-bound);
 * ``-m "processes and not compat"``: the tests that start processes or bind the SITL's fixed
   ports, one after another (see ``tests/conftest.py``);
-* ``-m compat``: MAVSDK and MAVProxy against real vehicles, signing with real clients and the view
-  on a live SITL (``tests/conftest.py``), one after another, in a network namespace of its own
-  (``unshare -n`` with only loopback up: its port block overlaps other instances' ports, e.g.
-  14640 is instance 60's API link). Where no namespace can be made, these run in the processes
-  session instead.
+* ``-m "compat and not mavsdk"``: MAVProxy against real vehicles, several vehicles, signing with
+  real clients and the view on a live SITL (``tests/conftest.py``), one after another, in a network
+  namespace of its own (``unshare -n`` with only loopback up: its port block overlaps other
+  instances' ports, e.g. 14640 is instance 60's API link);
+* ``-m "compat and mavsdk"``: MAVSDK 4 and MAVSDK-Python 3, in a second namespace (the two compat
+  sessions use the same ports; each namespace has its own loopback). Where no namespace can be
+  made, the compat tests run in the processes session instead.
 
 The lockstep processes the tests start do not busy-wait for their peer (``QUADSITL_LOCKSTEP_SPIN_S=0``,
-README "Speed"): three sessions share 2 cores here, and a spinning process takes the core its peer or
+README "Speed"): the sessions share 2 cores here, and a spinning process takes the core its peer or
 another session needs (measured: the suite 447 s -> 319 s wall, 13.8 -> 9.7 CPU minutes). The
 benchmarks measure the SITL with its default spin.
 
 Each session's output goes to ``out/tests/<session>.log`` and is printed when it ends; the exit code
-is non-zero when any session fails (or is interrupted), and the wall time of each is reported.
+is non-zero when any session fails (or is interrupted), and the wall time and CPU time (the session
+with every process it waited for) of each are reported.
 Extra arguments go to every session (``python -m tests.suite -x -k fuzz``).
 """
 
@@ -44,7 +47,8 @@ def sessions() -> list[tuple[str, str, list[str]]]:
     """(name, marker selection, command prefix) of each pytest session."""
     if namespace_available():
         return [("in-process", "not processes", []), ("processes", "processes and not compat", []),
-                ("compat", "compat", NAMESPACE)]  # fmt: skip
+                ("compat", "compat and not mavsdk", NAMESPACE),
+                ("mavsdk", "compat and mavsdk", NAMESPACE)]  # fmt: skip
     return [("in-process", "not processes", []), ("processes", "processes", [])]
 
 
@@ -64,14 +68,18 @@ def main(argv: list[str]) -> int:
         while pending:
             for run in list(pending):
                 name, log, process, cmd = run
-                if process.poll() is None:
+                pid, status, usage = os.wait4(process.pid, os.WNOHANG)
+                if pid == 0:
                     continue
+                process.returncode = os.waitstatus_to_exitcode(status)
                 pending.remove(run)
                 log.close()
                 codes[name] = process.returncode
                 elapsed = time.monotonic() - started
                 args = " ".join(cmd[cmd.index("pytest") + 1 :])
-                print(f"==== {name} tests ({args}): exit {process.returncode} after {elapsed:.0f} s")
+                cpu = usage.ru_utime + usage.ru_stime  # the session and every process it started
+                print(f"==== {name} tests ({args}): exit {process.returncode} after {elapsed:.0f} s, "
+                      f"{cpu:.0f} CPU-s")  # fmt: skip
                 print((LOGS / f"{name}.log").read_text(), flush=True)
             time.sleep(0.2)
     except KeyboardInterrupt:

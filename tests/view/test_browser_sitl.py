@@ -105,7 +105,8 @@ def flight(tmp_path_factory):
         [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(INSTANCE), "--speed", SPEED,
          "--view", "--view-port", str(port)],
     )  # fmt: skip
-    seen: dict = {"port": port, "labels": [], "rates": [], "sample_rates": [], "shots": {}, "log": None}
+    seen: dict = {"port": port, "labels": [], "rates": [], "sample_rates": [], "shots": {}, "log": None,
+                  "offboard_looks": []}  # fmt: skip
     recorder = fly = None
     try:
         banner = up.wait_line("live view (browser)", 60.0)
@@ -143,25 +144,29 @@ def flight(tmp_path_factory):
                 now = time.monotonic()
                 if label == "OFFBOARD":
                     # First a quiet window (nothing else started, no screenshot) to measure the
-                    # update rate; then the screenshots and the gust.
+                    # update rate; then the screenshots and the gust. The window lasts until one
+                    # rate was measured at least: on a loaded machine one look of this loop (two
+                    # round trips to the page) can take longer than the window.
                     offboard_since = offboard_since or now
+                    seen["offboard_looks"].append(round(now - offboard_since, 2))
+                    quiet = not seen["sample_rates"] or now - offboard_since <= QUIET_S + 0.05
                     if last_samples is None:
                         last_samples, last_wall = state["samples"][0], now
                         first_samples, first_wall = last_samples, now
-                    elif now - offboard_since <= QUIET_S + 0.05 and now - last_wall >= 1.0:
+                    elif quiet and now - last_wall >= 1.0:
                         seen["sample_rates"].append((state["samples"][0] - last_samples) / (now - last_wall))
                         seen["rates"].append(state["rateHz"])
                         last_samples, last_wall = state["samples"][0], now
                         seen["mean_sample_rate"] = (last_samples - first_samples) / (now - first_wall)
                     for name, after in (("square_1", QUIET_S), ("square_2", QUIET_S + 2.0)):
-                        if name not in seen["shots"] and now - offboard_since >= after:
+                        if name not in seen["shots"] and not quiet and now - offboard_since >= after:
                             seen["shots"][name] = {
                                 "scene": page.locator("#scene canvas").screenshot(),
                                 "plots": page.locator("#plots").screenshot(),
                                 "samples": state["samples"][0],
                             }
                             page.screenshot(path=str(ARTIFACTS / f"live_{name}.png"))
-                    if not gust_sent and now - offboard_since >= QUIET_S + 0.3:
+                    if not gust_sent and not quiet and now - offboard_since >= QUIET_S + 0.3:
                         gust_sent = True
                         subprocess.run(
                             [sys.executable, "gcs_scripts/upload_gusts.py", str(gust_file), "--instance",
@@ -197,7 +202,8 @@ def flight(tmp_path_factory):
 
 def test_page_connects_and_updates_arrive_at_10_hz_or_more_while_flying(flight):
     assert flight["before"]["connected"] and flight["before"]["kind"] == "live"
-    assert flight["sample_rates"], "no OFFBOARD phase was observed"
+    looks = flight["offboard_looks"]  # wall seconds into OFFBOARD of each look of the test's loop
+    assert flight["sample_rates"], f"no rate measured in OFFBOARD: {flight['labels']}, looks at {looks}"
     print("sample rates", flight["sample_rates"], "frame rates", flight["rates"], flight["mean_sample_rate"])
     # New samples of the flying vehicle per wall second (each second, and over the window), and
     # WebSocket frames per second as the page counts them.
