@@ -160,6 +160,14 @@ class _Schedule:
     def push(self, t_valid: float, reading) -> None:
         self.pending.append((t_valid + self.latency, reading))
 
+    def deliver(self, t_valid: float, reading):
+        """:meth:`push` then :meth:`pop` at ``t_valid``: without latency and with nothing pending
+        (the ideal profile, every frame) the reading itself, without the queue."""
+        if self.latency == 0.0 and not self.pending:
+            return reading
+        self.push(t_valid, reading)
+        return self.pop(t_valid)
+
     def pop(self, t: float):
         """The newest reading whose delivery time has come (older ones in the same frame are dropped)."""
         out = None
@@ -255,18 +263,24 @@ class SensorSuite:
         imu = self._imu(truth, t_s)
 
         mag = baro = gps = vision = None
-        if self._mag_s.due(t_s):
-            self._mag_s.push(t_s, MagReading(t_s, self._magnetometer(truth, t_s)))
-        mag = self._mag_s.pop(t_s)
-        if self._baro_s.due(t_s):
-            self._baro_s.push(t_s, self._barometer(truth, t_s))
-        baro = self._baro_s.pop(t_s)
-        if self._gps.enabled and self._gps_s.due(t_s):
-            self._gps_s.push(t_s, self._gps_fix(truth, t_s))
-        gps = self._gps_s.pop(t_s)
-        if self._vision.enabled and self._vision_s.due(t_s) and not self._fault_active("vision_outage", t_s):
-            self._vision_s.push(t_s, self._vision_pose(truth, t_s, rng))
-        vision = self._vision_s.pop(t_s)
+        mag_s, baro_s = self._mag_s, self._baro_s
+        if mag_s.due(t_s):
+            mag = mag_s.deliver(t_s, MagReading(t_s, self._magnetometer(truth, t_s)))
+        elif mag_s.pending:
+            mag = mag_s.pop(t_s)
+        if baro_s.due(t_s):
+            baro = baro_s.deliver(t_s, self._barometer(truth, t_s))
+        elif baro_s.pending:
+            baro = baro_s.pop(t_s)
+        gps_s, vision_s = self._gps_s, self._vision_s
+        if self._gps.enabled and gps_s.due(t_s):
+            gps = gps_s.deliver(t_s, self._gps_fix(truth, t_s))
+        elif gps_s.pending:
+            gps = gps_s.pop(t_s)
+        if self._vision.enabled and vision_s.due(t_s) and not self._fault_active("vision_outage", t_s):
+            vision = vision_s.deliver(t_s, self._vision_pose(truth, t_s, rng))
+        elif vision_s.pending:
+            vision = vision_s.pop(t_s)
 
         if mag is not None:
             self._held_mag = mag.field_gauss
