@@ -62,7 +62,6 @@ from .mavlink.params import ParamService
 from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
-from .mission import curve
 from .mission.service import MissionService
 from .params.definitions import (
     consistency_problems,
@@ -125,7 +124,6 @@ class AutopilotCore:
     def __init__(self, setup: AutopilotSetup, log: Callable[[str], None] = lambda text: None) -> None:
         self.setup = setup
         self.log = log
-        curve.preload()  # before the first frame, not at a timed-mission upload in flight
         sitl = setup.sitl
         self.system_id = wire.system_id(setup.instance)
         self.dt = 1.0 / sitl.rates.control_hz

@@ -22,6 +22,7 @@ from ..commander.modes import FlightMode
 from ..mavlink.codec import Encoder
 from ..mavlink.codec import mavlink as m
 from ..mavlink.commands import CommandDispatcher, CommandRequest
+from . import curve
 from .executor import MissionExecutor, MissionState, check_mission
 from .plans import Geofence, rally_points
 from .protocol import MissionProtocol, Output
@@ -85,6 +86,8 @@ class MissionService:
 
     # -- messages -------------------------------------------------------------------------------------
     def on_message(self, msg, link, address) -> None:
+        if msg.get_msgId() == m.MAVLINK_MSG_ID_MISSION_COUNT and msg.count > 0:
+            curve.preload()  # its items may be a timed curve: scipy.interpolate, in the background
         self.protocol.max_items = int(self.commander.params["MIS_ITEMS_MAX"])
         out = self.protocol.handle(msg, self.clock(), self._current_seq())
         if self.protocol.busy:
