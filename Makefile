@@ -65,3 +65,4 @@ bench: $(STAMP)
 
 clean:
 	rm -rf out .pytest_cache .ruff_cache
+	find . -name __pycache__ -not -path './.venv*' -prune -exec rm -rf {} +
