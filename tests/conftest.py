@@ -1,12 +1,13 @@
-"""Suite-wide wiring: the ``processes`` marker.
+"""Suite-wide wiring: the ``processes``, ``compat`` and ``second_namespace`` markers.
 
 The tests that start processes or bind the SITL's fixed ports (:data:`PROCESS_MODULES`) get the
-marker ``processes``. ``make test`` runs the suite as two pytest sessions side by side
-(:mod:`tests.suite`): ``-m processes`` (these, one after another: their instances were chosen not
-to collide with each other one at a time, and a lockstep pair of processes wants a core of its
-own) and ``-m "not processes"`` (in-process, in simulation time: the large majority). A plain
-``pytest`` runs everything in order.
-"""
+marker ``processes``; of those, the ones in :data:`COMPAT_MODULES` also ``compat``, and of those,
+the ones in :data:`SECOND_NAMESPACE` also ``second_namespace``. ``make test`` runs the suite as
+pytest sessions side by side on these markers (:mod:`tests.suite`): the in-process tests (in
+simulation time: the large majority), the process tests one after another (their instances were
+chosen not to collide with each other one at a time, and a lockstep pair of processes wants a core
+of its own), and the compat tests in two network namespaces. A plain ``pytest`` runs everything
+in order."""
 
 from __future__ import annotations
 
@@ -45,12 +46,19 @@ PROCESS_MODULES = {
 # tests/compat/vehicles.py) and, to balance the sessions' wall times (measured: the process session
 # was the longest by ~150 s), signing with real clients (instances 70-72) and the view's tests on a
 # live SITL (instances 65-69). Without namespaces they all run in the process session.
-COMPAT_MODULES = {"tests/compat/", "tests/view/test_browser_sitl.py", "tests/view/test_live_sitl.py"}
+COMPAT_MODULES = {
+    "tests/compat/", "tests/view/test_browser_sitl.py", "tests/view/test_live_sitl.py",
+    "tests/sitl/test_installed_wheel.py", "tests/sitl/test_paper_through_sitl.py",
+}  # fmt: skip
 NOT_COMPAT: set[str] = set()
-# Of the compat tests, MAVSDK's (marker ``mavsdk``) run in a fourth session, in a namespace of its
-# own too: they wait on real clients paced to the wall clock (~100 s of the ~220 s the compat session
-# took alone, measured), so two namespaces side by side halve that wait for a little more CPU.
-MAVSDK_MODULES = {"tests/compat/test_mavsdk.py", "tests/compat/test_mavsdk3.py"}
+# Of the compat tests, these (marker ``second_namespace``) run in a session of their own, in a
+# namespace of its own too: MAVSDK's wait on real clients paced to the wall clock (~100 s of the
+# ~220 s the compat session took alone, measured), so two namespaces side by side halve that wait
+# for a little more CPU; the installed wheel (~30 s) and the paper through the SITL (~25 s) moved
+# here and to the compat session from the process session, which was then the suite's last.
+SECOND_NAMESPACE = {
+    "tests/compat/test_mavsdk.py", "tests/compat/test_mavsdk3.py", "tests/sitl/test_installed_wheel.py",
+}  # fmt: skip
 
 
 def _listed(nodeid: str, entries: set[str]) -> bool:
@@ -69,6 +77,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.processes)
             if _listed(item.nodeid, COMPAT_MODULES) and not _listed(item.nodeid, NOT_COMPAT):
                 item.add_marker(pytest.mark.compat)
-                if _listed(item.nodeid, MAVSDK_MODULES):
-                    item.add_marker(pytest.mark.mavsdk)
+                if _listed(item.nodeid, SECOND_NAMESPACE):
+                    item.add_marker(pytest.mark.second_namespace)
 

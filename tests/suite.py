@@ -1,15 +1,17 @@
-"""``make test``: the suite as four pytest sessions side by side.
+"""``make test``: the suite as five pytest sessions side by side.
 
-* ``-m "not processes"``: in-process and in simulation time, the large majority (CPU-bound);
+* ``-m "not processes"``: in-process and in simulation time, the large majority (CPU-bound), in
+  two sessions (tests/sitl, tests/gcs_scripts and tests/estimation in the second);
 * ``-m "processes and not compat"``: the tests that start processes or bind the SITL's fixed
   ports, one after another (see ``tests/conftest.py``);
-* ``-m "compat and not mavsdk"``: MAVProxy against real vehicles, several vehicles, signing with
-  real clients and the view on a live SITL (``tests/conftest.py``), one after another, in a network
-  namespace of its own (``unshare -n`` with only loopback up: its port block overlaps other
-  instances' ports, e.g. 14640 is instance 60's API link);
-* ``-m "compat and mavsdk"``: MAVSDK 4 and MAVSDK-Python 3, in a second namespace (the two compat
-  sessions use the same ports; each namespace has its own loopback). Where no namespace can be
-  made, the compat tests run in the processes session instead.
+* ``-m "compat and not second_namespace"``: MAVProxy against real vehicles, several vehicles,
+  signing with real clients, the view on a live SITL and the paper through the SITL
+  (``tests/conftest.py``), one after another, in a network namespace of its own (``unshare -n``
+  with only loopback up: its port block overlaps other instances' ports, e.g. 14640 is instance
+  60's API link);
+* ``-m "compat and second_namespace"``: MAVSDK 4, MAVSDK-Python 3 and the installed wheel, in a
+  second namespace (the two compat sessions use the same ports; each namespace has its own
+  loopback). Where no namespace can be made, the compat tests run in the processes session.
 
 The lockstep processes the tests start do not busy-wait for their peer (``QUADSITL_LOCKSTEP_SPIN_S=0``,
 README "Speed"): the sessions share 2 cores here, and a spinning process takes the core its peer or
@@ -30,7 +32,7 @@ import sys
 import time
 from pathlib import Path
 
-from tests.conftest import COMPAT_MODULES, MAVSDK_MODULES, PROCESS_MODULES, _listed
+from tests.conftest import COMPAT_MODULES, PROCESS_MODULES, SECOND_NAMESPACE, _listed
 
 LOGS = Path("out/tests")
 # In a new network namespace: bring its loopback up, then run the command given after it.
@@ -53,14 +55,19 @@ def sessions() -> list[tuple[str, str, list[str], list[str]]]:
     They come from the same lists as the markers (tests/conftest.py), so they cannot disagree.
     """
     processes = _paths(PROCESS_MODULES)
+    # The in-process tests, CPU-bound, in two sessions of about equal CPU (measured alone: sitl,
+    # gcs_scripts and estimation 44 s; the rest 48 s): one would be the suite's last by ~15 s.
+    split = ["tests/sitl/", "tests/gcs_scripts/", "tests/estimation/"]
+    in_process = [("in-process", "not processes", [], ["tests/", *(f"--ignore={d}" for d in split)]),
+                  ("in-process-2", "not processes", [], split)]  # fmt: skip
     if namespace_available():
         compat = _paths(COMPAT_MODULES)
         not_compat = [p for p in processes if not _listed(p, COMPAT_MODULES)]
-        return [("in-process", "not processes", [], []),
+        return [*in_process,
                 ("processes", "processes and not compat", [], not_compat),
-                ("compat", "compat and not mavsdk", NAMESPACE, compat),
-                ("mavsdk", "compat and mavsdk", NAMESPACE, _paths(MAVSDK_MODULES))]  # fmt: skip
-    return [("in-process", "not processes", [], []), ("processes", "processes", [], processes)]
+                ("compat", "compat and not second_namespace", NAMESPACE, compat),
+                ("compat-2", "compat and second_namespace", NAMESPACE, _paths(SECOND_NAMESPACE))]  # fmt: skip
+    return [*in_process, ("processes", "processes", [], processes)]
 
 
 def _paths(entries: set[str]) -> list[str]:
