@@ -21,7 +21,8 @@ benchmarks measure the SITL with its default spin.
 Each session's output goes to ``out/tests/<session>.log`` and is printed when it ends; the exit code
 is non-zero when any session fails (or is interrupted), and the wall time and CPU time (the session
 with every process it waited for) of each are reported.
-Extra arguments go to every session (``python -m tests.suite -x -k fuzz``).
+Extra arguments go to every session (``python -m tests.suite -x -k fuzz``); when they name test
+paths (``python -m tests.suite tests/sitl``), every session collects those instead of its own.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import sys
 import time
 from pathlib import Path
 
-from tests.conftest import COMPAT_MODULES, PROCESS_MODULES, SECOND_NAMESPACE, _listed
+from tests.conftest import COMPAT_MODULES, NOT_COMPAT, PROCESS_MODULES, SECOND_NAMESPACE, _listed
 
 LOGS = Path("out/tests")
 # In a new network namespace: bring its loopback up, then run the command given after it.
@@ -47,27 +48,37 @@ def namespace_available() -> bool:
     return probe.returncode == 0
 
 
-def sessions() -> list[tuple[str, str, list[str], list[str]]]:
+def sessions(own_paths: bool = True) -> list[tuple[str, str, list[str], list[str]]]:
     """(name, marker selection, command prefix, paths to collect) of each pytest session.
 
-    The marker selects; the paths only spare a session importing test modules it would deselect
-    whole (collecting the whole tree costs ~3.6 s of CPU a session: matplotlib, scipy.stats, ...).
-    They come from the same lists as the markers (tests/conftest.py), so they cannot disagree.
+    The marker selects; the paths only spare the process and compat sessions importing test
+    modules they would deselect whole (collecting the whole tree costs ~3.6 s of CPU a session:
+    matplotlib, scipy.stats, ...), and split the in-process tests in two. They come from the same
+    lists as the markers (tests/conftest.py). ``own_paths=False`` (the caller names test paths):
+    one in-process session, and every session collects the caller's paths.
     """
     processes = _paths(PROCESS_MODULES)
-    # The in-process tests, CPU-bound, in two sessions of about equal CPU (measured alone: sitl,
-    # gcs_scripts and estimation 44 s; the rest 48 s): one would be the suite's last by ~15 s.
-    split = ["tests/sitl/", "tests/gcs_scripts/", "tests/estimation/"]
-    in_process = [("in-process", "not processes", [], ["tests/", *(f"--ignore={d}" for d in split)]),
-                  ("in-process-2", "not processes", [], split)]  # fmt: skip
+    if own_paths:
+        # The in-process tests, CPU-bound, in two sessions of about equal CPU (measured alone:
+        # sitl, gcs_scripts and estimation 44 s; the rest 48 s): one was the suite's last by ~15 s.
+        split = ["tests/sitl/", "tests/gcs_scripts/", "tests/estimation/"]
+        in_process = [("in-process", "not processes", [], ["tests/", *(f"--ignore={d}" for d in split)]),
+                      ("in-process-2", "not processes", [], split)]  # fmt: skip
+    else:
+        in_process = [("in-process", "not processes", [], [])]
     if namespace_available():
-        compat = _paths(COMPAT_MODULES)
-        not_compat = [p for p in processes if not _listed(p, COMPAT_MODULES)]
-        return [*in_process,
-                ("processes", "processes and not compat", [], not_compat),
-                ("compat", "compat and not second_namespace", NAMESPACE, compat),
-                ("compat-2", "compat and second_namespace", NAMESPACE, _paths(SECOND_NAMESPACE))]  # fmt: skip
-    return [*in_process, ("processes", "processes", [], processes)]
+        # NOT_COMPAT entries sit inside compat folders: named again so the process session has them.
+        not_compat = [p for p in processes if not _listed(p, COMPAT_MODULES)] + sorted(NOT_COMPAT)
+        compat, second = _paths(COMPAT_MODULES), _paths(SECOND_NAMESPACE)
+        sessions = [*in_process,
+                    ("processes", "processes and not compat", [], not_compat),
+                    ("compat", "compat and not second_namespace", NAMESPACE, compat),
+                    ("compat-2", "compat and second_namespace", NAMESPACE, second)]  # fmt: skip
+    else:
+        sessions = [*in_process, ("processes", "processes", [], processes)]
+    if not own_paths:
+        sessions = [(name, selection, prefix, []) for name, selection, prefix, _ in sessions]
+    return sessions
 
 
 def _paths(entries: set[str]) -> list[str]:
@@ -76,21 +87,35 @@ def _paths(entries: set[str]) -> list[str]:
     return sorted(e for e in entries if not any(e != f and e.startswith(f) for f in folders))
 
 
+# pytest options whose value may come as the next argument (``-k sitl``: "sitl" is not a path).
+_TAKES_VALUE = {
+    "-k", "-m", "-p", "-c", "-o", "-W", "-r", "--deselect", "--ignore", "--ignore-glob", "--junitxml",
+    "--junit-xml", "--rootdir", "--durations", "--durations-min", "--timeout", "--maxfail", "--basetemp",
+    "--confcutdir", "--log-file", "--log-level", "--tb", "--color", "--import-mode", "--override-ini",
+}  # fmt: skip
+
+
 def _names_paths(argv: list[str]) -> bool:
-    """True when the extra arguments name test files or folders: then they, not ours, are collected."""
-    return any(Path(arg.split("::", 1)[0]).exists() for arg in argv if not arg.startswith("-"))
+    """True when the extra arguments name test files or folders (not as an option's value)."""
+    skip = False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg.startswith("-"):
+            skip = arg in _TAKES_VALUE
+        elif Path(arg.split("::", 1)[0]).exists():
+            return True
+    return False
 
 
 def main(argv: list[str]) -> int:
     LOGS.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     runs = []
-    own_paths = not _names_paths(argv)
-    for name, selection, prefix, paths in sessions():
+    for name, selection, prefix, paths in sessions(own_paths=not _names_paths(argv)):
         log = (LOGS / f"{name}.log").open("w")
-        pytest = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", selection, *argv]
-        if own_paths:
-            pytest += paths
+        pytest = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", selection]
+        pytest += [*argv, *paths]
         cmd = [*prefix, *pytest]
         env = {**os.environ, "QUADSITL_LOCKSTEP_SPIN_S": "0"}
         # Bytecode cached (in __pycache__, ignored by git) even where the environment says not to:

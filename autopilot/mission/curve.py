@@ -15,6 +15,7 @@ samples. On the paper's circle and helix sampled at 2-50 Hz the result is within
 from __future__ import annotations
 
 import math
+import os
 import sys
 import threading
 from collections.abc import Sequence
@@ -61,10 +62,20 @@ def preload() -> None:
         _loader.start()
 
 
+def _finish_loading() -> None:
+    """Before a fork: a child forked while another thread holds an import lock would wait for it
+    forever (that thread does not exist in the child). A process pool forks (sitl/paper.py)."""
+    if _loader is not None and _loader.is_alive():
+        _loader.join()
+
+
+os.register_at_fork(before=_finish_loading)
+
+
 def _import_interpolate() -> None:
     try:
         import scipy.interpolate  # noqa: F401
-    except Exception:  # noqa: BLE001 - the fit imports it again and reports what fails
+    except Exception:  # noqa: BLE001 - the fit imports it again: the upload is refused with the reason
         pass
 
 

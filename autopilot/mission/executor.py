@@ -307,6 +307,8 @@ def check_mission(
             )
         except (ValueError, np.linalg.LinAlgError) as exc:  # e.g. samples no fit can pass through
             return m.MAV_MISSION_INVALID_PARAM1, f"timed items {first}-{last}: no curve fits them ({exc})"
+        except ImportError as exc:  # a broken installation: refused with the reason, not unanswered
+            return m.MAV_MISSION_ERROR, f"timed items {first}-{last}: cannot fit a curve ({exc})"
         vh, vup, vdown, acc = curve.peaks()
         checks = (
             (vh, limits.speed_horizontal, "horizontal speed", "m/s", "MPC_XY_VEL_MAX"),

@@ -86,7 +86,11 @@ class MissionService:
 
     # -- messages -------------------------------------------------------------------------------------
     def on_message(self, msg, link, address) -> None:
-        if msg.get_msgId() == m.MAVLINK_MSG_ID_MISSION_COUNT and msg.count > 0:
+        if (
+            msg.get_msgId() == m.MAVLINK_MSG_ID_MISSION_COUNT
+            and msg.count > 0
+            and msg.mission_type == m.MAV_MISSION_TYPE_MISSION
+        ):
             curve.preload()  # its items may be a timed curve: scipy.interpolate, in the background
         self.protocol.max_items = int(self.commander.params["MIS_ITEMS_MAX"])
         out = self.protocol.handle(msg, self.clock(), self._current_seq())

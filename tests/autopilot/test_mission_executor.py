@@ -1,6 +1,7 @@
 """Flying a mission (pure): legs, acceptance, hold times, speed changes, timed curves, land/RTL."""
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -226,3 +227,13 @@ def test_check_refuses_a_timed_curve_faster_than_the_limits():
         and "timed items 0-40" in problem[1]
     )
     assert check_mission(mission(*timed), HOME, LIMITS) is None
+
+
+def test_a_timed_curve_that_cannot_be_fitted_for_want_of_scipy_is_refused_with_the_reason(monkeypatch):
+    """scipy.interpolate is imported at the first upload (autopilot/mission/curve.py): a broken
+    installation refuses the mission (MISSION_ACK with an error) rather than leaving it unanswered."""
+    _, timed = timed_circle(duration_s=4.0, first_seq=0)
+    monkeypatch.setitem(sys.modules, "scipy.interpolate", None)  # "import scipy.interpolate" fails
+    problem = check_mission(mission(*timed), HOME, LIMITS)
+    assert problem is not None and problem[0] == m.MAV_MISSION_ERROR
+    assert "cannot fit a curve" in problem[1] and "scipy.interpolate" in problem[1]
