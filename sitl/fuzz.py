@@ -58,7 +58,7 @@ from autopilot.mavlink.params import float32_shortest
 from autopilot.params.store import INT32
 from gcs_scripts.upload_mission import MissionLink, make_item
 from quadcommon import wire
-from quadcommon.wire import new_parser, restart_parser
+from quadcommon.wire import new_parser, parse_datagram
 from simulator.core import SimulatorCore, SimulatorSetup
 
 from .inprocess import API_LINK, GCS_LINK, Lockstep, StackConnection
@@ -285,8 +285,7 @@ class Watch:
         if len(self._checked) > 4096:
             self._checked.clear()
         self._checked.add(data)
-        restart_parser(self.parser)
-        for msg in self.parser.parse_buffer(data) or []:
+        for msg in parse_datagram(self.parser, data):
             if msg.get_msgId() < 0:
                 raise FuzzFailure(f"{context}: the vehicle sent an unparseable frame")
             kind = msg.get_type()

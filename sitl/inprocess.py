@@ -47,8 +47,8 @@ from quadcommon.config import (  # noqa: E402
     load_sitl,
     load_vehicle,
 )
-from quadcommon.mavlink_fast import split_frames  # noqa: E402
 from quadcommon.trajectories import trajectory_from_spec  # noqa: E402
+from quadcommon.wire import parse_datagram  # noqa: E402
 from simulator.core import SimulatorCore, SimulatorSetup, as_nominal  # noqa: E402
 from simulator.environment.gust_profile import GustProfile, load_gust_profile  # noqa: E402
 from simulator.sensors import load_sensors  # noqa: E402
@@ -101,16 +101,8 @@ class GroundStation:
                 self.statustext.append(msg.text)
 
     def _parse(self, data: bytes) -> list:
-        """The messages in one datagram from the vehicle, parsed by pymavlink: frame by frame when
-        the datagram is whole MAVLink 2 frames (what the autopilot sends; pymavlink's byte-stream
-        parser costs ~2x more), else as a byte stream."""
-        frames = split_frames(data)
-        if sum(len(frame) for _, frame in frames) == len(data):
-            try:
-                return [self._parser.decode(bytearray(frame)) for _, frame in frames]
-            except mavlink.MAVError:
-                pass
-        return self._parser.parse_buffer(data) or []
+        """The messages in one datagram from the vehicle (:func:`quadcommon.wire.parse_datagram`)."""
+        return parse_datagram(self._parser, data)
 
     def of_type(self, kind: str) -> list:
         return [m for m in self.messages if m.get_type() == kind]
