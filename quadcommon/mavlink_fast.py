@@ -126,10 +126,10 @@ class FastEncoder:
 
     def __init__(
         self, message_class, system_id: int, component_id: int, template=None,
-        constant_from: int | None = None,
+        constant_from: str | None = None,
     ) -> None:  # fmt: skip
-        """``constant_from``: the flat values from this index on never change (ODOMETRY's 42
-        covariance entries and frame ids): packed once, only the values before it at each frame."""
+        """``constant_from``: a field from which on, in wire order, nothing ever changes (ODOMETRY's
+        covariances and frame ids): packed once; :attr:`values` then holds only the fields before it."""
         self.msg_id = message_class.id
         self.packer = message_class.unpacker
         self.slices = _flat_slices(message_class)
@@ -146,13 +146,14 @@ class FastEncoder:
         self._prefix: struct.Struct | None = None
         self._tail = b""
         if constant_from is not None:
-            # The wire format's codes, one per flat value ("<" then e.g. "Q16f42f..." expanded).
-            codes = [c for n, c in _codes(self.packer.format)]
-            if len(codes) != len(flat) or not 0 < constant_from <= len(flat):
-                raise ValueError(f"constant_from {constant_from} outside the {len(flat)} values")
-            self._prefix = struct.Struct("<" + "".join(codes[:constant_from]))
-            self._tail = struct.pack("<" + "".join(codes[constant_from:]), *flat[constant_from:])
-            self.values = flat[:constant_from]
+            where = self.slices.get(constant_from)
+            if where is None:
+                raise ValueError(f"constant_from {constant_from!r}: no such field in {message_class.name}")
+            start = where.start if isinstance(where, slice) else where
+            codes = _codes(self.packer.format)  # one per flat value
+            self._prefix = struct.Struct("<" + "".join(codes[:start]))
+            self._tail = struct.pack("<" + "".join(codes[start:]), *flat[start:])
+            self.values = flat[:start]
 
     def frame(self, seq: int) -> bytes:
         """The MAVLink 2 frame of :attr:`values` with sequence number ``seq`` (0-255)."""
@@ -167,14 +168,14 @@ class FastEncoder:
         return body + bytes((crc & 0xFF, crc >> 8))
 
 
-def _codes(fmt: str) -> list[tuple[int, str]]:
-    """``struct`` format ``"<Q3f2B"`` -> one (index, code) per value: Q, f, f, f, B, B."""
-    out: list[tuple[int, str]] = []
+def _codes(fmt: str) -> list[str]:
+    """``struct`` format ``"<Q3f2B"`` -> one code per value: Q, f, f, f, B, B."""
+    out: list[str] = []
     count = ""
     for char in fmt.lstrip("<>=!@"):
         if char.isdigit():
             count += char
             continue
-        out.extend((len(out) + k, char) for k in range(int(count or "1")))
+        out.extend(char * int(count or "1"))
         count = ""
     return out

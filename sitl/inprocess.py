@@ -48,7 +48,7 @@ from quadcommon.config import (  # noqa: E402
     load_vehicle,
 )
 from quadcommon.trajectories import trajectory_from_spec  # noqa: E402
-from quadcommon.wire import parse_datagram  # noqa: E402
+from quadcommon.wire import new_parser, parse_datagram  # noqa: E402
 from simulator.core import SimulatorCore, SimulatorSetup, as_nominal  # noqa: E402
 from simulator.environment.gust_profile import GustProfile, load_gust_profile  # noqa: E402
 from simulator.sensors import load_sensors  # noqa: E402
@@ -74,8 +74,7 @@ class GroundStation:
         self.address = ("in-process", next(_ports))
         self.mav = mavlink.MAVLink(self, srcSystem=system_id, srcComponent=component_id)
         self.mav.robust_parsing = True
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
+        self._parser = new_parser()
         self.messages: list = []  # everything received (keep=False: only the last of each type)
         self.keep = True
         self.inbox: deque = deque()  # not yet taken by recv_msg()
@@ -91,7 +90,7 @@ class GroundStation:
         self.stack.deliver(self.link, self.address, data)
 
     def receive(self, data: bytes) -> None:
-        for msg in self._parse(data):
+        for msg in parse_datagram(self._parser, data):
             if self.keep:
                 self.messages.append(msg)
             self.inbox.append(msg)
@@ -99,10 +98,6 @@ class GroundStation:
             self.last[kind] = msg
             if kind == "STATUSTEXT":
                 self.statustext.append(msg.text)
-
-    def _parse(self, data: bytes) -> list:
-        """The messages in one datagram from the vehicle (:func:`quadcommon.wire.parse_datagram`)."""
-        return parse_datagram(self._parser, data)
 
     def of_type(self, kind: str) -> list:
         return [m for m in self.messages if m.get_type() == kind]

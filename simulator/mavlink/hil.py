@@ -40,7 +40,7 @@ from typing import NamedTuple
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
-from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, _flat_slices, split_frames
+from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
 from ..dynamics.plant import TruthState
@@ -81,8 +81,9 @@ class HilFrameEncoder:
             list(_UNKNOWN_COVARIANCE), list(_UNKNOWN_COVARIANCE), 0, mavlink.MAV_ESTIMATOR_TYPE_MOCAP, 100,
         )  # fmt: skip
         # From the covariances on (and the frame ids) nothing changes: packed once.
-        fixed = _flat_slices(mavlink.MAVLink_odometry_message)["pose_covariance"].start
-        self._odometry = FastEncoder(mavlink.MAVLink_odometry_message, *ids, odometry, constant_from=fixed)
+        self._odometry = FastEncoder(
+            mavlink.MAVLink_odometry_message, *ids, odometry, constant_from="pose_covariance"
+        )
         gps = mavlink.MAVLink_hil_gps_message(0, GPS_FIX_3D, 0, 0, 0, 100, 100, 0, 0, 0, 0, 0, 10, 0, 0)
         self._gps = FastEncoder(mavlink.MAVLink_hil_gps_message, *ids, gps)
         vision = mavlink.MAVLink_vision_position_estimate_message(0, *(0.0,) * 6, [0.0] * 21, 0)
