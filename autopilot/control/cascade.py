@@ -37,6 +37,14 @@ class StateEstimate(NamedTuple):
     euler_rates_rad_s: Vector3
 
 
+class AttitudeReference(NamedTuple):
+    """What the rotational law tracks: eta_d, eta_d', eta_d'' (ZYX Euler, paper frames)."""
+
+    euler_rad: Vector3
+    euler_rates_rad_s: Vector3
+    euler_accelerations_rad_s2: Vector3
+
+
 class CascadeOutput(NamedTuple):
     thrust_n: float  # applied U1
     torque_euler_n_m: Vector3  # applied tau_eta (tau_phi, tau_theta, tau_psi)
@@ -109,20 +117,61 @@ class Cascade:
         if self._kernel is not None:
             self._kernel.push(self)
 
-    def step(self, state: StateEstimate, ref: Reference, integrate: bool = True) -> CascadeOutput:
+    def step(
+        self,
+        state: StateEstimate,
+        ref: Reference,
+        integrate: bool = True,
+        *,
+        roll_pitch: tuple[float, float] | None = None,
+        attitude: AttitudeReference | None = None,
+        thrust_n: float | None = None,
+    ) -> CascadeOutput:
+        """One control step towards ``ref``; the laws' states advance by ``dt`` if ``integrate``.
+
+        The manual modes fly the same loops with parts of the cascade's chain given instead of
+        computed: ``roll_pitch`` replaces the translational law's (phi_r, theta_r) before the
+        command filter (STABILIZED, ALTCTL: the sticks' tilt); ``attitude`` replaces the filter's
+        (eta_d, eta_d', eta_d'') whole, yaw included (ACRO: the attitude the sticks' rates
+        integrate); ``thrust_n`` replaces the translational law's U1 (STABILIZED, ACRO: the
+        throttle), saturated as any U1. The translational law still runs (its integrals follow
+        ``integrate``); the rotational law always tracks what reaches it.
+        """
         kernel = self._kernel
+        overridden = roll_pitch is not None or attitude is not None or thrust_n is not None
         if kernel is None:
-            return self._step(state, ref, integrate)
-        if integrate:
+            return self._step(state, ref, integrate, roll_pitch, attitude, thrust_n)
+        if integrate and not overridden:
             out = kernel.step(state, ref)
             if out is not None:
                 return out
         kernel.pull(self)
-        out = self._step(state, ref, integrate)
+        out = self._step(state, ref, integrate, roll_pitch, attitude, thrust_n)
         kernel.push(self)
         return out
 
-    def _step(self, state: StateEstimate, ref: Reference, integrate: bool) -> CascadeOutput:
+    def law_states(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
+        """The laws' internal states now, named (``translational.<name>``, ``rotational.<name>``):
+        the integrals, for logs. Read between steps."""
+        if self._kernel is not None:
+            self._kernel.pull(self)
+            self._kernel.push(self)
+        tr = tuple(self.translational.integral)
+        rot = tuple(self.rotational.integral)
+        names = tuple(f"translational.integral_{a}" for a in "xyz") + tuple(
+            f"rotational.integral_{a}" for a in ("roll", "pitch", "yaw")
+        )
+        return names, tr + rot
+
+    def _step(
+        self,
+        state: StateEstimate,
+        ref: Reference,
+        integrate: bool,
+        roll_pitch: tuple[float, float] | None = None,
+        attitude: AttitudeReference | None = None,
+        thrust_n: float | None = None,
+    ) -> CascadeOutput:
         """The specification: the Python laws, one step."""
         dt = self.dt
         euler = state.euler_rad
@@ -136,15 +185,19 @@ class Cascade:
             dt,
             integrate,
         )
-        raw = (outer.roll_ref_rad, outer.pitch_ref_rad)
+        raw = (outer.roll_ref_rad, outer.pitch_ref_rad) if roll_pitch is None else tuple(roll_pitch)
         (phi_d, phi_d_dot, phi_d_ddot), (theta_d, theta_d_dot, theta_d_ddot) = self.filter.outputs(raw)
         self.filter.advance(raw)
         eta_d = (phi_d, theta_d, ref.yaw_rad)
         eta_d_dot = (phi_d_dot, theta_d_dot, ref.yaw_rate_rad_s)
         eta_d_ddot = (phi_d_ddot, theta_d_ddot, ref.yaw_acceleration_rad_s2)
+        if attitude is not None:
+            eta_d, eta_d_dot, eta_d_ddot = attitude
         tau_eta = self.rotational.update(
             euler, state.euler_rates_rad_s, eta_d, eta_d_dot, eta_d_ddot, dt, integrate
         )
+        if thrust_n is not None:
+            outer = outer._replace(thrust_n=thrust_n)
         phi, theta = euler[0], euler[1]
         tau_body = body_torque_from_euler_torque(phi, theta, tau_eta)
         if self.rotor_mode:
