@@ -133,7 +133,7 @@ def inertia_matrix(Ixx: float, Iyy: float, Izz: float, phi: float, theta: float)
 def coriolis_matrix(
     Ixx: float, Iyy: float, Izz: float, phi: float, theta: float, a0: float, a1: float, a2: float
 ) -> tuple[float, ...]:
-    """``C(eta, eta_dot)`` of eqs. (5)-(6) as ``coriolis_matrix_fast`` computes it (9 entries)."""
+    """``C(eta, eta_dot)`` of eqs. (5)-(6) as ``coriolis_matrix`` computes it (9 entries)."""
     sf, cf = math.sin(phi), math.cos(phi)
     st, ct = math.sin(theta), math.cos(theta)
     d = Iyy - Izz
@@ -143,7 +143,7 @@ def coriolis_matrix(
     t13 = -Ixx * ct
     t23 = -d * sf * cf * st
     t33 = 2.0 * st * ct * (Ixx - Iyy * sf * sf - Izz * cf * cf)
-    # The same expressions, in the same order, as quadcommon.rigid_body.coriolis_matrix_fast.
+    # The same expressions, in the same order, as quadcommon.rigid_body.coriolis_matrix.
     fa1, fa2 = p22 * a1 + p23 * a2, p23 * a1 + p33 * a2
     ta0, ta2 = t13 * a2, t13 * a0 + t23 * a1 + t33 * a2
     m12 = p23 * a0 + t23 * a1

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 from quadcommon.config import NominalModel
 from quadcommon.frames import wrap_pi
-from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times
+from quadcommon.rigid_body import coriolis_matrix, inertia_matrix, matrix_times
 from quadcommon.schema import Section
 
 from ...params.store import ParamSpec
@@ -137,5 +137,5 @@ class IntegralBacksteppingAttitude:
                 integral[i] = bound[i] if value > bound[i] else (-bound[i] if value < -bound[i] else value)
         M = inertia_matrix(self.inertia, euler[0], euler[1])
         Ma = matrix_times(M, tuple(accel_cmd))
-        Ce = matrix_times(coriolis_matrix_fast(self.inertia, euler, euler_rates), euler_rates)
+        Ce = matrix_times(coriolis_matrix(self.inertia, euler, euler_rates), euler_rates)
         return (Ma[0] + Ce[0], Ma[1] + Ce[1], Ma[2] + Ce[2])

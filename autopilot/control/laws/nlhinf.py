@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 from quadcommon.config import NominalModel
 from quadcommon.frames import wrap_pi
-from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times, solve3
+from quadcommon.rigid_body import coriolis_matrix, inertia_matrix, matrix_times, solve3
 from quadcommon.schema import Section
 
 from ...params.store import ParamSpec
@@ -127,7 +127,7 @@ class NonlinearHinfAttitude:
         if state is None:
             C = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         else:
-            C = coriolis_matrix_fast(self.inertia, state[0], state[1])
+            C = coriolis_matrix(self.inertia, state[0], state[1])
         return tuple(tuple(k_p * (C[i][j] + (r_inv if i == j else 0.0)) for j in range(3)) for i in range(3))
 
     def integral_torque(self, euler: Vector3, euler_rates: Vector3) -> Vector3:
@@ -189,7 +189,7 @@ class NonlinearHinfAttitude:
         M = inertia_matrix(self.inertia, euler[0], euler[1])
         v = tuple(ref_accel[i] - k_d * e_dot[i] - k_p * e[i] for i in range(3))
         Mv = matrix_times(M, v)
-        C = coriolis_matrix_fast(self.inertia, euler, euler_rates)
+        C = coriolis_matrix(self.inertia, euler, euler_rates)
         C_eta_dot = matrix_times(C, euler_rates)
         C_s = matrix_times(C, s)
         r_inv = self.r_inv
