@@ -47,8 +47,8 @@ from quadcommon.trajectories import Trajectory, trajectory_from_spec
 from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
 from .control.cascade import Cascade, StateEstimate
-from .control.registry import ControllerFailure
 from .control.config import ControllerConfig, load_controller
+from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
 from .mavlink import telemetry

@@ -92,7 +92,8 @@ def allocate_rotors(a, o, thrust, tx, ty, tz, out):
     out[4], out[5], out[6], out[7] = math.sqrt(s1), math.sqrt(s2), math.sqrt(s3), math.sqrt(s4)
     out[0], out[1], out[2], out[3] = out[4] / top, out[5] / top, out[6] / top, out[7] / top
     saturated = 1.0 if (raw != base or k_rp < 1.0 or k_yaw < 1.0) else 0.0
-    return b * (s1 + s2 + s3 + s4), arm * b * (s4 - s2), arm * b * (s3 - s1), d * (-s1 + s2 - s3 + s4), saturated
+    thrust_a = b * (s1 + s2 + s3 + s4)
+    return thrust_a, arm * b * (s4 - s2), arm * b * (s3 - s1), d * (-s1 + s2 - s3 + s4), saturated
 
 
 class RotorAllocation(NamedTuple):

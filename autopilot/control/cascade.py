@@ -25,16 +25,19 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+
 from quadcommon.config import VehicleConfig
-from quadcommon.kernel import compiled, compiling, freeze, kernel, vector
+from quadcommon.kernel import compiled, compiling, freeze, kernel
 from quadcommon.rigid_body import body_rates_from_euler_rates, euler_torque_from_body_torque
+from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
 
 from . import command_filter as cf
 from . import registry
 from .allocation import A_SIZE, OUT_SIZE, actuator_numbers, allocate_rotors, saturate_wrench
 from .config import ControllerConfig
-from .registry import ControllerFailure, LawContext
+from .registry import ROTATIONAL, TRANSLATIONAL, ControllerFailure, LawContext
 
 Vector3 = tuple[float, float, float]
 
@@ -79,7 +82,8 @@ def cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, v
     if override & OVERRIDE_THRUST:
         thrust = thrust_given
     body_rates = body_rates_from_euler_rates(euler[0], euler[1], euler_rates)
-    tx, ty, tz = rotational(gr, xr, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate)
+    tx, ty, tz = rotational(gr, xr, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
+                            integrate)  # fmt: skip
     if K[K_ROTORS] != 0.0:
         thrust_a, ta0, ta1, ta2, saturated = allocate_rotors(K, K_ACTUATORS, thrust, tx, ty, tz, out)
     else:
@@ -88,6 +92,32 @@ def cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, v
     return (thrust_a, te0, te1, te2, ta0, ta1, ta2, eta_d[0], eta_d[1], eta_d[2], eta_d_dot[0], eta_d_dot[1],
             eta_d_dot[2], roll_r, pitch_r, a_x, a_y, a_z,
             1.0 if (saturated != 0.0 or thrust_limited != 0.0) else 0.0, tilt_limited)  # fmt: skip
+
+
+# What a step is given instead of computing it (Cascade.step's overrides), as numbers: the flags
+# (OVERRIDE_*, added up), roll and pitch, the attitude reference (eta_d, eta_d', eta_d''), U1.
+V_FLAGS, V_ROLL_PITCH, V_ATTITUDE, V_THRUST = 0, 1, 3, 12
+V_SIZE = 13
+
+
+@kernel
+def buffered_step(translational, rotational, buf, at, position, velocity, euler, euler_rates, ref_position,
+                  ref_velocity, ref_acceleration, yaw, yaw_rate, yaw_acceleration, integrate):  # fmt: skip
+    """:func:`cascade_step` with its arrays as parts of one buffer, at the offsets ``at`` (K, gt, xt,
+    gr, xr, the filter's state, the overrides given (layout ``V_*``), out, end): a compiled call
+    converts each array argument on its own, so one buffer costs one conversion instead of eight.
+    Returns :data:`OUTPUTS` followed by ``out`` (the normalised commands and the rotor speeds)."""
+    v = buf[at[6] : at[7]]
+    attitude = (v[V_ATTITUDE], v[V_ATTITUDE + 1], v[V_ATTITUDE + 2], v[V_ATTITUDE + 3], v[V_ATTITUDE + 4],
+                v[V_ATTITUDE + 5], v[V_ATTITUDE + 6], v[V_ATTITUDE + 7], v[V_ATTITUDE + 8])  # fmt: skip
+    out = buf[at[7] : at[8]]
+    K, gt, xt = buf[at[0] : at[1]], buf[at[1] : at[2]], buf[at[2] : at[3]]
+    gr, xr, filt = buf[at[3] : at[4]], buf[at[4] : at[5]], buf[at[5] : at[6]]
+    roll_pitch = (v[V_ROLL_PITCH], v[V_ROLL_PITCH + 1])
+    o = cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, velocity, euler,
+                     euler_rates, ref_position, ref_velocity, ref_acceleration, yaw, yaw_rate,
+                     yaw_acceleration, integrate, int(v[V_FLAGS]), roll_pitch, attitude, v[V_THRUST], out)
+    return o + (out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7])
 
 
 class StateEstimate(NamedTuple):
@@ -131,8 +161,31 @@ def law_context(controller: ControllerConfig, vehicle: VehicleConfig, dt: float)
 def cascade_numbers(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> tuple[float, ...]:
     """The cascade's own numbers (layout ``K_*``)."""
     f = controller.command_filter
-    return (dt, 1.0 if vehicle.actuation.mode == "rotors" else 0.0,
-            *cf.discretise(f.natural_frequency_rad_s, f.damping, dt, f.enabled), *actuator_numbers(vehicle))  # fmt: skip
+    rotors = 1.0 if vehicle.actuation.mode == "rotors" else 0.0
+    filter_numbers = cf.discretise(f.natural_frequency_rad_s, f.damping, dt, f.enabled)
+    return (dt, rotors, *filter_numbers, *actuator_numbers(vehicle))
+
+
+class Packed(NamedTuple):
+    """A controller config as numbers: its two law classes, their context and gains arrays, and
+    the cascade's own numbers (layout ``K_*``)."""
+
+    translational: type
+    rotational: type
+    context: LawContext
+    K: tuple[float, ...]
+    gt: tuple[float, ...]
+    gr: tuple[float, ...]
+
+
+def pack(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> Packed:
+    """``controller`` on ``vehicle`` at the control period ``dt``, checked (:func:`registry.check`)."""
+    context = law_context(controller, vehicle, dt)
+    translational = registry.law(TRANSLATIONAL, controller.translational.law)
+    rotational = registry.law(ROTATIONAL, controller.rotational.law)
+    return Packed(translational, rotational, context, cascade_numbers(controller, vehicle, dt),
+                  registry.check(TRANSLATIONAL, translational, controller.translational, context),
+                  registry.check(ROTATIONAL, rotational, controller.rotational, context))  # fmt: skip
 
 
 class Cascade:
@@ -144,18 +197,21 @@ class Cascade:
         self.name = controller.name
         self.dt = dt
         self.vehicle = vehicle
-        self.context = law_context(controller, vehicle, dt)
-        self.translational = registry.law(registry.TRANSLATIONAL, controller.translational.law)
-        self.rotational = registry.law(registry.ROTATIONAL, controller.rotational.law)
-        self.K = vector(cascade_numbers(controller, vehicle, dt))
-        self.gt = vector(registry.check(registry.TRANSLATIONAL, self.translational, controller.translational,
-                                        self.context))  # fmt: skip
-        self.gr = vector(registry.check(registry.ROTATIONAL, self.rotational, controller.rotational, self.context))
-        self.xt = vector(len(self.translational.STATE))
-        self.xr = vector(len(self.rotational.STATE))
-        self.filt = vector(cf.S_SIZE)
-        self.out = vector(OUT_SIZE)
+        packed = pack(controller, vehicle, dt)
+        self.translational, self.rotational = packed.translational, packed.rotational
+        self.context = packed.context
+        # One buffer, and views of its parts (buffered_step): the cascade's numbers, the laws' gains and
+        # states, the filter's state, the overrides given, the outputs.
+        sizes = (K_SIZE, len(packed.gt), len(self.translational.STATE), len(packed.gr),
+                 len(self.rotational.STATE), cf.S_SIZE, V_SIZE, OUT_SIZE)  # fmt: skip
+        self._at = tuple(int(v) for v in np.cumsum((0, *sizes)))
+        self.buffer = np.zeros(self._at[-1])
+        self.K, self.gt, self.xt, self.gr, self.xr, self.filt, self.given, self.out = (
+            self.buffer[a:b] for a, b in zip(self._at[:-1], self._at[1:], strict=True)
+        )
+        self.K[:], self.gt[:], self.gr[:] = packed.K, packed.gt, packed.gr
         self._last: tuple[Vector3, Vector3] | None = None  # (eta, eta') of the latest step: for retune
+        self._overridden = False
         self._step = _entry(self)
 
     # -- stepping ---------------------------------------------------------------------------------
@@ -181,38 +237,36 @@ class Cascade:
 
         A law that raises or gives a non-finite output raises :class:`ControllerFailure`.
         """
-        override = 0
-        if roll_pitch is not None:
-            override += OVERRIDE_ROLL_PITCH
-            roll_pitch = (float(roll_pitch[0]), float(roll_pitch[1]))
-        else:
-            roll_pitch = _ZERO2
-        if attitude is not None:
-            override += OVERRIDE_ATTITUDE
-            flat = tuple(float(v) for part in attitude for v in part)
-        else:
-            flat = _ZERO9
-        if thrust_n is not None:
-            override += OVERRIDE_THRUST
-            thrust_n = float(thrust_n)
-        else:
-            thrust_n = 0.0
+        given = self.given
+        overridden = roll_pitch is not None or attitude is not None or thrust_n is not None
+        if overridden:
+            flags = 0
+            if roll_pitch is not None:
+                flags += OVERRIDE_ROLL_PITCH
+                given[V_ROLL_PITCH : V_ROLL_PITCH + 2] = roll_pitch
+            if attitude is not None:
+                flags += OVERRIDE_ATTITUDE
+                given[V_ATTITUDE : V_ATTITUDE + 9] = [v for part in attitude for v in part]
+            if thrust_n is not None:
+                flags += OVERRIDE_THRUST
+                given[V_THRUST] = thrust_n
+            given[V_FLAGS] = flags
+        elif self._overridden:
+            given[V_FLAGS] = 0.0
+        self._overridden = overridden
         try:
-            o = self._step(self.K, self.gt, self.xt, self.gr, self.xr, self.filt, state.position_m,
-                           state.velocity_m_s, state.euler_rad, state.euler_rates_rad_s, ref.position_m,
-                           ref.velocity_m_s, ref.acceleration_m_s2, ref.yaw_rad, ref.yaw_rate_rad_s,
-                           ref.yaw_acceleration_rad_s2, integrate, override, roll_pitch, flat, thrust_n,
-                           self.out)  # fmt: skip
+            o = self._step(self.buffer, self._at, state.position_m, state.velocity_m_s, state.euler_rad,
+                           state.euler_rates_rad_s, ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2,
+                           ref.yaw_rad, ref.yaw_rate_rad_s, ref.yaw_acceleration_rad_s2, integrate)
         except Exception as error:  # noqa: BLE001 - a law (maybe a user's) failed: the failsafe acts
             raise ControllerFailure(f"controller {self.name}: {type(error).__name__}: {error}") from error
         # A NaN or inf anywhere in the applied wrench shows in this sum (saturation lets NaN through).
         if not math.isfinite(o[0] + o[4] + o[5] + o[6]):
             raise ControllerFailure(f"controller {self.name}: non-finite output (U1 {o[0]}, tau {o[4:7]})")
         self._last = (state.euler_rad, state.euler_rates_rad_s)
-        out = self.out
         return CascadeOutput(
-            o[0], (o[1], o[2], o[3]), (o[4], o[5], o[6]), (out[0], out[1], out[2], out[3]),
-            (out[4], out[5], out[6], out[7]), (o[7], o[8], o[9]), (o[10], o[11], o[12]), (o[13], o[14]),
+            o[0], (o[1], o[2], o[3]), (o[4], o[5], o[6]), (o[20], o[21], o[22], o[23]),
+            (o[24], o[25], o[26], o[27]), (o[7], o[8], o[9]), (o[10], o[11], o[12]), (o[13], o[14]),
             (o[15], o[16], o[17]),
         )  # fmt: skip
 
@@ -239,34 +293,33 @@ class Cascade:
         if (controller.translational.law != old.translational.law
                 or controller.rotational.law != old.rotational.law):  # fmt: skip
             raise ValueError("retune keeps the laws; a different cascade needs a restart")
-        context = law_context(controller, self.vehicle, self.dt)
-        gt = registry.check(registry.TRANSLATIONAL, self.translational, controller.translational, context)
-        gr = registry.check(registry.ROTATIONAL, self.rotational, controller.rotational, context)
+        packed = pack(controller, self.vehicle, self.dt)
+        context = packed.context
         euler, rates = self._last if self._last is not None else (None, None)
-        for law, x, before, after in ((self.translational, self.xt, old.translational, controller.translational),
-                                      (self.rotational, self.xr, old.rotational, controller.rotational)):  # fmt: skip
+        changes = ((self.translational, self.xt, old.translational, controller.translational),
+                   (self.rotational, self.xr, old.rotational, controller.rotational))  # fmt: skip
+        for law, x, before, after in changes:
             retune = getattr(law, "retune", None)
             if retune is not None and len(x):
                 x[:] = [float(v) for v in retune(before, after, context, [float(v) for v in x], euler, rates)]
-        self.gt[:], self.gr[:] = gt, gr
-        self.K[:] = cascade_numbers(controller, self.vehicle, self.dt)
+        self.gt[:], self.gr[:], self.K[:] = packed.gt, packed.gr, packed.K
         self.config, self.context = controller, context
-
-
-_ZERO2 = (0.0, 0.0)
-_ZERO9 = (0.0,) * 9
 
 
 def _entry(cascade: Cascade):
     """The step of ``cascade``'s law pair: compiled once per process (loaded from numba's cache
-    after the first time), warmed up on copies of the cascade's buffers at hover so nothing
-    compiles in the middle of a flight, then frozen."""
-    step = compiled(cascade_step, cascade.translational.step, cascade.rotational.step)
+    after the first time), warmed up on a copy of the cascade's buffer at hover so nothing compiles
+    in the middle of a flight, then frozen."""
+    step = compiled(buffered_step, cascade.translational.step, cascade.rotational.step)
     if compiling() and not getattr(step, "_quadsitl_warm", False):
-        copies = [b.copy() for b in (cascade.K, cascade.gt, cascade.xt, cascade.gr, cascade.xr, cascade.filt)]
         z3, up = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
-        step(*copies, up, z3, z3, z3, up, z3, z3, 0.0, 0.0, 0.0, True, 0, _ZERO2, _ZERO9, 0.0,
-             cascade.out.copy())  # fmt: skip
+        try:
+            step(cascade.buffer.copy(), cascade._at, up, z3, z3, z3, up, z3, z3, 0.0, 0.0, 0.0, True)
+        except Exception as error:  # numba's typing errors: a law it cannot compile
+            laws = f"{cascade.translational.NAME} + {cascade.rotational.NAME}"
+            detail = "\n".join(str(error).strip().splitlines()[:12])
+            raise ConfigError(f"the laws {laws} do not compile with numba ({type(error).__name__}):\n"
+                              f"{detail}\n(QUADSITL_PURE_PYTHON=1 runs them as Python, slower)") from error
         freeze(step)
         step._quadsitl_warm = True
     return step

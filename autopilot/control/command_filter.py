@@ -24,7 +24,9 @@ S_Y, S_YD, S_READY = 0, 2, 4
 S_SIZE = 5
 
 
-def discretise(natural_frequency_rad_s: float, damping: float, dt: float, enabled: bool = True) -> tuple[float, ...]:
+def discretise(
+    natural_frequency_rad_s: float, damping: float, dt: float, enabled: bool = True
+) -> tuple[float, ...]:
     """The filter's coefficients (layout ``F_*``) for the control period ``dt``."""
     import numpy as np
     from scipy.linalg import expm  # here: importing scipy.linalg costs every process start ~0.2 s

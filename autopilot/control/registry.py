@@ -150,11 +150,12 @@ def check(loop: str, cls: type, gains: Any, context: LawContext) -> tuple[float,
         out = tuple(cls.step(*args))  # type: ignore[attr-defined]
     except Exception as error:  # noqa: BLE001
         raise ConfigError(f"{where}: its step raised at hover: {type(error).__name__}: {error}") from error
-    if len(out) != STEP_OUTPUTS[loop] or not all(isinstance(v, int | float) and math.isfinite(v) for v in out):
+    numbers = all(isinstance(v, int | float) and math.isfinite(v) for v in out)
+    if len(out) != STEP_OUTPUTS[loop] or not numbers:
         raise ConfigError(f"{where}: its step must return {STEP_OUTPUTS[loop]} finite numbers, got {out}")
     if loop == TRANSLATIONAL and not 0.5 * context.mass_kg * g <= out[0] <= 2.0 * context.mass_kg * g:
-        raise ConfigError(f"{where}: at hover on its reference it asks for {out[0]:.3g} N of thrust, not about "
-                          f"m g = {context.mass_kg * g:.3g} N")  # fmt: skip
+        raise ConfigError(f"{where}: at hover on its reference it asks for {out[0]:.3g} N of thrust, not "
+                          f"about m g = {context.mass_kg * g:.3g} N")
     return packed
 
 

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from quadcommon.config import config_path
+from quadcommon.kernel import kernel
 from quadcommon.schema import ConfigError, Section, load_toml
 
 from .discrete_gust import OneMinusCosineGust, describe_gust, gust_to_mapping, parse_one_minus_cosine
@@ -202,6 +203,65 @@ def describe(profile: GustProfile, max_chars: int = 400) -> str:
     return text if len(text) <= max_chars else text[: max_chars - 3] + "..."
 
 
+# The profile's elements as rows of numbers (what DisturbanceSchedule and the campaign engine
+# evaluate): steps (channel, start, end, value), ramps (channel, start, end, hold until, value),
+# 1-cos gusts (start, end, half amplitude, 2 pi / duration, unit direction x, y, z). Channels index
+# CHANNELS (force x, y, z, torque on phi, theta, psi).
+def element_rows(profile: GustProfile) -> tuple[list[tuple[float, ...]], list[tuple[float, ...]],
+                                                list[tuple[float, ...]]]:  # fmt: skip
+    index = {c: i for i, c in enumerate(CHANNELS)}
+    steps = [(index[s.channel], s.start_s, s.end_s, s.value) for s in profile.steps]
+    ramps = [(index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps]
+    gusts = [(g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s, *g.unit())
+             for g in profile.one_minus_cosine]  # fmt: skip
+    return steps, ramps, gusts
+
+
+@kernel
+def _added(v, channel, value):
+    """The six channels ``v`` with ``value`` added to ``channel``."""
+    return (v[0] + value if channel == 0 else v[0], v[1] + value if channel == 1 else v[1],
+            v[2] + value if channel == 2 else v[2], v[3] + value if channel == 3 else v[3],
+            v[4] + value if channel == 4 else v[4], v[5] + value if channel == 5 else v[5])  # fmt: skip
+
+
+@kernel
+def steps_and_ramps(tau, steps, ramps):
+    """The steps' and ramps' sum at profile time ``tau``: force (3), torque (3), and whether a ramp
+    is still rising (the sum is not constant until the next breakpoint)."""
+    v = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    for i in range(len(steps)):
+        row = steps[i]
+        if row[1] <= tau < row[2]:
+            v = _added(v, int(row[0]), row[3])
+    ramping = False
+    for i in range(len(ramps)):
+        row = ramps[i]
+        start, end = row[1], row[2]
+        if start <= tau < row[3]:
+            v = _added(v, int(row[0]), row[4] * min((tau - start) / (end - start), 1.0))
+            if tau < end:
+                ramping = True
+    return v[0], v[1], v[2], v[3], v[4], v[5], ramping
+
+
+@kernel
+def one_minus_cosine_wind(tau, gusts):
+    """The 1-cos gusts' wind at profile time ``tau`` (m/s, world), and whether one is active."""
+    wx = wy = wz = 0.0
+    active = False
+    for i in range(len(gusts)):
+        row = gusts[i]
+        start = row[0]
+        if start <= tau < row[1]:
+            speed = row[2] * (1.0 - math.cos(row[3] * (tau - start)))
+            wx += speed * row[4]
+            wy += speed * row[5]
+            wz += speed * row[6]
+            active = True
+    return wx, wy, wz, active
+
+
 class DisturbanceSchedule:
     """Evaluates a profile at simulation time ``t``: (force_world, torque_euler, wind_world).
 
@@ -224,13 +284,7 @@ class DisturbanceSchedule:
         self.profile = profile
         self.start_time_s = start_time_s
         self.step_s = step_s
-        index = {c: i for i, c in enumerate(CHANNELS)}
-        self._steps = [(index[s.channel], s.start_s, s.end_s, s.value) for s in profile.steps]
-        self._ramps = [(index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps]
-        self._gusts = [
-            (g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s, *g.unit())
-            for g in profile.one_minus_cosine
-        ]
+        self._steps, self._ramps, self._gusts = element_rows(profile)
         ft_times = {s.start_s for s in profile.steps} | {s.end_s for s in profile.steps}
         ft_times |= {r.start_s for r in profile.ramps} | {r.end_s for r in profile.ramps}
         ft_times |= {r.hold_until_s for r in profile.ramps}
@@ -262,16 +316,8 @@ class DisturbanceSchedule:
 
     def _forces_torques(self, tau: float) -> tuple[Vector3, Vector3, bool]:
         """Sum of steps and ramps at profile time ``tau``; True when constant until the next breakpoint."""
-        values = [0.0] * 6
-        ramping = False
-        for channel, start, end, value in self._steps:
-            if start <= tau < end:
-                values[channel] += value
-        for channel, start, end, hold, value in self._ramps:
-            if start <= tau < hold:
-                values[channel] += value * min((tau - start) / (end - start), 1.0)
-                ramping = ramping or tau < end
-        return (values[0], values[1], values[2]), (values[3], values[4], values[5]), not ramping
+        f0, f1, f2, t0, t1, t2, ramping = steps_and_ramps(tau, self._steps, self._ramps)
+        return (f0, f1, f2), (t0, t1, t2), not ramping
 
     def evaluate(self, t: float) -> tuple[Vector3, Vector3, Vector3]:
         """Disturbance at simulation time ``t`` (s): force (N, world), torque (N m, Euler
@@ -289,15 +335,8 @@ class DisturbanceSchedule:
                 self._ft_from = lo + self.start_time_s
                 self._ft_until = hi + self.start_time_s
                 self._ft = (force, torque)
-        wind_constant = True
-        wx = wy = wz = 0.0
-        for start, end, half_amplitude, omega, ux, uy, uz in self._gusts:
-            if start <= tau < end:
-                speed = half_amplitude * (1.0 - math.cos(omega * (tau - start)))
-                wx += speed * ux
-                wy += speed * uy
-                wz += speed * uz
-                wind_constant = False
+        wx, wy, wz, gusting = one_minus_cosine_wind(tau, self._gusts)
+        wind_constant = not gusting
         if self._dryden_from <= tau < self._dryden_until:
             # Step index of the turbulence (rounded: t carries float error from k * dt sums).
             n = int(math.floor((t - self._dryden_t0) / self.step_s + 0.5))

@@ -25,7 +25,8 @@ def axis(g, i, e1, e1_dot, ref_acc):
 
 
 @kernel
-def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt, integrate):
+def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
+         integrate):
     ax = axis(g, 0, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0])
     ay = axis(g, 1, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1])
     az = axis(g, 2, position[2] - ref_position[2], velocity[2] - ref_velocity[2], ref_acceleration[2])

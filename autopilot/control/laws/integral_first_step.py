@@ -39,7 +39,8 @@ def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
 
 
 @kernel
-def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt, integrate):
+def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
+         integrate):
     ax = axis(g, x, 0, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0], dt,
               integrate)  # fmt: skip
     ay = axis(g, x, 1, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1], dt,

@@ -28,7 +28,13 @@ from dataclasses import dataclass, replace
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
 from quadcommon.numerics import clip_symmetric
-from quadcommon.rigid_body import body_torque_from_euler_torque, coriolis_matrix, inertia_matrix, matrix_times, solve3
+from quadcommon.rigid_body import (
+    body_torque_from_euler_torque,
+    coriolis_matrix,
+    inertia_matrix,
+    matrix_times,
+    solve3,
+)
 from quadcommon.schema import Section
 
 from ...params.store import ParamSpec
@@ -48,7 +54,9 @@ def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
     k_d, k_p, r_inv = g[G_KD], g[G_KP], g[G_RINV]
     inertia = (g[G_INERTIA], g[G_INERTIA + 1], g[G_INERTIA + 2])
     e0, e1, e2 = euler[0] - eta_d[0], euler[1] - eta_d[1], wrap_pi(euler[2] - eta_d[2])
-    ed0, ed1, ed2 = euler_rates[0] - eta_d_dot[0], euler_rates[1] - eta_d_dot[1], euler_rates[2] - eta_d_dot[2]
+    ed0 = euler_rates[0] - eta_d_dot[0]
+    ed1 = euler_rates[1] - eta_d_dot[1]
+    ed2 = euler_rates[2] - eta_d_dot[2]
     s = (ed0 + k_d * e0 + k_p * x[0], ed1 + k_d * e1 + k_p * x[1], ed2 + k_d * e2 + k_p * x[2])
     v = (eta_d_ddot[0] - k_d * ed0 - k_p * e0, eta_d_ddot[1] - k_d * ed1 - k_p * e1,
          eta_d_ddot[2] - k_d * ed2 - k_p * e2)  # fmt: skip
