@@ -5,7 +5,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
-from autopilot.control.config import CONTROLLER_NAMES, load_controller
+from autopilot.control.config import PAPER_CONTROLLERS, load_controller
 from gcs_scripts.analysis.metrics import indices
 from quadcommon.config import load_scenario
 from sitl.inprocess import RunOptions, run_scenario
@@ -17,8 +17,8 @@ def all_runs():
     """The paper's six runs (40 s each, the whole stack in-process) and the helix again with the
     autopilot on its EKF over the motion-capture sensors, on two processes as ``quadsitl paper``
     flies them."""
-    jobs = [(s, c, False, None, None, None) for s in ("circle", "helix") for c in CONTROLLER_NAMES]
-    jobs += [("helix", c, False, None, "ekf", "mocap") for c in CONTROLLER_NAMES]
+    jobs = [(s, c, False, None, None, None) for s in ("circle", "helix") for c in PAPER_CONTROLLERS]
+    jobs += [("helix", c, False, None, "ekf", "mocap") for c in PAPER_CONTROLLERS]
     with ProcessPoolExecutor(max_workers=2) as pool:
         done = zip(jobs, pool.map(run_job, jobs), strict=True)
         return {(s, c, job[4]): rec for job, (s, c, rec, _) in done}
@@ -41,7 +41,7 @@ def test_on_the_ekf_with_mocap_the_paper_pattern_holds(ekf_runs):
     assert np.abs(ours.position_error_m[-1]).max() <= 5e-3
     table = {c: indices(rec).ise for c, rec in ekf_runs.items()}
     for axis in ("x", "y", "z"):
-        assert min(CONTROLLER_NAMES, key=lambda c: table[c][axis]) == "intbs_nlhinf", (axis, table)
+        assert min(PAPER_CONTROLLERS, key=lambda c: table[c][axis]) == "intbs_nlhinf", (axis, table)
     est = ours.estimator  # the estimate beside the truth, frame by frame
     assert est is not None and est.shape[0] == len(ours.time_s)
     error = est[:, 1:4] - ours.position_m
@@ -49,7 +49,7 @@ def test_on_the_ekf_with_mocap_the_paper_pattern_holds(ekf_runs):
 
 
 @pytest.mark.parametrize("scenario", ["circle", "helix"])
-@pytest.mark.parametrize("controller", CONTROLLER_NAMES)
+@pytest.mark.parametrize("controller", PAPER_CONTROLLERS)
 def test_closed_loop_tracks_with_the_papers_gains(runs, scenario, controller):
     rec = runs[(scenario, controller)]
     err = np.abs(rec.position_error_m)
@@ -70,9 +70,9 @@ def test_paper_pattern_final_errors(runs, scenario):
 
 @pytest.mark.parametrize("scenario", ["circle", "helix"])
 def test_paper_controller_has_lowest_position_ise(runs, scenario):
-    table = {c: indices(runs[(scenario, c)]).ise for c in CONTROLLER_NAMES}
+    table = {c: indices(runs[(scenario, c)]).ise for c in PAPER_CONTROLLERS}
     for axis in ("x", "y", "z"):
-        best = min(CONTROLLER_NAMES, key=lambda c: table[c][axis])
+        best = min(PAPER_CONTROLLERS, key=lambda c: table[c][axis])
         assert best == "intbs_nlhinf", (axis, table)
 
 
