@@ -29,8 +29,8 @@ p, v, eta, eta_dot = [0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.2], [0.0, 0.
 rows = []
 for k in range(600):
     t = k * 0.002
-    ref = Reference((0.5 * math.sin(t), 0.3, 1.5), (0.5 * math.cos(t), 0.0, 0.0), (-0.5 * math.sin(t), 0.0, 0.0),
-                    0.1 * t, 0.1, 0.0)
+    s, c = 0.5 * math.sin(t), 0.5 * math.cos(t)
+    ref = Reference((s, 0.3, 1.5), (c, 0.0, 0.0), (-s, 0.0, 0.0), 0.1 * t, 0.1, 0.0)
     out = cascade.step(StateEstimate(tuple(p), tuple(v), tuple(eta), tuple(eta_dot)), ref)
     for i in range(3):
         eta_dot[i] += 0.002 * out.torque_euler_n_m[i] / (0.004, 0.004, 0.0084)[i]
