@@ -9,8 +9,12 @@ from pathlib import Path
 from .metrics import CONTROL_NAMES, STATE_NAMES, Indices
 
 CONTROLLER_TITLES = {
-    "intbs_nlhinf": "IntBS-NLH∞", "intbs": "IntBS", "bs_nlhinf": "BS-NLH∞", "px4_pid": "PX4 PID", "se3": "SE(3)",
-}  # fmt: skip
+    "intbs_nlhinf": "IntBS-NLH∞",
+    "intbs": "IntBS",
+    "bs_nlhinf": "BS-NLH∞",
+    "px4_pid": "PX4 PID",
+    "se3": "SE(3)",
+}
 
 # Raffo, Ortega & Rubio, Tables I-III (helix scenario, Section IV).
 PAPER_FINAL_ERRORS_M = {
