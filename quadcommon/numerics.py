@@ -44,6 +44,12 @@ DERIVATIVE_PREVIOUS, DERIVATIVE_FILTERED, DERIVATIVE_READY = 0, 3, 6
 DERIVATIVE_SIZE = 7
 
 
+def derivative_names(signal: str) -> tuple[str, ...]:
+    """Names of a filtered derivative's state entries (for a law's STATE), e.g. ``vel_prev_x``."""
+    previous, filtered = (f"{signal}_prev_{a}" for a in "xyz"), (f"{signal}_dot_{a}" for a in "xyz")
+    return (*previous, *filtered, f"{signal}_dot_ready")
+
+
 @kernel
 def filtered_derivative(x, at, values, alpha, dt, integrate):
     """The time derivative of a 3-vector signal sampled every ``dt`` s: the difference of two

@@ -170,9 +170,13 @@ def roll_pitch_from_body_z(bx: float, by: float, bz: float, psi: float) -> tuple
 
 @kernel
 def limit_tilt(bx: float, by: float, bz: float, tilt_max: float) -> tuple[float, float, float, float]:
-    """The unit vector ``b`` turned towards the world's z axis, in the vertical plane that holds
-    it, until its angle from z is at most ``tilt_max`` (rad): ``(bx, by, bz, limited)``, limited
-    1.0 when it had to turn. A vector along -z turns towards +x."""
+    """The direction of the vector ``b`` (the world's z axis if ``b`` is zero) turned towards z, in
+    the vertical plane that holds it, until its angle from z is at most ``tilt_max`` (rad): the unit
+    vector and ``limited``, 1.0 when it had to turn. A vector along -z turns towards +x."""
+    n = math.sqrt(bx * bx + by * by + bz * bz)
+    if n < 1e-9:
+        return 0.0, 0.0, 1.0, 0.0
+    bx, by, bz = bx / n, by / n, bz / n
     if bz >= math.cos(tilt_max):
         return bx, by, bz, 0.0
     horizontal = math.sqrt(bx * bx + by * by)

@@ -4,8 +4,9 @@ ground station may read and set, one range and one unit for both.
 A law lists its gains as :class:`Tunable` rows; :func:`read` loads them from the controller file
 (validated, errors naming file, key, value and range), :func:`parameter_specs` gives the
 parameters (defaults: the loaded values) and :func:`from_params` maps parameter values back onto
-the gains record (a frozen dataclass whose fields are the rows' keys). That is the registry's
-``load_gains`` / ``parameters`` / ``gains_from_params`` without writing a range twice.
+the gains record (a frozen dataclass whose fields are the rows' keys). A law class that derives
+from :class:`TunableLaw` and names its ``GAINS`` record and its ``TUNABLE`` rows gets the registry's
+``load_gains`` / ``parameters`` / ``gains_from_params`` from them, without writing a range twice.
 """
 
 from __future__ import annotations
@@ -89,3 +90,30 @@ def from_params(gains: Any, table: Sequence[Tunable], params: Mapping[str, float
         else:
             changes[row.key] = float(params[row.param])
     return replace(gains, **changes)
+
+
+class TunableLaw:
+    """The registry's ``load_gains``, ``parameters`` and ``gains_from_params`` of a law whose gains
+    are ``TUNABLE`` rows of a ``GAINS`` record (``GAINS(law, **rows, **settings)``); ``settings``
+    reads the law's other config keys (limits that are not parameters), none by default."""
+
+    NAME: str
+    STATE: tuple[str, ...] = ()  # no state unless the law says
+    GAINS: type
+    TUNABLE: tuple[Tunable, ...]
+
+    @classmethod
+    def settings(cls, section: Section) -> dict[str, Any]:
+        return {}
+
+    @classmethod
+    def load_gains(cls, section: Section) -> Any:
+        return cls.GAINS(cls.NAME, **read(section, cls.TUNABLE), **cls.settings(section))
+
+    @classmethod
+    def parameters(cls, gains: Any) -> tuple[ParamSpec, ...]:
+        return parameter_specs(gains, cls.TUNABLE)
+
+    @classmethod
+    def gains_from_params(cls, gains: Any, params: Mapping[str, float]) -> Any:
+        return from_params(gains, cls.TUNABLE, params)

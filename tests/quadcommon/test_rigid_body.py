@@ -183,7 +183,7 @@ def test_roll_pitch_from_body_z_gives_that_body_z_and_yaw():
     assert rb.roll_pitch_from_body_z(0.0, 0.0, 1.0, 1.2) == (0.0, 0.0)
 
 
-def test_limit_tilt_turns_a_vector_to_the_limit_in_its_vertical_plane():
+def test_limit_tilt_turns_a_direction_to_the_limit_in_its_vertical_plane():
     tilt = 0.7
     b = np.array([3.0, -4.0, 1.0]) / math.sqrt(26.0)  # 1.37 rad from the vertical
     *limited, flag = rb.limit_tilt(*b, tilt)
@@ -194,3 +194,5 @@ def test_limit_tilt_turns_a_vector_to_the_limit_in_its_vertical_plane():
     inside = (math.sin(0.5), 0.0, math.cos(0.5))
     assert rb.limit_tilt(*inside, tilt) == (*inside, 0.0)
     assert rb.limit_tilt(0.0, 0.0, -1.0, tilt) == pytest.approx((math.sin(tilt), 0.0, math.cos(tilt), 1.0))
+    assert rb.limit_tilt(0.0, 0.0, 0.0, tilt) == (0.0, 0.0, 1.0, 0.0)  # no direction: up
+    assert rb.limit_tilt(*(2.0 * v for v in inside), tilt) == pytest.approx((*inside, 0.0), abs=1e-15)

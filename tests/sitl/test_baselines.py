@@ -8,14 +8,12 @@ from __future__ import annotations
 import json
 import math
 import os
-import struct
 import subprocess
 import sys
 import textwrap
 
 import numpy as np
 import pytest
-from pymavlink.dialects.v20 import common as m
 
 from autopilot.control import registry
 from autopilot.control.cascade import Cascade
@@ -28,40 +26,12 @@ from sitl.inprocess import RunOptions, run_scenario
 from sitl.launcher import REPO
 
 from ..stack import Gcs, make_stack
+from .test_params_failsafes import param_list, param_set, take_off, texts, value_of
 
 BASELINES = ("px4_pid", "se3")
-REAL32 = m.MAV_PARAM_TYPE_REAL32
 
 
 # -- parameters over MAVLink ---------------------------------------------------------------------------
-def param_values(gcs: Gcs) -> dict[str, float]:
-    """PARAM_REQUEST_LIST, every PARAM_VALUE collected (floats; the baselines' switches are read as
-    their int32 bytes)."""
-    gcs.conn.mav.param_request_list_send(gcs.system_id, 1)
-    values: dict[str, float] = {}
-    end = gcs.sim_time + 3.0
-    while gcs.sim_time < end:
-        msg = gcs.poll()
-        if msg is not None and msg.get_type() == "PARAM_VALUE":
-            value = msg.param_value
-            if msg.param_type == m.MAV_PARAM_TYPE_INT32:
-                value = struct.unpack("<i", struct.pack("<f", value))[0]
-            values[msg.param_id] = value
-            if len(values) == msg.param_count:
-                return values
-    raise AssertionError(f"{len(values)} parameters in 3 s of simulation")
-
-
-def param_set(gcs: Gcs, name: str, value: float):
-    gcs.conn.mav.param_set_send(gcs.system_id, 1, name.encode(), value, REAL32)
-    end = gcs.sim_time + 1.0
-    while gcs.sim_time <= end:
-        msg = gcs.poll()
-        if msg is not None and msg.get_type() == "PARAM_VALUE" and msg.param_id == name:
-            return msg.param_value
-    raise AssertionError(f"no PARAM_VALUE {name}")
-
-
 @pytest.mark.parametrize(
     "controller, defaults, tuned, refused",
     [
@@ -75,21 +45,20 @@ def param_set(gcs: Gcs, name: str, value: float):
 def test_gains_are_parameters_and_a_param_set_retunes_the_flying_law(controller, defaults, tuned, refused):
     stack = make_stack("hover", controller)
     gcs = Gcs(stack)
-    values = param_values(gcs)
+    values = {msg.param_id: value_of(msg) for msg in param_list(gcs, 3.0).values()}
     for name, value in defaults.items():
         assert values[name] == pytest.approx(value, rel=1e-6), name
     cascade = stack.autopilot.cascade
     name, value = tuned
-    assert param_set(gcs, name, value) == pytest.approx(value)
+    assert value_of(param_set(gcs, name, value)) == pytest.approx(value)
     where = {"MPC_XY_P": ("mpc_xy_p", px4_position.G_POS_P), "SE3_KX": ("k_x", se3_position.G_KX)}
     field, index = where[name]
     assert getattr(cascade.config.translational, field) == pytest.approx(value)
     assert cascade.gt[index] == pytest.approx(value)  # what the compiled step reads
     name, value = refused
     before = values[name]
-    assert param_set(gcs, name, value) == pytest.approx(before, rel=1e-6)  # out of range: kept
-    gcs.wait(lambda g: any(f"{name}: {value:g} out of range" in t for t in g.statustext), sim_timeout=0.5,
-             what="the refusal's STATUSTEXT")  # fmt: skip
+    assert value_of(param_set(gcs, name, value)) == pytest.approx(before, rel=1e-6)  # out of range: kept
+    gcs.wait(lambda g: f"{name}: {value:g} out of range" in texts(g), sim_timeout=0.5, what="the refusal")
 
 
 @pytest.mark.parametrize("controller, horizontal_bound", [("px4_pid", 0.04), ("se3", 0.005)])
@@ -98,16 +67,9 @@ def test_takeoff_and_hold_with_the_baseline(controller, horizontal_bound):
     crossed inertia), then held: from 5 s to 15 s after reaching the altitude within 1 cm vertically
     and, horizontally, 4 cm for PX4's soft defaults (measured 3.2 cm, 1.1 cm after 10 s) and 5 mm
     for SE(3) (measured 1.7 mm: its steady offset under the CoM offset, no integral)."""
-    stack = make_stack("hover", controller)
-    gcs = Gcs(stack)
-    gcs.wait(lambda g: "HEARTBEAT" in g.last, sim_timeout=2.0, what="the vehicle's heartbeat")
-    for command, params in ((m.MAV_CMD_COMPONENT_ARM_DISARM, (1, 0, 0, 0, 0, 0, 0)),
-                            (m.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, math.nan, math.nan, math.nan, 488.0 + 2.5))):
-        gcs.conn.mav.command_long_send(gcs.system_id, 1, command, 0, *params)
-        gcs.wait(lambda g, c=command: any(a.command == c for a in g.acks), sim_timeout=1.0, what="an ack")
-        assert gcs.acks[-1].result == m.MAV_RESULT_ACCEPTED
-    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last and -g.last["LOCAL_POSITION_NED"].z > 2.47,
-             sim_timeout=20.0, what="takeoff")  # fmt: skip
+    gcs = Gcs(make_stack("hover", controller))
+    gcs.wait_heartbeat()
+    take_off(gcs, 2.5)
     start, vertical, horizontal = gcs.sim_time + 5.0, 0.0, 0.0
     while gcs.sim_time < start + 10.0:
         msg = gcs.poll()

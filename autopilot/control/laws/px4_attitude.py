@@ -35,11 +35,10 @@ references through, as PX4 has no such filter); the reference's yaw rate is.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
-from quadcommon.numerics import clip, clip_symmetric, filtered_derivative, low_pass_alpha
+from quadcommon.numerics import clip, clip_symmetric, derivative_names, filtered_derivative, low_pass_alpha
 from quadcommon.rigid_body import (
     cross,
     quaternion_conjugate,
@@ -48,12 +47,9 @@ from quadcommon.rigid_body import (
     quaternion_normalised,
     rotation_from_quaternion,
 )
-from quadcommon.schema import Section
 
-from ...params.store import ParamSpec
-from .. import tunable
 from ..registry import ROTATIONAL, LawContext, register
-from ..tunable import Tunable
+from ..tunable import Tunable, TunableLaw
 
 # Gains array, per body axis (roll, pitch, yaw) from each offset: attitude P (yaw divided by the
 # yaw weight), rate limits (rad/s), rate P, I, D (times K), rate FF, integrator limits, the actuators'
@@ -147,7 +143,7 @@ def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
 
 # PX4's parameters, ranges as PX4 declares them; where PX4 gives no upper bound (the I and FF gains)
 # the bound here is ours, and integrator limits stop at 1 (the largest normalised torque).
-TUNABLE = (
+TUNABLE_GAINS = (
     Tunable("mc_roll_p", "MC_ROLL_P", 0.0, 12.0, "1/s", "roll attitude P gain (rad/s per rad)"),
     Tunable("mc_pitch_p", "MC_PITCH_P", 0.0, 12.0, "1/s", "pitch attitude P gain (rad/s per rad)"),
     Tunable("mc_yaw_p", "MC_YAW_P", 0.0, 5.0, "1/s", "yaw attitude P gain (rad/s per rad)"),
@@ -212,23 +208,11 @@ class Px4AttitudeGains:
 
 
 @register(ROTATIONAL)
-class Px4Attitude:
+class Px4Attitude(TunableLaw):
     NAME = "px4_attitude"
-    STATE = ("rate_int_x", "rate_int_y", "rate_int_z", "rate_prev_x", "rate_prev_y", "rate_prev_z",
-             "rate_dot_x", "rate_dot_y", "rate_dot_z", "rate_dot_ready")  # fmt: skip
+    STATE = ("rate_int_x", "rate_int_y", "rate_int_z", *derivative_names("rate"))
+    GAINS, TUNABLE = Px4AttitudeGains, TUNABLE_GAINS
     step = staticmethod(step)
-
-    @classmethod
-    def load_gains(cls, section: Section) -> Px4AttitudeGains:
-        return Px4AttitudeGains(cls.NAME, **tunable.read(section, TUNABLE))
-
-    @staticmethod
-    def parameters(gains: Px4AttitudeGains) -> tuple[ParamSpec, ...]:
-        return tunable.parameter_specs(gains, TUNABLE)
-
-    @staticmethod
-    def gains_from_params(gains: Px4AttitudeGains, params: Mapping[str, float]) -> Px4AttitudeGains:
-        return tunable.from_params(gains, TUNABLE, params)
 
     @staticmethod
     def pack(gains: Px4AttitudeGains, context: LawContext) -> tuple[float, ...]:

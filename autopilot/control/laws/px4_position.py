@@ -36,18 +36,15 @@ of the law (``velocity_max_*``, ``thrust_min`` = MPC_THR_MIN, ``thrust_max`` = M
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
-from quadcommon.numerics import clip, filtered_derivative, low_pass_alpha
+from quadcommon.numerics import clip, derivative_names, filtered_derivative, low_pass_alpha
 from quadcommon.rigid_body import limit_tilt, roll_pitch_from_body_z
 from quadcommon.schema import Section
 
-from ...params.store import ParamSpec
-from .. import tunable
 from ..registry import TRANSLATIONAL, LawContext, register
-from ..tunable import Tunable
+from ..tunable import Tunable, TunableLaw
 
 # Gains array: position P (x, y, z), velocity P, I, D (x, y, z), the velocity derivative's low-pass
 # weight, MPC_ACC_DECOUPLE (1.0/0.0), the velocity limits (xy, up, down), the hover thrust, the
@@ -87,12 +84,7 @@ def thrust_setpoint(g, ax, ay, az):
     (world z up), 1.0 if the tilt limit acted, 1.0 if the minimum thrust did."""
     gravity = g[G_GRAVITY]
     vertical = gravity if g[G_DECOUPLE] != 0.0 else gravity + az
-    n = math.sqrt(ax * ax + ay * ay + vertical * vertical)
-    if n > 1e-9:
-        bx, by, bz = ax / n, ay / n, vertical / n
-    else:
-        bx, by, bz = 0.0, 0.0, 1.0
-    bx, by, bz, tilt_limited = limit_tilt(bx, by, bz, g[G_TILT_MAX])
+    bx, by, bz, tilt_limited = limit_tilt(ax, ay, vertical, g[G_TILT_MAX])
     hover = g[G_HOVER]
     collective = hover * (gravity + az) / gravity / bz
     floored = 0.0
@@ -149,7 +141,7 @@ def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_accele
     return collective * g[G_THRUST_MAX_N], roll_ref, pitch_ref, ax, ay, az, thrust_limited, tilt_limited
 
 
-TUNABLE = (
+TUNABLE_GAINS = (
     Tunable("mpc_xy_p", "MPC_XY_P", 0.0, 2.0, "1/s", "horizontal position P gain (m/s per m)"),
     Tunable("mpc_z_p", "MPC_Z_P", 0.1, 1.5, "1/s", "vertical position P gain (m/s per m)"),
     Tunable("mpc_xy_vel_p_acc", "MPC_XY_VEL_P_ACC", 1.2, 5.0, "1/s", "horizontal velocity P (m/s^2 per m/s)"),
@@ -189,14 +181,15 @@ class Px4PositionGains:
 
 
 @register(TRANSLATIONAL)
-class Px4Position:
+class Px4Position(TunableLaw):
     NAME = "px4_position"
-    STATE = ("vel_int_x", "vel_int_y", "vel_int_z", "vel_prev_x", "vel_prev_y", "vel_prev_z",
-             "vel_dot_x", "vel_dot_y", "vel_dot_z", "vel_dot_ready")  # fmt: skip
+    STATE = ("vel_int_x", "vel_int_y", "vel_int_z", *derivative_names("vel"))
+    GAINS, TUNABLE = Px4PositionGains, TUNABLE_GAINS
     step = staticmethod(step)
 
     @classmethod
-    def load_gains(cls, section: Section) -> Px4PositionGains:
+    def settings(cls, section: Section) -> dict[str, float]:
+        """The limits (config keys, not parameters)."""
         limits = {
             "velocity_max_xy_m_s": section.number("velocity_max_xy_m_s", lo=0.1, hi=20.0, unit="m/s"),
             "velocity_max_up_m_s": section.number("velocity_max_up_m_s", lo=0.1, hi=8.0, unit="m/s"),
@@ -208,15 +201,7 @@ class Px4Position:
         if limits["thrust_max"] <= limits["thrust_min"]:
             allowed = f"> thrust_min ({limits['thrust_min']:g})"
             raise section.error("thrust_max", limits["thrust_max"], allowed)
-        return Px4PositionGains(cls.NAME, **tunable.read(section, TUNABLE), **limits)
-
-    @staticmethod
-    def parameters(gains: Px4PositionGains) -> tuple[ParamSpec, ...]:
-        return tunable.parameter_specs(gains, TUNABLE)
-
-    @staticmethod
-    def gains_from_params(gains: Px4PositionGains, params: Mapping[str, float]) -> Px4PositionGains:
-        return tunable.from_params(gains, TUNABLE, params)
+        return limits
 
     @staticmethod
     def pack(gains: Px4PositionGains, context: LawContext) -> tuple[float, ...]:

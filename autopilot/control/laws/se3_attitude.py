@@ -20,7 +20,6 @@ body torque (N m). Linearised about hover each axis is ``J s^2 + k_W s + k_R``. 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
@@ -31,12 +30,9 @@ from quadcommon.rigid_body import (
     matrix_times,
     rotation_matrix,
 )
-from quadcommon.schema import Section
 
-from ...params.store import ParamSpec
-from .. import tunable
 from ..registry import ROTATIONAL, LawContext, register
-from ..tunable import Tunable
+from ..tunable import Tunable, TunableLaw
 
 # Gains array, per body axis from each offset: k_R (N m/rad), k_W (N m s/rad), the nominal inertia.
 G_KR, G_KW, G_INERTIA = 0, 3, 6
@@ -85,7 +81,7 @@ def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
     )
 
 
-TUNABLE = (
+TUNABLE_GAINS = (
     Tunable("k_R", "SE3_KR", 0.0, 1000.0, "N m/rad", "SE(3) attitude gain k_R", per_axis=True),
     Tunable("k_W", "SE3_KW", 0.0, 100.0, "N m s/rad", "SE(3) angular velocity gain k_W", per_axis=True),
 )
@@ -101,22 +97,10 @@ class Se3AttitudeGains:
 
 
 @register(ROTATIONAL)
-class Se3Attitude:
+class Se3Attitude(TunableLaw):
     NAME = "se3_attitude"
-    STATE = ()
+    GAINS, TUNABLE = Se3AttitudeGains, TUNABLE_GAINS
     step = staticmethod(step)
-
-    @classmethod
-    def load_gains(cls, section: Section) -> Se3AttitudeGains:
-        return Se3AttitudeGains(cls.NAME, **tunable.read(section, TUNABLE))
-
-    @staticmethod
-    def parameters(gains: Se3AttitudeGains) -> tuple[ParamSpec, ...]:
-        return tunable.parameter_specs(gains, TUNABLE)
-
-    @staticmethod
-    def gains_from_params(gains: Se3AttitudeGains, params: Mapping[str, float]) -> Se3AttitudeGains:
-        return tunable.from_params(gains, TUNABLE, params)
 
     @staticmethod
     def pack(gains: Se3AttitudeGains, context: LawContext) -> tuple[float, ...]:

@@ -24,19 +24,14 @@ as BS-NLHinf does.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
 from quadcommon.numerics import clip
 from quadcommon.rigid_body import limit_tilt, roll_pitch_from_body_z, rotation_matrix
-from quadcommon.schema import Section
 
-from ...params.store import ParamSpec
-from .. import tunable
 from ..registry import TRANSLATIONAL, LawContext, register
-from ..tunable import Tunable
+from ..tunable import Tunable, TunableLaw
 
 # Gains array: k_x (N/m), k_v (N s/m), the nominal mass, g, U1_max, the tilt limit.
 G_KX, G_KV, G_MASS, G_GRAVITY, G_THRUST_MAX, G_TILT_MAX = 0, 1, 2, 3, 4, 5
@@ -60,18 +55,13 @@ def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_accele
     thrust = fx * R[0][2] + fy * R[1][2] + fz * R[2][2]  # F_d . R e3
     thrust_max = g[G_THRUST_MAX]
     thrust_limited = 1.0 if thrust < 0.0 or thrust > thrust_max else 0.0
-    n = math.sqrt(fx * fx + fy * fy + fz * fz)
-    if n > 1e-9:
-        bx, by, bz = fx / n, fy / n, fz / n
-    else:
-        bx, by, bz = 0.0, 0.0, 1.0
-    bx, by, bz, tilt_limited = limit_tilt(bx, by, bz, g[G_TILT_MAX])
+    bx, by, bz, tilt_limited = limit_tilt(fx, fy, fz, g[G_TILT_MAX])  # b3_d
     roll_ref, pitch_ref = roll_pitch_from_body_z(bx, by, bz, ref_yaw)
     thrust = clip(thrust, 0.0, thrust_max)
     return thrust, roll_ref, pitch_ref, fx / m, fy / m, fz / m - gravity, thrust_limited, tilt_limited
 
 
-TUNABLE = (
+TUNABLE_GAINS = (
     Tunable("k_x", "SE3_KX", 0.0, 1000.0, "N/m", "SE(3) position gain k_x"),
     Tunable("k_v", "SE3_KV", 0.0, 1000.0, "N s/m", "SE(3) velocity gain k_v"),
 )
@@ -87,22 +77,10 @@ class Se3PositionGains:
 
 
 @register(TRANSLATIONAL)
-class Se3Position:
+class Se3Position(TunableLaw):
     NAME = "se3_position"
-    STATE = ()
+    GAINS, TUNABLE = Se3PositionGains, TUNABLE_GAINS
     step = staticmethod(step)
-
-    @classmethod
-    def load_gains(cls, section: Section) -> Se3PositionGains:
-        return Se3PositionGains(cls.NAME, **tunable.read(section, TUNABLE))
-
-    @staticmethod
-    def parameters(gains: Se3PositionGains) -> tuple[ParamSpec, ...]:
-        return tunable.parameter_specs(gains, TUNABLE)
-
-    @staticmethod
-    def gains_from_params(gains: Se3PositionGains, params: Mapping[str, float]) -> Se3PositionGains:
-        return tunable.from_params(gains, TUNABLE, params)
 
     @staticmethod
     def pack(gains: Se3PositionGains, context: LawContext) -> tuple[float, ...]:
