@@ -142,14 +142,14 @@ def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_accele
 
 
 TUNABLE_GAINS = (
-    Tunable("mpc_xy_p", "MPC_XY_P", 0.0, 2.0, "1/s", "horizontal position P gain (m/s per m)"),
-    Tunable("mpc_z_p", "MPC_Z_P", 0.1, 1.5, "1/s", "vertical position P gain (m/s per m)"),
-    Tunable("mpc_xy_vel_p_acc", "MPC_XY_VEL_P_ACC", 1.2, 5.0, "1/s", "horizontal velocity P (m/s^2 per m/s)"),
-    Tunable("mpc_xy_vel_i_acc", "MPC_XY_VEL_I_ACC", 0.0, 60.0, "1/s^2", "horizontal velocity I (m/s^2/m)"),
-    Tunable("mpc_xy_vel_d_acc", "MPC_XY_VEL_D_ACC", 0.1, 2.0, "s", "horizontal velocity D (on acceleration)"),
-    Tunable("mpc_z_vel_p_acc", "MPC_Z_VEL_P_ACC", 2.0, 15.0, "1/s", "vertical velocity P (m/s^2 per m/s)"),
-    Tunable("mpc_z_vel_i_acc", "MPC_Z_VEL_I_ACC", 0.2, 3.0, "1/s^2", "vertical velocity I (m/s^2 per m)"),
-    Tunable("mpc_z_vel_d_acc", "MPC_Z_VEL_D_ACC", 0.0, 2.0, "s", "vertical velocity D (on acceleration)"),
+    Tunable("mpc_xy_p", "MPC_XY_P", 0.0, 2.0, "1/s", "horizontal position P gain"),
+    Tunable("mpc_z_p", "MPC_Z_P", 0.1, 1.5, "1/s", "vertical position P gain"),
+    Tunable("mpc_xy_vel_p_acc", "MPC_XY_VEL_P_ACC", 1.2, 5.0, "1/s", "horizontal velocity P gain"),
+    Tunable("mpc_xy_vel_i_acc", "MPC_XY_VEL_I_ACC", 0.0, 60.0, "1/s^2", "horizontal velocity I gain"),
+    Tunable("mpc_xy_vel_d_acc", "MPC_XY_VEL_D_ACC", 0.1, 2.0, "s", "horizontal velocity D gain (on v')"),
+    Tunable("mpc_z_vel_p_acc", "MPC_Z_VEL_P_ACC", 2.0, 15.0, "1/s", "vertical velocity P gain"),
+    Tunable("mpc_z_vel_i_acc", "MPC_Z_VEL_I_ACC", 0.2, 3.0, "1/s^2", "vertical velocity I gain"),
+    Tunable("mpc_z_vel_d_acc", "MPC_Z_VEL_D_ACC", 0.0, 2.0, "s", "vertical velocity D gain (on v')"),
     Tunable("mpc_veld_lp", "MPC_VELD_LP", 0.0, 50.0, "Hz", "velocity derivative low-pass cutoff (0: none)"),
     Tunable("mpc_acc_decouple", "MPC_ACC_DECOUPLE", 0, 1, "", "tilt from the horizontal acceleration alone",
             switch=True),
