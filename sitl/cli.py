@@ -234,7 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
         "share ports (N's API client port 14540+N is N-10's GCS client port ...) and are refused together",
     )
     p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1; at most 10)")
-    p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
+    p.add_argument("--controller", default="intbs_nlhinf",
+                   help=f"cascade (config/controllers): {', '.join(CONTROLLER_NAMES)}, or your own")
     p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")
     p.add_argument("--vehicle", default="paper_quad", help="vehicle model and plant (config/vehicle)")
     p.add_argument(
@@ -324,7 +325,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("run", help="one in-process run of a scenario")
     p.add_argument("scenario", help="scenario name (config/scenarios) or path")
-    p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
+    p.add_argument("--controller", default="intbs_nlhinf",
+                   help=f"cascade (config/controllers): {', '.join(CONTROLLER_NAMES)}, or your own")
     p.add_argument("--nominal-plant", action="store_true",
                    help="fly the nominal Section II model instead of the coupled plant")  # fmt: skip
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
