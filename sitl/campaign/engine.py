@@ -21,7 +21,6 @@ from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import Rates, TrajectorySpec, VehicleConfig
 from quadcommon.trajectories import trajectory_from_spec
-from simulator.dynamics.compiled import plant_array
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
 from simulator.environment.gust_profile import CHANNELS, GustProfile
@@ -88,7 +87,7 @@ def initial_state(
     """``(state0, P)``: the plant placed by :meth:`Plant.reset` and its constants."""
     plant = Plant(plant_vehicle, dt_physics)
     plant.reset(position_m, euler_rad, velocity_m_s)
-    return np.array(plant.state, dtype=float), plant_array(plant)
+    return np.array(plant.state, dtype=float), np.array(plant.parameters(), dtype=float)
 
 
 def controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> np.ndarray:

@@ -10,11 +10,9 @@ These functions are a *transcription* of the scalar reference, with every expres
 the same order of floating-point operations so the two agree to rounding (the scalar code is
 the specification; the tests in ``tests/campaign/`` prove the agreement run for run):
 
-* plant: :class:`simulator.dynamics.plant.Plant` (``_make_derivative``, ``step``,
-  ``_resolve_ground_contact``, ``kinematics``): the coupled rigid body about G with forces at O
-  (CONTROL.md, "the more accurate plant"), RK4, quaternion renormalisation, ground contact; its
-  compiled form lives with the plant (:mod:`simulator.dynamics.compiled`, which the simulator
-  itself runs) and is imported here;
+* plant: the coupled rigid body about G with forces at O (CONTROL.md, "the more accurate
+  plant"), RK4, quaternion renormalisation, ground contact: the plant's own equations
+  (:mod:`simulator.dynamics.equations`, kernels the simulator itself runs), compiled in here;
 * disturbances: :class:`simulator.environment.gust_profile.DisturbanceSchedule.evaluate` (steps,
   ramps, 1-cos gusts, Dryden wind precomputed by the project's own generator);
 * cascade: :class:`autopilot.control.cascade.Cascade.step`: translational laws (eqs. 24-29 and
@@ -50,6 +48,8 @@ from autopilot.control.compiled import (  # the cascade, compiled (what the auto
     C_DT,
     C_ROTOR_MODE,
     F_SIZE,
+    _max,
+    _min,
     allocate_rotors,
     attitude_torque,
     command_filter,
@@ -59,7 +59,9 @@ from autopilot.control.compiled import (  # the cascade, compiled (what the auto
     translational,
     wrap_pi,
 )
-from simulator.dynamics.compiled import (  # the plant, compiled (see the cache note below)
+from quadcommon import kernel as _kernel
+from quadcommon.rigid_body import euler_from_rotation, rotation_from_quaternion
+from simulator.dynamics.equations import (  # the plant's equations (kernels; see the cache note below)
     P_GROUND,
     P_ROTOR_MODE,
     P_THRUST_MAX,
@@ -73,30 +75,31 @@ from simulator.dynamics.compiled import (  # the plant, compiled (see the cache 
     U_THRUST,
     U_TORQUE,
     U_WIND,
-    _max,
-    _min,
-    euler_from_rotation,
     ground_contact,
+    motion_of_O,
     rk4_step,
-    rotation_from_quaternion,
-    truth_of_O,
 )  # fmt: skip
+
+# The plant's equations are kernels: numba compiles them into the functions here once they are
+# registered with it, which this engine needs whatever QUADSITL_PURE_PYTHON says.
+_kernel._load_numba()
 
 
 def _forget_kernels_compiled_against_another_plant() -> None:
     """numba keys a cached function on its own file only, but these kernels have the plant's and
-    the cascade's functions and constants (:mod:`simulator.dynamics.compiled`,
-    :mod:`autopilot.control.compiled`) compiled into them: when either file changes, this file's
-    cache entries are deleted before anything here compiles."""
+    the plant's and the cascade's functions and constants (:mod:`simulator.dynamics.equations`,
+    :mod:`quadcommon.rigid_body`, :mod:`autopilot.control.compiled`) compiled into them: when any of
+    these files changes, this file's cache entries are deleted before anything here compiles."""
     import hashlib
     import os
     from pathlib import Path
 
     import autopilot.control.compiled as cascade_kernels
-    import simulator.dynamics.compiled as plant_kernels
+    import quadcommon.rigid_body as rigid_body
+    import simulator.dynamics.equations as plant_kernels
 
     digest = hashlib.sha256()
-    for module in (plant_kernels, cascade_kernels):
+    for module in (plant_kernels, rigid_body, cascade_kernels):
         digest.update(Path(module.__file__).read_bytes())
     stamp = digest.hexdigest()
     here = Path(__file__).resolve()
@@ -309,13 +312,13 @@ def simulate(  # noqa: C901
     t = 0.0
     for k in range(steps + 1):
         t = k * dt
-        pos, vel, euler, cos_tilt = truth_of_O(s, P)
+        R, pos, vel = motion_of_O(s, P)
+        euler, cos_tilt = euler_from_rotation(R), R[2][2]
         p_w, q_w, r_w = s[10], s[11], s[12]
         if wire:
             # ODOMETRY: float32 NED pose, NED velocity, FRD rates; the autopilot converts back.
             qw, qx, qy, qz = _f32(s[6]), _f32(s[7]), -_f32(-s[8]), -_f32(-s[9])
-            Rw = rotation_from_quaternion(qw, qx, qy, qz)
-            c_euler = euler_from_rotation(Rw[0], Rw[3], Rw[6], Rw[7], Rw[8])
+            c_euler = euler_from_rotation(rotation_from_quaternion(qw, qx, qy, qz))
             c_pos = (_f32(pos[0]), -_f32(-pos[1]), -_f32(-pos[2]))
             c_vel = (_f32(vel[0]), -_f32(-vel[1]), -_f32(-vel[2]))
             c_rates = euler_rates_from_body_rates(c_euler[0], c_euler[1], _f32(p_w), -_f32(-q_w), -_f32(-r_w))
