@@ -241,15 +241,6 @@ def physics_steps(work, P, inputs, h: float) -> None:
 
 
 @kernel
-def kinematics(s, P) -> tuple:
-    """``(position, velocity, euler, euler_rates)`` of O: what a controller with perfect state
-    knowledge reads."""
-    R, p_O, v_O = motion_of_O(s, P)
-    euler = euler_from_rotation(R)
-    return p_O, v_O, euler, euler_rates_from_body_rates(euler[0], euler[1], (s[10], s[11], s[12]))
-
-
-@kernel
 def truth(work, P, u) -> tuple:
     """The ground truth of ``work[0]`` with the inputs ``u`` held, in the fields' order of
     :class:`~.plant.TruthState`: O's position, velocity and acceleration, quaternion, Euler angles,

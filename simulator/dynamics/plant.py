@@ -122,7 +122,7 @@ class Plant:
         self._u = vector(U_SIZE)
         self._frame_u = vector(2 * U_SIZE)
         self._entries = _entries()
-        self._truth: tuple[list[float], TruthState] | None = None  # advance()'s (state it is of, truth)
+        self._truth: tuple[list[float], TruthState] | None = None  # (the state it is of, truth)
 
     def parameters(self) -> list[float]:
         """The parameter vector the equations read (layout ``P_*`` of :mod:`.equations`)."""
@@ -249,25 +249,26 @@ class Plant:
 
     # -- read-out ---------------------------------------------------------------------------------
     def on_ground(self) -> bool:
-        s = self._s
-        s[:] = self.state
-        return self._entries.on_ground(s, self._P)
+        return self.truth().on_ground
 
     def kinematics(self) -> tuple[Vector3, Vector3, Vector3, Vector3]:
-        """``(position, velocity, euler, euler_rates)`` of O: the cheap read-out for control."""
-        s = self._s
-        s[:] = self.state
-        return self._entries.kinematics(s, self._P)
+        """``(position, velocity, euler, euler_rates)`` of O: what a controller with perfect state
+        knowledge reads."""
+        truth = self.truth()
+        return truth.position_m, truth.velocity_m_s, truth.euler_rad, truth.euler_rates_rad_s
 
     def truth(self) -> TruthState:
-        """Ground truth now (one extra derivative evaluation gives the accelerations); after
-        :meth:`advance`, the read-out it made."""
+        """Ground truth now (one derivative evaluation gives the accelerations), kept until the
+        state or an input changes (after :meth:`advance`, the read-out it made)."""
         cached = self._truth
         if cached is not None and cached[0] == self.state:
             return cached[1]
-        self._s[:] = self.state
+        state = list(self.state)  # a copy: an in-place change of the state misses the cache
+        self._s[:] = state
         self._u[:] = self._held_inputs()
-        return TruthState._make(self._entries.truth(self._work, self._P, self._u))
+        truth = TruthState._make(self._entries.truth(self._work, self._P, self._u))
+        self._truth = (state, truth)
+        return truth
 
 
 def make_plant(vehicle: VehicleConfig, physics_dt_s: float):
@@ -286,8 +287,6 @@ class _Entries(NamedTuple):
     physics_steps: Callable[..., None]
     advance: Callable[..., tuple]
     truth: Callable[..., tuple]
-    kinematics: Callable[..., tuple]
-    on_ground: Callable[..., bool]
 
 
 @functools.cache
@@ -303,8 +302,6 @@ def _entries() -> _Entries:
         entries.physics_steps(work, P, u, 0.001)
         entries.advance(work, P, u, 0.001)
         entries.truth(work, P, u)
-        entries.kinematics(work[0], P)
-        entries.on_ground(work[0], P)
         for entry in entries:
             freeze(entry)
     return entries
