@@ -85,6 +85,12 @@ def transpose_times(R: tuple, v: tuple) -> tuple:
 
 
 @kernel
+def matrix_at(P, i: int) -> tuple:
+    """The 3x3 matrix stored row-major at ``P[i]`` (the inertia tensor, its inverse)."""
+    return ((P[i], P[i + 1], P[i + 2]), (P[i + 3], P[i + 4], P[i + 5]), (P[i + 6], P[i + 7], P[i + 8]))
+
+
+@kernel
 def com_offset(P) -> tuple:
     """``r_G``."""
     return (P[P_COM], P[P_COM + 1], P[P_COM + 2])
@@ -145,12 +151,8 @@ def derivative(s, out, P, u) -> None:
         tz += dz
 
     # Euler's equation about G: J w_dot = tau - w x J w.
-    J = ((P[P_J], P[P_J + 1], P[P_J + 2]), (P[P_J + 3], P[P_J + 4], P[P_J + 5]),
-         (P[P_J + 6], P[P_J + 7], P[P_J + 8]))  # fmt: skip
-    K = ((P[P_K], P[P_K + 1], P[P_K + 2]), (P[P_K + 3], P[P_K + 4], P[P_K + 5]),
-         (P[P_K + 6], P[P_K + 7], P[P_K + 8]))  # fmt: skip
-    gyro = cross(w, matrix_times(J, w))
-    dw = matrix_times(K, (tx - gyro[0], ty - gyro[1], tz - gyro[2]))
+    gyro = cross(w, matrix_times(matrix_at(P, P_J), w))
+    dw = matrix_times(matrix_at(P, P_K), (tx - gyro[0], ty - gyro[1], tz - gyro[2]))
 
     # Newton's equation for G (world frame): thrust, the disturbance force, drag on O's
     # air-relative velocity v_G - R (w x r_G) - wind.
