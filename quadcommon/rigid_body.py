@@ -111,8 +111,17 @@ def body_torque_from_euler_torque(phi: float, theta: float, tau_eta: Vector3) ->
     The Lagrangian generalised force is ``tau_eta = W_eta^T tau_body`` (eq. 4), so
     ``tau_body = W_eta^-T tau_eta``.
     """
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
+    return body_torque_from_euler_torque_sincos(
+        math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta), tau_eta
+    )
+
+
+@kernel
+def body_torque_from_euler_torque_sincos(
+    sf: float, cf: float, st: float, ct: float, tau_eta: Vector3
+) -> Vector3:
+    """:func:`body_torque_from_euler_torque` given ``sin``/``cos`` of phi and theta (a plant reads
+    them off its rotation matrix, without Euler angles)."""
     a, b, c = tau_eta
     # Solve W^T x = tau_eta, W^T = [[1,0,0],[0,cf,-sf],[-st, sf ct, cf ct]].
     x0 = a

@@ -23,7 +23,6 @@ from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import Rates, TrajectorySpec, VehicleConfig
 from quadcommon.kernel import compiled
 from quadcommon.trajectories import trajectory_from_spec
-from simulator.dynamics.compiled import plant_array
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
 from simulator.environment.gust_profile import GustProfile, element_rows
@@ -104,7 +103,7 @@ def initial_state(
     """``(state0, P)``: the plant placed by :meth:`Plant.reset` and its constants."""
     plant = Plant(plant_vehicle, dt_physics)
     plant.reset(position_m, euler_rad, velocity_m_s)
-    return np.array(plant.state, dtype=float), plant_array(plant)
+    return np.array(plant.state, dtype=float), np.array(plant.parameters(), dtype=float)
 
 
 def pack_controller(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> Controller:

@@ -37,8 +37,8 @@ from autopilot.control.command_filter import S_SIZE as FILTER_STATE_SIZE
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
 from quadcommon.numerics import clip
-from quadcommon.rigid_body import euler_from_quaternion, euler_rates_from_body_rates
-from simulator.dynamics.compiled import (  # the plant (what the simulator steps)
+from quadcommon.rigid_body import euler_from_quaternion, euler_from_rotation, euler_rates_from_body_rates
+from simulator.dynamics.equations import (  # the plant (what the simulator steps)
     P_GROUND,
     P_ROTOR_MODE,
     P_THRUST_MAX,
@@ -53,8 +53,8 @@ from simulator.dynamics.compiled import (  # the plant (what the simulator steps
     U_TORQUE,
     U_WIND,
     ground_contact,
+    motion_of_O,
     rk4_step,
-    truth_of_O,
 )
 from simulator.environment.gust_profile import one_minus_cosine_wind, steps_and_ramps
 
@@ -180,7 +180,8 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
     t = 0.0
     for k in range(steps + 1):
         t = k * dt
-        pos, vel, euler, cos_tilt = truth_of_O(s, P)
+        R, pos, vel = motion_of_O(s, P)
+        euler, cos_tilt = euler_from_rotation(R), R[2][2]
         p_w, q_w, r_w = s[10], s[11], s[12]
         if wire:
             # ODOMETRY: float32 NED pose, NED velocity, FRD rates; the autopilot converts back.
