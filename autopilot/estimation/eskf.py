@@ -305,9 +305,20 @@ class ErrorStateEkf:
         bg = self._bg
         P = self.P
         self._q, self._p, self._v, self._prev_acc_world = self._entries.predict(
-            P, self._q_diag, dt, self.gravity, rate, force, self._prev_rate, self._prev_acc_world, bg,
-            self._ba, self._q, self._p, self._v,
-        )  # fmt: skip
+            P,
+            self._q_diag,
+            dt,
+            self.gravity,
+            rate,
+            force,
+            self._prev_rate,
+            self._prev_acc_world,
+            bg,
+            self._ba,
+            self._q,
+            self._p,
+            self._v,
+        )
         self._prev_rate = rate
         self._prev_force = force
         self._rate = (rate[0] - bg[0], rate[1] - bg[1], rate[2] - bg[2])
