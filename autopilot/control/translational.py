@@ -71,8 +71,16 @@ G_SIZE = 22
 
 
 @kernel
-def backstepping_output(g, ax: float, ay: float, az: float, euler: Vector3) -> tuple:
-    """A backstepping law's commanded accelerations -> the translational step's output tuple."""
+def backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, dt,
+                      integrate):  # fmt: skip
+    """A backstepping law's step: ``axis(g, x, i, e1, e1', p_d'', dt, integrate)`` (the law's own
+    kernel) gives the commanded acceleration on each axis i, then :func:`thrust_and_tilt`."""
+    ax = axis(g, x, 0, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0], dt,
+              integrate)  # fmt: skip
+    ay = axis(g, x, 1, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1], dt,
+              integrate)  # fmt: skip
+    az = axis(g, x, 2, position[2] - ref_position[2], velocity[2] - ref_velocity[2], ref_acceleration[2], dt,
+              integrate)  # fmt: skip
     thrust, roll_ref, pitch_ref, thrust_limited, tilt_limited = thrust_and_tilt(
         g[G_MASS], g[G_GRAVITY], g[G_THRUST_MAX], g[G_SIN_TILT], ax, ay, az, euler
     )

@@ -12,25 +12,23 @@ from ..translational import (
     G_C1_C2,
     G_ONE_C1C2,
     backstepping_from_params,
-    backstepping_output,
     backstepping_parameters,
+    backstepping_step,
     load_backstepping_gains,
     pack_backstepping,
 )
 
 
 @kernel
-def axis(g, i, e1, e1_dot, ref_acc):
+def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
     return ref_acc - g[G_ONE_C1C2 + i] * e1 - g[G_C1_C2 + i] * e1_dot
 
 
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):
-    ax = axis(g, 0, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0])
-    ay = axis(g, 1, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1])
-    az = axis(g, 2, position[2] - ref_position[2], velocity[2] - ref_velocity[2], ref_acceleration[2])
-    return backstepping_output(g, ax, ay, az, euler)
+    return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
+                             ref_acceleration, dt, integrate)
 
 
 @register(TRANSLATIONAL)

@@ -21,8 +21,8 @@ from ..translational import (
     G_K,
     G_ONE_C1C2,
     backstepping_from_params,
-    backstepping_output,
     backstepping_parameters,
+    backstepping_step,
     load_backstepping_gains,
     pack_backstepping,
     rescale_integrals,
@@ -41,13 +41,8 @@ def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):
-    ax = axis(g, x, 0, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0], dt,
-              integrate)  # fmt: skip
-    ay = axis(g, x, 1, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1], dt,
-              integrate)  # fmt: skip
-    az = axis(g, x, 2, position[2] - ref_position[2], velocity[2] - ref_velocity[2], ref_acceleration[2], dt,
-              integrate)  # fmt: skip
-    return backstepping_output(g, ax, ay, az, euler)
+    return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
+                             ref_acceleration, dt, integrate)
 
 
 @register(TRANSLATIONAL)
