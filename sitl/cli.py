@@ -292,6 +292,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("rest", nargs=argparse.REMAINDER)
     p.set_defaults(func=lambda a: __import__("gcs_scripts.view.server", fromlist=["main"]).main(a.rest))
 
+    p = sub.add_parser("compile", help="compile the flight's kernels now (quadsitl compile --help)",
+                       add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=lambda a: __import__("sitl.compile", fromlist=["main"]).main(a.rest))
+
     p = sub.add_parser("demo", help="the paper's helix through the SITL for the three cascades (make demo)")
     p.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
     p.add_argument("--instance", type=int, default=0, help="vehicle instance used for the runs")
@@ -399,6 +404,10 @@ def _dispatch(argv: list[str]) -> int:
         from gcs_scripts.view.server import main as view_main
 
         return view_main(argv[1:], prog="quadsitl view")
+    if argv[:1] == ["compile"]:  # its own parser (options such as --help pass through)
+        from sitl.compile import main as compile_main
+
+        return compile_main(argv[1:])
     if argv[:1] == ["record"]:
         return _delegate(RECORD_MODULE, argv[1:], "quadsitl record")
     if tuple(argv[:2]) in DELEGATED:
