@@ -146,9 +146,9 @@ def _qualified(fn: Callable[..., Any]) -> str:
 @functools.cache
 def _project_digest() -> str:
     """Digest of every kernel module of the project (and of numba's version)."""
-    import numba
+    from importlib.metadata import version
 
-    digest = hashlib.sha256(numba.__version__.encode())
+    digest = hashlib.sha256(version("numba").encode())
     for package in PROJECT_PACKAGES:
         for path in sorted((PROJECT_ROOT / package).rglob("*.py")):
             try:
@@ -206,20 +206,37 @@ def _source_of_entry(fn: Callable[..., Any], bound: tuple[Callable[..., Any], ..
 _entries: dict[tuple[Any, ...], Callable[..., Any]] = {}
 
 
+def cached(fn: Callable[..., Any], *bound: Callable[..., Any], nogil: bool = False) -> bool:
+    """True when the entry ``compiled(fn, *bound, nogil=nogil)`` would load from numba's cache (no
+    compilation); without importing numba."""
+    name, _ = _entry_name(fn, tuple(bound), nogil)
+    pattern = f"{name}.entry-*.nbi"
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return any(Path(os.environ["NUMBA_CACHE_DIR"]).rglob(pattern))
+    return any((environment.kernel_cache_dir() / "__pycache__").glob(pattern))
+
+
+def _entry_name(
+    fn: Callable[..., Any], bound: tuple[Callable[..., Any], ...], nogil: bool
+) -> tuple[str, str]:
+    """The generated module's name and the digest it carries."""
+    digest = hashlib.sha256(_project_digest().encode())
+    for f in (fn, *bound):
+        digest.update(_qualified(f).encode())
+        path = _outside_project(f)
+        if path is not None:
+            digest.update(path.read_bytes())
+    digest.update(str(nogil).encode())
+    hexdigest = digest.hexdigest()
+    return f"quadsitl_entry_{fn.__name__}_{hexdigest[:20]}", hexdigest
+
+
 def _entry(fn: Callable[..., Any], bound: tuple[Callable[..., Any], ...], nogil: bool) -> Callable[..., Any]:
     key = (fn, bound, nogil)
     with _lock:
         if key in _entries:
             return _entries[key]
-        digest = hashlib.sha256(_project_digest().encode())
-        for f in (fn, *bound):
-            digest.update(_qualified(f).encode())
-            path = _outside_project(f)
-            if path is not None:
-                digest.update(path.read_bytes())
-        digest.update(str(nogil).encode())
-        hexdigest = digest.hexdigest()
-        name = f"quadsitl_entry_{fn.__name__}_{hexdigest[:20]}"
+        name, hexdigest = _entry_name(fn, bound, nogil)
         source = _source_of_entry(fn, bound, nogil, hexdigest)
         path = environment.kernel_cache_dir() / f"{name}.py"
         _write_once(path, source)

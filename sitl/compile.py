@@ -59,6 +59,45 @@ def compile_target(target: str) -> tuple[str, float]:
     return target, time.perf_counter() - start
 
 
+def entries_of(target: str) -> list[tuple]:
+    """The kernel entries a target compiles, as :func:`quadcommon.kernel.compiled` arguments."""
+    kind, _, name = target.partition(":")
+    if kind == "plant":
+        from simulator.dynamics import equations
+
+        return [(equations.physics_steps,), (equations.advance,), (equations.truth,)]
+    if kind == "estimator":
+        from autopilot.estimation import kernels
+
+        return [(kernels.predict,), (kernels.prior_variances,), (kernels.joseph_update,)]
+    from autopilot.control import registry
+    from autopilot.control.cascade import buffered_step
+    from autopilot.control.config import load_controller
+
+    config = load_controller(name)
+    laws = (registry.law(registry.TRANSLATIONAL, config.translational.law).step,
+            registry.law(registry.ROTATIONAL, config.rotational.law).step)  # fmt: skip
+    if kind == "cascade":
+        return [(buffered_step, *laws)]
+    from sitl.campaign.kernels import simulate
+
+    return [(simulate, *laws, True)]  # nogil
+
+
+def missing(names: Sequence[str]) -> list[str]:
+    """The targets with an entry numba would have to compile (not in its cache yet)."""
+    from quadcommon.kernel import cached
+
+    out = []
+    for target in names:
+        for entry in entries_of(target):
+            nogil = entry[-1] is True
+            if not cached(*(entry[:-1] if nogil else entry), nogil=nogil):
+                out.append(target)
+                break
+    return out
+
+
 def compile_all(names: Sequence[str], workers: int | None = None, log=print) -> float:
     """Compile ``names`` (:func:`targets`) with ``workers`` processes; returns the wall time."""
     from quadcommon.kernel import compiling
