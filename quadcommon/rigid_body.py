@@ -163,6 +163,16 @@ def cross(a: Vector3, b: Vector3) -> Vector3:
 
 
 @kernel
+def transpose_times(R: Matrix3, v: Vector3) -> Vector3:
+    """``R^T v`` (world to body for a body-to-world rotation ``R``)."""
+    return (
+        R[0][0] * v[0] + R[1][0] * v[1] + R[2][0] * v[2],
+        R[0][1] * v[0] + R[1][1] * v[1] + R[2][1] * v[2],
+        R[0][2] * v[0] + R[1][2] * v[1] + R[2][2] * v[2],
+    )
+
+
+@kernel
 def roll_pitch_from_body_z(bx: float, by: float, bz: float, psi: float) -> tuple[float, float]:
     """ZYX roll and pitch ``(phi, theta)`` of the attitude whose body z axis is the unit vector
     ``b`` (world frame) and whose yaw is ``psi``: the third column of ``R(phi, theta, psi)`` is

@@ -24,6 +24,7 @@ import math
 from quadcommon.kernel import kernel
 from quadcommon.rigid_body import (
     body_torque_from_euler_torque_sincos,
+    cross,
     euler_from_rotation,
     euler_rates_from_body_rates,
     matrix_times,
@@ -31,6 +32,7 @@ from quadcommon.rigid_body import (
     quaternion_multiply,
     quaternion_normalised,
     rotation_from_quaternion,
+    transpose_times,
 )
 
 # -- parameters P (read off a simulator.dynamics.plant.Plant) -------------------------------------
@@ -66,22 +68,6 @@ U_SIZE = 17
 
 # Ground contact: O within this of z = 0, and G's vertical speed below it, is resting.
 ON_GROUND_TOLERANCE = 1e-6
-
-
-@kernel
-def cross(a: tuple, b: tuple) -> tuple:
-    """``a x b``."""
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-@kernel
-def transpose_times(R: tuple, v: tuple) -> tuple:
-    """``R^T v`` (world to body for a body-to-world rotation ``R``)."""
-    return (
-        R[0][0] * v[0] + R[1][0] * v[1] + R[2][0] * v[2],
-        R[0][1] * v[0] + R[1][1] * v[1] + R[2][1] * v[2],
-        R[0][2] * v[0] + R[1][2] * v[1] + R[2][2] * v[2],
-    )
 
 
 @kernel

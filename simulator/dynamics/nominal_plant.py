@@ -18,9 +18,9 @@ from quadcommon.rigid_body import (
     quaternion_from_euler,
     rotation_matrix,
     solve3,
+    transpose_times,
 )
 
-from .equations import transpose_times
 from .plant import ZERO3, Plant, TruthState, Vector3
 
 

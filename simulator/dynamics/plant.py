@@ -44,10 +44,10 @@ import numpy as np
 
 from quadcommon.config import VehicleConfig
 from quadcommon.kernel import compiled, compiling, freeze, vector
-from quadcommon.rigid_body import matrix_times, quaternion_from_euler, rotation_from_quaternion, solve3
+from quadcommon.rigid_body import cross, matrix_times, quaternion_from_euler, rotation_from_quaternion, solve3
 
 from . import equations
-from .equations import P_SIZE, U_FORCE, U_ROTOR, U_SIZE, U_TAU, U_THRUST, U_TORQUE, U_WIND, cross
+from .equations import P_SIZE, U_FORCE, U_ROTOR, U_SIZE, U_TAU, U_THRUST, U_TORQUE, U_WIND
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
