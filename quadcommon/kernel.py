@@ -105,6 +105,16 @@ def vector(values: Sequence[float] | int) -> Any:
     return items
 
 
+def borrowed(array: Any) -> Any:
+    """``array`` itself where Python runs; in compiled code, a view of it that carries no reference
+    count. Compiled code counts references to every array it passes to a kernel (an atomic
+    increment and decrement per array per call, which numba cannot always prove redundant); a
+    kernel stepping thousands of times per run passes its arrays borrowed. The view is valid while
+    ``array`` is alive: borrow a function's arguments, or arrays it keeps in a variable it reads
+    again after the loop (see :func:`~sitl.campaign.kernels.simulate`)."""
+    return array
+
+
 def freeze(entry: Callable[..., Any]) -> None:
     """No compiling from now on (after a warm-up call): a call whose argument types match no
     compiled signature, even after numba's safe conversions, raises TypeError instead of stalling
@@ -125,6 +135,7 @@ def _load_numba() -> None:
         for fn in _pending:
             _register(fn)
         _pending.clear()
+        _register_borrowed()
         _numba_loaded = True
 
 
@@ -137,6 +148,35 @@ def _register(fn: Callable[..., Any]) -> None:
 
     implementation.__signature__ = inspect.signature(fn)  # type: ignore[attr-defined]
     overload(fn, jit_options=JIT_OPTIONS)(implementation)
+
+
+def _register_borrowed() -> None:
+    """:func:`borrowed` in compiled code: the array's struct with no meminfo (NRT's reference
+    counting skips a null meminfo) and no parent object."""
+    from numba.core import cgutils, types
+    from numba.extending import intrinsic, overload
+
+    @intrinsic
+    def view_without_meminfo(typingctx: Any, array: Any) -> Any:
+        if not isinstance(array, types.Array):
+            return None
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            source = context.make_array(signature.args[0])(context, builder, value=args[0])
+            view = context.make_array(signature.return_type)(context, builder)
+            cgutils.copy_struct(view, source)
+            view.meminfo = cgutils.get_null_value(view.meminfo.type)
+            view.parent = cgutils.get_null_value(view.parent.type)
+            return view._getvalue()
+
+        return array(array), codegen
+
+    def implementation(array):  # noqa: ANN001, ANN202 - numba matches its signature to the view's
+        if isinstance(array, types.Array):
+            return lambda array: view_without_meminfo(array)
+        return None
+
+    overload(borrowed, jit_options=JIT_OPTIONS)(implementation)
 
 
 def _qualified(fn: Callable[..., Any]) -> str:

@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from quadcommon.config import VehicleConfig
-from quadcommon.kernel import compiled, compiling, freeze, kernel
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel
 from quadcommon.rigid_body import body_rates_from_euler_rates, euler_torque_from_body_torque
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
@@ -107,6 +107,7 @@ def buffered_step(translational, rotational, buf, at, position, velocity, euler,
     gr, xr, the filter's state, the overrides given (layout ``V_*``), out, end): a compiled call
     converts each array argument on its own, so one buffer costs one conversion instead of eight.
     Returns :data:`OUTPUTS` followed by ``out`` (the normalised commands and the rotor speeds)."""
+    buf = borrowed(buf)  # the caller's for the call: its parts are passed on without counting
     v = buf[at[6] : at[7]]
     attitude = (v[V_ATTITUDE], v[V_ATTITUDE + 1], v[V_ATTITUDE + 2], v[V_ATTITUDE + 3], v[V_ATTITUDE + 4],
                 v[V_ATTITUDE + 5], v[V_ATTITUDE + 6], v[V_ATTITUDE + 7], v[V_ATTITUDE + 8])  # fmt: skip

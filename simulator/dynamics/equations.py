@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from quadcommon.kernel import kernel
+from quadcommon.kernel import borrowed, kernel
 from quadcommon.rigid_body import (
     body_torque_from_euler_torque_sincos,
     cross,
@@ -221,6 +221,7 @@ def on_ground(s, P) -> bool:
 def physics_steps(work, P, inputs, h: float) -> None:
     """One RK4 step of ``h`` of ``work[0]`` per ``U_SIZE`` block of ``inputs`` (held over that
     step), the ground contact resolved after each."""
+    work, P, inputs = borrowed(work), borrowed(P), borrowed(inputs)  # the caller's: no counting per call
     s = work[0]
     for j in range(len(inputs) // U_SIZE):
         rk4_step(s, work[1], work[2], work[3], work[4], work[5], P, inputs[j * U_SIZE : (j + 1) * U_SIZE], h)
@@ -235,6 +236,7 @@ def truth(work, P, u) -> tuple:
     body rates, Euler rates, specific force at O (body), rotor speeds, applied thrust and control
     torque about O, on the ground. One derivative evaluation (into ``work[1]``) gives the
     accelerations."""
+    work, P, u = borrowed(work), borrowed(P), borrowed(u)  # the caller's: no counting per call
     s, ds = work[0], work[1]
     derivative(s, ds, P, u)
     R, p_O, v_O = motion_of_O(s, P)

@@ -204,60 +204,77 @@ def describe(profile: GustProfile, max_chars: int = 400) -> str:
 
 
 # The profile's elements as rows of numbers (what DisturbanceSchedule and the campaign engine
-# evaluate): steps (channel, start, end, value), ramps (channel, start, end, hold until, value),
-# 1-cos gusts (start, end, half amplitude, 2 pi / duration, unit direction x, y, z). Channels index
-# CHANNELS (force x, y, z, torque on phi, theta, psi).
-def element_rows(profile: GustProfile) -> tuple[list[tuple[float, ...]], list[tuple[float, ...]],
-                                                list[tuple[float, ...]]]:  # fmt: skip
+# evaluate), each kind in one flat table of rows of its width. Channels index CHANNELS (force x,
+# y, z, torque on phi, theta, psi).
+STEP_WIDTH = 4  # channel, start, end, value
+RAMP_WIDTH = 5  # channel, start, end, hold until, value
+GUST_WIDTH = 7  # start, end, V_m / 2, 2 pi / duration, unit direction (3)
+
+
+def element_rows(profile: GustProfile) -> tuple[list[float], list[float], list[float]]:
+    """The steps, ramps and 1-cos gusts as flat tables, one row of ``*_WIDTH`` numbers after the
+    other: what :func:`steps_and_ramps` and :func:`one_minus_cosine_wind` read (a flat sequence
+    indexes cheaply both as a Python list and as a compiled array; a row view per element does not)."""
     index = {c: i for i, c in enumerate(CHANNELS)}
-    steps = [(index[s.channel], s.start_s, s.end_s, s.value) for s in profile.steps]
-    ramps = [(index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps]
-    gusts = [(g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s, *g.unit())
-             for g in profile.one_minus_cosine]  # fmt: skip
+    steps = [float(x) for s in profile.steps for x in (index[s.channel], s.start_s, s.end_s, s.value)]
+    ramps = [float(x) for r in profile.ramps
+             for x in (index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value)]  # fmt: skip
+    gusts = [float(x) for g in profile.one_minus_cosine
+             for x in (g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s,
+                       *g.unit())]  # fmt: skip
     return steps, ramps, gusts
 
 
 @kernel
-def _added(v, channel, value):
-    """The six channels ``v`` with ``value`` added to ``channel``."""
-    return (v[0] + value if channel == 0 else v[0], v[1] + value if channel == 1 else v[1],
-            v[2] + value if channel == 2 else v[2], v[3] + value if channel == 3 else v[3],
-            v[4] + value if channel == 4 else v[4], v[5] + value if channel == 5 else v[5])  # fmt: skip
-
-
-@kernel
 def steps_and_ramps(tau, steps, ramps):
-    """The steps' and ramps' sum at profile time ``tau``: force (3), torque (3), and whether a ramp
-    is still rising (the sum is not constant until the next breakpoint)."""
-    v = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    for i in range(len(steps)):
-        row = steps[i]
-        if row[1] <= tau < row[2]:
-            v = _added(v, int(row[0]), row[3])
+    """The steps' and ramps' sum at profile time ``tau`` (flat tables of :func:`element_rows`):
+    force (3), torque (3), and whether a ramp is still rising (the sum is not constant until the
+    next breakpoint)."""
+    v0 = v1 = v2 = v3 = v4 = v5 = 0.0
     ramping = False
-    for i in range(len(ramps)):
-        row = ramps[i]
-        start, end = row[1], row[2]
-        if start <= tau < row[3]:
-            v = _added(v, int(row[0]), row[4] * min((tau - start) / (end - start), 1.0))
+    n_steps = len(steps) // STEP_WIDTH
+    for k in range(n_steps + len(ramps) // RAMP_WIDTH):
+        if k < n_steps:  # a step: its value over [start, end)
+            i = k * STEP_WIDTH
+            if not steps[i + 1] <= tau < steps[i + 2]:
+                continue
+            channel, value = steps[i], steps[i + 3]
+        else:  # a ramp: up from start to end, held until its hold time
+            i = (k - n_steps) * RAMP_WIDTH
+            start, end = ramps[i + 1], ramps[i + 2]
+            if not start <= tau < ramps[i + 3]:
+                continue
+            channel, value = ramps[i], ramps[i + 4] * min((tau - start) / (end - start), 1.0)
             if tau < end:
                 ramping = True
-    return v[0], v[1], v[2], v[3], v[4], v[5], ramping
+        if channel == 0.0:
+            v0 += value
+        elif channel == 1.0:
+            v1 += value
+        elif channel == 2.0:
+            v2 += value
+        elif channel == 3.0:
+            v3 += value
+        elif channel == 4.0:
+            v4 += value
+        else:
+            v5 += value
+    return v0, v1, v2, v3, v4, v5, ramping
 
 
 @kernel
 def one_minus_cosine_wind(tau, gusts):
-    """The 1-cos gusts' wind at profile time ``tau`` (m/s, world), and whether one is active."""
+    """The 1-cos gusts' wind at profile time ``tau`` (m/s, world; a flat table of
+    :func:`element_rows`), and whether one is active."""
     wx = wy = wz = 0.0
     active = False
-    for i in range(len(gusts)):
-        row = gusts[i]
-        start = row[0]
-        if start <= tau < row[1]:
-            speed = row[2] * (1.0 - math.cos(row[3] * (tau - start)))
-            wx += speed * row[4]
-            wy += speed * row[5]
-            wz += speed * row[6]
+    for i in range(0, len(gusts), GUST_WIDTH):
+        start = gusts[i]
+        if start <= tau < gusts[i + 1]:
+            speed = gusts[i + 2] * (1.0 - math.cos(gusts[i + 3] * (tau - start)))
+            wx += speed * gusts[i + 4]
+            wy += speed * gusts[i + 5]
+            wz += speed * gusts[i + 6]
             active = True
     return wx, wy, wz, active
 

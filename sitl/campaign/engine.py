@@ -141,14 +141,14 @@ def disturbance_tables(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[float, ...]]:
     """Steps, ramps, 1-cos gusts, Dryden wind samples, and the Dryden window (S_DRYDEN_*).
 
-    Rows are built with the formulas of ``DisturbanceSchedule.__init__`` (start time 0); the
+    The flat tables of :func:`element_rows`, as ``DisturbanceSchedule`` reads them (start time 0); the
     Dryden wind is drawn by the project's :class:`DrydenWind` at the physics step, one sample
     per step index the run can reach.
     """
     step_rows, ramp_rows, gust_rows = element_rows(profile)
-    steps = np.array(step_rows, dtype=float).reshape(-1, 4)
-    ramps = np.array(ramp_rows, dtype=float).reshape(-1, 5)
-    gusts = np.array(gust_rows, dtype=float).reshape(-1, 7)
+    steps = np.array(step_rows, dtype=float)
+    ramps = np.array(ramp_rows, dtype=float)
+    gusts = np.array(gust_rows, dtype=float)
     d = profile.dryden
     if d is None:
         return steps, ramps, gusts, np.zeros((1, 3)), (0.0, 0.0, math.inf, math.inf, dt_physics)
