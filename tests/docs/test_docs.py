@@ -1,0 +1,113 @@
+"""The documentation's own checks, in-process and fast: every relative link and anchor in docs/,
+README.md, CONTRIBUTING.md and CHANGELOG.md leads somewhere, every page is in mkdocs.yml's
+navigation (and every navigation entry is a page), and the environment-variable table is
+quadcommon.environment's. ``make docs`` (``mkdocs build --strict``) checks the rendered site too.
+"""
+
+from __future__ import annotations
+
+import re
+import unicodedata
+from pathlib import Path
+
+import pytest
+
+from quadcommon import environment
+
+REPO = Path(__file__).resolve().parents[2]
+DOCS = REPO / "docs"
+ROOT_PAGES = [REPO / name for name in ("README.md", "CONTRIBUTING.md", "CHANGELOG.md")]
+
+FENCE = re.compile(r"^(```|~~~).*?^\1", re.M | re.S)
+CODE_SPAN = re.compile(r"(`+)[^`].*?\1", re.S)
+LINK = re.compile(r"!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
+HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*#*\s*$", re.M)
+NAV_PAGE = re.compile(r"^\s*-\s*(?:[^:\n]+:\s*)?([\w./-]+\.md)\s*$", re.M)
+
+
+def prose(text: str) -> str:
+    """The Markdown without its code blocks and code spans (links there are not links)."""
+    return CODE_SPAN.sub("", FENCE.sub("", text))
+
+
+def slug(heading: str) -> str:
+    """The anchor Python-Markdown's toc extension (MkDocs) gives a heading."""
+    text = re.sub(r"`([^`]*)`", r"\1", heading)
+    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", text)  # a link's text
+    text = re.sub(r"[*_]{1,2}([^*_]+)[*_]{1,2}", r"\1", text)  # emphasis
+    text = re.sub(r"<[^>]+>", "", text)
+    text = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
+    text = re.sub(r"[^\w\s-]", "", text).strip().lower()
+    return re.sub(r"[-\s]+", "-", text)
+
+
+def anchors(page: Path) -> set[str]:
+    seen: dict[str, int] = {}
+    result = set()
+    for _, title in HEADING.findall(FENCE.sub("", page.read_text())):
+        base = slug(title)
+        n = seen.get(base, 0)
+        seen[base] = n + 1
+        result.add(base if n == 0 else f"{base}_{n}")
+    return result
+
+
+def pages() -> list[Path]:
+    return sorted(DOCS.rglob("*.md")) + [p for p in ROOT_PAGES if p.exists()]
+
+
+def broken_links(page: Path) -> list[str]:
+    """The page's relative links whose file or anchor does not exist."""
+    problems = []
+    for target in LINK.findall(prose(page.read_text())):
+        if re.match(r"^[a-z][a-z0-9+.-]*:", target):  # https:, mailto:, ...
+            continue
+        path_text, _, anchor = target.partition("#")
+        destination = (page.parent / path_text).resolve() if path_text else page
+        where = f"{page.relative_to(REPO)}: ({target})"
+        if not destination.exists():
+            problems.append(f"{where} leads nowhere")
+            continue
+        if page.is_relative_to(DOCS) and not destination.is_relative_to(DOCS):
+            problems.append(f"{where} leaves docs/ (the site has only docs/; name the file in `code`)")
+            continue
+        if anchor and destination.suffix == ".md" and anchor not in anchors(destination):
+            problems.append(f"{where}: no heading #{anchor} in {destination.relative_to(REPO)}")
+    return problems
+
+
+@pytest.mark.parametrize("page", pages(), ids=lambda p: str(p.relative_to(REPO)))
+def test_relative_links_lead_somewhere(page: Path) -> None:
+    assert broken_links(page) == []
+
+
+def test_the_link_check_finds_broken_links(tmp_path: Path) -> None:
+    page = DOCS / "__probe_for_the_test.md"
+    page.write_text(
+        "# Probe\n\n[gone](missing.md) [anchor](running.md#no-such-heading) [out](../README.md)\n"
+        "[fine](running.md#ports-and-instances) `[code](nowhere.md)`\n\n```\n[block](nowhere.md)\n```\n"
+    )
+    try:
+        problems = broken_links(page)
+    finally:
+        page.unlink()
+    assert len(problems) == 3, problems
+    assert "missing.md" in problems[0] and "no-such-heading" in problems[1] and "leaves docs/" in problems[2]
+
+
+def test_slugs_are_mkdocs_anchors() -> None:
+    assert slug("Specs (`config/campaigns/*.toml`)") == "specs-configcampaignstoml"
+    assert slug("Starting a vehicle: `quadsitl up`") == "starting-a-vehicle-quadsitl-up"
+    assert slug("The paper's ±30 % box") == "the-papers-30-box"
+
+
+def test_every_page_is_in_the_navigation() -> None:
+    nav = set(NAV_PAGE.findall((REPO / "mkdocs.yml").read_text()))
+    on_disk = {str(p.relative_to(DOCS)) for p in DOCS.rglob("*.md")}
+    assert on_disk - nav == set(), "pages missing from mkdocs.yml's nav"
+    assert nav - on_disk == set(), "nav entries without a page"
+
+
+def test_environment_table_is_the_modules() -> None:
+    """docs/configuration.md shows quadcommon.environment.VARIABLES as they are."""
+    assert environment.markdown_table() in (DOCS / "configuration.md").read_text()
