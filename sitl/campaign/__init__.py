@@ -1,4 +1,4 @@
-"""Monte Carlo robustness campaigns (``quadsitl campaign``), issue 11.
+"""Monte Carlo robustness campaigns (``quadsitl campaign``).
 
 spec (validated TOML) -> sampling (per-run seeds) -> batch (chunks of runs, an Executor: local
 processes or Dask) -> engine + kernels (the numba batch engine, bit-for-bit the scalar runner's

@@ -111,3 +111,56 @@ def test_every_page_is_in_the_navigation() -> None:
 def test_environment_table_is_the_modules() -> None:
     """docs/configuration.md shows quadcommon.environment.VARIABLES as they are."""
     assert environment.markdown_table() in (DOCS / "configuration.md").read_text()
+
+
+# Development history in user-facing text: issue numbers, review findings, dates of measurements,
+# "before:" diaries, line counts of files. The history lives in CHANGELOG.md and git; the benchmarks
+# page keeps the dates of its figures.
+HISTORY = re.compile(
+    r"\b[Ii]ssues? #?\d+|\b[Ff]inding \d+|\b20\d\d-\d\d-\d\d\b|\bBefore:\s|~[\d,]+ lines\b"
+)
+HISTORY_ALLOWED = {
+    "docs/benchmarks.md": re.compile(r"20\d\d-\d\d-\d\d"),  # its dated table
+    "autopilot/mavlink/signing.py": re.compile(r"2015-01-01"),  # MAVLink signing's epoch
+    "docs/security.md": re.compile(r"2015-01-01|issue 1060"),  # the epoch; MAVSDK's tracker, linked
+    "tests/gcs_scripts/test_upload_gusts.py": re.compile(r"2024-01-01"),  # a TOML date as bad input
+}
+SOURCE_DIRS = ("autopilot", "simulator", "quadcommon", "gcs_scripts", "sitl", "benchmarks", "config", "tests")
+
+
+def user_facing_files() -> list[Path]:
+    files = [REPO / "README.md", REPO / "CONTRIBUTING.md", *sorted(DOCS.rglob("*.md"))]
+    for folder in SOURCE_DIRS:
+        for pattern in ("*.py", "*.toml", "*.md", "*.js", "*.html"):
+            files += [p for p in sorted((REPO / folder).rglob(pattern))
+                      if "node_modules" not in p.parts and "vendor" not in p.parts]  # fmt: skip
+    return [p for p in files if p.exists() and p != Path(__file__)]
+
+
+def history_in(path: Path) -> list[str]:
+    relative = str(path.relative_to(REPO))
+    allowed = HISTORY_ALLOWED.get(relative)
+    hits = []
+    for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+        for match in HISTORY.finditer(line):
+            if allowed is not None and allowed.fullmatch(match.group(0)):
+                continue
+            hits.append(f"{relative}:{number}: {match.group(0)!r} in {line.strip()[:100]!r}")
+    return hits
+
+
+def test_no_development_history_in_user_facing_text() -> None:
+    """README, docs, --help, docstrings and comments describe the product as it is."""
+    hits = [hit for path in user_facing_files() for hit in history_in(path)]
+    assert hits == []
+
+
+def test_the_history_check_finds_history(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.md"
+    probe.write_text("Fixed in issue 9.\nMeasured 2026-12-02.\nBefore: 3 s.\n(~800 lines)\nfine text\n")
+    probe_in_repo = DOCS / "__probe_history.md"
+    probe_in_repo.write_text(probe.read_text())
+    try:
+        assert len(history_in(probe_in_repo)) == 4
+    finally:
+        probe_in_repo.unlink()

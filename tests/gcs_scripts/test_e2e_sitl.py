@@ -27,7 +27,7 @@ WALL_LIMIT_S = 60.0
 @contextmanager
 def _sitl(instance: int, scenario: str, speed: str = "4") -> Iterator[Launcher]:
     # --speed 4, not max: the scripts stream setpoints paced on the telemetry but must still get the
-    # CPU; at max the 1 s offboard timeout is ~50 ms of wall time (README "Time and speed").
+    # CPU; at max the 1 s offboard timeout is ~50 ms of wall time (docs/running.md, "Time and speed").
     with Launcher() as launcher:
         launcher.start_vehicles([VehicleSpec(instance=instance, scenario=scenario, speed=speed)], 20.0)
         yield launcher
