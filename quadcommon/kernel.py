@@ -105,6 +105,16 @@ def vector(values: Sequence[float] | int) -> Any:
     return items
 
 
+def borrowed(array: Any) -> Any:
+    """``array`` itself where Python runs; in compiled code, a view of it that carries no reference
+    count. Compiled code counts references to every array it passes to a kernel (an atomic
+    increment and decrement per array per call, which numba cannot always prove redundant); a
+    kernel stepping thousands of times per run passes its arrays borrowed. The view is valid while
+    ``array`` is alive: borrow a function's arguments, or arrays it keeps in a variable it reads
+    again after the loop (see :func:`~sitl.campaign.kernels.simulate`)."""
+    return array
+
+
 def freeze(entry: Callable[..., Any]) -> None:
     """No compiling from now on (after a warm-up call): a call whose argument types match no
     compiled signature, even after numba's safe conversions, raises TypeError instead of stalling
@@ -125,6 +135,7 @@ def _load_numba() -> None:
         for fn in _pending:
             _register(fn)
         _pending.clear()
+        _register_borrowed()
         _numba_loaded = True
 
 
@@ -139,6 +150,35 @@ def _register(fn: Callable[..., Any]) -> None:
     overload(fn, jit_options=JIT_OPTIONS)(implementation)
 
 
+def _register_borrowed() -> None:
+    """:func:`borrowed` in compiled code: the array's struct with no meminfo (NRT's reference
+    counting skips a null meminfo) and no parent object."""
+    from numba.core import cgutils, types
+    from numba.extending import intrinsic, overload
+
+    @intrinsic
+    def view_without_meminfo(typingctx: Any, array: Any) -> Any:
+        if not isinstance(array, types.Array):
+            return None
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            source = context.make_array(signature.args[0])(context, builder, value=args[0])
+            view = context.make_array(signature.return_type)(context, builder)
+            cgutils.copy_struct(view, source)
+            view.meminfo = cgutils.get_null_value(view.meminfo.type)
+            view.parent = cgutils.get_null_value(view.parent.type)
+            return view._getvalue()
+
+        return array(array), codegen
+
+    def implementation(array):  # noqa: ANN001, ANN202 - numba matches its signature to the view's
+        if isinstance(array, types.Array):
+            return lambda array: view_without_meminfo(array)
+        return None
+
+    overload(borrowed, jit_options=JIT_OPTIONS)(implementation)
+
+
 def _qualified(fn: Callable[..., Any]) -> str:
     return f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', repr(fn))}"
 
@@ -146,9 +186,9 @@ def _qualified(fn: Callable[..., Any]) -> str:
 @functools.cache
 def _project_digest() -> str:
     """Digest of every kernel module of the project (and of numba's version)."""
-    import numba
+    from importlib.metadata import version
 
-    digest = hashlib.sha256(numba.__version__.encode())
+    digest = hashlib.sha256(version("numba").encode())
     for package in PROJECT_PACKAGES:
         for path in sorted((PROJECT_ROOT / package).rglob("*.py")):
             try:
@@ -206,20 +246,37 @@ def _source_of_entry(fn: Callable[..., Any], bound: tuple[Callable[..., Any], ..
 _entries: dict[tuple[Any, ...], Callable[..., Any]] = {}
 
 
+def cached(fn: Callable[..., Any], *bound: Callable[..., Any], nogil: bool = False) -> bool:
+    """True when the entry ``compiled(fn, *bound, nogil=nogil)`` would load from numba's cache (no
+    compilation); without importing numba."""
+    name, _ = _entry_name(fn, tuple(bound), nogil)
+    pattern = f"{name}.entry-*.nbi"
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return any(Path(os.environ["NUMBA_CACHE_DIR"]).rglob(pattern))
+    return any((environment.kernel_cache_dir() / "__pycache__").glob(pattern))
+
+
+def _entry_name(
+    fn: Callable[..., Any], bound: tuple[Callable[..., Any], ...], nogil: bool
+) -> tuple[str, str]:
+    """The generated module's name and the digest it carries."""
+    digest = hashlib.sha256(_project_digest().encode())
+    for f in (fn, *bound):
+        digest.update(_qualified(f).encode())
+        path = _outside_project(f)
+        if path is not None:
+            digest.update(path.read_bytes())
+    digest.update(str(nogil).encode())
+    hexdigest = digest.hexdigest()
+    return f"quadsitl_entry_{fn.__name__}_{hexdigest[:20]}", hexdigest
+
+
 def _entry(fn: Callable[..., Any], bound: tuple[Callable[..., Any], ...], nogil: bool) -> Callable[..., Any]:
     key = (fn, bound, nogil)
     with _lock:
         if key in _entries:
             return _entries[key]
-        digest = hashlib.sha256(_project_digest().encode())
-        for f in (fn, *bound):
-            digest.update(_qualified(f).encode())
-            path = _outside_project(f)
-            if path is not None:
-                digest.update(path.read_bytes())
-        digest.update(str(nogil).encode())
-        hexdigest = digest.hexdigest()
-        name = f"quadsitl_entry_{fn.__name__}_{hexdigest[:20]}"
+        name, hexdigest = _entry_name(fn, bound, nogil)
         source = _source_of_entry(fn, bound, nogil, hexdigest)
         path = environment.kernel_cache_dir() / f"{name}.py"
         _write_once(path, source)

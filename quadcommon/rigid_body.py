@@ -111,8 +111,17 @@ def body_torque_from_euler_torque(phi: float, theta: float, tau_eta: Vector3) ->
     The Lagrangian generalised force is ``tau_eta = W_eta^T tau_body`` (eq. 4), so
     ``tau_body = W_eta^-T tau_eta``.
     """
-    sf, cf = math.sin(phi), math.cos(phi)
-    st, ct = math.sin(theta), math.cos(theta)
+    return body_torque_from_euler_torque_sincos(
+        math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta), tau_eta
+    )
+
+
+@kernel
+def body_torque_from_euler_torque_sincos(
+    sf: float, cf: float, st: float, ct: float, tau_eta: Vector3
+) -> Vector3:
+    """:func:`body_torque_from_euler_torque` given ``sin``/``cos`` of phi and theta (a plant reads
+    them off its rotation matrix, without Euler angles)."""
     a, b, c = tau_eta
     # Solve W^T x = tau_eta, W^T = [[1,0,0],[0,cf,-sf],[-st, sf ct, cf ct]].
     x0 = a
@@ -130,6 +139,72 @@ def euler_torque_from_body_torque(phi: float, theta: float, tau_body: Vector3) -
     st, ct = math.sin(theta), math.cos(theta)
     x, y, z = tau_body
     return (x, cf * y - sf * z, -st * x + sf * ct * y + cf * ct * z)
+
+
+@kernel
+def body_acceleration_from_euler(phi: float, theta: float, eta_dot: Vector3, eta_ddot: Vector3) -> Vector3:
+    """``omega' = W_eta eta'' + W_eta' eta'``: the body angular acceleration of a motion of the
+    Euler angles (eq. 3 differentiated in time)."""
+    sf, cf = math.sin(phi), math.cos(phi)
+    st, ct = math.sin(theta), math.cos(theta)
+    dphi, dtheta, dpsi = eta_dot
+    a0, a1, a2 = eta_ddot
+    return (
+        a0 - st * a2 - ct * dtheta * dpsi,
+        cf * a1 + sf * ct * a2 - sf * dphi * dtheta + (cf * ct * dphi - sf * st * dtheta) * dpsi,
+        -sf * a1 + cf * ct * a2 - cf * dphi * dtheta - (sf * ct * dphi + cf * st * dtheta) * dpsi,
+    )
+
+
+@kernel
+def cross(a: Vector3, b: Vector3) -> Vector3:
+    """``a x b`` (also ``hat(a) b``)."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@kernel
+def transpose_times(R: Matrix3, v: Vector3) -> Vector3:
+    """``R^T v`` (world to body for a body-to-world rotation ``R``)."""
+    return (
+        R[0][0] * v[0] + R[1][0] * v[1] + R[2][0] * v[2],
+        R[0][1] * v[0] + R[1][1] * v[1] + R[2][1] * v[2],
+        R[0][2] * v[0] + R[1][2] * v[1] + R[2][2] * v[2],
+    )
+
+
+@kernel
+def roll_pitch_from_body_z(bx: float, by: float, bz: float, psi: float) -> tuple[float, float]:
+    """ZYX roll and pitch ``(phi, theta)`` of the attitude whose body z axis is the unit vector
+    ``b`` (world frame) and whose yaw is ``psi``: the third column of ``R(phi, theta, psi)`` is
+    ``b``. That attitude's body x axis lies in the vertical plane of heading ``psi`` (the attitude
+    PX4's ``bodyzToAttitude`` builds from a thrust direction and a yaw)."""
+    sp, cp = math.sin(psi), math.cos(psi)
+    # Rz(-psi) b = (sin(theta) cos(phi), -sin(phi), cos(theta) cos(phi))
+    forward = cp * bx + sp * by
+    left = cp * by - sp * bx
+    sin_phi = -left
+    sin_phi = 1.0 if sin_phi > 1.0 else (-1.0 if sin_phi < -1.0 else sin_phi)
+    return math.asin(sin_phi), math.atan2(forward, bz)
+
+
+@kernel
+def limit_tilt(bx: float, by: float, bz: float, tilt_max: float) -> tuple[float, float, float, float]:
+    """The direction of the vector ``b`` (the world's z axis if ``b`` is zero) turned towards z, in
+    the vertical plane that holds it, until its angle from z is at most ``tilt_max`` (rad): the unit
+    vector and ``limited``, 1.0 when it had to turn. A vector along -z turns towards +x."""
+    n = math.sqrt(bx * bx + by * by + bz * bz)
+    if n < 1e-9:
+        return 0.0, 0.0, 1.0, 0.0
+    bx, by, bz = bx / n, by / n, bz / n
+    if bz >= math.cos(tilt_max):
+        return bx, by, bz, 0.0
+    horizontal = math.sqrt(bx * bx + by * by)
+    if horizontal > 1e-12:
+        dx, dy = bx / horizontal, by / horizontal
+    else:
+        dx, dy = 1.0, 0.0
+    s = math.sin(tilt_max)
+    return s * dx, s * dy, math.cos(tilt_max), 1.0
 
 
 # --------------------------------------------------------------------------------------------

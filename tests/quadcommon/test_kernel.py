@@ -12,13 +12,13 @@ import textwrap
 import numpy as np
 import pytest
 
-from quadcommon.kernel import compiled, compiling, freeze, vector
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, vector
 
 pytestmark = pytest.mark.skipif(not compiling(), reason="numba is not installed or QUADSITL_PURE_PYTHON=1")
 
 TOY = '''
 import math
-from quadcommon.kernel import kernel
+from quadcommon.kernel import borrowed, kernel
 
 GAIN = {gain}
 
@@ -32,6 +32,17 @@ def scaled(x):
 def law(g, state, e, dt):
     state[0] += e * dt
     return scaled(g[0] * e) + state[0], math.sqrt(abs(e))
+
+
+@kernel
+def accumulate(f, g, state, e, dt, n):
+    """n steps of the law on a borrowed view of its state (compiled: no reference counting)."""
+    view = borrowed(state)
+    total = 0.0
+    for _ in range(n):
+        a, _ = f(g, view, e, dt)
+        total += a
+    return total + 0.0 * len(state)  # (state read after the loop: alive while the view is used)
 
 
 @kernel
@@ -70,6 +81,17 @@ def test_an_entry_runs_the_kernels_own_source_compiled(tmp_path, cache):
     assert state[0] == pytest.approx(0.05)  # the kernel's writes reach the caller's array
     assert type(entry).__name__ == "CPUDispatcher"
     assert [p.name for p in cache.glob("quadsitl_entry_twice_*.py")]  # its generated module
+
+
+def test_a_borrowed_array_is_the_same_memory_in_python_and_compiled(tmp_path, cache):
+    toy = load(tmp_path, "toy_borrowed", 2.0)
+    state = np.zeros(1)
+    assert borrowed(state) is state  # Python: the array itself
+    total = compiled(toy.accumulate, toy.law)(np.array([3.0]), state, 0.5, 0.1, 4)
+    expected_state = [0.0]
+    expected = toy.accumulate(toy.law, [3.0], expected_state, 0.5, 0.1, 4)
+    assert state[0] == pytest.approx(expected_state[0]) == pytest.approx(0.2)  # writes reach the caller
+    assert total == pytest.approx(expected, rel=1e-15)
 
 
 def test_an_entry_is_loaded_from_the_cache_by_a_new_process_and_recompiled_when_a_source_changes(
