@@ -115,9 +115,9 @@ def test_environment_table_is_the_modules() -> None:
 
 # Development history in user-facing text: issue numbers, review findings, dates of measurements,
 # "before:" diaries, line counts of files. The history lives in CHANGELOG.md and git; the benchmarks
-# page keeps the dates of its figures.
+# page keeps the dates of its figures. A date between slashes is a path (PX4's log/YYYY-MM-DD/).
 HISTORY = re.compile(
-    r"\b[Ii]ssues? #?\d+|\b[Ff]inding \d+|\b20\d\d-\d\d-\d\d\b|\bBefore:\s|~[\d,]+ lines\b"
+    r"\b[Ii]ssues? #?\d+|\b[Ff]inding \d+|(?<!/)\b20\d\d-\d\d-\d\d\b(?!/)|\bBefore:\s|~[\d,]+ lines\b"
 )
 HISTORY_ALLOWED = {
     "docs/benchmarks.md": re.compile(r"20\d\d-\d\d-\d\d"),  # its dated table
