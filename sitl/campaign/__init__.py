@@ -4,5 +4,5 @@ spec (validated TOML) -> sampling (per-run seeds) -> batch (chunks of runs, an E
 processes or Dask) -> engine + kernels (the numba batch engine, bit-for-bit the scalar runner's
 equations) -> results (Parquet parts, resumable) -> summary and figures.
 
-Needs ``quadsitl[campaign]`` (numba, tqdm); ``--scheduler`` needs ``quadsitl[cluster]``.
+The progress bar needs ``quadsitl[campaign]`` (tqdm); ``--scheduler`` needs ``quadsitl[cluster]``.
 """
