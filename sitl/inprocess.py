@@ -225,9 +225,7 @@ class Lockstep:
                     sim.answers_again(data)
             elif data is None or (answer := sim.answer_to_frame(data)) is None:
                 raise RuntimeError(f"the autopilot did not answer frame t={t:.3f} s")
-            if ap.flight_log.logging:  # the simulator's disturbance, as the SITL's truth on zenoh gives it
-                truth = sim.truth_row
-                ap.flight_log.disturbance(([truth[i] for i in _DISTURBANCE],))
+            self._log_disturbance()
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
@@ -245,10 +243,17 @@ class Lockstep:
         datagram = sim.begin_frame()
         ap.on_hil_datagram(datagram, t)
         self._dispatch(ap.after_frame())
+        self._log_disturbance()
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
             self.estimator_rows.extend(ap.take_estimator_rows())
+
+    def _log_disturbance(self) -> None:
+        """The simulator's disturbance into the flight log, as the SITL's truth on zenoh gives it."""
+        if self.autopilot.flight_log.logging:
+            truth = self.sim.truth_row
+            self.autopilot.flight_log.disturbance(([truth[i] for i in _DISTURBANCE],))
 
     def close(self) -> list:
         """End the flight log that is open and write what is left; the logs written (paths)."""

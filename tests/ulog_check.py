@@ -25,7 +25,8 @@ from autopilot.logger.ulog import TYPE_CODES
 MAGIC = b"ULog\x01\x12\x35"
 DEFINITION_TYPES = {ord(c) for c in "BFIMPQ"}
 FLIGHT_REVIEW = {
-    "vehicle_local_position": ("x", "y", "z", "vx", "vy", "vz", "xy_valid", "z_valid", "v_xy_valid", "v_z_valid"),
+    "vehicle_local_position": ("x", "y", "z", "vx", "vy", "vz", "xy_valid", "z_valid", "v_xy_valid",
+                               "v_z_valid"),
     "vehicle_local_position_setpoint": ("x", "y", "z", "vx", "vy", "vz"),
     "vehicle_attitude": ("q[0]", "q[1]", "q[2]", "q[3]"),
     "vehicle_attitude_setpoint": ("q_d[0]", "q_d[1]", "q_d[2]", "q_d[3]", "yaw_sp_move_rate"),
@@ -41,7 +42,9 @@ FLIGHT_REVIEW = {
     "vehicle_attitude_groundtruth": ("q[0]", "q[3]"),
     "vehicle_angular_velocity_groundtruth": ("xyz[0]",),
 }  # fmt: skip
-EKF_ONLY = {"estimator_status": ("pos_test_ratio", "vel_test_ratio", "hgt_test_ratio", "solution_status_flags")}
+EKF_ONLY = {
+    "estimator_status": ("pos_test_ratio", "vel_test_ratio", "hgt_test_ratio", "solution_status_flags")
+}
 
 
 def _format_fields(text: str) -> tuple[str, list[tuple[str, int, str]]]:
@@ -86,7 +89,9 @@ def check_plotjuggler(data: bytes) -> dict[str, int]:
             assert kind in DEFINITION_TYPES, f"message {chr(kind)!r} before the first subscription"
         if kind == ord("F"):
             name, fields = _format_fields(body.decode("ascii"))
-            assert fields[0] == ("uint64_t", 1, "timestamp"), f"format {name}: timestamp is not its first field"
+            assert fields[0] == ("uint64_t", 1, "timestamp"), (
+                f"format {name}: timestamp is not its first field"
+            )
             assert all(k in TYPE_CODES for k, _, _ in fields), f"format {name}: a nested or unknown type"
             formats[name] = sum(struct.calcsize("<" + TYPE_CODES[k]) * n for k, n, _ in fields)
         elif kind in (ord("I"), ord("P")):

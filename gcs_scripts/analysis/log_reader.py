@@ -169,7 +169,7 @@ def read_session(
 
 def as_array(column) -> np.ndarray:
     """A column as a numpy array (pyarrow columns are converted; arrays pass through)."""
-    return column if isinstance(column, np.ndarray) else column.toas_array(zero_copy_only=False)
+    return column if isinstance(column, np.ndarray) else column.to_numpy(zero_copy_only=False)
 
 
 def _read_flight_record(path: Path, window: Window | None, label: str | None) -> FlightRecord:

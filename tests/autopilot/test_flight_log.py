@@ -61,7 +61,10 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     log = check_ulog(paths[0])
     data = {d.name: d.data for d in log.data_list}
     t = data[topics.TRACKING]["timestamp"] * 1e-6
-    assert times["armed"] - 0.05 < t[0] <= times["armed"] and times["disarmed"] - 0.05 < t[-1] <= times["disarmed"]
+    assert (
+        times["armed"] - 0.05 < t[0] <= times["armed"]
+        and times["disarmed"] - 0.05 < t[-1] <= times["disarmed"]
+    )
     assert np.all(data[topics.TRACKING]["armed"] == 1) and np.all(np.diff(t) > 0)
     assert log.start_timestamp == data[topics.TRACKING]["timestamp"][0]
     # every control step (500 Hz), the other topics at PX4's rates
@@ -96,11 +99,17 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     assert abs(change[0][0] * 1e-6 - times["param_set"]) < 0.05
     # STATUSTEXT as logged strings, with their severity as the level
     texts = [(msg.message, msg.log_level - ord("0")) for msg in log.logged_messages]
-    assert ("mode AUTO.TAKEOFF", m.MAV_SEVERITY_INFO) in texts and ("landing detected", m.MAV_SEVERITY_INFO) in texts
+    assert ("mode AUTO.TAKEOFF", m.MAV_SEVERITY_INFO) in texts and (
+        "landing detected",
+        m.MAV_SEVERITY_INFO,
+    ) in texts
     heard = gcs.statustext  # what the ground station was told: the log has it, in order, from arming on
     first = heard.index(texts[0][0])
     assert [text for text, _ in texts] == heard[first : first + len(texts)]
-    assert log.msg_info_dict["sys_name"] == "quadsitl" and log.msg_info_dict["quadsitl_controller"] == "intbs_nlhinf"
+    assert (
+        log.msg_info_dict["sys_name"] == "quadsitl"
+        and log.msg_info_dict["quadsitl_controller"] == "intbs_nlhinf"
+    )
     # the cascade's own record, in the paper's frames, with the laws' integral states
     cascade = data[topics.CASCADE]
     assert "translational_integral_z" in cascade and "rotational_integral_yaw" in cascade
@@ -163,7 +172,9 @@ def test_sdlog_mode_3_is_refused_and_a_simulator_restart_ends_the_log(tmp_path):
 
 def test_the_ulog_encoding_is_what_pyulog_reads():
     """Formats, info of each type, parameters, subscriptions, samples, strings, sync, dropout."""
-    fmt = ulog.Format("demo", ulog.fields("uint64_t timestamp; float[3] v; double d; int8_t i; bool b; uint32_t u"))
+    fmt = ulog.Format(
+        "demo", ulog.fields("uint64_t timestamp; float[3] v; double d; int8_t i; bool b; uint32_t u")
+    )
     topic = ulog.Topic(fmt, 0)
     data = (ulog.file_header(1000) + ulog.flag_bits() + ulog.format_message(fmt)
             + ulog.info("sys_name", "quadsitl") + ulog.info("ver_sw_release", 0x010203FF, "uint32_t")
@@ -178,12 +189,19 @@ def test_the_ulog_encoding_is_what_pyulog_reads():
     assert counts == {"demo": 2}
     log = ULog(io.BytesIO(data))
     assert not log.file_corruption and log.start_timestamp == 1000 and log.last_timestamp == 2000
-    assert log.msg_info_dict == {"sys_name": "quadsitl", "ver_sw_release": 0x010203FF, "answer": 42, "ratio": 0.25}
+    assert log.msg_info_dict == {
+        "sys_name": "quadsitl",
+        "ver_sw_release": 0x010203FF,
+        "answer": 42,
+        "ratio": 0.25,
+    }
     assert log.get_version_info() == (1, 2, 3, 255) and log.get_version_info_str() == "v1.2.3"
     assert log.initial_parameters == {"A_FLOAT": pytest.approx(0.3), "AN_INT": -7}
     assert log.changed_parameters == [(1000, "AN_INT", 8)]  # pyulog stamps it with the last sample's time
     d = log.get_dataset("demo").data
-    assert list(d["timestamp"]) == [1000, 2000] and d["v[1]"][0] == np.float32(-2.0) and math.isnan(d["v[0]"][1])
+    assert (
+        list(d["timestamp"]) == [1000, 2000] and d["v[1]"][0] == np.float32(-2.0) and math.isnan(d["v[0]"][1])
+    )
     assert list(d["d"]) == [1e300, -1.0] and list(d["i"]) == [-5, 127] and list(d["u"]) == [2**32 - 1, 0]
     (msg,) = log.logged_messages
     assert (msg.log_level_str(), msg.timestamp, msg.message) == ("WARNING", 1500, "a warning")

@@ -30,7 +30,7 @@ WALL_LIMIT_S = 240
 INSIDE = """
 set -u
 ip link set lo up
-"{quadsitl}" up --speed 2 > "{log}" 2>&1 &
+"{quadsitl}" up --speed 2 --no-log > "{log}" 2>&1 &
 up=$!
 timeout {limit} "{client}" "{flows}" udpin://0.0.0.0:14540
 rc=$?
