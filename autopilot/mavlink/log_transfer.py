@@ -18,7 +18,9 @@
 A log being written is listed with its size at listing time and served up to it: a ULog cut at
 a flush is a readable ULog. Streaming is bounded: at most ``budget`` messages per :meth:`pump`,
 which the core calls once per control frame (after the answer to the simulator) and from its
-wall-clock housekeeping only while no frames flow, so a download never holds back lockstep. Each
+wall-clock housekeeping only while no frames flow, so a download never holds back lockstep; and
+at most :data:`MESSAGES_PER_S` a second of the wall clock, so a fast simulation does not flood a
+ground station. Each
 station (an address on a link) has its own listing and transfer, served in turn; PX4 keeps one
 per MAVLink instance, where a second station's request ends the first's stream. Every field of
 every request is checked here: no request raises, whatever its values.
@@ -43,6 +45,11 @@ from .codec import mavlink as m
 from .links import Address, GcsLink
 
 CHUNK = 90  # LOG_DATA.data
+# What one link streams at most, per second of the caller's clock (the process's wall clock; the
+# in-process runner's is simulation time): 180 kB/s of log, what the per-frame budget gives at
+# --speed 1. Faster, a Python ground station (MAVProxy) drops datagrams and asks for them again.
+MESSAGES_PER_S = 2000
+BURST = 100  # messages a link may send at once after a pause
 MAX_STATIONS_PER_LINK = 4  # stations with a listing or a transfer on one link; the oldest makes room
 REFUSE_REPEAT_S = 1.0  # the same refusal text is not repeated within this (wall clock)
 _LOG_DATA_HEAD = struct.Struct("<IHB")  # LOG_DATA in wire order: ofs, id, count, then data[90]
@@ -117,6 +124,8 @@ class LogTransfer:
         self.clock = clock
         self.stations: list[OrderedDict[Address, _Station]] = [OrderedDict() for _ in links]
         self.ignored = 0  # requests answered with nothing (unknown log id), as PX4
+        self._allowance = [BURST] * len(links)  # messages each link may still send now
+        self._pumped_at = clock()
         self._refused_at: dict[str, float] = {}
 
     def register(self, dispatcher) -> None:
@@ -205,11 +214,18 @@ class LogTransfer:
 
     # -- streaming ------------------------------------------------------------------------------
     def pump(self, budget: int) -> None:
-        """Send at most ``budget`` messages on each link, its stations taking turns."""
-        for link, stations in zip(self.links, self.stations, strict=True):
+        """Send at most ``budget`` messages on each link, its stations taking turns, and no more
+        than MESSAGES_PER_S of the caller's clock allows (what a Python ground station reads)."""
+        now = self.clock()
+        elapsed = min(max(now - self._pumped_at, 0.0), 1.0)
+        self._pumped_at = now
+        for index, (link, stations) in enumerate(zip(self.links, self.stations, strict=True)):
             if not stations:
+                self._allowance[index] = BURST
                 continue
-            left = budget
+            allowance = min(self._allowance[index] + elapsed * MESSAGES_PER_S, BURST)
+            left = min(budget, int(allowance))
+            self._allowance[index] = allowance - left
             while left > 0:
                 sent = 0
                 for station in list(stations.values()):
@@ -219,6 +235,7 @@ class LogTransfer:
                         sent += 1
                 if sent == 0:
                     break
+            self._allowance[index] += left  # not spent: nothing was left to send
 
     def _send_one(self, link: GcsLink, station: _Station) -> None:
         entries = station.listing or []
