@@ -9,6 +9,8 @@ from __future__ import annotations
 import io
 import math
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -115,6 +117,16 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     assert "translational_integral_z" in cascade and "rotational_integral_yaw" in cascade
     assert np.any(cascade["translational_integral_z"] != 0.0)
     assert stack.autopilot.faults.counts == {}
+    # PX4 users' first commands on a log: pyulog's ulog_info and ulog2csv
+    bin_dir = Path(sys.executable).parent
+    info = subprocess.run([bin_dir / "ulog_info", paths[0]], capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0 and "vehicle_local_position" in info.stdout
+    assert "sys_name: quadsitl" in info.stdout
+    csv = subprocess.run([bin_dir / "ulog2csv", "-o", tmp_path / "csv", "-m", "vehicle_attitude", paths[0]],
+                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert csv.returncode == 0, csv.stderr
+    (table,) = (tmp_path / "csv").glob("*vehicle_attitude_0.csv")
+    assert table.read_text().splitlines()[0].startswith("timestamp,timestamp_sample,q[0]")
 
 
 SEQUENCE = (("idle", 1.0), ("arm", 1.0), ("disarm", 1.0), ("arm", 1.0), ("disarm", 0.5))
