@@ -12,7 +12,8 @@
   ``int32_t`` or ``float`` (it throws on any other type); info keys ``type name``; every data
   message's id subscribed and its size the format's;
 * Flight Review (``app/plot_app``): the topics and fields its plots and tables read
-  (:data:`FLIGHT_REVIEW`), ``estimator_status`` too when the vehicle flew on its EKF.
+  (:data:`FLIGHT_REVIEW`; a plot missing one field is dropped whole), ``estimator_status`` too
+  when the vehicle flew on its EKF.
 """
 
 from __future__ import annotations
@@ -33,18 +34,22 @@ FLIGHT_REVIEW = {
     "vehicle_angular_velocity": ("xyz[0]", "xyz[1]", "xyz[2]"),
     "vehicle_rates_setpoint": ("roll", "pitch", "yaw"),
     "actuator_outputs": ("noutputs", "output[0]", "output[15]"),
-    "vehicle_status": ("nav_state", "arming_state", "is_vtol", "vehicle_type"),
+    "vehicle_status": ("nav_state", "arming_state", "is_vtol", "vehicle_type", "failsafe",
+                       "failsafe_and_user_took_over"),
     "sensor_combined": ("gyro_rad[0]", "accelerometer_m_s2[2]"),
-    "vehicle_gps_position": ("latitude_deg", "longitude_deg", "altitude_msl_m", "fix_type", "time_utc_usec"),
+    "vehicle_gps_position": ("latitude_deg", "longitude_deg", "altitude_msl_m", "fix_type", "time_utc_usec",
+                             "eph", "epv", "hdop", "vdop", "s_variance_m_s", "satellites_used", "vel_m_s",
+                             "noise_per_ms", "jamming_indicator"),
     "vehicle_global_position": ("lat", "lon", "alt"),
     "battery_status": ("voltage_v", "current_a", "remaining"),
     "vehicle_local_position_groundtruth": ("x", "y", "z"),
     "vehicle_attitude_groundtruth": ("q[0]", "q[3]"),
     "vehicle_angular_velocity_groundtruth": ("xyz[0]",),
 }  # fmt: skip
-EKF_ONLY = {
-    "estimator_status": ("pos_test_ratio", "vel_test_ratio", "hgt_test_ratio", "solution_status_flags")
-}
+EKF_ONLY = {  # health_flags, timeout_flags: its "Estimator Flags" plot
+    "estimator_status": ("pos_test_ratio", "vel_test_ratio", "hgt_test_ratio", "solution_status_flags",
+                         "health_flags", "timeout_flags"),
+}  # fmt: skip
 
 
 def _format_fields(text: str) -> tuple[str, list[tuple[str, int, str]]]:

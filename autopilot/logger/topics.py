@@ -293,7 +293,8 @@ VEHICLE_STATUS = (
     "uint64_t armed_time; uint64_t takeoff_time; uint64_t nav_state_timestamp; "
     "uint32_t valid_nav_states_mask; uint32_t can_set_nav_states_mask; "
     "uint8_t arming_state; uint8_t nav_state; uint8_t nav_state_user_intention; uint8_t hil_state; "
-    "uint8_t vehicle_type; bool failsafe; bool gcs_connection_lost; bool is_vtol; bool is_vtol_tailsitter; "
+    "uint8_t vehicle_type; bool failsafe; bool failsafe_and_user_took_over; bool gcs_connection_lost; "
+    "bool is_vtol; bool is_vtol_tailsitter; "
     "bool in_transition_mode; bool in_transition_to_fw; uint8_t system_type; uint8_t system_id; "
     "uint8_t component_id; bool pre_flight_checks_pass"
 )
@@ -310,7 +311,7 @@ def vehicle_status(s: Snapshot) -> tuple:
     state = nav_state(s.row[ROW_CUSTOM_MODE])
     return (s.t_us, s.arming_time_us if armed else 0, s.takeoff_time_us if armed else 0, s.mode_time_us,
             NAV_STATES_MASK, NAV_STATES_MASK, ARMING_STATE_ARMED if armed else ARMING_STATE_DISARMED,
-            state, state, 1, VEHICLE_TYPE_ROTARY_WING, False, False, False, False, False, False,
+            state, state, 1, VEHICLE_TYPE_ROTARY_WING, False, False, False, False, False, False, False,
             MAV_TYPE_QUADROTOR, s.system_id, 1, True)  # fmt: skip
 
 
@@ -331,10 +332,10 @@ def sensor_combined(s: Snapshot) -> tuple | None:
 
 GPS_POSITION = (
     "uint64_t timestamp_sample; uint64_t time_utc_usec; uint32_t device_id; double latitude_deg; "
-    "double longitude_deg; double altitude_msl_m; double altitude_ellipsoid_m; float s_variance_m_s2; "
-    "float c_variance_rad; float eph; float epv; float hdop; float vdop; float vel_m_s; float vel_n_m_s; "
-    "float vel_e_m_s; float vel_d_m_s; float cog_rad; uint8_t fix_type; bool vel_ned_valid; "
-    "uint8_t satellites_used"
+    "double longitude_deg; double altitude_msl_m; double altitude_ellipsoid_m; float s_variance_m_s; "
+    "float c_variance_rad; float eph; float epv; float hdop; float vdop; int32_t noise_per_ms; "
+    "int32_t jamming_indicator; float vel_m_s; float vel_n_m_s; float vel_e_m_s; float vel_d_m_s; "
+    "float cog_rad; uint8_t fix_type; bool vel_ned_valid; uint8_t satellites_used"
 )
 _UNKNOWN_U16 = 65535
 
@@ -348,7 +349,7 @@ def vehicle_gps_position(s: Snapshot) -> tuple | None:
     epv = g.epv * 0.01 if g.epv != _UNKNOWN_U16 else NAN
     cog = math.radians(g.cog * 0.01) if g.cog != _UNKNOWN_U16 else NAN
     utc = s.t_us + s.utc_offset_us if s.utc_offset_us else 0
-    return (s.t_us, s.t_us, utc, 0, g.lat * 1e-7, g.lon * 1e-7, alt, alt, NAN, NAN, eph, epv, eph, epv,
+    return (s.t_us, s.t_us, utc, 0, g.lat * 1e-7, g.lon * 1e-7, alt, alt, NAN, NAN, eph, epv, eph, epv, 0, 0,
             g.vel * 0.01 if g.vel != _UNKNOWN_U16 else NAN, g.vn * 0.01, g.ve * 0.01, g.vd * 0.01, cog,
             g.fix_type, True, g.satellites_visible)  # fmt: skip
 
@@ -369,7 +370,8 @@ ESTIMATOR_STATUS = (
     "uint32_t filter_fault_flags; float pos_horiz_accuracy; float pos_vert_accuracy; float hdg_test_ratio; "
     "float vel_test_ratio; float pos_test_ratio; float hgt_test_ratio; float tas_test_ratio; "
     "float hagl_test_ratio; float beta_test_ratio; uint16_t gps_check_fail_flags; "
-    "uint16_t innovation_check_flags; uint16_t solution_status_flags"
+    "uint16_t innovation_check_flags; uint16_t solution_status_flags; uint8_t health_flags; "
+    "uint8_t timeout_flags"
 )
 
 
@@ -377,10 +379,14 @@ def estimator_status(s: Snapshot) -> tuple | None:
     e = s.estimator
     if e is None:
         return None
-    # solution_status_flags are MAVLink's ESTIMATOR_STATUS_FLAGS bits, as PX4 fills them.
+    # solution_status_flags are MAVLink's ESTIMATOR_STATUS_FLAGS bits, as PX4 fills them;
+    # health_flags (velocity, position, height: bit set = its test failing) and timeout_flags (no
+    # aiding: dead reckoning) as PX4's older estimator_status, which Flight Review plots.
+    health = (e.vel_ratio > 1.0) | (e.pos_horiz_ratio > 1.0) << 1 | (e.pos_vert_ratio > 1.0) << 2
+    timeout = 0b011 if e.dead_reckoning else 0
     return (s.t_us, s.t_us, 0, 0.0, 0.0, 0.0, 0, e.pos_horiz_accuracy_m, e.pos_vert_accuracy_m,
             e.mag_ratio, e.vel_ratio, e.pos_horiz_ratio, e.pos_vert_ratio, 0.0, 0.0, 0.0, 0, 0,
-            e.flags)  # fmt: skip
+            e.flags, health, timeout)  # fmt: skip
 
 
 # -- our own topics (paper frames) ---------------------------------------------------------------------
