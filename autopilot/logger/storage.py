@@ -153,7 +153,13 @@ class LogWriter:
         which log is being written), the bytes and the close are the thread's."""
         for item in items:
             if isinstance(item, LogOpen):
-                path = self.directory.new_path(item.utc_s)
+                try:
+                    path = self.directory.new_path(item.utc_s)
+                except OSError as exc:  # the directory cannot be made: this log is not written
+                    if self.error is None:
+                        self.error = f"{self.directory.root}: {exc.strerror or exc}"
+                    self._do(("open", None))
+                    continue
                 self.directory.writing = path
                 self.written.append(path)
                 self._do(("open", path))
@@ -192,8 +198,9 @@ class LogWriter:
             if kind == "open":
                 self._close_file()
                 self._path = value
-                self._fd = os.open(value, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-                self._last_sync = time.monotonic()
+                if value is not None:  # None: a log that could not be placed (its bytes are dropped)
+                    self._fd = os.open(value, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+                    self._last_sync = time.monotonic()
             elif kind == "data":
                 if self._fd is not None:
                     view = memoryview(value)

@@ -283,3 +283,13 @@ def test_the_log_directory_names_logs_as_px4_and_lists_them_oldest_first(tmp_pat
     assert directory.read(str(tmp_path / "gone.ulg"), 0, 5) == b""
     directory.writing = second
     assert directory.erase() == 2 and [Path(e.key) for e in directory.entries()] == [second]
+
+
+def test_a_log_directory_that_cannot_be_written_is_reported_and_the_vehicle_flies_on(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory")
+    stack = make_stack(log_dir=str(blocker / "log"))
+    stack.autopilot.params.set("SDLOG_MODE", 2)
+    stack.run_for(0.5)
+    assert stack.close() == [] and "a_file/log: " in stack.log_writer.error
+    assert stack.autopilot.faults.counts == {} and stack.t >= 0.5
