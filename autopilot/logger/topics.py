@@ -114,7 +114,6 @@ class Snapshot:
     system_id: int = 1
     utc_offset_us: int = 0  # UTC minus simulation time (µs) when the log started with a clock, else 0
     arming_time_us: int = 0
-    takeoff_time_us: int = 0
     mode_time_us: int = 0
 
 
@@ -309,7 +308,7 @@ def nav_state(custom_mode: int) -> int:
 def vehicle_status(s: Snapshot) -> tuple:
     armed = s.row[ROW_ARMED] > 0.5
     state = nav_state(s.row[ROW_CUSTOM_MODE])
-    return (s.t_us, s.arming_time_us if armed else 0, s.takeoff_time_us if armed else 0, s.mode_time_us,
+    return (s.t_us, s.arming_time_us if armed else 0, 0, s.mode_time_us,
             NAV_STATES_MASK, NAV_STATES_MASK, ARMING_STATE_ARMED if armed else ARMING_STATE_DISARMED,
             state, state, 1, VEHICLE_TYPE_ROTARY_WING, False, False, False, False, False, False, False,
             MAV_TYPE_QUADROTOR, s.system_id, 1, True)  # fmt: skip
@@ -464,6 +463,5 @@ TOPICS: tuple[TopicSpec, ...] = tuple(
         (sim_disturbance, DISTURBANCE_FIELDS, 10),
     )
 )
-TOPIC_NAMES = tuple(spec.name for spec in TOPICS)
 # Sampled by the logger's own rules rather than by their interval alone (see TOPICS above).
 EVENT_TOPICS = ("vehicle_gps_position", DISTURBANCE)
