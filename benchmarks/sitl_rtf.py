@@ -14,10 +14,11 @@ Besides the wall time, the CPU time of both processes (user + system, start-up i
 simulated second is reported: on a shared machine it moves less than the wall time.
 ``--log``: each run twice, with the autopilot's flight log (ULog, SDLOG_MODE 0: the flight is
 armed from t = 0, so the whole run is logged) off and on, alternating, ``--repeat`` times; the
-last lines add the ratio of the real-time factors (on / off, the median of the pairs) and the
-log's size. ``--profile`` also runs both processes under cProfile at 500 Hz (with the last ``--estimator``)
-and prints where the time goes. The machine is shared and noisy: compare the rates with each
-other, measured in one run. Last lines: ``name: value unit``.
+last lines add the ratio of the real-time factors (on / off, the median of the pairs), the ratio
+of the two processes' CPU time (steadier than the wall time on a shared machine) and the log's
+size per simulated second. ``--profile`` also runs both processes under cProfile at 500 Hz (with
+the last ``--estimator``) and prints where the time goes. The machine is shared and noisy:
+compare the rates with each other, measured in one run. Last lines: ``name: value unit``.
 """
 
 from __future__ import annotations
@@ -145,23 +146,26 @@ def log_pairs(args, tmpdir: Path) -> None:
     lines = []
     for rate in args.rates:
         for estimator in args.estimator:
-            ratios, sizes = [], []
+            ratios, cpu_ratios, sizes = [], [], []
             for k in range(args.repeat):
-                rtf = {}
+                rtf, cpu_s = {}, {}
                 for on in (False, True):
                     log_dir = tmpdir / f"log_{rate}_{estimator}_{k}" if on else None
                     config = sitl_toml(tmpdir, rate)
                     elapsed, median, p99, cpu = run_once(config, args.duration, None, estimator, args.sensors,
                                                          args.instance, log_dir)  # fmt: skip
-                    rtf[on] = args.duration / elapsed
+                    rtf[on], cpu_s[on] = args.duration / elapsed, cpu
                     print(f"{rate:5d} Hz on {estimator}, flight log {'on ' if on else 'off'}: "
                           f"{rtf[on]:.1f}x, CPU {cpu:.1f} s, HIL round trip median {median} us, p99 {p99} us",
                           flush=True)  # fmt: skip
                     if on:
                         sizes += [f.stat().st_size for f in log_dir.rglob("*.ulg")]
                 ratios.append(rtf[True] / rtf[False])
+                cpu_ratios.append(cpu_s[True] / cpu_s[False])
             suffix = "" if estimator == "truth" else "_ekf"
-            lines.append(f"sitl_rtf_{rate}hz{suffix}_log_on_over_off: {statistics.median(ratios):.3f} ratio")
+            name = f"{rate}hz{suffix}_log_on_over_off"
+            lines.append(f"sitl_rtf_{name}: {statistics.median(ratios):.3f} ratio")
+            lines.append(f"sitl_cpu_{name}: {statistics.median(cpu_ratios):.3f} ratio")
             if sizes:
                 per_s = statistics.median(sizes) / args.duration
                 lines.append(f"ulog_bytes_per_sim_s_{rate}hz{suffix}: {per_s:.0f} B")
