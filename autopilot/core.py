@@ -493,13 +493,14 @@ class AutopilotCore:
         s = log.snapshot
         s.t_us = frame.time_usec
         s.truth = self._frame_truth
-        s.estimate = frame.state
         s.row = self.controller_rows[-1]
-        s.reference = guidance.reference
-        s.output = output
-        s.controls = self._controls
-        s.estimator = self.estimator.last_status if self.estimator is not None else None
-        log.sample(frame.parts, frame.sensors)
+        if log.sample(frame.parts):  # the other topics are due (one frame in five, at most)
+            s.estimate = frame.state
+            s.reference = guidance.reference
+            s.output = output
+            s.controls = self._controls
+            s.estimator = self.estimator.last_status if self.estimator is not None else None
+            log.sample_due(frame.parts, frame.sensors)
 
     @property
     def status(self) -> telemetry.VehicleStatus:

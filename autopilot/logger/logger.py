@@ -1,7 +1,8 @@
 """The flight logger: when a log runs (``SDLOG_MODE``, as PX4's logger) and the ULog bytes of it.
 
 Pure: the core calls :meth:`FlightLogger.update` once per control step, after the answer has
-gone to the simulator, and :meth:`FlightLogger.sample` while a log is open; the shell takes
+gone to the simulator, and :meth:`FlightLogger.sample` (and, when periodic topics are due,
+:meth:`FlightLogger.sample_due`) while a log is open; the shell takes
 what it wrote with :meth:`FlightLogger.take` (:class:`LogOpen` / bytes / :class:`LogClose` in
 file order) and writes it, in a thread off the lockstep's critical path (:mod:`.storage`).
 
@@ -132,7 +133,8 @@ class FlightLogger:
         self._scheduled: list[_Scheduled] = []
         self._gps: ulog.Topic | None = None
         self._status: _Scheduled | None = None
-        self._status_key: tuple = ()
+        self._status_mode: float | None = None  # the row's custom_mode and armed at the last status
+        self._status_armed: float | None = None
         self._disturbance: ulog.Topic | None = None
         self._disturbance_last: tuple = ()
         self._disturbance_logged: tuple = ()
@@ -168,11 +170,12 @@ class FlightLogger:
                 self.stop()
         return self.logging
 
-    def sample(self, parts: dict | None, sensors) -> None:
-        """The frame's samples (after :meth:`update` returned True and the snapshot was filled):
-        ``paper_tracking`` always, the other topics when due. ``parts`` are the frame's undecoded
-        messages: HIL_GPS and HIL_SENSOR are decoded from them when a sample needs them, unless
-        ``sensors`` (what the EKF read of the frame) has them already."""
+    def sample(self, parts: dict | None) -> bool:
+        """Every control step's samples (after :meth:`update` returned True, the snapshot's
+        ``t_us``, ``truth`` and ``row`` set for the frame): ``paper_tracking``, the GPS fix when the
+        frame carries one (``parts``: its undecoded messages), ``vehicle_status`` when the mode or
+        arming changed. True when periodic topics are due: the caller then fills the rest of the
+        snapshot and calls :meth:`sample_due` (most frames need neither)."""
         s = self.snapshot
         t_us = s.t_us
         buf = self._buffer
@@ -184,11 +187,17 @@ class FlightLogger:
             values = topics.vehicle_gps_position(s)
             if values is not None:
                 buf += self._gps.sample(values)
-        status_key = (s.row[topics.ROW_CUSTOM_MODE], s.row[topics.ROW_ARMED])
-        if status_key != self._status_key:
-            self._on_status_change(status_key, t_us)
-        if t_us < self._next_due_us:
-            return
+        row = s.row
+        if row[topics.ROW_CUSTOM_MODE] != self._status_mode or row[topics.ROW_ARMED] != self._status_armed:
+            self._on_status_change(row[topics.ROW_CUSTOM_MODE], row[topics.ROW_ARMED], t_us)
+        return t_us >= self._next_due_us
+
+    def sample_due(self, parts: dict | None, sensors) -> None:
+        """The periodic topics due at this frame; HIL_SENSOR is decoded from ``parts`` when a
+        sample needs it, unless ``sensors`` (what the EKF read of the frame) has it already."""
+        s = self.snapshot
+        t_us = s.t_us
+        buf = self._buffer
         s.sensors = sensors
         next_due = t_us + 3_600_000_000
         for item in self._scheduled:
@@ -321,23 +330,22 @@ class FlightLogger:
         self.snapshot.utc_offset_us = round(utc * 1e6) - t_us if utc is not None else 0
         self._next_due_us = t_us
         self._next_sync_us = t_us
-        self._status_key = ()
+        self._status_mode = self._status_armed = None
         self._disturbance_last = self._disturbance_logged = ()
         self._disturbance_next_us = t_us
 
     def _law_state_values(self) -> tuple[float, ...]:
         return self.law_states()[1]
 
-    def _on_status_change(self, key: tuple, t_us: int) -> None:
+    def _on_status_change(self, mode: float, armed: float, t_us: int) -> None:
         """vehicle_status at once when the mode or arming changes (PX4's commander publishes it
         then), besides its periodic sample; the times of the last arming and mode change."""
         s = self.snapshot
-        previous = self._status_key
-        self._status_key = key
-        if previous and previous[0] != key[0]:
+        if self._status_mode is not None and mode != self._status_mode:
             s.mode_time_us = t_us
-        if key[1] > 0.5 and (not previous or not previous[1] > 0.5):
+        if armed > 0.5 and not (self._status_armed is not None and self._status_armed > 0.5):
             s.arming_time_us = t_us
+        self._status_mode, self._status_armed = mode, armed
         self._status.next_us = t_us
         self._next_due_us = t_us
 

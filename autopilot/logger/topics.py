@@ -18,10 +18,12 @@ x north / y west / z up, body front-left-up, ZYX Euler angles), SI units:
   SITL, the simulator core in-process); the HIL link does not carry it.
 
 Rates are PX4's default logging profile (``logged_topics.cpp``: an interval in ms, at most one
-sample per interval; its SITL ground-truth topics included), sampled on the simulation clock of
-the frames. Every builder reads the frame's :class:`Snapshot` and returns the sample's values,
-timestamp first, or None when the vehicle has no such data now (no estimate yet, no GPS fix in
-this frame, not flying on the EKF).
+sample per interval; its SITL ground-truth topics included, at 20 ms rather than PX4's 10 ms for
+attitude and rates, and ``sensor_combined`` at 20 ms rather than every sample: each sample costs
+the lockstep's process a few µs), sampled on the simulation clock of the frames. Every builder
+reads the frame's :class:`Snapshot` and returns the sample's values, timestamp first, or None
+when the vehicle has no such data now (no estimate yet, no GPS fix in this frame, not flying on
+the EKF).
 
 Pure: no file, no clock; :mod:`.logger` decides when a log runs and packs these samples.
 """
@@ -456,8 +458,8 @@ TOPICS: tuple[TopicSpec, ...] = tuple(
         (actuator_outputs, OUTPUTS, 100),
         (battery_status, BATTERY, 200),
         (estimator_status, ESTIMATOR_STATUS, 200),
-        (vehicle_angular_velocity_groundtruth, ANGULAR_VELOCITY, 10),
-        (vehicle_attitude_groundtruth, ATTITUDE, 10),
+        (vehicle_angular_velocity_groundtruth, ANGULAR_VELOCITY, 20),
+        (vehicle_attitude_groundtruth, ATTITUDE, 20),
         (vehicle_global_position_groundtruth, GLOBAL_POSITION, 100),
         (vehicle_local_position_groundtruth, LOCAL_POSITION, 20),
         (sim_disturbance, DISTURBANCE_FIELDS, 10),

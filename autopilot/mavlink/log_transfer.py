@@ -126,6 +126,7 @@ class LogTransfer:
         self.ignored = 0  # requests answered with nothing (unknown log id), as PX4
         self._allowance = [BURST] * len(links)  # messages each link may still send now
         self._pumped_at = clock()
+        self._requested = False  # a request came in that pump() has not finished serving
         self._refused_at: dict[str, float] = {}
 
     def register(self, dispatcher) -> None:
@@ -145,6 +146,7 @@ class LogTransfer:
             0, wire.AUTOPILOT_COMPONENT_ID)  # fmt: skip
 
     def _station(self, link: GcsLink, address: Address) -> _Station:
+        self._requested = True
         stations = self.stations[link.index]
         station = stations.get(address)
         if station is None:
@@ -216,9 +218,12 @@ class LogTransfer:
     def pump(self, budget: int) -> None:
         """Send at most ``budget`` messages on each link, its stations taking turns, and no more
         than MESSAGES_PER_S of the caller's clock allows (what a Python ground station reads)."""
+        if not self._requested:  # nothing asked since the last pump found nothing to send
+            return
         now = self.clock()
         elapsed = min(max(now - self._pumped_at, 0.0), 1.0)
         self._pumped_at = now
+        busy = False
         for index, (link, stations) in enumerate(zip(self.links, self.stations, strict=True)):
             if not stations:
                 self._allowance[index] = BURST
@@ -236,7 +241,8 @@ class LogTransfer:
                 if sent == 0:
                     break
             self._allowance[index] += left  # not spent: nothing was left to send
-
+            busy = busy or any(station.busy for station in stations.values())
+        self._requested = busy
     def _send_one(self, link: GcsLink, station: _Station) -> None:
         entries = station.listing or []
         n = len(entries)
