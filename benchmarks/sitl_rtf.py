@@ -16,14 +16,19 @@ simulated second is reported: on a shared machine it moves less than the wall ti
 armed from t = 0, so the whole run is logged) off and on, alternating, ``--repeat`` times; the
 last lines add the ratio of the real-time factors (on / off, the median of the pairs), the ratio
 of the two processes' CPU time (steadier than the wall time on a shared machine) and the log's
-size per simulated second. ``--profile`` also runs both processes under cProfile at 500 Hz (with
-the last ``--estimator``) and prints where the time goes. The machine is shared and noisy:
+size per simulated second. In both runs of a pair this process subscribes to the simulator's
+truth on zenoh, as a recorder would: the logging autopilot subscribes to it (for the disturbance),
+and whether the simulator's truth has a subscriber changes its timing by itself (measured: with
+none, the HIL round trip sat at ~1 ms in some runs), which would be measured instead.
+``--profile`` also runs both processes under cProfile at 500 Hz (with the last ``--estimator``)
+and prints where the time goes. The machine is shared and noisy:
 compare the rates with each other, measured in one run. Last lines: ``name: value unit``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import pstats
 import re
 import resource
@@ -31,6 +36,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from quadcommon import bus, wire
 from sitl.launcher import LINKED, Launcher, VehicleSpec
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,9 +65,11 @@ def run_once(
     sensors: str | None = None,
     instance: int = INSTANCE,
     log_dir: Path | None = None,
+    truth_subscriber: bool = False,
 ) -> tuple[float, int, int, float]:
     """One SITL run through the project's launcher; (wall seconds from linked to the end, RTT median
-    and p99 in µs as the simulator reports them, CPU seconds of both processes)."""
+    and p99 in µs as the simulator reports them, CPU seconds of both processes). ``truth_subscriber``:
+    this process subscribes to the simulator's truth on zenoh during the run (as a recorder does)."""
     def profiled(spec_cmd: list[str], name: str) -> list[str]:
         if profile_dir is None:
             return spec_cmd
@@ -72,9 +80,14 @@ def run_once(
                        sensors=sensors if estimator == "ekf" else None,
                        log_dir=str(log_dir) if log_dir is not None else None)  # fmt: skip
     cpu_before = _children_cpu_s()
-    with Launcher() as launcher:
+    with Launcher() as launcher, contextlib.ExitStack() as taps:
         sim = launcher.spawn("simulator", profiled(spec.simulator_command(), "simulator"))
         sim.wait_line("waiting for the autopilot", 30.0)
+        if truth_subscriber:
+            import zenoh
+
+            session = taps.enter_context(contextlib.closing(bus.open_peer(spec.ports().zenoh)))
+            session.declare_subscriber(wire.zenoh_key(instance, "truth"), zenoh.handlers.RingChannel(64))
         launcher.spawn("autopilot", profiled(spec.autopilot_command(), "autopilot"))
         sim.wait_line(LINKED, 30.0)
         start = time.perf_counter()
@@ -153,7 +166,8 @@ def log_pairs(args, tmpdir: Path) -> None:
                     log_dir = tmpdir / f"log_{rate}_{estimator}_{k}" if on else None
                     config = sitl_toml(tmpdir, rate)
                     elapsed, median, p99, cpu = run_once(config, args.duration, None, estimator, args.sensors,
-                                                         args.instance, log_dir)  # fmt: skip
+                                                         args.instance, log_dir,
+                                                         truth_subscriber=True)  # fmt: skip
                     rtf[on], cpu_s[on] = args.duration / elapsed, cpu
                     print(f"{rate:5d} Hz on {estimator}, flight log {'on ' if on else 'off'}: "
                           f"{rtf[on]:.1f}x, CPU {cpu:.1f} s, HIL round trip median {median} us, p99 {p99} us",
