@@ -488,19 +488,16 @@ class AutopilotCore:
     def _log_frame(self, frame, guidance, output) -> None:
         """The frame into the flight log (autopilot/logger/), when one is open."""
         log = self.flight_log
-        if not log.update(frame.time_usec, self.commander.armed):
-            return
-        s = log.snapshot
-        s.t_us = frame.time_usec
-        s.truth = self._frame_truth
-        s.row = self.controller_rows[-1]
-        if log.sample(frame.parts):  # the other topics are due (one frame in five, at most)
+        if log.frame(
+            frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1], frame.parts
+        ):  # the periodic topics are due (one frame in ten, at most)
+            s = log.snapshot
             s.estimate = frame.state
             s.reference = guidance.reference
             s.output = output
             s.controls = self._controls
             s.estimator = self.estimator.last_status if self.estimator is not None else None
-            log.sample_due(frame.parts, frame.sensors)
+            log.sample_due(frame.parts)
 
     @property
     def status(self) -> telemetry.VehicleStatus:

@@ -1,8 +1,8 @@
 """The flight logger: when a log runs (``SDLOG_MODE``, as PX4's logger) and the ULog bytes of it.
 
-Pure: the core calls :meth:`FlightLogger.update` once per control step, after the answer has
-gone to the simulator, and :meth:`FlightLogger.sample` (and, when periodic topics are due,
-:meth:`FlightLogger.sample_due`) while a log is open; the shell takes
+Pure: the core calls :meth:`FlightLogger.frame` once per control step, after the answer has
+gone to the simulator (and, when periodic topics are due, :meth:`FlightLogger.sample_due`); the
+shell takes
 what it wrote with :meth:`FlightLogger.take` (:class:`LogOpen` / bytes / :class:`LogClose` in
 file order) and writes it, in a thread off the lockstep's critical path (:mod:`.storage`).
 
@@ -86,17 +86,25 @@ class LogClose(NamedTuple):
     end_us: int
 
 
-class _Scheduled:
-    """One periodic topic of the open log."""
+class _Periodic(NamedTuple):
+    """One periodic topic of the open log: its message, the builder of its values, and what is
+    appended to them (the laws' states of ``cascade_status``), if anything."""
 
-    __slots__ = ("topic", "build", "interval_us", "next_us", "extra")
+    topic: ulog.Topic
+    build: Callable[[Snapshot], tuple | None]
+    extra: Callable[[], Sequence[float]] | None = None
 
-    def __init__(self, topic: ulog.Topic, build, interval_us: int) -> None:
-        self.topic = topic
-        self.build = build
+
+class _Group:
+    """The periodic topics of one interval: due together (the frames' clock is checked once per
+    interval, not once per topic)."""
+
+    __slots__ = ("interval_us", "next_us", "topics")
+
+    def __init__(self, interval_us: int, next_us: int) -> None:
         self.interval_us = interval_us
-        self.next_us = 0
-        self.extra: Callable[[], Sequence[float]] | None = None
+        self.next_us = next_us
+        self.topics: list[_Periodic] = []
 
 
 class FlightLogger:
@@ -130,9 +138,9 @@ class FlightLogger:
         self._disarmed_since_boot = False
         self._last_t_us = -1
         self._tracking: ulog.Topic | None = None
-        self._scheduled: list[_Scheduled] = []
+        self._groups: list[_Group] = []
         self._gps: ulog.Topic | None = None
-        self._status: _Scheduled | None = None
+        self._status: ulog.Topic | None = None
         self._status_mode: float | None = None  # the row's custom_mode and armed at the last status
         self._status_armed: float | None = None
         self._disturbance: ulog.Topic | None = None
@@ -170,51 +178,56 @@ class FlightLogger:
                 self.stop()
         return self.logging
 
-    def sample(self, parts: dict | None) -> bool:
-        """Every control step's samples (after :meth:`update` returned True, the snapshot's
-        ``t_us``, ``truth`` and ``row`` set for the frame): ``paper_tracking``, the GPS fix when the
-        frame carries one (``parts``: its undecoded messages), ``vehicle_status`` when the mode or
-        arming changed. True when periodic topics are due: the caller then fills the rest of the
-        snapshot and calls :meth:`sample_due` (most frames need neither)."""
+    def frame(self, t_us: int, armed: bool, truth, row: tuple, parts: dict | None) -> bool:
+        """One control step: :meth:`update`, then, while a log is open, the samples of every step:
+        ``paper_tracking`` (the frame's ``truth`` and controller ``row``), the GPS fix when the frame
+        carries one (``parts``: its undecoded messages), ``vehicle_status`` when the mode or arming
+        changed. True when periodic topics are due: the caller then fills the rest of the snapshot
+        and calls :meth:`sample_due` (most frames need neither)."""
+        if t_us <= self._last_t_us or armed != self._was_armed or self._decide:
+            if not self.update(t_us, armed):
+                return False
+        else:  # (update's common case, inline: this runs every control step)
+            self._last_t_us = t_us
+            if not self.logging:
+                return False
         s = self.snapshot
-        t_us = s.t_us
+        s.t_us, s.truth, s.row = t_us, truth, row
         buf = self._buffer
         tracking = self._tracking
         buf += tracking.prefix
-        buf += tracking.pack(*topics.paper_tracking(s))
+        buf += tracking.pack(*topics.paper_tracking_values(t_us, truth, row))
         if parts is not None and topics.GPS_ID in parts:
             s.gps = topics.gps_of(parts)
             values = topics.vehicle_gps_position(s)
             if values is not None:
                 buf += self._gps.sample(values)
-        row = s.row
         if row[topics.ROW_CUSTOM_MODE] != self._status_mode or row[topics.ROW_ARMED] != self._status_armed:
             self._on_status_change(row[topics.ROW_CUSTOM_MODE], row[topics.ROW_ARMED], t_us)
         return t_us >= self._next_due_us
 
-    def sample_due(self, parts: dict | None, sensors) -> None:
-        """The periodic topics due at this frame; HIL_SENSOR is decoded from ``parts`` when a
-        sample needs it, unless ``sensors`` (what the EKF read of the frame) has it already."""
+    def sample_due(self, parts: dict | None) -> None:
+        """The periodic topics due at this frame (``parts``: its undecoded messages, for the raw
+        sensor topic)."""
         s = self.snapshot
         t_us = s.t_us
         buf = self._buffer
-        s.sensors = sensors
+        s.parts = parts
         next_due = t_us + 3_600_000_000
-        for item in self._scheduled:
-            if t_us >= item.next_us:
-                if item.build is topics.sensor_combined and s.sensors is None and parts is not None:
-                    s.sensors = topics.sensors_of(parts, s.home_geodetic)
-                values = item.build(s)
-                if values is not None:
-                    if item.extra is not None:
-                        values = (*values, *item.extra())
-                    buf += item.topic.prefix
-                    buf += item.topic.pack(*values)
-                item.next_us += item.interval_us
-                if item.next_us <= t_us:
-                    item.next_us = t_us + item.interval_us
-            if item.next_us < next_due:
-                next_due = item.next_us
+        for group in self._groups:
+            if t_us >= group.next_us:
+                for topic, build, extra in group.topics:
+                    values = build(s)
+                    if values is not None:
+                        if extra is not None:
+                            values = (*values, *extra())
+                        buf += topic.prefix
+                        buf += topic.pack(*values)
+                group.next_us += group.interval_us
+                if group.next_us <= t_us:
+                    group.next_us = t_us + group.interval_us
+            if group.next_us < next_due:
+                next_due = group.next_us
         self._next_due_us = next_due
         if t_us >= self._next_sync_us:
             buf += ulog.sync()
@@ -303,7 +316,7 @@ class FlightLogger:
             buf += ulog.info("time_ref_utc", 0)
         for name, value in self.params.values.items():
             buf += ulog.parameter(name, value, self.params.specs[name].kind == INT32)
-        self._scheduled = []
+        groups: dict[int, _Group] = {}
         for msg_id, (spec, fmt) in enumerate(zip(TOPICS, formats, strict=True)):
             buf += ulog.add_logged(msg_id, spec.name)
             topic = ulog.Topic(fmt, msg_id)
@@ -314,13 +327,12 @@ class FlightLogger:
             elif spec.name == topics.DISTURBANCE:
                 self._disturbance = topic
             else:
-                item = _Scheduled(topic, spec.build, spec.interval_ms * 1000)
-                item.next_us = t_us
-                if spec.name == topics.CASCADE:
-                    item.extra = self._law_state_values
                 if spec.name == "vehicle_status":
-                    self._status = item
-                self._scheduled.append(item)
+                    self._status = topic
+                group = groups.setdefault(spec.interval_ms, _Group(spec.interval_ms * 1000, t_us))
+                extra = self._law_state_values if spec.name == topics.CASCADE else None
+                group.topics.append(_Periodic(topic, spec.build, extra))
+        self._groups = sorted(groups.values(), key=lambda g: g.interval_us)
         self._flush_buffer()
         self._out.append(LogOpen(t_us, utc))
         self._buffer += buf
@@ -346,8 +358,7 @@ class FlightLogger:
         if armed > 0.5 and not (self._status_armed is not None and self._status_armed > 0.5):
             s.arming_time_us = t_us
         self._status_mode, self._status_armed = mode, armed
-        self._status.next_us = t_us
-        self._next_due_us = t_us
+        self._buffer += self._status.sample(topics.vehicle_status(s))  # reads the row only
 
 
 _UINT32_INFO = ("ver_sw_release", "ver_data_format")

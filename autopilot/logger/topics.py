@@ -9,9 +9,10 @@ x north / y west / z up, body front-left-up, ZYX Euler angles), SI units:
   quantities as the recorder's Parquet columns (``quadsitl analyze`` reads either): the truth the
   HIL frame carries (position, Euler angles), the reference, eta_d, the applied U1 and tau_eta,
   and the mode and armed state;
-* ``cascade_status``: the rest of the cascade (reference velocity and acceleration, phi_r and
-  theta_r before the command filter, eta_d', the acceleration command, the body torque, the
-  normalised actuator controls, the commanded rotor speeds) and the laws' integral states
+* ``cascade_status`` (every 50 ms: reading the laws' states costs ~5 µs): the rest of the
+  cascade (reference velocity and acceleration, phi_r and theta_r before the command filter,
+  eta_d', the acceleration command, the body torque, the normalised actuator controls, the
+  commanded rotor speeds) and the laws' integral states
   (:meth:`~autopilot.control.cascade.Cascade.law_states`, one field per state);
 * ``sim_disturbance``: the disturbance the simulator applies (force at the CoM, world; torque on
   the Euler coordinates), when the autopilot is given it (the simulator's truth on zenoh in the
@@ -30,6 +31,7 @@ Pure: no file, no clock; :mod:`.logger` decides when a log runs and packs these 
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 from collections.abc import Callable
@@ -42,7 +44,7 @@ from quadcommon.rigid_body import body_rates_from_euler_rates, quaternion_from_e
 
 from ..commander.modes import FlightMode, LandedState
 from ..mavlink.codec import mavlink
-from ..mavlink.hil import GpsFields, SensorSamples, gps_fields, sensor_samples
+from ..mavlink.hil import GpsFields, gps_fields, imu_fields
 from .ulog import Format, fields
 
 NAN = math.nan
@@ -88,10 +90,10 @@ def gps_of(parts: dict) -> GpsFields | None:
         return None
 
 
-def sensors_of(parts: dict, home: tuple[float, float, float]) -> SensorSamples | None:
-    """The frame's HIL_SENSOR (and the rest an estimator reads), or None."""
+def imu_of(parts: dict) -> list | None:
+    """The frame's HIL_SENSOR gyro and accelerometer as sent (FRD), or None (none, or corrupt)."""
     try:
-        return sensor_samples(parts, home)
+        return imu_fields(parts)
     except (ValueError, struct.error):
         return None
 
@@ -109,7 +111,7 @@ class Snapshot:
     controls: tuple = (0.0, 0.0, 0.0, 0.0)  # normalised actuator controls sent to the simulator
     commander: object = None  # the Commander (its landed state is read when a sample needs it)
     estimator: object = None  # EstimatorStatus | None (flying on truth: None)
-    sensors: object = None  # SensorSamples | None, decoded when a sensor topic asks for it
+    parts: dict | None = None  # the frame's undecoded messages (sensor_combined reads HIL_SENSOR's)
     gps: object = None  # hil.GpsFields of this frame's HIL_GPS, or None
     thrust_max_n: float = 1.0
     home_geodetic: tuple = (0.0, 0.0, 0.0)  # the local frame's origin (lat, lon, alt)
@@ -302,14 +304,17 @@ VEHICLE_STATUS = (
 NAV_STATES_MASK = sum(1 << n for n in NAV_STATE.values())
 
 
+@functools.lru_cache(maxsize=64)
 def nav_state(custom_mode: int) -> int:
+    """PX4's nav_state of a custom_mode (unknown: AUTO_LOITER, hold); cached: looking a mode up
+    walks the FlightMode enum."""
     mode = FlightMode.from_custom_mode(int(custom_mode))
-    return NAV_STATE.get(mode, 4) if mode is not None else 4  # unknown: AUTO_LOITER (hold)
+    return NAV_STATE.get(mode, 4) if mode is not None else 4
 
 
 def vehicle_status(s: Snapshot) -> tuple:
     armed = s.row[ROW_ARMED] > 0.5
-    state = nav_state(s.row[ROW_CUSTOM_MODE])
+    state = nav_state(int(s.row[ROW_CUSTOM_MODE]))
     return (s.t_us, s.arming_time_us if armed else 0, 0, s.mode_time_us,
             NAV_STATES_MASK, NAV_STATES_MASK, ARMING_STATE_ARMED if armed else ARMING_STATE_DISARMED,
             state, state, 1, VEHICLE_TYPE_ROTARY_WING, False, False, False, False, False, False, False,
@@ -324,11 +329,12 @@ SENSOR_COMBINED = (
 
 
 def sensor_combined(s: Snapshot) -> tuple | None:
-    samples = s.sensors
-    if samples is None or "imu" in samples.refused:
+    """HIL_SENSOR's IMU as the simulator sent it (FRD already), non-finite samples left out."""
+    imu = imu_of(s.parts) if s.parts is not None else None
+    if imu is None or not math.isfinite(sum(imu)):
         return None
-    return (s.t_us, *frames.vector_to_ned(samples.angular_rate_rad_s), 0, 0,
-            *frames.vector_to_ned(samples.specific_force_m_s2), 0, 0, 0, 0, 0)  # fmt: skip
+    gx, gy, gz, ax, ay, az = imu
+    return (s.t_us, gx, gy, gz, 0, 0, ax, ay, az, 0, 0, 0, 0, 0)
 
 
 GPS_POSITION = (
@@ -398,10 +404,15 @@ TRACKING_FIELDS = (
 )
 
 
-def paper_tracking(s: Snapshot) -> tuple:
-    row = s.row
-    return (s.t_us, *s.truth.position_m, *row[ROW_POS_REF], *s.truth.euler_rad, *row[ROW_EULER_REF],
+def paper_tracking_values(t_us: int, truth, row: tuple) -> tuple:
+    """One ``paper_tracking`` sample: the frame's truth and its controller row (every control step:
+    the logger calls this directly, without the snapshot)."""
+    return (t_us, *truth.position_m, *row[ROW_POS_REF], *truth.euler_rad, *row[ROW_EULER_REF],
             row[ROW_U1], *row[ROW_TAU], int(row[ROW_CUSTOM_MODE]), row[ROW_ARMED] > 0.5)  # fmt: skip
+
+
+def paper_tracking(s: Snapshot) -> tuple:
+    return paper_tracking_values(s.t_us, s.truth, s.row)
 
 
 CASCADE = "cascade_status"
@@ -436,6 +447,7 @@ def sim_disturbance(s: Snapshot) -> None:
     """Not sampled from frames: FlightLogger.disturbance() logs what it is given."""
     return None
 
+
 # The topics sampled from frames, in message-id order. vehicle_gps_position is sampled from every
 # frame that carries HIL_GPS, vehicle_status also whenever the mode or arming changes; paper_tracking
 # every control step; sim_disturbance as it is given (FlightLogger.disturbance).
@@ -443,7 +455,7 @@ TOPICS: tuple[TopicSpec, ...] = tuple(
     TopicSpec(build.__name__, layout, interval_ms, build)
     for build, layout, interval_ms in (
         (paper_tracking, TRACKING_FIELDS, 0),
-        (cascade_status, CASCADE_FIELDS, 20),
+        (cascade_status, CASCADE_FIELDS, 50),
         (vehicle_status, VEHICLE_STATUS, 500),
         (vehicle_land_detected, LAND_DETECTED, 100),
         (vehicle_attitude, ATTITUDE, 50),

@@ -176,6 +176,16 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
                          tuple(refused))  # fmt: skip
 
 
+_IMU_FIELDS = _where(_SENSOR, "xgyro", "ygyro", "zgyro", "xacc", "yacc", "zacc")
+
+
+def imu_fields(parts: dict) -> list | None:
+    """The frame's HIL_SENSOR gyro (rad/s) and accelerometer (m/s²) as sent, FRD body axes, or
+    None when the frame has none (a log's raw sensor topic: no conversion, no checks)."""
+    raw = parts.get(_ID_SENSOR)
+    return None if raw is None else _fields(_SENSOR, raw, _IMU_FIELDS)
+
+
 class GpsFields(NamedTuple):
     """HIL_GPS as sent: scaled integers (degE7, mm, cm/s, cm), ``cog`` in cdeg (65535: unknown)."""
 

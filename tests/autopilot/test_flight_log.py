@@ -85,6 +85,10 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     truth_z = data["vehicle_local_position_groundtruth"]["z"]
     assert truth_z.min() == pytest.approx(-2.5, abs=0.05) and truth_z[-1] == pytest.approx(0.0, abs=0.02)
     assert data[topics.TRACKING]["position_m[2]"].max() == pytest.approx(-truth_z.min(), abs=0.02)  # z up
+    # sensor_combined: HIL_SENSOR as sent, FRD (at rest on the ground, the specific force points up: -z)
+    accel_z = data["sensor_combined"]["accelerometer_m_s2[2]"]
+    assert accel_z[0] == pytest.approx(-9.81, abs=0.3) and np.median(accel_z) == pytest.approx(-9.81, abs=0.5)
+    assert abs(data["sensor_combined"]["gyro_rad[2]"][0]) < 0.05
     lat = data["vehicle_gps_position"]["latitude_deg"]
     assert np.allclose(lat, 47.397742, atol=1e-5)
     nav = data["vehicle_status"]["nav_state"]
