@@ -154,7 +154,7 @@ class FlightLogger:
     # -- inputs ---------------------------------------------------------------------------------
     def update(self, t_us: int, armed: bool) -> bool:
         """Start or stop the log as ``SDLOG_MODE`` says for this frame; True while a log is open
-        (then the caller fills :attr:`snapshot` for the frame and calls :meth:`sample`)."""
+        (:meth:`frame` calls it; the rest of a frame is sampled there)."""
         if t_us > self._last_t_us and armed == self._was_armed and not self._decide:
             self._last_t_us = t_us  # most frames: nothing that could start or stop a log changed
             return self.logging
