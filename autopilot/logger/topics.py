@@ -435,7 +435,7 @@ def cascade_status(s: Snapshot) -> tuple | None:
 
 
 def law_state_field(name: str) -> str:
-    """A law state's field name: ``translational.integral_x`` -> ``translational_integral_x``."""
+    """A law state's field name: ``translational.xi_x`` -> ``translational_xi_x``."""
     return "".join(c if c.isalnum() or c == "_" else "_" for c in name)
 
 
