@@ -40,6 +40,7 @@ from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 from autopilot.commander.modes import FlightMode  # noqa: E402
 from autopilot.control.config import ControllerConfig  # noqa: E402
 from autopilot.core import AutopilotCore, AutopilotSetup  # noqa: E402
+from autopilot.logger.logger import LogOptions  # noqa: E402
 from autopilot.logger.storage import LogDirectory, LogWriter  # noqa: E402
 from autopilot.mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing  # noqa: E402
 from gcs_scripts.analysis.record import FlightRecord  # noqa: E402
@@ -296,6 +297,7 @@ class RunOptions:
     estimator: str | None = None  # "truth" or "ekf" (the autopilot flies on its EKF); None: the scenario's
     true_plant: VehicleConfig | None = None  # a campaign's drawn plant (else the scenario's uncertainty)
     initial_velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    log_dir: str | None = None  # the autopilot's flight logs (ULog) go there; None: no flight log
 
 
 def paper_stack(
@@ -318,7 +320,8 @@ def paper_stack(
     sensors = options.sensors or scenario.sensors
     ap = AutopilotSetup(sitl, vehicle, controller, autostart=trajectory_from_spec(scenario.trajectory),
                         default_remotes=False, estimator=options.estimator or scenario.estimator,
-                        estimator_profile=estimator_profile_for(sensors))  # fmt: skip
+                        estimator_profile=estimator_profile_for(sensors),
+                        log=LogOptions(options.log_dir))  # fmt: skip
     return Lockstep(sim, ap)
 
 

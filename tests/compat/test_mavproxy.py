@@ -35,6 +35,7 @@ import warnings
 from quadcommon import frames
 from quadcommon.config import load_sitl
 
+from ..ulog_check import check_ulog
 from .mavproxy_driver import MavProxy
 from .vehicles import TruthTap, ports, sitl_output, vehicle, vehicle_logs
 
@@ -148,6 +149,7 @@ def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config, flight_logs):
                 assert (count, last) == (3, 2)
                 listed[log_id] = size
             assert len(flight) == 1
+            check_ulog(flight[0])  # this flight's log, written by the autopilot process
             assert listed == {k: p.stat().st_size for k, p in enumerate([*on_vehicle, *flight])}
             mp.send("log download 1 got1.ulg")
             mp.expect(r"Finished downloading got1.ulg", 30)
