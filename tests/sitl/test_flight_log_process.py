@@ -60,9 +60,17 @@ def test_pymavlink_downloads_the_log_being_written_and_a_killed_autopilot_leaves
         conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports.api_remote}", source_system=255)
         try:
             assert conn.wait_heartbeat(timeout=10) is not None
-            conn.mav.log_request_list_send(sysid, 1, 0, 0xFFFF)
-            entry = conn.recv_match(type="LOG_ENTRY", blocking=True, timeout=5)
-            assert entry is not None and (entry.id, entry.num_logs) == (0, 1) and entry.size > 0
+            # The heartbeat may come before the simulator links (the vehicle arms, its log starts, its
+            # writer thread puts the first bytes on disk): until then the listing is num_logs 0.
+            deadline = time.monotonic() + 15
+            while True:
+                conn.mav.log_request_list_send(sysid, 1, 0, 0xFFFF)
+                entry = conn.recv_match(type="LOG_ENTRY", blocking=True, timeout=5)
+                assert entry is not None, "no LOG_ENTRY"
+                if entry.num_logs or time.monotonic() > deadline:
+                    break
+                time.sleep(0.2)  # (a poll interval: nothing is asserted on its count)
+            assert (entry.id, entry.num_logs) == (0, 1) and entry.size > 0
             assert abs(entry.time_utc - time.time()) < 60  # its start, from its name (UTC)
             (path,) = log_dir.glob("*/*.ulg")  # log/YYYY-MM-DD/HH_MM_SS.ulg
             assert time.strftime("%Y-%m-%d", time.gmtime(entry.time_utc)) == path.parent.name
