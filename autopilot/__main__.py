@@ -14,6 +14,7 @@ from quadcommon.udp import PortInUse
 
 from .app import Autopilot
 from .core import AutopilotSetup
+from .logger.logger import LogOptions
 from .mavlink.signing import SigningOptions
 
 
@@ -49,13 +50,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--signing-state", metavar="FILE", default=None,
                         help="where the signing key and timestamps persist (default: signing-N.json "
                         "beside --params, else beside --signing-key, else in memory)")  # fmt: skip
+    parser.add_argument("--log-dir", metavar="DIR", default="log",
+                        help="flight logs (ULog) go to DIR/YYYY-MM-DD/HH_MM_SS.ulg as PX4's, when SDLOG_MODE "
+                        "says (default 0: from arming to disarming), and the MAVLink log download serves "
+                        "them (default: log under the working directory)")  # fmt: skip
+    parser.add_argument("--no-log", action="store_true",
+                        help="no flight log at all (the log download lists none)")  # fmt: skip
     args = parser.parse_args(argv)
     try:
         setup = AutopilotSetup.load(args.instance, args.controller, args.vehicle, args.sitl_config,
                                     args.autostart, args.state_source, args.params, args.estimator,
                                     args.estimator_profile)  # fmt: skip
         signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
-        setup = dataclasses.replace(setup, signing=signing)
+        log = LogOptions(None if args.no_log else args.log_dir, utc_clock=time.time, version=_version())
+        setup = dataclasses.replace(setup, signing=signing, log=log)
         app = Autopilot(setup, zenoh=not args.no_zenoh, quiet=args.quiet)
         app.open()
     except (ConfigError, ValueError) as exc:
@@ -72,6 +80,15 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         app.close()
         print("autopilot: stopped", flush=True)
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("quadsitl")
+    except metadata.PackageNotFoundError:
+        return ""
 
 
 if __name__ == "__main__":

@@ -3,8 +3,11 @@
 One thread, one loop. ``select`` waits on the HIL socket and the two GCS sockets; every datagram
 goes into the core with the wall clock, and whatever the core returns goes out on the socket of
 its link. A lockstep frame is answered before anything else is sent (the simulator is waiting).
-Every 50 ms of wall time the core's housekeeping runs, its controller internals go to zenoh and
-the info queryable is answered. Nothing here decides anything about the vehicle.
+Every 50 ms of wall time the core's housekeeping runs, its controller internals go to zenoh, the
+flight log it wrote goes to the log writer's thread (:mod:`autopilot.logger.storage`: the
+files, off the lockstep's critical path) and the info queryable is answered. While a log is
+open, the simulator's truth on zenoh gives the log the disturbance the simulator applies. Nothing
+here decides anything about the vehicle.
 
 Run: ``python -m autopilot --instance N --controller NAME --vehicle NAME``.
 """
@@ -16,10 +19,12 @@ import selectors
 import time
 
 from quadcommon import bus, wire
-from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC
+from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC, TRUTH_CODEC, TRUTH_FIELDS
 from quadcommon.udp import bind_udp
 
 from .core import AutopilotCore, AutopilotSetup
+from .logger.storage import LogDirectory, LogWriter
+from .mavlink.codec import mavlink
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing
 
 HOUSEKEEPING_S = 0.05
@@ -34,12 +39,19 @@ MAX_DATAGRAM = 65535
 # beyond it waits in the socket's buffer, which the kernel caps (and drops from), so it cannot
 # starve the control loop: measured by benchmarks/hostile_load.py.
 GCS_DATAGRAMS_PER_FRAME = 8
+# The truth row's columns the flight log's sim_disturbance reads (time, applied force and torque).
+DISTURBANCE_COLUMNS = [TRUTH_FIELDS.index(name) for name in
+                       ("time_s", "Ax_n", "Ay_n", "Az_n", "Ap_n_m", "Aq_n_m", "Ar_n_m")]  # fmt: skip
 
 
 class Autopilot:
     def __init__(self, setup: AutopilotSetup, zenoh: bool = True, quiet: bool = False) -> None:
         self.quiet = quiet
-        self.core = AutopilotCore(setup, self.log)
+        directory = setup.log.directory
+        self.log_directory = LogDirectory(directory) if directory is not None else None
+        self.log_writer = LogWriter(self.log_directory) if self.log_directory is not None else None
+        self._log_error_reported = False
+        self.core = AutopilotCore(setup, self.log, log_store=self.log_directory)
         sitl = setup.sitl
         self.ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base,
                                 sitl.api_port_base, sitl.zenoh_port_base)  # fmt: skip
@@ -50,6 +62,7 @@ class Autopilot:
         self.hil_only = selectors.DefaultSelector()  # while the GCS links' budgets are spent
         self.gcs_budget: dict[int, int] = {}
         self.session = self.controller_pub = self.estimator_pub = self.info_queryable = None
+        self.truth_sub = None  # the simulator's truth, for the flight log's disturbance
         self._hold_rows_until: float | None = None  # the first rows wait for a subscriber (below)
         self._running = True
 
@@ -79,9 +92,18 @@ class Autopilot:
             self.info_queryable = self.session.declare_queryable(
                 wire.zenoh_key(n, "autopilot/info"), zenoh.handlers.FifoChannel(16)
             )
+            if self.log_writer is not None:
+                self.truth_sub = self.session.declare_subscriber(
+                    wire.zenoh_key(n, "truth"), zenoh.handlers.FifoChannel(1024)
+                )
 
     def close(self) -> None:
         self._publish_rows(force=True)
+        if self.log_writer is not None:
+            self.core.flight_log.stop()
+            self._write_log()
+            self.log_writer.close()
+            self.log_directory.close()
         self.core.signing.save()  # the newest signing timestamp, so a restart refuses older frames
         for sock in self.socks.values():
             sock.close()
@@ -117,6 +139,35 @@ class Autopilot:
             except Exception:
                 pass  # session closing under us at shutdown
 
+    def _write_log(self) -> None:
+        """The flight log the core wrote since the last call, to the writer's thread; a write
+        failure is announced once (STATUSTEXT), and the vehicle flies on."""
+        self._feed_disturbance()
+        self.log_writer.handle(self.core.take_log())
+        error = self.log_writer.error
+        if error is not None and not self._log_error_reported:
+            self._log_error_reported = True
+            self.core.statustext(mavlink.MAV_SEVERITY_CRITICAL, f"flight log not written: {error}"[:200])
+
+    def _feed_disturbance(self) -> None:
+        sub = self.truth_sub
+        if sub is None:
+            return
+        logging = self.core.flight_log.logging
+        for _ in range(1024):  # bounded: what arrived since the last tick
+            try:
+                sample = sub.try_recv()
+            except Exception:
+                return  # session closing under us at shutdown
+            if sample is None:
+                return
+            if logging:
+                try:
+                    rows = TRUTH_CODEC.decode(sample.payload.to_bytes())
+                except ValueError:
+                    continue
+                self.core.flight_log.disturbance(rows[:, DISTURBANCE_COLUMNS].tolist())
+
     def _poll_info(self) -> None:
         if self.info_queryable is None:
             return
@@ -149,6 +200,8 @@ class Autopilot:
                 self._refill_gcs_budgets()  # served even while no frame comes (simulator lost)
                 self.send(core.tick(now))
                 self._publish_rows(force=now - core.last_frame_wall > HOUSEKEEPING_S)
+                if self.log_writer is not None:
+                    self._write_log()
                 self._poll_info()
             # Frames in quick succession (faster than real time): wait for the next one awake
             # (see quadcommon.wire.spin_until_readable); paced at real time, just block.

@@ -51,12 +51,15 @@ from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
+from .logger.logger import FlightLogger, LogOptions, log_info
+from .logger.topics import Snapshot
 from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
 from .mavlink.dispatch import FaultLog, MessageDispatcher
 from .mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
+from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.manual import decode_sticks
 from .mavlink.offboard import decode_setpoint
 from .mavlink.params import ParamService
@@ -78,6 +81,12 @@ HIL_HELLO_S = 0.2  # heartbeat to the simulator until frames flow: it learns our
 _NAN3 = (math.nan, math.nan, math.nan)
 ESTIMATORS = ("truth", "ekf")
 IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it (no alignment)
+# Log download (LOG_DATA / LOG_ENTRY) messages per ground station link: per control frame (4 at
+# 500 Hz: 180 kB/s of simulation time, ~10 us of a frame's bookkeeping), and per housekeeping
+# tick (wall) while no frames flow.
+LOG_MESSAGES_PER_FRAME = 4
+LOG_MESSAGES_PER_TICK = 100
+NO_FRAMES_S = 0.1  # wall time without frames after which the housekeeping streams the download
 
 
 @dataclass(frozen=True)
@@ -95,6 +104,7 @@ class AutopilotSetup:
     signing: SigningOptions = SigningOptions()  # MAVLink 2 signing on the GCS links: key, state, wall clock
     estimator: str = "truth"  # "truth": fly on the simulator's state; "ekf": on the EKF (EKF2_EN)
     estimator_profile: str = "default"  # config/estimator/NAME.toml: the EKF2_* values to start from
+    log: LogOptions = LogOptions()  # the flight log (ULog): where, and the wall clock for its UTC times
 
     @classmethod
     def load(
@@ -122,7 +132,14 @@ class AutopilotSetup:
 
 
 class AutopilotCore:
-    def __init__(self, setup: AutopilotSetup, log: Callable[[str], None] = lambda text: None) -> None:
+    def __init__(
+        self,
+        setup: AutopilotSetup,
+        log: Callable[[str], None] = lambda text: None,
+        log_store: LogStore | None = None,
+    ) -> None:
+        """``log``: where the process's text goes; ``log_store``: the flight logs on disk, for the
+        MAVLink log download (the shell's :class:`~autopilot.logger.storage.LogDirectory`)."""
         self.setup = setup
         self.log = log
         sitl = setup.sitl
@@ -146,6 +163,7 @@ class AutopilotCore:
         self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
         self._estimator_done: tuple | None = None  # (t, estimate, loop) of the frame, for its row
         self._statustext_id = 0
+        self._frame_truth: StateEstimate | None = None  # the frame's truth (before the EKF's estimate)
 
         self.params = default_parameters(setup.controller, sitl.rates, estimator=True)
         self.params.values["MAV_SYS_ID"] = float(self.system_id)
@@ -163,6 +181,16 @@ class AutopilotCore:
         gains = controller_config_from_params(setup.controller, self.params)
         self.cascade = Cascade(gains, setup.vehicle, self.dt)
         self._gain_names = {spec.name for spec in controller_params(setup.controller)}
+        self.flight_log = FlightLogger(
+            self.params,
+            log_info(setup.log.version, setup.controller.name, setup.vehicle.name, setup.estimator,
+                     setup.instance),
+            self.cascade.law_states,
+            Snapshot(thrust_max_n=setup.vehicle.actuation.thrust_max_n, home_geodetic=sitl.home,
+                     system_id=self.system_id, commander=self.commander),
+            utc_clock=setup.log.utc_clock,
+            enabled=setup.log.enabled,
+        )  # fmt: skip
         self.params.on_change(self._on_param_change)
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
@@ -204,6 +232,9 @@ class AutopilotCore:
                                lambda: self.commander.armed, self.system_id, log, setup.params_file,
                                setup.instance)  # fmt: skip
         self.signing.register(self.dispatcher)  # SETUP_SIGNING
+        self.log_transfer = LogTransfer(log_store or NoLogs(), self.encoder, self.links, self.statustext,
+                                        lambda: self.commander.armed, self.system_id, clock)  # fmt: skip
+        self.log_transfer.register(self.dispatcher)  # LOG_REQUEST_LIST, _DATA, _END, LOG_ERASE
         d = self.dispatcher
         d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
         d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
@@ -255,6 +286,10 @@ class AutopilotCore:
             self.faults.record("housekeeping", exc, now)
         return self._take()
 
+    def take_log(self) -> list:
+        """The flight log written since the last call (FlightLogger.take): for the shell to write."""
+        return self.flight_log.take()
+
     def take_controller_rows(self) -> list[tuple[float, ...]]:
         """The controller internals of every frame since the last call (CONTROLLER_FIELDS order)."""
         rows, self.controller_rows = self.controller_rows, []
@@ -281,6 +316,7 @@ class AutopilotCore:
             },
             "peers": {link.name: [f"{host}:{port}" for host, port in link.peers] for link in self.links},
             "signing": self.signing.info(),
+            "flight_log": {"logging": self.flight_log.logging, "logs_started": self.flight_log.logs_started},
         }
 
     def on_foreign_datagram(self, what: str) -> None:
@@ -340,6 +376,7 @@ class AutopilotCore:
         self.missions.restart_clock()
 
     def _control_step(self, frame) -> bytes:
+        self._frame_truth = frame.state
         t = frame.time_usec * 1e-6
         self.sim_time = t
         self.last_time_usec = frame.time_usec
@@ -456,9 +493,25 @@ class AutopilotCore:
             self._record_estimator(t_est, loop.estimate() if est is not None else None, loop)
         self._status_of = (frame, guidance, output)  # brought into the status when it is read
         self._record_controller(t, guidance, output)
+        self._log_frame(frame, guidance, output)
         self._send_telemetry(t)
         self.missions.update(t)  # MISSION_CURRENT, MISSION_ITEM_REACHED
         self.send_events()
+        self.log_transfer.pump(LOG_MESSAGES_PER_FRAME)
+
+    def _log_frame(self, frame, guidance, output) -> None:
+        """The frame into the flight log (autopilot/logger/), when one is open."""
+        log = self.flight_log
+        if log.frame(
+            frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1], frame.parts
+        ):  # the periodic topics are due (one frame in ten, at most)
+            s = log.snapshot
+            s.estimate = frame.state
+            s.reference = guidance.reference
+            s.output = output
+            s.controls = self._controls
+            s.estimator = self.estimator.last_status if self.estimator is not None else None
+            log.sample_due(frame.parts)
 
     @property
     def status(self) -> telemetry.VehicleStatus:
@@ -535,6 +588,7 @@ class AutopilotCore:
     def statustext(self, severity: int, text: str) -> None:
         """STATUSTEXT on every link (long texts in 50-byte chunks with one id, as MAVLink 2)."""
         self.log(f"[t={self.sim_time:8.3f}] {text}")
+        self.flight_log.statustext(severity, text, self.sim_time)
         self._statustext_id = (self._statustext_id % 65535) + 1
         for msg in telemetry.statustext_messages(severity, text, self._statustext_id):
             data = self.encoder.pack(msg)
@@ -614,6 +668,7 @@ class AutopilotCore:
     def _on_param_change(self, name: str, value: float) -> None:
         """Gains take effect between two control steps (this runs between frames), no jump in
         the integral action (Cascade.retune)."""
+        self.flight_log.parameter(name, value)
         if name in self._gain_names:
             try:
                 self.cascade.retune(controller_config_from_params(self.setup.controller, self.params))
@@ -634,6 +689,8 @@ class AutopilotCore:
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
         self.signing.poll(now)  # wall clock -> timestamps, refusals announced, state saved
+        if now - self.last_frame_wall > NO_FRAMES_S:  # else each frame streams the log download
+            self.log_transfer.pump(LOG_MESSAGES_PER_TICK)
         sim_loss_s = self.params["COM_SIM_LOSS_T"]
         if self.linked and now - self.last_frame_wall <= sim_loss_s:
             return

@@ -7,19 +7,28 @@ time from "linked" to the simulator's exit; the simulator reports the HIL round 
 sent -> matching HIL_ACTUATOR_CONTROLS received) per frame: median and p99.
 
 Run: ``.venv/bin/python benchmarks/sitl_rtf.py [--duration 40] [--rates 250 500 1000] [--profile]
-[--estimator truth ekf] [--sensors mocap] [--instance N]``.
+[--estimator truth ekf] [--sensors mocap] [--instance N] [--log] [--repeat K]``.
 ``--estimator``: what the autopilot flies on, one run per rate for each (truth, its EKF over the
 ``--sensors`` profile; default: truth only), so the cost of the EKF is a ratio within one run.
 Besides the wall time, the CPU time of both processes (user + system, start-up included) per
 simulated second is reported: on a shared machine it moves less than the wall time.
+``--log``: each run twice, with the autopilot's flight log (ULog, SDLOG_MODE 0: the flight is
+armed from t = 0, so the whole run is logged) off and on, alternating, ``--repeat`` times; the
+last lines add the ratio of the real-time factors (on / off, the median of the pairs), the ratio
+of the two processes' CPU time (steadier than the wall time on a shared machine) and the log's
+size per simulated second. In both runs of a pair this process subscribes to the simulator's
+truth on zenoh, as a recorder would: the logging autopilot subscribes to it (for the disturbance),
+and whether the simulator's truth has a subscriber changes its timing by itself (measured: with
+none, the HIL round trip sat at ~1 ms in some runs), which would be measured instead.
 ``--profile`` also runs both processes under cProfile at 500 Hz (with the last ``--estimator``)
-and prints where the time goes. The machine is shared and noisy: compare the rates with each
-other, measured in one run. Last lines: ``name: value unit``.
+and prints where the time goes. The machine is shared and noisy:
+compare the rates with each other, measured in one run. Last lines: ``name: value unit``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import pstats
 import re
 import resource
@@ -27,6 +36,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from quadcommon import bus, wire
 from sitl.launcher import LINKED, Launcher, VehicleSpec
 
 REPO = Path(__file__).resolve().parents[1]
@@ -54,9 +64,12 @@ def run_once(
     estimator: str = "truth",
     sensors: str | None = None,
     instance: int = INSTANCE,
+    log_dir: Path | None = None,
+    truth_subscriber: bool = False,
 ) -> tuple[float, int, int, float]:
     """One SITL run through the project's launcher; (wall seconds from linked to the end, RTT median
-    and p99 in µs as the simulator reports them, CPU seconds of both processes)."""
+    and p99 in µs as the simulator reports them, CPU seconds of both processes). ``truth_subscriber``:
+    this process subscribes to the simulator's truth on zenoh during the run (as a recorder does)."""
     def profiled(spec_cmd: list[str], name: str) -> list[str]:
         if profile_dir is None:
             return spec_cmd
@@ -64,11 +77,17 @@ def run_once(
 
     spec = VehicleSpec(instance=instance, scenario="circle", speed="max", autostart=True, duration_s=duration,
                        sitl_config=str(config), extra_autopilot_args=("--quiet",), estimator=estimator,
-                       sensors=sensors if estimator == "ekf" else None)  # fmt: skip
+                       sensors=sensors if estimator == "ekf" else None,
+                       log_dir=str(log_dir) if log_dir is not None else None)  # fmt: skip
     cpu_before = _children_cpu_s()
-    with Launcher() as launcher:
+    with Launcher() as launcher, contextlib.ExitStack() as taps:
         sim = launcher.spawn("simulator", profiled(spec.simulator_command(), "simulator"))
         sim.wait_line("waiting for the autopilot", 30.0)
+        if truth_subscriber:
+            import zenoh
+
+            session = taps.enter_context(contextlib.closing(bus.open_peer(spec.ports().zenoh)))
+            session.declare_subscriber(wire.zenoh_key(instance, "truth"), zenoh.handlers.RingChannel(64))
         launcher.spawn("autopilot", profiled(spec.autopilot_command(), "autopilot"))
         sim.wait_line(LINKED, 30.0)
         start = time.perf_counter()
@@ -95,10 +114,15 @@ def main() -> None:
     parser.add_argument("--estimator", nargs="+", choices=("truth", "ekf"), default=["truth"])
     parser.add_argument("--sensors", default="mocap", help="sensor profile of the EKF runs (default mocap)")
     parser.add_argument("--instance", type=int, default=INSTANCE, help=f"SITL instance (default {INSTANCE})")
+    parser.add_argument("--log", action="store_true", help="each run with the flight log off and on")
+    parser.add_argument("--repeat", type=int, default=1, help="--log: pairs of runs per rate (default 1)")
     args = parser.parse_args()
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmpdir = Path(tmp)
+        if args.log:
+            log_pairs(args, tmpdir)
+            return
         for rate in args.rates:
             for estimator in args.estimator:
                 elapsed, median, p99, cpu = run_once(
@@ -125,6 +149,42 @@ def main() -> None:
         print(f"cpu_per_sim_s_{rate}hz{suffix}: {cpu_per_s:.3f} s")
         print(f"hil_rtt_median_{rate}hz{suffix}: {median} us")
         print(f"hil_rtt_p99_{rate}hz{suffix}: {p99} us")
+
+
+def log_pairs(args, tmpdir: Path) -> None:
+    """The flight log's cost: runs with it off and on, alternating (the machine's load moves
+    slowly, so neighbours compare), per rate and estimator."""
+    import statistics
+
+    lines = []
+    for rate in args.rates:
+        for estimator in args.estimator:
+            ratios, cpu_ratios, sizes = [], [], []
+            for k in range(args.repeat):
+                rtf, cpu_s = {}, {}
+                for on in (False, True) if k % 2 == 0 else (True, False):  # neither always first
+                    log_dir = tmpdir / f"log_{rate}_{estimator}_{k}" if on else None
+                    config = sitl_toml(tmpdir, rate)
+                    elapsed, median, p99, cpu = run_once(config, args.duration, None, estimator, args.sensors,
+                                                         args.instance, log_dir,
+                                                         truth_subscriber=True)  # fmt: skip
+                    rtf[on], cpu_s[on] = args.duration / elapsed, cpu
+                    print(f"{rate:5d} Hz on {estimator}, flight log {'on ' if on else 'off'}: "
+                          f"{rtf[on]:.1f}x, CPU {cpu:.1f} s, HIL round trip median {median} us, p99 {p99} us",
+                          flush=True)  # fmt: skip
+                    if on:
+                        sizes += [f.stat().st_size for f in log_dir.rglob("*.ulg")]
+                ratios.append(rtf[True] / rtf[False])
+                cpu_ratios.append(cpu_s[True] / cpu_s[False])
+            suffix = "" if estimator == "truth" else "_ekf"
+            name = f"{rate}hz{suffix}_log_on_over_off"
+            lines.append(f"sitl_rtf_{name}: {statistics.median(ratios):.3f} ratio")
+            lines.append(f"sitl_cpu_{name}: {statistics.median(cpu_ratios):.3f} ratio")
+            if sizes:
+                per_s = statistics.median(sizes) / args.duration
+                lines.append(f"ulog_bytes_per_sim_s_{rate}hz{suffix}: {per_s:.0f} B")
+    print()
+    print("\n".join(lines))
 
 
 if __name__ == "__main__":

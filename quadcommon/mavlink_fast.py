@@ -158,14 +158,29 @@ class FastEncoder:
     def frame(self, seq: int) -> bytes:
         """The MAVLink 2 frame of :attr:`values` with sequence number ``seq`` (0-255)."""
         if self._prefix is None:
-            payload = self.packer.pack(*self.values).rstrip(b"\0") or b"\0"
+            payload = self.packer.pack(*self.values)
         else:
-            payload = (self._prefix.pack(*self.values) + self._tail).rstrip(b"\0") or b"\0"
-        system_id, component_id, id_low, id_high = self._ids
-        body = _HEADER_V2.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, id_low, id_high)
-        body += payload
-        crc = _crc(body[1:] + self._crc_extra, 0xFFFF)
-        return body + bytes((crc & 0xFF, crc >> 8))
+            payload = self._prefix.pack(*self.values) + self._tail
+        return _frame(payload, seq, self._ids, self._crc_extra)
+
+
+def frame_payload(message_class, payload: bytes, seq: int, system_id: int, component_id: int) -> bytes:
+    """The unsigned MAVLink 2 frame of a ``message_class`` whose payload (all fields, wire order)
+    the caller packed itself: for a message whose bulk is already bytes (LOG_DATA's 90 bytes),
+    where building the message object and packing it field by field costs ~40 µs."""
+    msg_id = message_class.id
+    ids = (system_id, component_id, msg_id & 0xFFFF, msg_id >> 16)
+    return _frame(payload, seq, ids, bytes((message_class.crc_extra,)))
+
+
+def _frame(payload: bytes, seq: int, ids: tuple[int, int, int, int], crc_extra: bytes) -> bytes:
+    """MAVLink 2 framing as pymavlink's: trailing zeros of the payload dropped, CRC extra, unsigned."""
+    payload = payload.rstrip(b"\0") or b"\0"
+    system_id, component_id, id_low, id_high = ids
+    body = _HEADER_V2.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, id_low, id_high)
+    body += payload
+    crc = _crc(body[1:] + crc_extra, 0xFFFF)
+    return body + bytes((crc & 0xFF, crc >> 8))
 
 
 def _codes(fmt: str) -> list[str]:

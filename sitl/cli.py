@@ -167,6 +167,14 @@ def _params_file(args: argparse.Namespace, instance: int, controller) -> str | N
     return path
 
 
+def _log_dir(args: argparse.Namespace, instance: int) -> str | None:
+    """Vehicle ``instance``'s flight-log directory: --log-dir itself, or DIR/instance_N with several
+    vehicles (PX4's multi-vehicle SITL gives each instance its own directory); None: --no-log."""
+    if args.no_log:
+        return None
+    return args.log_dir if args.count == 1 else str(Path(args.log_dir) / f"instance_{instance}")
+
+
 def _cmd_up(args: argparse.Namespace) -> int:
     from autopilot.control.config import load_controller
     from quadcommon import wire
@@ -201,6 +209,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
             duration_s=args.duration, sitl_config=args.sitl_config, params_file=params[k],
             signing_key_file=str(Path(args.signing_key).resolve()) if args.signing_key else None,
             sensors=args.sensors, estimator=args.estimator,
+            log_dir=_log_dir(args, args.instance + k),
         )
         for k in range(args.count)
     ]  # fmt: skip
@@ -266,6 +275,15 @@ def build_parser() -> argparse.ArgumentParser:
         "(as MAVProxy's 'signing setup PASSPHRASE'); state kept as signing-N.json beside --params, "
         "else beside FILE",
     )
+    p.add_argument(
+        "--log-dir",
+        metavar="DIR",
+        default="log",
+        help="flight logs (ULog, PX4's layout DIR/YYYY-MM-DD/HH_MM_SS.ulg; with --count > 1 "
+        "DIR/instance_N/...), written as SDLOG_MODE says (default 0: from arming to disarming) and "
+        "served by the MAVLink log download (default: log in the working directory)",
+    )
+    p.add_argument("--no-log", action="store_true", help="no flight logs at all")
     p.add_argument(
         "--no-restart",
         action="store_true",

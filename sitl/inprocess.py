@@ -11,6 +11,10 @@ their trajectories are identical.
 The autopilot's wall clock (``now``: mission transfer timeouts, parameter list pacing, simulator
 loss) is simulation time here: nothing waits on anything real.
 
+With a log directory in the autopilot's setup (``AutopilotSetup.log``), the autopilot writes its
+flight logs (ULog) there as the process does, without the writer thread, and serves them to the
+ground stations' log download; :meth:`Lockstep.close` ends the open log.
+
 Ground stations act in simulation time: a :class:`GroundStation` receives what the autopilot
 sends to it (parsed by pymavlink, as any client) and sends MAVLink messages, delivered before the
 next frame. A ``script(gcs, t)`` callback runs once per frame; :meth:`Lockstep.run_until` stops on
@@ -36,6 +40,8 @@ from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 from autopilot.commander.modes import FlightMode  # noqa: E402
 from autopilot.control.config import ControllerConfig  # noqa: E402
 from autopilot.core import AutopilotCore, AutopilotSetup  # noqa: E402
+from autopilot.logger.logger import LogOptions  # noqa: E402
+from autopilot.logger.storage import LogDirectory, LogWriter  # noqa: E402
 from autopilot.mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing  # noqa: E402
 from gcs_scripts.analysis.record import FlightRecord  # noqa: E402
 from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS  # noqa: E402
@@ -56,6 +62,7 @@ from simulator.sensors import load_sensors  # noqa: E402
 HOUSEKEEPING_S = 0.05  # the autopilot's tick, as its process runs it (here in simulation time)
 _T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 _C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
+_DISTURBANCE = [_T[name] for name in ("time_s", "Ax_n", "Ay_n", "Az_n", "Ap_n_m", "Aq_n_m", "Ar_n_m")]
 _ports = itertools.count(20000)
 
 
@@ -146,7 +153,9 @@ class Lockstep:
 
     def __init__(self, simulator: SimulatorSetup, autopilot: AutopilotSetup, log=lambda text: None) -> None:
         self.sim = SimulatorCore(simulator, log)
-        self.autopilot = AutopilotCore(autopilot, log)
+        self.log_directory = LogDirectory(autopilot.log.directory) if autopilot.log.enabled else None
+        self.log_writer = LogWriter(self.log_directory, threaded=False) if self.log_directory else None
+        self.autopilot = AutopilotCore(autopilot, log, log_store=self.log_directory)
         self.stations: dict[tuple[str, int], GroundStation] = {}
         self.observers: list[Callable[[Outgoing], None]] = []  # see every datagram the vehicle sends
         self.truth_rows: list[tuple[float, ...]] = []
@@ -199,6 +208,8 @@ class Lockstep:
         if t >= self._next_tick:
             self._next_tick = t + HOUSEKEEPING_S
             self._dispatch(ap.tick(t))
+            if self.log_writer is not None:
+                self.log_writer.handle(ap.take_log())
         self.clock = t + sim.dt_control
         if not self.frames_flow:
             return
@@ -215,6 +226,7 @@ class Lockstep:
                     sim.answers_again(data)
             elif data is None or (answer := sim.answer_to_frame(data)) is None:
                 raise RuntimeError(f"the autopilot did not answer frame t={t:.3f} s")
+            self._log_disturbance()
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
@@ -232,10 +244,27 @@ class Lockstep:
         datagram = sim.begin_frame()
         ap.on_hil_datagram(datagram, t)
         self._dispatch(ap.after_frame())
+        self._log_disturbance()
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
             self.estimator_rows.extend(ap.take_estimator_rows())
+
+    def _log_disturbance(self) -> None:
+        """The simulator's disturbance into the flight log, as the SITL's truth on zenoh gives it."""
+        if self.autopilot.flight_log.logging:
+            truth = self.sim.truth_row
+            self.autopilot.flight_log.disturbance(([truth[i] for i in _DISTURBANCE],))
+
+    def close(self) -> list:
+        """End the flight log that is open and write what is left; the logs written (paths)."""
+        if self.log_writer is None:
+            return []
+        self.autopilot.flight_log.stop()
+        self.log_writer.handle(self.autopilot.take_log())
+        self.log_writer.close()
+        self.log_directory.close()
+        return list(self.log_writer.written)
 
     def run_until(
         self,
@@ -268,6 +297,7 @@ class RunOptions:
     estimator: str | None = None  # "truth" or "ekf" (the autopilot flies on its EKF); None: the scenario's
     true_plant: VehicleConfig | None = None  # a campaign's drawn plant (else the scenario's uncertainty)
     initial_velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    log_dir: str | None = None  # the autopilot's flight logs (ULog) go there; None: no flight log
 
 
 def paper_stack(
@@ -290,7 +320,8 @@ def paper_stack(
     sensors = options.sensors or scenario.sensors
     ap = AutopilotSetup(sitl, vehicle, controller, autostart=trajectory_from_spec(scenario.trajectory),
                         default_remotes=False, estimator=options.estimator or scenario.estimator,
-                        estimator_profile=estimator_profile_for(sensors))  # fmt: skip
+                        estimator_profile=estimator_profile_for(sensors),
+                        log=LogOptions(options.log_dir))  # fmt: skip
     return Lockstep(sim, ap)
 
 

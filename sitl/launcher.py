@@ -184,6 +184,7 @@ class VehicleSpec:
     signing_key_file: str | None = None  # MAVLink 2 signing key (--signing-key): hex key or passphrase
     sensors: str | None = None  # sensor profile (config/sensors); None: the scenario's
     estimator: str | None = None  # "truth" or "ekf"; None: the scenario's
+    log_dir: str | None = None  # the autopilot's flight logs (ULog); None: no flight log (--no-log)
     extra_simulator_args: tuple[str, ...] = ()
     extra_autopilot_args: tuple[str, ...] = ()
 
@@ -205,6 +206,7 @@ class VehicleSpec:
             cmd += ["--params", self.params_file]
         if self.signing_key_file:
             cmd += ["--signing-key", self.signing_key_file]
+        cmd += ["--log-dir", self.log_dir] if self.log_dir is not None else ["--no-log"]
         estimator, profile = self.estimation()
         if estimator != "truth":
             cmd += ["--estimator", estimator, "--estimator-profile", profile]

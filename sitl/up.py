@@ -45,8 +45,16 @@ def endpoints_banner(spec: VehicleSpec, ports: wire.Ports) -> str:
             f"(pymavlink: udpin:127.0.0.1:{ports.api_remote})",
             f"  zenoh (truth, internals)  : tcp/127.0.0.1:{ports.zenoh}   "
             f"keys quadsitl/{n}/truth, quadsitl/{n}/controller",
+            f"  flight logs (ULog)        : {_log_line(spec)}",
         ]
     )
+
+
+def _log_line(spec: VehicleSpec) -> str:
+    if spec.log_dir is None:
+        return "off (--no-log)"
+    return (f"{spec.log_dir}/YYYY-MM-DD/HH_MM_SS.ulg, from arming to disarming (SDLOG_MODE); "
+            "MAVLink log download")  # fmt: skip
 
 
 def _echo(name: str, line: str) -> None:

@@ -26,6 +26,7 @@ PROCESS_MODULES = {
     "tests/gcs_scripts/test_upload_mission.py",
     "tests/simulator/test_sim_cli.py",
     "tests/simulator/test_sim_process.py",
+    "tests/sitl/test_flight_log_process.py",
     "tests/sitl/test_hostile_udp.py",
     "tests/sitl/test_installed_wheel.py",
     "tests/sitl/test_launcher_ports.py",

@@ -7,6 +7,7 @@ from dataclasses import replace
 
 from autopilot.control.config import load_controller
 from autopilot.core import AutopilotSetup
+from autopilot.logger.logger import LogOptions
 from gcs_scripts.link import Link
 from simulator.core import SimulatorSetup
 from sitl.inprocess import API_LINK, Lockstep, StackConnection
@@ -19,14 +20,16 @@ def make_stack(
     sensors: str | None = None,
     vehicle: str | None = None,
     log=lambda text: None,
+    log_dir: str | None = None,
     **sitl_changes,
 ) -> Lockstep:
-    """A vehicle on the ground (or where ``scenario`` puts it), nothing armed, no client yet."""
+    """A vehicle on the ground (or where ``scenario`` puts it), nothing armed, no client yet;
+    ``log_dir``: its flight logs (ULog) go there (default: no flight log)."""
     sim = SimulatorSetup.load(scenario=scenario, vehicle=vehicle, sensors=sensors)
     if sitl_changes:
         sim = replace(sim, sitl=replace(sim.sitl, **sitl_changes))
     ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller(controller), params_file=params_file,
-                        default_remotes=False)  # fmt: skip
+                        default_remotes=False, log=LogOptions(log_dir))  # fmt: skip
     return Lockstep(sim, ap, log=log)
 
 

@@ -53,6 +53,9 @@ class Frame(NamedTuple):
     time_usec: int
     state: StateEstimate  # paper frames: the truth (ODOMETRY or HIL_STATE_QUATERNION)
     sensors: SensorSamples | None = None  # decoded when asked (decode_frame(..., sensors=True))
+    # The frame's messages by id, undecoded (a log decodes HIL_SENSOR / HIL_GPS from them at its
+    # own rate: sensor_samples(), gps_fields()).
+    parts: dict[int, bytes] | None = None
 
 
 _ODOMETRY = FastDecoder(mavlink.MAVLink_odometry_message)
@@ -89,19 +92,19 @@ def decode_frame(
 def _decode_frame(datagram: bytes, parser, home, use_odometry: bool, sensors: bool) -> Frame | None:
     parts = dict(split_frames(datagram))
     raw = parts.get(_ID_ODOMETRY)
-    samples = _sensor_samples(parts, home) if sensors else None
+    samples = sensor_samples(parts, home) if sensors else None
     if raw is not None and (use_odometry or _ID_STATE not in parts):
         payload = _ODOMETRY.payload(raw)
         t, x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r = _ODOMETRY_STATE.unpack_from(payload)
         state = state_from_odometry_fields(
             (qw, qx, qy, qz), (x, y, z), (vx, vy, vz), (p, q, r), payload[_ODOMETRY_CHILD_FRAME]
         )
-        return Frame(t, state, samples)
+        return Frame(t, state, samples, parts)
     raw = parts.get(_ID_STATE)
     if raw is None:
         return None
     msg = parser.decode(bytearray(raw))
-    return Frame(msg.time_usec, state_from_hil_state(msg, home), samples)
+    return Frame(msg.time_usec, state_from_hil_state(msg, home), samples, parts)
 
 
 _SENSOR = FastDecoder(mavlink.MAVLink_hil_sensor_message)
@@ -128,7 +131,9 @@ _GPS_FIELDS = _where(_GPS, "fix_type", "lat", "lon", "alt", "eph", "epv", "vn", 
 _VISION_FIELDS = _where(_VISION, "x", "y", "z", "yaw", "covariance")
 
 
-def _sensor_samples(parts: dict, home) -> SensorSamples | None:
+def sensor_samples(parts: dict, home) -> SensorSamples | None:
+    """What an estimator reads of a frame's messages (``Frame.parts``); None without HIL_SENSOR.
+    DecodeError (quadcommon.mavlink_fast) if a message is corrupt."""
     raw = parts.get(_ID_SENSOR)
     if raw is None:
         return None
@@ -169,6 +174,44 @@ def _sensor_samples(parts: dict, home) -> SensorSamples | None:
             refused.append("vision")
     return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision,
                          tuple(refused))  # fmt: skip
+
+
+_IMU_FIELDS = _where(_SENSOR, "xgyro", "ygyro", "zgyro", "xacc", "yacc", "zacc")
+
+
+def imu_fields(parts: dict) -> list | None:
+    """The frame's HIL_SENSOR gyro (rad/s) and accelerometer (m/s²) as sent, FRD body axes, or
+    None when the frame has none (a log's raw sensor topic: no conversion, no checks)."""
+    raw = parts.get(_ID_SENSOR)
+    return None if raw is None else _fields(_SENSOR, raw, _IMU_FIELDS)
+
+
+class GpsFields(NamedTuple):
+    """HIL_GPS as sent: scaled integers (degE7, mm, cm/s, cm), ``cog`` in cdeg (65535: unknown)."""
+
+    fix_type: int
+    lat: int
+    lon: int
+    alt: int
+    eph: int
+    epv: int
+    vel: int
+    vn: int
+    ve: int
+    vd: int
+    cog: int
+    satellites_visible: int
+
+
+_GPS_RAW_FIELDS = _where(_GPS, *GpsFields._fields)
+
+
+def gps_fields(parts: dict) -> GpsFields | None:
+    """The frame's HIL_GPS fields as sent (``Frame.parts``), or None when the frame has no fix."""
+    raw = parts.get(_ID_GPS)
+    if raw is None:
+        return None
+    return GpsFields(*_fields(_GPS, raw, _GPS_RAW_FIELDS))
 
 
 def _attitude(q_ned, rates_frd):

@@ -145,6 +145,16 @@ FAILSAFE_PARAMS = (
     ),
 )
 
+# The flight log (autopilot/logger/): PX4's SDLOG_MODE values; 3 (by an RC switch) is not supported.
+LOGGER_PARAMS = (
+    ParamSpec(
+        "SDLOG_MODE", 0, -1, 4, kind=INT32,
+        description="flight log (ULog): -1 off, 0 from arming to disarming, 1 from boot until disarming, "
+        "2 from boot until shutdown, 4 from the first arming until shutdown (PX4 values)",
+        refused={3.0: "logging by an RC switch (AUX1) is not supported"},
+    ),
+)  # fmt: skip
+
 RATES_READ_ONLY = (
     "fixed by config/sitl.toml [rates] for simulator and autopilot (lockstep); edit it and restart"
 )
@@ -190,7 +200,7 @@ def default_parameters(
 ) -> ParameterStore:
     """Commander and failsafe parameters, plus the gains of ``controller`` and ``rates`` if given,
     and the estimator's (EKF2_EN and the EKF2_* of :mod:`autopilot.estimation.parameters`)."""
-    specs = [*COMMANDER_PARAMS, *FAILSAFE_PARAMS]
+    specs = [*COMMANDER_PARAMS, *FAILSAFE_PARAMS, *LOGGER_PARAMS]
     if controller is not None:
         specs += controller_params(controller)
     if rates is not None:

@@ -1,7 +1,8 @@
 """``quadsitl analyze``: the paper's indices and figures for recorded runs, from logs only.
 
 For each log (a recorder session ``NAME.parquet``, a ``NAME.parts/`` directory left by a
-recorder that died, or an in-process run's Parquet file) this builds a FlightRecord
+recorder that died, an in-process run's Parquet file, or the autopilot's flight log ``.ulg``)
+this builds a FlightRecord
 (:func:`~gcs_scripts.analysis.log_reader.read_session`) and writes to ``--out``:
 
 * ``comparison.md``: the runs (source, scenario, controller, window, samples) and one table of
@@ -97,7 +98,7 @@ def _runs_markdown(records: Sequence[FlightRecord], windows: Sequence[Window | N
     for rec, w in zip(records, windows, strict=True):
         if w is None:
             win = "whole log"
-        elif not rec.source.startswith("sitl"):  # in-process runs start at 0: only the duration applies
+        elif not rec.source.startswith(("sitl", "flight log")):  # in-process runs start at 0: duration only
             win = "whole run" if w[1] is None else f"first {w[1]:g} s"
         else:
             t0 = "start" if w[0] is None else f"t0={w[0]:g} s"
@@ -150,7 +151,8 @@ def build_parser(prog: str = "quadsitl analyze") -> argparse.ArgumentParser:
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument(
-        "logs", nargs="+", help="session .parquet, NAME.parts/ directory, or in-process .parquet"
+        "logs", nargs="+",
+        help="session .parquet, NAME.parts/ directory, in-process .parquet, or flight log .ulg",
     )
     parser.add_argument("--out", default="out/analysis", help="output directory (default out/analysis)")
     parser.add_argument(

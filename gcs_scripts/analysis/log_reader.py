@@ -3,7 +3,8 @@
 Reads what :mod:`gcs_scripts.record` writes: a merged ``NAME.parquet``, or the
 ``NAME.parts/`` directory a recorder that died leaves behind (or a bare ``NAME``). Also accepts
 the Parquet files of in-process runs (``FlightRecord.write_parquet``), so SITL and in-process
-runs can be compared.
+runs can be compared, and the autopilot's flight logs (``.ulg``: the same columns from its
+``paper_tracking`` topic, :mod:`.ulog_reader`; no estimator columns there).
 
 * position and Euler angles: the simulator's ground truth (``x_m``..., ``phi_rad``...);
 * references, U1 and tau (Euler coordinates): the controller's own record (``x_ref_m``...,
@@ -30,6 +31,7 @@ import pyarrow.parquet as pq
 from gcs_scripts.session_log import read_session_table, resolve_session_path, time_key
 
 from .record import ESTIMATOR_COLUMNS, FlightRecord
+from .ulog_reader import is_ulog, read_ulog_columns
 
 Window = tuple[
     float | None, float | None
@@ -112,14 +114,20 @@ def read_session(
     resolved = resolve_session_path(path)
     if _is_flight_record_file(resolved):
         return _read_flight_record(resolved, window, label)
-    table, meta = read_session_table(resolved)
-    missing = [c for c in ("time_s", *REQUIRED) if c not in table.column_names]
+    if is_ulog(resolved):
+        columns, meta = read_ulog_columns(resolved)
+        kind = "flight log"
+    else:
+        table, meta = read_session_table(resolved)
+        columns = {c: table.column(c) for c in table.column_names}
+        kind = "sitl log"
+    missing = [c for c in ("time_s", *REQUIRED) if c not in columns]
     if missing:
         raise ValueError(f"{resolved}: not a quadsitl session log (missing columns {', '.join(missing)})")
-    has_estimator = all(c in table.column_names for c in ESTIMATOR_COLUMNS)
+    has_estimator = all(c in columns for c in ESTIMATOR_COLUMNS)
     estimator_cols = ESTIMATOR_COLUMNS if has_estimator else ()
-    wanted = ["time_s", *REQUIRED, *(c for c in DISTURBANCE if c in table.column_names), *estimator_cols]
-    cols = coalesce_duplicate_times({c: table.column(c).to_numpy(zero_copy_only=False) for c in wanted})
+    wanted = ["time_s", *REQUIRED, *(c for c in DISTURBANCE if c in columns), *estimator_cols]
+    cols = coalesce_duplicate_times({c: as_array(columns[c]) for c in wanted})
     complete = np.all([~np.isnan(cols[c]) for c in REQUIRED], axis=0)
     in_window, t0 = _window_mask(cols["time_s"], window)
     keep = complete & in_window
@@ -154,9 +162,14 @@ def read_session(
         disturbance_force_n=force,
         disturbance_torque_n_m=torque,
         event_times_s=disturbance_events(time_s, both),
-        source=f"sitl log {resolved}" + ("" if window is None else f" from t0={t0:g} s"),
+        source=f"{kind} {resolved}" + ("" if window is None else f" from t0={t0:g} s"),
         estimator=np.column_stack([time_s, stack(*ESTIMATOR_COLUMNS)]) if has_estimator else None,
     )
+
+
+def as_array(column) -> np.ndarray:
+    """A column as a numpy array (pyarrow columns are converted; arrays pass through)."""
+    return column if isinstance(column, np.ndarray) else column.to_numpy(zero_copy_only=False)
 
 
 def _read_flight_record(path: Path, window: Window | None, label: str | None) -> FlightRecord:

@@ -1,9 +1,11 @@
 """Recorded sessions and in-process runs as replay tracks for the page.
 
-Reads what ``gcs_scripts/record.py`` writes (``NAME.parquet``, a ``NAME.parts/`` directory) and
-the Parquet files of in-process runs (``quadsitl run ... --out``, ``out/paper/runs/``), through
-the same readers as the analysis (:mod:`gcs_scripts.session_log`,
-:class:`gcs_scripts.analysis.record.FlightRecord`).
+Reads what ``gcs_scripts/record.py`` writes (``NAME.parquet``, a ``NAME.parts/`` directory),
+the Parquet files of in-process runs (``quadsitl run ... --out``, ``out/paper/runs/``) and the
+autopilot's flight logs (``.ulg``), through the same readers as the analysis
+(:mod:`gcs_scripts.session_log`, :class:`gcs_scripts.analysis.record.FlightRecord`,
+:mod:`gcs_scripts.analysis.ulog_reader`). A flight log starts when it started (at arming, by
+default): its replay has no ground phase before that.
 
 A track holds the log decimated to ``rate_hz`` samples per second of simulation time (the page
 plays them back itself: play, pause, speed and seek need no round trip), the disturbance onsets
@@ -22,8 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from gcs_scripts.analysis.log_reader import coalesce_duplicate_times, disturbance_events
+from gcs_scripts.analysis.log_reader import as_array, coalesce_duplicate_times, disturbance_events
 from gcs_scripts.analysis.record import FlightRecord
+from gcs_scripts.analysis.ulog_reader import is_ulog, read_ulog_columns
 from gcs_scripts.session_log import read_session_table, resolve_session_path
 
 from .telemetry import LANDED_STATE_NAMES, mode_name
@@ -147,13 +150,17 @@ def load_track(
     resolved = resolve_session_path(path)
     if _is_flight_record(resolved):
         return _from_flight_record(resolved, label, rate_hz, align)
-    table, meta = read_session_table(resolved)
-    names = set(table.column_names)
+    if is_ulog(resolved):
+        columns, meta = read_ulog_columns(resolved)
+    else:
+        table, meta = read_session_table(resolved)
+        columns = {c: table.column(c) for c in table.column_names}
+    names = set(columns)
     if "time_s" not in names or "x_m" not in names:
         raise ValueError(f"{resolved}: not a quadsitl session log (no time_s / x_m columns)")
     wanted = ["time_s", *(c for c, _ in COLUMNS.values() if c in names)]
     wanted += [c for c in (*STATUS_COLUMNS, *FALLBACK_STATUS_COLUMNS) if c in names]
-    cols = coalesce_duplicate_times({c: table.column(c).to_numpy(zero_copy_only=False) for c in wanted})
+    cols = coalesce_duplicate_times({c: as_array(columns[c]) for c in wanted})
     keep = np.isfinite(cols["x_m"])  # rows with ground truth (the controller's may lag at the edges)
     if keep.sum() < 2:
         raise ValueError(f"{resolved}: fewer than 2 rows with ground truth")
@@ -162,8 +169,8 @@ def load_track(
     if "mav_custom_mode" in cols and np.any(np.isfinite(cols["mav_custom_mode"])):
         mode, armed = cols["mav_custom_mode"], cols.get("mav_armed")
         landed = cols.get("mav_landed_state")
-    elif "custom_mode" in cols:
-        mode, armed, landed = cols["custom_mode"], cols.get("armed"), None
+    elif "custom_mode" in cols:  # the controller's record (a flight log has its landed state too)
+        mode, armed, landed = cols["custom_mode"], cols.get("armed"), cols.get("mav_landed_state")
     else:
         mode = armed = landed = None
     offset = _alignment_offset(time_s, armed, align, resolved)

@@ -344,7 +344,7 @@ def build_parser(prog: str = "quadsitl view") -> argparse.ArgumentParser:
         "logs",
         nargs="*",
         metavar="LOG",
-        help="replay these logs (session .parquet / .parts, or in-process runs) instead",
+        help="replay these logs (session .parquet / .parts, in-process runs, or flight logs .ulg) instead",
     )
     parser.add_argument(
         "--instance",

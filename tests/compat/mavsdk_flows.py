@@ -1,7 +1,7 @@
 """MAVSDK-Python 4 scripts, written as a PX4 user would, flown against a running quadsitl vehicle.
 
 usage: python tests/compat/mavsdk_flows.py FLOW URL [--param-gain NAME]
-FLOW is one of: action, offboard, mission, params. URL is a MAVSDK connection string such as
+FLOW is one of: action, offboard, mission, params, logs. URL is a MAVSDK connection string such as
 ``udpin://0.0.0.0:14540`` (the vehicle sends its API stream there).
 
 Each run prints one JSON object per line on stdout (``{"event": ..., "t": wall s, ...}``); the
@@ -62,6 +62,7 @@ import traceback
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.log_files import LogFilesAsync, LogFilesError
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw, VelocityNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
@@ -498,7 +499,46 @@ def _item(i: MissionItem) -> dict:
     }
 
 
-FLOWS = {"action": flow_action, "offboard": flow_offboard, "mission": flow_mission, "params": flow_params}
+async def flow_logs(system, args) -> None:
+    """A PX4 user's log download with the log_files plugin: list the vehicle's logs and download
+    each; arm and disarm (one more log, from arming to disarming), list and download it; erase."""
+    logs = LogFilesAsync(system)
+
+    async def listing(event: str):
+        entries = await logs.get_entries()
+        emit(event, entries=[{"id": e.id, "date": e.date, "size": e.size_bytes} for e in entries])
+        return entries
+
+    async def download(entry) -> None:
+        path = os.path.join(args.out, f"{entry.id}.ulg")
+        progress = [data.progress async for _, data in logs.download_log_file(entry, path)]
+        emit("downloaded", id=entry.id, path=path, updates=len(progress), last=progress[-1])
+
+    for entry in await listing("entries"):
+        await download(entry)
+    tel, action = TelemetryAsync(system), ActionAsync(system)
+    watch = Watch(tel)
+    watch.start()
+    try:
+        await ready(watch)
+        await action.arm()
+        await watch.sim_sleep(1.0)
+        await action.disarm()
+        await watch.until("disarmed", lambda w: w.latest["armed"] is False, 5.0)
+    finally:
+        await watch.stop()
+    entries = await listing("entries_after_flight")
+    await download(entries[-1])
+    await logs.erase_all_log_files()  # LOG_ERASE has no answer: listing again shows what it did
+    try:
+        left = await logs.get_entries()
+        emit("after_erase", entries=len(left))
+    except LogFilesError as exc:
+        emit("after_erase", error=exc.result.name)
+
+
+FLOWS = {"action": flow_action, "offboard": flow_offboard, "mission": flow_mission, "params": flow_params,
+         "logs": flow_logs}  # fmt: skip
 
 
 async def main(args) -> None:
@@ -526,5 +566,6 @@ if __name__ == "__main__":
     parser.add_argument("url")
     parser.add_argument("--param-gain", default="", help="a controller gain parameter to retune in flight")
     parser.add_argument("--gain-factor", type=float, default=0.3)
+    parser.add_argument("--out", default=".", help="logs: where the downloads go")
     asyncio.run(main(parser.parse_args()))
     os._exit(0)  # the watchdog timer thread must not keep us alive

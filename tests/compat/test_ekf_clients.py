@@ -23,6 +23,8 @@ from quadcommon import bus, frames, wire
 from quadcommon.bus_records import TRUTH_CODEC, TRUTH_FIELDS
 from sitl.launcher import Child
 
+from ..ulog_check import check_ulog
+
 INSTANCE = 23
 SPEED = "2"  # wall-clock pacing: pymavlink in Python keeps up with every message; the flow ~10 s
 _T = {n: i for i, n in enumerate(TRUTH_FIELDS)}
@@ -125,7 +127,7 @@ def _estimate_minus_truth(gpi, home, truth: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.timeout(60)
-def test_a_pymavlink_client_arms_only_on_the_aligned_ekf_and_sees_the_estimate() -> None:
+def test_a_pymavlink_client_arms_only_on_the_aligned_ekf_and_sees_the_estimate(tmp_path) -> None:
     ports = wire.ports(INSTANCE)
     sysid = wire.system_id(INSTANCE)
     # Listening before the vehicle starts (the GCS client port is the client's, not the launcher's):
@@ -134,7 +136,8 @@ def test_a_pymavlink_client_arms_only_on_the_aligned_ekf_and_sees_the_estimate()
     client = Client(ports.gcs_remote, sysid)
     m = client.m
     up = Child("quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(INSTANCE),
-                               "--speed", SPEED, "--estimator", "ekf", "--sensors", "gps"])  # fmt: skip
+                               "--speed", SPEED, "--estimator", "ekf", "--sensors", "gps",
+                               "--log-dir", str(tmp_path / "log")])  # fmt: skip
     truth = None
     try:
         client.wait(lambda: "HEARTBEAT" in client.last, "the first HEARTBEAT", 30.0)
@@ -206,3 +209,8 @@ def test_a_pymavlink_client_arms_only_on_the_aligned_ekf_and_sees_the_estimate()
         if truth is not None:
             truth.close()
         assert up.stop(10.0) == 0
+    # The flight's log, flown on the EKF: what Flight Review plots of an EKF flight is there.
+    (log,) = (tmp_path / "log").glob("*/*.ulg")
+    ulog = check_ulog(log, ekf=True)
+    assert ulog.msg_info_dict["quadsitl_estimator"] == "ekf"
+    assert len(ulog.get_dataset("estimator_status").data["timestamp"]) > 10

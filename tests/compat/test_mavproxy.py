@@ -17,6 +17,9 @@ Two things a PX4 user meets here, both from the client side, both the same again
   (autopilot/app.py), so ``takeoff 3`` climbs to 3 m. PX4 would ignore it and climb to
   MIS_TAKEOFF_ALT.
 
+After the landing, ``log list`` / ``log download N FILE`` (MAVProxy's log module, LOG_REQUEST_*):
+the flight's own log is listed beside the two the vehicle had, and one comes down byte-identical.
+
 Waypoint files: line 0 of a QGC WPL 110 file is a real mission item here (PX4's semantics; MAVProxy
 uploads every line as seq 0..n-1). An ArduPilot file whose line 0 is the home position is flown
 as a waypoint at home: with frame 0 (AMSL) at the home altitude that is a point on the ground.
@@ -32,8 +35,9 @@ import warnings
 from quadcommon import frames
 from quadcommon.config import load_sitl
 
+from ..ulog_check import check_ulog
 from .mavproxy_driver import MavProxy
-from .vehicles import TruthTap, ports, sitl_output, vehicle
+from .vehicles import TruthTap, ports, sitl_output, vehicle, vehicle_logs
 
 INSTANCE = 5  # of the compat port block (PX4 instance 105's ports); sysid 6
 SYSID = 1 + INSTANCE
@@ -60,11 +64,16 @@ def position(row) -> tuple[float, float, float]:
     return (row["x_m"], row["y_m"], row["z_m"])
 
 
-def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config):
+def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config, flight_logs):
     started = time.monotonic()
     home = load_sitl(str(compat_sitl_config)).home
     targets = write_plan(tmp_path / "mission.txt", home)
-    with vehicle(INSTANCE, compat_sitl_config, speed="2") as sitl, TruthTap(INSTANCE) as truth:
+    log_dir = tmp_path / "log"
+    on_vehicle = vehicle_logs(log_dir, flight_logs)
+    with (
+        vehicle(INSTANCE, compat_sitl_config, speed="2", log_dir=log_dir) as sitl,
+        TruthTap(INSTANCE) as truth,
+    ):
         mp = MavProxy(ports(INSTANCE).gcs_remote, tmp_path)
         try:
             mp.expect(rf"online system {SYSID}\b", 15)
@@ -129,6 +138,22 @@ def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config):
             mp.expect(r"^DISARMED", 30)  # landed; disarmed after COM_DISARM_LAND
             row = truth.latest()
             assert row is not None and row["z_m"] < 0.01
+
+            # The flight logs: the two the vehicle had, and this flight's (from arming to disarming)
+            flight = [p for p in log_dir.glob("*/*.ulg") if p not in on_vehicle]
+            mp.send("log list")
+            listed = {}
+            for _ in range(3):
+                entry = mp.expect(r"^Log (\d+)\s+numLogs (\d+)\s+lastLog (\d+)\s+size (\d+)", 10)
+                log_id, count, last, size = (int(v) for v in entry.groups())
+                assert (count, last) == (3, 2)
+                listed[log_id] = size
+            assert len(flight) == 1
+            check_ulog(flight[0])  # this flight's log, written by the autopilot process
+            assert listed == {k: p.stat().st_size for k, p in enumerate([*on_vehicle, *flight])}
+            mp.send("log download 1 got1.ulg")
+            mp.expect(r"Finished downloading got1.ulg", 30)
+            assert (tmp_path / "got1.ulg").read_bytes() == on_vehicle[1].read_bytes()
         except AssertionError as exc:
             raise AssertionError(f"{exc}\n--- MAVProxy:\n{mp.tail()}\n{sitl_output(sitl)}") from None
         finally:

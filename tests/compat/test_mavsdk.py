@@ -18,11 +18,13 @@ from __future__ import annotations
 import math
 import struct
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from .vehicles import TruthTap, ports, run_flow, sitl_output, vehicle
+from ..ulog_check import check_ulog
+from .vehicles import TruthTap, ports, run_flow, sitl_output, vehicle, vehicle_logs
 
 HOME = (47.397742, 8.545594)  # config/sitl.toml [home]
 FLOW_TIMEOUT_S = 50.0
@@ -178,6 +180,33 @@ def test_params_get_set_and_a_gain_that_changes_the_flight(compat_sitl_config):
         assert abs(arrived - step["goal_n"]) < 0.02, step["label"]
     assert rms["changed"] > 2.0 * rms["default"], rms
     assert rms["changed"] < 0.05, rms  # retuned in flight without a bump
+
+
+def test_log_files_lists_and_downloads_logs_byte_identical(compat_sitl_config, flight_logs, tmp_path):
+    """MAVSDK's log_files plugin (what QGC's Log Download does too): the logs on the vehicle, and
+    one it writes while the flow arms and disarms it, downloaded byte-identical; then erased."""
+    log_dir, out = tmp_path / "log", tmp_path / "downloads"
+    out.mkdir()
+    vehicle_logs(log_dir, flight_logs)
+    with vehicle(6, compat_sitl_config, log_dir=log_dir) as sitl:
+        url = f"udpin://0.0.0.0:{ports(6).api_remote}"
+        result = run_flow("logs", url, FLOW_TIMEOUT_S, "--out", str(out))
+        if result.returncode != 0 or result.timed_out:
+            pytest.fail(f"MAVSDK flow 'logs' failed\n{result.transcript()}\n{sitl_output(sitl)}")
+    first = result.event("entries")["entries"]
+    assert [(e["id"], e["date"], e["size"]) for e in first] == [
+        (0, "2024-05-01T10:00:00Z", flight_logs[0].stat().st_size),
+        (1, "2024-05-01T10:05:30Z", flight_logs[1].stat().st_size),
+    ]
+    downloads = [e for e in result.events if e["event"] == "downloaded"]
+    assert [d["id"] for d in downloads] == [0, 1, 2] and all(d["last"] == 1.0 for d in downloads)
+    for original, d in zip(flight_logs, downloads[:2], strict=False):
+        assert Path(d["path"]).read_bytes() == original.read_bytes()
+    assert result.event("entries_after_flight")["entries"][-1]["id"] == 2
+    assert result.event("after_erase").get("error") == "NO_LOGFILES"  # num_logs 0: nothing left
+    assert not list(log_dir.glob("*/*.ulg"))  # erased on the vehicle
+    ulog = check_ulog(Path(downloads[2]["path"]), flight_review=False)  # the flow's arming, logged
+    assert ulog.get_dataset("paper_tracking").data["armed"].all()
 
 
 def test_what_mavsdk_needs_item_by_item(compat_sitl_config):

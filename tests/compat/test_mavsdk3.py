@@ -13,6 +13,7 @@ from ``.venv-mavsdk3`` (``make .venv-mavsdk3``, which ``make test`` makes).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 import subprocess
@@ -26,13 +27,31 @@ CLIENT = REPO / ".venv-mavsdk3" / "bin" / "python"
 FLOWS = Path(__file__).with_name("mavsdk3_flows.py")
 QUADSITL = REPO / ".venv" / "bin" / "quadsitl"
 WALL_LIMIT_S = 240
+# MAVSDK-Python 3.15.3's own examples/logfile_download.py, byte for byte (upstream/README.md).
+LOG_EXAMPLE = Path(__file__).with_name("upstream") / "logfile_download.py"
+LOG_EXAMPLE_BLOB = "d6020b662c88f974f1d6ed680cc8dfe71f4ec35c"  # its git blob id at tag 3.15.3
+LOG_EXAMPLE_LIMIT_S = 60
 
 INSIDE = """
 set -u
 ip link set lo up
-"{quadsitl}" up --speed 2 > "{log}" 2>&1 &
+"{quadsitl}" up --speed 2 --no-log > "{log}" 2>&1 &
 up=$!
 timeout {limit} "{client}" "{flows}" udpin://0.0.0.0:14540
+rc=$?
+kill -INT $up 2>/dev/null; wait $up
+exit $rc
+"""
+
+
+# The example as a user runs it: in the directory the downloads go to, the vehicle up beside it.
+INSIDE_LOG_EXAMPLE = """
+set -u
+ip link set lo up
+"{quadsitl}" up --speed 2 --log-dir "{log_dir}" > "{log}" 2>&1 &
+up=$!
+cd "{downloads}"
+timeout {limit} "{client}" "{example}"
 rc=$?
 kill -INT $up 2>/dev/null; wait $up
 exit $rc
@@ -82,3 +101,46 @@ def test_mavsdk_python3_examples_fly_in_a_loopback_only_namespace(tmp_path):
     steps = {e["step"]: e["wall_s"] for e in events if e["event"] == "step_time"}
     print(f"MAVSDK-Python 3 flows: {wall:.1f} s wall in all; per step: {steps}")
     assert wall < WALL_LIMIT_S
+
+
+def _git_blob_id(path: Path) -> str:
+    data = path.read_bytes()
+    return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
+
+
+@pytest.mark.timeout(LOG_EXAMPLE_LIMIT_S + 60)
+def test_mavsdk_python3s_own_log_download_example_runs_unchanged(tmp_path, flight_logs):
+    """``examples/logfile_download.py`` of MAVSDK-Python 3.15.3, unchanged: it lists the vehicle's
+    logs and downloads each to ./log-<date>.ulog; the files are the vehicle's, byte for byte."""
+    why = _namespaces_available()
+    if why:
+        pytest.skip(f"MAVSDK-Python 3 needs a loopback-only network namespace for its mavsdk_server: {why}")
+    assert CLIENT.exists(), "no .venv-mavsdk3: run `make .venv-mavsdk3` (make test does)"
+    assert _git_blob_id(LOG_EXAMPLE) == LOG_EXAMPLE_BLOB, "the example is not upstream's text"
+    from .vehicles import vehicle_logs
+
+    log_dir, downloads = tmp_path / "log", tmp_path / "downloads"
+    downloads.mkdir()
+    on_vehicle = vehicle_logs(log_dir, flight_logs)
+    up_log = tmp_path / "up.log"
+    script = INSIDE_LOG_EXAMPLE.format(quadsitl=QUADSITL, log_dir=log_dir, log=up_log,
+                                       downloads=downloads, limit=LOG_EXAMPLE_LIMIT_S, client=CLIENT,
+                                       example=LOG_EXAMPLE)  # fmt: skip
+    result = subprocess.run(["unshare", "-n", "bash", "-c", script], capture_output=True, text=True,
+                            timeout=LOG_EXAMPLE_LIMIT_S + 30)  # fmt: skip
+    detail = (
+        f"rc {result.returncode}\n{result.stdout[-3000:]}\n{result.stderr[-2000:]}\n--- quadsitl up:\n"
+        + (up_log.read_text()[-3000:] if up_log.exists() else "")
+    )
+    assert result.returncode == 0, detail
+    assert (
+        "Log 0 from 2024-05-01T10:00:00Z" in result.stdout
+        and "Log 1 from 2024-05-01T10:05:30Z" in result.stdout
+    )
+    expected = {
+        "log-2024-05-01T10-00-00Z.ulog": on_vehicle[0],
+        "log-2024-05-01T10-05-30Z.ulog": on_vehicle[1],
+    }
+    assert sorted(p.name for p in downloads.iterdir()) == sorted(expected), detail
+    for name, original in expected.items():
+        assert (downloads / name).read_bytes() == original.read_bytes(), name

@@ -118,7 +118,7 @@ def start_up(config) -> tuple[Child, Child]:
     """``quadsitl up --instance 7 --count 2``, the command a user types; returns it twice (as the
     process and as its collected output: one Child is both)."""
     cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(FIRST), "--count", "2",
-           "--speed", "2", "--sitl-config", str(config)]  # fmt: skip
+           "--speed", "2", "--sitl-config", str(config), "--no-log"]  # fmt: skip
     up = Child("quadsitl up", cmd)
     try:
         up.wait_line("Ctrl-C stops every process", 30.0)

@@ -224,7 +224,7 @@ def test_quadsitl_up_with_a_passphrase_file_and_mavproxy_signing_key(tmp_path):
     key.write_text(PASSPHRASE + "\n")
     key.chmod(0o600)
     up = Child("quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(instance),
-                               "--speed", "1", "--signing-key", str(key)])  # fmt: skip
+                               "--speed", "1", "--signing-key", str(key), "--no-log"])  # fmt: skip
     info = mp = None
     try:
         up.wait_line("Ctrl-C stops", 30.0)

@@ -60,16 +60,36 @@ def ports(instance: int) -> wire.Ports:
 
 
 @contextmanager
-def vehicle(instance: int, sitl_config: Path, speed: str = "2") -> Iterator[Launcher]:
+def vehicle(
+    instance: int, sitl_config: Path, speed: str = "2", log_dir: Path | None = None
+) -> Iterator[Launcher]:
     """One vehicle (simulator + autopilot) started by the ``quadsitl up`` launcher; always stopped.
 
     ``speed`` is the wall-clock pacing: MAVSDK and MAVProxy time out on the wall clock, so they run
-    at a modest factor, never at ``max``.
+    at a modest factor, never at ``max``. ``log_dir``: its flight logs (default: none).
     """
     assert 0 <= instance <= 9, "compat tests use instances 0-9 of the shifted port block"
+    spec = VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config),
+                       log_dir=str(log_dir) if log_dir is not None else None)  # fmt: skip
     with Launcher() as sitl:
-        sitl.start_vehicles([VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config))], 20.0)
+        sitl.start_vehicles([spec], 20.0)
         yield sitl
+
+
+# Where flight_logs' files go on a vehicle: PX4's layout, distinct start times (MAVSDK's example
+# names a download after its date).
+LOG_NAMES = ("2024-05-01/10_00_00.ulg", "2024-05-01/10_05_30.ulg")
+
+
+def vehicle_logs(directory: Path, logs: list[Path]) -> list[Path]:
+    """Copies of ``logs`` in ``directory`` as a vehicle keeps them (LOG_NAMES), oldest first."""
+    out = []
+    for name, log in zip(LOG_NAMES, logs, strict=True):
+        target = directory / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(log.read_bytes())
+        out.append(target)
+    return out
 
 
 def sitl_output(sitl: Launcher, lines: int = 40) -> str:

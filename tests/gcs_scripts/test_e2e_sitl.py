@@ -17,19 +17,24 @@ import pytest
 from gcs_scripts import fly_setpoints, fly_trajectory, record
 from gcs_scripts.analysis.analyze import analyze
 from gcs_scripts.analysis.log_reader import read_session
+from gcs_scripts.analysis.metrics import indices
 from sitl.launcher import Launcher, VehicleSpec, python_script
 
 from ..stack import connect, make_stack
+from ..ulog_check import check_ulog
+from .test_ulog_analysis import assert_same_indices
 
 WALL_LIMIT_S = 60.0
 
 
 @contextmanager
-def _sitl(instance: int, scenario: str, speed: str = "4") -> Iterator[Launcher]:
+def _sitl(instance: int, scenario: str, speed: str = "4", log_dir: Path | None = None) -> Iterator[Launcher]:
     # --speed 4, not max: the scripts stream setpoints paced on the telemetry but must still get the
     # CPU; at max the 1 s offboard timeout is ~50 ms of wall time (docs/running.md, "Time and speed").
+    spec = VehicleSpec(instance=instance, scenario=scenario, speed=speed,
+                       log_dir=str(log_dir) if log_dir is not None else None)  # fmt: skip
     with Launcher() as launcher:
-        launcher.start_vehicles([VehicleSpec(instance=instance, scenario=scenario, speed=speed)], 20.0)
+        launcher.start_vehicles([spec], 20.0)
         yield launcher
 
 
@@ -43,7 +48,7 @@ def _recorder(launcher: Launcher, instance: int, out: Path):
 
 def test_fly_setpoints_through_the_sitl_and_record_it(tmp_path: Path) -> None:
     n = 60
-    with _sitl(n, "hover") as launcher:
+    with _sitl(n, "hover", log_dir=tmp_path / "log") as launcher:
         rec = _recorder(launcher, n, tmp_path / "s")
         done = _script(
             launcher, fly_setpoints, "--instance", str(n), "--takeoff-alt", "1.5", "--setpoint", "1", "0.5",
@@ -62,6 +67,15 @@ def test_fly_setpoints_through_the_sitl_and_record_it(tmp_path: Path) -> None:
     assert np.linalg.norm(record_.position_m[i] - (1.0, 0.5, 1.5)) < 0.1
     paths = analyze([tmp_path / "s.parquet"], tmp_path / "analysis")
     assert (tmp_path / "analysis" / "comparison.md").exists() and len(paths) == 6
+    # The autopilot's flight log of the same flight gives the same paper indices (float32 in the
+    # log: docs/logs.md's tolerance), over the span both cover.
+    (ulg,) = (tmp_path / "log").glob("*/*.ulg")
+    check_ulog(ulg)
+    from_log = read_session(ulg)
+    t0 = max(from_log.time_s[0], record_.time_s[0])
+    span = min(from_log.time_s[-1], record_.time_s[-1]) - t0
+    parquet, ulog = (indices(read_session(p, (t0, span))) for p in (tmp_path / "s.parquet", ulg))
+    assert_same_indices(parquet, ulog)
 
 
 def test_fly_trajectory_lines_up_with_the_reference() -> None:

@@ -45,7 +45,8 @@ def alive(pid: int) -> bool:
 
 def start_up(*args: str) -> Child:
     """``quadsitl up`` as a child of the launcher (its output read by a thread: no blocking read)."""
-    cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(INSTANCE), "--speed", "max", *args]
+    cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(INSTANCE), "--speed", "max",
+           "--no-log", *args]  # fmt: skip
     return Child("quadsitl up", cmd)
 
 

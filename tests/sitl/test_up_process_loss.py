@@ -31,7 +31,8 @@ ARMED = m.MAV_MODE_FLAG_SAFETY_ARMED
 
 
 def start_up(instance: int, *args: str) -> Child:
-    cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(instance), "--speed", "max", *args]
+    cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(instance), "--speed", "max",
+           "--no-log", *args]  # fmt: skip
     up = Child("quadsitl up", cmd)
     try:
         up.wait_line("Ctrl-C stops every process", 40.0)
@@ -213,7 +214,7 @@ def test_a_process_that_keeps_dying_is_left_down_after_the_cap():
 
 def test_reaching_duration_is_a_normal_end_not_a_loss():
     up = Child("quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", "85",
-                               "--speed", "max", "--duration", "0.5"])  # fmt: skip
+                               "--speed", "max", "--duration", "0.5", "--no-log"])  # fmt: skip
     try:
         code = up.wait(60.0)
     finally:

@@ -103,7 +103,7 @@ def flight(tmp_path_factory):
     up = Child(
         "quadsitl up",
         [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(INSTANCE), "--speed", SPEED,
-         "--view", "--view-port", str(port)],
+         "--view", "--view-port", str(port), "--no-log"],
     )  # fmt: skip
     seen: dict = {"port": port, "labels": [], "rates": [], "sample_rates": [], "shots": {}, "log": None,
                   "offboard_looks": []}  # fmt: skip

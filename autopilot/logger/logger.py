@@ -1,0 +1,364 @@
+"""The flight logger: when a log runs (``SDLOG_MODE``, as PX4's logger) and the ULog bytes of it.
+
+Pure: the core calls :meth:`FlightLogger.frame` once per control step, after the answer has
+gone to the simulator (and, when periodic topics are due, :meth:`FlightLogger.sample_due`); the
+shell takes
+what it wrote with :meth:`FlightLogger.take` (:class:`LogOpen` / bytes / :class:`LogClose` in
+file order) and writes it, in a thread off the lockstep's critical path (:mod:`.storage`).
+
+``SDLOG_MODE`` (PX4's values): -1 no logging; 0 from arming until disarming (default); 1 from
+boot until the first disarming, then from arming until disarming; 2 from boot until shutdown;
+4 from the first arming until shutdown. Boot is the first frame. A simulator that restarts
+(time going backwards) ends the log: a ULog's time cannot go back; a new one starts as the mode
+says. A mode change takes effect at the next frame.
+
+A log holds the definitions (formats, info, every parameter's value at the start), then samples
+of :data:`~.topics.TOPICS` at their rates, every STATUSTEXT as a logged string with its
+severity, every parameter change, and, when given, the simulator's disturbance.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from ..params.store import INT32, ParameterStore
+from . import topics, ulog
+from .topics import TOPICS, Snapshot
+
+SDLOG_OFF, SDLOG_WHILE_ARMED, SDLOG_BOOT_UNTIL_DISARM, SDLOG_BOOT_UNTIL_SHUTDOWN = -1, 0, 1, 2
+SDLOG_FIRST_ARM_UNTIL_SHUTDOWN = 4
+SYNC_EVERY_US = 1_000_000  # a sync marker per second of log (lets a reader resynchronise)
+DISTURBANCE_INTERVAL_US = 10_000  # sim_disturbance: at most this often, and at every onset
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """Where an autopilot logs: ``directory`` (None: no flight log at all) and the wall clock
+    (POSIX seconds) for UTC times in the log (None: none there); ``version``: the software's, for
+    the log's ``ver_sw`` (the shell reads it from the installed package)."""
+
+    directory: str | None = None
+    utc_clock: Callable[[], float] | None = None
+    version: str = ""
+
+    @property
+    def enabled(self) -> bool:
+        return self.directory is not None
+
+
+def log_info(version: str, controller: str, vehicle: str, estimator: str, instance: int) -> dict:
+    """The log's information messages: PX4's keys where they mean the same (Flight Review shows
+    ``sys_name``, ``ver_hw``, ``ver_sw``; ``ver_data_format`` 2 says vehicle_gps_position has
+    ``latitude_deg``...), and what the run is (controller, vehicle, estimator, instance)."""
+    return {
+        "sys_name": "quadsitl",
+        "ver_hw": "SITL",
+        "ver_sw": f"quadsitl {version}".strip(),
+        "ver_sw_release": _release_number(version),
+        "ver_data_format": 2,
+        "sys_os_name": "Linux",
+        "sys_toolchain": "CPython",
+        "quadsitl_controller": controller,
+        "quadsitl_vehicle": vehicle,
+        "quadsitl_estimator": estimator,
+        "quadsitl_instance": instance,
+    }
+
+
+def _release_number(version: str) -> int:
+    """PX4's ``ver_sw_release`` encoding: 0xMMmmpp followed by the type byte (255: a release)."""
+    parts = [int(p) if p.isdigit() else 0 for p in version.split(".")[:3]] + [0, 0, 0]
+    major, minor, patch = (min(max(v, 0), 255) for v in parts[:3])
+    return (major << 24) | (minor << 16) | (patch << 8) | 0xFF
+
+
+class LogOpen(NamedTuple):
+    """A new log starts here: ``utc_s`` is the wall clock when it started (None: no clock given)."""
+
+    start_us: int  # simulation time of its first sample
+    utc_s: float | None
+
+
+class LogClose(NamedTuple):
+    end_us: int
+
+
+class _Periodic(NamedTuple):
+    """One periodic topic of the open log: its message, the builder of its values, and what is
+    appended to them (the laws' states of ``cascade_status``), if anything."""
+
+    topic: ulog.Topic
+    build: Callable[[Snapshot], tuple | None]
+    extra: Callable[[], Sequence[float]] | None = None
+
+
+class _Group:
+    """The periodic topics of one interval: due together (the frames' clock is checked once per
+    interval, not once per topic)."""
+
+    __slots__ = ("interval_us", "next_us", "topics")
+
+    def __init__(self, interval_us: int, next_us: int) -> None:
+        self.interval_us = interval_us
+        self.next_us = next_us
+        self.topics: list[_Periodic] = []
+
+
+class FlightLogger:
+    """``info``: the log's information messages (``sys_name``, ``ver_sw``, ...); ``law_states``:
+    the cascade's :meth:`~autopilot.control.cascade.Cascade.law_states` (read at the rate of
+    ``cascade_status``); ``utc_clock``: the wall clock (POSIX seconds) the shell gives, for the
+    GPS topic's UTC time and the file name, or None (in-process runs: no wall time in the log)."""
+
+    def __init__(
+        self,
+        params: ParameterStore,
+        info: dict[str, str | int],
+        law_states: Callable[[], tuple[tuple[str, ...], tuple[float, ...]]],
+        snapshot: Snapshot,
+        utc_clock: Callable[[], float] | None = None,
+        enabled: bool = True,
+    ) -> None:
+        self.params = params
+        self.info = info
+        self.law_states = law_states
+        self.snapshot = snapshot
+        self.utc_clock = utc_clock
+        self.enabled = enabled
+        self.logging = False
+        self.logs_started = 0
+        self._out: list = []  # LogOpen / bytes / LogClose, in file order, until take()
+        self._buffer = bytearray()  # the open log's bytes since the last take()
+        self._was_armed = False
+        self._decide = True  # the next update() decides whether a log runs (first frame, SDLOG_MODE)
+        self._ever_armed = False
+        self._disarmed_since_boot = False
+        self._last_t_us = -1
+        self._tracking: ulog.Topic | None = None
+        self._groups: list[_Group] = []
+        self._gps: ulog.Topic | None = None
+        self._status: ulog.Topic | None = None
+        self._status_mode: float | None = None  # the row's custom_mode and armed at the last status
+        self._status_armed: float | None = None
+        self._disturbance: ulog.Topic | None = None
+        self._disturbance_last: tuple = ()
+        self._disturbance_logged: tuple = ()
+        self._disturbance_next_us = 0
+        self._next_due_us = 0
+        self._next_sync_us = 0
+        self._start_us = 0
+
+    # -- inputs ---------------------------------------------------------------------------------
+    def update(self, t_us: int, armed: bool) -> bool:
+        """Start or stop the log as ``SDLOG_MODE`` says for this frame; True while a log is open
+        (:meth:`frame` calls it; the rest of a frame is sampled there)."""
+        if t_us > self._last_t_us and armed == self._was_armed and not self._decide:
+            self._last_t_us = t_us  # most frames: nothing that could start or stop a log changed
+            return self.logging
+        if not self.enabled:
+            return False
+        if t_us < self._last_t_us:  # the simulator restarted: this log's time cannot go back
+            self.stop()
+            self._disarmed_since_boot = False
+        self._last_t_us = t_us
+        if armed and not self._was_armed:
+            self._ever_armed = True
+        elif self._was_armed and not armed:
+            self._disarmed_since_boot = True
+        self._was_armed = armed
+        self._decide = False
+        want = self._wanted(armed)
+        if want != self.logging:
+            if want:
+                self._start(t_us)
+            else:
+                self.stop()
+        return self.logging
+
+    def frame(self, t_us: int, armed: bool, truth, row: tuple, parts: dict | None) -> bool:
+        """One control step: :meth:`update`, then, while a log is open, the samples of every step:
+        ``paper_tracking`` (the frame's ``truth`` and controller ``row``), the GPS fix when the frame
+        carries one (``parts``: its undecoded messages), ``vehicle_status`` when the mode or arming
+        changed. True when periodic topics are due: the caller then fills the rest of the snapshot
+        and calls :meth:`sample_due` (most frames need neither)."""
+        if t_us <= self._last_t_us or armed != self._was_armed or self._decide:
+            if not self.update(t_us, armed):
+                return False
+        else:  # (update's common case, inline: this runs every control step)
+            self._last_t_us = t_us
+            if not self.logging:
+                return False
+        s = self.snapshot
+        s.t_us, s.truth, s.row = t_us, truth, row
+        buf = self._buffer
+        tracking = self._tracking
+        buf += tracking.prefix
+        buf += tracking.pack(*topics.paper_tracking_values(t_us, truth, row))
+        if parts is not None and topics.GPS_ID in parts:
+            s.gps = topics.gps_of(parts)
+            values = topics.vehicle_gps_position(s)
+            if values is not None:
+                buf += self._gps.sample(values)
+        if row[topics.ROW_CUSTOM_MODE] != self._status_mode or row[topics.ROW_ARMED] != self._status_armed:
+            self._on_status_change(row[topics.ROW_CUSTOM_MODE], row[topics.ROW_ARMED], t_us)
+        return t_us >= self._next_due_us
+
+    def sample_due(self, parts: dict | None) -> None:
+        """The periodic topics due at this frame (``parts``: its undecoded messages, for the raw
+        sensor topic)."""
+        s = self.snapshot
+        t_us = s.t_us
+        buf = self._buffer
+        s.parts = parts
+        next_due = t_us + 3_600_000_000
+        for group in self._groups:
+            if t_us >= group.next_us:
+                for topic, build, extra in group.topics:
+                    values = build(s)
+                    if values is not None:
+                        if extra is not None:
+                            values = (*values, *extra())
+                        buf += topic.prefix
+                        buf += topic.pack(*values)
+                group.next_us += group.interval_us
+                if group.next_us <= t_us:
+                    group.next_us = t_us + group.interval_us
+            if group.next_us < next_due:
+                next_due = group.next_us
+        self._next_due_us = next_due
+        if t_us >= self._next_sync_us:
+            buf += ulog.sync()
+            self._next_sync_us = t_us + SYNC_EVERY_US
+
+    def statustext(self, severity: int, text: str, t_s: float) -> None:
+        """A STATUSTEXT as a logged string (its severity is the log level)."""
+        if self.logging:
+            self._buffer += ulog.logged_string(severity, self._clamp(t_s), text)
+
+    def parameter(self, name: str, value: float) -> None:
+        """A parameter change, logged where it happened."""
+        if name == "SDLOG_MODE":
+            self._decide = True
+        if self.logging:
+            spec = self.params.specs.get(name)
+            self._buffer += ulog.parameter(name, value, spec is not None and spec.kind == INT32)
+
+    def disturbance(self, rows: Iterable[Sequence[float]]) -> None:
+        """The simulator's applied disturbance, ``(time_s, Fx, Fy, Fz, Tphi, Ttheta, Tpsi)`` rows
+        in the paper's frames: logged at most every 10 ms and at every onset (the first sample
+        that differs from a constant stretch), so the analysis finds the events where they are."""
+        if not self.logging:
+            return
+        topic = self._disturbance
+        for row in rows:
+            t_us = round(row[0] * 1e6)
+            if t_us < self._start_us or t_us > self._last_t_us + DISTURBANCE_INTERVAL_US:
+                continue  # before this log, or a late row of a finished one
+            values = tuple(row[1:7])
+            onset = values != self._disturbance_last and self._disturbance_last == self._disturbance_logged
+            self._disturbance_last = values
+            if onset or t_us >= self._disturbance_next_us:
+                self._buffer += topic.sample((t_us, *values))
+                self._disturbance_logged = values
+                self._disturbance_next_us = t_us + DISTURBANCE_INTERVAL_US
+
+    def stop(self) -> None:
+        """End the open log (disarm, shutdown, a simulator restart); nothing if none is open."""
+        if not self.logging:
+            return
+        self.logging = False
+        self._flush_buffer()
+        self._out.append(LogClose(self._last_t_us))
+
+    def take(self) -> list:
+        """What was written since the last call: LogOpen / bytes / LogClose, in file order."""
+        self._flush_buffer()
+        out, self._out = self._out, []
+        return out
+
+    # -- internals ------------------------------------------------------------------------------
+    def _wanted(self, armed: bool) -> bool:
+        mode = int(self.params.values.get("SDLOG_MODE", SDLOG_WHILE_ARMED))
+        if mode == SDLOG_WHILE_ARMED:
+            return armed
+        if mode == SDLOG_BOOT_UNTIL_DISARM:
+            return armed or not self._disarmed_since_boot
+        if mode == SDLOG_BOOT_UNTIL_SHUTDOWN:
+            return True
+        if mode == SDLOG_FIRST_ARM_UNTIL_SHUTDOWN:
+            return self._ever_armed
+        return False  # SDLOG_OFF
+
+    def _clamp(self, t_s: float) -> int:
+        t_us = round(t_s * 1e6) if math.isfinite(t_s) else self._last_t_us
+        return max(min(t_us, self._last_t_us), self._start_us)
+
+    def _flush_buffer(self) -> None:
+        if self._buffer:
+            self._out.append(bytes(self._buffer))
+            self._buffer.clear()
+
+    def _start(self, t_us: int) -> None:
+        utc = self.utc_clock() if self.utc_clock is not None else None
+        names, _ = self.law_states()
+        law_fields = "".join(f"float {topics.law_state_field(n)};" for n in names)
+        buf = bytearray(ulog.file_header(t_us))
+        buf += ulog.flag_bits()
+        formats = [spec.format(law_fields if spec.name == topics.CASCADE else "") for spec in TOPICS]
+        for fmt in formats:
+            buf += ulog.format_message(fmt)
+        for key, value in self.info.items():
+            buf += ulog.info(key, value, "uint32_t" if key in _UINT32_INFO else None)
+        if utc is not None:
+            buf += ulog.info("time_ref_utc", 0)
+        for name, value in self.params.values.items():
+            buf += ulog.parameter(name, value, self.params.specs[name].kind == INT32)
+        groups: dict[int, _Group] = {}
+        for msg_id, (spec, fmt) in enumerate(zip(TOPICS, formats, strict=True)):
+            buf += ulog.add_logged(msg_id, spec.name)
+            topic = ulog.Topic(fmt, msg_id)
+            if spec.name == topics.TRACKING:
+                self._tracking = topic
+            elif spec.name == "vehicle_gps_position":
+                self._gps = topic
+            elif spec.name == topics.DISTURBANCE:
+                self._disturbance = topic
+            else:
+                if spec.name == "vehicle_status":
+                    self._status = topic
+                group = groups.setdefault(spec.interval_ms, _Group(spec.interval_ms * 1000, t_us))
+                extra = self._law_state_values if spec.name == topics.CASCADE else None
+                group.topics.append(_Periodic(topic, spec.build, extra))
+        self._groups = sorted(groups.values(), key=lambda g: g.interval_us)
+        self._flush_buffer()
+        self._out.append(LogOpen(t_us, utc))
+        self._buffer += buf
+        self.logging = True
+        self.logs_started += 1
+        self._start_us = t_us
+        self.snapshot.utc_offset_us = round(utc * 1e6) - t_us if utc is not None else 0
+        self._next_due_us = t_us
+        self._next_sync_us = t_us
+        self._status_mode = self._status_armed = None
+        self._disturbance_last = self._disturbance_logged = ()
+        self._disturbance_next_us = t_us
+
+    def _law_state_values(self) -> tuple[float, ...]:
+        return self.law_states()[1]
+
+    def _on_status_change(self, mode: float, armed: float, t_us: int) -> None:
+        """vehicle_status at once when the mode or arming changes (PX4's commander publishes it
+        then), besides its periodic sample; the times of the last arming and mode change."""
+        s = self.snapshot
+        if self._status_mode is not None and mode != self._status_mode:
+            s.mode_time_us = t_us
+        if armed > 0.5 and not (self._status_armed is not None and self._status_armed > 0.5):
+            s.arming_time_us = t_us
+        self._status_mode, self._status_armed = mode, armed
+        self._buffer += self._status.sample(topics.vehicle_status(s))  # reads the row only
+
+
+_UINT32_INFO = ("ver_sw_release", "ver_data_format")

@@ -1,0 +1,481 @@
+"""What the flight log holds: the topics, their fields and rates, and their samples built from a frame.
+
+PX4's topics keep PX4's names, fields and units (NED world, FRD body, radians, metres; a subset
+of each message's fields: every one that Flight Review and PlotJuggler users plot), so their
+tools read a quadsitl log as a PX4 SITL log. Our own topics are in the paper's frames (world
+x north / y west / z up, body front-left-up, ZYX Euler angles), SI units:
+
+* ``paper_tracking`` (every control step): what the paper's indices are computed from, the same
+  quantities as the recorder's Parquet columns (``quadsitl analyze`` reads either): the truth the
+  HIL frame carries (position, Euler angles), the reference, eta_d, the applied U1 and tau_eta,
+  and the mode and armed state;
+* ``cascade_status`` (every 50 ms: reading the laws' states costs ~5 µs): the rest of the
+  cascade (reference velocity and acceleration, phi_r and theta_r before the command filter,
+  eta_d', the acceleration command, the body torque, the normalised actuator controls, the
+  commanded rotor speeds) and the laws' integral states
+  (:meth:`~autopilot.control.cascade.Cascade.law_states`, one field per state);
+* ``sim_disturbance``: the disturbance the simulator applies (force at the CoM, world; torque on
+  the Euler coordinates), when the autopilot is given it (the simulator's truth on zenoh in the
+  SITL, the simulator core in-process); the HIL link does not carry it.
+
+Rates are PX4's default logging profile (``logged_topics.cpp``: an interval in ms, at most one
+sample per interval; its SITL ground-truth topics included, at 20 ms rather than PX4's 10 ms for
+attitude and rates, and ``sensor_combined`` at 20 ms rather than every sample: each sample costs
+the lockstep's process a few µs), sampled on the simulation clock of the frames. Every builder
+reads the frame's :class:`Snapshot` and returns the sample's values, timestamp first, or None
+when the vehicle has no such data now (no estimate yet, no GPS fix in this frame, not flying on
+the EKF).
+
+Pure: no file, no clock; :mod:`.logger` decides when a log runs and packs these samples.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from quadcommon import frames
+from quadcommon.bus_records import CONTROLLER_FIELDS
+from quadcommon.rigid_body import body_rates_from_euler_rates, quaternion_from_euler
+
+from ..commander.modes import FlightMode, LandedState
+from ..mavlink.codec import mavlink
+from ..mavlink.hil import GpsFields, gps_fields, imu_fields
+from .ulog import Format, fields
+
+NAN = math.nan
+NAN3 = (NAN, NAN, NAN)
+
+# Where the controller row (quadcommon.bus_records.CONTROLLER_FIELDS, one per frame) holds what the
+# log reads of it: the recorder's Parquet columns are these same rows.
+_C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
+ROW_POS_REF = slice(_C["x_ref_m"], _C["z_ref_m"] + 1)
+ROW_VEL_REF = slice(_C["vx_ref_m_s"], _C["vz_ref_m_s"] + 1)
+ROW_ACC_REF = slice(_C["ax_ref_m_s2"], _C["az_ref_m_s2"] + 1)
+ROW_EULER_REF = slice(_C["phi_ref_rad"], _C["psi_ref_rad"] + 1)
+ROW_RAW = slice(_C["phi_raw_rad"], _C["theta_raw_rad"] + 1)
+ROW_U1 = _C["U1_n"]
+ROW_TAU = slice(_C["tau_phi_n_m"], _C["tau_psi_n_m"] + 1)
+ROW_ARMED = _C["armed"]
+ROW_CUSTOM_MODE = _C["custom_mode"]
+
+# PX4's vehicle_status.nav_state for the modes flown here (msg/VehicleStatus.msg).
+NAV_STATE = {
+    FlightMode.POSCTL: 2,
+    FlightMode.AUTO_MISSION: 3,
+    FlightMode.AUTO_LOITER: 4,
+    FlightMode.AUTO_RTL: 5,
+    FlightMode.OFFBOARD: 14,
+    FlightMode.AUTO_TAKEOFF: 17,
+    FlightMode.AUTO_LAND: 18,
+}
+ARMING_STATE_DISARMED, ARMING_STATE_ARMED = 1, 2  # vehicle_status.arming_state
+VEHICLE_TYPE_ROTARY_WING = 1
+MAV_TYPE_QUADROTOR = 2
+ACTUATOR_OUTPUTS = 16  # actuator_outputs.output[16]
+
+
+GPS_ID = mavlink.MAVLINK_MSG_ID_HIL_GPS
+
+
+def gps_of(parts: dict) -> GpsFields | None:
+    """The frame's HIL_GPS as sent, or None (none in the frame, or corrupt)."""
+    try:
+        return gps_fields(parts)
+    except (ValueError, struct.error):  # DecodeError is a ValueError
+        return None
+
+
+def imu_of(parts: dict) -> list | None:
+    """The frame's HIL_SENSOR gyro and accelerometer as sent (FRD), or None (none, or corrupt)."""
+    try:
+        return imu_fields(parts)
+    except (ValueError, struct.error):
+        return None
+
+
+@dataclass
+class Snapshot:
+    """One frame as the log reads it (refreshed in place by the logger when a sample is due)."""
+
+    t_us: int = 0  # the frame's time_usec: simulation time since boot
+    truth: object = None  # StateEstimate: the simulator's state in the HIL frame (paper frames)
+    estimate: object = None  # StateEstimate | None: what the vehicle flies on
+    row: tuple = ()  # the frame's controller row (CONTROLLER_FIELDS)
+    reference: object = None  # quadcommon.trajectories.Reference | None
+    output: object = None  # CascadeOutput | None (motors off: None)
+    controls: tuple = (0.0, 0.0, 0.0, 0.0)  # normalised actuator controls sent to the simulator
+    commander: object = None  # the Commander (its landed state is read when a sample needs it)
+    estimator: object = None  # EstimatorStatus | None (flying on truth: None)
+    parts: dict | None = None  # the frame's undecoded messages (sensor_combined reads HIL_SENSOR's)
+    gps: object = None  # hil.GpsFields of this frame's HIL_GPS, or None
+    thrust_max_n: float = 1.0
+    home_geodetic: tuple = (0.0, 0.0, 0.0)  # the local frame's origin (lat, lon, alt)
+    system_id: int = 1
+    utc_offset_us: int = 0  # UTC minus simulation time (µs) when the log started with a clock, else 0
+    arming_time_us: int = 0
+    mode_time_us: int = 0
+
+
+class TopicSpec(NamedTuple):
+    """One logged topic: PX4's message notation of its fields after the timestamp, and at most one
+    sample per ``interval_ms`` of simulation time (0: every control step)."""
+
+    name: str
+    fields: str
+    interval_ms: int
+    build: Callable[[Snapshot], tuple | None]
+
+    def format(self, extra: str = "") -> Format:
+        return Format(self.name, fields(f"uint64_t timestamp; {self.fields}; {extra}"))
+
+
+def _q_ned(euler) -> tuple[float, float, float, float]:
+    return frames.quaternion_to_ned(quaternion_from_euler(*euler))
+
+
+def _rates_frd(state) -> tuple[float, float, float]:
+    phi, theta, _ = state.euler_rad
+    return frames.vector_to_ned(body_rates_from_euler_rates(phi, theta, state.euler_rates_rad_s))
+
+
+# -- PX4's topics --------------------------------------------------------------------------------------
+LOCAL_POSITION = (
+    "uint64_t timestamp_sample; uint64_t ref_timestamp; double ref_lat; double ref_lon; "
+    "float x; float y; float z; float vx; float vy; float vz; float z_deriv; float ax; float ay; float az; "
+    "float heading; float ref_alt; float eph; float epv; float evh; float evv; "
+    "bool xy_valid; bool z_valid; bool v_xy_valid; bool v_z_valid; bool xy_global; bool z_global; "
+    "bool heading_good_for_control; bool dead_reckoning"
+)
+
+
+def _local_position(s: Snapshot, state, estimator) -> tuple:
+    x, y, z = frames.vector_to_ned(state.position_m)
+    vx, vy, vz = frames.vector_to_ned(state.velocity_m_s)
+    lat, lon, alt = s.home_geodetic
+    if estimator is not None:
+        eph, epv = estimator.pos_horiz_accuracy_m, estimator.pos_vert_accuracy_m
+        evh, dead_reckoning = estimator.vel_accuracy_m_s, estimator.dead_reckoning
+    else:
+        eph = epv = evh = 0.0
+        dead_reckoning = False
+    return (s.t_us, s.t_us, 0, lat, lon, x, y, z, vx, vy, vz, vz, NAN, NAN, NAN,
+            frames.yaw_to_ned(state.euler_rad[2]), alt, eph, epv, evh, evh,
+            True, True, True, True, True, True, True, dead_reckoning)  # fmt: skip
+
+
+def vehicle_local_position(s: Snapshot) -> tuple | None:
+    return None if s.estimate is None else _local_position(s, s.estimate, s.estimator)
+
+
+def vehicle_local_position_groundtruth(s: Snapshot) -> tuple:
+    return _local_position(s, s.truth, None)
+
+
+GLOBAL_POSITION = (
+    "uint64_t timestamp_sample; double lat; double lon; float alt; float alt_ellipsoid; float delta_alt; "
+    "float eph; float epv; float terrain_alt; bool lat_lon_valid; bool alt_valid; bool terrain_alt_valid; "
+    "bool dead_reckoning"
+)
+
+
+def _global_position(s: Snapshot, state, estimator) -> tuple:
+    lat, lon, alt = frames.ned_to_geodetic(*frames.vector_to_ned(state.position_m), s.home_geodetic)
+    eph, epv = (estimator.pos_horiz_accuracy_m, estimator.pos_vert_accuracy_m) if estimator else (0.0, 0.0)
+    reckoning = estimator.dead_reckoning if estimator else False
+    return (s.t_us, s.t_us, lat, lon, alt, alt, 0.0, eph, epv, NAN, True, True, False, reckoning)
+
+
+def vehicle_global_position(s: Snapshot) -> tuple | None:
+    return None if s.estimate is None else _global_position(s, s.estimate, s.estimator)
+
+
+def vehicle_global_position_groundtruth(s: Snapshot) -> tuple:
+    return _global_position(s, s.truth, None)
+
+
+ATTITUDE = "uint64_t timestamp_sample; float[4] q; float[4] delta_q_reset; uint8_t quat_reset_counter"
+
+
+def vehicle_attitude(s: Snapshot) -> tuple | None:
+    if s.estimate is None:
+        return None
+    return (s.t_us, s.t_us, *_q_ned(s.estimate.euler_rad), 1.0, 0.0, 0.0, 0.0, 0)
+
+
+def vehicle_attitude_groundtruth(s: Snapshot) -> tuple:
+    return (s.t_us, s.t_us, *_q_ned(s.truth.euler_rad), 1.0, 0.0, 0.0, 0.0, 0)
+
+
+ANGULAR_VELOCITY = "uint64_t timestamp_sample; float[3] xyz; float[3] xyz_derivative"
+
+
+def vehicle_angular_velocity(s: Snapshot) -> tuple | None:
+    if s.estimate is None:
+        return None
+    return (s.t_us, s.t_us, *_rates_frd(s.estimate), NAN, NAN, NAN)
+
+
+def vehicle_angular_velocity_groundtruth(s: Snapshot) -> tuple:
+    return (s.t_us, s.t_us, *_rates_frd(s.truth), NAN, NAN, NAN)
+
+
+ATTITUDE_SETPOINT = (
+    "float roll_body; float pitch_body; float yaw_body; float yaw_sp_move_rate; float[4] q_d; "
+    "float[3] thrust_body; bool reset_integral; bool fw_control_yaw_wheel"
+)
+
+
+def vehicle_attitude_setpoint(s: Snapshot) -> tuple | None:
+    eta_d = s.row[ROW_EULER_REF]
+    if s.output is None or not math.isfinite(eta_d[0]):
+        return None
+    roll, pitch, yaw = frames.euler_to_ned(eta_d)
+    yaw_rate = frames.yaw_to_ned(s.reference.yaw_rate_rad_s) if s.reference is not None else 0.0
+    thrust = s.row[ROW_U1] / s.thrust_max_n
+    return (s.t_us, roll, pitch, yaw, yaw_rate, *_q_ned(eta_d), 0.0, 0.0, -thrust, False, False)
+
+
+RATES_SETPOINT = "float roll; float pitch; float yaw; float[3] thrust_body; bool reset_integral"
+
+
+def vehicle_rates_setpoint(s: Snapshot) -> tuple | None:
+    out = s.output
+    if out is None:
+        return None
+    phi, theta, _ = out.euler_ref_rad
+    roll, pitch, yaw = frames.vector_to_ned(body_rates_from_euler_rates(phi, theta, out.euler_rate_ref_rad_s))
+    return (s.t_us, roll, pitch, yaw, 0.0, 0.0, -out.thrust_n / s.thrust_max_n, False)
+
+
+LOCAL_POSITION_SETPOINT = (
+    "float x; float y; float z; float yaw; float yawspeed; float vx; float vy; float vz; "
+    "float[3] acceleration; float[3] thrust"
+)
+
+
+def vehicle_local_position_setpoint(s: Snapshot) -> tuple | None:
+    ref = s.reference
+    if ref is None:
+        return None
+    x, y, z = frames.vector_to_ned(ref.position_m)
+    vx, vy, vz = frames.vector_to_ned(ref.velocity_m_s)
+    thrust = (0.0, 0.0, -s.row[ROW_U1] / s.thrust_max_n) if s.output is not None else NAN3
+    return (s.t_us, x, y, z, frames.yaw_to_ned(ref.yaw_rad), frames.yaw_to_ned(ref.yaw_rate_rad_s),
+            vx, vy, vz, *frames.vector_to_ned(ref.acceleration_m_s2), *thrust)  # fmt: skip
+
+
+LAND_DETECTED = (
+    "float alt_max; bool freefall; bool ground_contact; bool maybe_landed; bool landed; "
+    "bool in_ground_effect; bool in_descend; bool at_rest"
+)
+
+
+def vehicle_land_detected(s: Snapshot) -> tuple:
+    """PX4's land detector flags from MAV_LANDED_STATE: on the ground, landing (descending), or
+    in the air (taking off included)."""
+    state = s.commander.landed_state
+    on_ground = state is LandedState.ON_GROUND
+    landing = state is LandedState.LANDING
+    return (s.t_us, NAN, False, on_ground, on_ground, on_ground, False, landing, on_ground)
+
+
+OUTPUTS = "uint32_t noutputs; float[16] output"
+
+
+def actuator_outputs(s: Snapshot) -> tuple:
+    c = s.controls
+    return (s.t_us, len(c), *c, *(0.0,) * (ACTUATOR_OUTPUTS - len(c)))
+
+
+VEHICLE_STATUS = (
+    "uint64_t armed_time; uint64_t takeoff_time; uint64_t nav_state_timestamp; "
+    "uint32_t valid_nav_states_mask; uint32_t can_set_nav_states_mask; "
+    "uint8_t arming_state; uint8_t nav_state; uint8_t nav_state_user_intention; uint8_t hil_state; "
+    "uint8_t vehicle_type; bool failsafe; bool failsafe_and_user_took_over; bool gcs_connection_lost; "
+    "bool is_vtol; bool is_vtol_tailsitter; "
+    "bool in_transition_mode; bool in_transition_to_fw; uint8_t system_type; uint8_t system_id; "
+    "uint8_t component_id; bool pre_flight_checks_pass"
+)
+NAV_STATES_MASK = sum(1 << n for n in NAV_STATE.values())
+
+
+@functools.lru_cache(maxsize=64)
+def nav_state(custom_mode: int) -> int:
+    """PX4's nav_state of a custom_mode (unknown: AUTO_LOITER, hold); cached: looking a mode up
+    walks the FlightMode enum."""
+    mode = FlightMode.from_custom_mode(int(custom_mode))
+    return NAV_STATE.get(mode, 4) if mode is not None else 4
+
+
+def vehicle_status(s: Snapshot) -> tuple:
+    armed = s.row[ROW_ARMED] > 0.5
+    state = nav_state(int(s.row[ROW_CUSTOM_MODE]))
+    return (s.t_us, s.arming_time_us if armed else 0, 0, s.mode_time_us,
+            NAV_STATES_MASK, NAV_STATES_MASK, ARMING_STATE_ARMED if armed else ARMING_STATE_DISARMED,
+            state, state, 1, VEHICLE_TYPE_ROTARY_WING, False, False, False, False, False, False, False,
+            MAV_TYPE_QUADROTOR, s.system_id, 1, True)  # fmt: skip
+
+
+SENSOR_COMBINED = (
+    "float[3] gyro_rad; uint32_t gyro_integral_dt; int32_t accelerometer_timestamp_relative; "
+    "float[3] accelerometer_m_s2; uint32_t accelerometer_integral_dt; uint8_t accelerometer_clipping; "
+    "uint8_t gyro_clipping; uint8_t accel_calibration_count; uint8_t gyro_calibration_count"
+)
+
+
+def sensor_combined(s: Snapshot) -> tuple | None:
+    """HIL_SENSOR's IMU as the simulator sent it (FRD already), non-finite samples left out."""
+    imu = imu_of(s.parts) if s.parts is not None else None
+    if imu is None or not math.isfinite(sum(imu)):
+        return None
+    gx, gy, gz, ax, ay, az = imu
+    return (s.t_us, gx, gy, gz, 0, 0, ax, ay, az, 0, 0, 0, 0, 0)
+
+
+GPS_POSITION = (
+    "uint64_t timestamp_sample; uint64_t time_utc_usec; uint32_t device_id; double latitude_deg; "
+    "double longitude_deg; double altitude_msl_m; double altitude_ellipsoid_m; float s_variance_m_s; "
+    "float c_variance_rad; float eph; float epv; float hdop; float vdop; int32_t noise_per_ms; "
+    "int32_t jamming_indicator; float vel_m_s; float vel_n_m_s; float vel_e_m_s; float vel_d_m_s; "
+    "float cog_rad; uint8_t fix_type; bool vel_ned_valid; uint8_t satellites_used"
+)
+_UNKNOWN_U16 = 65535
+
+
+def vehicle_gps_position(s: Snapshot) -> tuple | None:
+    g = s.gps
+    if g is None:
+        return None
+    alt = g.alt * 1e-3
+    eph = g.eph * 0.01 if g.eph != _UNKNOWN_U16 else NAN
+    epv = g.epv * 0.01 if g.epv != _UNKNOWN_U16 else NAN
+    cog = math.radians(g.cog * 0.01) if g.cog != _UNKNOWN_U16 else NAN
+    utc = s.t_us + s.utc_offset_us if s.utc_offset_us else 0
+    return (s.t_us, s.t_us, utc, 0, g.lat * 1e-7, g.lon * 1e-7, alt, alt, NAN, NAN, eph, epv, eph, epv, 0, 0,
+            g.vel * 0.01 if g.vel != _UNKNOWN_U16 else NAN, g.vn * 0.01, g.ve * 0.01, g.vd * 0.01, cog,
+            g.fix_type, True, g.satellites_visible)  # fmt: skip
+
+
+BATTERY = (
+    "float voltage_v; float current_a; float current_average_a; float discharged_mah; float remaining; "
+    "float scale; float temperature; uint8_t cell_count; bool connected; uint8_t id; uint8_t warning"
+)
+
+
+def battery_status(s: Snapshot) -> tuple:
+    """The simulated vehicle has no battery model: a full, healthy 4S pack (as SYS_STATUS says)."""
+    return (s.t_us, 16.0, -1.0, -1.0, 0.0, 1.0, 1.0, NAN, 4, True, 0, 0)
+
+
+ESTIMATOR_STATUS = (
+    "uint64_t timestamp_sample; uint64_t control_mode_flags; float[3] output_tracking_error; "
+    "uint32_t filter_fault_flags; float pos_horiz_accuracy; float pos_vert_accuracy; float hdg_test_ratio; "
+    "float vel_test_ratio; float pos_test_ratio; float hgt_test_ratio; float tas_test_ratio; "
+    "float hagl_test_ratio; float beta_test_ratio; uint16_t gps_check_fail_flags; "
+    "uint16_t innovation_check_flags; uint16_t solution_status_flags; uint8_t health_flags; "
+    "uint8_t timeout_flags"
+)
+
+
+def estimator_status(s: Snapshot) -> tuple | None:
+    e = s.estimator
+    if e is None:
+        return None
+    # solution_status_flags are MAVLink's ESTIMATOR_STATUS_FLAGS bits, as PX4 fills them;
+    # health_flags (velocity, position, height: bit set = its test failing) and timeout_flags (no
+    # aiding: dead reckoning) as PX4's older estimator_status, which Flight Review plots.
+    health = (e.vel_ratio > 1.0) | (e.pos_horiz_ratio > 1.0) << 1 | (e.pos_vert_ratio > 1.0) << 2
+    timeout = 0b011 if e.dead_reckoning else 0
+    return (s.t_us, s.t_us, 0, 0.0, 0.0, 0.0, 0, e.pos_horiz_accuracy_m, e.pos_vert_accuracy_m,
+            e.mag_ratio, e.vel_ratio, e.pos_horiz_ratio, e.pos_vert_ratio, 0.0, 0.0, 0.0, 0, 0,
+            e.flags, health, timeout)  # fmt: skip
+
+
+# -- our own topics (paper frames) ---------------------------------------------------------------------
+TRACKING = "paper_tracking"
+TRACKING_FIELDS = (
+    "float[3] position_m; float[3] position_ref_m; float[3] euler_rad; float[3] euler_ref_rad; "
+    "float thrust_n; float[3] torque_euler_n_m; uint32_t custom_mode; bool armed"
+)
+
+
+def paper_tracking_values(t_us: int, truth, row: tuple) -> tuple:
+    """One ``paper_tracking`` sample: the frame's truth and its controller row (every control step:
+    the logger calls this directly, without the snapshot)."""
+    return (t_us, *truth.position_m, *row[ROW_POS_REF], *truth.euler_rad, *row[ROW_EULER_REF],
+            row[ROW_U1], *row[ROW_TAU], int(row[ROW_CUSTOM_MODE]), row[ROW_ARMED] > 0.5)  # fmt: skip
+
+
+def paper_tracking(s: Snapshot) -> tuple:
+    return paper_tracking_values(s.t_us, s.truth, s.row)
+
+
+CASCADE = "cascade_status"
+CASCADE_FIELDS = (
+    "float[3] velocity_ref_m_s; float[3] acceleration_ref_m_s2; float[2] roll_pitch_raw_rad; "
+    "float[3] euler_rate_ref_rad_s; float[3] acceleration_cmd_m_s2; float[3] torque_body_n_m; "
+    "float[4] actuator_controls; float[4] rotor_speeds_rad_s"
+)
+
+
+def cascade_status(s: Snapshot) -> tuple | None:
+    """Without the laws' states (the logger appends them: their names depend on the laws)."""
+    out, row = s.output, s.row
+    if out is None:
+        return (s.t_us, *row[ROW_VEL_REF], *row[ROW_ACC_REF], *row[ROW_RAW], *NAN3, *NAN3, 0.0, 0.0, 0.0,
+                *s.controls, 0.0, 0.0, 0.0, 0.0)  # fmt: skip
+    return (s.t_us, *row[ROW_VEL_REF], *row[ROW_ACC_REF], *row[ROW_RAW], *out.euler_rate_ref_rad_s,
+            *out.acceleration_cmd_m_s2, *out.torque_body_n_m, *s.controls,
+            *out.rotor_speeds_rad_s)  # fmt: skip
+
+
+def law_state_field(name: str) -> str:
+    """A law state's field name: ``translational.xi_x`` -> ``translational_xi_x``."""
+    return "".join(c if c.isalnum() or c == "_" else "_" for c in name)
+
+
+DISTURBANCE = "sim_disturbance"
+DISTURBANCE_FIELDS = "float[3] force_n; float[3] torque_n_m"
+
+
+def sim_disturbance(s: Snapshot) -> None:
+    """Not sampled from frames: FlightLogger.disturbance() logs what it is given."""
+    return None
+
+
+# The topics sampled from frames, in message-id order. vehicle_gps_position is sampled from every
+# frame that carries HIL_GPS, vehicle_status also whenever the mode or arming changes; paper_tracking
+# every control step; sim_disturbance as it is given (FlightLogger.disturbance).
+TOPICS: tuple[TopicSpec, ...] = tuple(
+    TopicSpec(build.__name__, layout, interval_ms, build)
+    for build, layout, interval_ms in (
+        (paper_tracking, TRACKING_FIELDS, 0),
+        (cascade_status, CASCADE_FIELDS, 50),
+        (vehicle_status, VEHICLE_STATUS, 500),
+        (vehicle_land_detected, LAND_DETECTED, 100),
+        (vehicle_attitude, ATTITUDE, 50),
+        (vehicle_attitude_setpoint, ATTITUDE_SETPOINT, 50),
+        (vehicle_angular_velocity, ANGULAR_VELOCITY, 20),
+        (vehicle_rates_setpoint, RATES_SETPOINT, 20),
+        (vehicle_local_position, LOCAL_POSITION, 100),
+        (vehicle_local_position_setpoint, LOCAL_POSITION_SETPOINT, 100),
+        (vehicle_global_position, GLOBAL_POSITION, 200),
+        (vehicle_gps_position, GPS_POSITION, 0),
+        (sensor_combined, SENSOR_COMBINED, 20),
+        (actuator_outputs, OUTPUTS, 100),
+        (battery_status, BATTERY, 200),
+        (estimator_status, ESTIMATOR_STATUS, 200),
+        (vehicle_angular_velocity_groundtruth, ANGULAR_VELOCITY, 20),
+        (vehicle_attitude_groundtruth, ATTITUDE, 20),
+        (vehicle_global_position_groundtruth, GLOBAL_POSITION, 100),
+        (vehicle_local_position_groundtruth, LOCAL_POSITION, 20),
+        (sim_disturbance, DISTURBANCE_FIELDS, 10),
+    )
+)
+# Sampled by the logger's own rules rather than by their interval alone (see TOPICS above).
+EVENT_TOPICS = ("vehicle_gps_position", DISTURBANCE)
