@@ -36,12 +36,20 @@ from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..guidance.sticks import LOST, Sticks, StickStream
-from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
-from ..mission.plans import Geofence
+from ..mission.executor import (
+    MissionAction,
+    MissionExecutor,
+    MissionState,
+    PlanContext,
+    check_mission,
+    fence_violation,
+)
+from ..mission.plans import Geofence, RallyPoint
 from ..params.definitions import RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD
 from ..params.store import ParameterStore
 from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, fence_excess, prearm_problem, rc_loss_action
 from .modes import FlightMode, LandedState
+from .rtl import return_altitude, return_destination
 from .transitions import (
     AFTER,
     ASKED,
@@ -150,7 +158,7 @@ class Commander:
         self._manual_limits = self.manual_limits()  # rebuilt when a parameter changes, not per step
         self.last_reference: Reference | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
-        self.rally_points: list[tuple[float, float]] = []  # uploaded rally points (paper x, y, m)
+        self.rally_points: list[RallyPoint] = []  # the uploaded rally plan (RTL's destinations)
         self.failsafes = FailsafeMonitor(params)
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
@@ -367,12 +375,35 @@ class Commander:
         excess, what = fence_excess(self.params, target, self.home, self.failsafes.geofence)
         return f"outside the geofence: {what}" if excess > 0.0 else None
 
-    def set_geofence(self, geofence: Geofence | None) -> None:
-        """The uploaded geofence plan (None or no areas: only the GF_MAX_* limits)."""
+    def set_geofence(self, t: float, geofence: Geofence | None) -> None:
+        """The uploaded geofence plan (None or no areas: only the GF_MAX_* limits). The stored
+        mission is checked against it as PX4 does: the fence is accepted whatever the mission;
+        a mission it excludes is announced ("Geofence violation for waypoint N"), AUTO.MISSION
+        refuses it until the mission or the fence changes, and flying it, the vehicle holds."""
         self.failsafes.geofence = geofence if geofence is not None and geofence.areas else None
+        problem = self.mission_fence_problem()
+        if problem is None:
+            return
+        self._event(SEVERITY_CRITICAL, f"{problem}: the mission is not valid with this geofence")
+        if self.phase == Phase.MISSION:
+            self._fire(t, Event.MISSION_INVALID)
+            self._event(SEVERITY_CRITICAL, "No valid mission available, loitering")
 
-    def set_rally_points(self, points: list[tuple[float, float]]) -> None:
-        """Rally points (paper frame x, y, m): RTL goes to the nearest one when closer than home."""
+    def mission_fence_problem(self) -> str | None:
+        """Why the stored mission breaks the geofence (PX4's "Geofence violation for waypoint N",
+        N counted from 1), or None."""
+        mission = self.mission
+        if mission is None or mission.count == 0:
+            return None
+        violation = fence_violation(mission.items, mission.origin, self.target_problem,
+                                    self.home or ZERO3)  # fmt: skip
+        if violation is None:
+            return None
+        seq, why = violation
+        return f"Geofence violation for waypoint {seq + 1} (item {seq}: {why})"
+
+    def set_rally_points(self, points: list[RallyPoint]) -> None:
+        """The rally plan: RTL's destinations besides home, by RTL_TYPE (:mod:`.rtl`)."""
         self.rally_points = list(points)
 
     # -- missions ------------------------------------------------------------------------------------
@@ -731,30 +762,31 @@ class Commander:
         self._event(SEVERITY_INFO, "landing")
 
     def _act_plan_return(self, t: float, **_) -> None:
+        """Climb to the return altitude, fly above the destination RTL_TYPE picks (:mod:`.rtl`),
+        then (PLAN_DONE) land there."""
         state, home = self.state, self.home
         assert state is not None and home is not None
         limits = self.limits()
         start = self.last_or_measured(state)
         yaw = start.yaw_rad
-        altitude = max(state.position_m[2], home[2] + self.params["RTL_RETURN_ALT"])
         brake = stop_from(start, limits)
         p = brake.sample(brake.duration_s).position_m
+        rtl_type = int(self.params["RTL_TYPE"])
+        destination = return_destination(rtl_type, p, home, self.rally_points)
+        if destination.name == "here":  # RTL_TYPE 5 without a rally point: PX4 lands where it is
+            self._fly(t, brake)
+            self._event(SEVERITY_WARNING, "no rally point to return to (RTL_TYPE 5): landing here")
+            return
+        altitude = return_altitude(state.position_m[2], destination, self.params["RTL_RETURN_ALT"])
         climb_to = (p[0], p[1], altitude)
-        # PX4 (RTL_TYPE 0): to the closest of home and the rally points, horizontally.
-        destination, where = (home[0], home[1]), "launch"
-        best = math.hypot(p[0] - home[0], p[1] - home[1])
-        for k, rally in enumerate(self.rally_points):
-            d = math.hypot(p[0] - rally[0], p[1] - rally[1])
-            if d < best:
-                destination, where, best = rally, f"rally point {k}", d
-        above_home = (destination[0], destination[1], altitude)
+        above = (destination.position_m[0], destination.position_m[1], altitude)
         pieces = [
             brake,
             LineMove(p, climb_to, limits, yaw, yaw),
-            LineMove(climb_to, above_home, limits, yaw, yaw),
+            LineMove(climb_to, above, limits, yaw, yaw),
         ]
         self._fly(t, PiecewiseTrajectory(pieces))
-        self._event(SEVERITY_INFO, f"returning to {where} at {altitude - home[2]:.1f} m")
+        self._event(SEVERITY_INFO, f"returning to {destination.name} at {altitude - home[2]:.1f} m")
 
     def _act_touchdown(self, t: float, **_) -> None:
         self._touchdown_at = t
@@ -776,6 +808,9 @@ class Commander:
         problem = check_mission(mission.items, mission.origin, self.limits(), self.params.values)
         if problem is not None:
             return self._refuse(DENIED, f"AUTO.MISSION refused: {problem[1]}")
+        fence_problem = self.mission_fence_problem()
+        if fence_problem is not None:
+            return self._refuse(DENIED, f"AUTO.MISSION refused: {fence_problem}")
         return None
 
     def _act_start_mission(self, t: float, **_) -> Outcome | None:
@@ -783,6 +818,9 @@ class Commander:
         mission, state = self.mission, self.state
         if mission is None or mission.count == 0:
             return self._refuse(DENIED, "AUTO.MISSION refused: no mission loaded")
+        fence_problem = self.mission_fence_problem()
+        if fence_problem is not None:
+            return self._refuse(DENIED, f"AUTO.MISSION refused: {fence_problem}")
         assert state is not None and self.home is not None
         on_ground = self.phase in ON_GROUND or not self.in_air()
         p = self.params

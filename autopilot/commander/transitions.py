@@ -55,6 +55,7 @@ class Event(Enum):
     MISSION_START = "mission start"  # MAV_CMD_MISSION_START: (re)start from the current item
     SET_CURRENT = "set current item"
     MISSION_REPLACED = "mission replaced"
+    MISSION_INVALID = "mission invalid"  # a new geofence excludes the mission flown (PX4: loiter)
     SCENARIO = "scenario"  # armed and flying a scenario's trajectory from t = 0
     REPOSITION = "reposition"  # MAV_CMD_DO_REPOSITION: fly to a point, then hold there
     # raised by the commander itself
@@ -143,6 +144,7 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
     (ARMED,                   E.MISSION_START,     P.MISSION,     M.AUTO_MISSION,  "start_mission"),
     ((P.MISSION,),            E.SET_CURRENT,       SAME,          KEEP,            "start_mission"),
     ((P.MISSION,),            E.MISSION_REPLACED,  P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
+    ((P.MISSION,),            E.MISSION_INVALID,   P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
     # -- plans that end, touchdown, timeouts -----------------------------------------------------
     ((P.TAKEOFF,),            E.PLAN_DONE,         P.HOLD,        M.AUTO_LOITER,   None),
     ((P.RTL,),                E.PLAN_DONE,         P.RTL_LAND,    M.AUTO_RTL,      "plan_landing"),
@@ -167,6 +169,7 @@ REFUSALS: dict[Event, str] = {
     E.REPOSITION: "reposition refused: disarmed (arm first)",
     E.SET_CURRENT: "",  # not flying the mission: the current item is just stored
     E.MISSION_REPLACED: "",  # not flying the mission: the new one is just stored
+    E.MISSION_INVALID: "",  # not flying the mission: AUTO.MISSION refuses it until it is valid
 }
 
 

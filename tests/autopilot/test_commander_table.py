@@ -3,9 +3,9 @@
 For each (phase, event) pair the table defines, a fresh commander is flown into the phase along a
 route of table rows (each step of the route is itself checked), the event is made to happen (a
 command is fired; an internal event is provoked: a plan is let run out, setpoints stop, the
-vehicle touches down, the geofence is breached, the sticks move or raise the throttle) and the
-phase and mode afterwards must be the row's. The vehicle follows its reference exactly and stops
-at the ground, as in the other commander tests.
+vehicle touches down, the geofence is breached or changed, the sticks move or raise the throttle)
+and the phase and mode afterwards must be the row's. The vehicle follows its reference exactly and
+stops at the ground, as in the other commander tests.
 """
 
 import math
@@ -32,6 +32,7 @@ from autopilot.guidance.sticks import Sticks
 from autopilot.mavlink.codec import mavlink as m
 from autopilot.mission.executor import MissionExecutor
 from autopilot.mission.items import WireItem, parse_item
+from autopilot.mission.plans import Area, Geofence
 from autopilot.params.definitions import GF_HOLD, GF_LAND, GF_RTL, default_parameters
 from quadcommon import frames
 from quadcommon.trajectories import Hover
@@ -136,6 +137,8 @@ class Flight:
             self.step()  # the stream as it was
             self.sticks = replace(self.sticks, forward=0.5)  # then a stick moves (held, it would not)
             self.step_until(lambda: c.phase != phase, seconds=1.0)
+        elif event == E.MISSION_INVALID:  # a fence that excludes the mission's waypoint (1, 0)
+            c.set_geofence(self.t, Geofence((Area(False, centre=(1.0, 0.0), radius_m=0.3),)))
         elif event == E.PLAN_DONE:
             self.step_until(lambda: c.phase != phase)
         elif event == E.TOUCHDOWN:
