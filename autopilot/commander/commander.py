@@ -9,7 +9,8 @@ as ``(severity, text)`` for the MAVLink shell to send as STATUSTEXT.
 Behaviour follows PX4 where PX4 users would expect it: arming only on the ground; takeoff climbs to
 ``MIS_TAKEOFF_ALT`` (or the commanded altitude) then holds (AUTO.LOITER); land descends at
 ``MPC_LAND_SPEED``, detects touchdown and disarms after ``COM_DISARM_LAND``; RTL climbs to
-``RTL_RETURN_ALT``, returns above home and lands; OFFBOARD needs a setpoint stream before it is
+``RTL_RETURN_ALT`` above its destination (home or a rally point, by ``RTL_TYPE``: :mod:`.rtl`),
+flies above it and lands; OFFBOARD needs a setpoint stream before it is
 entered and falls back to hold when setpoints stop for ``COM_OF_LOSS_T`` (simulation time); an
 armed vehicle that does not take off within ``COM_DISARM_PRFLT`` disarms itself. The manual modes
 (MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO) need the sticks (MANUAL_CONTROL) to be entered, take off
