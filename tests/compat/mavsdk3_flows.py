@@ -116,10 +116,8 @@ EXAMPLE_INPUTS_S = 6.0
 
 
 async def manual_control_example(drone: System) -> None:
-    """examples/manual_control.py on the landed, disarmed vehicle; then the sticks stop."""
-    # The vehicle runs at --speed 2: the example's 10 Hz (wall) is 5 Hz of simulation time, so the
-    # loss timeout is doubled to keep PX4's margin of a real-time vehicle (5 samples).
-    await drone.param.set_param_float("COM_RC_LOSS_T", 1.0)
+    """examples/manual_control.py on the landed, disarmed vehicle (COM_RC_LOSS_T 1 s: see
+    manual_control); then the sticks stop."""
     await drone.manual_control.set_manual_control_input(float(0), float(0), 0.5, float(0))
     await drone.action.arm()
     await drone.action.takeoff()
@@ -254,6 +252,9 @@ async def mission_raw(drone: System) -> None:
 
 
 async def manual_control(drone: System) -> None:
+    # The vehicle runs at --speed 2: a 10 Hz (wall) joystick is 5 Hz of simulation time, so the
+    # loss timeout is doubled to keep PX4's margin of a real-time vehicle (5 samples).
+    await drone.param.set_param_float("COM_RC_LOSS_T", 1.0)
     for _ in range(5):
         await drone.manual_control.set_manual_control_input(0.0, 0.0, 0.5, 0.0)
         await asyncio.sleep(0.1)
