@@ -104,9 +104,10 @@ class StickStream:
         self.sticks = sticks
 
     def fresh(self, t: float, loss_s: float) -> Sticks | None:
-        """The latest sticks if they arrived within ``loss_s`` of ``t``, else None."""
+        """The latest sticks if they arrived within ``loss_s`` before ``t``, else None (also for
+        sticks stamped after ``t``: from before a simulator restart, when time went back)."""
         sticks = self.sticks
-        if sticks is None or t - sticks.time_s > loss_s:
+        if sticks is None or not 0.0 <= t - sticks.time_s <= loss_s:
             return None
         return sticks
 
@@ -116,7 +117,7 @@ class StickStream:
         sticks = self.sticks
         if sticks is None:
             return None
-        stale = t - sticks.time_s > loss_s
+        stale = self.fresh(t, loss_s) is None
         if stale and not self.lost:
             self.lost = True
             self._lost_since = sticks.time_s

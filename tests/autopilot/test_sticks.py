@@ -82,6 +82,8 @@ def test_the_stream_is_lost_after_the_timeout_and_regained_with_the_gap():
     stream.receive(Sticks(2.7), 0.5, 0.3)
     kind, gap = stream.poll(2.7, 0.5)
     assert kind == REGAINED and gap == pytest.approx(2.3)
+    # The simulator restarted (time went back): sticks stamped in the old run are not fresh.
+    assert stream.fresh(0.1, 0.5) is None and stream.poll(0.1, 0.5) == (LOST, 0.0)
 
 
 def _feed(stream: StickStream, values, start=0.0, every=0.1, threshold=0.3) -> bool:
