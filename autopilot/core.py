@@ -46,7 +46,7 @@ from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
 from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
-from .control.cascade import Cascade, StateEstimate
+from .control.cascade import AttitudeReference, Cascade, StateEstimate
 from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
@@ -165,7 +165,7 @@ class AutopilotCore:
         self._statustext_id = 0
         self._frame_truth: StateEstimate | None = None  # the frame's truth (before the EKF's estimate)
 
-        self.params = default_parameters(setup.controller, sitl.rates, estimator=True)
+        self.params = default_parameters(setup.controller, sitl.rates, estimator=True, vehicle=setup.vehicle)
         self.params.values["MAV_SYS_ID"] = float(self.system_id)
         self.params.values["EKF2_EN"] = 1.0 if setup.estimator == "ekf" else 0.0
         load_params_file(config_path("estimator", setup.estimator_profile), self.params)
@@ -180,6 +180,7 @@ class AutopilotCore:
         self.commander = Commander(self.params)
         gains = controller_config_from_params(setup.controller, self.params)
         self.cascade = Cascade(gains, setup.vehicle, self.dt)
+        self._thrust_max_n = setup.vehicle.actuation.thrust_max_n  # U1_max: the manual modes' thrust scale
         self._gain_names = {spec.name for spec in controller_params(setup.controller)}
         self.flight_log = FlightLogger(
             self.params,
@@ -400,7 +401,7 @@ class AutopilotCore:
                 self.cascade.reset()
                 self._flying = True
             try:
-                output = self.cascade.step(est, guidance.reference)
+                output = self._cascade_step(est, guidance)
                 controls = output.actuator_controls
             except ControllerFailure as failure:
                 output, controls = None, self._controller_failed(t, failure)
@@ -411,6 +412,18 @@ class AutopilotCore:
         self._controls = controls
         self._frame_done = (frame, guidance, output)
         return self.actuators.encode(frame.time_usec, controls, commander.armed)
+
+    def _cascade_step(self, est: StateEstimate, guidance):
+        """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'
+        tilt, attitude, thrust as a fraction of the vehicle's U1_max) go in through the cascade's
+        own override arguments."""
+        manual = guidance.manual
+        if manual is None:
+            return self.cascade.step(est, guidance.reference)
+        attitude = AttitudeReference(*manual.attitude) if manual.attitude is not None else None
+        thrust = manual.thrust * self._thrust_max_n if manual.thrust is not None else None
+        return self.cascade.step(est, guidance.reference, roll_pitch=manual.roll_pitch, attitude=attitude,
+                                 thrust_n=thrust)  # fmt: skip
 
     def _controller_failed(self, t: float, failure: ControllerFailure) -> tuple[float, float, float, float]:
         """A law gave a non-finite output or raised: flight termination (motors off, disarmed), as

@@ -59,7 +59,7 @@ from enum import Enum
 
 from ..mavlink.codec import mavlink as m
 from .items import ItemRejected, MissionItem, WireItem, parse_item
-from .plans import check_fence, parse_fence_item, parse_rally_item
+from .plans import check_fence, fence_notes, parse_fence_item, parse_rally_item
 
 RETRY_S = 0.5
 MAX_RETRIES = 5
@@ -330,6 +330,8 @@ class MissionProtocol:
         self._store(self._type, Mission(items, current), out)
         out.replies.append(self._ack(self.partner, m.MAV_MISSION_ACCEPTED, self._type))
         out.notices.append((SEVERITY_INFO, f"{_PLAN_NAMES[self._type]} of {len(items)} items accepted"))
+        if self._type == FENCE:
+            out.notices.extend((SEVERITY_INFO, note) for note in fence_notes(items))
         self._completed_upload = (self.partner, self._count - 1)
         self._idle()
 
