@@ -49,6 +49,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--signing-state", metavar="FILE", default=None,
                         help="where the signing key and timestamps persist (default: signing-N.json "
                         "beside --params, else beside --signing-key, else in memory)")  # fmt: skip
+    parser.add_argument("--impair", action="append", default=[], metavar="LINK:SPEC",
+                        help="impair a link, e.g. gcs:loss=5%%,delay=50ms (repeatable; replaces that link's "
+                        "[impair] entry of sitl.toml; docs/links.md)")  # fmt: skip
     args = parser.parse_args(argv)
     try:
         setup = AutopilotSetup.load(args.instance, args.controller, args.vehicle, args.sitl_config,
@@ -56,6 +59,9 @@ def main(argv: list[str] | None = None) -> int:
                                     args.estimator_profile)  # fmt: skip
         signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
         setup = dataclasses.replace(setup, signing=signing)
+        if args.impair:
+            impair = setup.sitl.impair.with_specs(args.impair)
+            setup = dataclasses.replace(setup, sitl=dataclasses.replace(setup.sitl, impair=impair))
         app = Autopilot(setup, zenoh=not args.no_zenoh, quiet=args.quiet)
         app.open()
     except (ConfigError, ValueError) as exc:
