@@ -31,7 +31,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .impairment import LINKS, ImpairConfig, ImpairmentError, parse_impairment
+from .impairment import LINKS, ImpairConfig, parse_impairment
 from .schema import ConfigError, Section, load_toml
 
 Vector3 = tuple[float, float, float]
@@ -519,9 +519,6 @@ def load_impair(sec: Section) -> ImpairConfig:
     links = {}
     for link in LINKS:
         text = sec.string(link, "")
-        try:
-            links[link] = parse_impairment(text, f"{sec.source}: key '{sec.key_name(link)}' = {text!r}")
-        except ImpairmentError as exc:
-            raise ConfigError(str(exc)) from None
+        links[link] = parse_impairment(text, f"{sec.source}: key '{sec.key_name(link)}' = {text!r}")
     sec.finish()
     return ImpairConfig(seed, **links)

@@ -32,6 +32,8 @@ import zlib
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
+from .schema import ConfigError
+
 LINKS = ("hil", "gcs", "api")
 REORDER_HOLD_S = 0.05  # a reordered datagram arrives this much later than its delay says
 MAX_DELAY_S = 10.0  # delay and jitter: at most this (s)
@@ -40,7 +42,7 @@ _TIME_KEYS = {"delay": "delay_s", "jitter": "jitter_s"}
 _TIME_UNITS = {"ms": 1e-3, "us": 1e-6, "s": 1.0}
 
 
-class ImpairmentError(ValueError):
+class ImpairmentError(ConfigError):
     """An impairment spec is invalid; the message names the value, its unit and the range."""
 
 

@@ -184,6 +184,7 @@ class VehicleSpec:
     signing_key_file: str | None = None  # MAVLink 2 signing key (--signing-key): hex key or passphrase
     sensors: str | None = None  # sensor profile (config/sensors); None: the scenario's
     estimator: str | None = None  # "truth" or "ekf"; None: the scenario's
+    impair: tuple[str, ...] = ()  # --impair LINK:SPEC for both processes (docs/links.md)
     extra_simulator_args: tuple[str, ...] = ()
     extra_autopilot_args: tuple[str, ...] = ()
 
@@ -219,6 +220,8 @@ class VehicleSpec:
 
     def _common(self) -> list[str]:
         common = ["--instance", str(self.instance), "--vehicle", self.vehicle]
+        for spec in self.impair:
+            common += ["--impair", spec]
         return common + (["--sitl-config", self.sitl_config] if self.sitl_config else [])
 
     def ports(self) -> wire.Ports:
