@@ -165,7 +165,7 @@ class Autopilot:
                 payload = query.payload.to_bytes() if query.payload is not None else b""
                 ok, reply = self.impaired.change(payload)
                 if ok:
-                    self.log(f"impairment now: {reply.decode()}")
+                    self.log(f"impairment changed at t={self.core.sim_time:.3f} s: {reply.decode()}")
                     query.reply(query.key_expr, reply)
                 else:
                     query.reply_err(reply)

@@ -60,7 +60,9 @@ def ports(instance: int) -> wire.Ports:
 
 
 @contextmanager
-def vehicle(instance: int, sitl_config: Path, speed: str = "2") -> Iterator[Launcher]:
+def vehicle(
+    instance: int, sitl_config: Path, speed: str = "2", impair: tuple[str, ...] = ()
+) -> Iterator[Launcher]:
     """One vehicle (simulator + autopilot) started by the ``quadsitl up`` launcher; always stopped.
 
     ``speed`` is the wall-clock pacing: MAVSDK and MAVProxy time out on the wall clock, so they run
@@ -68,7 +70,8 @@ def vehicle(instance: int, sitl_config: Path, speed: str = "2") -> Iterator[Laun
     """
     assert 0 <= instance <= 9, "compat tests use instances 0-9 of the shifted port block"
     with Launcher() as sitl:
-        sitl.start_vehicles([VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config))], 20.0)
+        spec = VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config), impair=impair)
+        sitl.start_vehicles([spec], 20.0)
         yield sitl
 
 

@@ -42,7 +42,8 @@ def test_the_papers_helix_is_bit_identical_under_hil_loss_duplication_and_reorde
     clean, lossy = runs
     assert len(lossy.truth_rows) == len(clean.truth_rows) == round(scenario.duration_s * 500) + 1
     assert np.array_equal(np.asarray(lossy.truth_rows), np.asarray(clean.truth_rows))
-    assert np.array_equal(np.asarray(lossy.controller_rows), np.asarray(clean.controller_rows), equal_nan=True)
+    controller = np.asarray(lossy.controller_rows), np.asarray(clean.controller_rows)
+    assert np.array_equal(*controller, equal_nan=True)
     frames = lossy.frames
     links = lossy.impaired.info()
     assert 0.04 * frames < links["hil sim->ap"]["dropped"] < 0.06 * frames
