@@ -50,6 +50,7 @@ from .control.cascade import Cascade, StateEstimate
 from .control.config import ControllerConfig, load_controller
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
+from .estimation.streams import StreamWatch
 from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
@@ -175,6 +176,7 @@ class AutopilotCore:
         self.hil_parser = new_parser()
         self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
+        self.sensor_streams = StreamWatch()  # sensor streams of the frames that stop (on the EKF)
         self._switch_estimator()
 
         ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
@@ -412,6 +414,8 @@ class AutopilotCore:
         if loop is None:  # EKF2_EN = 1 set in flight: the switch waits for the disarm
             return frame.state
         samples = frame.sensors
+        for text in self.sensor_streams.update(t, samples):  # a stream that stops is announced
+            self.statustext(m.MAV_SEVERITY_WARNING, text)
         if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
             self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
             return None

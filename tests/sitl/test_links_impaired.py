@@ -14,6 +14,7 @@ from gcs_scripts.upload_mission import MissionLink, items_from_list, same_item
 from quadcommon.config import load_scenario
 from quadcommon.impairment import ImpairConfig
 from quadcommon.trajectories import trajectory_from_spec
+from quadcommon.wire import new_parser, parse_datagram
 from simulator.core import SimulatorCore, SimulatorSetup
 from sitl.inprocess import GCS_LINK, RunOptions, paper_stack
 
@@ -242,3 +243,37 @@ def test_gcs_loss_fires_after_com_dl_loss_t_when_the_gcs_link_dies_and_not_on_a_
     stack.step()
     assert ap.commander.mode.px4_name == "AUTO.LAND"
     assert any("GCS connection lost" in text for text in gcs.statustext) is False  # the link is dead
+
+
+# -- a stream that stops ----------------------------------------------------------------------------
+@pytest.mark.timeout(120)
+def test_a_sensor_stream_that_stops_in_flight_is_announced_and_flown_through():
+    """Flying the helix on the EKF over the GPS profile, HIL_GPS vanishes from the frames for 3 s:
+    the autopilot says so after a second, the EKF dead reckons, the flight goes on, and the
+    stream's return is announced too."""
+    stack = paper_stack(load_scenario("helix"), load_controller("intbs_nlhinf"),
+                        RunOptions(estimator="ekf", sensors="gps"))  # fmt: skip
+    texts: list[str] = []
+    stack.autopilot.log = lambda text: texts.append(text)
+    parser, frame = new_parser(), stack.sim.begin_frame
+    cut = (6.0, 9.0)
+
+    def begin_frame() -> bytes:
+        data = frame()
+        if cut[0] <= stack.sim.t < cut[1]:  # the GPS stream stops (and comes back)
+            data = b"".join(bytes(msg.get_msgbuf()) for msg in parse_datagram(parser, data)
+                            if msg.get_type() != "HIL_GPS")  # fmt: skip
+        return data
+
+    stack.sim.begin_frame = begin_frame
+    _fly(stack, 12.0)
+    stopped = [t for t in texts if "sensor stream stopped: GPS (HIL_GPS)" in t]
+    resumed = [t for t in texts if "sensor stream resumed: GPS (HIL_GPS)" in t]
+    assert len(stopped) == 1 and len(resumed) == 1, texts
+    t_stopped = float(stopped[0].split("[t=")[1].split("]")[0])
+    assert cut[0] + 0.9 < t_stopped <= cut[0] + 1.05  # a second after the last fix (10 Hz)
+    assert float(resumed[0].split("[t=")[1].split("]")[0]) == pytest.approx(cut[1], abs=0.11)
+    assert stack.autopilot.commander.armed
+    truth = np.asarray(stack.truth_rows)
+    assert np.all(np.isfinite(truth)) and truth[-1][3] > 0.5  # still flying, no hang
+    assert not any("stream stopped" in t and "GPS" not in t for t in texts)  # the others flowed on
