@@ -165,7 +165,8 @@ class Autopilot:
                 payload = query.payload.to_bytes() if query.payload is not None else b""
                 ok, reply = self.impaired.change(payload)
                 if ok:
-                    self.log(f"impairment changed at t={self.core.sim_time:.3f} s: {reply.decode()}")
+                    now_impaired = self.impaired.config.describe()
+                    self.log(f"impairment changed at t={self.core.sim_time:.3f} s: {now_impaired}")
                     query.reply(query.key_expr, reply)
                 else:
                     query.reply_err(reply)

@@ -34,6 +34,8 @@ def change_impairment(
     Raises ImpairmentError for a bad spec (before sending), NoAnswer if a process stays silent."""
     ImpairConfig().with_specs(specs, "impair")  # refused here, naming the value, before anything is sent
     payload = " ".join(specs).encode()
+    import zenoh
+
     own = session is None
     if own:
         session = bus.open_peer(wire.ports(instance, zenoh_base=load_sitl().zenoh_port_base).zenoh, router)
@@ -42,7 +44,10 @@ def change_impairment(
     deadline = time.monotonic() + timeout_s
     try:
         while len(answers) < len(PROCESSES) and time.monotonic() < deadline:
-            for reply in session.get(key, payload=payload, timeout=max(deadline - time.monotonic(), 0.1)):
+            # Both processes answer on the same key: no consolidation, or zenoh keeps one reply
+            replies = session.get(key, payload=payload, timeout=max(deadline - time.monotonic(), 0.1),
+                                  consolidation=zenoh.ConsolidationMode.NONE)  # fmt: skip
+            for reply in replies:
                 body = reply.ok.payload.to_bytes() if reply.ok is not None else reply.err.payload.to_bytes()
                 try:
                     answer = json.loads(body)

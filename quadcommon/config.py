@@ -448,7 +448,7 @@ class SitlConfig:
     zenoh_router: str  # "" for peer-to-peer on loopback, else an endpoint like tcp/host:7447
     lockstep_timeout_s: float
     lockstep_spin_s: float = 0.002  # busy-wait for the peer's datagram this long before blocking
-    lockstep_resend_s: float = 0.02  # wall: a frame unanswered this long is sent again
+    lockstep_resend_s: float = 0.01  # wall: a frame unanswered this long is sent again
     impair: ImpairConfig = ImpairConfig()  # loss, delay ... per link ([impair], --impair)
 
 
@@ -502,7 +502,7 @@ def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
     sec = root.section("lockstep", optional=True)
     timeout = sec.number("timeout_s", 2.0, lo=0.05, hi=600.0, unit="s")
     spin = sec.number("spin_s", 0.002, lo=0.0, hi=0.05, unit="s")
-    resend = sec.number("resend_s", 0.02, lo=0.001, hi=1.0, unit="s")
+    resend = sec.number("resend_s", 0.01, lo=0.001, hi=1.0, unit="s")
     sec.finish()
     if resend >= timeout:
         raise sec.error("resend_s", resend, f"less than timeout_s ({timeout:g} s)")

@@ -162,7 +162,9 @@ class ImpairConfig:
         return ImpairedChannel(impairment, channel_seed(self.seed, name), name) if impairment.active else None
 
     def describe(self) -> str:
-        return "; ".join(f"{link}: {self.of(link).describe()}" for link in LINKS if self.of(link).active)
+        """``hil: loss=1%; gcs: delay=50ms`` (``none`` when every link is perfect)."""
+        text = "; ".join(f"{link}: {self.of(link).describe()}" for link in LINKS if self.of(link).active)
+        return text or "none"
 
 
 def channel_seed(seed: int, name: str) -> int:

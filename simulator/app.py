@@ -136,7 +136,7 @@ class Simulator:
     def _change_impairment(self, payload: bytes) -> tuple[bool, bytes]:
         ok, reply = self.impaired.change(payload)
         if ok:
-            self.log(f"impairment changed at t={self.core.t:.3f} s: {reply.decode()}")
+            self.log(f"impairment changed at t={self.core.t:.3f} s: {self.impaired.config.describe()}")
         return ok, reply
 
     def _poll_services(self) -> None:
