@@ -6,6 +6,11 @@ its link. A lockstep frame is answered before anything else is sent (the simulat
 Every 50 ms of wall time the core's housekeeping runs, its controller internals go to zenoh and
 the info queryable is answered. Nothing here decides anything about the vehicle.
 
+With an impairment (``[impair]`` of sitl.toml, ``--impair``, or ``quadsitl impair`` on zenoh's
+``quadsitl/<N>/impair`` while running) every send goes through the link's outgoing channel and every
+ground-station datagram received through its incoming one (:mod:`quadcommon.impaired_udp`); the
+loop's waits end when a held datagram is due.
+
 Run: ``python -m autopilot --instance N --controller NAME --vehicle NAME``.
 """
 

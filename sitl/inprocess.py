@@ -11,6 +11,13 @@ their trajectories are identical.
 The autopilot's wall clock (``now``: mission transfer timeouts, parameter list pacing, simulator
 loss) is simulation time here: nothing waits on anything real.
 
+The links can be impaired as the processes' are (``impair=``, ``RunOptions.impair``, the
+simulator's ``[impair]``; :meth:`Lockstep.impair` while running): ground-station datagrams arrive
+when their channel says, and over an impaired HIL link each frame is exchanged as the two processes
+exchange it (resends after ``resend_after_s``, copies answered from the last answer, late ones
+dropped), in stack time. A slow exchange holds the stack's clock up (as it holds up the SITL); the
+flight itself is the same as without the impairment.
+
 Ground stations act in simulation time: a :class:`GroundStation` receives what the autopilot
 sends to it (parsed by pymavlink, as any client) and sends MAVLink messages, delivered before the
 next frame. A ``script(gcs, t)`` callback runs once per frame; :meth:`Lockstep.run_until` stops on
