@@ -6,16 +6,30 @@ test_links_impaired.py."""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
 import pytest
 
 from gcs_scripts import fly_setpoints, impair, upload_mission
+from quadcommon import bus, wire
 from sitl.launcher import Launcher, VehicleSpec, python_script
 
 LOSSY = "loss=5%,delay=50ms"
 WALL_LIMIT_S = 90.0
+
+
+def _info(instance: int, leaf: str) -> dict:
+    session = bus.open_peer(wire.ports(instance).zenoh)
+    try:
+        for _attempt in range(20):
+            for reply in session.get(wire.zenoh_key(instance, leaf), timeout=2.0):
+                if reply.ok is not None:
+                    return json.loads(reply.ok.payload.to_bytes())
+        raise AssertionError(f"no answer on {leaf}")
+    finally:
+        session.close()
 
 
 def _script(launcher: Launcher, module, *args: str):
@@ -66,6 +80,10 @@ def test_offboard_loss_fires_after_com_of_loss_t_once_quadsitl_impair_cuts_the_a
         # COM_OF_LOSS_T (1 s) after the last setpoint, which came at most a telemetry period and the
         # zenoh query's handling (a housekeeping tick, 50 ms) before the cut
         assert 0.85 <= t_lost - t_cut <= 1.05, (t_cut, t_lost)
+        info = _info(n, "autopilot/info")  # the counts on the autopilot's info queryable
+        assert info["impairment"]["api out"]["impairment"] == "loss=100%"
+        assert info["impairment"]["api out"]["dropped"] == info["impairment"]["api out"]["sent"] > 0
+        assert _info(n, "info")["resends"] >= 0  # the simulator's, beside its sim time
         lines = autopilot.output.splitlines()
         at = lines.index(lost)
         assert lines[at - 1].endswith("mode AUTO.LOITER") and lines[at - 1][:22] == lost[:22]  # hold, then
