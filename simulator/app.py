@@ -31,7 +31,6 @@ from __future__ import annotations
 import select
 import sys
 import time
-from array import array
 from typing import Any
 
 from quadcommon import bus, wire
@@ -39,13 +38,13 @@ from quadcommon.impaired_udp import ImpairedLinks, ImpairedSender, wait_s
 from quadcommon.udp import PortInUse, bind_udp
 
 from .core import PlantDiverged, SimulatorCore, SimulatorSetup
+from .latency import LatencyHistogram
 from .mavlink.hil import ActuatorAnswer
 from .pacing import Pacer
 from .truth_bus import GustUploadServer, InfoServer, RequestServer, TruthStream
 
 POLL_S = 0.05  # longest blocking wait: bounds the reaction time to SIGTERM and info queries
 MAX_DATAGRAM = 65535
-MAX_ROUND_TRIP_SAMPLES = 2_000_000  # 16 MB at most, ~1 h at 500 Hz
 MAX_DRAIN = 1000  # datagrams read per frame while the autopilot is lost (bounded)
 
 
@@ -77,7 +76,7 @@ class Simulator:
         self.pacer: Pacer | None = None
         self.work_s = self.wait_s = 0.0  # wall time per frame: own work, waiting for the autopilot
         self.loop_start = self.loop_s = 0.0  # the frame loop's wall time (linked to the last frame)
-        self.round_trips = array("d")  # HIL round trip per frame (wall s); bounded memory
+        self.round_trips = LatencyHistogram()  # HIL round trip per frame (wall s); constant memory
         self._outage_wall = 0.0
 
     def log(self, text: str) -> None:
@@ -270,8 +269,8 @@ class Simulator:
                     break  # stopped while waiting
                 if answer is None:
                     pacer.resync()  # the wait was an outage, not simulated time
-                elif len(self.round_trips) < MAX_ROUND_TRIP_SAMPLES:
-                    self.round_trips.append(perf_counter() - sent_at)
+                else:
+                    self.round_trips.add(perf_counter() - sent_at)
             answered = perf_counter()
             core.end_frame(answer)
             if core.warnings:
@@ -293,7 +292,6 @@ class Simulator:
             t = self.core.t
             text += f"; {t:.3f} s simulated in {self.loop_s:.3f} s of frame loop ({t / self.loop_s:.1f}x)"
         if self.round_trips:
-            rtt = sorted(self.round_trips)
-            median, p99 = rtt[len(rtt) // 2], rtt[min(int(0.99 * len(rtt)), len(rtt) - 1)]
+            median, p99 = self.round_trips.quantile(0.5), self.round_trips.quantile(0.99)
             text += f"; HIL round trip median {1e6 * median:.0f} us, p99 {1e6 * p99:.0f} us"
         return text
