@@ -58,6 +58,10 @@ def mission_items() -> list:
     return upload_mission.items_from_list({"frame": "paper", "items": entries})
 
 
+def _interrupt(*_args) -> None:
+    raise KeyboardInterrupt
+
+
 def fly_mission(link, items, sample) -> None:
     """From the first item: arm, AUTO.MISSION, until the vehicle has landed and disarmed."""
     last = len(items) - 1
@@ -146,13 +150,18 @@ def main() -> int:
                 samples.append((now - wall0, sim_s, {k: rss_mb(p) for k, p in pids.items()}))
             return False
 
+        signal.signal(signal.SIGTERM, _interrupt)  # stopped early: still report what was flown
         try:
             while True:
                 next_sample[0] = 0.0
                 sample()
                 if samples[-1][1] >= target_s:
                     break
-                fly_mission(link, items, sample)
+                try:
+                    fly_mission(link, items, sample)
+                except KeyboardInterrupt:
+                    print("soak: interrupted; reporting what was flown", flush=True)
+                    break
                 missions += 1
                 if missions % 10 == 0:
                     s = samples[-1]
@@ -163,7 +172,7 @@ def main() -> int:
             link.close()
             session.close()
             recorder.send_signal(signal.SIGINT)
-            recorder_code = recorder.wait(120.0)
+            recorder_code = recorder.wait(600.0)  # it merges its parts into one Parquet file
             view.terminate()
             view.wait(30.0)
     report(samples, out, start_info, end_info, missions, recorder_code)

@@ -68,4 +68,4 @@ def test_under_hil_loss_the_sitl_flies_the_same_flight_as_without_it():
     gap = np.abs(truth[:, 1:] - inproc_truth[:, 1:]).max()
     assert gap <= 1e-9, f"largest difference in the truth rows: {gap:.2e}"
     resent = int(simulator.output.split(" frames resent")[0].rsplit(" ", 1)[1])
-    assert 0.005 * steps < resent < 0.05 * steps, simulator.tail()  # ~2 % of frames: either way lost
+    assert 0.005 * steps < resent < 0.2 * steps, simulator.tail()  # ~2 %: either way lost (+ a slow answer)
