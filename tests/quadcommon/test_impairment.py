@@ -152,3 +152,24 @@ def test_time_is_an_argument_and_nothing_leaves_before_its_time():
     channel.send(b"y", 11.0)
     assert channel.due(100.0) == [] and channel.counts.dropped == 1
     assert channel.info()["impairment"] == "loss=100%"
+
+
+def test_quadsitl_impair_refuses_a_bad_spec_before_sending_anything(capsys):
+    from gcs_scripts import impair
+
+    assert impair.main(["api:loss=5"], prog="quadsitl impair") == 2
+    assert "quadsitl impair: impair api: loss=5: give a percentage with '%'" in capsys.readouterr().err
+
+
+def test_a_live_change_applies_to_the_links_it_names_and_reports_them():
+    from quadcommon.impaired_udp import ImpairedLinks
+
+    links = ImpairedLinks(ImpairConfig().with_specs(["hil:loss=1%"]), "autopilot")
+    links.receiver("api", "in")
+    hil = links.sender(None, "hil", "ap->sim")
+    assert links.receiver("gcs", "in").channel is None  # perfect: no channel, the direct path
+    ok, reply = links.change(b"api:loss=100% hil:none")
+    assert ok and hil.channel.impairment == Impairment() and links.endpoints[("api", "in")].channel
+    assert '"api in": {"impairment": "loss=100%"' in reply.decode()
+    ok, reply = links.change(b"api:loss=500%")
+    assert not ok and "loss=500% is out of range" in reply.decode() and links.config.api.loss == 1.0
