@@ -163,6 +163,8 @@ def test_mission_upload_download_and_parameters_complete_over_a_lossy_slow_gcs_l
                 values[msg.param_index] = msg.param_value
         if total is not None and len(values) == total:
             break
+        if total is None:  # the request (or every answer) was lost: ask again
+            gcs.param_request_list_send(stack.autopilot.system_id, 1)
         for index in sorted(set(range(total or 0)) - set(values))[:20]:
             gcs.param_request_read_send(stack.autopilot.system_id, 1, b"", index)
     assert total is not None and len(values) == total
