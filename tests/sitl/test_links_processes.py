@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 from pathlib import Path
 
 import pytest
@@ -23,11 +24,13 @@ WALL_LIMIT_S = 90.0
 def _info(instance: int, leaf: str) -> dict:
     session = bus.open_peer(wire.ports(instance).zenoh)
     try:
-        for _attempt in range(20):
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:  # a fresh session may not know the queryable yet: no reply
             for reply in session.get(wire.zenoh_key(instance, leaf), timeout=2.0):
                 if reply.ok is not None:
                     return json.loads(reply.ok.payload.to_bytes())
-        raise AssertionError(f"no answer on {leaf}")
+            time.sleep(0.2)
+        raise AssertionError(f"no answer on {leaf} within 20 s")
     finally:
         session.close()
 
