@@ -48,6 +48,7 @@ from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
 from .control.cascade import Cascade, StateEstimate
 from .control.config import ControllerConfig, load_controller
+from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
 from .estimation.streams import StreamWatch
@@ -166,7 +167,7 @@ class AutopilotCore:
             log(f"warning: parameters inconsistent (arming refused until fixed): {problem}")
         self.commander = Commander(self.params)
         gains = controller_config_from_params(setup.controller, self.params)
-        self.cascade = Cascade(gains, setup.vehicle, self.dt, compiled=True)
+        self.cascade = Cascade(gains, setup.vehicle, self.dt)
         self._gain_names = {spec.name for spec in controller_params(setup.controller)}
         self.params.on_change(self._on_param_change)
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
@@ -381,8 +382,11 @@ class AutopilotCore:
             if not self._flying:
                 self.cascade.reset()
                 self._flying = True
-            output = self.cascade.step(est, guidance.reference)
-            controls = output.actuator_controls
+            try:
+                output = self.cascade.step(est, guidance.reference)
+                controls = output.actuator_controls
+            except ControllerFailure as failure:
+                output, controls = None, self._controller_failed(t, failure)
         else:
             self._flying = False
             self.cascade.reset()
@@ -391,6 +395,16 @@ class AutopilotCore:
         self._frame_done = (frame, guidance, output)
         self._last_answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
         return self._last_answer
+
+    def _controller_failed(self, t: float, failure: ControllerFailure) -> tuple[float, float, float, float]:
+        """A law gave a non-finite output or raised: flight termination (motors off, disarmed), as
+        PX4's failure detector terminates; the process flies on, the reason on every link."""
+        self.statustext(m.MAV_SEVERITY_EMERGENCY, f"flight terminated: {failure}"[:200])
+        self.log(f"flight terminated: {failure}")
+        self.commander.disarm(t, force=True)
+        self._flying = False
+        self.cascade.reset()
+        return (0.0, 0.0, 0.0, 0.0)
 
     # -- the estimator ----------------------------------------------------------------------------
     def _switch_estimator(self) -> None:

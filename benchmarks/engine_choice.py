@@ -132,7 +132,7 @@ def bench_jax(state0, consts, batch, steps) -> tuple[float, float] | None:
 def _numba_loops():
     from numba import njit
 
-    from simulator.dynamics.compiled import U_SIZE, U_TAU, U_THRUST, U_TORQUE, rk4_step
+    from simulator.dynamics.equations import U_SIZE, U_TAU, U_THRUST, U_TORQUE, rk4_step
 
     @njit(cache=True)
     def per_run(state0, P, u, steps, runs):
@@ -181,7 +181,7 @@ def main() -> None:
     plant.reset((0.0, 0.0, 1.0), (0.0, 0.0, 0.5))
     state0 = np.array(plant.state)
     consts = _constants(plant)
-    P = eng.plant_array(plant)
+    P = np.array(plant.parameters())
 
     results: dict[str, float] = {}
     # numpy is slow: a tenth of the steps gives the per-step cost just as well.

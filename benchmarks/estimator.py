@@ -5,10 +5,10 @@ sensor models' own samples (profiles ``gps`` and ``mocap``) of a vehicle held at
 simulated seconds, generated before timing; the filter (``autopilot.estimation``) is then fed
 exactly as the autopilot feeds it, each call timed. Reports the best of N runs per figure (the
 machine is shared: the best run is the least disturbed). Also measured, in the same run, why the
-hot path is written as it is: the covariance prediction ``F P F^T`` as the compiled kernel (what
-the filter runs with numba), as numpy products (its fallback) and as a block-sparse plain-float
-version written out below; the whole filter per control step on the kernels and on the numpy
-products; and the nominal propagation in plain floats against small numpy arrays.
+hot path is written as it is: the covariance prediction ``F P F^T + Q`` as the filter computes it
+(:func:`autopilot.estimation.kernels.predict_covariance`, compiled; run by Python with
+``QUADSITL_PURE_PYTHON=1``), as two numpy products and as a block-sparse plain-float version
+written out below; and the nominal propagation in plain floats against small numpy arrays.
 Last lines: ``name: value unit``.
 """
 
@@ -29,6 +29,8 @@ from autopilot.estimation import (
     VisionPose,
     load_estimator_params,
 )
+from autopilot.estimation.kernels import predict_covariance
+from quadcommon.kernel import compiled, compiling
 from quadcommon.rigid_body import quaternion_from_euler, rotation_from_quaternion
 from simulator.dynamics.plant import TruthState
 from simulator.sensors import SensorSuite, load_sensors
@@ -76,15 +78,11 @@ def make_inputs(profile: str, seconds: float) -> list:
     return frames
 
 
-def feed(
-    profile: str, frames: list, compiled: bool = True
-) -> tuple[dict[str, float], dict[str, int], float, int]:
+def feed(profile: str, frames: list) -> tuple[dict[str, float], dict[str, int], float, int]:
     """Feed one run; per-kind total seconds and counts of the calls that fused or gated a sample
     (after the alignment; a sample skipped by a fusion-rate limit is not counted), and the
-    total over the control steps. ``compiled=False``: the numpy products instead of the kernels."""
+    total over the control steps."""
     ekf = ErrorStateEkf(load_estimator_params(profile))
-    if not compiled:
-        ekf._kernels = None
     methods = {
         "predict": ekf.predict, "gps": ekf.fuse_gps, "baro": ekf.fuse_baro, "mag": ekf.fuse_mag,
         "vision": ekf.fuse_vision,
@@ -118,10 +116,13 @@ def feed(
 
 # -- the alternatives measured against the filter's choices ------------------------------------------
 def covariance_numpy(
-    P: np.ndarray, F: np.ndarray, q: np.ndarray, diag: np.ndarray, f_idx, values
+    P: np.ndarray, F: np.ndarray, q: np.ndarray, diag: np.ndarray, dt: float, S: np.ndarray, B: np.ndarray
 ) -> np.ndarray:
-    """What ErrorStateEkf.predict does: fill F's moving entries, two products, add Q."""
-    F.flat[f_idx] = values
+    """F P F^T + Q as numpy products: fill F's moving blocks (see covariance_plain), two products,
+    add Q."""
+    F[0, 3] = F[1, 4] = F[2, 5] = dt
+    F[3:6, 6:9] = S
+    F[3:6, 12:15] = F[6:9, 9:12] = B
     P = F @ P @ F.T
     P.flat[diag] += q
     return P
@@ -216,11 +217,6 @@ def main() -> None:
         figures[f"estimator_step_{profile}"] = best_step
         for kind, us in best_kind.items():
             figures.setdefault(f"estimator_{kind}", us)
-        if ErrorStateEkf()._kernels is not None:  # the same run on the numpy products
-            runs = [feed(profile, frames, compiled=False) for _ in range(args.repeat)]
-            step_numpy = min(step_total / steps * 1e6 for _, _, step_total, steps in runs)
-            print(f"{profile}: per control step on the numpy products {step_numpy:.1f} us")
-            figures[f"estimator_step_{profile}_numpy"] = step_numpy
 
     # The hot-path choices, measured in this run.
     n = 19
@@ -228,28 +224,28 @@ def main() -> None:
     A = rng.normal(size=(n, n))
     P = A @ A.T * 1e-3 + np.eye(n) * 1e-3
     F = np.eye(n)
-    ekf = ErrorStateEkf()
-    values = tuple(rng.normal(size=len(ekf._f_idx)) * 1e-3)
     q = np.full(n, 1e-9)
     diag = np.arange(n) * (n + 1)
-    numpy_us = best_us(lambda: covariance_numpy(P, F, q, diag, ekf._f_idx, values), 5000, args.repeat)
     Pl = P.tolist()
     S = [[0.0, 0.02, -0.001], [-0.02, 0.0, 0.003], [0.001, -0.003, 0.0]]
     B = [[-0.002, 0.0001, 0.0], [-0.0001, -0.002, 0.0], [0.0, 0.0, -0.002]]
+    Sa, Ba = np.array(S), np.array(B)
+    numpy_us = best_us(lambda: covariance_numpy(P, F, q, diag, 0.002, Sa, Ba), 5000, args.repeat)
     ql = q.tolist()
     plain_us = best_us(lambda: covariance_plain(Pl, 0.002, S, B, ql), 500, args.repeat)
     ref = F.copy()
     ref[0:3, 3:6] = np.eye(3) * 0.002
     ref[3:6, 6:9], ref[3:6, 12:15], ref[6:9, 9:12] = S, B, B
     assert np.allclose(np.array(covariance_plain(Pl, 0.002, S, B, ql)), ref @ P @ ref.T + np.diag(q))
-    kernel_us = math.nan
-    if ekf._kernels is not None:  # the compiled kernel on the same F (R = -B / dt; S = -[m dt]_x)
-        Pk, scratch, dt = P.copy(), np.empty((n, n)), 0.002
-        R = [[-b / dt for b in row] for row in B]
-        args_k = (0, 3, 6, 9, 12, dt, S[1][2], S[2][0], S[0][1], *R[0], *R[1], *R[2], q)
-        ekf._kernels.predict_covariance(Pk, scratch, *args_k)
-        assert np.allclose(Pk, ref @ P @ ref.T + np.diag(q), rtol=1e-12, atol=1e-18)
-        kernel_us = best_us(lambda: ekf._kernels.predict_covariance(Pk, scratch, *args_k), 5000, args.repeat)
+    # The filter's kernel on the same F (R = -B / dt; S = -[m dt]_x).
+    kernel = compiled(predict_covariance)
+    dt = 0.002
+    R = tuple(tuple(-b / dt for b in row) for row in B)
+    md = (S[1][2], S[2][0], S[0][1])
+    Pk = P.copy()
+    kernel(Pk, q, dt, md, R)
+    assert np.allclose(Pk, ref @ P @ ref.T + np.diag(q), rtol=1e-12, atol=1e-18)
+    kernel_us = best_us(lambda: kernel(Pk, q, dt, md, R), 5000 if compiling() else 200, args.repeat)
     p3, v3, f3, g3 = np.zeros(3), np.ones(3), np.array([0.1, 0.2, 9.8]), np.array([0.0, 0.0, 9.81])
     R3 = np.eye(3)
     nominal_np_us = best_us(lambda: nominal_numpy(p3, v3, R3, f3, g3, 0.002), 20000, args.repeat)
@@ -260,7 +256,8 @@ def main() -> None:
         args.repeat,
     )
     print(
-        f"F P F^T: compiled kernel {kernel_us:.1f} us vs numpy {numpy_us:.1f} us "
+        f"F P F^T: the filter's kernel{'' if compiling() else ' (run by Python)'} {kernel_us:.1f} us "
+        f"vs numpy {numpy_us:.1f} us "
         f"vs block-sparse plain floats {plain_us:.1f} us "
         f"({plain_us / numpy_us:.0f}x); nominal p, v step: numpy {nominal_np_us:.1f} us vs floats "
         f"{nominal_fl_us:.1f} us ({nominal_np_us / nominal_fl_us:.0f}x)"
@@ -268,7 +265,7 @@ def main() -> None:
     print()
     for name, value in figures.items():
         print(f"{name}: {value:.1f} us")
-    print(f"covariance_prediction_compiled: {kernel_us:.1f} us")
+    print(f"covariance_prediction_{'compiled' if compiling() else 'python'}: {kernel_us:.1f} us")
     print(f"covariance_prediction_numpy: {numpy_us:.1f} us")
     print(f"covariance_prediction_plain_floats: {plain_us:.1f} us")
     print(f"nominal_pv_step_numpy: {nominal_np_us:.1f} us")

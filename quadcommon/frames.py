@@ -17,6 +17,8 @@ from __future__ import annotations
 import functools
 import math
 
+from .kernel import kernel
+
 Vector3 = tuple[float, float, float]
 Quaternion = tuple[float, float, float, float]
 
@@ -72,8 +74,9 @@ def quaternion_from_ned(q_ned: Quaternion) -> Quaternion:
     return (q_ned[0], q_ned[1], -q_ned[2], -q_ned[3])
 
 
+@kernel
 def wrap_pi(angle: float) -> float:
-    """Angle wrapped into [-pi, pi)."""
+    """Angle wrapped into [-pi, pi) (a kernel: the attitude laws and the campaign engine use it)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 

@@ -239,7 +239,8 @@ def build_parser() -> argparse.ArgumentParser:
         "share ports (N's API client port 14540+N is N-10's GCS client port ...) and are refused together",
     )
     p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1; at most 10)")
-    p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
+    p.add_argument("--controller", default="intbs_nlhinf",
+                   help=f"cascade (config/controllers): {', '.join(CONTROLLER_NAMES)}, or your own")
     p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")
     p.add_argument("--vehicle", default="paper_quad", help="vehicle model and plant (config/vehicle)")
     p.add_argument(
@@ -300,6 +301,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("rest", nargs=argparse.REMAINDER)
     p.set_defaults(func=lambda a: __import__("gcs_scripts.view.server", fromlist=["main"]).main(a.rest))
 
+    p = sub.add_parser("compile", help="compile the flight's kernels now (quadsitl compile --help)",
+                       add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=lambda a: __import__("sitl.compile", fromlist=["main"]).main(a.rest))
+
     p = sub.add_parser("demo", help="the paper's helix through the SITL for the three cascades (make demo)")
     p.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
     p.add_argument("--instance", type=int, default=0, help="vehicle instance used for the runs")
@@ -333,7 +339,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("run", help="one in-process run of a scenario")
     p.add_argument("scenario", help="scenario name (config/scenarios) or path")
-    p.add_argument("--controller", default="intbs_nlhinf", help="cascade: intbs_nlhinf, intbs, bs_nlhinf")
+    p.add_argument("--controller", default="intbs_nlhinf",
+                   help=f"cascade (config/controllers): {', '.join(CONTROLLER_NAMES)}, or your own")
     p.add_argument("--nominal-plant", action="store_true",
                    help="fly the nominal Section II model instead of the coupled plant")  # fmt: skip
     p.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
@@ -409,6 +416,10 @@ def _dispatch(argv: list[str]) -> int:
         from gcs_scripts.view.server import main as view_main
 
         return view_main(argv[1:], prog="quadsitl view")
+    if argv[:1] == ["compile"]:  # its own parser (options such as --help pass through)
+        from sitl.compile import main as compile_main
+
+        return compile_main(argv[1:])
     if argv[:1] == ["record"]:
         return _delegate(RECORD_MODULE, argv[1:], "quadsitl record")
     if argv[:1] == ["impair"]:

@@ -53,6 +53,18 @@ def _echo(name: str, line: str) -> None:
     write_line(f"[{name}] {line}")
 
 
+def compile_first(specs: Sequence[VehicleSpec]) -> None:
+    """Compile what the vehicles' processes would compile at their start (once after an install or
+    an edited equation: seconds per entry, and the link would wait on it), with a word about it."""
+    from .compile import compile_all, missing, targets
+
+    todo = missing(targets(sorted({s.controller for s in specs}), campaign=False))
+    if todo:
+        write_line(f"quadsitl: compiling the flight's kernels first ({', '.join(todo)}): once after an "
+                   "install or an edit, cached after that")  # fmt: skip
+        compile_all(todo, log=lambda line: write_line(f"quadsitl:{line}"))
+
+
 def run_up(
     specs: Sequence[VehicleSpec], policy: RestartPolicy | None = None, view_port: int | None = None
 ) -> int:
@@ -70,6 +82,7 @@ def run_up(
     try:
         if view_port is not None:  # --view: its port is checked with the others, before any start
             check_view_port(view_port)
+        compile_first(specs)
         launcher.start_vehicles(specs)
         if view_port is not None:
             _, view_url = start_view(launcher, [s.instance for s in specs], view_port, specs[0].sitl_config)

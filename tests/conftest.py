@@ -34,6 +34,7 @@ PROCESS_MODULES = {
     "tests/sitl/test_params_failsafes.py",
     "tests/sitl/test_signing_cli.py",
     "tests/sitl/test_sitl_vs_inprocess.py",
+    "tests/sitl/test_own_law_sitl.py",
     "tests/sitl/test_up_cli.py",
     "tests/sitl/test_up_process_loss.py",
     "tests/campaign/test_dask.py",

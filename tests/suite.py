@@ -111,6 +111,11 @@ def _names_paths(argv: list[str]) -> bool:
 def main(argv: list[str]) -> int:
     LOGS.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
+    # The flight's kernels compiled once, here, in parallel: else the sessions' first processes
+    # would each compile the same entries at once (seconds each) while others wait on them.
+    compile_kernels = subprocess.run([sys.executable, "-m", "sitl.compile"], timeout=1200)
+    if compile_kernels.returncode != 0:
+        return compile_kernels.returncode
     runs = []
     for name, selection, prefix, paths in sessions(own_paths=not _names_paths(argv)):
         log = (LOGS / f"{name}.log").open("w")

@@ -9,6 +9,10 @@ Saturation preserves thrust first: the collective part is clipped to the feasibl
 the roll/pitch part is scaled down until every rotor is within its limits, then the yaw part.
 Normalised rotor commands are ``Omega_i / Omega_max`` in [0, 1] (``HIL_ACTUATOR_CONTROLS``).
 Under ``actuation = "wrench"`` the normalised commands are ``U1 / U1_max`` and ``tau_i / tau_max``.
+
+The two allocations are kernels over the actuators' numbers (layout ``A_*`` from an offset into
+the cascade's array) writing the normalised commands, and the rotor speeds, into ``out``;
+:class:`Allocator` runs them on one vehicle's numbers for Python callers.
 """
 
 from __future__ import annotations
@@ -17,8 +21,79 @@ import math
 from typing import NamedTuple
 
 from quadcommon.config import VehicleConfig
+from quadcommon.kernel import kernel
+from quadcommon.numerics import clip
 
 Vector3 = tuple[float, float, float]
+
+# The actuators' numbers: U1_max, tau_max (3), rotor constants b, d, arm, the limits of Omega^2,
+# Omega_max.
+A_THRUST_MAX, A_TORQUE_MAX, A_B, A_D, A_ARM, A_SQ_MIN, A_SQ_MAX, A_SPEED_MAX = 0, 1, 4, 5, 6, 7, 8, 9
+A_SIZE = 10
+# out: the four normalised commands, then the four rotor speeds (rad/s; zeros under "wrench").
+OUT_SIZE = 8
+
+
+def actuator_numbers(vehicle: VehicleConfig) -> tuple[float, ...]:
+    """The layout ``A_*`` for ``vehicle``."""
+    rotors, actuation = vehicle.rotors, vehicle.actuation
+    return (
+        actuation.thrust_max_n, *actuation.torque_max_n_m, rotors.thrust_coefficient_n_s2,
+        rotors.drag_coefficient_n_m_s2, vehicle.nominal.arm_length_m, rotors.speed_min_rad_s**2,
+        rotors.speed_max_rad_s**2, rotors.speed_max_rad_s,
+    )  # fmt: skip
+
+
+@kernel
+def saturate_wrench(a, o, thrust, tx, ty, tz, out):
+    """U1 clipped to [0, U1_max], each body torque to [-tau_max, tau_max]: ``(U1, tau, saturated)``;
+    the normalised commands into ``out``."""
+    thrust_max = a[o + A_THRUST_MAX]
+    m0, m1, m2 = a[o + A_TORQUE_MAX], a[o + A_TORQUE_MAX + 1], a[o + A_TORQUE_MAX + 2]
+    thrust_a = clip(thrust, 0.0, thrust_max)
+    t0, t1, t2 = clip(tx, -m0, m0), clip(ty, -m1, m1), clip(tz, -m2, m2)
+    saturated = 1.0 if (thrust_a != thrust or t0 != tx or t1 != ty or t2 != tz) else 0.0
+    out[0], out[1], out[2], out[3] = thrust_a / thrust_max, t0 / m0, t1 / m1, t2 / m2
+    out[4], out[5], out[6], out[7] = 0.0, 0.0, 0.0, 0.0
+    return thrust_a, t0, t1, t2, saturated
+
+
+@kernel
+def largest_scale(base, delta, lo, hi):
+    """Largest k in [0, 1] with lo <= base_i + k delta_i <= hi for each of the four rotors."""
+    k = 1.0
+    for i in range(4):
+        b0, dl = base[i], delta[i]
+        if dl > 0.0 and b0 + dl > hi:
+            k = min(k, max(hi - b0, 0.0) / dl)
+        elif dl < 0.0 and b0 + dl < lo:
+            k = min(k, max(b0 - lo, 0.0) / -dl)
+    return k
+
+
+@kernel
+def allocate_rotors(a, o, thrust, tx, ty, tz, out):
+    """Rotor speeds for (U1, tau) with the saturation order of the module: ``(U1, tau, saturated)``
+    achieved; normalised commands and speeds into ``out``."""
+    b, d, arm = a[o + A_B], a[o + A_D], a[o + A_ARM]
+    lo, hi = a[o + A_SQ_MIN], a[o + A_SQ_MAX]
+    raw = thrust / (4.0 * b)
+    base = clip(raw, lo, hi)
+    rp = (-ty / (2.0 * arm * b), -tx / (2.0 * arm * b), ty / (2.0 * arm * b), tx / (2.0 * arm * b))
+    yaw = (-tz / (4.0 * d), tz / (4.0 * d), -tz / (4.0 * d), tz / (4.0 * d))
+    k_rp = largest_scale((base, base, base, base), rp, lo, hi)
+    partial = (base + k_rp * rp[0], base + k_rp * rp[1], base + k_rp * rp[2], base + k_rp * rp[3])
+    k_yaw = largest_scale(partial, yaw, lo, hi)
+    s1 = clip(partial[0] + k_yaw * yaw[0], lo, hi)
+    s2 = clip(partial[1] + k_yaw * yaw[1], lo, hi)
+    s3 = clip(partial[2] + k_yaw * yaw[2], lo, hi)
+    s4 = clip(partial[3] + k_yaw * yaw[3], lo, hi)
+    top = a[o + A_SPEED_MAX]
+    out[4], out[5], out[6], out[7] = math.sqrt(s1), math.sqrt(s2), math.sqrt(s3), math.sqrt(s4)
+    out[0], out[1], out[2], out[3] = out[4] / top, out[5] / top, out[6] / top, out[7] / top
+    saturated = 1.0 if (raw != base or k_rp < 1.0 or k_yaw < 1.0) else 0.0
+    thrust_a = b * (s1 + s2 + s3 + s4)
+    return thrust_a, arm * b * (s4 - s2), arm * b * (s3 - s1), d * (-s1 + s2 - s3 + s4), saturated
 
 
 class RotorAllocation(NamedTuple):
@@ -29,66 +104,24 @@ class RotorAllocation(NamedTuple):
 
 
 class Allocator:
+    """The allocation kernels on one vehicle's actuators, for Python callers."""
+
     def __init__(self, vehicle: VehicleConfig) -> None:
-        rot = vehicle.rotors
-        self.b = rot.thrust_coefficient_n_s2
-        self.d = rot.drag_coefficient_n_m_s2
-        self.arm = vehicle.nominal.arm_length_m
-        self.sq_min = rot.speed_min_rad_s**2
-        self.sq_max = rot.speed_max_rad_s**2
-        self.speed_max = rot.speed_max_rad_s
-        self.thrust_max = vehicle.actuation.thrust_max_n
-        self.torque_max = vehicle.actuation.torque_max_n_m
+        self.numbers = actuator_numbers(vehicle)
+        self.speed_max = vehicle.rotors.speed_max_rad_s
 
-    # -- rotors ----------------------------------------------------------------------------------
     def to_rotors(self, thrust_n: float, torque_body_n_m: Vector3) -> RotorAllocation:
-        b, d, arm = self.b, self.d, self.arm
-        tx, ty, tz = torque_body_n_m
-        lo, hi = self.sq_min, self.sq_max
-        base = min(max(thrust_n / (4.0 * b), lo), hi)
-        rp = (
-            -ty / (2.0 * arm * b),
-            -tx / (2.0 * arm * b),
-            ty / (2.0 * arm * b),
-            tx / (2.0 * arm * b),
-        )
-        yaw = (-tz / (4.0 * d), tz / (4.0 * d), -tz / (4.0 * d), tz / (4.0 * d))
-        k_rp = _largest_scale((base,) * 4, rp, lo, hi)
-        partial = tuple(base + k_rp * x for x in rp)
-        k_yaw = _largest_scale(partial, yaw, lo, hi)
-        squares = tuple(min(max(p + k_yaw * y, lo), hi) for p, y in zip(partial, yaw, strict=True))
-        speeds = tuple(math.sqrt(s) for s in squares)
-        s1, s2, s3, s4 = squares
-        return RotorAllocation(
-            speeds_rad_s=speeds,  # type: ignore[arg-type]
-            normalised=tuple(s / self.speed_max for s in speeds),  # type: ignore[arg-type]
-            thrust_n=b * (s1 + s2 + s3 + s4),
-            torque_body_n_m=(arm * b * (s4 - s2), arm * b * (s3 - s1), d * (-s1 + s2 - s3 + s4)),
-        )
+        out = [0.0] * OUT_SIZE
+        thrust, tx, ty, tz, _ = allocate_rotors(self.numbers, 0, thrust_n, *torque_body_n_m, out)
+        return RotorAllocation(tuple(out[4:]), tuple(out[:4]), thrust, (tx, ty, tz))  # type: ignore[arg-type]
 
-    # -- wrench ----------------------------------------------------------------------------------
     def saturate_wrench(self, thrust_n: float, torque_body_n_m: Vector3) -> tuple[float, Vector3]:
         """U1 clipped to [0, U1_max], each body torque to [-tau_max, tau_max]."""
-        m0, m1, m2 = self.torque_max
-        t0, t1, t2 = torque_body_n_m
-        return (
-            min(max(thrust_n, 0.0), self.thrust_max),
-            (min(max(t0, -m0), m0), min(max(t1, -m1), m1), min(max(t2, -m2), m2)),
-        )
+        thrust, tx, ty, tz, _ = saturate_wrench(self.numbers, 0, thrust_n, *torque_body_n_m, [0.0] * OUT_SIZE)
+        return thrust, (tx, ty, tz)
 
     def wrench_to_normalised(self, thrust_n: float, torque_body_n_m: Vector3) -> tuple[float, ...]:
-        """Normalised ``HIL_ACTUATOR_CONTROLS`` of an already saturated wrench."""
-        tm = self.torque_max
-        t0, t1, t2 = torque_body_n_m
-        return (thrust_n / self.thrust_max, t0 / tm[0], t1 / tm[1], t2 / tm[2])
-
-
-def _largest_scale(base: tuple[float, ...], delta: tuple[float, ...], lo: float, hi: float) -> float:
-    """Largest k in [0, 1] with lo <= base_i + k delta_i <= hi for every i."""
-    k = 1.0
-    for b0, dl in zip(base, delta, strict=True):
-        if dl > 0.0 and b0 + dl > hi:
-            k = min(k, max(hi - b0, 0.0) / dl)
-        elif dl < 0.0 and b0 + dl < lo:
-            k = min(k, max(b0 - lo, 0.0) / -dl)
-    return k
+        """Normalised ``HIL_ACTUATOR_CONTROLS`` of a wrench (saturated first)."""
+        out = [0.0] * OUT_SIZE
+        saturate_wrench(self.numbers, 0, thrust_n, *torque_body_n_m, out)
+        return tuple(out[:4])

@@ -1,31 +1,124 @@
 """The control cascade: translational law -> command filter -> attitude law -> actuators.
 
-Cascades are selected by name (``config/controllers/NAME.toml``): ``intbs_nlhinf`` (the
-paper's), ``intbs`` (integral in the first step, both loops), ``bs_nlhinf`` (no integral); the
-laws themselves are looked up by name (:mod:`.registry`, ``laws/``). Pure: one
-:meth:`Cascade.step` per control period, driven by whoever owns the clock.
+Cascades are selected by name (``config/controllers/NAME.toml``): ``intbs_nlhinf`` (the paper's),
+``intbs`` (integral in the first step, both loops), ``bs_nlhinf`` (no integral), ``px4_pid`` (PX4's
+cascade of P and PID loops) and ``se3`` (geometric control on SE(3)); the laws themselves are looked
+up by name (:mod:`.registry`). Pure: one :meth:`Cascade.step` per control period, driven by whoever
+owns the clock.
 
-The attitude laws produce the generalised torque tau_eta of eq. (4); the actuators produce a
-body torque, ``tau_body = W_eta^-T tau_eta``, which is what is saturated (or allocated to the
-rotors). The torque reported back (for logs and the IADU index) is the applied one, mapped
-back to the Euler coordinates.
+One step (:func:`cascade_step`, a kernel composed with the cascade's two laws):
+
+1. the translational law: U1 and the roll/pitch references (phi_r, theta_r);
+2. the command filter: eta_d, eta_d', eta_d'' from (phi_r, theta_r) and the reference's yaw;
+3. the rotational law: the body torque;
+4. the actuators: U1 and the torque saturated (``actuation = "wrench"``) or allocated to the
+   rotors, as normalised commands. The torque reported back (logs, the IADU index) is the applied
+   one, also as the generalised torque ``tau_eta = W_eta^T tau_body`` of eq. (4).
+
+The manual modes replace parts of the chain (:meth:`Cascade.step`'s overrides). The same kernel
+is what the autopilot flies per frame, compiled by numba with the two laws inlined
+(:func:`quadcommon.kernel.compiled`), and what the campaign engine flies per run.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
+import numpy as np
+
 from quadcommon.config import VehicleConfig
-from quadcommon.rigid_body import body_torque_from_euler_torque, euler_torque_from_body_torque
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel
+from quadcommon.rigid_body import body_rates_from_euler_rates, euler_torque_from_body_torque
+from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
 
+from . import command_filter as cf
 from . import registry
-from .allocation import Allocator
-from .command_filter import SecondOrderFilter
+from .allocation import A_SIZE, OUT_SIZE, actuator_numbers, allocate_rotors, saturate_wrench
 from .config import ControllerConfig
-from .translational import TranslationalController
+from .registry import ROTATIONAL, TRANSLATIONAL, ControllerFailure, LawContext
 
 Vector3 = tuple[float, float, float]
+
+# The cascade's own numbers: the control period, wrench (0.0) or rotors (1.0), the command filter's
+# coefficients (command_filter.F_*), the actuators' numbers (allocation.A_*).
+K_DT, K_ROTORS, K_FILTER = 0, 1, 2
+K_ACTUATORS = K_FILTER + cf.F_SIZE
+K_SIZE = K_ACTUATORS + A_SIZE
+# What a step may be given instead of computing it (flags, added up).
+OVERRIDE_ROLL_PITCH, OVERRIDE_ATTITUDE, OVERRIDE_THRUST = 1, 2, 4
+# What a step returns, in order.
+OUTPUTS = (
+    "thrust", "tau_eta_x", "tau_eta_y", "tau_eta_z", "tau_x", "tau_y", "tau_z",
+    "phi_d", "theta_d", "psi_d", "phi_d_dot", "theta_d_dot", "psi_d_dot", "phi_r", "theta_r",
+    "a_x", "a_y", "a_z", "saturated", "tilt_limited",
+)  # fmt: skip
+
+
+@kernel
+def cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, velocity, euler, euler_rates,
+                 ref_position, ref_velocity, ref_acceleration, yaw, yaw_rate, yaw_acceleration, integrate,
+                 override, roll_pitch, attitude, thrust_given, out):  # fmt: skip
+    """One step of the cascade (module docstring) with the laws ``translational`` and ``rotational``
+    (their step kernels), their gains ``gt``, ``gr`` and states ``xt``, ``xr``; the command filter's
+    state ``filt``. Normalised commands and rotor speeds go into ``out`` (allocation.OUT_SIZE);
+    returns the numbers named by :data:`OUTPUTS`."""
+    dt = K[K_DT]
+    thrust, roll_r, pitch_r, a_x, a_y, a_z, thrust_limited, tilt_limited = translational(
+        gt, xt, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, yaw, dt, integrate
+    )
+    if override & OVERRIDE_ROLL_PITCH:
+        roll_r, pitch_r = roll_pitch[0], roll_pitch[1]
+    phi_d, theta_d, phi_d_dot, theta_d_dot, phi_d_ddot, theta_d_ddot = cf.advance(K, K_FILTER, filt, roll_r,
+                                                                                 pitch_r)  # fmt: skip
+    eta_d = (phi_d, theta_d, yaw)
+    eta_d_dot = (phi_d_dot, theta_d_dot, yaw_rate)
+    eta_d_ddot = (phi_d_ddot, theta_d_ddot, yaw_acceleration)
+    if override & OVERRIDE_ATTITUDE:
+        eta_d = (attitude[0], attitude[1], attitude[2])
+        eta_d_dot = (attitude[3], attitude[4], attitude[5])
+        eta_d_ddot = (attitude[6], attitude[7], attitude[8])
+    if override & OVERRIDE_THRUST:
+        thrust = thrust_given
+    body_rates = body_rates_from_euler_rates(euler[0], euler[1], euler_rates)
+    tx, ty, tz = rotational(gr, xr, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
+                            integrate)  # fmt: skip
+    if K[K_ROTORS] != 0.0:
+        thrust_a, ta0, ta1, ta2, saturated = allocate_rotors(K, K_ACTUATORS, thrust, tx, ty, tz, out)
+    else:
+        thrust_a, ta0, ta1, ta2, saturated = saturate_wrench(K, K_ACTUATORS, thrust, tx, ty, tz, out)
+    te0, te1, te2 = euler_torque_from_body_torque(euler[0], euler[1], (ta0, ta1, ta2))
+    return (thrust_a, te0, te1, te2, ta0, ta1, ta2, eta_d[0], eta_d[1], eta_d[2], eta_d_dot[0], eta_d_dot[1],
+            eta_d_dot[2], roll_r, pitch_r, a_x, a_y, a_z,
+            1.0 if (saturated != 0.0 or thrust_limited != 0.0) else 0.0, tilt_limited)  # fmt: skip
+
+
+# What a step is given instead of computing it (Cascade.step's overrides), as numbers: the flags
+# (OVERRIDE_*, added up), roll and pitch, the attitude reference (eta_d, eta_d', eta_d''), U1.
+V_FLAGS, V_ROLL_PITCH, V_ATTITUDE, V_THRUST = 0, 1, 3, 12
+V_SIZE = 13
+
+
+@kernel
+def buffered_step(translational, rotational, buf, at, position, velocity, euler, euler_rates, ref_position,
+                  ref_velocity, ref_acceleration, yaw, yaw_rate, yaw_acceleration, integrate):  # fmt: skip
+    """:func:`cascade_step` with its arrays as parts of one buffer, at the offsets ``at`` (K, gt, xt,
+    gr, xr, the filter's state, the overrides given (layout ``V_*``), out, end): a compiled call
+    converts each array argument on its own, so one buffer costs one conversion instead of eight.
+    Returns :data:`OUTPUTS` followed by ``out`` (the normalised commands and the rotor speeds)."""
+    buf = borrowed(buf)  # the caller's for the call: its parts are passed on without counting
+    v = buf[at[6] : at[7]]
+    attitude = (v[V_ATTITUDE], v[V_ATTITUDE + 1], v[V_ATTITUDE + 2], v[V_ATTITUDE + 3], v[V_ATTITUDE + 4],
+                v[V_ATTITUDE + 5], v[V_ATTITUDE + 6], v[V_ATTITUDE + 7], v[V_ATTITUDE + 8])  # fmt: skip
+    out = buf[at[7] : at[8]]
+    K, gt, xt = buf[at[0] : at[1]], buf[at[1] : at[2]], buf[at[2] : at[3]]
+    gr, xr, filt = buf[at[3] : at[4]], buf[at[4] : at[5]], buf[at[5] : at[6]]
+    roll_pitch = (v[V_ROLL_PITCH], v[V_ROLL_PITCH + 1])
+    o = cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, velocity, euler,
+                     euler_rates, ref_position, ref_velocity, ref_acceleration, yaw, yaw_rate,
+                     yaw_acceleration, integrate, int(v[V_FLAGS]), roll_pitch, attitude, v[V_THRUST], out)
+    return o + (out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7])
 
 
 class StateEstimate(NamedTuple):
@@ -57,66 +150,72 @@ class CascadeOutput(NamedTuple):
     acceleration_cmd_m_s2: Vector3
 
 
-class Cascade:
-    """``compiled=True``: step with :mod:`.compiled` where it can (numba installed, the built-in laws,
-    wrench actuation, integrating), bit for bit the same as the Python laws; the autopilot asks
-    for it. The laws' state then lives in the kernel's arrays between steps and is copied back to
-    the Python law objects before anything else reads or changes them (retune, reset, a
-    non-integrating step)."""
+def law_context(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> LawContext:
+    nominal, actuation = vehicle.nominal, vehicle.actuation
+    return LawContext(
+        mass_kg=nominal.mass_kg, gravity_m_s2=nominal.gravity_m_s2, inertia_kg_m2=nominal.inertia_kg_m2,
+        arm_length_m=nominal.arm_length_m, thrust_max_n=actuation.thrust_max_n,
+        torque_max_n_m=actuation.torque_max_n_m, tilt_max_rad=controller.tilt_max_rad, dt_s=dt,
+    )  # fmt: skip
 
-    def __init__(
-        self, controller: ControllerConfig, vehicle: VehicleConfig, dt: float, compiled: bool = False
-    ) -> None:
+
+def cascade_numbers(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> tuple[float, ...]:
+    """The cascade's own numbers (layout ``K_*``)."""
+    f = controller.command_filter
+    rotors = 1.0 if vehicle.actuation.mode == "rotors" else 0.0
+    filter_numbers = cf.discretise(f.natural_frequency_rad_s, f.damping, dt, f.enabled)
+    return (dt, rotors, *filter_numbers, *actuator_numbers(vehicle))
+
+
+class Packed(NamedTuple):
+    """A controller config as numbers: its two law classes, their context and gains arrays, and
+    the cascade's own numbers (layout ``K_*``)."""
+
+    translational: type
+    rotational: type
+    context: LawContext
+    K: tuple[float, ...]
+    gt: tuple[float, ...]
+    gr: tuple[float, ...]
+
+
+def pack(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> Packed:
+    """``controller`` on ``vehicle`` at the control period ``dt``, checked (:func:`registry.check`)."""
+    context = law_context(controller, vehicle, dt)
+    translational = registry.law(TRANSLATIONAL, controller.translational.law)
+    rotational = registry.law(ROTATIONAL, controller.rotational.law)
+    return Packed(translational, rotational, context, cascade_numbers(controller, vehicle, dt),
+                  registry.check(TRANSLATIONAL, translational, controller.translational, context),
+                  registry.check(ROTATIONAL, rotational, controller.rotational, context))  # fmt: skip
+
+
+class Cascade:
+    """A controller config flying: its laws' gains and states, the command filter's state, and the
+    step entry (compiled with the two laws where numba compiles)."""
+
+    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> None:
         self.config = controller
         self.name = controller.name
         self.dt = dt
-        nominal = vehicle.nominal
-        self.rotor_mode = vehicle.actuation.mode == "rotors"
-        tr_law = registry.law(registry.TRANSLATIONAL, controller.translational.law)
-        rot_law = registry.law(registry.ROTATIONAL, controller.rotational.law)
-        self.translational = TranslationalController(
-            tr_law(controller.translational, nominal), nominal, vehicle.actuation.thrust_max_n,
-            controller.tilt_max_rad,
-        )  # fmt: skip
-        self.rotational = rot_law(controller.rotational, nominal)
-        if hasattr(self.rotational, "set_integral_limit"):  # anti-windup at the actuators' limit
-            self.rotational.set_integral_limit(vehicle.actuation.torque_max_n_m)
-        self.filter = SecondOrderFilter(controller.command_filter, dt, channels=2)
-        self.allocator = Allocator(vehicle)
-        self._kernel = _CompiledCascade.for_cascade(self) if compiled else None
+        self.vehicle = vehicle
+        packed = pack(controller, vehicle, dt)
+        self.translational, self.rotational = packed.translational, packed.rotational
+        self.context = packed.context
+        # One buffer, and views of its parts (buffered_step): the cascade's numbers, the laws' gains and
+        # states, the filter's state, the overrides given, the outputs.
+        sizes = (K_SIZE, len(packed.gt), len(self.translational.STATE), len(packed.gr),
+                 len(self.rotational.STATE), cf.S_SIZE, V_SIZE, OUT_SIZE)  # fmt: skip
+        self._at = tuple(int(v) for v in np.cumsum((0, *sizes)))
+        self.buffer = np.zeros(self._at[-1])
+        self.K, self.gt, self.xt, self.gr, self.xr, self.filt, self.given, self.out = (
+            self.buffer[a:b] for a, b in zip(self._at[:-1], self._at[1:], strict=True)
+        )
+        self.K[:], self.gt[:], self.gr[:] = packed.K, packed.gt, packed.gr
+        self._last: tuple[Vector3, Vector3] | None = None  # (eta, eta') of the latest step: for retune
+        self._overridden = False
+        self._step = _entry(self)
 
-    def retune(self, controller: ControllerConfig) -> None:
-        """Switch to the gains of ``controller`` (same laws) between two steps.
-
-        Each law rescales its integral states so that the integral action's contribution to its
-        output is unchanged at the moment of the change (no jump in U1 or tau from the integrals);
-        the command filter keeps its state. Laws cannot change in flight (ValueError).
-        """
-        kernel = self._kernel
-        if kernel is not None:
-            kernel.pull(self)
-        old = self.config
-        if (
-            controller.translational.law != old.translational.law
-            or controller.rotational.law != old.rotational.law
-        ):
-            raise ValueError("retune keeps the laws; a different cascade needs a restart")
-        self.translational.law.retune(controller.translational)
-        self.translational.set_tilt_max(controller.tilt_max_rad)
-        self.rotational.retune(controller.rotational)
-        self.filter.retune(controller.command_filter)
-        self.config = controller
-        if kernel is not None:
-            kernel.push(self, new_gains=True)
-
-    def reset(self) -> None:
-        """Zero every integral and re-initialise the command filter (disarmed / on the ground)."""
-        self.translational.reset()
-        self.rotational.reset()
-        self.filter.reset()
-        if self._kernel is not None:
-            self._kernel.push(self)
-
+    # -- stepping ---------------------------------------------------------------------------------
     def step(
         self,
         state: StateEstimate,
@@ -129,178 +228,99 @@ class Cascade:
     ) -> CascadeOutput:
         """One control step towards ``ref``; the laws' states advance by ``dt`` if ``integrate``.
 
-        The manual modes fly the same loops with parts of the cascade's chain given instead of
-        computed: ``roll_pitch`` replaces the translational law's (phi_r, theta_r) before the
-        command filter (STABILIZED, ALTCTL: the sticks' tilt); ``attitude`` replaces the filter's
-        (eta_d, eta_d', eta_d'') whole, yaw included (ACRO: the attitude the sticks' rates
-        integrate); ``thrust_n`` replaces the translational law's U1 (STABILIZED, ACRO: the
-        throttle), saturated as any U1. The translational law still runs (its integrals follow
-        ``integrate``); the rotational law always tracks what reaches it.
+        The manual modes fly the same loops with parts of the chain given instead of computed:
+        ``roll_pitch`` replaces the translational law's (phi_r, theta_r) before the command filter
+        (STABILIZED, ALTCTL: the sticks' tilt); ``attitude`` replaces the filter's (eta_d, eta_d',
+        eta_d'') whole, yaw included (ACRO: the attitude the sticks' rates integrate); ``thrust_n``
+        replaces the translational law's U1 (STABILIZED, ACRO: the throttle), saturated as any U1.
+        The translational law still runs (its states follow ``integrate``); the rotational law
+        tracks whatever reaches it.
+
+        A law that raises or gives a non-finite output raises :class:`ControllerFailure`.
         """
-        kernel = self._kernel
+        given = self.given
         overridden = roll_pitch is not None or attitude is not None or thrust_n is not None
-        if kernel is None:
-            return self._step(state, ref, integrate, roll_pitch, attitude, thrust_n)
-        if integrate and not overridden:
-            out = kernel.step(state, ref)
-            if out is not None:
-                return out
-        kernel.pull(self)
-        out = self._step(state, ref, integrate, roll_pitch, attitude, thrust_n)
-        kernel.push(self)
-        return out
+        if overridden:
+            flags = 0
+            if roll_pitch is not None:
+                flags += OVERRIDE_ROLL_PITCH
+                given[V_ROLL_PITCH : V_ROLL_PITCH + 2] = roll_pitch
+            if attitude is not None:
+                flags += OVERRIDE_ATTITUDE
+                given[V_ATTITUDE : V_ATTITUDE + 9] = [v for part in attitude for v in part]
+            if thrust_n is not None:
+                flags += OVERRIDE_THRUST
+                given[V_THRUST] = thrust_n
+            given[V_FLAGS] = flags
+        elif self._overridden:
+            given[V_FLAGS] = 0.0
+        self._overridden = overridden
+        try:
+            o = self._step(self.buffer, self._at, state.position_m, state.velocity_m_s, state.euler_rad,
+                           state.euler_rates_rad_s, ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2,
+                           ref.yaw_rad, ref.yaw_rate_rad_s, ref.yaw_acceleration_rad_s2, integrate)
+        except Exception as error:  # noqa: BLE001 - a law (maybe a user's) failed: the failsafe acts
+            raise ControllerFailure(f"controller {self.name}: {type(error).__name__}: {error}") from error
+        # A NaN or inf anywhere in the applied wrench shows in this sum (saturation lets NaN through).
+        if not math.isfinite(o[0] + o[4] + o[5] + o[6]):
+            raise ControllerFailure(f"controller {self.name}: non-finite output (U1 {o[0]}, tau {o[4:7]})")
+        self._last = (state.euler_rad, state.euler_rates_rad_s)
+        return CascadeOutput(
+            o[0], (o[1], o[2], o[3]), (o[4], o[5], o[6]), (o[20], o[21], o[22], o[23]),
+            (o[24], o[25], o[26], o[27]), (o[7], o[8], o[9]), (o[10], o[11], o[12]), (o[13], o[14]),
+            (o[15], o[16], o[17]),
+        )  # fmt: skip
 
     def law_states(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
-        """The laws' internal states now, named (``translational.<name>``, ``rotational.<name>``):
-        the integrals, for logs. Read between steps."""
-        if self._kernel is not None:
-            self._kernel.pull(self)
-            self._kernel.push(self)
-        tr = tuple(self.translational.integral)
-        rot = tuple(self.rotational.integral)
-        names = tuple(f"translational.integral_{a}" for a in "xyz") + tuple(
-            f"rotational.integral_{a}" for a in ("roll", "pitch", "yaw")
-        )
-        return names, tr + rot
+        """The laws' states now, named (``translational.<name>``, ``rotational.<name>``), for logs."""
+        names = (*(f"translational.{n}" for n in self.translational.STATE),
+                 *(f"rotational.{n}" for n in self.rotational.STATE))  # fmt: skip
+        return names, (*(float(v) for v in self.xt), *(float(v) for v in self.xr))
 
-    def _step(
-        self,
-        state: StateEstimate,
-        ref: Reference,
-        integrate: bool,
-        roll_pitch: tuple[float, float] | None = None,
-        attitude: AttitudeReference | None = None,
-        thrust_n: float | None = None,
-    ) -> CascadeOutput:
-        """The specification: the Python laws, one step."""
-        dt = self.dt
-        euler = state.euler_rad
-        outer = self.translational.update(
-            state.position_m,
-            state.velocity_m_s,
-            euler,
-            ref.position_m,
-            ref.velocity_m_s,
-            ref.acceleration_m_s2,
-            dt,
-            integrate,
-        )
-        raw = (outer.roll_ref_rad, outer.pitch_ref_rad) if roll_pitch is None else tuple(roll_pitch)
-        (phi_d, phi_d_dot, phi_d_ddot), (theta_d, theta_d_dot, theta_d_ddot) = self.filter.outputs(raw)
-        self.filter.advance(raw)
-        eta_d = (phi_d, theta_d, ref.yaw_rad)
-        eta_d_dot = (phi_d_dot, theta_d_dot, ref.yaw_rate_rad_s)
-        eta_d_ddot = (phi_d_ddot, theta_d_ddot, ref.yaw_acceleration_rad_s2)
-        if attitude is not None:
-            eta_d, eta_d_dot, eta_d_ddot = attitude
-        tau_eta = self.rotational.update(
-            euler, state.euler_rates_rad_s, eta_d, eta_d_dot, eta_d_ddot, dt, integrate
-        )
-        if thrust_n is not None:
-            outer = outer._replace(thrust_n=thrust_n)
-        phi, theta = euler[0], euler[1]
-        tau_body = body_torque_from_euler_torque(phi, theta, tau_eta)
-        if self.rotor_mode:
-            alloc = self.allocator.to_rotors(outer.thrust_n, tau_body)
-            thrust, tau_applied = alloc.thrust_n, alloc.torque_body_n_m
-            controls, speeds = alloc.normalised, alloc.speeds_rad_s
-        else:
-            thrust, tau_applied = self.allocator.saturate_wrench(outer.thrust_n, tau_body)
-            controls = self.allocator.wrench_to_normalised(thrust, tau_applied)
-            speeds = (0.0, 0.0, 0.0, 0.0)
-        return CascadeOutput(
-            thrust_n=thrust,
-            torque_euler_n_m=euler_torque_from_body_torque(phi, theta, tau_applied),
-            torque_body_n_m=tau_applied,
-            actuator_controls=controls,  # type: ignore[arg-type]
-            rotor_speeds_rad_s=speeds,
-            euler_ref_rad=eta_d,
-            euler_rate_ref_rad_s=eta_d_dot,
-            roll_pitch_raw_rad=raw,
-            acceleration_cmd_m_s2=outer.acceleration_cmd_m_s2,
-        )
+    # -- state ------------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Zero the laws' states and re-initialise the command filter (disarmed / on the ground)."""
+        for buffer in (self.xt, self.xr, self.filt):
+            buffer[:] = [0.0] * len(buffer)
+
+    def retune(self, controller: ControllerConfig) -> None:
+        """Switch to the gains of ``controller`` (same laws) between two steps.
+
+        Each law with a ``retune`` maps its state so that its action stays continuous (no jump in
+        U1 or tau from its integrals); the command filter keeps its state with its new
+        coefficients. Laws cannot change in flight (ValueError).
+        """
+        old = self.config
+        if (controller.translational.law != old.translational.law
+                or controller.rotational.law != old.rotational.law):  # fmt: skip
+            raise ValueError("retune keeps the laws; a different cascade needs a restart")
+        packed = pack(controller, self.vehicle, self.dt)
+        context = packed.context
+        euler, rates = self._last if self._last is not None else (None, None)
+        changes = ((self.translational, self.xt, old.translational, controller.translational),
+                   (self.rotational, self.xr, old.rotational, controller.rotational))  # fmt: skip
+        for law, x, before, after in changes:
+            retune = getattr(law, "retune", None)
+            if retune is not None and len(x):
+                x[:] = [float(v) for v in retune(before, after, context, [float(v) for v in x], euler, rates)]
+        self.gt[:], self.gr[:], self.K[:] = packed.gt, packed.gr, packed.K
+        self.config, self.context = controller, context
 
 
-_ZERO4 = (0.0, 0.0, 0.0, 0.0)
-
-
-class _CompiledCascade:
-    """The kernel's arrays for one Cascade (:func:`.compiled.cascade_step`) and the copies of the
-    laws' state between them and the Python law objects."""
-
-    @classmethod
-    def for_cascade(cls, cascade: Cascade) -> _CompiledCascade | None:
-        """None where the Python laws fly: numba absent, QUADSITL_PURE_PYTHON=1, a law the kernels
-        do not have (the registry's), the rotor actuation."""
-        if cascade.rotor_mode:
-            return None
+def _entry(cascade: Cascade):
+    """The step of ``cascade``'s law pair: compiled once per process (loaded from numba's cache
+    after the first time), warmed up on a copy of the cascade's buffer at hover so nothing compiles
+    in the middle of a flight, then frozen."""
+    step = compiled(buffered_step, cascade.translational.step, cascade.rotational.step)
+    if compiling() and not getattr(step, "_quadsitl_warm", False):
+        z3, up = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
         try:
-            from . import compiled
-        except ImportError:  # numba is in the campaign extra
-            return None
-        if not compiled.enabled() or not compiled.supports(cascade):
-            return None
-        return cls(cascade, compiled)
-
-    def __init__(self, cascade: Cascade, compiled) -> None:
-        import numpy as np
-
-        self._compiled = compiled
-        self.C = compiled.controller_array(cascade)
-        self.integ_t, self.integ_r, self.filt = np.zeros(3), np.zeros(3), np.zeros(compiled.F_SIZE)
-        self.stale = False  # the arrays are ahead of the Python laws
-        self.last_state: tuple[Vector3, Vector3] | None = None
-        # Load (or compile) the kernel now, on scratch arrays, not at the first step in flight; then
-        # no compiling in the middle of a flight: numba converts what it can to this signature (an
-        # int among the floats), and anything it cannot takes the Python laws (TypeError).
-        z3 = (0.0, 0.0, 0.0)
-        compiled.cascade_step(self.C.copy(), np.zeros(3), np.zeros(3), np.zeros(compiled.F_SIZE),
-                              z3, z3, z3, z3, z3, z3, z3, 0.0, 0.0, 0.0)  # fmt: skip
-        compiled.cascade_step.disable_compile()
-        self._step = compiled.cascade_step
-        self.push(cascade)
-
-    def push(self, cascade: Cascade, new_gains: bool = False) -> None:
-        """The Python laws' state (and, after a retune, their gains) into the arrays."""
-        if new_gains:
-            self.C = self._compiled.controller_array(cascade)
-        self.integ_t[:] = cascade.translational.law.integral
-        self.integ_r[:] = cascade.rotational.integral
-        f = cascade.filter
-        self.filt[0:2] = f.value
-        self.filt[2:4] = f.rate
-        self.filt[4] = 1.0 if f.initialised else 0.0
-        self.stale = False
-
-    def pull(self, cascade: Cascade) -> None:
-        """The arrays' state back into the Python laws (before they are read or changed)."""
-        if not self.stale:
-            return
-        cascade.translational.law.integral = self.integ_t.tolist()
-        rot = cascade.rotational
-        if rot.NAME == "nlhinf" and rot.k_p == 0.0:  # the Python law does not integrate then
-            rot.integral = [0.0, 0.0, 0.0]
-        else:
-            rot.integral = self.integ_r.tolist()
-        if self.last_state is not None and hasattr(rot, "_last_state"):
-            rot._last_state = self.last_state
-        f = cascade.filter
-        f.value, f.rate, f.initialised = self.filt[0:2].tolist(), self.filt[2:4].tolist(), self.filt[4] == 1.0
-        self.stale = False
-
-    def step(self, state: StateEstimate, ref: Reference) -> CascadeOutput | None:
-        """One integrating step in the kernel; None if numba cannot take its arguments."""
-        try:
-            o = self._step(self.C, self.integ_t, self.integ_r, self.filt, state.position_m,
-                           state.velocity_m_s, state.euler_rad, state.euler_rates_rad_s, ref.position_m,
-                           ref.velocity_m_s, ref.acceleration_m_s2, ref.yaw_rad, ref.yaw_rate_rad_s,
-                           ref.yaw_acceleration_rad_s2)  # fmt: skip
-        except TypeError:
-            return None
-        self.stale = True
-        self.last_state = (state.euler_rad, state.euler_rates_rad_s)
-        return CascadeOutput(
-            o[0], (o[1], o[2], o[3]), (o[4], o[5], o[6]), (o[7], o[8], o[9], o[10]), _ZERO4,
-            (o[11], o[12], ref.yaw_rad), (o[13], o[14], ref.yaw_rate_rad_s), (o[15], o[16]),
-            (o[17], o[18], o[19]),
-        )  # fmt: skip
+            step(cascade.buffer.copy(), cascade._at, up, z3, z3, z3, up, z3, z3, 0.0, 0.0, 0.0, True)
+        except Exception as error:  # numba's typing errors: a law it cannot compile
+            laws = f"{cascade.translational.NAME} + {cascade.rotational.NAME}"
+            detail = "\n".join(str(error).strip().splitlines()[:12])
+            raise ConfigError(f"the laws {laws} do not compile with numba ({type(error).__name__}):\n"
+                              f"{detail}\n(QUADSITL_PURE_PYTHON=1 runs them as Python, slower)") from error
+        freeze(step)
+        step._quadsitl_warm = True
+    return step

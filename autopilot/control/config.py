@@ -16,15 +16,19 @@ from quadcommon.schema import load_toml
 
 from . import registry
 
-CONTROLLER_NAMES = ("intbs_nlhinf", "intbs", "bs_nlhinf")  # the paper's three cascades
+PAPER_CONTROLLERS = ("intbs_nlhinf", "intbs", "bs_nlhinf")  # the paper's three cascades
+BASELINES = ("px4_pid", "se3")  # PX4's cascade and geometric control on SE(3), for comparison
+CONTROLLER_NAMES = PAPER_CONTROLLERS + BASELINES
 
 
 @dataclass(frozen=True)
 class CommandFilter:
-    """Second-order filter giving eta_d, eta_d', eta_d'' from the roll/pitch references."""
+    """Second-order filter giving eta_d, eta_d', eta_d'' from the roll/pitch references (or, not
+    enabled, the references passed through with zero rates: :mod:`.command_filter`)."""
 
     natural_frequency_rad_s: float
     damping: float
+    enabled: bool = True
 
 
 @dataclass(frozen=True)
@@ -62,6 +66,7 @@ def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConf
     command_filter = CommandFilter(
         natural_frequency_rad_s=sec.number("natural_frequency_rad_s", 60.0, lo=1.0, hi=1000.0, unit="rad/s"),
         damping=sec.number("damping", 1.0, lo=0.1, hi=5.0),
+        enabled=sec.boolean("enabled", True),
     )
     sec.finish()
     root.finish()

@@ -1,8 +1,8 @@
-"""The translational (outer) loop: a law's commanded accelerations -> U1 and the roll/pitch references.
+"""What the translational laws share: the thrust and tilt of eqs. 23-29, and the backstepping family's
+gains, parameters and state.
 
-Per axis i in {x, y, z}, with the error sign of CONTROL.md (e1 = p - p_d, e1' = v - v_d), the
-law (``translational.law``, see :mod:`.registry` and ``laws/``) gives a commanded acceleration
-``a_i``; then, the same for every law (eqs. 24-29, as clarified in CONTROL.md):
+Per axis i in {x, y, z}, with the error sign of CONTROL.md (e1 = p - p_d, e1' = v - v_d), a
+backstepping law gives a commanded acceleration ``a_i``; then (eqs. 24-29, as CONTROL.md reads them):
 
 * ``U1 = m (g + a_z) / (cos(phi) cos(theta))``, saturated to ``[0, U1_max]``;
 * ``u_x = m a_x / U1``, ``u_y = m a_y / U1`` (the thrust directions of eq. 23);
@@ -10,9 +10,10 @@ law (``translational.law``, see :mod:`.registry` and ``laws/``) gives a commande
   ``theta_r = asin((cos(psi) u_x + sin(psi) u_y) / cos(phi_r))``, arguments clipped to the tilt
   limit (eq. 29 solved for the angles; the paper prints the u_y line twice).
 
-The backstepping family of the paper (integral in the 2nd step, in the 1st step, none) shares its
-gains (c1, c2, k_integral per axis) and their parameters (``BS_C1_*``, ``BS_C2_*``, ``BS_KI_*``):
-:class:`BacksteppingGains` and the helpers below.
+:func:`thrust_and_tilt` is that map, a kernel any translational law may end with. The family of
+the paper (integral in the 2nd step, in the 1st step, none) shares its gains (c1, c2, k_integral
+per axis), its parameters (``BS_C1_*``, ``BS_C2_*``, ``BS_KI_*``) and the layout of its gains array
+(``G_*``): :func:`pack_backstepping` and the helpers below.
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import NamedTuple
 
-from quadcommon.config import NominalModel
+from quadcommon.kernel import kernel
+from quadcommon.numerics import clip
 from quadcommon.schema import Section
 
 from ..params.store import ParamSpec
+from .registry import LawContext
 
 Vector3 = tuple[float, float, float]
 AXES = ("X", "Y", "Z")
@@ -33,103 +35,58 @@ GAIN_HI = 1000.0
 INTEGRAL_LO = 0.001  # integral gains stay > 0: the retune keeps k * integral, which needs k != 0
 
 
-class TranslationalOutput(NamedTuple):
-    thrust_n: float  # U1, saturated
-    roll_ref_rad: float  # phi_r
-    pitch_ref_rad: float  # theta_r
-    acceleration_cmd_m_s2: Vector3  # a_x, a_y, a_z of the law
+@kernel
+def thrust_and_tilt(
+    mass: float, gravity: float, thrust_max: float, sin_tilt_max: float, ax: float, ay: float, az: float,
+    euler: Vector3,
+) -> tuple[float, float, float, float, float]:  # fmt: skip
+    """Eqs. 23-29: ``(U1, phi_r, theta_r, thrust_limited, tilt_limited)`` for the commanded
+    accelerations, the limits flagged 1.0 when they act. Below a tenth of the hover thrust the
+    horizontal directions u_x, u_y are taken at that thrust (free fall has no direction)."""
+    phi, theta, psi = euler
+    tilt = math.cos(phi) * math.cos(theta)
+    thrust = mass * (gravity + az) / (tilt if tilt > 0.1 else 0.1)
+    thrust_limited = 1.0 if thrust < 0.0 or thrust > thrust_max else 0.0
+    thrust = clip(thrust, 0.0, thrust_max)
+    floor = 0.1 * mass * gravity
+    divisor = thrust if thrust > floor else floor
+    u_x = mass * ax / divisor
+    u_y = mass * ay / divisor
+    sp, cp = math.sin(psi), math.cos(psi)
+    arg = sp * u_x - cp * u_y
+    tilt_limited = 1.0 if arg < -sin_tilt_max or arg > sin_tilt_max else 0.0
+    roll_ref = math.asin(clip(arg, -sin_tilt_max, sin_tilt_max))
+    arg = (cp * u_x + sp * u_y) / math.cos(roll_ref)
+    if arg < -sin_tilt_max or arg > sin_tilt_max:
+        tilt_limited = 1.0
+    pitch_ref = math.asin(clip(arg, -sin_tilt_max, sin_tilt_max))
+    return thrust, roll_ref, pitch_ref, thrust_limited, tilt_limited
 
 
-class TranslationalController:
-    """The loop around one translational law: thrust and roll/pitch references (eqs. 23-29)."""
-
-    def __init__(self, law, nominal: NominalModel, thrust_max_n: float, tilt_max_rad: float) -> None:
-        self.law = law
-        self.mass = nominal.mass_kg
-        self.gravity = nominal.gravity_m_s2
-        self.thrust_max = thrust_max_n
-        # Below this thrust the horizontal directions u_x, u_y are meaningless (free fall).
-        self.thrust_floor = 0.1 * nominal.mass_kg * nominal.gravity_m_s2
-        self.set_tilt_max(tilt_max_rad)
-
-    def _limit_integrals(self) -> None:
-        """The law's anti-windup bound: horizontally what the tilt limit allows (g tan(tilt)),
-        vertically what the thrust allows above hover (U1_max / m - g)."""
-        if hasattr(self.law, "set_integral_limit"):
-            horizontal = self.gravity * math.tan(self.tilt_max_rad)
-            vertical = max(self.thrust_max / self.mass - self.gravity, 0.0)
-            self.law.set_integral_limit((horizontal, horizontal, vertical))
-
-    @classmethod
-    def for_gains(cls, gains, nominal: NominalModel, thrust_max_n: float, tilt_max_rad: float = 0.7):
-        """The loop around the law that ``gains`` belong to (looked up by ``gains.law``)."""
-        from . import registry
-
-        return cls(registry.law(registry.TRANSLATIONAL, gains.law)(gains, nominal), nominal, thrust_max_n,
-                   tilt_max_rad)  # fmt: skip
-
-    # The loop's integral state is its law's.
-    @property
-    def gains(self):
-        return self.law.gains
-
-    @property
-    def integral(self) -> list[float]:
-        return self.law.integral
-
-    @integral.setter
-    def integral(self, values) -> None:
-        self.law.integral = list(values)
-
-    def integral_acceleration(self) -> Vector3:
-        return self.law.integral_acceleration()
-
-    def retune(self, gains) -> None:
-        self.law.retune(gains)
-        self._limit_integrals()
-
-    def set_tilt_max(self, tilt_max_rad: float) -> None:
-        self.tilt_max_rad = tilt_max_rad
-        self.sin_tilt_max = math.sin(tilt_max_rad)
-        self._limit_integrals()
-
-    def reset(self) -> None:
-        """Zero the law's integral states (on the ground, disarmed)."""
-        self.law.reset()
-
-    def update(
-        self,
-        position: Vector3,
-        velocity: Vector3,
-        euler: Vector3,
-        ref_position: Vector3,
-        ref_velocity: Vector3,
-        ref_acceleration: Vector3,
-        dt: float,
-        integrate: bool = True,
-    ) -> TranslationalOutput:
-        """One control step; the law's integral states advance by ``dt`` if ``integrate``."""
-        e1 = (position[0] - ref_position[0], position[1] - ref_position[1], position[2] - ref_position[2])
-        e1_dot = (velocity[0] - ref_velocity[0], velocity[1] - ref_velocity[1], velocity[2] - ref_velocity[2])
-        ax, ay, az = self.law.accelerations(e1, e1_dot, ref_acceleration, dt, integrate)
-        phi, theta, psi = euler
-        m = self.mass
-        tilt = math.cos(phi) * math.cos(theta)
-        thrust = m * (self.gravity + az) / max(tilt, 0.1)
-        thrust = min(max(thrust, 0.0), self.thrust_max)
-        divisor = max(thrust, self.thrust_floor)
-        u_x = m * ax / divisor
-        u_y = m * ay / divisor
-        sp, cp = math.sin(psi), math.cos(psi)
-        limit = self.sin_tilt_max
-        arg = sp * u_x - cp * u_y
-        roll_ref = math.asin(min(max(arg, -limit), limit))
-        arg = (cp * u_x + sp * u_y) / math.cos(roll_ref)
-        pitch_ref = math.asin(min(max(arg, -limit), limit))
-        return TranslationalOutput(thrust, roll_ref, pitch_ref, (ax, ay, az))
+# -- the backstepping family ---------------------------------------------------------------------
+# Gains array of the three backstepping laws: per axis (x, y, z) from each offset.
+G_C1, G_C2, G_K, G_ONE_C1C2, G_C1_C2, G_BOUND = 0, 3, 6, 9, 12, 15
+G_MASS, G_GRAVITY, G_THRUST_MAX, G_SIN_TILT = 18, 19, 20, 21
+G_SIZE = 22
 
 
-# -- the backstepping family's gains and parameters ----------------------------------------------
+@kernel
+def backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, dt,
+                      integrate):  # fmt: skip
+    """A backstepping law's step: ``axis(g, x, i, e1, e1', p_d'', dt, integrate)`` (the law's own
+    kernel) gives the commanded acceleration on each axis i, then :func:`thrust_and_tilt`."""
+    ax = axis(g, x, 0, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0], dt,
+              integrate)  # fmt: skip
+    ay = axis(g, x, 1, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1], dt,
+              integrate)  # fmt: skip
+    az = axis(g, x, 2, position[2] - ref_position[2], velocity[2] - ref_velocity[2], ref_acceleration[2], dt,
+              integrate)  # fmt: skip
+    thrust, roll_ref, pitch_ref, thrust_limited, tilt_limited = thrust_and_tilt(
+        g[G_MASS], g[G_GRAVITY], g[G_THRUST_MAX], g[G_SIN_TILT], ax, ay, az, euler
+    )
+    return thrust, roll_ref, pitch_ref, ax, ay, az, thrust_limited, tilt_limited
+
+
 @dataclass(frozen=True)
 class BacksteppingGains:
     """Per-axis (x, y, z) gains of the translational backstepping laws (Section 3.1, eqs. 24-29).
@@ -188,60 +145,28 @@ def backstepping_from_params(gains: BacksteppingGains, params: Mapping[str, floa
                    k_integral=vec("BS_KI", gains.k_integral))  # fmt: skip
 
 
-class BacksteppingLaw:
-    """Shared state and retune of the family: integral states, and per-axis coefficients."""
+def acceleration_limits(context: LawContext) -> Vector3:
+    """What the vehicle can give at all (m/s^2, per axis): horizontally what the tilt limit allows
+    (g tan(tilt)), vertically what the thrust allows above hover (U1_max / m - g). An integral
+    state is held where its term of the commanded acceleration reaches this (anti-windup)."""
+    horizontal = context.gravity_m_s2 * math.tan(context.tilt_max_rad)
+    vertical = max(context.thrust_max_n / context.mass_kg - context.gravity_m_s2, 0.0)
+    return (horizontal, horizontal, vertical)
 
-    NAME = ""
 
-    def __init__(self, gains: BacksteppingGains, nominal: NominalModel | None = None) -> None:
-        self.integral = [0.0, 0.0, 0.0]
-        self._a_max: Vector3 = (math.inf, math.inf, math.inf)
-        self._set_gains(gains)
+def pack_backstepping(gains: BacksteppingGains, context: LawContext, weights: Vector3) -> tuple[float, ...]:
+    """The gains array (layout ``G_*``); ``weights[i]``: the integral state's weight in ``a_i``
+    (its term is ``-weights[i] * state[i]``), which sets its anti-windup bound."""
+    a_max = acceleration_limits(context)
+    bound = tuple(a_max[i] / w if w > 0.0 else math.inf for i, w in enumerate(weights))
+    c1, c2, k = gains.c1, gains.c2, gains.k_integral
+    return (
+        *c1, *c2, *k, *(1.0 + c1[i] * c2[i] for i in range(3)), *(c1[i] + c2[i] for i in range(3)), *bound,
+        context.mass_kg, context.gravity_m_s2, context.thrust_max_n, math.sin(context.tilt_max_rad),
+    )  # fmt: skip
 
-    def _set_gains(self, gains: BacksteppingGains) -> None:
-        self.gains = gains
-        c1, c2, k = gains.c1, gains.c2, gains.k_integral
-        self._coef = [(c1[i], c2[i], k[i], 1.0 + c1[i] * c2[i], c1[i] + c2[i]) for i in range(3)]
-        w = self.integral_weights(gains)
-        self.integral_bound = tuple(self._a_max[i] / w[i] if w[i] > 0.0 else math.inf for i in range(3))
 
-    def set_integral_limit(self, acceleration_max: Vector3) -> None:
-        """Anti-windup: each integral state is held where its term of the commanded acceleration
-        is at most ``acceleration_max`` (m/s^2, per axis): what the vehicle can give at all."""
-        self._a_max = acceleration_max
-        self._set_gains(self.gains)
-
-    def _clamp_integral(self) -> None:
-        integral, bound = self.integral, self.integral_bound
-        for i in range(3):
-            if integral[i] > bound[i]:
-                integral[i] = bound[i]
-            elif integral[i] < -bound[i]:
-                integral[i] = -bound[i]
-
-    def reset(self) -> None:
-        self.integral = [0.0, 0.0, 0.0]
-
-    def integral_weights(self, gains: BacksteppingGains) -> Vector3:
-        """w_i such that the integral term of ``a_i`` is ``-w_i * integral_i`` (1/s^2 units)."""
-        return (0.0, 0.0, 0.0)
-
-    def integral_acceleration(self) -> Vector3:
-        """The integral states' contribution to the commanded acceleration now (m/s^2)."""
-        w = self.integral_weights(self.gains)
-        return (-w[0] * self.integral[0], -w[1] * self.integral[1], -w[2] * self.integral[2])
-
-    def retune(self, gains: BacksteppingGains) -> None:
-        """New gains from the next step on, without a jump in the integral action.
-
-        Each integral state is rescaled by ``w_old / w_new`` (:meth:`integral_weights`), so
-        ``w * integral`` and hence the commanded acceleration's integral term are unchanged at the
-        moment of the change; the new gains then shape how it evolves. The proportional terms
-        change with c1, c2 as they must. A new integral gain of zero drops the integral.
-        """
-        if gains.law != self.NAME:
-            raise ValueError(f"cannot switch translational law {self.NAME} -> {gains.law} by retuning")
-        old, new = self.integral_weights(self.gains), self.integral_weights(gains)
-        for i in range(3):
-            self.integral[i] = self.integral[i] * old[i] / new[i] if new[i] != 0.0 else 0.0
-        self._set_gains(gains)
+def rescale_integrals(state: list[float], old: Vector3, new: Vector3) -> list[float]:
+    """Integral states after a retune: ``weight * state`` (the integral's term of the commanded
+    acceleration) unchanged at the moment of the change; a new weight of zero drops the state."""
+    return [state[i] * old[i] / new[i] if new[i] != 0.0 else 0.0 for i in range(len(state))]

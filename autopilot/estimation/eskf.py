@@ -48,30 +48,46 @@ This is the "delayed-state buffer" of PX4's EKF2 without its delayed time horizo
 one propagation, no output predictor; the neglected terms are of order ``D x (velocity and
 attitude uncertainty)``, well below the noise of the delayed sensors (mm for a 0.1 s GPS delay).
 
-Hot path: the nominal state is plain floats (tuples), the 19x19 covariance a numpy array. Both
-choices are measured by ``benchmarks/estimator.py``: the position/velocity step costs ~8x more
-with small numpy arrays than in floats, while ``F P F^T`` costs ~10x more as block-sparse
-plain-float code than as two numpy products (the sparse blocks touch every row of P anyway).
-With numba installed, the covariance prediction and the Joseph update run compiled
-(:mod:`.compiled`: one call each instead of ~8 and ~20 numpy calls; 1.5 us for ``F P F^T + Q``);
-the numpy products stay the fallback and the reference. A prediction costs ~5-10 us, so the
+Hot path: the prediction (nominal state and covariance), the gates' prior variances and the
+Joseph update are kernels written once in :mod:`.kernels`. The filter calls their compiled
+entries (numba: one call per IMU sample, two per fusion), or the same functions run by Python
+where nothing compiles (``QUADSITL_PURE_PYTHON=1``; slower). Between calls the nominal state is
+plain floats (tuples) and the 19x19 covariance a numpy array the kernels update in place.
+``benchmarks/estimator.py`` measures the choices: the position/velocity step costs ~10x more
+with small numpy arrays than in floats, and ``F P F^T + Q`` several times more as two numpy
+products than compiled with F's structure. A prediction costs a few microseconds, so the
 covariance is predicted at every IMU sample (PX4's 100 Hz down-sampling is not needed).
 
-(~1,300 lines in one module on purpose: the 19-state filter's prediction and every fusion
-are written out element by element in plain floats for speed, and they share the covariance
-layout; split, the index bookkeeping would be spread over files.)
+(~1,150 lines in one module on purpose: every fusion is written out element by element in plain
+floats for speed, and they share the covariance layout; split, the index bookkeeping would be
+spread over files.)
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from quadcommon import frames
-from quadcommon.rigid_body import euler_from_quaternion, euler_rates_from_body_rates
+from quadcommon.kernel import compiled, compiling, freeze
+from quadcommon.rigid_body import (
+    euler_from_quaternion,
+    euler_rates_from_body_rates,
+    matrix_times,
+    quaternion_conjugate,
+    quaternion_exp,
+    quaternion_from_euler,
+    quaternion_multiply,
+    quaternion_normalised,
+    rotation_from_quaternion,
+)
 
+from . import kernels
+from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N
 from .measurements import GPS_FIX_3D, BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from .parameters import (
     DEFAULT_PARAMS,
@@ -108,14 +124,6 @@ from .status import (
 Vector3 = tuple[float, float, float]
 Quaternion = tuple[float, float, float, float]
 
-# Error-state layout.
-N = 19
-IP, IV, ITH, IBG, IBA, IBM, IBH = 0, 3, 6, 9, 12, 15, 18
-STATE_NAMES = (
-    "px", "py", "pz", "vx", "vy", "vz", "thx", "thy", "thz",
-    "bgx", "bgy", "bgz", "bax", "bay", "baz", "bmx", "bmy", "bmz", "bh",
-)  # fmt: skip
-
 DEFAULT_EARTH_FIELD_WORLD_GAUSS: Vector3 = frames.vector_from_ned((0.21, 0.016, 0.43))  # type: ignore[assignment]
 """The simulator's default field (about Zurich's), in the paper's world frame."""
 
@@ -142,56 +150,9 @@ _Q_ID = (1.0, 0.0, 0.0, 0.0)
 _Z3 = (0.0, 0.0, 0.0)
 
 
-def quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
-    """Hamilton product ``a (x) b`` (Solà §1.2.2)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def quat_exp(rx: float, ry: float, rz: float) -> Quaternion:
-    """Quaternion of the rotation vector ``r``: ``Exp(r) = [cos(|r|/2), sin(|r|/2) r/|r|]`` (Solà §1.3.4)."""
-    th2 = rx * rx + ry * ry + rz * rz
-    if th2 > 1e-12:
-        th = math.sqrt(th2)
-        s = math.sin(0.5 * th) / th
-        c = math.cos(0.5 * th)
-    else:  # series: avoids 0/0 and is exact to double precision here
-        s = 0.5 - th2 / 48.0
-        c = 1.0 - th2 / 8.0
-    return (c, rx * s, ry * s, rz * s)
-
-
-def quat_conjugate(q: Quaternion) -> Quaternion:
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-def rotation_matrix_rows(q: Quaternion) -> tuple[float, ...]:
-    """Row-major entries of the body-to-world rotation matrix of a unit quaternion (Hamilton)."""
-    w, x, y, z = q
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return (
-        1.0 - 2.0 * (yy + zz),
-        2.0 * (xy - wz),
-        2.0 * (xz + wy),
-        2.0 * (xy + wz),
-        1.0 - 2.0 * (xx + zz),
-        2.0 * (yz - wx),
-        2.0 * (xz - wy),
-        2.0 * (yz + wx),
-        1.0 - 2.0 * (xx + yy),
-    )
-
-
 def yaw_of(q: Quaternion) -> float:
-    """The paper's psi of a body-to-world quaternion (ZYX Euler)."""
+    """The paper's psi of a body-to-world quaternion (ZYX Euler): ``atan2(R10, R00)`` with the two
+    entries of :func:`~quadcommon.rigid_body.rotation_from_quaternion` it reads (per fusion)."""
     w, x, y, z = q
     return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
 
@@ -202,8 +163,7 @@ def yaw_jacobian(q: Quaternion) -> Vector3:
     With ``psi = atan2(R10, R00)``: ``dR00 = -dth_z R10 + dth_y R20``, ``dR10 = dth_z R00 -
     dth_x R20``, so ``dpsi = dth_z - (R00 R20 dth_x + R10 R20 dth_y) / (R00^2 + R10^2)``.
     """
-    r = rotation_matrix_rows(q)
-    r00, r10, r20 = r[0], r[3], r[6]
+    (r00, _, _), (r10, _, _), (r20, _, _) = rotation_from_quaternion(*q)
     d = r00 * r00 + r10 * r10
     if d < 1e-9:  # pitch at +-90 deg: yaw undefined; fall back to the level-flight Jacobian
         return (0.0, 0.0, 1.0)
@@ -214,23 +174,20 @@ def mag_model(q: Quaternion, earth_field: Vector3, bias: Vector3) -> tuple[Vecto
     """Predicted body field ``R^T m_e + b_m`` and its Jacobian ``R^T [m_e]_x`` on the global
     attitude error (``R <- (I + [dtheta]_x) R`` gives ``R^T m_e <- R^T m_e + R^T [m_e]_x dtheta``);
     the Jacobian on ``b_m`` is the identity."""
-    r = rotation_matrix_rows(q)
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_from_quaternion(*q)
     ex, ey, ez = earth_field
     pred = (
-        r[0] * ex + r[3] * ey + r[6] * ez + bias[0],
-        r[1] * ex + r[4] * ey + r[7] * ez + bias[1],
-        r[2] * ex + r[5] * ey + r[8] * ez + bias[2],
+        r00 * ex + r10 * ey + r20 * ez + bias[0],
+        r01 * ex + r11 * ey + r21 * ez + bias[1],
+        r02 * ex + r12 * ey + r22 * ez + bias[2],
     )
-    skew = ((0.0, -ez, ey), (ez, 0.0, -ex), (-ey, ex, 0.0))
-    H = tuple(
-        (
-            r[i] * skew[0][0] + r[3 + i] * skew[1][0] + r[6 + i] * skew[2][0],
-            r[i] * skew[0][1] + r[3 + i] * skew[1][1] + r[6 + i] * skew[2][1],
-            r[i] * skew[0][2] + r[3 + i] * skew[1][2] + r[6 + i] * skew[2][2],
-        )
-        for i in range(3)
+    # Row i of R^T [m_e]_x is (column i of R) x m_e.
+    H = (
+        (r10 * ez - r20 * ey, r20 * ex - r00 * ez, r00 * ey - r10 * ex),
+        (r11 * ez - r21 * ey, r21 * ex - r01 * ez, r01 * ey - r11 * ex),
+        (r12 * ez - r22 * ey, r22 * ex - r02 * ez, r02 * ey - r12 * ex),
     )
-    return pred, H  # type: ignore[return-value]
+    return pred, H
 
 
 class ErrorStateEkf:
@@ -274,20 +231,9 @@ class ErrorStateEkf:
         self._rate: Vector3 = _Z3  # bias-corrected rate of the last sample (what the controllers get)
         self._dt_avg = 0.002
 
-        # Covariance and the preallocated transition matrix.
+        # Covariance (in place: the kernels update it) and the step's process noise.
         self.P = np.zeros((N, N))
-        self._F = np.eye(N)
-        # Flat indices of F's non-constant entries, in the order predict() fills them.
-        f_idx = [(IP + i) * N + IV + i for i in range(3)]
-        f_idx += [(IV + 0) * N + ITH + 1, (IV + 0) * N + ITH + 2, (IV + 1) * N + ITH + 0,
-                  (IV + 1) * N + ITH + 2, (IV + 2) * N + ITH + 0, (IV + 2) * N + ITH + 1]  # fmt: skip
-        f_idx += [(IV + i) * N + IBA + j for i in range(3) for j in range(3)]
-        f_idx += [(ITH + i) * N + IBG + j for i in range(3) for j in range(3)]
-        self._f_idx = np.array(f_idx)
-        self._diag = np.arange(N) * (N + 1)
-        self._I = np.eye(N)
-        self._kernels = _compiled_kernels()  # None: the numpy products (see .compiled)
-        self._scratch = np.empty((N, N))
+        self._entries = filter_entries()
         self._q_dt = -1.0
         self._q_diag = np.zeros(N)
 
@@ -352,99 +298,33 @@ class ErrorStateEkf:
         self.time_s = t = imu.time_s
         self._dt_avg += 0.01 * (dt - self._dt_avg)
 
-        gx, gy, gz = imu.angular_rate_rad_s
-        fx, fy, fz = imu.specific_force_m_s2
-        pgx, pgy, pgz = self._prev_rate
-        bgx, bgy, bgz = self._bg
-        bax, bay, baz = self._ba
         if abs(dt - self._q_dt) > 1e-9:  # time stamps jitter in the last bits: keep the cache
             self._set_process_noise(dt)
-        kernels = self._kernels
-        if kernels is not None:  # the same prediction, compiled (.compiled.predict_step)
-            out = kernels.predict_step(self.P, self._scratch, self._q_diag, IP, IV, ITH, IBG, IBA, dt,
-                                       self.gravity, gx, gy, gz, fx, fy, fz, pgx, pgy, pgz, bgx, bgy, bgz,
-                                       bax, bay, baz, *self._q, *self._prev_acc_world, *self._p,
-                                       *self._v)  # fmt: skip
-            self._q, self._p, self._v, self._prev_acc_world = out[0:4], out[4:7], out[7:10], out[10:13]
-            self._prev_rate = (gx, gy, gz)
-            self._prev_force = (fx, fy, fz)
-            self._rate = (gx - bgx, gy - bgy, gz - bgz)
-            self._finish_prediction(t, dt, self.P)
-            return
-        # Attitude: the mean bias-corrected rate over the step (trapezoid), body-frame increment.
-        h = 0.5 * dt
-        rx = (gx + pgx) * h - bgx * dt
-        ry = (gy + pgy) * h - bgy * dt
-        rz = (gz + pgz) * h - bgz * dt
-        th2 = rx * rx + ry * ry + rz * rz
-        if th2 > 1e-12:
-            th = math.sqrt(th2)
-            s = math.sin(0.5 * th) / th
-            dw = math.cos(0.5 * th)
-        else:
-            s = 0.5 - th2 / 48.0
-            dw = 1.0 - th2 / 8.0
-        dx, dy, dz = rx * s, ry * s, rz * s
-        qw, qx, qy, qz = self._q
-        w = qw * dw - qx * dx - qy * dy - qz * dz
-        x = qw * dx + qx * dw + qy * dz - qz * dy
-        y = qw * dy - qx * dz + qy * dw + qz * dx
-        z = qw * dz + qx * dy - qy * dx + qz * dw
-        n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
-        w, x, y, z = w * n, x * n, y * n, z * n
-        self._q = (w, x, y, z)
-        # Rotation matrix of the new attitude.
-        xx, yy, zz = x * x, y * y, z * z
-        xy, xz, yz = x * y, x * z, y * z
-        wx, wy, wz = w * x, w * y, w * z
-        r00, r01, r02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
-        r10, r11, r12 = 2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)
-        r20, r21, r22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
-        ux, uy, uz = fx - bax, fy - bay, fz - baz
-        a1x = r00 * ux + r01 * uy + r02 * uz
-        a1y = r10 * ux + r11 * uy + r12 * uz
-        a1z = r20 * ux + r21 * uy + r22 * uz
-        a0x, a0y, a0z = self._prev_acc_world
-        px, py, pz = self._p
-        vx, vy, vz = self._v
-        dt2 = dt * dt
-        g = self.gravity
-        self._p = (
-            px + vx * dt + (a0x / 3.0 + a1x / 6.0) * dt2,
-            py + vy * dt + (a0y / 3.0 + a1y / 6.0) * dt2,
-            pz + vz * dt + (a0z / 3.0 + a1z / 6.0 - 0.5 * g) * dt2,
+        rate = imu.angular_rate_rad_s
+        force = imu.specific_force_m_s2
+        bg = self._bg
+        P = self.P
+        self._q, self._p, self._v, self._prev_acc_world = self._entries.predict(
+            P,
+            self._q_diag,
+            dt,
+            self.gravity,
+            rate,
+            force,
+            self._prev_rate,
+            self._prev_acc_world,
+            bg,
+            self._ba,
+            self._q,
+            self._p,
+            self._v,
         )
-        mx, my, mz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
-        self._v = (vx + mx * dt, vy + my * dt, vz + (mz - g) * dt)
-        self._prev_acc_world = (a1x, a1y, a1z)
-        self._prev_rate = (gx, gy, gz)
-        self._prev_force = (fx, fy, fz)
-        self._rate = (gx - bgx, gy - bgy, gz - bgz)
-
-        # Covariance, eq. 269: P <- F P F^T + Q.
-        mdx, mdy, mdz = mx * dt, my * dt, mz * dt
-        F = self._F
-        e00, e01, e02 = -r00 * dt, -r01 * dt, -r02 * dt
-        e10, e11, e12 = -r10 * dt, -r11 * dt, -r12 * dt
-        e20, e21, e22 = -r20 * dt, -r21 * dt, -r22 * dt
-        F.flat[self._f_idx] = (
-            dt, dt, dt,
-            mdz, -mdy, -mdz, mdx, mdy, -mdx,
-            e00, e01, e02, e10, e11, e12, e20, e21, e22,
-            e00, e01, e02, e10, e11, e12, e20, e21, e22,
-        )  # fmt: skip
-        P = F @ self.P @ F.T
-        P.flat[self._diag] += self._q_diag
-        if not self.imu_samples & 255:
-            P = 0.5 * (P + P.T)  # round-off makes F P F^T drift from symmetry (the kernel mirrors)
-        self._finish_prediction(t, dt, P)
-
-    def _finish_prediction(self, t: float, dt: float, P: np.ndarray) -> None:
-        """The bad-vertical-acceleration noise, the covariance, the delayed-state buffer."""
+        self._prev_rate = rate
+        self._prev_force = force
+        self._rate = (rate[0] - bg[0], rate[1] - bg[1], rate[2] - bg[2])
         if t < self._bad_accel_until_s:
             P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
             P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
-        self.P = P
         # Delayed-state buffer.
         head = (self._head + 1) & RING_MASK
         self._ring[head] = (t, self._p, self._v, self._q, self._cp, self._cv, self._cq)
@@ -472,13 +352,9 @@ class ErrorStateEkf:
         self._rate = (g[0] - self._bg[0], g[1] - self._bg[1], g[2] - self._bg[2])
 
     def _world_force(self, f: Vector3) -> Vector3:
-        r = rotation_matrix_rows(self._q)
-        u = (f[0] - self._ba[0], f[1] - self._ba[1], f[2] - self._ba[2])
-        return (
-            r[0] * u[0] + r[1] * u[1] + r[2] * u[2],
-            r[3] * u[0] + r[4] * u[1] + r[5] * u[2],
-            r[6] * u[0] + r[7] * u[1] + r[8] * u[2],
-        )
+        """``R (f - b_a)``: a body specific force in the world frame."""
+        ba = self._ba
+        return matrix_times(rotation_from_quaternion(*self._q), (f[0] - ba[0], f[1] - ba[1], f[2] - ba[2]))
 
     # ------------------------------------------------------------------------------------------
     # Alignment and explicit initialisation
@@ -570,17 +446,17 @@ class ErrorStateEkf:
             yaw_var = (
                 p.mag_bias_init_gauss**2 * (J[0] ** 2 + J[1] ** 2 + J[2] ** 2) + noise**2 / self._align_mn
             )
-        q = _quaternion_from_euler(phi, theta, yaw)
+        q = quaternion_from_euler(phi, theta, yaw)
         self._q = q
 
         P = np.zeros((N, N))
         # Accelerometer bias prior, and the tilt error it causes: the alignment makes the
         # horizontal specific force vanish, so g dth_y = (R b_a)_x and g dth_x = -(R b_a)_y.
-        r = rotation_matrix_rows(q)
+        R = rotation_from_quaternion(*q)
         g = self.gravity
         M = np.zeros((3, 3))
-        M[0, :] = [-r[3] / g, -r[4] / g, -r[5] / g]
-        M[1, :] = [r[0] / g, r[1] / g, r[2] / g]
+        M[0, :] = [-R[1][0] / g, -R[1][1] / g, -R[1][2] / g]
+        M[1, :] = [R[0][0] / g, R[0][1] / g, R[0][2] / g]
         Pba = np.eye(3) * p.accel_bias_init**2
         var_f = [max(self._align_f2[i] / n - fbar[i] ** 2, 0.0) for i in range(3)]
         P[IBA : IBA + 3, IBA : IBA + 3] = Pba
@@ -738,8 +614,9 @@ class ErrorStateEkf:
             p[2] + ncp[2] - cp[2] + v[2] * dtm,
         )
         vm = (v[0] + ncv[0] - cv[0], v[1] + ncv[1] - cv[1], v[2] + ncv[2] - cv[2])
-        qm = q if cq is self._cq else quat_multiply(quat_multiply(self._cq, quat_conjugate(cq)), q)
-        return pm, vm, qm, now - t_m
+        if cq is not self._cq:  # corrected since it was stored: the corrections since, cq_now (x) cq^-1
+            q = quaternion_multiply(quaternion_multiply(self._cq, quaternion_conjugate(cq)), q)
+        return pm, vm, q, now - t_m
 
     # ------------------------------------------------------------------------------------------
     # Fusion
@@ -761,15 +638,10 @@ class ErrorStateEkf:
         for k, (idx, h, _, _) in enumerate(rows):
             for i, hi in zip(idx, h, strict=True):
                 H[k, i] = hi
-        kernels = self._kernels
-        if kernels is not None:
-            prior = np.empty(m)
-            kernels.prior_variances(self.P, H, prior)
-            d = prior.tolist()
-        else:
-            PHt = self.P @ H.T
-            S = H @ PHt
-            d = S.diagonal().tolist()
+        entries = self._entries
+        prior = np.empty(m)
+        entries.prior_variances(self.P, H, prior)
+        d = prior.tolist()
         now = self.time_s
         keep: list[int] = []
         results: list[bool] = []
@@ -802,25 +674,12 @@ class ErrorStateEkf:
             k += len(group_rows)
         if not keep:
             return results
-        if kernels is not None:
-            if len(keep) < m:
-                H = H[keep]
-            dx = np.empty(N)
-            kernels.joseph_update(self.P, H, np.array([rows[i][3] for i in keep]),
-                                  np.array([rows[i][2] for i in keep]), dx)  # fmt: skip
-            self._inject(dx)
-            return results
         if len(keep) < m:
             H = H[keep]
-            PHt = PHt[:, keep]
-            S = S[np.ix_(keep, keep)]
-        r = [rows[i][3] for i in keep]
-        y = [rows[i][2] for i in keep]
-        S.flat[:: len(keep) + 1] += r
-        K = PHt @ _inverse_spd(S)
-        A = self._I - K @ H
-        self.P = A @ self.P @ A.T + (K * r) @ K.T
-        self._inject(K @ y)
+        dx = np.empty(N)
+        entries.joseph_update(self.P, H, np.array([rows[i][3] for i in keep]),
+                              np.array([rows[i][2] for i in keep]), dx)  # fmt: skip
+        self._inject(dx)
         return results
 
     def _inject(self, dx: np.ndarray) -> None:
@@ -831,10 +690,8 @@ class ErrorStateEkf:
         p, v = self._p, self._v
         self._p = (p[0] + dp[0], p[1] + dp[1], p[2] + dp[2])
         self._v = (v[0] + dv[0], v[1] + dv[1], v[2] + dv[2])
-        dq = quat_exp(d[6], d[7], d[8])
-        q = quat_multiply(dq, self._q)
-        n = 1.0 / math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
-        self._q = (q[0] * n, q[1] * n, q[2] * n, q[3] * n)
+        dq = quaternion_exp(d[6], d[7], d[8])
+        self._q = quaternion_normalised(quaternion_multiply(dq, self._q))
         bg, ba, bm = self._bg, self._ba, self._bm
         self._bg = (bg[0] + d[9], bg[1] + d[10], bg[2] + d[11])
         self._ba = (ba[0] + d[12], ba[1] + d[13], ba[2] + d[14])
@@ -844,7 +701,7 @@ class ErrorStateEkf:
         cp, cv = self._cp, self._cv
         self._cp = (cp[0] + dp[0], cp[1] + dp[1], cp[2] + dp[2])
         self._cv = (cv[0] + dv[0], cv[1] + dv[1], cv[2] + dv[2])
-        self._cq = quat_multiply(dq, self._cq)
+        self._cq = quaternion_multiply(dq, self._cq)
         # The previous sample's world force and the reported rate follow the new q and biases.
         self._prev_acc_world = self._world_force(self._prev_force)
         g = self._prev_rate
@@ -1034,8 +891,8 @@ class ErrorStateEkf:
         ):
             ok = False
         if ok and p.mag_check & MAG_CHECK_INCLINATION and strength > 0.0:
-            r = rotation_matrix_rows(q)
-            wz = r[6] * c[0] + r[7] * c[1] + r[8] * c[2]
+            R = rotation_from_quaternion(*q)
+            wz = R[2][0] * c[0] + R[2][1] * c[1] + R[2][2] * c[2]
             incl = math.asin(max(-1.0, min(1.0, -wz / strength)))
             ok = abs(incl - self._field_inclination) <= p.mag_inclination_tol_rad
         if not ok:
@@ -1172,7 +1029,7 @@ class ErrorStateEkf:
         return self._bg, self._ba
 
     def covariance(self) -> np.ndarray:
-        """A copy of the 19x19 error-state covariance (order: :data:`STATE_NAMES`)."""
+        """A copy of the 19x19 error-state covariance (order: :data:`.kernels.STATE_NAMES`)."""
         return self.P.copy()
 
     def status(self) -> EstimatorStatus:
@@ -1296,63 +1153,33 @@ class _Window:
         return self.total / len(self.samples)
 
 
-def _compiled_kernels():
-    """:mod:`.compiled` (its kernels loaded once per process), or None: numba is not installed
-    (the ``campaign`` extra) or ``QUADSITL_PURE_PYTHON=1``."""
-    try:
-        from . import compiled
-    except ImportError:
-        return None
-    if not compiled.enabled():
-        return None
-    compiled.warm_up()
-    return compiled
+class FilterEntries(NamedTuple):
+    """What the filter calls per IMU sample and per fusion: :mod:`.kernels`' compiled entries, or
+    the kernels themselves where nothing compiles."""
+
+    predict: Any
+    prior_variances: Any
+    joseph_update: Any
 
 
-def _inverse_spd(S: np.ndarray) -> np.ndarray:
-    """Inverse of a small symmetric positive-definite matrix: closed form up to 4x4 (numpy's
-    general inverse costs ~7 us of call overhead, the cofactors ~2 us), numpy beyond."""
-    m = S.shape[0]
-    if m == 1:
-        return np.array(((1.0 / S[0, 0],),))
-    if m == 2:
-        (a, b), (_, d) = S.tolist()
-        det = a * d - b * b
-        return np.array(((d / det, -b / det), (-b / det, a / det)))
-    if m == 3:
-        return np.array(_inverse3(S.tolist()))
-    if m == 4:
-        # Blockwise: S = [[A, u], [u^T, c]], A 3x3; Schur complement k = c - u^T A^-1 u.
-        rows = S.tolist()
-        Ai = _inverse3([rows[0][:3], rows[1][:3], rows[2][:3]])
-        u = (rows[0][3], rows[1][3], rows[2][3])
-        w = [Ai[i][0] * u[0] + Ai[i][1] * u[1] + Ai[i][2] * u[2] for i in range(3)]  # A^-1 u
-        k = 1.0 / (rows[3][3] - (u[0] * w[0] + u[1] * w[1] + u[2] * w[2]))
-        out = [[Ai[i][j] + k * w[i] * w[j] for j in range(3)] + [-k * w[i]] for i in range(3)]
-        out.append([-k * w[0], -k * w[1], -k * w[2], k])
-        return np.array(out)
-    return np.linalg.inv(S)
-
-
-def _inverse3(S: list) -> list:
-    (a, b, c), (_, e, f), (_, _, i) = S
-    A, B, C = e * i - f * f, c * f - b * i, b * f - c * e
-    det = a * A + b * B + c * C
-    D, E, F = a * i - c * c, b * c - a * f, a * e - b * b
-    return [[A / det, B / det, C / det], [B / det, D / det, E / det], [C / det, E / det, F / det]]
+@functools.cache
+def filter_entries() -> FilterEntries:
+    """The entries, compiled (or loaded from numba's cache) and run once on scratch arrays of the
+    filter's types now, not at the first sample in flight, then frozen: an argument of another
+    type is refused (TypeError) instead of stalling a flight for a compilation. Once per process."""
+    entries = FilterEntries(
+        compiled(kernels.predict), compiled(kernels.prior_variances), compiled(kernels.joseph_update)
+    )
+    if compiling():
+        P, H, z3 = np.eye(N), np.zeros((2, N)), (0.0, 0.0, 0.0)
+        H[0, IP] = H[1, IP + 1] = 1.0
+        entries.predict(P, np.zeros(N), 0.002, 9.81, z3, z3, z3, z3, z3, z3, (1.0, 0.0, 0.0, 0.0), z3, z3)
+        entries.prior_variances(P, H, np.empty(2))
+        entries.joseph_update(P, H, np.ones(2), np.zeros(2), np.empty(N))
+        for entry in entries:
+            freeze(entry)
+    return entries
 
 
 def _copy(stats: SourceStats) -> SourceStats:
     return SourceStats(**vars(stats))
-
-
-def _quaternion_from_euler(phi: float, theta: float, psi: float) -> Quaternion:
-    cf, sf = math.cos(0.5 * phi), math.sin(0.5 * phi)
-    ct, st = math.cos(0.5 * theta), math.sin(0.5 * theta)
-    cp, sp = math.cos(0.5 * psi), math.sin(0.5 * psi)
-    return (
-        cf * ct * cp + sf * st * sp,
-        sf * ct * cp - cf * st * sp,
-        cf * st * cp + sf * ct * sp,
-        cf * ct * sp - sf * st * cp,
-    )

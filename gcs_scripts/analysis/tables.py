@@ -8,7 +8,13 @@ from pathlib import Path
 
 from .metrics import CONTROL_NAMES, STATE_NAMES, Indices
 
-CONTROLLER_TITLES = {"intbs_nlhinf": "IntBS-NLH∞", "intbs": "IntBS", "bs_nlhinf": "BS-NLH∞"}
+CONTROLLER_TITLES = {
+    "intbs_nlhinf": "IntBS-NLH∞",
+    "intbs": "IntBS",
+    "bs_nlhinf": "BS-NLH∞",
+    "px4_pid": "PX4 PID",
+    "se3": "SE(3)",
+}
 
 # Raffo, Ortega & Rubio, Tables I-III (helix scenario, Section IV).
 PAPER_FINAL_ERRORS_M = {
@@ -51,16 +57,17 @@ def _paper_table(
 ) -> list[str]:
     header = f"| {unit} |"
     rule = "|---|"
-    for c in controllers:
-        header += f" {_title(c)} (ours) |" + (f" {_title(c)} (paper) |" if paper else "")
-        rule += "---:|" + ("---:|" if paper else "")
+    for c in controllers:  # the paper's column beside ours for the controllers it flew
+        in_paper = paper is not None and c in paper
+        header += f" {_title(c)} (ours) |" + (f" {_title(c)} (paper) |" if in_paper else "")
+        rule += "---:|" + ("---:|" if in_paper else "")
     lines = [header, rule]
     for i, row in enumerate(rows):
         line = f"| {row} |"
         for c in controllers:
             line += f" {_fmt(ours(results[(scenario, c)])[i], digits)} |"
-            if paper:
-                line += f" {_fmt(paper[c][i], digits)} |" if c in paper else " — |"
+            if paper is not None and c in paper:
+                line += f" {_fmt(paper[c][i], digits)} |"
         lines.append(line)
     return lines
 

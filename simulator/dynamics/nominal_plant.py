@@ -18,9 +18,10 @@ from quadcommon.rigid_body import (
     quaternion_from_euler,
     rotation_matrix,
     solve3,
+    transpose_times,
 )
 
-from .plant import ZERO3, Plant, TruthState, Vector3, _rotate_transpose
+from .plant import ZERO3, Plant, TruthState, Vector3
 
 
 class NominalPlant:
@@ -51,9 +52,13 @@ class NominalPlant:
     set_wrench = Plant.set_wrench
     set_actuator_controls = Plant.set_actuator_controls
     set_disturbance = Plant.set_disturbance
-    advance = Plant.advance  # step by step: no compiled path here
     rotor_mode = False
-    _compiled = None
+
+    def advance(self, disturbances) -> None:
+        """:meth:`Plant.advance`'s contract, one :meth:`step` at a time."""
+        for force, torque, wind in disturbances:
+            self.set_disturbance(force, torque, wind)
+            self.step()
 
     def set_rotor_commands(self, speeds_rad_s: tuple[float, float, float, float]) -> None:
         raise ValueError("the nominal plant has no rotors")
@@ -130,7 +135,7 @@ class NominalPlant:
         )
         on_ground = self.on_ground()
         acc = ZERO3 if on_ground else (ds[3], ds[4], ds[5])
-        specific = _rotate_transpose(R, (acc[0], acc[1], acc[2] + self.gravity))
+        specific = transpose_times(R, (acc[0], acc[1], acc[2] + self.gravity))
         return TruthState(
             position_m=(s[0], s[1], s[2]),
             velocity_m_s=(s[3], s[4], s[5]),

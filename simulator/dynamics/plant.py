@@ -27,23 +27,27 @@ Nominal plant (``plant.model = "nominal"``, :mod:`.nominal_plant`): eqs. (1)-(6)
 ``(xi, eta)``: the model the controllers are designed on, for checking them against their own
 assumptions.
 
-The per-step path uses plain floats (15x cheaper than small-array numpy here).
+The equations are in :mod:`.equations`, written once: this class holds the vehicle's parameters
+and the held inputs, and calls those kernels, compiled with numba (loaded or compiled when the
+first plant is built, never in the middle of a flight), or as plain Python where nothing compiles
+(``QUADSITL_PURE_PYTHON=1``: the same source, slower).
 """
 
 from __future__ import annotations
 
+import functools
 import math
-import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
+import numpy as np
+
 from quadcommon.config import VehicleConfig
-from quadcommon.rigid_body import (
-    euler_from_rotation,
-    euler_rates_from_body_rates,
-    quaternion_from_euler,
-    rotation_from_quaternion,
-)
+from quadcommon.kernel import compiled, compiling, freeze, vector
+from quadcommon.rigid_body import cross, matrix_times, quaternion_from_euler, rotation_from_quaternion, solve3
+
+from . import equations
+from .equations import P_SIZE, U_FORCE, U_ROTOR, U_SIZE, U_TAU, U_THRUST, U_TORQUE, U_WIND
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
@@ -90,10 +94,9 @@ class Plant:
         Ixy, Ixz, Iyz = plant.products_of_inertia_kg_m2
         # Inertia tensor about G (positive products in the config mean J = [[Ixx, -Ixy, ...]]).
         self.inertia = ((Ixx, -Ixy, -Ixz), (-Ixy, Iyy, -Iyz), (-Ixz, -Iyz, Izz))
-        self.inertia_inv = _inverse3(self.inertia)
+        columns = [solve3(self.inertia, e) for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))]
+        self.inertia_inv = tuple(tuple(column[i] for column in columns) for i in range(3))
         self.com_offset = plant.com_offset_m
-        # O is |r_G| from G at most: with G higher than this above z = 0, O is in the air.
-        self._ground_reach = math.sqrt(sum(c * c for c in plant.com_offset_m)) + 1e-3
         self.drag = plant.drag_coefficient_n_s_m
         self.ground_contact = plant.ground_contact
         self.thrust_max = act.thrust_max_n
@@ -110,11 +113,36 @@ class Plant:
         self.force_dist: Vector3 = ZERO3
         self.torque_dist_eta: Vector3 = ZERO3
         self.wind: Vector3 = ZERO3
-        self._derivative = self._make_derivative()
         self.state: list[float] = []
         self.reset(ZERO3, ZERO3)
-        self._compiled = _compiled_step(self)  # None: numba absent (or QUADSITL_PURE_PYTHON=1)
-        self._truth: tuple[list[float], TruthState] | None = None  # advance()'s (state it is of, truth)
+        # The kernels' buffers: parameters, state and RK4 scratch, one step's inputs, a frame's.
+        self._P = vector(self.parameters())
+        self._work = _rows(6, len(self.state))
+        self._s = self._work[0]
+        self._u = vector(U_SIZE)
+        self._frame_u = vector(2 * U_SIZE)
+        self._entries = _entries()
+        self._truth: tuple[list[float], TruthState] | None = None  # (the state it is of, truth)
+
+    def parameters(self) -> list[float]:
+        """The parameter vector the equations read (layout ``P_*`` of :mod:`.equations`)."""
+        P = [0.0] * P_SIZE
+        P[equations.P_MASS] = self.mass
+        P[equations.P_GRAVITY] = self.gravity
+        P[equations.P_J : equations.P_J + 9] = [x for row in self.inertia for x in row]
+        P[equations.P_K : equations.P_K + 9] = [x for row in self.inertia_inv for x in row]
+        P[equations.P_COM : equations.P_COM + 3] = self.com_offset
+        P[equations.P_DRAG : equations.P_DRAG + 3] = self.drag
+        P[equations.P_B], P[equations.P_D], P[equations.P_ARM] = self.b, self.d, self.arm
+        P[equations.P_JR], P[equations.P_TAU] = self.rotor_inertia, self.rotor_tau
+        P[equations.P_WMIN], P[equations.P_WMAX] = self.speed_min, self.speed_max
+        P[equations.P_THRUST_MAX] = self.thrust_max
+        P[equations.P_TORQUE_MAX : equations.P_TORQUE_MAX + 3] = self.torque_max
+        P[equations.P_ROTOR_MODE] = 1.0 if self.rotor_mode else 0.0
+        P[equations.P_GROUND] = 1.0 if self.ground_contact else 0.0
+        P[equations.P_HAS_DRAG] = 1.0 if any(k != 0.0 for k in self.drag) else 0.0
+        P[equations.P_GROUND_REACH] = math.sqrt(sum(c * c for c in self.com_offset)) + 1e-3
+        return [float(x) for x in P]
 
     # -- state ------------------------------------------------------------------------------------
     def reset(
@@ -125,16 +153,14 @@ class Plant:
         body_rates_rad_s: Vector3 = ZERO3,
     ) -> None:
         """Place O at ``position_m`` with the given attitude and motion; rotors at rest."""
+        self._truth = None
         q = quaternion_from_euler(*euler_rad)
         R = rotation_from_quaternion(*q)
-        rx, ry, rz = self.com_offset
-        Rr = tuple(R[i][0] * rx + R[i][1] * ry + R[i][2] * rz for i in range(3))
-        w = body_rates_rad_s
-        wxr = (w[1] * rz - w[2] * ry, w[2] * rx - w[0] * rz, w[0] * ry - w[1] * rx)
-        Rwxr = tuple(R[i][0] * wxr[0] + R[i][1] * wxr[1] + R[i][2] * wxr[2] for i in range(3))
+        Rr = matrix_times(R, self.com_offset)
+        Rwxr = matrix_times(R, cross(body_rates_rad_s, self.com_offset))
         p_G = [position_m[i] + Rr[i] for i in range(3)]
         v_G = [velocity_m_s[i] + Rwxr[i] for i in range(3)]
-        self.state = [*p_G, *v_G, *q, *w]
+        self.state = [*p_G, *v_G, *q, *body_rates_rad_s]
         if self.rotor_mode:
             self.state += [0.0, 0.0, 0.0, 0.0]
 
@@ -182,261 +208,67 @@ class Plant:
         self.wind = wind_world_m_s
 
     # -- dynamics ---------------------------------------------------------------------------------
-    def _make_derivative(self):  # noqa: C901 - one flat function is the fast form here
-        """Build ``f(state) -> state_dot`` with every constant bound as a local (hot path)."""
-        m = self.mass
-        g = self.gravity
-        (J00, J01, J02), (J10, J11, J12), (J20, J21, J22) = self.inertia
-        (K00, K01, K02), (K10, K11, K12), (K20, K21, K22) = self.inertia_inv
-        rx, ry, rz = self.com_offset
-        kdx, kdy, kdz = self.drag
-        has_drag = (kdx, kdy, kdz) != ZERO3
-        b, d, arm, Jr, tau_r = self.b, self.d, self.arm, self.rotor_inertia, self.rotor_tau
-        rotor_mode = self.rotor_mode
-        sqrt = math.sqrt
-        plant = self
-
-        def derivative(s: list[float]) -> list[float]:
-            _, _, _, vx, vy, vz, qw, qx, qy, qz, p, q, r = s[:13]
-            # Rotation body -> world.
-            xx, yy, zz = qx * qx, qy * qy, qz * qz
-            xy, xz, yz = qx * qy, qx * qz, qy * qz
-            wx, wy, wz = qw * qx, qw * qy, qw * qz
-            R00, R01, R02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
-            R10, R11, R12 = 2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)
-            R20, R21, R22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
-
-            # Actuators: thrust along body z at O and control torque (body).
-            if rotor_mode:
-                w1, w2, w3, w4 = s[13], s[14], s[15], s[16]
-                c1, c2, c3, c4 = plant.rotor_cmd
-                dw1, dw2 = (c1 - w1) / tau_r, (c2 - w2) / tau_r
-                dw3, dw4 = (c3 - w3) / tau_r, (c4 - w4) / tau_r
-                s1, s2, s3, s4 = w1 * w1, w2 * w2, w3 * w3, w4 * w4
-                thrust = b * (s1 + s2 + s3 + s4)
-                omega_r = -w1 + w2 - w3 + w4
-                tx = arm * b * (s4 - s2) + Jr * omega_r * q
-                ty = arm * b * (s3 - s1) - Jr * omega_r * p
-                tz = d * (-s1 + s2 - s3 + s4) + Jr * (-dw1 + dw2 - dw3 + dw4)
-            else:
-                thrust = plant.thrust_cmd
-                tx, ty, tz = plant.torque_cmd
-
-            # Moment of the thrust (applied at O) about G: (-r_G) x (0, 0, T).
-            tx -= ry * thrust
-            ty += rx * thrust
-
-            # Torque disturbance on the Euler coordinates -> body couple W^-T tau_eta (eq. 4).
-            ap, aq, ar = plant.torque_dist_eta
-            if ap != 0.0 or aq != 0.0 or ar != 0.0:
-                st = -R20
-                ct = sqrt(max(1.0 - st * st, 1e-12))
-                sf, cf = R21 / ct, R22 / ct
-                rhs = (ar + st * ap) / ct
-                tx += ap
-                ty += cf * aq + sf * rhs
-                tz += -sf * aq + cf * rhs
-
-            # Euler's equation about G: J w_dot = tau - w x J w.
-            hx = J00 * p + J01 * q + J02 * r
-            hy = J10 * p + J11 * q + J12 * r
-            hz = J20 * p + J21 * q + J22 * r
-            ex = tx - (q * hz - r * hy)
-            ey = ty - (r * hx - p * hz)
-            ez = tz - (p * hy - q * hx)
-            dp = K00 * ex + K01 * ey + K02 * ez
-            dq = K10 * ex + K11 * ey + K12 * ez
-            dr = K20 * ex + K21 * ey + K22 * ez
-
-            # Newton's equation for G (world frame).
-            fx, fy, fz = plant.force_dist
-            fx += R02 * thrust
-            fy += R12 * thrust
-            fz += R22 * thrust
-            if has_drag:
-                # Air-relative velocity of O: v_G - R (w x r_G) - wind.
-                cx, cy, cz = q * rz - r * ry, r * rx - p * rz, p * ry - q * rx
-                wnx, wny, wnz = plant.wind
-                fx -= kdx * (vx - (R00 * cx + R01 * cy + R02 * cz) - wnx)
-                fy -= kdy * (vy - (R10 * cx + R11 * cy + R12 * cz) - wny)
-                fz -= kdz * (vz - (R20 * cx + R21 * cy + R22 * cz) - wnz)
-            ax, ay, az = fx / m, fy / m, fz / m - g
-
-            # Attitude kinematics q_dot = 1/2 q (x) (0, w).
-            out = [
-                vx, vy, vz, ax, ay, az,
-                -0.5 * (qx * p + qy * q + qz * r),
-                0.5 * (qw * p + qy * r - qz * q),
-                0.5 * (qw * q + qz * p - qx * r),
-                0.5 * (qw * r + qx * q - qy * p),
-                dp, dq, dr,
-            ]  # fmt: skip
-            if rotor_mode:
-                out += [dw1, dw2, dw3, dw4]
-            return out
-
-        return derivative
-
     def advance(self, disturbances: Sequence[tuple[Vector3, Vector3, Vector3]]) -> None:
         """One physics step per ``(force, torque, wind)`` of ``disturbances``, each held over its
-        step (:meth:`set_disturbance` then :meth:`step`): a lockstep frame's physics. Compiled, the
-        steps and the truth read-out that the next frame asks for are one call (the same
-        operations as :meth:`step` and :meth:`truth`: bit for bit); :meth:`truth` then returns it
-        until the state or an input changes."""
-        if self._compiled is None:
-            for force, torque, wind in disturbances:
-                self.set_disturbance(force, torque, wind)
-                self.step()
-            return
-        pos, vel, acc, euler, euler_rates, specific, on_ground = self._compiled.advance(self, disturbances)
+        step (as :meth:`set_disturbance` then :meth:`step` would): a lockstep frame's physics, and
+        the truth read-out that the next frame asks for, in one call of the equations;
+        :meth:`truth` then returns it until the state or an input changes."""
+        held = self._held_actuators()
+        inputs: list[float] = []
+        for force, torque, wind in disturbances:
+            inputs += (*held, *force, *torque, *wind)  # the U_* layout, one block per step
+        frame_u = self._frame_u
+        if len(frame_u) != len(inputs):
+            frame_u = self._frame_u = vector(len(inputs))
+        frame_u[:] = inputs  # one conversion
+        s = self._s
+        s[:] = self.state
+        truth = TruthState._make(self._entries.advance(self._work, self._P, frame_u, self.dt))
         self.force_dist, self.torque_dist_eta, self.wind = disturbances[-1]
-        s = self.state
-        speeds, thrust, torque = self._actuation(s)
-        truth = TruthState(pos, vel, acc, (s[6], s[7], s[8], s[9]), euler, (s[10], s[11], s[12]), euler_rates,
-                           specific, speeds, thrust, torque, on_ground)  # fmt: skip
-        self._truth = (list(s), truth)  # a copy: an in-place change of the state misses the cache
+        self.state = _listed(s)
+        self._truth = (list(self.state), truth)  # a copy: an in-place change of the state misses it
 
     def step(self) -> None:
-        """Advance one physics step (classical RK4, inputs held): compiled when numba is there
-        (:mod:`.compiled`, the same operations in the same order: bit for bit), else here."""
-        if self._compiled is not None:
-            self._compiled.step(self)
-            return
-        f = self._derivative
-        s = self.state
-        h = self.dt
-        h2 = 0.5 * h
-        # (zip without strict=: the lists have the state's length by construction, and the check
-        # doubles the cost of these comprehensions)
-        k1 = f(s)
-        k2 = f([a + h2 * b for a, b in zip(s, k1)])  # noqa: B905
-        k3 = f([a + h2 * b for a, b in zip(s, k2)])  # noqa: B905
-        k4 = f([a + h * b for a, b in zip(s, k3)])  # noqa: B905
-        h6 = h / 6.0
-        s = [a + h6 * (b1 + 2.0 * (b2 + b3) + b4) for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4)]  # noqa: B905
-        # Keep the quaternion on the unit sphere (RK4 drifts off it by O(h^5) per step).
-        qw, qx, qy, qz = s[6], s[7], s[8], s[9]
-        n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        s[6], s[7], s[8], s[9] = qw * n, qx * n, qy * n, qz * n
-        self.state = s
-        if self.ground_contact and s[2] < self._ground_reach:  # O may be at the ground only then
-            self._resolve_ground_contact()
+        """Advance one physics step (classical RK4, inputs held), then the ground contact."""
+        self._truth = None
+        s = self._s
+        s[:] = self.state
+        self._u[:] = self._held_inputs()
+        self._entries.physics_steps(self._work, self._P, self._u, self.dt)
+        self.state = _listed(s)
 
-    def _resolve_ground_contact(self) -> None:
-        """Keep O on or above z = 0: a vehicle pressed into the ground rests there, level."""
-        s = self.state
-        R = rotation_from_quaternion(s[6], s[7], s[8], s[9])
-        rx, ry, rz = self.com_offset
-        z_O = s[2] - (R[2][0] * rx + R[2][1] * ry + R[2][2] * rz)
-        if z_O > 0.0:
-            return
-        # velocity of O along z
-        p, q, r = s[10], s[11], s[12]
-        cx, cy, cz = q * rz - r * ry, r * rx - p * rz, p * ry - q * rx
-        vz_O = s[5] - (R[2][0] * cx + R[2][1] * cy + R[2][2] * cz)
-        if vz_O > 0.0:
-            return
-        psi = math.atan2(R[1][0], R[0][0])
-        qn = quaternion_from_euler(0.0, 0.0, psi)
-        Rl = rotation_from_quaternion(*qn)
-        x_O = s[0] - (R[0][0] * rx + R[0][1] * ry + R[0][2] * rz)
-        y_O = s[1] - (R[1][0] * rx + R[1][1] * ry + R[1][2] * rz)
-        s[0] = x_O + Rl[0][0] * rx + Rl[0][1] * ry + Rl[0][2] * rz
-        s[1] = y_O + Rl[1][0] * rx + Rl[1][1] * ry + Rl[1][2] * rz
-        s[2] = Rl[2][0] * rx + Rl[2][1] * ry + Rl[2][2] * rz
-        s[3:6] = [0.0, 0.0, 0.0]
-        s[6:10] = list(qn)
-        s[10:13] = [0.0, 0.0, 0.0]
+    def _held_actuators(self) -> tuple[float, ...]:
+        """The actuator part of the held inputs (``U_THRUST`` .. ``U_FORCE``)."""
+        if self.rotor_mode:
+            return (0.0, 0.0, 0.0, 0.0, *self.rotor_cmd)
+        return (self.thrust_cmd, *self.torque_cmd, 0.0, 0.0, 0.0, 0.0)
+
+    def _held_inputs(self) -> tuple[float, ...]:
+        """The inputs held over the next step (layout ``U_*``)."""
+        return (*self._held_actuators(), *self.force_dist, *self.torque_dist_eta, *self.wind)
 
     # -- read-out ---------------------------------------------------------------------------------
     def on_ground(self) -> bool:
-        if not self.ground_contact:
-            return False
-        s = self.state
-        R = rotation_from_quaternion(s[6], s[7], s[8], s[9])
-        rx, ry, rz = self.com_offset
-        z_O = s[2] - (R[2][0] * rx + R[2][1] * ry + R[2][2] * rz)
-        return z_O <= 1e-6 and abs(s[5]) < 1e-6
+        return self.truth().on_ground
 
     def kinematics(self) -> tuple[Vector3, Vector3, Vector3, Vector3]:
-        """``(position, velocity, euler, euler_rates)`` of O: the cheap read-out for control."""
-        s = self.state
-        R = rotation_from_quaternion(s[6], s[7], s[8], s[9])
-        w = (s[10], s[11], s[12])
-        Rr = _rotate(R, self.com_offset)
-        Rwxr = _rotate(R, _cross(w, self.com_offset))
-        euler = euler_from_rotation(R)
-        return (
-            (s[0] - Rr[0], s[1] - Rr[1], s[2] - Rr[2]),
-            (s[3] - Rwxr[0], s[4] - Rwxr[1], s[5] - Rwxr[2]),
-            euler,
-            euler_rates_from_body_rates(euler[0], euler[1], w),
-        )
+        """``(position, velocity, euler, euler_rates)`` of O: what a controller with perfect state
+        knowledge reads."""
+        truth = self.truth()
+        return truth.position_m, truth.velocity_m_s, truth.euler_rad, truth.euler_rates_rad_s
 
     def truth(self) -> TruthState:
-        """Ground truth now (one extra derivative evaluation gives the accelerations).
-
-        Written out component by component: it runs once per frame, on the lockstep path (where
-        :meth:`advance` has usually computed it already, compiled)."""
+        """Ground truth now (one derivative evaluation gives the accelerations), kept until the
+        state or an input changes (after :meth:`advance`, the read-out it made)."""
         cached = self._truth
         if cached is not None and cached[0] == self.state:
             return cached[1]
-        s = self.state
-        ds = self._derivative(s)
-        q = (s[6], s[7], s[8], s[9])
-        (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = rotation_from_quaternion(*q)
-        rx, ry, rz = self.com_offset
-        p, qr, r = s[10], s[11], s[12]
-        dp, dq, dr = ds[10], ds[11], ds[12]
-        # w x r and (w_dot x r + w x (w x r)): the motion of O relative to G
-        cx, cy, cz = qr * rz - r * ry, r * rx - p * rz, p * ry - qr * rx
-        ax_ = dq * rz - dr * ry + (qr * cz - r * cy)
-        ay_ = dr * rx - dp * rz + (r * cx - p * cz)
-        az_ = dp * ry - dq * rx + (p * cy - qr * cx)
-        pos = (s[0] - (R00 * rx + R01 * ry + R02 * rz), s[1] - (R10 * rx + R11 * ry + R12 * rz),
-               s[2] - (R20 * rx + R21 * ry + R22 * rz))  # fmt: skip
-        vel = (s[3] - (R00 * cx + R01 * cy + R02 * cz), s[4] - (R10 * cx + R11 * cy + R12 * cz),
-               s[5] - (R20 * cx + R21 * cy + R22 * cz))  # fmt: skip
-        on_ground = self.ground_contact and pos[2] <= 1e-6 and abs(s[5]) < 1e-6
-        if on_ground:
-            acc = ZERO3
-        else:
-            acc = (ds[3] - (R00 * ax_ + R01 * ay_ + R02 * az_), ds[4] - (R10 * ax_ + R11 * ay_ + R12 * az_),
-                   ds[5] - (R20 * ax_ + R21 * ay_ + R22 * az_))  # fmt: skip
-        fx, fy, fz = acc[0], acc[1], acc[2] + self.gravity  # specific force, world; into the body: R^T
-        specific = (R00 * fx + R10 * fy + R20 * fz, R01 * fx + R11 * fy + R21 * fz,
-                    R02 * fx + R12 * fy + R22 * fz)  # fmt: skip
-        euler = euler_from_rotation(((R00, R01, R02), (R10, R11, R12), (R20, R21, R22)))
-        w = (p, qr, r)
-        speeds, thrust, torque = self._actuation(s)
-        return TruthState(
-            position_m=pos,
-            velocity_m_s=vel,
-            acceleration_m_s2=acc,
-            quaternion=q,
-            euler_rad=euler,
-            body_rates_rad_s=w,
-            euler_rates_rad_s=euler_rates_from_body_rates(euler[0], euler[1], w),
-            specific_force_body_m_s2=specific,
-            rotor_speeds_rad_s=speeds,
-            thrust_n=thrust,
-            torque_body_n_m=torque,
-            on_ground=on_ground,
-        )
-
-
-    def _actuation(self, s: list[float]) -> tuple[tuple[float, float, float, float], float, Vector3]:
-        """Rotor speeds, applied thrust and control torque about O of state ``s`` (truth)."""
-        if self.rotor_mode:
-            speeds = (s[13], s[14], s[15], s[16])
-            sq = [x * x for x in speeds]
-            torque = (
-                self.arm * self.b * (sq[3] - sq[1]),
-                self.arm * self.b * (sq[2] - sq[0]),
-                self.d * (-sq[0] + sq[1] - sq[2] + sq[3]),
-            )
-            return speeds, self.b * sum(sq), torque
-        return (0.0, 0.0, 0.0, 0.0), self.thrust_cmd, self.torque_cmd
+        state = list(self.state)  # a copy: an in-place change of the state misses the cache
+        self._s[:] = state
+        self._u[:] = self._held_inputs()
+        truth = TruthState._make(self._entries.truth(self._work, self._P, self._u))
+        self._truth = (state, truth)
+        return truth
 
 
 def make_plant(vehicle: VehicleConfig, physics_dt_s: float):
@@ -449,46 +281,54 @@ def make_plant(vehicle: VehicleConfig, physics_dt_s: float):
     return Plant(vehicle, physics_dt_s)
 
 
-def _compiled_step(plant: Plant):
-    """The numba step for ``plant`` (:mod:`.compiled`), or None: numba is not installed (the
-    ``campaign`` extra brings it) or ``QUADSITL_PURE_PYTHON=1`` asks for the Python reference."""
-    if os.environ.get("QUADSITL_PURE_PYTHON") == "1":
-        return None
-    try:
-        from .compiled import CompiledStep
-    except ImportError:
-        return None
-    return CompiledStep(plant)
+class _Entries(NamedTuple):
+    """What :class:`Plant` calls: the equations' entries (:func:`quadcommon.kernel.compiled`)."""
+
+    physics_steps: Callable[..., None]
+    advance: Callable[..., tuple]
+    truth: Callable[..., tuple]
 
 
-# -- small helpers (off the RK4 path) -------------------------------------------------------------
+@functools.cache
+def _entries() -> _Entries:
+    """The entries, made once per process. Compiled, each is called once now on scratch buffers
+    (loaded from numba's cache, or compiled: ~1 s or more, which in the middle of lockstep the
+    autopilot would see as a simulator stall) and frozen: nothing compiles mid-flight."""
+    entries = _Entries(*(compiled(getattr(equations, name)) for name in _Entries._fields))
+    if compiling():
+        n = 17
+        work, P, u = np.zeros((6, n)), np.zeros(P_SIZE), np.zeros(U_SIZE)
+        work[0, 6] = P[equations.P_MASS] = P[equations.P_TAU] = 1.0
+        entries.physics_steps(work, P, u, 0.001)
+        entries.advance(work, P, u, 0.001)
+        entries.truth(work, P, u)
+        for entry in entries:
+            freeze(entry)
+    return entries
+
+
+# The held-input block, in the order of _held_inputs.
+assert (U_THRUST, U_TAU, U_ROTOR, U_FORCE, U_TORQUE, U_WIND, U_SIZE) == (0, 1, 4, 8, 11, 14, 17)
+
+
+# -- small helpers (off the equations) ------------------------------------------------------------
+def _rows(count: int, width: int):
+    """``count`` float buffers of ``width`` for the kernels: one 2-D array where they compile (one
+    argument to unbox per call), else a list of lists (:func:`quadcommon.kernel.vector`)."""
+    rows = [vector(width) for _ in range(count)]
+    return np.array(rows) if compiling() else rows
+
+
+def _listed(buffer) -> list[float]:
+    """A copy of a kernel buffer as a list of Python floats."""
+    return buffer[:] if isinstance(buffer, list) else buffer.tolist()
+
+
 def _clip(x: float, lo: float, hi: float) -> float:
     """``min(max(x, lo), hi)``, the same comparisons (NaN passes through), without two builtin
     calls: the actuator inputs are clipped at every frame."""
     x = lo if lo > x else x
     return hi if hi < x else x
-
-
-def _cross(a: Vector3, b: Vector3) -> Vector3:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _rotate(R, v: Vector3) -> Vector3:
-    return tuple(R[i][0] * v[0] + R[i][1] * v[1] + R[i][2] * v[2] for i in range(3))  # type: ignore[return-value]
-
-
-def _rotate_transpose(R, v: Vector3) -> Vector3:
-    return tuple(R[0][i] * v[0] + R[1][i] * v[1] + R[2][i] * v[2] for i in range(3))  # type: ignore[return-value]
-
-
-def _inverse3(A):
-    (a, b, c), (d, e, f), (g, h, i) = A
-    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    return (
-        ((e * i - f * h) / det, (c * h - b * i) / det, (b * f - c * e) / det),
-        ((f * g - d * i) / det, (a * i - c * g) / det, (c * d - a * f) / det),
-        ((d * h - e * g) / det, (b * g - a * h) / det, (a * e - b * d) / det),
-    )
 
 
 __all__ = ["Plant", "TruthState", "make_plant"]

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from quadcommon.config import config_path
+from quadcommon.kernel import kernel
 from quadcommon.schema import ConfigError, Section, load_toml
 
 from .discrete_gust import OneMinusCosineGust, describe_gust, gust_to_mapping, parse_one_minus_cosine
@@ -202,6 +203,82 @@ def describe(profile: GustProfile, max_chars: int = 400) -> str:
     return text if len(text) <= max_chars else text[: max_chars - 3] + "..."
 
 
+# The profile's elements as rows of numbers (what DisturbanceSchedule and the campaign engine
+# evaluate), each kind in one flat table of rows of its width. Channels index CHANNELS (force x,
+# y, z, torque on phi, theta, psi).
+STEP_WIDTH = 4  # channel, start, end, value
+RAMP_WIDTH = 5  # channel, start, end, hold until, value
+GUST_WIDTH = 7  # start, end, V_m / 2, 2 pi / duration, unit direction (3)
+
+
+def element_rows(profile: GustProfile) -> tuple[list[float], list[float], list[float]]:
+    """The steps, ramps and 1-cos gusts as flat tables, one row of ``*_WIDTH`` numbers after the
+    other: what :func:`steps_and_ramps` and :func:`one_minus_cosine_wind` read (a flat sequence
+    indexes cheaply both as a Python list and as a compiled array; a row view per element does not)."""
+    index = {c: i for i, c in enumerate(CHANNELS)}
+    steps = [float(x) for s in profile.steps for x in (index[s.channel], s.start_s, s.end_s, s.value)]
+    ramps = [float(x) for r in profile.ramps
+             for x in (index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value)]  # fmt: skip
+    gusts = [float(x) for g in profile.one_minus_cosine
+             for x in (g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s,
+                       *g.unit())]  # fmt: skip
+    return steps, ramps, gusts
+
+
+@kernel
+def steps_and_ramps(tau, steps, ramps):
+    """The steps' and ramps' sum at profile time ``tau`` (flat tables of :func:`element_rows`):
+    force (3), torque (3), and whether a ramp is still rising (the sum is not constant until the
+    next breakpoint)."""
+    v0 = v1 = v2 = v3 = v4 = v5 = 0.0
+    ramping = False
+    n_steps = len(steps) // STEP_WIDTH
+    for k in range(n_steps + len(ramps) // RAMP_WIDTH):
+        if k < n_steps:  # a step: its value over [start, end)
+            i = k * STEP_WIDTH
+            if not steps[i + 1] <= tau < steps[i + 2]:
+                continue
+            channel, value = steps[i], steps[i + 3]
+        else:  # a ramp: up from start to end, held until its hold time
+            i = (k - n_steps) * RAMP_WIDTH
+            start, end = ramps[i + 1], ramps[i + 2]
+            if not start <= tau < ramps[i + 3]:
+                continue
+            channel, value = ramps[i], ramps[i + 4] * min((tau - start) / (end - start), 1.0)
+            if tau < end:
+                ramping = True
+        if channel == 0.0:
+            v0 += value
+        elif channel == 1.0:
+            v1 += value
+        elif channel == 2.0:
+            v2 += value
+        elif channel == 3.0:
+            v3 += value
+        elif channel == 4.0:
+            v4 += value
+        else:
+            v5 += value
+    return v0, v1, v2, v3, v4, v5, ramping
+
+
+@kernel
+def one_minus_cosine_wind(tau, gusts):
+    """The 1-cos gusts' wind at profile time ``tau`` (m/s, world; a flat table of
+    :func:`element_rows`), and whether one is active."""
+    wx = wy = wz = 0.0
+    active = False
+    for i in range(0, len(gusts), GUST_WIDTH):
+        start = gusts[i]
+        if start <= tau < gusts[i + 1]:
+            speed = gusts[i + 2] * (1.0 - math.cos(gusts[i + 3] * (tau - start)))
+            wx += speed * gusts[i + 4]
+            wy += speed * gusts[i + 5]
+            wz += speed * gusts[i + 6]
+            active = True
+    return wx, wy, wz, active
+
+
 class DisturbanceSchedule:
     """Evaluates a profile at simulation time ``t``: (force_world, torque_euler, wind_world).
 
@@ -224,13 +301,7 @@ class DisturbanceSchedule:
         self.profile = profile
         self.start_time_s = start_time_s
         self.step_s = step_s
-        index = {c: i for i, c in enumerate(CHANNELS)}
-        self._steps = [(index[s.channel], s.start_s, s.end_s, s.value) for s in profile.steps]
-        self._ramps = [(index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps]
-        self._gusts = [
-            (g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s, *g.unit())
-            for g in profile.one_minus_cosine
-        ]
+        self._steps, self._ramps, self._gusts = element_rows(profile)
         ft_times = {s.start_s for s in profile.steps} | {s.end_s for s in profile.steps}
         ft_times |= {r.start_s for r in profile.ramps} | {r.end_s for r in profile.ramps}
         ft_times |= {r.hold_until_s for r in profile.ramps}
@@ -262,16 +333,8 @@ class DisturbanceSchedule:
 
     def _forces_torques(self, tau: float) -> tuple[Vector3, Vector3, bool]:
         """Sum of steps and ramps at profile time ``tau``; True when constant until the next breakpoint."""
-        values = [0.0] * 6
-        ramping = False
-        for channel, start, end, value in self._steps:
-            if start <= tau < end:
-                values[channel] += value
-        for channel, start, end, hold, value in self._ramps:
-            if start <= tau < hold:
-                values[channel] += value * min((tau - start) / (end - start), 1.0)
-                ramping = ramping or tau < end
-        return (values[0], values[1], values[2]), (values[3], values[4], values[5]), not ramping
+        f0, f1, f2, t0, t1, t2, ramping = steps_and_ramps(tau, self._steps, self._ramps)
+        return (f0, f1, f2), (t0, t1, t2), not ramping
 
     def evaluate(self, t: float) -> tuple[Vector3, Vector3, Vector3]:
         """Disturbance at simulation time ``t`` (s): force (N, world), torque (N m, Euler
@@ -289,15 +352,8 @@ class DisturbanceSchedule:
                 self._ft_from = lo + self.start_time_s
                 self._ft_until = hi + self.start_time_s
                 self._ft = (force, torque)
-        wind_constant = True
-        wx = wy = wz = 0.0
-        for start, end, half_amplitude, omega, ux, uy, uz in self._gusts:
-            if start <= tau < end:
-                speed = half_amplitude * (1.0 - math.cos(omega * (tau - start)))
-                wx += speed * ux
-                wy += speed * uy
-                wz += speed * uz
-                wind_constant = False
+        wx, wy, wz, gusting = one_minus_cosine_wind(tau, self._gusts)
+        wind_constant = not gusting
         if self._dryden_from <= tau < self._dryden_until:
             # Step index of the turbulence (rounded: t carries float error from k * dt sums).
             n = int(math.floor((t - self._dryden_t0) / self.step_s + 0.5))

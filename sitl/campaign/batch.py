@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.control.config import ControllerConfig, load_controller
+from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
-from quadcommon.config import VehicleConfig, load_scenario, load_sitl, load_vehicle
+from quadcommon.config import VehicleConfig, load_scenario, load_vehicle
 from simulator.environment.gust_profile import GustProfile
 
 from . import engine as eng
@@ -27,9 +27,9 @@ from .spec import CampaignSpec
 
 
 @functools.lru_cache(maxsize=32)
-def _controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> np.ndarray:
+def _controller(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> eng.Controller:
     # Building a Cascade runs scipy's expm for the command filter: once per process, not per run.
-    return eng.controller_array(controller, vehicle, dt_control)
+    return eng.pack_controller(controller, vehicle, dt_control)
 
 
 @functools.lru_cache(maxsize=8)
@@ -54,7 +54,7 @@ def flights(spec: CampaignSpec, sample: RunSample) -> dict[str, eng.Flight]:
     T = _reference(sc.trajectory, rates, spec.duration_s, spec.wire_float32)
     return {
         c.name: eng.Flight(
-            state0, P, _controller_array(c, spec.vehicle, dt_control), T, S, steps, ramps, gusts, dryden
+            state0, P, _controller(c, spec.vehicle, dt_control), T, S, steps, ramps, gusts, dryden
         )
         for c in spec.controllers
     }
@@ -84,20 +84,20 @@ def fly_recorded(spec: CampaignSpec, run: int, controller: str) -> tuple[FlightR
     return record, eng.metrics_dict(metrics)
 
 
-def warm_up() -> float:
-    """Compile the kernels (or load them from numba's cache) now; returns the seconds it took.
-
-    Flies a two-step hover: numba compiles ``simulate`` for the argument types on first call.
-    """
+def warm_up(spec: CampaignSpec) -> float:
+    """Compile the flight of each of the spec's law pairs now (or load it from numba's cache), in
+    this process before the workers fork; returns the seconds it took. Flies a two-step hover with
+    each controller."""
     start = time.perf_counter()
     vehicle = load_vehicle("paper_quad")
     scenario = load_scenario("hover")
-    rates = load_sitl().rates
+    rates = spec.rates
     dtp = eng.dt_physics_of(rates)
     state0, P = eng.initial_state(vehicle, dtp, scenario.initial_position_m, scenario.initial_euler_rad)
     steps, ramps, gusts, dryden, window = eng.disturbance_tables(GustProfile(), dtp, 0.004)
-    C = _controller_array(load_controller("intbs_nlhinf"), vehicle, 1.0 / rates.control_hz)
     S = eng.sim_array(rates, 0.004, True, eng.FailureLimits(), window)
     T = eng.reference_table(scenario.trajectory, rates, 0.004, True)
-    eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden))
+    for controller in spec.controllers:
+        C = _controller(controller, spec.vehicle, 1.0 / rates.control_hz)
+        eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden))
     return time.perf_counter() - start

@@ -1,30 +1,31 @@
-"""The batch engine: pack a run's configuration into flat arrays and fly it with the kernels.
+"""The batch engine: pack a run's configuration into flat arrays and fly it with the kernel.
 
-Every number the kernels use is read off the project's own objects, built the way the scalar
+Every number the kernel uses is read off the project's own objects, built the way the scalar
 runner builds them (a :class:`simulator.dynamics.plant.Plant`, a
-:class:`autopilot.control.cascade.Cascade`, the trajectory of :func:`trajectory_from_spec`, the
+:func:`autopilot.control.cascade.pack`, the trajectory of :func:`trajectory_from_spec`, the
 gust profile's elements, the Dryden generator), so the batch engine and
-``sitl.inprocess.run_scenario`` fly the same parameters; :mod:`sitl.campaign.kernels` holds the
-equations (see its docstring for why a transcription and how it is tested).
+``sitl.inprocess.run_scenario`` fly the same parameters with the same equations
+(:mod:`sitl.campaign.kernels`): any registered law pair flies here, compiled.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from autopilot.control import compiled as compiled_cascade
-from autopilot.control.cascade import Cascade
+from autopilot.control import registry
+from autopilot.control.cascade import pack
 from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import Rates, TrajectorySpec, VehicleConfig
+from quadcommon.kernel import compiled
 from quadcommon.trajectories import trajectory_from_spec
-from simulator.dynamics.compiled import plant_array
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
-from simulator.environment.gust_profile import CHANNELS, GustProfile
+from simulator.environment.gust_profile import GustProfile, element_rows
 
 from . import kernels as lay
 
@@ -57,12 +58,26 @@ class FailureLimits:
 
 
 @dataclass(frozen=True)
+class Controller:
+    """A cascade packed for the kernel: its two laws (by name), its own numbers ``K``, the laws'
+    gains and how many state entries each has."""
+
+    translational: str
+    rotational: str
+    K: np.ndarray
+    gt: np.ndarray
+    gr: np.ndarray
+    nxt: int
+    nxr: int
+
+
+@dataclass(frozen=True)
 class Flight:
     """One run x controller, packed for :func:`sitl.campaign.kernels.simulate`."""
 
     state0: np.ndarray
     plant: np.ndarray
-    controller: np.ndarray
+    controller: Controller
     reference: np.ndarray  # reference_table()
     sim: np.ndarray
     steps: np.ndarray
@@ -88,12 +103,14 @@ def initial_state(
     """``(state0, P)``: the plant placed by :meth:`Plant.reset` and its constants."""
     plant = Plant(plant_vehicle, dt_physics)
     plant.reset(position_m, euler_rad, velocity_m_s)
-    return np.array(plant.state, dtype=float), plant_array(plant)
+    return np.array(plant.state, dtype=float), np.array(plant.parameters(), dtype=float)
 
 
-def controller_array(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> np.ndarray:
-    """The cascade's gains as the kernels read them (layout ``C_*``), off a real :class:`Cascade`."""
-    return compiled_cascade.controller_array(Cascade(controller, vehicle, dt_control))
+def pack_controller(controller: ControllerConfig, vehicle: VehicleConfig, dt_control: float) -> Controller:
+    """The cascade's numbers as the kernel reads them, packed as :class:`Cascade` packs them."""
+    p = pack(controller, vehicle, dt_control)
+    return Controller(controller.translational.law, controller.rotational.law, np.array(p.K), np.array(p.gt),
+                      np.array(p.gr), len(p.translational.STATE), len(p.rotational.STATE))  # fmt: skip
 
 
 def reference_table(spec: TrajectorySpec, rates: Rates, duration_s: float, wire_float32: bool) -> np.ndarray:
@@ -124,24 +141,14 @@ def disturbance_tables(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[float, ...]]:
     """Steps, ramps, 1-cos gusts, Dryden wind samples, and the Dryden window (S_DRYDEN_*).
 
-    Rows are built with the formulas of ``DisturbanceSchedule.__init__`` (start time 0); the
+    The flat tables of :func:`element_rows`, as ``DisturbanceSchedule`` reads them (start time 0); the
     Dryden wind is drawn by the project's :class:`DrydenWind` at the physics step, one sample
     per step index the run can reach.
     """
-    index = {c: i for i, c in enumerate(CHANNELS)}
-    steps = np.array(
-        [(index[s.channel], s.start_s, s.end_s, s.value) for s in profile.steps], dtype=float
-    ).reshape(-1, 4)
-    ramps = np.array(
-        [(index[r.channel], r.start_s, r.end_s, r.hold_until_s, r.value) for r in profile.ramps], dtype=float
-    ).reshape(-1, 5)
-    gusts = np.array(
-        [
-            (g.start_s, g.end_s, 0.5 * g.amplitude_m_s, 2.0 * math.pi / g.duration_s, *g.unit())
-            for g in profile.one_minus_cosine
-        ],
-        dtype=float,
-    ).reshape(-1, 7)
+    step_rows, ramp_rows, gust_rows = element_rows(profile)
+    steps = np.array(step_rows, dtype=float)
+    ramps = np.array(ramp_rows, dtype=float)
+    gusts = np.array(gust_rows, dtype=float)
     d = profile.dryden
     if d is None:
         return steps, ramps, gusts, np.zeros((1, 3)), (0.0, 0.0, math.inf, math.inf, dt_physics)
@@ -190,22 +197,23 @@ def dt_physics_of(rates: Rates) -> float:
 # -------------------------------------------------------------------------------------------------
 # Flying
 # -------------------------------------------------------------------------------------------------
+@functools.cache
+def entry(translational: str, rotational: str):
+    """The compiled flight of a law pair (numba compiles it on its first call in a process, or loads
+    it from its cache)."""
+    tr = registry.law(registry.TRANSLATIONAL, translational)
+    rot = registry.law(registry.ROTATIONAL, rotational)
+    return compiled(lay.simulate, tr.step, rot.step, nogil=True)
+
+
 def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Fly one packed run: ``(metrics row, recorded rows or None)``."""
-    # numba compiles simulate (or loads it from its cache) on the first call in a process.
     rows = np.zeros((flight.samples if record else 0, lay.R_SIZE))
-    metrics = lay.simulate(
-        flight.state0,
-        flight.plant,
-        flight.controller,
-        flight.reference,
-        flight.sim,
-        flight.steps,
-        flight.ramps,
-        flight.gusts,
-        flight.dryden,
-        rows,
-    )
+    c = flight.controller
+    metrics = entry(c.translational, c.rotational)(
+        flight.state0, flight.plant, c.K, c.gt, c.gr, c.nxt, c.nxr, flight.reference, flight.sim,
+        flight.steps, flight.ramps, flight.gusts, flight.dryden, rows,
+    )  # fmt: skip
     if not record:
         return metrics, None
     flown = int(round(metrics[lay.M_T_END] / flight.sim[lay.S_DT_CONTROL])) + 1

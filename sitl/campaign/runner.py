@@ -118,7 +118,7 @@ def run_campaign(
     # Compile (or load) the kernels here for local work: forked workers inherit them, and a
     # compile error shows up once, before any task is sent. Dask workers compile their own.
     local = executor is None and not scheduler
-    warm = warm_up() if missing and local else 0.0
+    warm = warm_up(spec) if missing and local else 0.0
     bar = _progress(spec.runs, len(done), progress)
     finished = len(done)
     kind = "in-process"

@@ -16,7 +16,7 @@ AT_REF = StateEstimate((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 
 
 @pytest.fixture(params=["intbs_nlhinf", "intbs", "bs_nlhinf"])
 def cascade(request) -> Cascade:
-    return Cascade(load_controller(request.param), load_vehicle("paper_quad"), 0.002, compiled=True)
+    return Cascade(load_controller(request.param), load_vehicle("paper_quad"), 0.002)
 
 
 def test_roll_pitch_reaches_the_attitude_law_through_the_command_filter(cascade):

@@ -1,103 +1,146 @@
-"""The control-law registry: a new law is one class (its file) plus one registration, and then the
-config loader, the cascade and the parameter table all know it without naming it."""
+"""The control-law registry: a law is one file and one registration, found by name in a
+configuration directory's laws/; a law that breaks the contract is refused when it registers or
+loads, with the reason and its file; one that fails in flight terminates the flight, and the
+autopilot lives on."""
 
 from __future__ import annotations
 
-import shutil
-from collections.abc import Iterator
-from dataclasses import dataclass, replace
+import sys
 
 import pytest
+from pymavlink.dialects.v20 import common as m
 
 from autopilot.control import registry
 from autopilot.control.cascade import Cascade, StateEstimate
 from autopilot.control.config import load_controller
+from autopilot.control.registry import ControllerFailure, LawError
 from autopilot.params.definitions import controller_config_from_params, default_parameters
-from autopilot.params.store import ParamSpec
 from quadcommon.config import config_path, load_sitl, load_vehicle
+from quadcommon.kernel import kernel
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
-
-
-@dataclass(frozen=True)
-class PdGains:
-    law: str
-    kp: float
-    kd: float
-
-
-class ProportionalDerivative:
-    """A toy translational law: a = p_d'' - kp e1 - kd e1' (no integral)."""
-
-    NAME = "test_pd"
-
-    @classmethod
-    def load_gains(cls, section):
-        kp, kd = section.number("kp", lo=0.0, hi=100.0), section.number("kd", lo=0.0, hi=100.0)
-        return PdGains(cls.NAME, kp, kd)
-
-    @staticmethod
-    def parameters(gains):
-        return (ParamSpec("PD_KP", gains.kp, 0.0, 100.0), ParamSpec("PD_KD", gains.kd, 0.0, 100.0))
-
-    @staticmethod
-    def gains_from_params(gains, params):
-        return replace(gains, kp=params.get("PD_KP", gains.kp), kd=params.get("PD_KD", gains.kd))
-
-    def __init__(self, gains, nominal) -> None:
-        self.gains, self.integral = gains, [0.0, 0.0, 0.0]
-
-    def reset(self) -> None:
-        pass
-
-    def retune(self, gains) -> None:
-        self.gains = gains
-
-    def integral_acceleration(self):
-        return (0.0, 0.0, 0.0)
-
-    def accelerations(self, e1, e1_dot, ref_acc, dt, integrate):
-        g = self.gains
-        return [ref_acc[i] - g.kp * e1[i] - g.kd * e1_dot[i] for i in range(3)]
+from tests.own_law import write_overlay
+from tests.stack import Gcs, make_stack
 
 
 @pytest.fixture
-def registered() -> Iterator[type]:
-    law = registry.register(registry.TRANSLATIONAL)(ProportionalDerivative)  # the one registration
-    yield law
-    registry._LAWS[registry.TRANSLATIONAL].pop(law.NAME)
+def overlay(tmp_path, monkeypatch):
+    """A configuration directory in QUADSITL_CONFIG_DIR; its laws forgotten afterwards."""
+    registry.names(registry.TRANSLATIONAL)  # the built-in laws loaded before the snapshot
+    monkeypatch.setenv("QUADSITL_CONFIG_DIR", str(tmp_path))
+    before = {loop: dict(laws) for loop, laws in registry._LAWS.items()}
+    yield tmp_path
+    for loop, laws in before.items():
+        registry._LAWS[loop].clear()
+        registry._LAWS[loop].update(laws)
+    for module in [name for name in sys.modules if name.startswith(registry.USER_PACKAGE + ".")]:
+        del sys.modules[module]
+    registry.user_package()
 
 
-def test_a_new_law_is_loaded_flown_and_tuned_without_naming_it_anywhere(registered, tmp_path):
-    path = tmp_path / "pd.toml"
-    text = config_path("controllers", "intbs_nlhinf").read_text()
-    start, end = text.index("[translational]"), text.index("[rotational]")
-    path.write_text(text[:start] + '[translational]\nlaw = "test_pd"\nkp = 4.0\nkd = 3.0\n\n' + text[end:])
-    config = load_controller(path)
-    assert config.translational == PdGains("test_pd", 4.0, 3.0)
+HOVER = Reference((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+BELOW = StateEstimate((0.0, 0.0, 0.9), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def test_a_law_in_a_configuration_directory_is_found_flown_and_tuned_by_name(overlay):
+    name = write_overlay(overlay, "toy_pd")
+    config = load_controller(name)
+    assert config.translational.law == "toy_pd" and config.translational.kp == 4.0
+    assert "toy_pd" in registry.names(registry.TRANSLATIONAL)
+    assert type(config.translational).__module__ == "quadsitl_laws.toy_pd"  # importable by name (pickles)
     params = default_parameters(config, load_sitl().rates)
     assert params["PD_KP"] == 4.0 and "BS_C1_X" not in params and "NLH_W1" in params
     cascade = Cascade(config, load_vehicle("paper_quad"), 0.002)
-    ref = Reference((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
-    below = StateEstimate((0.0, 0.0, 0.9), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    out = cascade.step(below, ref)
-    assert out.acceleration_cmd_m_s2[2] == pytest.approx(4.0 * 0.1)  # kp * 0.1 m below
+    assert cascade.step(BELOW, HOVER).acceleration_cmd_m_s2[2] == pytest.approx(4.0 * 0.1)  # kp * 0.1 m below
     params.set("PD_KP", 8.0)
     cascade.retune(controller_config_from_params(config, params))
-    assert cascade.step(below, ref).acceleration_cmd_m_s2[2] == pytest.approx(8.0 * 0.1)
+    assert cascade.step(BELOW, HOVER).acceleration_cmd_m_s2[2] == pytest.approx(8.0 * 0.1)
 
 
 def test_an_unknown_law_is_a_config_error_listing_the_known_ones(tmp_path):
     path = tmp_path / "bad.toml"
-    shutil.copy(config_path("controllers", "intbs"), path)
-    path.write_text(path.read_text().replace('law = "integral_first_step"', 'law = "sliding_mode"'))
-    with pytest.raises(ConfigError, match="translational.law.*'sliding_mode'.*integral_second_step"):
+    text = config_path("controllers", "intbs").read_text()
+    path.write_text(text.replace('"integral_first_step"', '"sliding"'))
+    with pytest.raises(ConfigError, match="translational.law.*'sliding'.*integral_second_step"):
         load_controller(path)
 
 
-def test_two_laws_of_one_name_are_refused(registered):
-    with pytest.raises(ValueError, match="two translational laws named 'test_pd'"):
-        registry.register(registry.TRANSLATIONAL)(ProportionalDerivative)
+def test_a_broken_law_file_is_named_in_the_error(overlay):
+    (overlay / "laws").mkdir()
+    (overlay / "laws" / "half_written.py").write_text("def step(:\n")
+    with pytest.raises(ConfigError, match=r"half_written\.py.*SyntaxError"):
+        registry.names(registry.TRANSLATIONAL)
+
+
+class Minimal:
+    NAME = "minimal"
+    STATE = ()
+    load_gains = parameters = gains_from_params = pack = staticmethod(lambda *a: ())
+
+    @staticmethod
+    @kernel
+    def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
+             integrate):  # fmt: skip
+        return (0.0,) * 8
+
+
+@pytest.mark.parametrize(
+    "change, reason",
+    [
+        ({"NAME": "no name"}, "NAME must be a name"),
+        ({"STATE": ["xi"]}, "STATE must be a tuple"),
+        ({"pack": None}, "no pack"),
+        ({"step": staticmethod(lambda g, x: (0.0,) * 8)}, "must be a @kernel"),
+        ({"step": staticmethod(kernel(lambda g, x, position: (0.0,) * 8))}, "takes 3 arguments"),
+    ],
+)
+def test_a_law_that_breaks_the_contract_is_refused_when_it_registers(change, reason):
+    broken = type("Broken", (Minimal,), change)
+    with pytest.raises(LawError, match=reason):
+        registry.register(registry.TRANSLATIONAL)(broken)
+    assert "minimal" not in registry.names(registry.TRANSLATIONAL)
+
+
+@pytest.mark.parametrize(
+    "failure, reason",
+    [
+        ("raise ValueError('not yet written')", "step raised at hover: ValueError: not yet written"),
+        ("ax = g[99]", "step raised at hover: IndexError"),
+        ("return ax, ay, az", "must return 8 finite numbers"),
+        ("az = az + 100.0", "asks for 28 N of thrust"),
+        ("az = az * math.nan", "must return 8 finite numbers"),
+    ],
+)
+def test_a_law_that_fails_at_hover_is_refused_when_a_controller_loads_it(overlay, failure, reason):
+    name = write_overlay(overlay, "toy_bad", failure=failure)
+    with pytest.raises(ConfigError, match=rf"translational law 'toy_bad' \(.*toy_bad\.py\): .*{reason}"):
+        Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
+
+
+def test_a_law_numba_cannot_compile_is_refused_with_the_reason(overlay):
+    name = write_overlay(overlay, "toy_dict", failure="table = {'a': object()}")
+    with pytest.raises(ConfigError, match="toy_dict \\+ nlhinf do not compile with numba"):
+        Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
+
+
+def test_a_law_failing_in_flight_terminates_the_flight_and_the_autopilot_lives_on(overlay):
+    """NaN once the vehicle is 1.5 m above home: the cascade raises ControllerFailure, the autopilot
+    stops the motors (disarmed), says why on every link, and keeps answering frames."""
+    name = write_overlay(overlay, "toy_nan", failure="if position[2] > 1.5:\n        az = math.nan")
+    cascade = Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
+    with pytest.raises(ControllerFailure, match="toy_nan.*non-finite output"):
+        cascade.step(StateEstimate((0.0, 0.0, 1.6), (0.0,) * 3, (0.0,) * 3, (0.0,) * 3), HOVER)
+    stack = make_stack(controller=name)
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    assert gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 2.5).result == m.MAV_RESULT_ACCEPTED
+    gcs.wait(lambda g: any("flight terminated" in t for t in g.statustext), sim_timeout=10.0,
+             what="the failsafe's STATUSTEXT")  # fmt: skip
+    assert any("toy_nan" in t and "non-finite" in t for t in gcs.statustext)
+    gcs.wait(lambda g: not g.armed, sim_timeout=1.0, what="disarmed")
+    frames = stack.autopilot.frames
+    gcs.wait(lambda g: stack.autopilot.frames > frames + 100, sim_timeout=1.0, what="frames still answered")
 
 
 def test_the_papers_laws_are_registered():

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,9 +28,8 @@ from autopilot.estimation import (
     MagSample,
     VisionPose,
 )
-from autopilot.estimation.eskf import quat_multiply
 from quadcommon.config import apply_uncertainty, load_scenario, load_sitl, load_vehicle
-from quadcommon.rigid_body import rotation_from_quaternion
+from quadcommon.rigid_body import quaternion_multiply, rotation_from_quaternion
 from quadcommon.trajectories import trajectory_from_spec
 from simulator.dynamics.plant import TruthState, make_plant
 from simulator.environment.gust_profile import DisturbanceSchedule, load_gust_profile
@@ -96,7 +96,7 @@ def helix_truth(
 
 def attitude_error(q_true, q_est) -> tuple[float, float, float]:
     """``dtheta`` with ``q_true = Exp(dtheta) (x) q_est`` (the filter's global error), rad."""
-    w, x, y, z = quat_multiply(q_true, (q_est[0], -q_est[1], -q_est[2], -q_est[3]))
+    w, x, y, z = quaternion_multiply(q_true, (q_est[0], -q_est[1], -q_est[2], -q_est[3]))
     if w < 0.0:
         w, x, y, z = -w, -x, -y, -z
     s = math.sqrt(x * x + y * y + z * z)
@@ -142,12 +142,14 @@ def run_filter(
     status_every_s: float = 0.0,
     nees_every: int = 1,
     reset_at_s: float | None = None,
+    each_frame: Callable[[float, ErrorStateEkf], None] | None = None,
 ) -> FilterRun:
     """Replay ``truth`` through the sensors (seeded by ``sensors.seed``) and the filter.
 
     ``reset_at_s``: instead of the alignment, start the filter there with
     :meth:`ErrorStateEkf.reset_to` on the true position, velocity and attitude (biases unknown:
-    zero, with their EKF2_*BIAS_INIT priors), e.g. in the air."""
+    zero, with their EKF2_*BIAS_INIT priors), e.g. in the air. ``each_frame(t, ekf)``: called
+    after every frame's prediction and fusions once the filter is initialised."""
     suite = SensorSuite(sensors, HOME_ALT_M, imu_rate_hz=500.0)
     for f in faults:
         suite.add_fault(f)
@@ -191,6 +193,8 @@ def run_filter(
             ekf.fuse_vision(VisionPose(t, v.position_m, v.yaw_rad, v.position_std_m, v.yaw_std_rad))
         if not ekf.initialised:
             continue
+        if each_frame is not None:
+            each_frame(t, ekf)
         if math.isnan(converged_t) and ekf.status().converged:
             converged_t = t
         if status_every_s > 0.0 and t >= next_status:

@@ -19,21 +19,19 @@ from autopilot.estimation import (
     VisionPose,
     estimator_params,
 )
-from autopilot.estimation.eskf import (
-    N,
-    mag_model,
-    quat_conjugate,
-    quat_exp,
-    quat_multiply,
-    yaw_jacobian,
-    yaw_of,
+from autopilot.estimation.eskf import N, mag_model, yaw_jacobian, yaw_of
+from quadcommon.rigid_body import (
+    quaternion_conjugate,
+    quaternion_exp,
+    quaternion_from_euler,
+    quaternion_multiply,
+    rotation_from_quaternion,
 )
-from quadcommon.rigid_body import quaternion_from_euler, rotation_from_quaternion
 
 pytestmark = pytest.mark.timeout(60)
 
 G = 9.81
-Q0 = quat_multiply(quat_exp(0.2, -0.3, 0.8), (1.0, 0.0, 0.0, 0.0))
+Q0 = quaternion_multiply(quaternion_exp(0.2, -0.3, 0.8), (1.0, 0.0, 0.0, 0.0))
 
 
 def rest_force(q) -> tuple[float, float, float]:
@@ -50,7 +48,7 @@ def filter_at(dx=None, params=DEFAULT_PARAMS) -> tuple[ErrorStateEkf, ImuSample]
     if dx is not None:
         ekf._p = tuple(np.add(ekf._p, dx[0:3]))
         ekf._v = tuple(np.add(ekf._v, dx[3:6]))
-        ekf._q = quat_multiply(quat_exp(*dx[6:9]), ekf._q)  # global error: q_true = Exp(dth) q
+        ekf._q = quaternion_multiply(quaternion_exp(*dx[6:9]), ekf._q)  # global error: q_true = Exp(dth) q
         ekf._bg = tuple(np.add(ekf._bg, dx[9:12]))
         ekf._ba = tuple(np.add(ekf._ba, dx[12:15]))
     ekf._restart_trapezoid(imu)
@@ -58,7 +56,7 @@ def filter_at(dx=None, params=DEFAULT_PARAMS) -> tuple[ErrorStateEkf, ImuSample]
 
 
 def error_between(true: ErrorStateEkf, nominal: ErrorStateEkf) -> np.ndarray:
-    w, x, y, z = quat_multiply(true._q, quat_conjugate(nominal._q))
+    w, x, y, z = quaternion_multiply(true._q, quaternion_conjugate(nominal._q))
     dth = np.array((x, y, z)) * 2.0 * math.copysign(1.0, w)
     return np.concatenate([
         np.subtract(true._p, nominal._p), np.subtract(true._v, nominal._v), dth,
@@ -119,11 +117,11 @@ def test_measurement_jacobians_are_the_derivatives_of_the_models():
     for j in range(3):
         d = [0.0, 0.0, 0.0]
         d[j] = eps
-        moved = mag_model(quat_multiply(quat_exp(*d), Q0), field, bias)[0]
+        moved = mag_model(quaternion_multiply(quaternion_exp(*d), Q0), field, bias)[0]
         assert [(moved[i] - pred[i]) / eps for i in range(3)] == pytest.approx(
             [H[i][j] for i in range(3)], abs=1e-6
         )
-        yaw_moved = yaw_of(quat_multiply(quat_exp(*d), Q0))
+        yaw_moved = yaw_of(quaternion_multiply(quaternion_exp(*d), Q0))
         assert (yaw_moved - yaw_of(Q0)) / eps == pytest.approx(yaw_jacobian(Q0)[j], abs=1e-5)
 
 
@@ -250,7 +248,7 @@ def test_tilt_error_of_the_alignment_is_correlated_with_the_accelerometer_bias()
         if k % 10 == 0:
             ekf.fuse_mag(MagSample(t, m_body))
         k += 1
-    w, x, y, z = quat_multiply(q, quat_conjugate(ekf.estimate().quaternion))
+    w, x, y, z = quaternion_multiply(q, quaternion_conjugate(ekf.estimate().quaternion))
     tilt_error = np.array((x, y)) * 2.0
     P = ekf.P
     regression = P[6:8, 12:15] @ np.linalg.inv(P[12:15, 12:15])  # E[dth | db] = C db

@@ -72,13 +72,6 @@ def test_C_eta_dot_equals_lagrangian_residual(inertia):
         assert np.allclose(C_eta_dot, residual, atol=1e-9)
 
 
-def test_fast_coriolis_matches_christoffel_sum():
-    for eta, eta_dot in random_states():
-        slow = np.array(rb.coriolis_matrix(ASYMMETRIC, eta, eta_dot))
-        fast = np.array(rb.coriolis_matrix_fast(ASYMMETRIC, eta, eta_dot))
-        assert np.allclose(slow, fast, atol=1e-15)
-
-
 def test_rotation_matrix_matches_scipy_zyx():
     for eta, _ in random_states(20):
         ours = np.array(rb.rotation_matrix(*eta))
@@ -133,3 +126,73 @@ def test_solve3():
         b = rng.normal(size=3)
         x = rb.solve3(tuple(map(tuple, A)), tuple(b))
         assert np.allclose(A @ np.array(x), b)
+
+
+def test_quaternion_algebra_matches_rotation_matrices():
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        a = rb.quaternion_normalised(tuple(rng.normal(size=4)))
+        b = rb.quaternion_normalised(tuple(rng.normal(size=4)))
+        ab = rb.quaternion_multiply(a, b)
+        Ra, Rb = np.array(rb.rotation_from_quaternion(*a)), np.array(rb.rotation_from_quaternion(*b))
+        assert np.allclose(np.array(rb.rotation_from_quaternion(*ab)), Ra @ Rb)
+        identity = rb.quaternion_multiply(a, rb.quaternion_conjugate(a))
+        assert np.allclose(identity, (1.0, 0.0, 0.0, 0.0), atol=1e-15)
+        r = rng.normal(size=3) * (1e-8 if _ % 2 else 1.0)  # the series branch and the closed form
+        expected = Rotation.from_rotvec(r).as_matrix()
+        ours = np.array(rb.rotation_from_quaternion(*rb.quaternion_exp(*r)))
+        assert np.allclose(ours, expected, atol=1e-14)
+
+
+def test_body_acceleration_is_the_time_derivative_of_the_body_rates():
+    """omega' = W_eta eta'' + W_eta' eta' against d/dt of W_eta(eta(t)) eta'(t) by finite differences."""
+    h = 1e-6
+    rng = np.random.default_rng(9)
+    for eta, eta_dot in random_states(20):
+        e0, ed, edd = np.array(eta), np.array(eta_dot), rng.normal(size=3)
+        omega = []
+        for t in (h, -h):  # eta(t) = eta + t eta' + t^2/2 eta''
+            e, e_dot = e0 + t * ed + 0.5 * t * t * edd, ed + t * edd
+            omega.append(np.array(rb.body_rates_from_euler_rates(e[0], e[1], tuple(e_dot))))
+        expected = (omega[0] - omega[1]) / (2 * h)
+        got = rb.body_acceleration_from_euler(eta[0], eta[1], eta_dot, tuple(edd))
+        assert np.allclose(got, expected, atol=1e-7)
+
+
+def test_cross():
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        assert np.allclose(rb.cross(tuple(a), tuple(b)), np.cross(a, b), atol=1e-15)
+
+
+def test_roll_pitch_from_body_z_gives_that_body_z_and_yaw():
+    """R(phi, theta, psi) e3 is the given unit vector, and the body x axis lies in the vertical plane
+    of heading psi (PX4's bodyzToAttitude: x_b = y_C x z_b, y_C = (-sin psi, cos psi, 0))."""
+    rng = np.random.default_rng(6)
+    for _ in range(50):
+        b = rng.normal(size=3)
+        b[2] = abs(b[2]) + 0.2
+        b /= np.linalg.norm(b)
+        psi = rng.uniform(-3, 3)
+        phi, theta = rb.roll_pitch_from_body_z(*b, psi)
+        R = np.array(rb.rotation_matrix(phi, theta, psi))
+        assert np.allclose(R[:, 2], b, atol=1e-12)
+        x_c = np.cross([-math.sin(psi), math.cos(psi), 0.0], b)
+        assert np.allclose(R[:, 0], x_c / np.linalg.norm(x_c), atol=1e-12)
+    assert rb.roll_pitch_from_body_z(0.0, 0.0, 1.0, 1.2) == (0.0, 0.0)
+
+
+def test_limit_tilt_turns_a_direction_to_the_limit_in_its_vertical_plane():
+    tilt = 0.7
+    b = np.array([3.0, -4.0, 1.0]) / math.sqrt(26.0)  # 1.37 rad from the vertical
+    *limited, flag = rb.limit_tilt(*b, tilt)
+    assert flag == 1.0
+    assert math.acos(limited[2]) == pytest.approx(tilt, abs=1e-12)
+    assert np.linalg.norm(limited) == pytest.approx(1.0, abs=1e-12)
+    assert np.allclose(np.array(limited[:2]) / np.linalg.norm(limited[:2]), [0.6, -0.8], atol=1e-12)
+    inside = (math.sin(0.5), 0.0, math.cos(0.5))
+    assert rb.limit_tilt(*inside, tilt) == (*inside, 0.0)
+    assert rb.limit_tilt(0.0, 0.0, -1.0, tilt) == pytest.approx((math.sin(tilt), 0.0, math.cos(tilt), 1.0))
+    assert rb.limit_tilt(0.0, 0.0, 0.0, tilt) == (0.0, 0.0, 1.0, 0.0)  # no direction: up
+    assert rb.limit_tilt(*(2.0 * v for v in inside), tilt) == pytest.approx((*inside, 0.0), abs=1e-15)

@@ -1,15 +1,22 @@
 """Physics invariants of the plant core (coupled and nominal)."""
 
+import json
 import math
+import os
+import random
+import subprocess
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from quadcommon.config import load_vehicle
+from quadcommon.kernel import compiling
 from quadcommon.rigid_body import rotation_from_quaternion
 from simulator.dynamics.nominal_plant import NominalPlant
-from simulator.dynamics.plant import Plant
+from simulator.dynamics.plant import Plant, TruthState
 
 DT = 0.001
 
@@ -207,3 +214,85 @@ def test_wrench_saturation():
     plant.set_actuator_controls((0.5, 1.0, -0.5, 0.0))
     assert plant.thrust_cmd == pytest.approx(14.0)
     assert plant.torque_cmd == pytest.approx((1.5, -0.75, 0.0))
+
+
+def random_controls(rng: random.Random, top: float) -> tuple[float, ...]:
+    return (rng.uniform(0.0, top), *(rng.uniform(-0.3, 0.3) for _ in range(3)))
+
+
+def random_frame(rng: random.Random) -> list[tuple[tuple[float, ...], ...]]:
+    """Two physics steps' (force, torque on eta, wind)."""
+    return [tuple(tuple(rng.gauss(0.0, sd) for _ in range(3)) for sd in (0.5, 0.02, 2.0)) for _ in range(2)]
+
+
+def flattened(truth: TruthState) -> list:
+    return [x for field in truth for x in (field if isinstance(field, tuple) else (field,))]
+
+
+def random_flight(frames: int = 1500) -> dict[str, list]:
+    """Each vehicle model flown from a tumbling start under random controls and disturbances
+    (wind with drag, rotors with their lag, torques on the Euler coordinates), frames of two
+    physics steps flown by ``advance`` and by ``step`` in turn, down onto the ground: the final
+    state and the truth every 50 frames, flattened."""
+    flown = {}
+    for name in ("paper_quad", "paper_quad_drag", "paper_quad_rotors"):
+        plant = Plant(load_vehicle(name), DT)
+        rng = random.Random(7)
+        plant.reset((0.0, 0.0, 0.3), (0.05, -0.03, 0.5), (0.2, -0.1, 0.0), (0.1, 0.0, -0.2))
+        numbers: list = []
+        for k in range(frames):
+            plant.set_actuator_controls(random_controls(rng, 0.9 if k < frames // 2 else 0.2))
+            frame = random_frame(rng)
+            if k % 2:
+                plant.advance(frame)
+            else:
+                for force, torque, wind in frame:
+                    plant.set_disturbance(force, torque, wind)
+                    plant.step()
+            if k % 50 == 0:
+                numbers += flattened(plant.truth())
+        flown[name] = [*numbers, *plant.state, plant.on_ground(), *plant.kinematics()[0]]
+    return flown
+
+
+@pytest.mark.timeout(300)
+def test_python_and_compiled_plants_fly_the_same_flight():
+    """The equations are one source (simulator/dynamics/equations.py) that numba compiles and
+    Python runs: the same random flight, here compiled and in a subprocess with
+    QUADSITL_PURE_PYTHON=1, agrees to rounding (measured: bit for bit), landing included."""
+    if not compiling():
+        pytest.skip("the plant runs in Python here (numba missing or QUADSITL_PURE_PYTHON=1)")
+    script = "import json; from tests.simulator.test_plant import random_flight as f; print(json.dumps(f()))"
+    env = {**os.environ, "QUADSITL_PURE_PYTHON": "1"}
+    root = Path(__file__).resolve().parents[2]
+    python = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=240, env=env, cwd=root
+    )
+    assert python.returncode == 0, python.stderr
+    in_python = json.loads(python.stdout)
+    here = random_flight()
+    for name, numbers in here.items():
+        assert len(numbers) == len(in_python[name])
+        assert numbers == pytest.approx(in_python[name], rel=1e-12, abs=1e-12), name
+        assert numbers[-4] is True and in_python[name][-4] is True  # landed: on the ground at the end
+
+
+@pytest.mark.parametrize("name", ["paper_quad_drag", "paper_quad_rotors"])
+def test_a_frame_advanced_in_one_call_is_its_steps_and_its_truth(name):
+    """advance(frame) flies what set_disturbance + step per physics step flies, and its truth is
+    the one truth() reads off the state afterwards."""
+    one_call, step_by_step = Plant(load_vehicle(name), DT), Plant(load_vehicle(name), DT)
+    rng = random.Random(3)
+    for plant in (one_call, step_by_step):
+        plant.reset((0.0, 0.0, 5.0), (0.1, -0.2, 0.3), (1.0, 0.0, -0.5), (0.3, -0.2, 0.1))
+    for _ in range(300):
+        controls = random_controls(rng, 0.8)
+        frame = random_frame(rng)
+        for plant in (one_call, step_by_step):
+            plant.set_actuator_controls(controls)
+        one_call.advance(frame)
+        for force, torque, wind in frame:
+            step_by_step.set_disturbance(force, torque, wind)
+            step_by_step.step()
+        assert one_call.state == step_by_step.state
+        assert one_call.truth() == step_by_step.truth()

@@ -5,20 +5,24 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
-from autopilot.control.config import CONTROLLER_NAMES, load_controller
+from autopilot.control.config import CONTROLLER_NAMES, PAPER_CONTROLLERS, load_controller
 from gcs_scripts.analysis.metrics import indices
 from quadcommon.config import load_scenario
 from sitl.inprocess import RunOptions, run_scenario
 from sitl.paper import run_job
 
+# The module's runs (13 flights of 40 s, the EKF ones the slowest) take about 2 min on two cores, more
+# while numba compiles the law pairs for the first time.
+pytestmark = pytest.mark.timeout(420)
+
 
 @pytest.fixture(scope="module")
 def all_runs():
-    """The paper's six runs (40 s each, the whole stack in-process) and the helix again with the
-    autopilot on its EKF over the motion-capture sensors, on two processes as ``quadsitl paper``
-    flies them."""
+    """The paper's runs of every cascade (40 s each, the whole stack in-process) and the helix again
+    with the paper's three on the autopilot's EKF over the motion-capture sensors, on two processes
+    as ``quadsitl paper`` flies them."""
     jobs = [(s, c, False, None, None, None) for s in ("circle", "helix") for c in CONTROLLER_NAMES]
-    jobs += [("helix", c, False, None, "ekf", "mocap") for c in CONTROLLER_NAMES]
+    jobs += [("helix", c, False, None, "ekf", "mocap") for c in PAPER_CONTROLLERS]
     with ProcessPoolExecutor(max_workers=2) as pool:
         done = zip(jobs, pool.map(run_job, jobs), strict=True)
         return {(s, c, job[4]): rec for job, (s, c, rec, _) in done}
@@ -36,16 +40,26 @@ def ekf_runs(all_runs):
 
 def test_on_the_ekf_with_mocap_the_paper_pattern_holds(ekf_runs):
     """The estimator in the loop (mocap: 1 mm, 0.11 deg, 100 Hz, 10 ms; a MEMS IMU): IntBS-NLHinf
-    still ends within 5 mm and has the lowest position ISE of the three."""
+    still ends within 5 mm and has the lowest position ISE of the paper's three."""
     ours = ekf_runs["intbs_nlhinf"]
     assert np.abs(ours.position_error_m[-1]).max() <= 5e-3
     table = {c: indices(rec).ise for c, rec in ekf_runs.items()}
     for axis in ("x", "y", "z"):
-        assert min(CONTROLLER_NAMES, key=lambda c: table[c][axis]) == "intbs_nlhinf", (axis, table)
+        assert min(PAPER_CONTROLLERS, key=lambda c: table[c][axis]) == "intbs_nlhinf", (axis, table)
     est = ours.estimator  # the estimate beside the truth, frame by frame
     assert est is not None and est.shape[0] == len(ours.time_s)
     error = est[:, 1:4] - ours.position_m
     assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < 5e-3
+
+
+# Largest position error after the first 4 s (disturbances included) and largest tilt, per cascade.
+# The paper's three and SE(3) stay within 10 cm (SE(3) measured 5 cm on the circle, 7 cm on the
+# helix, as BS-NLHinf: no integral action) under the tilt limit 0.7 rad plus a small overshoot.
+# PX4's default gains are far softer than the paper's: its attitude loop gives 0.9 N m per rad
+# where NLHinf gives ~15, so the 1 N m torque steps tilt it by up to ~1 rad for about a second before
+# its rate integrals take them over, and the vehicle is pushed up to 5 m off the path (measured
+# 5.0 m on the circle, 4.9 m on the helix, 4.8 m on the EKF), tilting to 0.85 rad (limit 45 deg).
+TRACKING_BOUNDS = {"px4_pid": (6.0, 0.9)}
 
 
 @pytest.mark.parametrize("scenario", ["circle", "helix"])
@@ -54,8 +68,9 @@ def test_closed_loop_tracks_with_the_papers_gains(runs, scenario, controller):
     rec = runs[(scenario, controller)]
     err = np.abs(rec.position_error_m)
     after_transient = rec.time_s > 4.0
-    assert err[after_transient].max() < 0.1  # within 10 cm all along, disturbances included
-    assert np.abs(rec.euler_rad[:, :2]).max() < 0.75  # tilt limit 0.7 rad, small overshoot
+    position_bound, tilt_bound = TRACKING_BOUNDS.get(controller, (0.1, 0.75))
+    assert err[after_transient].max() < position_bound
+    assert np.abs(rec.euler_rad[:, :2]).max() < tilt_bound
 
 
 @pytest.mark.parametrize("scenario", ["circle", "helix"])
@@ -70,9 +85,10 @@ def test_paper_pattern_final_errors(runs, scenario):
 
 @pytest.mark.parametrize("scenario", ["circle", "helix"])
 def test_paper_controller_has_lowest_position_ise(runs, scenario):
-    table = {c: indices(runs[(scenario, c)]).ise for c in CONTROLLER_NAMES}
+    """Of the paper's three (the baselines are compared in the docs' tables, as measured)."""
+    table = {c: indices(runs[(scenario, c)]).ise for c in PAPER_CONTROLLERS}
     for axis in ("x", "y", "z"):
-        best = min(CONTROLLER_NAMES, key=lambda c: table[c][axis])
+        best = min(PAPER_CONTROLLERS, key=lambda c: table[c][axis])
         assert best == "intbs_nlhinf", (axis, table)
 
 

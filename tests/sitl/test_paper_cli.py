@@ -2,6 +2,7 @@
 
 import csv
 
+from autopilot.control.config import CONTROLLER_NAMES
 from gcs_scripts.analysis.record import FlightRecord
 from sitl.cli import main
 
@@ -10,7 +11,8 @@ def test_paper_command_writes_tables_figures_and_runs(tmp_path, capsys):
     """The command's outputs, on short runs (the paper's pattern itself: test_inprocess.py)."""
     assert main(["paper", "--out", str(tmp_path), "--workers", "2", "--duration", "6"]) == 0
     printed = capsys.readouterr().out
-    assert "[6/6]" in printed and "tables.md" in printed
+    runs = 2 * len(CONTROLLER_NAMES)  # circle and helix, every shipped cascade (the baselines too)
+    assert f"[{runs}/{runs}]" in printed and "tables.md" in printed
     expected_columns = {
         "table1_final_errors.csv": ["scenario", "controller", "x", "y", "z"],
         "table2_ise.csv": ["scenario", "controller", "x", "y", "z", "phi", "theta", "psi"],
@@ -21,7 +23,7 @@ def test_paper_command_writes_tables_figures_and_runs(tmp_path, capsys):
             rows = list(csv.reader(handle))
         assert rows[0] == columns
         keys = {(r[0], r[1]) for r in rows[1:]}
-        assert keys == {(s, c) for s in ("circle", "helix") for c in ("intbs_nlhinf", "intbs", "bs_nlhinf")}
+        assert keys == {(s, c) for s in ("circle", "helix") for c in CONTROLLER_NAMES}
     with (tmp_path / "table1_final_errors.csv").open() as handle:
         finals = {(r["scenario"], r["controller"]): r for r in csv.DictReader(handle)}
     assert all(abs(float(finals[("helix", "intbs_nlhinf")][a])) < 0.05 for a in "xyz")

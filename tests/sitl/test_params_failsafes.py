@@ -53,6 +53,20 @@ def wait_param_value(gcs: Gcs, name: str, sim_timeout: float = 1.0):
     raise AssertionError(f"no PARAM_VALUE {name} within {sim_timeout} s")
 
 
+def param_list(gcs: Gcs, sim_timeout: float = 2.0) -> dict[int, object]:
+    """PARAM_REQUEST_LIST: the PARAM_VALUEs by index, until all have come or ``sim_timeout`` s."""
+    gcs.conn.mav.param_request_list_send(gcs.system_id, 1)
+    values: dict[int, object] = {}
+    end = gcs.sim_time + sim_timeout
+    while gcs.sim_time < end:
+        msg = gcs.poll()
+        if msg is not None and msg.get_type() == "PARAM_VALUE":
+            values[msg.param_index] = msg
+            if len(values) == msg.param_count:
+                break
+    return values
+
+
 def param_get(gcs: Gcs, name: str):
     gcs.conn.mav.param_request_read_send(gcs.system_id, 1, name.encode(), -1)
     return wait_param_value(gcs, name)
@@ -115,15 +129,7 @@ def column(rows, index, name):
 # -- parameter protocol ---------------------------------------------------------------------------------
 def test_param_list_get_set_and_refusals(vehicle):
     _, gcs = vehicle
-    gcs.conn.mav.param_request_list_send(gcs.system_id, 1)
-    values: dict[int, object] = {}
-    end = gcs.sim_time + 2.0
-    while gcs.sim_time < end:
-        msg = gcs.poll()
-        if msg is not None and msg.get_type() == "PARAM_VALUE":
-            values[msg.param_index] = msg
-            if len(values) == msg.param_count:
-                break
+    values = param_list(gcs)
     count = next(iter(values.values())).param_count
     assert sorted(values) == list(range(count)) and all(v.param_count == count for v in values.values())
     by_name = {v.param_id: v for v in values.values()}

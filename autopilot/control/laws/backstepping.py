@@ -5,33 +5,44 @@ sustained disturbance (nothing integrates it away).
 
 from __future__ import annotations
 
+from quadcommon.kernel import kernel
+
 from ..registry import TRANSLATIONAL, register
 from ..translational import (
-    BacksteppingLaw,
+    G_C1_C2,
+    G_ONE_C1C2,
     backstepping_from_params,
     backstepping_parameters,
+    backstepping_step,
     load_backstepping_gains,
+    pack_backstepping,
 )
 
 
+@kernel
+def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
+    return ref_acc - g[G_ONE_C1C2 + i] * e1 - g[G_C1_C2 + i] * e1_dot
+
+
+@kernel
+def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
+         integrate):
+    return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
+                             ref_acceleration, dt, integrate)
+
+
 @register(TRANSLATIONAL)
-class Backstepping(BacksteppingLaw):
+class Backstepping:
     NAME = "backstepping"
+    STATE = ()
+    step = staticmethod(step)
+    parameters = staticmethod(lambda gains: backstepping_parameters(gains, None))
+    gains_from_params = staticmethod(backstepping_from_params)
 
     @classmethod
     def load_gains(cls, section):
         return load_backstepping_gains(section, cls.NAME, integral=False)
 
     @staticmethod
-    def parameters(gains):
-        return backstepping_parameters(gains, None)
-
-    gains_from_params = staticmethod(backstepping_from_params)
-
-    def accelerations(self, e1, e1_dot, ref_acc, dt: float, integrate: bool):
-        coef = self.coef_pd
-        return [ref_acc[i] - coef[i][0] * e1[i] - coef[i][1] * e1_dot[i] for i in range(3)]
-
-    def _set_gains(self, gains) -> None:
-        super()._set_gains(gains)
-        self.coef_pd = [(c[3], c[4]) for c in self._coef]
+    def pack(gains, context):
+        return pack_backstepping(gains, context, (0.0, 0.0, 0.0))

@@ -3,7 +3,9 @@
 Integral in the FIRST backstepping step, per Euler axis (e1 = eta - eta_d):
 chi' = e1, e2 = e1' + c1 e1 + lambda chi, and the commanded angular acceleration
 ``eta_cmd'' = eta_d'' + (c1^2 - 1 - lambda) e1 - (c1 + c2) e2 + c1 lambda chi``, applied through
-the nominal model: ``tau = M(eta) eta_cmd'' + C(eta, eta') eta'``.
+the nominal model: ``tau = M(eta) eta_cmd'' + C(eta, eta') eta'`` (a generalised torque; the
+actuators get ``W_eta^-T tau``). The chi terms of eta_cmd'' add up to ``-c2 lambda chi``, whose
+torque near hover ``I c2 lambda chi`` sets the anti-windup bound and the retune.
 """
 
 from __future__ import annotations
@@ -12,18 +14,50 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
-from quadcommon.config import NominalModel
 from quadcommon.frames import wrap_pi
-from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times
+from quadcommon.kernel import kernel
+from quadcommon.numerics import clip_symmetric
+from quadcommon.rigid_body import body_torque_from_euler_torque, coriolis_matrix, inertia_matrix, matrix_times
 from quadcommon.schema import Section
 
 from ...params.store import ParamSpec
 from ..registry import ROTATIONAL, register
-from ..translational import GAIN_HI, INTEGRAL_LO
+from ..translational import GAIN_HI, INTEGRAL_LO, rescale_integrals
 
 Vector3 = tuple[float, float, float]
 EULER_AXES = ("R", "P", "Y")  # parameter suffixes: roll, pitch, yaw
 _POSITIVE = {"lo": 0.0, "lo_open": True, "hi": 1e4}
+
+# Gains array, per Euler axis from each offset: c1, c2, lambda, the nominal inertia, the bounds.
+G_C1, G_C2, G_LAMBDA, G_INERTIA, G_BOUND = 0, 3, 6, 9, 12
+G_SIZE = 15
+
+
+@kernel
+def commanded_acceleration(g, x, i, e, e_dot, ref_acc):
+    """eta_cmd'' on Euler axis i (the module's formula)."""
+    c1, c2, lam = g[G_C1 + i], g[G_C2 + i], g[G_LAMBDA + i]
+    chi = x[i]
+    e2 = e_dot + c1 * e + lam * chi
+    return ref_acc + (c1 * c1 - 1.0 - lam) * e - (c1 + c2) * e2 + c1 * lam * chi
+
+
+@kernel
+def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
+    e0, e1, e2 = euler[0] - eta_d[0], euler[1] - eta_d[1], wrap_pi(euler[2] - eta_d[2])
+    acc = (
+        commanded_acceleration(g, x, 0, e0, euler_rates[0] - eta_d_dot[0], eta_d_ddot[0]),
+        commanded_acceleration(g, x, 1, e1, euler_rates[1] - eta_d_dot[1], eta_d_ddot[1]),
+        commanded_acceleration(g, x, 2, e2, euler_rates[2] - eta_d_dot[2], eta_d_ddot[2]),
+    )
+    if integrate:
+        x[0] = clip_symmetric(x[0] + e0 * dt, g[G_BOUND])
+        x[1] = clip_symmetric(x[1] + e1 * dt, g[G_BOUND + 1])
+        x[2] = clip_symmetric(x[2] + e2 * dt, g[G_BOUND + 2])
+    inertia = (g[G_INERTIA], g[G_INERTIA + 1], g[G_INERTIA + 2])
+    Ma = matrix_times(inertia_matrix(inertia, euler[0], euler[1]), acc)
+    Ce = matrix_times(coriolis_matrix(inertia, euler, euler_rates), euler_rates)
+    return body_torque_from_euler_torque(euler[0], euler[1], (Ma[0] + Ce[0], Ma[1] + Ce[1], Ma[2] + Ce[2]))
 
 
 @dataclass(frozen=True)
@@ -36,9 +70,15 @@ class IntBSAttitudeGains:
     k_integral: Vector3
 
 
+def integral_weights(gains: IntBSAttitudeGains) -> Vector3:
+    return tuple(gains.c2[i] * gains.k_integral[i] for i in range(3))  # type: ignore[return-value]
+
+
 @register(ROTATIONAL)
 class IntegralBacksteppingAttitude:
     NAME = "integral_backstepping"
+    STATE = ("chi_roll", "chi_pitch", "chi_yaw")
+    step = staticmethod(step)
 
     @classmethod
     def load_gains(cls, section: Section) -> IntBSAttitudeGains:
@@ -67,75 +107,15 @@ class IntegralBacksteppingAttitude:
         return replace(gains, c1=vec("ATT_C1", gains.c1), c2=vec("ATT_C2", gains.c2),
                        k_integral=vec("ATT_KI", gains.k_integral))  # fmt: skip
 
-    def __init__(self, gains: IntBSAttitudeGains, nominal: NominalModel) -> None:
-        self.gains = gains
-        self.c1, self.c2, self.lam = gains.c1, gains.c2, gains.k_integral
-        self.inertia = nominal.inertia_kg_m2
-        self.integral = [0.0, 0.0, 0.0]
-        self._torque_max: Vector3 = (math.inf, math.inf, math.inf)
-        self._bound_integral()
+    @staticmethod
+    def pack(gains: IntBSAttitudeGains, context) -> tuple[float, ...]:
+        inertia, tau = context.inertia_kg_m2, context.torque_max_n_m
+        w = integral_weights(gains)
+        bound = tuple(tau[i] / (inertia[i] * w[i]) if w[i] > 0.0 else math.inf for i in range(3))
+        return (*gains.c1, *gains.c2, *gains.k_integral, *inertia, *bound)
 
-    def set_integral_limit(self, torque_max: Vector3) -> None:
-        """Anti-windup: chi is held where its torque, ``I c2 lambda chi`` per axis near hover (the
-        integral term of eta_cmd'' through M), is at most ``torque_max`` (N m)."""
-        self._torque_max = torque_max
-        self._bound_integral()
-
-    def _bound_integral(self) -> None:
-        gains = [self.inertia[i] * self.c2[i] * self.lam[i] for i in range(3)]
-        tau = self._torque_max
-        self.integral_bound = tuple(tau[i] / g if g > 0.0 else math.inf for i, g in enumerate(gains))
-
-    def reset(self) -> None:
-        self.integral = [0.0, 0.0, 0.0]
-
-    def integral_acceleration(self) -> Vector3:
-        """The integral's term of eta_cmd'' now: ``-c2 lambda chi`` per axis (rad/s^2).
-
-        In eta_cmd'' the chi terms are ``-(c1 + c2) lambda chi`` (through e2) and ``+c1 lambda chi``,
-        which add up to ``-c2 lambda chi``; tau = M eta_cmd'' + C eta' carries them through M.
-        """
-        return tuple(-self.c2[i] * self.lam[i] * self.integral[i] for i in range(3))  # type: ignore[return-value]
-
-    def retune(self, gains: IntBSAttitudeGains) -> None:
-        """New gains from the next step on, without a jump in the integral action.
-
-        chi_i is rescaled by ``(c2 lambda)_old / (c2 lambda)_new`` so every component of the
-        integral term of eta_cmd'' is unchanged, and so is its image ``M (.)`` in tau at any
-        state. A new lambda of zero drops the integral.
-        """
-        c2, k_integral = gains.c2, gains.k_integral
-        for i in range(3):
-            old, new = self.c2[i] * self.lam[i], c2[i] * k_integral[i]
-            self.integral[i] = self.integral[i] * old / new if new != 0.0 else 0.0
-        self.gains = gains
-        self.c1, self.c2, self.lam = tuple(gains.c1), tuple(c2), tuple(k_integral)
-        self._bound_integral()
-
-    def update(
-        self,
-        euler: Vector3,
-        euler_rates: Vector3,
-        ref: Vector3,
-        ref_rate: Vector3,
-        ref_accel: Vector3,
-        dt: float,
-        integrate: bool = True,
-    ) -> Vector3:
-        e = (euler[0] - ref[0], euler[1] - ref[1], wrap_pi(euler[2] - ref[2]))
-        accel_cmd = []
-        for i in range(3):
-            c1, c2, lam = self.c1[i], self.c2[i], self.lam[i]
-            chi = self.integral[i]
-            e_dot = euler_rates[i] - ref_rate[i]
-            e2 = e_dot + c1 * e[i] + lam * chi
-            accel_cmd.append(ref_accel[i] + (c1 * c1 - 1.0 - lam) * e[i] - (c1 + c2) * e2 + c1 * lam * chi)
-        if integrate:
-            bound, integral = self.integral_bound, self.integral
-            for i in range(3):
-                value = integral[i] + e[i] * dt
-                integral[i] = bound[i] if value > bound[i] else (-bound[i] if value < -bound[i] else value)
-        M = inertia_matrix(self.inertia, euler[0], euler[1])
-        Ma = matrix_times(M, tuple(accel_cmd))
-        Ce = matrix_times(coriolis_matrix_fast(self.inertia, euler, euler_rates), euler_rates)
-        return (Ma[0] + Ce[0], Ma[1] + Ce[1], Ma[2] + Ce[2])
+    @staticmethod
+    def retune(old, new, context, state, euler, euler_rates) -> list[float]:
+        """chi rescaled so ``c2 lambda chi`` (hence its image ``M (.)`` in tau at any state) is
+        unchanged; a new lambda of zero drops the integral."""
+        return rescale_integrals(state, integral_weights(old), integral_weights(new))

@@ -3,51 +3,69 @@
 
 Per axis: chi' = e1, e2 = e1' + c1 e1 + lambda chi and
 ``a = p_d'' + (c1^2 - 1 - lambda) e1 - (c1 + c2) e2 + c1 lambda chi``. Its integral pole is very
-slow (about -0.09 with lambda = 1.5), which is why it converges slowly (the paper's Fig. 8).
+slow (about -0.09 with lambda = 1.5), which is why it converges slowly (the paper's Fig. 8). The chi
+terms of ``a`` add up to ``-c2 lambda chi``: that weight sets the anti-windup bound and the retune.
 """
 
 from __future__ import annotations
 
+from quadcommon.kernel import kernel
+from quadcommon.numerics import clip_symmetric
+
 from ..registry import TRANSLATIONAL, register
 from ..translational import (
-    BacksteppingGains,
-    BacksteppingLaw,
+    G_BOUND,
+    G_C1,
+    G_C1_C2,
+    G_K,
     backstepping_from_params,
     backstepping_parameters,
+    backstepping_step,
     load_backstepping_gains,
+    pack_backstepping,
+    rescale_integrals,
 )
 
 
+@kernel
+def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
+    c1, k = g[G_C1 + i], g[G_K + i]
+    chi = x[i]
+    e2 = e1_dot + c1 * e1 + k * chi
+    a = ref_acc + (c1 * c1 - 1.0 - k) * e1 - g[G_C1_C2 + i] * e2 + c1 * k * chi
+    if integrate:
+        x[i] = clip_symmetric(chi + e1 * dt, g[G_BOUND + i])
+    return a
+
+
+@kernel
+def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
+         integrate):
+    return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
+                             ref_acceleration, dt, integrate)
+
+
+def integral_weights(gains):
+    c2, k = gains.c2, gains.k_integral
+    return (c2[0] * k[0], c2[1] * k[1], c2[2] * k[2])
+
+
 @register(TRANSLATIONAL)
-class IntegralFirstStep(BacksteppingLaw):
+class IntegralFirstStep:
     NAME = "integral_first_step"
+    STATE = ("chi_x", "chi_y", "chi_z")
+    step = staticmethod(step)
+    parameters = staticmethod(lambda gains: backstepping_parameters(gains, "lambda (integral of e1)"))
+    gains_from_params = staticmethod(backstepping_from_params)
 
     @classmethod
     def load_gains(cls, section):
         return load_backstepping_gains(section, cls.NAME, integral=True)
 
     @staticmethod
-    def parameters(gains):
-        return backstepping_parameters(gains, "lambda (integral of e1)")
+    def pack(gains, context):
+        return pack_backstepping(gains, context, integral_weights(gains))
 
-    gains_from_params = staticmethod(backstepping_from_params)
-
-    def integral_weights(self, gains: BacksteppingGains):
-        # (c1^2 - 1 - lambda) e1 - (c1 + c2)(e1' + c1 e1 + lambda chi) + c1 lambda chi: the chi
-        # terms add up to -(c1 + c2) lambda chi + c1 lambda chi = -c2 lambda chi.
-        c2, lam = gains.c2, gains.k_integral
-        return (c2[0] * lam[0], c2[1] * lam[1], c2[2] * lam[2])
-
-    def accelerations(self, e1, e1_dot, ref_acc, dt: float, integrate: bool):
-        integral, coef = self.integral, self._coef
-        out = [0.0, 0.0, 0.0]
-        for i in range(3):
-            c1, _, k, _, c1_plus_c2 = coef[i]
-            chi = integral[i]
-            e2 = e1_dot[i] + c1 * e1[i] + k * chi
-            out[i] = ref_acc[i] + (c1 * c1 - 1.0 - k) * e1[i] - c1_plus_c2 * e2 + c1 * k * chi
-            if integrate:
-                integral[i] += e1[i] * dt
-        if integrate:
-            self._clamp_integral()  # anti-windup (BacksteppingLaw.set_integral_limit)
-        return out
+    @staticmethod
+    def retune(old, new, context, state, euler, euler_rates):
+        return rescale_integrals(state, integral_weights(old), integral_weights(new))

@@ -2,47 +2,65 @@
 (Section 3.1, eqs. 24-28, with eq. 28's last term p_d'' as CONTROL.md reads it).
 
 Per axis: integral state xi' = e2 = e1' + c1 e1 and
-``a = p_d'' - k_xi xi - (1 + c1 c2) e1 - (c1 + c2) e1'``. Gains of Section IV: c1 = 17, c2 = 2.5,
-k_xi = 1.5 on every axis.
+``a = p_d'' - k_xi xi - (1 + c1 c2) e1 - (c1 + c2) e1'``, then U1 and the roll/pitch references of
+eqs. 23-29 (:func:`~..translational.thrust_and_tilt`). Gains of Section IV: c1 = 17, c2 = 2.5,
+k_xi = 1.5 on every axis. Anti-windup: xi is held where ``k_xi xi`` reaches what the vehicle can
+give (:func:`~..translational.acceleration_limits`).
 """
 
 from __future__ import annotations
 
+from quadcommon.kernel import kernel
+from quadcommon.numerics import clip_symmetric
+
 from ..registry import TRANSLATIONAL, register
 from ..translational import (
-    BacksteppingGains,
-    BacksteppingLaw,
+    G_BOUND,
+    G_C1,
+    G_C1_C2,
+    G_K,
+    G_ONE_C1C2,
     backstepping_from_params,
     backstepping_parameters,
+    backstepping_step,
     load_backstepping_gains,
+    pack_backstepping,
+    rescale_integrals,
 )
 
 
+@kernel
+def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
+    """eq. 28 on axis i, and the integral of e2 = e1' + c1 e1 (eq. 24)."""
+    a = ref_acc - g[G_K + i] * x[i] - g[G_ONE_C1C2 + i] * e1 - g[G_C1_C2 + i] * e1_dot
+    if integrate:
+        x[i] = clip_symmetric(x[i] + (e1_dot + g[G_C1 + i] * e1) * dt, g[G_BOUND + i])
+    return a
+
+
+@kernel
+def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
+         integrate):
+    return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
+                             ref_acceleration, dt, integrate)
+
+
 @register(TRANSLATIONAL)
-class IntegralSecondStep(BacksteppingLaw):
+class IntegralSecondStep:
     NAME = "integral_second_step"
+    STATE = ("xi_x", "xi_y", "xi_z")
+    step = staticmethod(step)
+    parameters = staticmethod(lambda gains: backstepping_parameters(gains, "k_xi (integral of e2)"))
+    gains_from_params = staticmethod(backstepping_from_params)
 
     @classmethod
     def load_gains(cls, section):
         return load_backstepping_gains(section, cls.NAME, integral=True)
 
     @staticmethod
-    def parameters(gains):
-        return backstepping_parameters(gains, "k_xi (integral of e2)")
+    def pack(gains, context):
+        return pack_backstepping(gains, context, gains.k_integral)  # the integral term is -k_xi xi
 
-    gains_from_params = staticmethod(backstepping_from_params)
-
-    def integral_weights(self, gains: BacksteppingGains):
-        return gains.k_integral  # the integral term is -k_xi xi
-
-    def accelerations(self, e1, e1_dot, ref_acc, dt: float, integrate: bool):
-        integral, coef = self.integral, self._coef
-        out = [0.0, 0.0, 0.0]
-        for i in range(3):
-            c1, _, k, one_plus_c1c2, c1_plus_c2 = coef[i]
-            out[i] = ref_acc[i] - k * integral[i] - one_plus_c1c2 * e1[i] - c1_plus_c2 * e1_dot[i]
-            if integrate:
-                integral[i] += (e1_dot[i] + c1 * e1[i]) * dt
-        if integrate:
-            self._clamp_integral()  # anti-windup (BacksteppingLaw.set_integral_limit)
-        return out
+    @staticmethod
+    def retune(old, new, context, state, euler, euler_rates):
+        return rescale_integrals(state, old.k_integral, new.k_integral)

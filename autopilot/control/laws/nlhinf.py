@@ -12,8 +12,11 @@ With eta~ = eta - eta_d and the weights of eq. (44) (Q_i = w_i^2 1, R = w_u^2 1,
     tau = M (eta_d'' - k_d eta~' - k_p eta~) + C eta' - (C + w_u^-2 1) s,
     s   = eta~' + k_d eta~ + k_p int(eta~) dt.
 
-Linearised about hover each axis has the poles of (s + 1/(w_u^2 I))(s^2 + k_d s + k_p). The gains
-do not depend on gamma. With omega3 = 0 (BS-NLHinf) K_I = 0 and there is no integral action.
+tau is the generalised torque on the Euler coordinates (eq. 4); the actuators get the body torque
+``W_eta^-T tau``. Linearised about hover each axis has the poles of
+(s + 1/(w_u^2 I))(s^2 + k_d s + k_p). The gains do not depend on gamma. With omega3 = 0
+(BS-NLHinf) K_I = 0 and there is no integral action. Anti-windup: the integral is held where its
+torque near hover, ``w_u^-2 k_p int(eta~)``, reaches the actuators' limit.
 """
 
 from __future__ import annotations
@@ -22,9 +25,16 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
-from quadcommon.config import NominalModel
 from quadcommon.frames import wrap_pi
-from quadcommon.rigid_body import coriolis_matrix_fast, inertia_matrix, matrix_times, solve3
+from quadcommon.kernel import kernel
+from quadcommon.numerics import clip_symmetric
+from quadcommon.rigid_body import (
+    body_torque_from_euler_torque,
+    coriolis_matrix,
+    inertia_matrix,
+    matrix_times,
+    solve3,
+)
 from quadcommon.schema import Section
 
 from ...params.store import ParamSpec
@@ -32,6 +42,35 @@ from ..registry import ROTATIONAL, register
 from ..translational import GAIN_HI, INTEGRAL_LO
 
 Vector3 = tuple[float, float, float]
+
+# Gains array: k_d, k_p, 1 / omega_u^2, the nominal inertia, the integrals' bounds.
+G_KD, G_KP, G_RINV, G_INERTIA, G_BOUND = 0, 1, 2, 3, 6
+G_SIZE = 9
+
+
+@kernel
+def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
+    """eq. (43) as the module docstring writes it; returns the body torque (N m)."""
+    k_d, k_p, r_inv = g[G_KD], g[G_KP], g[G_RINV]
+    inertia = (g[G_INERTIA], g[G_INERTIA + 1], g[G_INERTIA + 2])
+    e0, e1, e2 = euler[0] - eta_d[0], euler[1] - eta_d[1], wrap_pi(euler[2] - eta_d[2])
+    ed0 = euler_rates[0] - eta_d_dot[0]
+    ed1 = euler_rates[1] - eta_d_dot[1]
+    ed2 = euler_rates[2] - eta_d_dot[2]
+    s = (ed0 + k_d * e0 + k_p * x[0], ed1 + k_d * e1 + k_p * x[1], ed2 + k_d * e2 + k_p * x[2])
+    v = (eta_d_ddot[0] - k_d * ed0 - k_p * e0, eta_d_ddot[1] - k_d * ed1 - k_p * e1,
+         eta_d_ddot[2] - k_d * ed2 - k_p * e2)  # fmt: skip
+    Mv = matrix_times(inertia_matrix(inertia, euler[0], euler[1]), v)
+    C = coriolis_matrix(inertia, euler, euler_rates)
+    Ce = matrix_times(C, euler_rates)
+    Cs = matrix_times(C, s)
+    if integrate and k_p != 0.0:  # omega3 = 0: no integral action, no state to grow
+        x[0] = clip_symmetric(x[0] + e0 * dt, g[G_BOUND])
+        x[1] = clip_symmetric(x[1] + e1 * dt, g[G_BOUND + 1])
+        x[2] = clip_symmetric(x[2] + e2 * dt, g[G_BOUND + 2])
+    tau_eta = (Mv[0] + Ce[0] - Cs[0] - r_inv * s[0], Mv[1] + Ce[1] - Cs[1] - r_inv * s[1],
+               Mv[2] + Ce[2] - Cs[2] - r_inv * s[2])  # fmt: skip
+    return body_torque_from_euler_torque(euler[0], euler[1], tau_eta)
 
 
 @dataclass(frozen=True)
@@ -52,16 +91,33 @@ class NlHinfGains:
     def k_p(self) -> float:
         return self.omega3 / self.omega1
 
+    @property
+    def r_inv(self) -> float:
+        return 1.0 / self.omega_u**2
+
 
 def nlhinf_gains(omega1: float, omega2: float, omega3: float, omega_u: float) -> NlHinfGains:
     return NlHinfGains(NonlinearHinfAttitude.NAME, omega1, omega2, omega3, omega_u)
 
 
+def integral_matrix(gains: NlHinfGains, inertia: Vector3, euler: Vector3 | None, euler_rates: Vector3 | None):
+    """``(C + w_u^-2 1) k_p``: tau's integral term is minus this times int(eta~) dt (C = 0 before
+    any state is known: the small-rate form, exact at hover)."""
+    if euler is None or euler_rates is None:
+        C = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    else:
+        C = coriolis_matrix(inertia, euler, euler_rates)
+    k_p, r_inv = gains.k_p, gains.r_inv
+    return tuple(tuple(k_p * (C[i][j] + (r_inv if i == j else 0.0)) for j in range(3)) for i in range(3))
+
+
 @register(ROTATIONAL)
 class NonlinearHinfAttitude:
-    """eq. (43)-(44) on the nominal inertia; holds the integral of the attitude error."""
+    """eq. (43)-(44) on the nominal inertia; its state is the integral of the attitude error."""
 
     NAME = "nlhinf"
+    STATE = ("int_roll", "int_pitch", "int_yaw")
+    step = staticmethod(step)
 
     @classmethod
     def load_gains(cls, section: Section) -> NlHinfGains:
@@ -93,113 +149,29 @@ class NonlinearHinfAttitude:
         return replace(g, omega1=params["NLH_W1"], omega2=params["NLH_W2"], omega3=params["NLH_W3"],
                        omega_u=params["NLH_WU"])  # fmt: skip
 
-    def __init__(self, gains: NlHinfGains, nominal: NominalModel) -> None:
-        self.inertia = nominal.inertia_kg_m2
-        self.integral = [0.0, 0.0, 0.0]
-        self._set_gains(gains)
-        # (eta, eta') of the latest update: where retune() evaluates C
-        self._last_state: tuple[Vector3, Vector3] | None = None
+    @staticmethod
+    def pack(g: NlHinfGains, context) -> tuple[float, ...]:
+        gain = g.r_inv * g.k_p
+        bound = tuple(t / gain if gain > 0.0 else math.inf for t in context.torque_max_n_m)
+        return (g.k_d, g.k_p, g.r_inv, *context.inertia_kg_m2, *bound)
 
-    def _set_gains(self, gains: NlHinfGains) -> None:
-        self.gains = gains
-        self.k_d = gains.k_d
-        self.k_p = gains.k_p
-        self.r_inv = 1.0 / gains.omega_u**2
-        self._bound_integral()
-
-    def set_integral_limit(self, torque_max: Vector3) -> None:
-        """Anti-windup: the integral of the attitude error is held where its torque,
-        ``w_u^-2 k_p int(eta~)`` per axis (the s term of the module docstring near hover), is at
-        most ``torque_max`` (N m): more than the actuators can give is never asked for."""
-        self._torque_max = torque_max
-        self._bound_integral()
-
-    def _bound_integral(self) -> None:
-        gain = self.r_inv * self.k_p
-        tau = getattr(self, "_torque_max", (math.inf, math.inf, math.inf))
-        self.integral_bound = tuple(tau[i] / gain if gain > 0.0 else math.inf for i in range(3))
-
-    def reset(self) -> None:
-        self.integral = [0.0, 0.0, 0.0]
-
-    def _integral_matrix(self, k_p: float, r_inv: float, state: tuple[Vector3, Vector3] | None):
-        """``(C + r_inv 1) k_p``: tau's integral term is minus this times int(eta~) dt."""
-        if state is None:
-            C = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-        else:
-            C = coriolis_matrix_fast(self.inertia, state[0], state[1])
-        return tuple(tuple(k_p * (C[i][j] + (r_inv if i == j else 0.0)) for j in range(3)) for i in range(3))
-
-    def integral_torque(self, euler: Vector3, euler_rates: Vector3) -> Vector3:
-        """The integral's contribution to tau_eta at the state (eta, eta') now (N m)."""
-        A = self._integral_matrix(self.k_p, self.r_inv, (euler, euler_rates))
-        v = matrix_times(A, tuple(self.integral))
-        return (-v[0], -v[1], -v[2])
-
-    def retune(self, gains: NlHinfGains) -> None:
-        """New weights from the next step on, without a jump in the integral action.
-
-        The integral enters tau only through ``-(C + w_u^-2 1) k_p int(eta~)`` (the s term of
-        the module docstring). Keeping it equal at the latest state means solving
-        ``(C + w_u'^-2 1) k_p' I' = (C + w_u^-2 1) k_p I`` for the new integral I'. C is
-        evaluated at the (eta, eta') of the latest update, so the integral term is exactly
-        continuous there; by the next step the state has moved by one control period, an O(dt)
-        difference. Before any update (or if the system is singular) C is taken as 0, which is
-        the small-rate approximation ``I' = I (k_p / k_p') (w_u'^2 / w_u^2)``, exact at hover.
-        k_p' = w3' / w1' = 0 removes the integral action, and the integral is zeroed.
-        """
-        k_p_new, r_inv_new = gains.omega3 / gains.omega1, 1.0 / gains.omega_u**2
-        if k_p_new == 0.0:
-            self.integral = [0.0, 0.0, 0.0]
-        else:
-            state = self._last_state
-            old = matrix_times(self._integral_matrix(self.k_p, self.r_inv, state), tuple(self.integral))
-            new = self._integral_matrix(k_p_new, r_inv_new, state)
-            try:
-                solved = solve3(new, old)
-                if not all(math.isfinite(v) for v in solved):
-                    raise ZeroDivisionError
-                self.integral = list(solved)
-            except ZeroDivisionError:
-                scale = (self.k_p * self.r_inv) / (k_p_new * r_inv_new)
-                self.integral = [v * scale for v in self.integral]
-        self._set_gains(gains)
-
-    def update(
-        self,
-        euler: Vector3,
-        euler_rates: Vector3,
-        ref: Vector3,
-        ref_rate: Vector3,
-        ref_accel: Vector3,
-        dt: float,
-        integrate: bool = True,
-    ) -> Vector3:
-        """Generalised torque tau_eta (N m) on the Euler coordinates."""
-        k_d, k_p = self.k_d, self.k_p
-        self._last_state = (euler, euler_rates)
-        e = (euler[0] - ref[0], euler[1] - ref[1], wrap_pi(euler[2] - ref[2]))
-        e_dot = (
-            euler_rates[0] - ref_rate[0],
-            euler_rates[1] - ref_rate[1],
-            euler_rates[2] - ref_rate[2],
-        )
-        integral = self.integral
-        s = tuple(e_dot[i] + k_d * e[i] + k_p * integral[i] for i in range(3))
-        M = inertia_matrix(self.inertia, euler[0], euler[1])
-        v = tuple(ref_accel[i] - k_d * e_dot[i] - k_p * e[i] for i in range(3))
-        Mv = matrix_times(M, v)
-        C = coriolis_matrix_fast(self.inertia, euler, euler_rates)
-        C_eta_dot = matrix_times(C, euler_rates)
-        C_s = matrix_times(C, s)
-        r_inv = self.r_inv
-        if integrate and k_p != 0.0:  # omega3 = 0: no integral action, no state to grow
-            bound = self.integral_bound
-            for i in range(3):
-                value = integral[i] + e[i] * dt
-                integral[i] = bound[i] if value > bound[i] else (-bound[i] if value < -bound[i] else value)
-        return (
-            Mv[0] + C_eta_dot[0] - C_s[0] - r_inv * s[0],
-            Mv[1] + C_eta_dot[1] - C_s[1] - r_inv * s[1],
-            Mv[2] + C_eta_dot[2] - C_s[2] - r_inv * s[2],
-        )
+    @staticmethod
+    def retune(old: NlHinfGains, new: NlHinfGains, context, state, euler, euler_rates) -> list[float]:
+        """The integral enters tau only through ``-(C + w_u^-2 1) k_p int(eta~)``; keeping it equal
+        at the latest state means solving ``(C + w_u'^-2 1) k_p' I' = (C + w_u^-2 1) k_p I`` for
+        the new integral I' (C at the (eta, eta') of the latest step, so the integral term is
+        exactly continuous there; by the next step the state has moved one control period, an
+        O(dt) difference). A singular system falls back to the small-rate scaling; k_p' = 0 removes
+        the integral action and the integral."""
+        if new.k_p == 0.0:
+            return [0.0, 0.0, 0.0]
+        inertia = context.inertia_kg_m2
+        target = matrix_times(integral_matrix(old, inertia, euler, euler_rates), tuple(state))
+        try:
+            solved = solve3(integral_matrix(new, inertia, euler, euler_rates), target)
+            if all(math.isfinite(v) for v in solved):
+                return list(solved)
+        except ZeroDivisionError:
+            pass
+        scale = (old.k_p * old.r_inv) / (new.k_p * new.r_inv)
+        return [v * scale for v in state]

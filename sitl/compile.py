@@ -1,0 +1,135 @@
+"""``quadsitl compile``: compile the flight's kernels now, in parallel, instead of at first use.
+
+numba compiles each kernel entry (:mod:`quadcommon.kernel`) the first time a process needs it and
+caches it on disk, so after an install, an upgrade or an edited equation the first simulator,
+autopilot or campaign of each controller spends seconds compiling (~3-10 s per entry). Here the
+entries a flight needs are compiled up front, one process per core: the plant, the estimator, the
+cascade of each controller and the campaign engine's flight of each controller. Already cached
+entries cost a fraction of a second each. ``make test`` runs it before the suite, so no test's
+process waits on a compilation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+
+
+def targets(controllers: Sequence[str], campaign: bool = True) -> list[str]:
+    """What to compile: ``plant``, ``estimator``, ``cascade:NAME`` and ``campaign:NAME``, the slowest
+    first (they are handed out in this order)."""
+    out = ["plant", "estimator"]
+    if campaign:
+        out += [f"campaign:{name}" for name in controllers]
+    return out + [f"cascade:{name}" for name in controllers]
+
+
+def compile_target(target: str) -> tuple[str, float]:
+    """Compile (or load) one target's entries in this process; returns its name and seconds."""
+    start = time.perf_counter()
+    kind, _, name = target.partition(":")
+    if kind == "plant":
+        from quadcommon.config import load_vehicle
+        from simulator.dynamics.plant import Plant
+
+        Plant(load_vehicle("paper_quad"), 0.001)
+    elif kind == "estimator":
+        from autopilot.estimation.eskf import ErrorStateEkf
+
+        ErrorStateEkf()
+    elif kind == "cascade":
+        from autopilot.control.cascade import Cascade
+        from autopilot.control.config import load_controller
+        from quadcommon.config import load_vehicle
+
+        Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
+    elif kind == "campaign":
+        from dataclasses import replace
+
+        from autopilot.control.config import load_controller
+        from sitl.campaign.batch import warm_up
+        from sitl.campaign.spec import load_campaign
+
+        warm_up(replace(load_campaign("paper_box", runs=1), controllers=(load_controller(name),)))
+    else:
+        raise ValueError(f"unknown target {target!r}")
+    return target, time.perf_counter() - start
+
+
+def entries_of(target: str) -> list[tuple]:
+    """The kernel entries a target compiles, as :func:`quadcommon.kernel.compiled` arguments."""
+    kind, _, name = target.partition(":")
+    if kind == "plant":
+        from simulator.dynamics import equations
+
+        return [(equations.physics_steps,), (equations.advance,), (equations.truth,)]
+    if kind == "estimator":
+        from autopilot.estimation import kernels
+
+        return [(kernels.predict,), (kernels.prior_variances,), (kernels.joseph_update,)]
+    from autopilot.control import registry
+    from autopilot.control.cascade import buffered_step
+    from autopilot.control.config import load_controller
+
+    config = load_controller(name)
+    laws = (registry.law(registry.TRANSLATIONAL, config.translational.law).step,
+            registry.law(registry.ROTATIONAL, config.rotational.law).step)  # fmt: skip
+    if kind == "cascade":
+        return [(buffered_step, *laws)]
+    from sitl.campaign.kernels import simulate
+
+    return [(simulate, *laws, True)]  # nogil
+
+
+def missing(names: Sequence[str]) -> list[str]:
+    """The targets with an entry numba would have to compile (not in its cache yet)."""
+    from quadcommon.kernel import cached
+
+    out = []
+    for target in names:
+        for entry in entries_of(target):
+            nogil = entry[-1] is True
+            if not cached(*(entry[:-1] if nogil else entry), nogil=nogil):
+                out.append(target)
+                break
+    return out
+
+
+def compile_all(names: Sequence[str], workers: int | None = None, log=print) -> float:
+    """Compile ``names`` (:func:`targets`) with ``workers`` processes; returns the wall time."""
+    from quadcommon.kernel import compiling
+
+    start = time.perf_counter()
+    if not compiling():
+        log("quadsitl compile: nothing to compile (numba missing or QUADSITL_PURE_PYTHON=1)")
+        return 0.0
+    workers = workers or os.cpu_count() or 1
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        for target, seconds in pool.map(compile_target, names):
+            log(f"  {target}: {seconds:.1f} s")
+    return time.perf_counter() - start
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from autopilot.control.config import CONTROLLER_NAMES
+
+    parser = argparse.ArgumentParser(prog="quadsitl compile", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("--controllers", nargs="+", default=list(CONTROLLER_NAMES), metavar="NAME",
+                        help="the controllers whose cascade and campaign flight to compile (default: "
+                        "the shipped ones; yours by name from your configuration directory)")  # fmt: skip
+    parser.add_argument("--no-campaign", action="store_true", help="not the campaign engine's flights")
+    parser.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
+    args = parser.parse_args(argv)
+    names = targets(args.controllers, campaign=not args.no_campaign)
+    print(f"quadsitl compile: {len(names)} targets")
+    wall = compile_all(names, args.workers)
+    print(f"quadsitl compile: done in {wall:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

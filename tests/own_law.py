@@ -1,0 +1,79 @@
+"""A researcher's own control law, as the tests write it: one file in a configuration directory's
+laws/ and a controller file naming it (README "Adding a control law")."""
+
+from __future__ import annotations
+
+from quadcommon.config import config_path
+
+TOY_LAW = '''
+"""A toy translational law: a = p_d'' - kp e1 - kd e1' (no integral), then eqs. 23-29."""
+
+from dataclasses import dataclass, replace
+
+from autopilot.control.registry import TRANSLATIONAL, register
+from autopilot.control.translational import thrust_and_tilt
+from autopilot.params.store import ParamSpec
+from quadcommon.kernel import kernel
+
+import math
+
+
+@dataclass(frozen=True)
+class PdGains:
+    law: str
+    kp: float
+    kd: float
+
+
+@kernel
+def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
+         integrate):
+    kp, kd = g[0], g[1]
+    ax = ref_acceleration[0] - kp * (position[0] - ref_position[0]) - kd * (velocity[0] - ref_velocity[0])
+    ay = ref_acceleration[1] - kp * (position[1] - ref_position[1]) - kd * (velocity[1] - ref_velocity[1])
+    az = ref_acceleration[2] - kp * (position[2] - ref_position[2]) - kd * (velocity[2] - ref_velocity[2])
+    {failure}
+    thrust, roll, pitch, thrust_limited, tilt_limited = thrust_and_tilt(g[2], g[3], g[4], g[5], ax, ay, az,
+                                                                        euler)
+    return thrust, roll, pitch, ax, ay, az, thrust_limited, tilt_limited
+
+
+@register(TRANSLATIONAL)
+class ProportionalDerivative:
+    NAME = "{name}"
+    STATE = ()
+    step = staticmethod(step)
+
+    @classmethod
+    def load_gains(cls, section):
+        kp, kd = section.number("kp", lo=0.0, hi=100.0), section.number("kd", lo=0.0, hi=100.0)
+        return PdGains(cls.NAME, kp, kd)
+
+    @staticmethod
+    def parameters(gains):
+        return (ParamSpec("PD_KP", gains.kp, 0.0, 100.0), ParamSpec("PD_KD", gains.kd, 0.0, 100.0))
+
+    @staticmethod
+    def gains_from_params(gains, params):
+        return replace(gains, kp=params.get("PD_KP", gains.kp), kd=params.get("PD_KD", gains.kd))
+
+    @staticmethod
+    def pack(gains, context):
+        return (gains.kp, gains.kd, context.mass_kg, context.gravity_m_s2, context.thrust_max_n,
+                math.sin(context.tilt_max_rad))
+'''
+
+
+def write_overlay(directory, name: str, failure: str = "pass", kp: float = 4.0) -> str:
+    """A configuration directory with a toy law ``name`` (laws/NAME.py) and a controller of the same
+    name flying it with the paper's attitude law; returns the controller's name."""
+    (directory / "laws").mkdir(parents=True, exist_ok=True)
+    (directory / "controllers").mkdir(exist_ok=True)
+    law = TOY_LAW.replace("{name}", name).replace("{failure}", failure)
+    (directory / "laws" / f"{name}.py").write_text(law)
+    paper = config_path("controllers", "intbs_nlhinf").read_text()
+    start, end = paper.index("[translational]"), paper.index("[rotational]")
+    toml = paper[:start] + f'[translational]\nlaw = "{name}"\nkp = {kp}\nkd = 3.0\n\n' + paper[end:]
+    toml = toml.replace('name = "intbs_nlhinf"', f'name = "{name}"')
+    (directory / "controllers" / f"{name}.toml").write_text(toml)
+    return name
