@@ -31,6 +31,7 @@ PROCESS_MODULES = {
     "tests/sitl/test_installed_wheel.py",
     "tests/sitl/test_launcher_ports.py",
     "tests/sitl/test_manual_modes_sitl.py",
+    "tests/sitl/test_links_processes.py",
     "tests/sitl/test_paper_through_sitl.py",
     "tests/sitl/test_params_failsafes.py",
     "tests/sitl/test_signing_cli.py",
