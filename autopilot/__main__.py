@@ -56,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
                         "them (default: log under the working directory)")  # fmt: skip
     parser.add_argument("--no-log", action="store_true",
                         help="no flight log at all (the log download lists none)")  # fmt: skip
+    parser.add_argument("--impair", action="append", default=[], metavar="LINK:SPEC",
+                        help="impair a link, e.g. gcs:loss=5%%,delay=50ms (repeatable; replaces that link's "
+                        "[impair] entry of sitl.toml; docs/links.md)")  # fmt: skip
     args = parser.parse_args(argv)
     try:
         setup = AutopilotSetup.load(args.instance, args.controller, args.vehicle, args.sitl_config,
@@ -64,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
         signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
         log = LogOptions(None if args.no_log else args.log_dir, utc_clock=time.time, version=_version())
         setup = dataclasses.replace(setup, signing=signing, log=log)
+        if args.impair:
+            impair = setup.sitl.impair.with_specs(args.impair)
+            setup = dataclasses.replace(setup, sitl=dataclasses.replace(setup.sitl, impair=impair))
         app = Autopilot(setup, zenoh=not args.no_zenoh, quiet=args.quiet)
         app.open()
     except (ConfigError, ValueError) as exc:

@@ -9,6 +9,11 @@ files, off the lockstep's critical path) and the info queryable is answered. Whi
 open, the simulator's truth on zenoh gives the log the disturbance the simulator applies. Nothing
 here decides anything about the vehicle.
 
+With an impairment (``[impair]`` of sitl.toml, ``--impair``, or ``quadsitl impair`` on zenoh's
+``quadsitl/<N>/impair`` while running) every send goes through the link's outgoing channel and every
+ground-station datagram received through its incoming one (:mod:`quadcommon.impaired_udp`); the
+loop's waits end when a held datagram is due.
+
 Run: ``python -m autopilot --instance N --controller NAME --vehicle NAME``.
 """
 
@@ -20,6 +25,7 @@ import time
 
 from quadcommon import bus, wire
 from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC, TRUTH_CODEC, TRUTH_FIELDS
+from quadcommon.impaired_udp import ImpairedLinks, ImpairedReceiver, ImpairedSender, wait_s
 from quadcommon.udp import bind_udp
 
 from .core import AutopilotCore, AutopilotSetup
@@ -28,6 +34,7 @@ from .mavlink.codec import mavlink
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing
 
 HOUSEKEEPING_S = 0.05
+LINK_NAMES = {HIL_LINK: "hil", GCS_LINK: "gcs", API_LINK: "api"}  # as --impair names them
 SPIN_BELOW_GAP_S = 0.001  # frames closer than this (wall): spin-wait for the next one
 CONTROLLER_BATCH = 10  # controller rows per zenoh sample
 # Wall seconds the first rows wait for a subscriber declared before this process started (a
@@ -63,6 +70,10 @@ class Autopilot:
         self.gcs_budget: dict[int, int] = {}
         self.session = self.controller_pub = self.estimator_pub = self.info_queryable = None
         self.truth_sub = None  # the simulator's truth, for the flight log's disturbance
+        self.impair_queryable = None
+        self.impaired = ImpairedLinks(setup.sitl.impair, "autopilot")  # live: quadsitl/<N>/impair
+        self.senders: dict[int, ImpairedSender] = {}
+        self.receivers: dict[int, ImpairedReceiver] = {}
         self._hold_rows_until: float | None = None  # the first rows wait for a subscriber (below)
         self._running = True
 
@@ -75,6 +86,12 @@ class Autopilot:
         self.socks[GCS_LINK] = bind_udp(self.ports.gcs_local, "GCS link")
         self.socks[API_LINK] = bind_udp(self.ports.api_local, "API link")
         self.socks[HIL_LINK] = bind_udp(0, "HIL link")
+        impaired, names = self.impaired, LINK_NAMES
+        self.senders = {link: impaired.sender(sock, names[link], "ap->sim" if link == HIL_LINK else "out")
+                        for link, sock in self.socks.items()}  # fmt: skip
+        self.receivers = {link: impaired.receiver(names[link], "in") for link in (GCS_LINK, API_LINK)}
+        if impaired.config.active:
+            self.log(f"links impaired: {impaired.config.describe()}")
         for link, sock in self.socks.items():
             self.selector.register(sock, selectors.EVENT_READ, link)
             if link == HIL_LINK:
@@ -96,6 +113,9 @@ class Autopilot:
                 self.truth_sub = self.session.declare_subscriber(
                     wire.zenoh_key(n, "truth"), zenoh.handlers.FifoChannel(1024)
                 )
+            self.impair_queryable = self.session.declare_queryable(
+                wire.zenoh_key(n, "impair"), zenoh.handlers.FifoChannel(16)
+            )
 
     def close(self) -> None:
         self._publish_rows(force=True)
@@ -114,12 +134,22 @@ class Autopilot:
         self._running = False
 
     def send(self, out: list[Outgoing]) -> None:
-        socks = self.socks
+        """Out on the link's socket, through its impairment (a failed send, nobody listening, is
+        normal for a GCS port and dropped)."""
+        senders = self.senders
         for link, address, data in out:
-            try:
-                socks[link].sendto(data, address or self.hil_address)
-            except OSError:
-                pass  # nobody listening (ECONNREFUSED on loopback) is normal for a GCS port
+            senders[link].sendto(data, address or self.hil_address)
+
+    def _flush_impaired(self, now: float) -> None:
+        """Held datagrams whose time has come: out, or into the core."""
+        for sender in self.senders.values():
+            sender.flush(now)
+        for link, receiver in self.receivers.items():
+            for data, address in receiver.due(now):
+                self.send(self.core.on_gcs_datagram(link, address, data, now))
+
+    def _next_due(self) -> list[float | None]:
+        return [e.next_due() for e in self.impaired.endpoints.values()]
 
     def _publish_rows(self, force: bool = False) -> None:
         core = self.core
@@ -168,16 +198,34 @@ class Autopilot:
                     continue
                 self.core.flight_log.disturbance(rows[:, DISTURBANCE_COLUMNS].tolist())
 
+    def info(self) -> dict:
+        """The answer of ``quadsitl/<N>/autopilot/info``: the core's, and the links' impairment."""
+        return {**self.core.info(), "impairment": self.impaired.info()}
+
     def _poll_info(self) -> None:
         if self.info_queryable is None:
             return
         try:
             query = self.info_queryable.try_recv()
         except Exception:
+            query = None
+        if query is not None:
+            with query:
+                query.reply(query.key_expr, json.dumps(self.info()).encode())
+        try:
+            query = self.impair_queryable.try_recv()
+        except Exception:
             return
         if query is not None:
             with query:
-                query.reply(query.key_expr, json.dumps(self.core.info()).encode())
+                payload = query.payload.to_bytes() if query.payload is not None else b""
+                ok, reply = self.impaired.change(payload)
+                if ok:
+                    now_impaired = self.impaired.config.describe()
+                    self.log(f"impairment changed at t={self.core.sim_time:.3f} s: {now_impaired}")
+                    query.reply(query.key_expr, reply)
+                else:
+                    query.reply_err(reply)
 
     def run(self, max_wall_s: float | None = None) -> int:
         core, hil = self.core, self.socks[HIL_LINK]
@@ -209,7 +257,12 @@ class Autopilot:
             if gap < SPIN_BELOW_GAP_S:
                 wire.spin_until_readable(hil, min(spin_s, 3.0 * gap))
             selector = self.selector if any(self.gcs_budget.values()) else self.hil_only
-            for key, _ in selector.select(HOUSEKEEPING_S):
+            if self.impaired.endpoints_active:
+                self._flush_impaired(time.monotonic())
+                timeout = wait_s(HOUSEKEEPING_S, time.monotonic(), *self._next_due())
+            else:
+                timeout = HOUSEKEEPING_S
+            for key, _ in selector.select(timeout):
                 self._drain(key.data, key.fileobj)
         return 0
 
@@ -243,4 +296,5 @@ class Autopilot:
                 self._publish_rows()
             else:
                 gcs_budget[link] -= 1
-                self.send(core.on_gcs_datagram(link, address, data, now))
+                for held, sender in self.receivers[link].received(data, address, now):
+                    self.send(core.on_gcs_datagram(link, sender, held, now))

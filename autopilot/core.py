@@ -46,11 +46,12 @@ from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
 from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
-from .control.cascade import Cascade, StateEstimate
+from .control.cascade import AttitudeReference, Cascade, StateEstimate
 from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
+from .estimation.streams import StreamWatch
 from .logger.logger import FlightLogger, LogOptions, log_info
 from .logger.topics import Snapshot
 from .mavlink import telemetry
@@ -80,6 +81,9 @@ WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)
 HIL_HELLO_S = 0.2  # heartbeat to the simulator until frames flow: it learns our address from it
 _NAN3 = (math.nan, math.nan, math.nan)
 ESTIMATORS = ("truth", "ekf")
+# A frame for t = 0 this long (s of ``now``) after the run's first one is a restarted simulator's,
+# not a late copy of the first frame (a link delays a copy by at most a few 100 ms).
+LATE_COPY_S = 1.0
 IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it (no alignment)
 # Log download (LOG_DATA / LOG_ENTRY) messages per ground station link: per control frame (4 at
 # 500 Hz: 180 kB/s of simulation time, ~10 us of a frame's bookkeeping), and per housekeeping
@@ -161,11 +165,13 @@ class AutopilotCore:
         self._flying = False
         self._controls = (0.0, 0.0, 0.0, 0.0)
         self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
+        self._last_answer: bytes | None = None  # sent again for a resent or duplicated frame
+        self._first_frame_wall = 0.0  # ``now`` at this run's first frame (see _restarted)
         self._estimator_done: tuple | None = None  # (t, estimate, loop) of the frame, for its row
         self._statustext_id = 0
         self._frame_truth: StateEstimate | None = None  # the frame's truth (before the EKF's estimate)
 
-        self.params = default_parameters(setup.controller, sitl.rates, estimator=True)
+        self.params = default_parameters(setup.controller, sitl.rates, estimator=True, vehicle=setup.vehicle)
         self.params.values["MAV_SYS_ID"] = float(self.system_id)
         self.params.values["EKF2_EN"] = 1.0 if setup.estimator == "ekf" else 0.0
         load_params_file(config_path("estimator", setup.estimator_profile), self.params)
@@ -180,6 +186,7 @@ class AutopilotCore:
         self.commander = Commander(self.params)
         gains = controller_config_from_params(setup.controller, self.params)
         self.cascade = Cascade(gains, setup.vehicle, self.dt)
+        self._thrust_max_n = setup.vehicle.actuation.thrust_max_n  # U1_max: the manual modes' thrust scale
         self._gain_names = {spec.name for spec in controller_params(setup.controller)}
         self.flight_log = FlightLogger(
             self.params,
@@ -199,6 +206,7 @@ class AutopilotCore:
         self.hil_parser = new_parser()
         self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
+        self.sensor_streams = StreamWatch()  # sensor streams of the frames that stop (on the EKF)
         self._switch_estimator()
 
         ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
@@ -343,8 +351,12 @@ class AutopilotCore:
             return None  # a heartbeat from the simulator, or no state in it
         if frame.time_usec <= self.last_time_usec:
             if frame.time_usec == self.last_time_usec:
-                # The simulator resent a frame it got no answer to: the same answer again.
-                return self.actuators.encode(frame.time_usec, self._controls, self.commander.armed)
+                # The simulator resent a frame it got no answer to (or the link duplicated it): the
+                # same answer again, byte for byte, without stepping twice.
+                return self._last_answer
+            if not self._restarted(frame.time_usec, now):
+                self.on_foreign_datagram("HIL frame already answered (a late copy)")
+                return None  # the simulator has moved on: nobody waits for this answer
             self._simulator_restarted()
         p, v, e, w = frame.state
         total = p[0] + p[1] + p[2] + v[0] + v[1] + v[2] + e[0] + e[1] + e[2] + w[0] + w[1] + w[2]
@@ -357,6 +369,8 @@ class AutopilotCore:
             frame = frame._replace(
                 state=StateEstimate(c.position_m, c.velocity_m_s, c.euler_rad, c.euler_rates_rad_s)
             )
+        if self.last_time_usec < 0:
+            self._first_frame_wall = now
         self.frame_gap_s = now - self.last_frame_wall
         self.last_frame_wall = now
         if not self.linked or self.sim_lost:
@@ -365,6 +379,13 @@ class AutopilotCore:
                 self.statustext(m.MAV_SEVERITY_INFO, "simulator link recovered")
             self.linked, self.sim_lost = True, False
         return self._control_step(frame)
+
+    def _restarted(self, time_usec: int, now: float) -> bool:
+        """A frame older than the last answered one: a restarted simulator (it starts again at
+        t = 0, after this autopilot reported it lost, or more than :data:`LATE_COPY_S` after this
+        run's first frame) or else a late copy of a frame already answered (a duplicated or
+        reordered datagram), which is dropped."""
+        return self.sim_lost or (time_usec == 0 and now - self._first_frame_wall > LATE_COPY_S)
 
     def _simulator_restarted(self) -> None:
         self.log("simulator time went backwards: simulator restarted; resetting")
@@ -400,7 +421,7 @@ class AutopilotCore:
                 self.cascade.reset()
                 self._flying = True
             try:
-                output = self.cascade.step(est, guidance.reference)
+                output = self._cascade_step(est, guidance)
                 controls = output.actuator_controls
             except ControllerFailure as failure:
                 output, controls = None, self._controller_failed(t, failure)
@@ -410,7 +431,20 @@ class AutopilotCore:
             controls = (0.0, 0.0, 0.0, 0.0)
         self._controls = controls
         self._frame_done = (frame, guidance, output)
-        return self.actuators.encode(frame.time_usec, controls, commander.armed)
+        self._last_answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
+        return self._last_answer
+
+    def _cascade_step(self, est: StateEstimate, guidance):
+        """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'
+        tilt, attitude, thrust as a fraction of the vehicle's U1_max) go in through the cascade's
+        own override arguments."""
+        manual = guidance.manual
+        if manual is None:
+            return self.cascade.step(est, guidance.reference)
+        attitude = AttitudeReference(*manual.attitude) if manual.attitude is not None else None
+        thrust = manual.thrust * self._thrust_max_n if manual.thrust is not None else None
+        return self.cascade.step(est, guidance.reference, roll_pitch=manual.roll_pitch, attitude=attitude,
+                                 thrust_n=thrust)  # fmt: skip
 
     def _controller_failed(self, t: float, failure: ControllerFailure) -> tuple[float, float, float, float]:
         """A law gave a non-finite output or raised: flight termination (motors off, disarmed), as
@@ -444,6 +478,8 @@ class AutopilotCore:
         if loop is None:  # EKF2_EN = 1 set in flight: the switch waits for the disarm
             return frame.state
         samples = frame.sensors
+        for text in self.sensor_streams.update(t, samples):  # a stream that stops is announced
+            self.statustext(m.MAV_SEVERITY_WARNING, text)
         if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
             self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
             return None

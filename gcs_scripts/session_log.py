@@ -49,7 +49,11 @@ from quadcommon.bus_records import CONTROLLER_FIELDS, ESTIMATOR_FIELDS, TRUTH_FI
 METADATA_KEY = b"quadsitl.session"
 FORMAT = "quadsitl.session/1"
 PART_GLOB = "part-*.parquet"
-STALE_WALL_S = 1.0  # a stream silent this long (wall) no longer holds the watermark back
+# A stream silent this long (wall) no longer holds the watermark back. Not shorter: at --speed max
+# on a loaded 2-core machine a publisher's zenoh thread can fall over 1 s behind while the lockstep
+# goes on (benchmarks/soak.py saw the controller rows of 8 frames arrive after their truth rows had
+# been written with 1 s, so each of those frames became two half rows).
+STALE_WALL_S = 5.0
 NO_ZENOH_FALLBACK_WALL_S = 3.0  # no zenoh at all after this long: rows from LOCAL_POSITION_NED
 
 FRAMES_NOTE = (

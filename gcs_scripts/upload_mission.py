@@ -372,6 +372,7 @@ class MissionLink(Link):
         self.mav.mission_count_send(*self.target, count, m.MAV_MISSION_TYPE_MISSION)
         tries = 0
         answered = False
+        last_sent = -1  # the item sent last: sent again when the vehicle falls silent (its ACK lost)
         while time.monotonic() < deadline:
             msg = self._wait(
                 lambda x: x.get_type() in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"),
@@ -379,10 +380,14 @@ class MissionLink(Link):
             )
             if msg is None:
                 tries += 1
-                if answered or tries > RETRIES:
+                if tries > RETRIES:
                     raise MissionError(f"mission upload: no answer from the vehicle ({tries} waits)")
-                self.mav.mission_count_send(*self.target, count, m.MAV_MISSION_TYPE_MISSION)
+                if answered:  # the vehicle repeats a request itself; a silence is a lost last ACK
+                    self.mav.send(items[last_sent].message(self.target, last_sent))
+                else:
+                    self.mav.mission_count_send(*self.target, count, m.MAV_MISSION_TYPE_MISSION)
                 continue
+            tries = 0
             kind = msg.get_type()
             if kind == "MISSION_ACK":
                 if msg.type == m.MAV_MISSION_ACCEPTED:
@@ -395,7 +400,7 @@ class MissionLink(Link):
             if kind == "MISSION_REQUEST":
                 raise MissionError("the vehicle asked for float MISSION_ITEMs: not supported here")
             if 0 <= msg.seq < count:
-                answered = True
+                answered, last_sent = True, msg.seq
                 self.mav.send(items[msg.seq].message(self.target, msg.seq))
         raise MissionError(f"mission upload: not finished within {timeout_s:g} s")
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from . import environment
+from .impairment import LINKS, ImpairConfig, parse_impairment
 from .schema import ConfigError, Section, load_toml
 
 Vector3 = tuple[float, float, float]
@@ -445,6 +446,8 @@ class SitlConfig:
     zenoh_router: str  # "" for peer-to-peer on loopback, else an endpoint like tcp/host:7447
     lockstep_timeout_s: float
     lockstep_spin_s: float = 0.002  # busy-wait for the peer's datagram this long before blocking
+    lockstep_resend_s: float = 0.01  # wall: a frame unanswered this long is sent again
+    impair: ImpairConfig = ImpairConfig()  # loss, delay ... per link ([impair], --impair)
 
 
 def load_rates(sec: Section) -> Rates:
@@ -497,9 +500,24 @@ def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
     sec = root.section("lockstep", optional=True)
     timeout = sec.number("timeout_s", 2.0, lo=0.05, hi=600.0, unit="s")
     spin = sec.number("spin_s", 0.002, lo=0.0, hi=0.05, unit="s")
+    resend = sec.number("resend_s", 0.01, lo=0.001, hi=1.0, unit="s")
     sec.finish()
+    if resend >= timeout:
+        raise sec.error("resend_s", resend, f"less than timeout_s ({timeout:g} s)")
+    impair = load_impair(root.section("impair", optional=True))
     root.finish()
     spin_text = environment.lockstep_spin()
     if spin_text is not None:
         spin = _spin_from_environment(spin_text)
-    return SitlConfig(rates, hil, gcs, api, home, zenoh_port, router, timeout, spin)
+    return SitlConfig(rates, hil, gcs, api, home, zenoh_port, router, timeout, spin, resend, impair)
+
+
+def load_impair(sec: Section) -> ImpairConfig:
+    """``[impair]``: ``seed`` and one spec string per link (``hil = "loss=1%,dup=0.5%"``)."""
+    seed = sec.integer("seed", 0, lo=0, hi=2**31 - 1)
+    links = {}
+    for link in LINKS:
+        text = sec.string(link, "")
+        links[link] = parse_impairment(text, f"{sec.source}: key '{sec.key_name(link)}' = {text!r}")
+    sec.finish()
+    return ImpairConfig(seed, **links)

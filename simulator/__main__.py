@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import signal
@@ -13,6 +14,12 @@ from quadcommon.schema import ConfigError
 
 from .app import Simulator, StartupError
 from .core import SimulatorSetup
+
+
+def with_impairments(setup: SimulatorSetup, specs: list[str]) -> SimulatorSetup:
+    """``--impair LINK:SPEC`` over the sitl.toml's ``[impair]`` (ImpairmentError names the value)."""
+    sitl = setup.sitl
+    return dataclasses.replace(setup, sitl=dataclasses.replace(sitl, impair=sitl.impair.with_specs(specs)))
 
 
 # -- command line -----------------------------------------------------------------------------------
@@ -57,6 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
     parser.add_argument("--sensors", default=None,
                         help="sensor profile: ideal, mocap, gps (config/sensors; default: the scenario's)")
+    parser.add_argument("--impair", action="append", default=[], metavar="LINK:SPEC",
+                        help="impair a link, e.g. hil:loss=1%%,delay=5ms (repeatable; replaces that link's "
+                        "[impair] entry of sitl.toml; docs/links.md)")  # fmt: skip
     return parser
 
 
@@ -74,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         setup = SimulatorSetup.load(
             args.instance, args.scenario, args.vehicle, args.sitl_config, args.sensors
         )
+        if args.impair:
+            setup = with_impairments(setup, args.impair)
         app = Simulator(setup, args.speed, args.duration)
     except (ConfigError, ValueError) as exc:
         print(f"simulator: {exc}", file=sys.stderr)

@@ -7,6 +7,12 @@ strangers' datagrams are ignored), lets the core step the plant, and paces on th
 sleeps until ``wall_start + t / speed`` (no sleeping for ``max``); more than 0.2 s behind, it
 re-anchors instead of sprinting to catch up.
 
+A frame unanswered for ``[lockstep] resend_s`` (plus the HIL impairment's delay and jitter both
+ways) is sent again, byte for byte, and again after each such wait: a lost frame or answer costs
+one resend, and the autopilot answers a frame it has answered already from that answer. With
+``[impair] hil`` (or ``--impair hil:...``) the frames go out through the impaired channel
+(:mod:`quadcommon.impairment`); the autopilot impairs its answers the same way.
+
 Autopilot lost: after ``[lockstep] timeout_s`` of wall time without the answer the simulator says
 so and keeps stepping (paced as before) under the core's own emergency descent (level, descend at
 0.5 m/s, motors off on touchdown; a vehicle on the ground or disarmed keeps its motors off), still
@@ -25,20 +31,20 @@ from __future__ import annotations
 import select
 import sys
 import time
-from array import array
 from typing import Any
 
 from quadcommon import bus, wire
+from quadcommon.impaired_udp import ImpairedLinks, ImpairedSender, wait_s
 from quadcommon.udp import PortInUse, bind_udp
 
 from .core import PlantDiverged, SimulatorCore, SimulatorSetup
+from .latency import LatencyHistogram
 from .mavlink.hil import ActuatorAnswer
 from .pacing import Pacer
-from .truth_bus import GustUploadServer, InfoServer, TruthStream
+from .truth_bus import GustUploadServer, InfoServer, RequestServer, TruthStream
 
 POLL_S = 0.05  # longest blocking wait: bounds the reaction time to SIGTERM and info queries
 MAX_DATAGRAM = 65535
-MAX_ROUND_TRIP_SAMPLES = 2_000_000  # 16 MB at most, ~1 h at 500 Hz
 MAX_DRAIN = 1000  # datagrams read per frame while the autopilot is lost (bounded)
 
 
@@ -59,6 +65,8 @@ class Simulator:
                                 sitl.api_port_base, sitl.zenoh_port_base)  # fmt: skip
         self.timeout_s, self.spin_s = sitl.lockstep_timeout_s, sitl.lockstep_spin_s
         self.sock: Any = None
+        self.impaired = ImpairedLinks(sitl.impair, "simulator")  # live changes: quadsitl/<N>/impair
+        self.hil_out = ImpairedSender(None, None)  # frames to the autopilot, impaired or not (open)
         self.session: Any = None
         self.truth_stream: TruthStream | None = None
         self.services: list = []  # zenoh queryables polled from the loop
@@ -68,7 +76,7 @@ class Simulator:
         self.pacer: Pacer | None = None
         self.work_s = self.wait_s = 0.0  # wall time per frame: own work, waiting for the autopilot
         self.loop_start = self.loop_s = 0.0  # the frame loop's wall time (linked to the last frame)
-        self.round_trips = array("d")  # HIL round trip per frame (wall s); bounded memory
+        self.round_trips = LatencyHistogram()  # HIL round trip per frame (wall s); constant memory
         self._outage_wall = 0.0
 
     def log(self, text: str) -> None:
@@ -83,6 +91,10 @@ class Simulator:
             raise StartupError(f"{exc}: is another simulator running with --instance {n}? "
                                "(pick another --instance)") from None  # fmt: skip
         self.sock.settimeout(POLL_S)
+        self.hil_out = self.impaired.sender(self.sock, "hil", "sim->ap", time.perf_counter)
+        if self.hil_out.channel is not None:
+            described = self.hil_out.channel.impairment.describe()
+            self.log(f"HIL link impaired (frames to the autopilot): {described}")
         try:
             self.session = bus.open_hub(self.ports.zenoh, core.setup.sitl.zenoh_router)
         except bus.BusError as exc:
@@ -92,6 +104,7 @@ class Simulator:
         self.services = [
             InfoServer(self.session, wire.zenoh_key(n, "info"), self.describe),
             GustUploadServer(self.session, wire.zenoh_key(n, "sim/gusts"), core.upload_gusts),
+            RequestServer(self.session, wire.zenoh_key(n, "impair"), self._change_impairment),
         ]  # fmt: skip
 
     def close(self) -> None:
@@ -115,7 +128,15 @@ class Simulator:
 
     def describe(self) -> dict[str, Any]:
         """The answer of the ``quadsitl/<N>/info`` queryable."""
-        return {**self.core.info(), "speed": "max" if self.speed is None else self.speed}
+        info = {**self.core.info(), "speed": "max" if self.speed is None else self.speed}
+        info["impairment"] = self.impaired.info()
+        return info
+
+    def _change_impairment(self, payload: bytes) -> tuple[bool, bytes]:
+        ok, reply = self.impaired.change(payload)
+        if ok:
+            self.log(f"impairment changed at t={self.core.t:.3f} s: {self.impaired.config.describe()}")
+        return ok, reply
 
     def _poll_services(self) -> None:
         for service in self.services:
@@ -144,22 +165,36 @@ class Simulator:
                 return True
         return False
 
-    def _await_answer(self) -> ActuatorAnswer | None:
-        """The answer to the current frame; None if stopped or after ``timeout_s`` (then LOST)."""
-        sock, core = self.sock, self.core
-        deadline = time.perf_counter() + self.timeout_s
+    def _await_answer(self, sent_at: float) -> ActuatorAnswer | None:
+        """The answer to the current frame; None if stopped or after ``timeout_s`` (then LOST).
+        Unanswered for ``core.resend_after_s``, the frame is sent again (a lost frame or answer)."""
+        sock, core, perf_counter = self.sock, self.core, time.perf_counter
+        deadline = sent_at + self.timeout_s
+        resend_at = sent_at + core.resend_after_s
+        hil_out = self.hil_out
         wire.spin_until_readable(sock, self.spin_s)  # the answer is due within ~100 µs
         while self._running:
-            try:
-                data, address = sock.recvfrom(MAX_DATAGRAM)
-            except OSError:  # timeout, or ICMP port unreachable: the peer is gone
+            # Block until the socket is readable, a resend is due or a held datagram is: the
+            # socket's own timeout is POLL_S, longer than the resend wait, so select first.
+            now = perf_counter()
+            if select.select((sock,), (), (), wait_s(POLL_S, now, resend_at, hil_out.next_due()))[0]:
+                try:
+                    data, address = sock.recvfrom(MAX_DATAGRAM)
+                except OSError:  # ICMP port unreachable: the peer is gone
+                    data = None
+            else:
                 data = None
             if data is not None and address == self.peer:
                 answer = core.answer_to_frame(data)
                 if answer is not None:
                     return answer
+            now = perf_counter()
+            hil_out.flush(now)
+            if now >= resend_at and now < deadline:
+                hil_out.sendto(core.resend_frame(), self.peer)
+                resend_at = now + core.resend_after_s
             # Checked on every wake-up, so a peer chattering without answering is reported too.
-            if time.perf_counter() >= deadline:
+            if now >= deadline:
                 self.log(f"no HIL_ACTUATOR_CONTROLS for frame t={core.t:.3f} s within {self.timeout_s:.1f} s;"
                          f" is the autopilot running? (udp {wire.LOOPBACK}:{self.ports.hil})")  # fmt: skip
                 core.autopilot_lost()
@@ -217,10 +252,7 @@ class Simulator:
                 print(f"simulator: {exc}; stopping", file=sys.stderr, flush=True)
                 return 1
             sent_at = perf_counter()
-            try:
-                sock.sendto(datagram, self.peer)
-            except OSError:
-                pass  # the autopilot is gone; the lockstep timeout reports it
+            self.hil_out.sendto(datagram, self.peer)  # a send that fails: the timeout reports it
             self.frames_sent += 1
             append_truth(core.truth_row)  # bookkeeping while the autopilot computes its answer
             self._poll_services()
@@ -232,13 +264,13 @@ class Simulator:
                     pacer.resync()
                 answer = None
             else:
-                answer = self._await_answer()
+                answer = self._await_answer(sent_at)
                 if answer is None and not core.emergency:
                     break  # stopped while waiting
                 if answer is None:
                     pacer.resync()  # the wait was an outage, not simulated time
-                elif len(self.round_trips) < MAX_ROUND_TRIP_SAMPLES:
-                    self.round_trips.append(perf_counter() - sent_at)
+                else:
+                    self.round_trips.add(perf_counter() - sent_at)
             answered = perf_counter()
             core.end_frame(answer)
             if core.warnings:
@@ -253,13 +285,13 @@ class Simulator:
         text = (
             f"stopped at t={self.core.t:.3f} s ({self.frames_sent} frames; per frame "
             f"{1e6 * self.work_s / n:.0f} us own work, {1e6 * self.wait_s / n:.0f} us waiting for the "
-            f"autopilot; {self.pacer.overruns if self.pacer else 0} re-anchors)"
+            f"autopilot; {self.pacer.overruns if self.pacer else 0} re-anchors; "
+            f"{self.core.resends} frames resent)"
         )
         if self.loop_s > 0.0:
             t = self.core.t
             text += f"; {t:.3f} s simulated in {self.loop_s:.3f} s of frame loop ({t / self.loop_s:.1f}x)"
         if self.round_trips:
-            rtt = sorted(self.round_trips)
-            median, p99 = rtt[len(rtt) // 2], rtt[min(int(0.99 * len(rtt)), len(rtt) - 1)]
+            median, p99 = self.round_trips.quantile(0.5), self.round_trips.quantile(0.99)
             text += f"; HIL round trip median {1e6 * median:.0f} us, p99 {1e6 * p99:.0f} us"
         return text

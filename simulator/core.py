@@ -8,6 +8,9 @@ flown when the autopilot is lost. One lockstep period is two calls:
    frame's time ``t = k / control_hz`` as ONE datagram (HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY,
    and HIL_GPS at the GPS rate, all stamped ``time_usec = round(k * 1e6 / control_hz)``); the
    frame's truth row (with the disturbance applied at ``t``) is :attr:`~SimulatorCore.truth_row`;
+   If no answer comes within :attr:`~SimulatorCore.resend_after_s` (wall time in the process,
+   simulation time in-process), :meth:`~SimulatorCore.resend_frame` gives the same datagram again
+   (counted): a lost frame or answer costs one resend, not the lockstep timeout;
 2. :meth:`~SimulatorCore.end_frame` ``(answer)``: apply the autopilot's HIL_ACTUATOR_CONTROLS for
    that frame (zero unless armed, consistent and finite) or, while the autopilot is lost, the
    emergency descent; then step the plant ``physics_hz / control_hz`` times by RK4, evaluating the
@@ -118,6 +121,9 @@ class SimulatorCore:
         self.k = 0  # the frame being flown
         self.time_usec = 0
         self.truth_row: tuple[float, ...] = ()
+        self.frame_datagram = b""  # the current frame's, as sent: a resend repeats it byte for byte
+        self.resends = 0  # frames sent again for want of an answer (a lost frame or answer)
+        self.resend_after_s = resend_after_s(setup.sitl)
         self.warnings: list[str] = []  # once each: for the shell's stderr
         self._warned: set[str] = set()
         # Autopilot lost: the emergency descent.
@@ -145,7 +151,16 @@ class SimulatorCore:
         force, torque, wind = self.schedule.evaluate(t)
         sensed = self.sensors.step(t, truth)
         self.truth_row = truth_row(t, truth, force, torque, wind)
-        return self.encoder.encode(time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision)
+        datagram = self.encoder.encode(time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision)
+        self.frame_datagram = datagram
+        return datagram
+
+    def resend_frame(self) -> bytes:
+        """The current frame again, unchanged (its answer is overdue: the frame or the answer was
+        lost); counted in :attr:`resends`. The autopilot answers a frame it has answered already
+        from that answer, without stepping again, so a resend never changes the flight."""
+        self.resends += 1
+        return self.frame_datagram
 
     def is_autopilot(self, datagram: bytes) -> bool:
         """True if ``datagram`` holds a valid MAVLink message from this vehicle's autopilot
@@ -294,7 +309,15 @@ class SimulatorCore:
             "physics_hz": self.physics_hz,
             "control_hz": self.control_hz,
             "sim_time_s": self.t,
+            "resends": self.resends,
         }
+
+
+def resend_after_s(sitl: SitlConfig) -> float:
+    """How long (s) an unanswered frame waits before it is sent again: ``[lockstep] resend_s``
+    plus the HIL link's impairment round trip (delay and jitter both ways), so a frame that is
+    merely delayed is not resent."""
+    return sitl.lockstep_resend_s + 2.0 * sitl.impair.hil.latest_s
 
 
 def as_nominal(vehicle: VehicleConfig) -> VehicleConfig:

@@ -133,11 +133,9 @@ class InfoServer(_PolledQueryable):
         query.reply(self.key, json.dumps(self.describe()).encode())
 
 
-class GustUploadServer(_PolledQueryable):
-    """The simulator's side of ``quadsitl/<N>/sim/gusts``: each query's payload goes to
-    ``handle(payload) -> (accepted, reply)`` (:meth:`simulator.core.SimulatorCore.upload_gusts`,
-    the protocol of environment/gust_upload.py) and the reply goes back. Call :meth:`poll` from the
-    main loop."""
+class RequestServer(_PolledQueryable):
+    """Each query's payload on ``key`` goes to ``handle(payload) -> (accepted, reply)`` and the
+    reply goes back (an error reply if not accepted). Call :meth:`poll` from the main loop."""
 
     def __init__(
         self, session: zenoh.Session, key: str, handle: Callable[[bytes], tuple[bool, bytes]]
@@ -152,3 +150,8 @@ class GustUploadServer(_PolledQueryable):
             query.reply(self.key, reply)
         else:
             query.reply_err(reply)
+
+
+class GustUploadServer(RequestServer):
+    """The simulator's side of ``quadsitl/<N>/sim/gusts``: ``handle`` is
+    :meth:`simulator.core.SimulatorCore.upload_gusts` (the protocol of environment/gust_upload.py)."""

@@ -39,6 +39,7 @@ DELEGATED: dict[tuple[str, str], tuple[str, tuple[str, ...], str]] = {
     ("gusts", "upload"): ("upload_gusts", (), "send a gust profile to the simulator (zenoh)"),
 }
 RECORD_MODULE = "record"
+IMPAIR_MODULE = "impair"
 GROUP_HELP = {
     "fly": "fly a running SITL: setpoints, trajectory, paper (quadsitl fly NAME --help)",
     "mission": "the vehicle's mission: upload, download, clear (quadsitl mission NAME --help)",
@@ -198,6 +199,10 @@ def _cmd_up(args: argparse.Namespace) -> int:
     load_scenario(args.scenario)
     load_vehicle(args.vehicle)
     params = [_params_file(args, args.instance + k, controller) for k in range(args.count)]
+    if args.impair:  # a bad spec fails here, naming the value, before any process starts
+        from quadcommon.impairment import ImpairConfig
+
+        ImpairConfig().with_specs(args.impair)
     if args.signing_key:  # a bad key file fails here, before any process starts
         from autopilot.mavlink.signing import read_key_file
 
@@ -208,7 +213,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
             scenario=args.scenario, speed=args.speed, autostart=args.autostart,
             duration_s=args.duration, sitl_config=args.sitl_config, params_file=params[k],
             signing_key_file=str(Path(args.signing_key).resolve()) if args.signing_key else None,
-            sensors=args.sensors, estimator=args.estimator,
+            sensors=args.sensors, estimator=args.estimator, impair=tuple(args.impair),
             log_dir=_log_dir(args, args.instance + k),
         )
         for k in range(args.count)
@@ -298,6 +303,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="restarts of one process per 60 s before it is left down (default 3; 0 = --no-restart)",
     )
     _estimation_arguments(p)
+    p.add_argument("--impair", action="append", default=[], metavar="LINK:SPEC",
+                   help="faults on a link, LINK one of hil, gcs, api: e.g. gcs:loss=5%%,delay=50ms,"
+                   "jitter=20ms,dup=1%%,reorder=1%% (repeatable; replaces sitl.toml's [impair] entry; "
+                   "docs/links.md)")  # fmt: skip
     p.add_argument("--view", action="store_true", help="also start the live view in the browser")
     p.add_argument("--view-port", type=int, default=8080, help="the view's port on 127.0.0.1 (default 8080)")
     p.set_defaults(func=_cmd_up)
@@ -371,6 +380,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("record", help="record a session: tlog + Parquet (quadsitl record --help)",
                        add_help=False)  # fmt: skip
     p.add_argument("rest", nargs=argparse.REMAINDER)
+    p = sub.add_parser("impair", help="change a running vehicle's link faults: quadsitl impair "
+                       "api:loss=100%% (docs/links.md)", add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
 
     p = sub.add_parser("config", help="the configuration: copy the shipped files out, or list where names "
                        "are looked up")  # fmt: skip
@@ -428,6 +440,8 @@ def _dispatch(argv: list[str]) -> int:
         return compile_main(argv[1:])
     if argv[:1] == ["record"]:
         return _delegate(RECORD_MODULE, argv[1:], "quadsitl record")
+    if argv[:1] == ["impair"]:
+        return _delegate(IMPAIR_MODULE, argv[1:], "quadsitl impair")
     if tuple(argv[:2]) in DELEGATED:
         module, before, _ = DELEGATED[(argv[0], argv[1])]
         return _delegate(module, [*before, *argv[2:]], f"quadsitl {argv[0]} {argv[1]}")

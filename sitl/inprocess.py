@@ -14,6 +14,12 @@ loss) is simulation time here: nothing waits on anything real.
 With a log directory in the autopilot's setup (``AutopilotSetup.log``), the autopilot writes its
 flight logs (ULog) there as the process does, without the writer thread, and serves them to the
 ground stations' log download; :meth:`Lockstep.close` ends the open log.
+The links can be impaired as the processes' are (``impair=``, ``RunOptions.impair``, the
+simulator's ``[impair]``; :meth:`Lockstep.impair` while running): ground-station datagrams arrive
+when their channel says, and over an impaired HIL link each frame is exchanged as the two processes
+exchange it (resends after ``resend_after_s``, copies answered from the last answer, late ones
+dropped), in stack time. A slow exchange holds the stack's clock up (as it holds up the SITL); the
+flight itself is the same as without the impairment.
 
 Ground stations act in simulation time: a :class:`GroundStation` receives what the autopilot
 sends to it (parsed by pymavlink, as any client) and sends MAVLink messages, delivered before the
@@ -27,6 +33,7 @@ trajectory: ``--autostart``), returning the time series as a FlightRecord.
 from __future__ import annotations
 
 import itertools
+import json
 import os
 from collections import deque
 from collections.abc import Callable
@@ -53,6 +60,8 @@ from quadcommon.config import (  # noqa: E402
     load_sitl,
     load_vehicle,
 )
+from quadcommon.impaired_udp import ImpairedLinks, ImpairedReceiver  # noqa: E402
+from quadcommon.impairment import ImpairConfig, ImpairmentError  # noqa: E402
 from quadcommon.trajectories import trajectory_from_spec  # noqa: E402
 from quadcommon.wire import new_parser, parse_datagram  # noqa: E402
 from simulator.core import SimulatorCore, SimulatorSetup, as_nominal  # noqa: E402
@@ -151,11 +160,29 @@ class StackConnection:
 class Lockstep:
     """The simulator core and the autopilot core in lockstep, with in-process ground stations."""
 
-    def __init__(self, simulator: SimulatorSetup, autopilot: AutopilotSetup, log=lambda text: None) -> None:
+    def __init__(
+        self,
+        simulator: SimulatorSetup,
+        autopilot: AutopilotSetup,
+        log=lambda text: None,
+        impair: ImpairConfig | None = None,
+    ) -> None:
         self.sim = SimulatorCore(simulator, log)
         self.log_directory = LogDirectory(autopilot.log.directory) if autopilot.log.enabled else None
         self.log_writer = LogWriter(self.log_directory, threaded=False) if self.log_directory else None
         self.autopilot = AutopilotCore(autopilot, log, log_store=self.log_directory)
+        # The links' impairment (default: the simulator's sitl.toml [impair]), in stack time: one
+        # channel per link and direction, as the two processes have at their sockets.
+        impair = simulator.sitl.impair if impair is None else impair
+        self.impaired = ImpairedLinks(impair, "in-process")
+        self.channels: dict[tuple[int, str], ImpairedReceiver] = {
+            (HIL_LINK, "sim->ap"): self.impaired.receiver("hil", "sim->ap"),
+            (HIL_LINK, "ap->sim"): self.impaired.receiver("hil", "ap->sim"),
+            (GCS_LINK, "in"): self.impaired.receiver("gcs", "in"),
+            (GCS_LINK, "out"): self.impaired.receiver("gcs", "out"),
+            (API_LINK, "in"): self.impaired.receiver("api", "in"),
+            (API_LINK, "out"): self.impaired.receiver("api", "out"),
+        }
         self.stations: dict[tuple[str, int], GroundStation] = {}
         self.observers: list[Callable[[Outgoing], None]] = []  # see every datagram the vehicle sends
         self.truth_rows: list[tuple[float, ...]] = []
@@ -167,6 +194,7 @@ class Lockstep:
         self.frames_flow = True  # False: the simulator is gone (no frames; the autopilot's clock runs)
         self.clock = 0.0  # the autopilot's wall clock: simulation time, unless the simulator pauses
         self._inbox: list[tuple[int, tuple[str, int], bytes]] = []
+        self._hil_direct: dict[str, list[bytes]] = {"sim->ap": [], "ap->sim": []}  # unimpaired way
         self._next_tick = 0.0
         self.frames = 0
 
@@ -185,18 +213,54 @@ class Lockstep:
         return gcs
 
     def deliver(self, link: int, address: tuple[str, int], data: bytes) -> None:
-        self._inbox.append((link, address, data))
+        channel = self.channels[(link, "in")].channel
+        if channel is None:
+            self._inbox.append((link, address, data))
+        else:  # arrives when the link says (or never)
+            channel.send((link, address, data), self.clock)
 
-    def _dispatch(self, out: list[Outgoing]) -> None:
+    def impair(self, spec: str) -> None:
+        """Change the links' impairment from now on: ``"api:loss=100%"``, ``"gcs:none"`` ... (as
+        ``quadsitl impair``); ImpairmentError names a bad value."""
+        ok, reply = self.impaired.change(spec.encode())
+        if not ok:
+            raise ImpairmentError(json.loads(reply)["error"])
+
+    def _dispatch(self, out: list[Outgoing], now: float | None = None) -> None:
         for watch in self.observers:
             for record in out:
                 watch(record)
-        for link, address, data in out:
-            if link == HIL_LINK:
+        now = self.clock if now is None else now
+        channels = self.channels
+        for record in out:
+            if record[0] == HIL_LINK:
                 continue  # hellos to the simulator: it is linked already
-            station = self.stations.get(address) if address is not None else None
-            if station is not None:
-                station.receive(data)
+            channel = channels[(record[0], "out")].channel
+            if channel is None:
+                self._to_station(record)
+            else:
+                channel.send(record, now)
+                for held in channel.due(now):
+                    self._to_station(held)
+
+    def _to_station(self, record: Outgoing) -> None:
+        address = record[1]
+        station = self.stations.get(address) if address is not None else None
+        if station is not None:
+            station.receive(record[2])
+
+    def _ground_links_due(self, now: float) -> None:
+        """Datagrams held by impaired ground-station links whose time has come, both ways."""
+        channels, ap = self.channels, self.autopilot
+        for link in (GCS_LINK, API_LINK):
+            channel = channels[(link, "out")].channel
+            if channel is not None:
+                for held in channel.due(now):
+                    self._to_station(held)
+            channel = channels[(link, "in")].channel
+            if channel is not None:
+                for held_link, address, data in channel.due(now):
+                    self._dispatch(ap.on_gcs_datagram(held_link, address, data, now))
 
     def step(self) -> None:
         """One frame: ground-station datagrams in, the frame, its answer, the plant steps."""
@@ -205,6 +269,8 @@ class Lockstep:
             inbox, self._inbox = self._inbox, []
             for link, address, data in inbox:
                 self._dispatch(ap.on_gcs_datagram(link, address, data, t))
+        if self.impaired.endpoints_active:
+            self._ground_links_due(t)
         if t >= self._next_tick:
             self._next_tick = t + HOUSEKEEPING_S
             self._dispatch(ap.tick(t))
@@ -218,6 +284,9 @@ class Lockstep:
         if not self.answer_frames:  # the link is cut: the simulator flies its emergency descent
             if not sim.emergency:
                 sim.autopilot_lost()
+        elif self.channels[(HIL_LINK, "sim->ap")].channel or self.channels[(HIL_LINK, "ap->sim")].channel:
+            answer, done = self._impaired_exchange(datagram, t)
+            self.clock = max(self.clock, done)  # a slow exchange holds the stack up, as in the SITL
         else:
             data = ap.on_hil_datagram(datagram, t)
             self._dispatch(ap.after_frame())
@@ -236,6 +305,58 @@ class Lockstep:
             ap.estimator_rows.clear()
         sim.end_frame(answer)
         self.frames += 1
+
+    def _impaired_exchange(self, datagram: bytes, t: float):
+        """The frame and its answer over the impaired HIL link, as the two processes exchange them
+        (simulator/app.py), in stack time: the frame goes out, copies arrive when the channel says,
+        the autopilot answers each (a copy of a frame answered already from that answer, a late
+        one not at all), an unanswered frame is resent after ``sim.resend_after_s``, and after
+        ``[lockstep] timeout_s`` without the answer the simulator flies its emergency descent.
+        Returns (the answer or None, the time the exchange ended)."""
+        sim, ap = self.sim, self.autopilot
+        send, answer_back = self._hil_send, self._hil_answer
+        now = t
+        send("sim->ap", datagram, now)
+        resend_at = now + sim.resend_after_s
+        lost_at = now + sim.setup.sitl.lockstep_timeout_s
+        while True:
+            for data in self._hil_due("sim->ap", now):
+                reply = ap.on_hil_datagram(data, now)
+                self._dispatch(ap.after_frame(), now)
+                if reply is not None:
+                    send("ap->sim", reply, now)
+            for data in self._hil_due("ap->sim", now):
+                if sim.emergency:
+                    if sim.answers_again(data):
+                        return None, now
+                elif (answer := answer_back(data)) is not None:
+                    return answer, now
+            if sim.emergency:
+                return None, now  # one send per frame while lost (as the process does)
+            if now >= lost_at:
+                sim.autopilot_lost()
+                return None, now
+            if now >= resend_at:
+                send("sim->ap", sim.resend_frame(), now)
+                resend_at = now + sim.resend_after_s
+            due = [c.channel.next_due() for c in self.channels.values() if c.channel is not None]
+            now = min([d for d in due if d is not None] + [resend_at, lost_at])
+
+    def _hil_send(self, direction: str, data: bytes, now: float) -> None:
+        channel = self.channels[(HIL_LINK, direction)].channel
+        if channel is None:
+            self._hil_direct[direction].append(data)
+        else:
+            channel.send(data, now)
+
+    def _hil_due(self, direction: str, now: float) -> list[bytes]:
+        direct = self._hil_direct[direction]
+        out = direct[:]
+        direct.clear()
+        return out + self.channels[(HIL_LINK, direction)].due(now)
+
+    def _hil_answer(self, data: bytes):
+        return self.sim.answer_to_frame(data)
 
     def final_frame(self) -> None:
         """The last frame of a run: sent, answered and recorded, not stepped (as the SITL's
@@ -298,6 +419,7 @@ class RunOptions:
     true_plant: VehicleConfig | None = None  # a campaign's drawn plant (else the scenario's uncertainty)
     initial_velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     log_dir: str | None = None  # the autopilot's flight logs (ULog) go there; None: no flight log
+    impair: ImpairConfig | None = None  # the links' faults (default: sitl.toml's [impair])
 
 
 def paper_stack(
@@ -322,7 +444,7 @@ def paper_stack(
                         default_remotes=False, estimator=options.estimator or scenario.estimator,
                         estimator_profile=estimator_profile_for(sensors),
                         log=LogOptions(options.log_dir))  # fmt: skip
-    return Lockstep(sim, ap)
+    return Lockstep(sim, ap, impair=options.impair)
 
 
 def run_scenario(

@@ -185,6 +185,7 @@ class VehicleSpec:
     sensors: str | None = None  # sensor profile (config/sensors); None: the scenario's
     estimator: str | None = None  # "truth" or "ekf"; None: the scenario's
     log_dir: str | None = None  # the autopilot's flight logs (ULog); None: no flight log (--no-log)
+    impair: tuple[str, ...] = ()  # --impair LINK:SPEC for both processes (docs/links.md)
     extra_simulator_args: tuple[str, ...] = ()
     extra_autopilot_args: tuple[str, ...] = ()
 
@@ -221,6 +222,8 @@ class VehicleSpec:
 
     def _common(self) -> list[str]:
         common = ["--instance", str(self.instance), "--vehicle", self.vehicle]
+        for spec in self.impair:
+            common += ["--impair", spec]
         return common + (["--sitl-config", self.sitl_config] if self.sitl_config else [])
 
     def ports(self) -> wire.Ports:

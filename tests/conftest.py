@@ -30,6 +30,8 @@ PROCESS_MODULES = {
     "tests/sitl/test_hostile_udp.py",
     "tests/sitl/test_installed_wheel.py",
     "tests/sitl/test_launcher_ports.py",
+    "tests/sitl/test_manual_modes_sitl.py",
+    "tests/sitl/test_links_processes.py",
     "tests/sitl/test_paper_through_sitl.py",
     "tests/sitl/test_params_failsafes.py",
     "tests/sitl/test_signing_cli.py",
@@ -51,6 +53,7 @@ PROCESS_MODULES = {
 COMPAT_MODULES = {
     "tests/compat/", "tests/view/test_browser_sitl.py", "tests/view/test_live_sitl.py",
     "tests/sitl/test_installed_wheel.py", "tests/sitl/test_paper_through_sitl.py",
+    "tests/sitl/test_manual_modes_sitl.py",  # the sticks paced on telemetry: a namespace of its own
 }  # fmt: skip
 NOT_COMPAT: set[str] = set()
 # Of the compat tests, these (marker ``second_namespace``) run in a session of their own, in a

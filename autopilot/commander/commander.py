@@ -9,9 +9,14 @@ as ``(severity, text)`` for the MAVLink shell to send as STATUSTEXT.
 Behaviour follows PX4 where PX4 users would expect it: arming only on the ground; takeoff climbs to
 ``MIS_TAKEOFF_ALT`` (or the commanded altitude) then holds (AUTO.LOITER); land descends at
 ``MPC_LAND_SPEED``, detects touchdown and disarms after ``COM_DISARM_LAND``; RTL climbs to
-``RTL_RETURN_ALT``, returns above home and lands; OFFBOARD needs a setpoint stream before it is
+``RTL_RETURN_ALT`` above its destination (home or a rally point, by ``RTL_TYPE``: :mod:`.rtl`),
+flies above it and lands; OFFBOARD needs a setpoint stream before it is
 entered and falls back to hold when setpoints stop for ``COM_OF_LOSS_T`` (simulation time); an
-armed vehicle that does not take off within ``COM_DISARM_PRFLT`` disarms itself.
+armed vehicle that does not take off within ``COM_DISARM_PRFLT`` disarms itself. The manual modes
+(MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO) need the sticks (MANUAL_CONTROL) to be entered, take off
+when the throttle is raised above 62.5 % on the ground, land on their own, and act by
+``NAV_RCL_ACT`` when the sticks stop for ``COM_RC_LOSS_T``; sticks that move take over the AUTO
+modes and OFFBOARD into POSCTL by ``COM_RC_OVERRIDE`` (:mod:`autopilot.guidance.sticks`).
 
 Every change of phase or mode goes through the one table in :mod:`.transitions`; this module
 decides which event happened and carries out the row's action (the plans and the guards).
@@ -28,15 +33,37 @@ from typing import NamedTuple
 
 from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
 
-from ..guidance.manual import ManualGuidance, ManualLimits, Sticks
+from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
-from ..mission.executor import MissionAction, MissionExecutor, MissionState, PlanContext, check_mission
-from ..mission.plans import Geofence
+from ..guidance.sticks import LOST, Sticks, StickStream
+from ..mission.executor import (
+    MissionAction,
+    MissionExecutor,
+    MissionState,
+    PlanContext,
+    check_mission,
+    fence_violation,
+)
+from ..mission.plans import Geofence, RallyPoint
+from ..params.definitions import RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD
 from ..params.store import ParameterStore
-from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, fence_excess, prearm_problem
+from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, fence_excess, prearm_problem, rc_loss_action
 from .modes import FlightMode, LandedState
-from .transitions import AFTER, ASKED, DESCENDING, FLYING, ON_GROUND, REFUSALS, TABLE, Event, Phase, lookup
+from .rtl import return_altitude, return_destination
+from .transitions import (
+    AFTER,
+    ASKED,
+    AUTOMATIC,
+    DESCENDING,
+    FLYING,
+    ON_GROUND,
+    REFUSALS,
+    TABLE,
+    Event,
+    Phase,
+    lookup,
+)
 
 __all__ = ["Commander", "Event", "Phase", "TABLE", "Motors", "GuidanceOutput", "Outcome", "VehicleState"]
 
@@ -54,6 +81,7 @@ ON_GROUND_HEIGHT_M = 0.05  # O within this of the ground counts as touching it
 LANDED_SPEED_M_S = 0.1
 LANDED_CONFIRM_S = 0.3
 IN_AIR_HEIGHT_M = 0.1
+STICK_TAKEOFF_UP = 0.25  # throttle stick above 62.5 % of its travel takes off a manual mode (PX4)
 
 
 @dataclass(frozen=True)
@@ -76,6 +104,7 @@ class Motors(Enum):
 class GuidanceOutput(NamedTuple):
     motors: Motors
     reference: Reference | None
+    manual: ManualSetpoint | None = None  # a manual mode's overrides of the cascade (None: none)
 
 
 class Outcome(NamedTuple):
@@ -90,9 +119,13 @@ class Outcome(NamedTuple):
 _FAILSAFE_EVENTS = {HOLD: Event.FAILSAFE_HOLD, RTL: Event.FAILSAFE_RTL, LAND: Event.FAILSAFE_LAND}
 _FAILSAFE_DOING = {HOLD: "holding", RTL: "returning to launch", LAND: "landing"}
 _MODE_EVENTS = {
+    FlightMode.MANUAL: Event.MANUAL,
+    FlightMode.STABILIZED: Event.MANUAL,
+    FlightMode.ALTCTL: Event.MANUAL,
+    FlightMode.POSCTL: Event.MANUAL,
+    FlightMode.ACRO: Event.MANUAL,
     FlightMode.OFFBOARD: Event.OFFBOARD,
     FlightMode.AUTO_LOITER: Event.HOLD,
-    FlightMode.POSCTL: Event.HOLD,
     FlightMode.AUTO_LAND: Event.LAND,
     FlightMode.AUTO_RTL: Event.RTL,
     FlightMode.AUTO_TAKEOFF: Event.SELECT_TAKEOFF,
@@ -100,6 +133,14 @@ _MODE_EVENTS = {
 }
 _TRAJECTORY_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.TRAJECTORY, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
 _LIFTING_PHASES = (Phase.TAKEOFF, Phase.OFFBOARD, Phase.TRAJECTORY, Phase.MISSION)
+# Each manual mode's control step (autopilot/guidance/manual.py); MANUAL flies as STABILIZED (PX4).
+_MANUAL_STEPS = {
+    FlightMode.POSCTL: ManualGuidance.position,
+    FlightMode.ALTCTL: ManualGuidance.altitude,
+    FlightMode.STABILIZED: ManualGuidance.stabilized,
+    FlightMode.MANUAL: ManualGuidance.stabilized,
+    FlightMode.ACRO: ManualGuidance.acro,
+}
 
 
 class Commander:
@@ -113,11 +154,12 @@ class Commander:
         self.state: VehicleState | None = None
         self.events: list[tuple[int, str]] = []
         self.offboard = OffboardGuidance(self.limits())
-        self.manual = ManualGuidance()  # POSCTL's sticks
+        self.sticks = StickStream()  # MANUAL_CONTROL: freshness, loss, override requests
+        self.manual = ManualGuidance()  # the manual modes' state
         self._manual_limits = self.manual_limits()  # rebuilt when a parameter changes, not per step
         self.last_reference: Reference | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
-        self.rally_points: list[tuple[float, float]] = []  # uploaded rally points (paper x, y, m)
+        self.rally_points: list[RallyPoint] = []  # the uploaded rally plan (RTL's destinations)
         self.failsafes = FailsafeMonitor(params)
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
@@ -159,14 +201,27 @@ class Commander:
 
     def manual_limits(self) -> ManualLimits:
         p = self.params
+        rad = math.radians
         return ManualLimits(
             speed_horizontal=p["MPC_VEL_MANUAL"],
             speed_up=p["MPC_Z_VEL_MAX_UP"],
             speed_down=p["MPC_Z_VEL_MAX_DN"],
             acceleration=p["MPC_ACC_HOR"],
-            yaw_rate=math.radians(p["MPC_MAN_Y_MAX"]),
+            yaw_rate=rad(p["MPC_MAN_Y_MAX"]),
             deadzone=p["MPC_HOLD_DZ"],
             loss_s=p["COM_RC_LOSS_T"],
+            tilt_max=rad(p["MPC_MAN_TILT_MAX"]),
+            thrust_hover=p["MPC_THR_HOVER"],
+            thrust_min=p["MPC_MANTHR_MIN"],
+            thrust_max=p["MPC_THR_MAX"],
+            thrust_rescale=p["MPC_THR_CURVE"] == 0,
+            acro_rates=(rad(p["MC_ACRO_R_MAX"]), rad(p["MC_ACRO_P_MAX"]), rad(p["MC_ACRO_Y_MAX"])),
+            acro_expo=p["MC_ACRO_EXPO"],
+            acro_expo_yaw=p["MC_ACRO_EXPO_Y"],
+            acro_super_expo=p["MC_ACRO_SUPEXPO"],
+            acro_super_expo_yaw=p["MC_ACRO_SUPEXPOY"],
+            acro_tilt=rad(p["ACRO_TILT_LIM"]),
+            override_speed=p["COM_RC_STICK_OV"] / 100.0,
         )
 
     def in_air(self) -> bool:
@@ -273,7 +328,7 @@ class Commander:
         return self._fire(t, Event.TAKEOFF, altitude_m=altitude_m)
 
     def hold(self, t: float, reason: str = "") -> Outcome:
-        outcome = self._fire(t, Event.HOLD, mode=FlightMode.AUTO_LOITER)
+        outcome = self._fire(t, Event.HOLD)
         if reason:
             self._event(SEVERITY_WARNING, reason)
         return outcome
@@ -321,12 +376,35 @@ class Commander:
         excess, what = fence_excess(self.params, target, self.home, self.failsafes.geofence)
         return f"outside the geofence: {what}" if excess > 0.0 else None
 
-    def set_geofence(self, geofence: Geofence | None) -> None:
-        """The uploaded geofence plan (None or no areas: only the GF_MAX_* limits)."""
+    def set_geofence(self, t: float, geofence: Geofence | None) -> None:
+        """The uploaded geofence plan (None or no areas: only the GF_MAX_* limits). The stored
+        mission is checked against it as PX4 does: the fence is accepted whatever the mission;
+        a mission it excludes is announced ("Geofence violation for waypoint N"), AUTO.MISSION
+        refuses it until the mission or the fence changes, and flying it, the vehicle holds."""
         self.failsafes.geofence = geofence if geofence is not None and geofence.areas else None
+        problem = self.mission_fence_problem()
+        if problem is None:
+            return
+        self._event(SEVERITY_CRITICAL, f"{problem}: the mission is not valid with this geofence")
+        if self.phase == Phase.MISSION:
+            self._fire(t, Event.MISSION_INVALID)
+            self._event(SEVERITY_CRITICAL, "No valid mission available, loitering")
 
-    def set_rally_points(self, points: list[tuple[float, float]]) -> None:
-        """Rally points (paper frame x, y, m): RTL goes to the nearest one when closer than home."""
+    def mission_fence_problem(self) -> str | None:
+        """Why the stored mission breaks the geofence (PX4's "Geofence violation for waypoint N",
+        N counted from 1), or None."""
+        mission = self.mission
+        if mission is None or mission.count == 0:
+            return None
+        violation = fence_violation(mission.items, mission.origin, self.target_problem,
+                                    self.home or ZERO3)  # fmt: skip
+        if violation is None:
+            return None
+        seq, why = violation
+        return f"Geofence violation for waypoint {seq + 1} (item {seq}: {why})"
+
+    def set_rally_points(self, points: list[RallyPoint]) -> None:
+        """The rally plan: RTL's destinations besides home, by RTL_TYPE (:mod:`.rtl`)."""
         self.rally_points = list(points)
 
     # -- missions ------------------------------------------------------------------------------------
@@ -351,8 +429,9 @@ class Commander:
         return self._fire(t, Event.SET_CURRENT)
 
     def manual_sticks(self, sticks: Sticks) -> None:
-        """A MANUAL_CONTROL: flown in POSCTL once deflected (kept otherwise, as PX4 keeps RC)."""
-        self.manual.update(sticks)
+        """A MANUAL_CONTROL (flown in the manual modes; kept otherwise, as PX4 keeps RC)."""
+        limits = self._manual_limits
+        self.sticks.receive(sticks, limits.loss_s, limits.override_speed)
 
     def offboard_setpoint(self, setpoint: OffboardSetpoint) -> None:
         self.offboard.update(setpoint)
@@ -371,6 +450,34 @@ class Commander:
         """No sensor frames any more: the position is unknown until they resume (no arming)."""
         self.position_valid = False
 
+    def _check_sticks(self, t: float) -> None:
+        """The sticks' stream (PX4's rules): announce a loss and a return; a loss while flying a
+        manual mode acts by NAV_RCL_ACT; sticks that move take over by COM_RC_OVERRIDE."""
+        limits = self._manual_limits
+        change = self.sticks.poll(t, limits.loss_s)
+        if change is not None:
+            kind, gap = change
+            if kind == LOST:
+                self._event(SEVERITY_WARNING, "Manual control lost")
+                if self.phase == Phase.MANUAL:
+                    mode = self.mode.px4_name
+                    action, number = rc_loss_action(self.params)
+                    self._fire(t, _FAILSAFE_EVENTS[action])
+                    doing = f"{_FAILSAFE_DOING[action]} (NAV_RCL_ACT {number})"
+                    self._event(SEVERITY_CRITICAL, f"manual control lost in {mode}: {doing}")
+            else:
+                self._event(SEVERITY_INFO, f"Manual control regained after {gap:.1f}s")
+        override = self.sticks.take_override() and self._override_allowed()
+        if override and self._fire(t, Event.RC_OVERRIDE, mode=FlightMode.POSCTL).accepted:
+            self._event(SEVERITY_INFO, "Pilot took over using sticks")
+
+    def _override_allowed(self) -> bool:
+        """COM_RC_OVERRIDE: bit 0 the AUTO modes (flying), bit 1 OFFBOARD."""
+        bits = int(self.params["COM_RC_OVERRIDE"])
+        if self.phase == Phase.OFFBOARD:
+            return bool(bits & RC_OVERRIDE_OFFBOARD)
+        return self.phase in AUTOMATIC and bool(bits & RC_OVERRIDE_AUTO)
+
     def _check_failsafes(self, t: float, state: VehicleState) -> None:
         """Data link loss and geofence (failsafe.py); once per step while flying."""
         for action, text in self.failsafes.check(t, state.position_m, self.home, self.in_air()):
@@ -388,6 +495,7 @@ class Commander:
     # -- the per-step decision ------------------------------------------------------------------------
     def step(self, t: float, dt: float) -> GuidanceOutput:
         """Decide this control step (``dt`` = control period, s)."""
+        self._check_sticks(t)
         state = self.state
         if self.phase == Phase.DISARMED or state is None:
             return GuidanceOutput(Motors.OFF, None)
@@ -411,12 +519,20 @@ class Commander:
             if t - self._armed_at > p["COM_DISARM_PRFLT"] > 0.0:
                 self._fire(t, Event.PREFLIGHT_TIMEOUT, force=True, why="disarmed: no takeoff after arming")
                 return GuidanceOutput(Motors.OFF, None)
+            if self._throttle_raised(t):
+                self._fire(t, Event.STICK_TAKEOFF)
+                return None
             return GuidanceOutput(Motors.IDLE, None)
         if phase == Phase.LANDED:
             if t - self._touchdown_at >= p["COM_DISARM_LAND"]:
                 self._fire(t, Event.LANDED_TIMEOUT, force=True, why="landed: disarmed")
                 return GuidanceOutput(Motors.OFF, None)
+            if self._throttle_raised(t):
+                self._fire(t, Event.STICK_TAKEOFF)
+                return None
             return GuidanceOutput(Motors.IDLE, None)
+        if phase == Phase.MANUAL:
+            return self._manual_step(t, dt, state)
 
         if phase == Phase.OFFBOARD:
             if not self.offboard_stream_active(t) and self.offboard.setpoint is not None:
@@ -441,14 +557,6 @@ class Commander:
                 self._fire(t, Event.MISSION_RTL)
                 return None
             reference = out.reference
-        elif phase == Phase.HOLD and self.mode == FlightMode.POSCTL and self.manual.engage_if_moved(
-            t, self._manual_limits
-        ):
-            was_lost = self.manual.lost
-            previous = self.last_reference or _at_rest(state)
-            reference = self.manual.reference(t, dt, previous, self._manual_limits)
-            if self.manual.lost and not was_lost:
-                self._event(SEVERITY_WARNING, "manual control lost: sticks centred, holding position")
         else:
             assert self._trajectory is not None
             local = t - self._trajectory_start
@@ -472,6 +580,33 @@ class Commander:
             # Waiting for the reference to lift off: do not fight the ground (integrators).
             return GuidanceOutput(Motors.IDLE, reference)
         return GuidanceOutput(Motors.FLY, reference)
+
+    def _throttle_raised(self, t: float) -> bool:
+        """On the ground in a manual mode: fresh sticks with the throttle above 62.5 % (PX4)."""
+        if not self.mode.is_manual:
+            return False
+        sticks = self.sticks.fresh(t, self._manual_limits.loss_s)
+        return sticks is not None and sticks.up > STICK_TAKEOFF_UP
+
+    def _manual_step(self, t: float, dt: float, state: VehicleState) -> GuidanceOutput:
+        """A manual mode's control step; touchdown with the throttle at or below centre lands."""
+        limits = self._manual_limits
+        sticks = self.sticks.fresh(t, limits.loss_s)  # (None only until NAV_RCL_ACT has acted)
+        if sticks is None or sticks.up <= limits.deadzone:
+            if self._touched_down(t, state):
+                self._fire(t, Event.TOUCHDOWN)
+                return GuidanceOutput(Motors.IDLE, None)
+        else:
+            self._landed_since = None
+        if self.mode == FlightMode.POSCTL and not self.manual.engage_if_moved(sticks, limits):
+            assert self._trajectory is not None  # POSCTL holds (the stop plan) until a stick moves
+            reference = self._trajectory.sample(t - self._trajectory_start)
+            self.last_reference = reference
+            return GuidanceOutput(Motors.FLY, reference)
+        previous = self.last_reference or _at_rest(state)
+        setpoint = _MANUAL_STEPS[self.mode](self.manual, dt, previous, state, sticks, limits)
+        self.last_reference = setpoint.reference
+        return GuidanceOutput(Motors.FLY, setpoint.reference, setpoint if setpoint.overrides else None)
 
     def _touched_down(self, t: float, state: VehicleState) -> bool:
         resting = (
@@ -497,6 +632,9 @@ class Commander:
                 return self._refuse(DENIED, "arming refused: vehicle not landed")
             if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
                 return self._refuse(DENIED, "arming refused: OFFBOARD without a setpoint stream")
+            if self.mode.is_manual and self.sticks.fresh(t, self._manual_limits.loss_s) is None:
+                return self._refuse(DENIED, f"arming refused: no manual control input ({self.mode.px4_name} "
+                                            "flies on MANUAL_CONTROL)")  # fmt: skip
             problem = self.estimator_problem or prearm_problem(
                 self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence
             )
@@ -541,8 +679,30 @@ class Commander:
 
     def _act_plan_hold(self, t: float, **_) -> None:
         assert self.state is not None
-        self.manual.reset()  # POSCTL: the stop plan flies until the sticks move
         self._fly(t, stop_from(self.last_or_measured(self.state), self.limits()))
+
+    def _act_enter_manual(self, t: float, mode: FlightMode, **_) -> Outcome | None:
+        """A manual mode needs the sticks (PX4: "No manual control input"); flying, it starts from
+        the measured state (POSCTL holding until a stick moves)."""
+        if self.sticks.fresh(t, self._manual_limits.loss_s) is None:
+            return self._refuse(DENIED, f"Switching to {mode.px4_name} is currently not possible: no manual "
+                                        "control input (send MANUAL_CONTROL first)")  # fmt: skip
+        state = self.state
+        if state is not None:
+            self.manual.enter(state)
+            if self.phase in FLYING:
+                self._fly(t, stop_from(self.last_or_measured(state), self.limits()))
+        return None
+
+    def _act_stick_takeoff(self, t: float, **_) -> None:
+        """The throttle raised on the ground: the manual mode flies from the vehicle at rest."""
+        state = self.state
+        assert state is not None
+        self.manual.enter(state)
+        self.last_reference = _at_rest(state)
+        self._fly(t, stop_from(self.last_reference, self.limits()))
+        self._landed_since = None
+        self._event(SEVERITY_INFO, f"taking off on the sticks in {self.mode.px4_name}")
 
     def _act_plan_reposition(
         self, t: float, target: Vector3, speed_m_s: float | None, yaw_rad: float | None, **_
@@ -603,30 +763,31 @@ class Commander:
         self._event(SEVERITY_INFO, "landing")
 
     def _act_plan_return(self, t: float, **_) -> None:
+        """Climb to the return altitude, fly above the destination RTL_TYPE picks (:mod:`.rtl`),
+        then (PLAN_DONE) land there."""
         state, home = self.state, self.home
         assert state is not None and home is not None
         limits = self.limits()
         start = self.last_or_measured(state)
         yaw = start.yaw_rad
-        altitude = max(state.position_m[2], home[2] + self.params["RTL_RETURN_ALT"])
         brake = stop_from(start, limits)
         p = brake.sample(brake.duration_s).position_m
+        rtl_type = int(self.params["RTL_TYPE"])
+        destination = return_destination(rtl_type, p, home, self.rally_points)
+        if destination.name == "here":  # RTL_TYPE 5 without a rally point: PX4 lands where it is
+            self._fly(t, brake)
+            self._event(SEVERITY_WARNING, "no rally point to return to (RTL_TYPE 5): landing here")
+            return
+        altitude = return_altitude(state.position_m[2], destination, self.params["RTL_RETURN_ALT"])
         climb_to = (p[0], p[1], altitude)
-        # PX4 (RTL_TYPE 0): to the closest of home and the rally points, horizontally.
-        destination, where = (home[0], home[1]), "launch"
-        best = math.hypot(p[0] - home[0], p[1] - home[1])
-        for k, rally in enumerate(self.rally_points):
-            d = math.hypot(p[0] - rally[0], p[1] - rally[1])
-            if d < best:
-                destination, where, best = rally, f"rally point {k}", d
-        above_home = (destination[0], destination[1], altitude)
+        above = (destination.position_m[0], destination.position_m[1], altitude)
         pieces = [
             brake,
             LineMove(p, climb_to, limits, yaw, yaw),
-            LineMove(climb_to, above_home, limits, yaw, yaw),
+            LineMove(climb_to, above, limits, yaw, yaw),
         ]
         self._fly(t, PiecewiseTrajectory(pieces))
-        self._event(SEVERITY_INFO, f"returning to {where} at {altitude - home[2]:.1f} m")
+        self._event(SEVERITY_INFO, f"returning to {destination.name} at {altitude - home[2]:.1f} m")
 
     def _act_touchdown(self, t: float, **_) -> None:
         self._touchdown_at = t
@@ -648,6 +809,9 @@ class Commander:
         problem = check_mission(mission.items, mission.origin, self.limits(), self.params.values)
         if problem is not None:
             return self._refuse(DENIED, f"AUTO.MISSION refused: {problem[1]}")
+        fence_problem = self.mission_fence_problem()
+        if fence_problem is not None:
+            return self._refuse(DENIED, f"AUTO.MISSION refused: {fence_problem}")
         return None
 
     def _act_start_mission(self, t: float, **_) -> Outcome | None:
@@ -655,6 +819,9 @@ class Commander:
         mission, state = self.mission, self.state
         if mission is None or mission.count == 0:
             return self._refuse(DENIED, "AUTO.MISSION refused: no mission loaded")
+        fence_problem = self.mission_fence_problem()
+        if fence_problem is not None:
+            return self._refuse(DENIED, f"AUTO.MISSION refused: {fence_problem}")
         assert state is not None and self.home is not None
         on_ground = self.phase in ON_GROUND or not self.in_air()
         p = self.params

@@ -15,6 +15,11 @@ Each failsafe is a parameter with PX4's name, values and default:
   the boundary does not retrigger every step). An uploaded geofence plan (inclusion/exclusion
   polygons and circles, :class:`autopilot.mission.plans.Geofence`) counts the same way: the worst
   excess of all decides, so a breach of any of them acts by ``GF_ACTION``.
+* Manual control loss: no MANUAL_CONTROL for ``COM_RC_LOSS_T`` while flying a manual mode ->
+  ``NAV_RCL_ACT`` (1 hold, 2 return (PX4's default), 3 land): :func:`rc_loss_action`; the stream
+  itself is watched by the commander (:class:`autopilot.guidance.sticks.StickStream`). In the AUTO
+  modes and OFFBOARD the loss is announced and nothing else (as PX4 with ``COM_RCL_EXCEPT``
+  excepting them).
 * Offboard setpoint loss (``COM_OF_LOSS_T``) and simulator loss (``COM_SIM_LOSS_T``) live in the
   commander and the process shell respectively.
 
@@ -36,6 +41,9 @@ from ..params.definitions import (
     GF_LAND,
     GF_RTL,
     GF_WARN,
+    RCL_HOLD,
+    RCL_LAND,
+    RCL_RTL,
     consistency_problems,
 )
 from ..params.store import ParameterStore
@@ -45,12 +53,19 @@ Vector3 = tuple[float, float, float]
 WARN, HOLD, RTL, LAND = "warn", "hold", "rtl", "land"
 _DLL_ACTIONS = {DLL_HOLD: HOLD, DLL_RTL: RTL, DLL_LAND: LAND}
 _GF_ACTIONS = {GF_WARN: WARN, GF_HOLD: HOLD, GF_RTL: RTL, GF_LAND: LAND}
+_RCL_ACTIONS = {RCL_HOLD: HOLD, RCL_RTL: RTL, RCL_LAND: LAND}
 FENCE_REARM_M = 0.5  # back inside by this much (or 10 % of the limit if smaller) re-arms the fence
 
 
 class FailsafeAction(NamedTuple):
     action: str  # WARN, HOLD, RTL or LAND
     text: str  # for STATUSTEXT (the commander adds what it does)
+
+
+def rc_loss_action(params: ParameterStore) -> tuple[str, int]:
+    """What losing the sticks in a manual mode does: (HOLD, RTL or LAND, the NAV_RCL_ACT value)."""
+    number = int(params["NAV_RCL_ACT"])
+    return _RCL_ACTIONS.get(number, RTL), number
 
 
 def fence_excess(

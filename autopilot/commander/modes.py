@@ -19,6 +19,7 @@ MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN
     6,
     7,
 )
+_MANUAL_MAINS = (MAIN_MANUAL, MAIN_STABILIZED, MAIN_ALTCTL, MAIN_POSCTL, MAIN_ACRO)
 # PX4 AUTO sub modes
 SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
 
@@ -26,7 +27,11 @@ SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4,
 class FlightMode(Enum):
     """The modes this autopilot flies, with their PX4 (main, sub) numbers."""
 
+    MANUAL = (MAIN_MANUAL, 0)  # a multicopter's MANUAL flies as STABILIZED (PX4)
+    STABILIZED = (MAIN_STABILIZED, 0)
+    ALTCTL = (MAIN_ALTCTL, 0)
     POSCTL = (MAIN_POSCTL, 0)
+    ACRO = (MAIN_ACRO, 0)
     AUTO_TAKEOFF = (MAIN_AUTO, SUB_TAKEOFF)
     AUTO_LOITER = (MAIN_AUTO, SUB_LOITER)
     AUTO_MISSION = (MAIN_AUTO, SUB_MISSION)
@@ -38,6 +43,8 @@ class FlightMode(Enum):
         # A plain attribute, computed once: telemetry and the controller rows read it every frame
         # (an Enum property costs ~0.2 us a read).
         self.custom_mode: int = (main << 16) | (sub << 24)
+        # Flown from the sticks (MANUAL_CONTROL): MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO.
+        self.is_manual: bool = main in _MANUAL_MAINS
 
     @property
     def px4_name(self) -> str:

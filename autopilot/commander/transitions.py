@@ -13,8 +13,8 @@ An event with no row for the current phase is refused (commands) or cannot happe
 events are only raised where a row exists).
 
 Mode column: a :class:`~.modes.FlightMode`, or ``KEEP`` (unchanged), ``ASKED`` (the mode the
-event asked for: hold is AUTO.LOITER or POSCTL), ``AFTER`` (the mode a scenario's trajectory hands
-over to when it ends). Phase column ``SAME`` keeps the phase.
+event asked for: one of the manual modes MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO), ``AFTER`` (the
+mode a scenario's trajectory hands over to when it ends). Phase column ``SAME`` keeps the phase.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ class Phase(Enum):
     RTL = "rtl"  # climbing to RTL_RETURN_ALT and returning above home
     RTL_LAND = "rtl_land"  # RTL's final descent (mode stays AUTO.RTL)
     LANDED = "landed"  # touched down, motors idle, waiting to disarm
+    MANUAL = "manual"  # flying on the sticks (MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO)
 
 
 class Event(Enum):
@@ -45,7 +46,8 @@ class Event(Enum):
     DISARM = "disarm"
     TAKEOFF = "takeoff"  # MAV_CMD_NAV_TAKEOFF
     SELECT_TAKEOFF = "select takeoff"  # DO_SET_MODE AUTO.TAKEOFF
-    HOLD = "hold"  # AUTO.LOITER or POSCTL
+    HOLD = "hold"  # AUTO.LOITER
+    MANUAL = "manual"  # a manual mode (MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO): needs the sticks
     LAND = "land"
     RTL = "rtl"
     OFFBOARD = "offboard"
@@ -53,6 +55,7 @@ class Event(Enum):
     MISSION_START = "mission start"  # MAV_CMD_MISSION_START: (re)start from the current item
     SET_CURRENT = "set current item"
     MISSION_REPLACED = "mission replaced"
+    MISSION_INVALID = "mission invalid"  # a new geofence excludes the mission flown (PX4: loiter)
     SCENARIO = "scenario"  # armed and flying a scenario's trajectory from t = 0
     REPOSITION = "reposition"  # MAV_CMD_DO_REPOSITION: fly to a point, then hold there
     # raised by the commander itself
@@ -66,6 +69,8 @@ class Event(Enum):
     FAILSAFE_HOLD = "failsafe hold"
     FAILSAFE_RTL = "failsafe rtl"
     FAILSAFE_LAND = "failsafe land"
+    STICK_TAKEOFF = "stick takeoff"  # on the ground in a manual mode: throttle above 62.5 %
+    RC_OVERRIDE = "rc override"  # sticks moved in AUTO or OFFBOARD (COM_RC_OVERRIDE): to POSCTL
 
 
 class _Marker(Enum):
@@ -81,11 +86,12 @@ P = Phase
 E = Event
 M = FlightMode
 ON_GROUND = (P.IDLE, P.LANDED)
-FLYING = (P.TAKEOFF, P.HOLD, P.OFFBOARD, P.MISSION, P.TRAJECTORY, P.LAND, P.RTL, P.RTL_LAND)
+FLYING = (P.TAKEOFF, P.HOLD, P.OFFBOARD, P.MISSION, P.TRAJECTORY, P.LAND, P.RTL, P.RTL_LAND, P.MANUAL)
 ARMED = ON_GROUND + FLYING
 DESCENDING = (P.LAND, P.RTL_LAND)
 BUSY = (P.LAND, P.RTL, P.RTL_LAND)  # returning or landing: a hold/RTL failsafe lets it go on
 NOT_BUSY = tuple(p for p in FLYING if p not in BUSY)
+AUTOMATIC = tuple(p for p in FLYING if p not in (P.OFFBOARD, P.MANUAL))  # AUTO modes, in the air
 
 
 def _but(phases: tuple[Phase, ...], *excluded: Phase) -> tuple[Phase, ...]:
@@ -105,20 +111,27 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
     ((P.DISARMED,),           E.SCENARIO,          P.TRAJECTORY,  M.AUTO_MISSION,  "start_scenario"),
     # -- disarmed: a selected mode is remembered (arming enters OFFBOARD or AUTO.MISSION) -------
     ((P.DISARMED,),           E.SELECT_TAKEOFF,    SAME,          M.AUTO_TAKEOFF,  None),
-    ((P.DISARMED,),           E.HOLD,              SAME,          ASKED,           None),
+    ((P.DISARMED,),           E.HOLD,              SAME,          M.AUTO_LOITER,   None),
     ((P.DISARMED,),           E.LAND,              SAME,          M.AUTO_LAND,     None),
     ((P.DISARMED,),           E.RTL,               SAME,          M.AUTO_RTL,      None),
     ((P.DISARMED,),           E.OFFBOARD,          SAME,          M.OFFBOARD,      "enter_offboard"),
     ((P.DISARMED,),           E.MISSION,           SAME,          M.AUTO_MISSION,  "check_mission"),
     ((P.DISARMED,),           E.MISSION_START,     SAME,          M.AUTO_MISSION,  "check_mission"),
+    ((P.DISARMED,),           E.MANUAL,            SAME,          ASKED,           "enter_manual"),
     # -- armed on the ground: hold/land/RTL only change the mode --------------------------------
-    (ON_GROUND,               E.HOLD,              SAME,          ASKED,           None),
+    (ON_GROUND,               E.HOLD,              SAME,          M.AUTO_LOITER,   None),
     (ON_GROUND,               E.LAND,              SAME,          M.AUTO_LAND,     None),
     (ON_GROUND,               E.RTL,               SAME,          M.AUTO_RTL,      None),
+    (ON_GROUND,               E.MANUAL,            SAME,          ASKED,           "enter_manual"),
+    # -- the sticks: a manual mode flies them; they take off, land, and take over --------------------
+    (ON_GROUND,               E.STICK_TAKEOFF,     P.MANUAL,      KEEP,            "stick_takeoff"),
+    (FLYING,                  E.MANUAL,            P.MANUAL,      ASKED,           "enter_manual"),
+    (AUTOMATIC + (P.OFFBOARD,), E.RC_OVERRIDE,     P.MANUAL,      M.POSCTL,        "enter_manual"),
+    ((P.MANUAL,),             E.TOUCHDOWN,         P.LANDED,      KEEP,            "touchdown"),
     # -- armed: going somewhere ------------------------------------------------------------------
     (ARMED,                   E.TAKEOFF,           P.TAKEOFF,     M.AUTO_TAKEOFF,  "plan_takeoff"),
     (ARMED,                   E.SELECT_TAKEOFF,    P.TAKEOFF,     M.AUTO_TAKEOFF,  "plan_takeoff"),
-    (FLYING,                  E.HOLD,              P.HOLD,        ASKED,           "plan_hold"),
+    (FLYING,                  E.HOLD,              P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
     (FLYING,                  E.REPOSITION,        P.HOLD,        M.AUTO_LOITER,   "plan_reposition"),
     (ON_GROUND,               E.REPOSITION,        P.TAKEOFF,     M.AUTO_LOITER,   "plan_climb_reposition"),
     (_but(FLYING, *DESCENDING), E.LAND,            P.LAND,        M.AUTO_LAND,     "plan_landing"),
@@ -131,6 +144,7 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
     (ARMED,                   E.MISSION_START,     P.MISSION,     M.AUTO_MISSION,  "start_mission"),
     ((P.MISSION,),            E.SET_CURRENT,       SAME,          KEEP,            "start_mission"),
     ((P.MISSION,),            E.MISSION_REPLACED,  P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
+    ((P.MISSION,),            E.MISSION_INVALID,   P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
     # -- plans that end, touchdown, timeouts -----------------------------------------------------
     ((P.TAKEOFF,),            E.PLAN_DONE,         P.HOLD,        M.AUTO_LOITER,   None),
     ((P.RTL,),                E.PLAN_DONE,         P.RTL_LAND,    M.AUTO_RTL,      "plan_landing"),
@@ -155,6 +169,7 @@ REFUSALS: dict[Event, str] = {
     E.REPOSITION: "reposition refused: disarmed (arm first)",
     E.SET_CURRENT: "",  # not flying the mission: the current item is just stored
     E.MISSION_REPLACED: "",  # not flying the mission: the new one is just stored
+    E.MISSION_INVALID: "",  # not flying the mission: AUTO.MISSION refuses it until it is valid
 }
 
 
@@ -186,7 +201,8 @@ def lookup(phase: Phase, event: Event) -> Transition | None:
 def describe() -> str:
     """The table as Markdown, one line per row (``python -c "from autopilot.commander.transitions import
     describe; print(describe())"``)."""
-    groups = {ARMED: "armed (any)", FLYING: "flying (any)", NOT_BUSY: "flying, not returning or landing"}
+    groups = {ARMED: "armed (any)", FLYING: "flying (any)", NOT_BUSY: "flying, not returning or landing",
+              AUTOMATIC + (P.OFFBOARD,): "flying an AUTO mode or OFFBOARD"}
     lines = ["| from | event | to | mode | action |", "|---|---|---|---|---|"]
     for phases, event, to, mode, action in TABLE:
         names = groups.get(phases) or ", ".join(p.name for p in phases)

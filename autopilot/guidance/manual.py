@@ -1,23 +1,42 @@
-"""Position mode on the sticks (PX4's POSCTL): stick deflections -> a smooth reference.
+"""The manual modes (PX4's, for a multicopter): sticks -> what the cascade's own loops fly.
 
-What a pilot (or MAVSDK's ``manual_control`` plugin, QGroundControl's virtual joystick) sends as
-MANUAL_CONTROL, already decoded into the paper's body axes by the MAVLink edge
-(:func:`autopilot.mavlink.manual.decode_sticks`), each axis in [-1, 1]:
+Every mode flies the cascade in use (whichever laws it has), through the cascade's overrides
+(:meth:`autopilot.control.cascade.Cascade.step`); this module only says what to give it, one
+:class:`ManualSetpoint` per control step:
 
-* ``forward`` / ``left``: a horizontal velocity in the vehicle's heading frame, full deflection
-  ``MPC_VEL_MANUAL``;
-* ``up`` (the throttle stick, centre = 0): a climb rate, full deflection ``MPC_Z_VEL_MAX_UP`` up and
-  ``MPC_Z_VEL_MAX_DN`` down;
-* ``yaw`` (counter-clockwise seen from above, as the paper's yaw): a yaw rate, full deflection
-  ``MPC_MAN_Y_MAX``.
+=================  =========================================  ==================================
+mode               sticks                                     what the cascade gets
+=================  =========================================  ==================================
+POSCTL             pitch/roll: horizontal velocity in the     a reference (p_d, p_d', p_d'',
+                   heading frame (``MPC_VEL_MANUAL``);        yaw): the position law flies it
+                   throttle: climb rate (``MPC_Z_VEL_MAX_UP``
+                   / ``_DN``); yaw: yaw rate (``MPC_MAN_Y_MAX``)
+ALTCTL             pitch/roll: tilt (``MPC_MAN_TILT_MAX``);   roll/pitch before the command
+                   throttle: climb rate, altitude held at     filter; the position law's thrust
+                   centre; yaw: yaw rate                      with the vertical reference from the
+                                                              throttle and the horizontal one at
+                                                              the measured state (no horizontal
+                                                              error)
+STABILIZED         pitch/roll: tilt; throttle: thrust         roll/pitch before the command
+(and MANUAL)       (``MPC_THR_HOVER`` at centre); yaw: yaw    filter, U1 from the throttle
+                   rate
+ACRO               pitch/roll/yaw: body rates                 the whole attitude reference (the
+                   (``MC_ACRO_*_MAX``, expo); throttle:       attitude the rates integrate, the
+                   thrust                                     rates as feed-forward), U1 from the
+                                                              throttle
+=================  =========================================  ==================================
 
-Deflections inside ``MPC_HOLD_DZ`` count as centred, and the rest is rescaled to start from zero
-at the deadzone's edge (no jump). The commanded velocity moves towards the sticks' at most
-``MPC_ACC_HOR`` (every axis), so a stick slammed to full never steps p_d'; the position reference
-integrates it, and with the sticks centred the vehicle brakes and holds where it stopped, as
-PX4's position mode does; the throttle stick held down brakes the descent to rest on the ground.
-Sticks older than ``COM_RC_LOSS_T`` count as centred (the pilot's link
-is lost: hold, and the commander says so once).
+In every mode the translational law keeps running on its reference (the measured state where the
+mode gives no position), so its integrals neither wind up nor jump when the mode changes.
+
+POSCTL's reference: the commanded velocity moves towards the sticks' at most ``MPC_ACC_HOR``
+(every axis), so a stick slammed to full never steps p_d'; the position reference integrates it,
+and with the sticks centred the vehicle brakes and holds where it stopped; the throttle held down
+brakes the descent to rest on the ground. ALTCTL's vertical channel is the same.
+
+ACRO integrates ZYX Euler angles, which the paper's attitude law tracks; they are singular at 90
+degrees of pitch, so ACRO here cannot flip: the attitude it integrates stays within
+``ACRO_TILT_LIM`` of roll and pitch (the rate on that axis stops at the limit).
 
 Pure: time comes in as arguments, limits as a record.
 """
@@ -26,29 +45,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple, Protocol
 
+from quadcommon.rigid_body import euler_rates_from_body_rates
 from quadcommon.trajectories import Reference
+
+from .sticks import Sticks, acro_rate, beyond_deadzone, stick_tilt, throttle_curve
 
 Vector3 = tuple[float, float, float]
 GROUND_Z_M = 0.0
-
-
-@dataclass(frozen=True)
-class Sticks:
-    """One MANUAL_CONTROL, in the paper's body axes, each in [-1, 1] (before the deadzone)."""
-
-    time_s: float  # simulation time of arrival
-    forward: float = 0.0
-    left: float = 0.0
-    up: float = 0.0
-    yaw: float = 0.0  # counter-clockwise seen from above
-
-    def deflected(self, deadzone: float) -> bool:
-        return max(abs(self.forward), abs(self.left), abs(self.up), abs(self.yaw)) > deadzone
+ZERO3: Vector3 = (0.0, 0.0, 0.0)
+CENTRED = Sticks(0.0)
 
 
 @dataclass(frozen=True)
 class ManualLimits:
+    """The manual modes' parameters (PX4's names), in SI units."""
+
     speed_horizontal: float = 10.0  # MPC_VEL_MANUAL, m/s at full deflection
     speed_up: float = 1.5  # MPC_Z_VEL_MAX_UP
     speed_down: float = 1.0  # MPC_Z_VEL_MAX_DN
@@ -56,85 +69,176 @@ class ManualLimits:
     yaw_rate: float = math.radians(150.0)  # MPC_MAN_Y_MAX, rad/s
     deadzone: float = 0.1  # MPC_HOLD_DZ, of full deflection
     loss_s: float = 0.5  # COM_RC_LOSS_T, s
+    tilt_max: float = math.radians(35.0)  # MPC_MAN_TILT_MAX, rad
+    thrust_hover: float = 0.5  # MPC_THR_HOVER, of U1_max
+    thrust_min: float = 0.08  # MPC_MANTHR_MIN
+    thrust_max: float = 1.0  # MPC_THR_MAX
+    thrust_rescale: bool = True  # MPC_THR_CURVE 0 (rescale to the hover thrust)
+    acro_rates: Vector3 = (math.radians(100.0),) * 3  # MC_ACRO_R_MAX, _P_MAX, _Y_MAX, rad/s
+    acro_expo: float = 0.0  # MC_ACRO_EXPO (roll, pitch)
+    acro_expo_yaw: float = 0.0  # MC_ACRO_EXPO_Y
+    acro_super_expo: float = 0.0  # MC_ACRO_SUPEXPO
+    acro_super_expo_yaw: float = 0.0  # MC_ACRO_SUPEXPOY
+    acro_tilt: float = math.radians(60.0)  # ACRO_TILT_LIM, rad
+    override_speed: float = 0.3  # COM_RC_STICK_OV / 100: full travel per second
 
 
-def _beyond_deadzone(value: float, deadzone: float) -> float:
-    """``value`` in [-1, 1] with the deadzone removed and the rest rescaled to [-1, 1]."""
-    magnitude = abs(value) - deadzone
-    if magnitude <= 0.0:
-        return 0.0
-    return math.copysign(min(magnitude / (1.0 - deadzone), 1.0), value)
+class MeasuredState(Protocol):
+    """What the guidance reads of the vehicle (paper frames, SI)."""
+
+    position_m: Vector3
+    velocity_m_s: Vector3
+    euler_rad: Vector3
+
+
+class ManualSetpoint(NamedTuple):
+    """What one control step of a manual mode gives the cascade."""
+
+    reference: Reference  # the translational law's (and the yaw, unless ``attitude``)
+    roll_pitch: tuple[float, float] | None = None  # (phi, theta) rad, before the command filter
+    attitude: tuple[Vector3, Vector3, Vector3] | None = None  # eta_d, eta_d', eta_d'' (ACRO)
+    thrust: float | None = None  # U1 / U1_max
+
+    @property
+    def overrides(self) -> bool:
+        """Whether the cascade is given more than a reference."""
+        return self.roll_pitch is not None or self.attitude is not None or self.thrust is not None
+
+
+def _thrust(up: float, limits: ManualLimits) -> float:
+    lim = limits
+    return throttle_curve(up, lim.thrust_hover, lim.thrust_min, lim.thrust_max, lim.thrust_rescale)
+
+
+def _vertical(up: float, z0: float, vz0: float, dt: float, limits: ManualLimits) -> Vector3:
+    """(z, vz, az) after ``dt``: the climb rate ``up`` (deadzone removed) asks for, reached within
+    the acceleration limit; down no faster than it can brake to rest at the ground, and resting
+    there when the stick is held down."""
+    target = up * (limits.speed_up if up > 0.0 else limits.speed_down)
+    step = limits.acceleration * dt
+    floor_speed = max(math.sqrt(2.0 * limits.acceleration * max(z0 - GROUND_Z_M, 0.0)) - step, 0.0)
+    target = max(target, -floor_speed)
+    vz = vz0 + min(max(target - vz0, -step), step)
+    az = (vz - vz0) / dt
+    z = z0 + 0.5 * (vz0 + vz) * dt
+    if z < GROUND_Z_M:
+        return GROUND_Z_M, 0.0, 0.0
+    return z, vz, az
 
 
 class ManualGuidance:
-    """The sticks' reference while in POSCTL: :meth:`reference` once per control step."""
+    """The manual modes' state between control steps: POSCTL's engagement, ACRO's attitude."""
 
     def __init__(self) -> None:
-        self.sticks: Sticks | None = None
-        self.engaged = False  # a deflection arrived since POSCTL was entered: the sticks fly
-        self.lost = False  # engaged, and the sticks went stale
+        self.engaged = False  # POSCTL: a deflection arrived since it was entered, the sticks fly
+        self._acro_attitude: Vector3 | None = None
 
-    def update(self, sticks: Sticks) -> None:
-        self.sticks = sticks
-
-    def reset(self) -> None:
-        """Entering hold or POSCTL: the stop plan flies until the sticks are moved."""
+    def enter(self, state: MeasuredState) -> None:
+        """A manual mode is entered: POSCTL holds until the sticks move, ACRO starts from the
+        measured attitude."""
         self.engaged = False
-        self.lost = False
+        self._acro_attitude = state.euler_rad
 
-    def fresh(self, t: float, limits: ManualLimits) -> Sticks | None:
-        sticks = self.sticks
-        if sticks is None or t - sticks.time_s > limits.loss_s:
-            return None
-        return sticks
-
-    def engage_if_moved(self, t: float, limits: ManualLimits) -> bool:
-        """True once fresh sticks have been deflected beyond the deadzone (then they fly)."""
+    def engage_if_moved(self, sticks: Sticks | None, limits: ManualLimits) -> bool:
+        """POSCTL: True once fresh sticks were deflected beyond the deadzone (then they fly)."""
         if not self.engaged:
-            sticks = self.fresh(t, limits)
             self.engaged = sticks is not None and sticks.deflected(limits.deadzone)
         return self.engaged
 
-    def reference(self, t: float, dt: float, previous: Reference, limits: ManualLimits) -> Reference:
-        """The reference at ``t``, continuing from ``previous`` (the last step's)."""
-        sticks = self.fresh(t, limits)
-        self.lost = sticks is None
+    # -- the modes: one control step each, continuing from ``previous`` (the last step's reference) --
+    def position(
+        self,
+        dt: float,
+        previous: Reference,
+        state: MeasuredState,
+        sticks: Sticks | None,
+        limits: ManualLimits,
+    ) -> ManualSetpoint:
+        """POSCTL: velocity in the heading frame, climb rate and yaw rate from the sticks."""
+        s = sticks or CENTRED
         dz = limits.deadzone
-        if sticks is None:
-            forward = left = up = yaw_stick = 0.0
-        else:
-            forward = _beyond_deadzone(sticks.forward, dz)
-            left = _beyond_deadzone(sticks.left, dz)
-            up = _beyond_deadzone(sticks.up, dz)
-            yaw_stick = _beyond_deadzone(sticks.yaw, dz)
+        forward, left = beyond_deadzone(s.forward, dz), beyond_deadzone(s.left, dz)
+        up, yaw_stick = beyond_deadzone(s.up, dz), beyond_deadzone(s.yaw, dz)
         psi = previous.yaw_rad
-        c, s = math.cos(psi), math.sin(psi)
+        c, sn = math.cos(psi), math.sin(psi)
         v_max = limits.speed_horizontal
         # Heading frame -> world: forward along (cos psi, sin psi), left along (-sin psi, cos psi).
-        target = (
-            v_max * (c * forward - s * left),
-            v_max * (s * forward + c * left),
-            up * (limits.speed_up if up > 0.0 else limits.speed_down),
-        )
+        target = (v_max * (c * forward - sn * left), v_max * (sn * forward + c * left))
         p0, v0 = previous.position_m, previous.velocity_m_s
         step = limits.acceleration * dt
-        # Down no faster than it can brake to rest at the ground within the acceleration limit.
-        floor_speed = max(math.sqrt(2.0 * limits.acceleration * max(p0[2] - GROUND_Z_M, 0.0)) - step, 0.0)
-        target = (target[0], target[1], max(target[2], -floor_speed))
-        velocity = (
-            v0[0] + min(max(target[0] - v0[0], -step), step),
-            v0[1] + min(max(target[1] - v0[1], -step), step),
-            v0[2] + min(max(target[2] - v0[2], -step), step),
-        )
-        acceleration = (
-            (velocity[0] - v0[0]) / dt,
-            (velocity[1] - v0[1]) / dt,
-            (velocity[2] - v0[2]) / dt,
-        )
-        z = p0[2] + 0.5 * (v0[2] + velocity[2]) * dt
-        if z < GROUND_Z_M:  # the throttle stick held down: the reference rests on the ground
-            z, velocity, acceleration = GROUND_Z_M, (velocity[0], velocity[1], 0.0), (*acceleration[:2], 0.0)
-        position = (p0[0] + 0.5 * (v0[0] + velocity[0]) * dt, p0[1] + 0.5 * (v0[1] + velocity[1]) * dt, z)
+        vx = v0[0] + min(max(target[0] - v0[0], -step), step)
+        vy = v0[1] + min(max(target[1] - v0[1], -step), step)
+        z, vz, az = _vertical(up, p0[2], v0[2], dt, limits)
+        position = (p0[0] + 0.5 * (v0[0] + vx) * dt, p0[1] + 0.5 * (v0[1] + vy) * dt, z)
+        acceleration = ((vx - v0[0]) / dt, (vy - v0[1]) / dt, az)
         yaw_rate = yaw_stick * limits.yaw_rate
         yaw = math.remainder(psi + yaw_rate * dt, 2.0 * math.pi)
-        return Reference(position, velocity, acceleration, yaw, yaw_rate, 0.0)  # type: ignore[arg-type]
+        return ManualSetpoint(Reference(position, (vx, vy, vz), acceleration, yaw, yaw_rate, 0.0))
+
+    def altitude(
+        self,
+        dt: float,
+        previous: Reference,
+        state: MeasuredState,
+        sticks: Sticks | None,
+        limits: ManualLimits,
+    ) -> ManualSetpoint:
+        """ALTCTL: tilt from the roll/pitch sticks, climb rate (altitude held at centre), yaw rate."""
+        s = sticks or CENTRED
+        dz = limits.deadzone
+        z, vz, az = _vertical(beyond_deadzone(s.up, dz), previous.position_m[2], previous.velocity_m_s[2],
+                              dt, limits)  # fmt: skip
+        p, v = state.position_m, state.velocity_m_s
+        yaw_rate = beyond_deadzone(s.yaw, dz) * limits.yaw_rate
+        yaw = math.remainder(previous.yaw_rad + yaw_rate * dt, 2.0 * math.pi)
+        reference = Reference((p[0], p[1], z), (v[0], v[1], vz), (0.0, 0.0, az), yaw, yaw_rate, 0.0)
+        return ManualSetpoint(reference, roll_pitch=stick_tilt(s.forward, s.left, limits.tilt_max))
+
+    def stabilized(
+        self,
+        dt: float,
+        previous: Reference,
+        state: MeasuredState,
+        sticks: Sticks | None,
+        limits: ManualLimits,
+    ) -> ManualSetpoint:
+        """STABILIZED (and MANUAL): tilt from the roll/pitch sticks, thrust from the throttle, yaw
+        rate from the yaw stick."""
+        s = sticks or CENTRED
+        yaw_rate = s.yaw * limits.yaw_rate
+        yaw = math.remainder(previous.yaw_rad + yaw_rate * dt, 2.0 * math.pi)
+        reference = Reference(state.position_m, state.velocity_m_s, ZERO3, yaw, yaw_rate, 0.0)
+        return ManualSetpoint(reference, roll_pitch=stick_tilt(s.forward, s.left, limits.tilt_max),
+                              thrust=_thrust(s.up, limits))  # fmt: skip
+
+    def acro(
+        self,
+        dt: float,
+        previous: Reference,
+        state: MeasuredState,
+        sticks: Sticks | None,
+        limits: ManualLimits,
+    ) -> ManualSetpoint:
+        """ACRO: body rates from the roll/pitch/yaw sticks, integrated into the attitude reference;
+        thrust from the throttle."""
+        s = sticks or CENTRED
+        roll_max, pitch_max, yaw_max = limits.acro_rates
+        omega = (
+            acro_rate(-s.left, roll_max, limits.acro_expo, limits.acro_super_expo),
+            acro_rate(s.forward, pitch_max, limits.acro_expo, limits.acro_super_expo),
+            acro_rate(s.yaw, yaw_max, limits.acro_expo_yaw, limits.acro_super_expo_yaw),
+        )
+        phi, theta, psi = self._acro_attitude if self._acro_attitude is not None else state.euler_rad
+        rates = list(euler_rates_from_body_rates(phi, theta, omega))
+        angles = [phi + rates[0] * dt, theta + rates[1] * dt]
+        limit = limits.acro_tilt
+        for i in range(2):
+            if abs(angles[i]) > limit:  # no flips: the rate stops at the limit
+                angles[i] = math.copysign(limit, angles[i])
+                rates[i] = 0.0
+        psi = math.remainder(psi + rates[2] * dt, 2.0 * math.pi)
+        eta = (angles[0], angles[1], psi)
+        self._acro_attitude = eta
+        reference = Reference(state.position_m, state.velocity_m_s, ZERO3, psi, rates[2], 0.0)
+        return ManualSetpoint(reference, attitude=(eta, (rates[0], rates[1], rates[2]), ZERO3),
+                              thrust=_thrust(s.up, limits))  # fmt: skip

@@ -136,6 +136,21 @@ def transition(
     moving = any(abs(v) > 1e-6 for v in start.velocity_m_s + start.acceleration_m_s2)
     if not moving:
         return LineMove(start.position_m, target, limits, start.yaw_rad, yaw1)
+    seg = _quintic_within_limits(start, target, limits, yaw1)
+    if seg is not None:
+        return seg
+    if not brake_first:
+        return _free_stop(start, limits)
+    brake = stop_from(start, limits)
+    rest = brake.sample(brake.duration_s)
+    return PiecewiseTrajectory([brake, LineMove(rest.position_m, target, limits, rest.yaw_rad, yaw1)])
+
+
+def _quintic_within_limits(
+    start: Reference, target: Vector3, limits: Limits, yaw1: float
+) -> Trajectory | None:
+    """A quintic from ``start`` to rest at ``target`` within the speed and acceleration limits, or
+    None if none of 20 durations keeps within them."""
     distance = math.dist(start.position_m, target)
     speed = math.sqrt(sum(v * v for v in start.velocity_m_s))
     vmax = min(limits.speed_horizontal, limits.speed_up, limits.speed_down)
@@ -148,15 +163,32 @@ def transition(
         if peak_v <= max(vmax, speed) * 1.05 and peak_a <= amax * 1.05:
             return seg
         T *= 1.25
-    if not brake_first:
-        return seg
-    brake = stop_from(start, limits)
-    rest = brake.sample(brake.duration_s)
-    return PiecewiseTrajectory([brake, LineMove(rest.position_m, target, limits, rest.yaw_rad, yaw1)])
+    return None
+
+
+def _free_stop(start: Reference, limits: Limits) -> Trajectory:
+    """To rest wherever the vehicle comes to rest: each axis' velocity a cubic from (v0, a0) to
+    (0, 0) (its integral fixes the end point), so it never reverses; the shortest such stop
+    within the acceleration limit (or the start's own acceleration, if that is above it)."""
+    p0, v0, a0 = start.position_m, start.velocity_m_s, start.acceleration_m_s2
+    speed = math.sqrt(sum(v * v for v in v0))
+    accel = math.sqrt(sum(a * a for a in a0))
+    amax = max(limits.acceleration, accel)
+    T = max(1.5 * speed / amax, 0.2)
+    for _ in range(40):
+        # The integral of the cubic Hermite velocity: v0 T / 2 + a0 T^2 / 12 per axis.
+        target = tuple(p + v * T / 2.0 + a * T * T / 12.0 for p, v, a in zip(p0, v0, a0, strict=True))
+        seg = QuinticSegment(T, p0, target, v0, ZERO3, a0, ZERO3, start.yaw_rad, start.yaw_rad)  # type: ignore[arg-type]
+        if _peaks(seg, T)[1] <= amax * 1.05:
+            break
+        T *= 1.15
+    return seg
 
 
 def stop_from(start: Reference, limits: Limits) -> Trajectory:
-    """Brake from ``start`` (p, v, a) to rest, about where a constant deceleration would stop."""
+    """Brake from ``start`` (p, v, a) to rest, about where a constant deceleration would stop;
+    where that is not possible within the limits (an acceleration along the velocity at the
+    start), to rest wherever the vehicle comes to rest without reversing."""
     speed = math.sqrt(sum(v * v for v in start.velocity_m_s))
     if speed < 1e-3 and not any(abs(a) > 1e-6 for a in start.acceleration_m_s2):
         p = start.position_m

@@ -4,7 +4,8 @@ The message's axes are int16 in thousandths of full deflection: ``x`` pitch stic
 ``y`` roll stick (right +), ``r`` yaw stick (clockwise +), each in [-1000, 1000]; ``z`` the thrust
 stick, read as PX4 reads it, [0, 1000] with 500 centred (below 0: full down). ``INT16_MAX`` on an
 axis means "this axis is not sent" (MAVLink): it reads as centred. Anything else outside
-[-1000, 1000] is not a stick: the whole message is refused, with the axis and value named.
+[-1000, 1000] is not a stick: the whole message is refused, with the axis and value named (a
+value that is not an integer, which only an in-process caller could hand over, likewise).
 Buttons and the extension axes are ignored (no camera, no gimbal).
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 from quadcommon import frames
 
-from ..guidance.manual import Sticks
+from ..guidance.sticks import Sticks
 
 INT16_MAX = 32767
 FULL = 1000.0
@@ -23,6 +24,8 @@ def decode_sticks(msg, t: float) -> tuple[Sticks | None, str]:
     values = {}
     for axis, centre in (("x", 0), ("y", 0), ("z", 500), ("r", 0)):
         raw = getattr(msg, axis)
+        if not isinstance(raw, int):  # pymavlink decodes int16; NaN or a float is no stick
+            return None, f"MANUAL_CONTROL {axis}={raw!r} is not an integer"
         if raw == INT16_MAX:
             raw = centre
         elif not -1000 <= raw <= 1000:

@@ -246,6 +246,25 @@ _TAKES_TIME = frozenset(
 )  # fmt: skip
 
 
+def fence_violation(
+    items: Sequence[MissionItem],
+    origin: tuple[float, float, float],
+    fence: Callable[[Vector3], str | None],
+    home_local: Vector3 = ZERO3,
+) -> tuple[int, str] | None:
+    """The first item whose position breaks the geofence (``fence``: why a paper-frame point does,
+    or None), as (seq, why); None if every one is inside. Relative altitudes above ``home_local``,
+    an item without altitude checked at the ground (PX4's feasibility check)."""
+    for item in items:
+        if item.position is None or not item.position.horizontal_given:
+            continue
+        x, y, z = item.position.to_paper(origin, home_local)
+        problem = fence((x, y, home_local[2] if math.isnan(z) else z))
+        if problem:
+            return item.seq, problem
+    return None
+
+
 def check_mission(
     items: Sequence[MissionItem],
     origin: tuple[float, float, float],
@@ -263,20 +282,18 @@ def check_mission(
     altitude checked at the ground). Timed curves must stay within the vehicle's speed and
     acceleration limits (their speed is set by their times, so they are refused rather than
     slowed down)."""
-    if params is not None or fence is not None:
+    if params is not None:
         for item in items:
             if item.position is None or not item.position.horizontal_given:
                 continue
-            if params is not None:
-                x, y, z = item.position.to_paper(origin, ZERO3)
-                problem = reference_problem((x, y, 0.0 if math.isnan(z) else z), ZERO3, params)
-                if problem:
-                    return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
-            if fence is not None:
-                x, y, z = item.position.to_paper(origin, home_local)
-                problem = fence((x, y, home_local[2] if math.isnan(z) else z))
-                if problem:
-                    return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
+            x, y, z = item.position.to_paper(origin, ZERO3)
+            problem = reference_problem((x, y, 0.0 if math.isnan(z) else z), ZERO3, params)
+            if problem:
+                return m.MAV_MISSION_INVALID_PARAM5_X, f"item {item.seq}: {problem}"
+    if fence is not None:
+        violation = fence_violation(items, origin, fence, home_local)
+        if violation is not None:
+            return m.MAV_MISSION_INVALID_PARAM5_X, f"item {violation[0]}: {violation[1]}"
     for item in items:
         if item.kind != ItemKind.JUMP:
             continue

@@ -9,13 +9,16 @@ Fence items (PX4's set), in ``MAV_FRAME_GLOBAL(_INT)`` or ``MAV_FRAME_GLOBAL_REL
 =====================================  =====  ===================================================
 NAV_FENCE_POLYGON_VERTEX_INCLUSION     5001   p1 = vertex count n (>= 3); n consecutive items of
 NAV_FENCE_POLYGON_VERTEX_EXCLUSION     5002   the same command and count form one polygon
-NAV_FENCE_CIRCLE_INCLUSION             5003   p1 = radius (m, > 0) about x, y
-NAV_FENCE_CIRCLE_EXCLUSION             5004
+NAV_FENCE_CIRCLE_INCLUSION             5003   p1 = radius (m) about x, y; a radius <= 0 is no
+NAV_FENCE_CIRCLE_EXCLUSION             5004   circle: accepted, stored, ignored (MAVSDK sends
+                                              ``Circle(Point(0, 0), 0)`` for "no circle")
 NAV_FENCE_RETURN_POINT                 5000   stored (PX4 accepts it); not used: a breach acts by
                                               ``GF_ACTION``
 =====================================  =====  ===================================================
 
-Rally items: NAV_RALLY_POINT (5100), global frames, x, y, z = latitude, longitude, altitude.
+Rally items: NAV_RALLY_POINT (5100), global frames, x, y, z = latitude, longitude, altitude: RTL's
+destinations (``RTL_TYPE``), the altitude being the destination's, which the return altitude is
+counted from (:class:`RallyPoint`).
 
 Enforcement, as PX4's ``Geofence``: with inclusion areas the vehicle must be inside at least one of
 them, and inside none of the exclusion areas. :meth:`Geofence.excess` gives how far outside the
@@ -42,6 +45,7 @@ from .items import (
     ItemPosition,
     ItemRejected,
     MissionItem,
+    PositionKind,
     WireItem,
 )
 
@@ -97,16 +101,31 @@ def parse_fence_item(wire: WireItem, origin: tuple[float, float, float]) -> Miss
     if kind is None:
         raise ItemRejected(m.MAV_MISSION_UNSUPPORTED, f"fence item {seq}: command {wire.command} unsupported")
     position = _global_position(wire)
-    _far(position, origin, seq)
     p1 = wire.param1
     if kind == ItemKind.FENCE_POLYGON:
         if not (math.isfinite(p1) and p1 == int(p1) and 3 <= p1 <= MAX_VERTICES):
             raise ItemRejected(
                 m.MAV_MISSION_INVALID_PARAM1, f"fence item {seq}: vertex count {p1} not in 3..{MAX_VERTICES}"
             )
-    elif kind == ItemKind.FENCE_CIRCLE and not (math.isfinite(p1) and 0.0 < p1 <= MAX_RADIUS_M):
-        raise ItemRejected(m.MAV_MISSION_INVALID_PARAM1, f"fence item {seq}: radius {p1} m not in (0, 10 km]")
+    elif kind == ItemKind.FENCE_CIRCLE and not (math.isfinite(p1) and p1 <= MAX_RADIUS_M):
+        why = f"fence item {seq}: radius {p1} m not finite or > 10 km"
+        raise ItemRejected(m.MAV_MISSION_INVALID_PARAM1, why)
+    if not _no_circle(kind, p1):  # "no circle" may sit anywhere (MAVSDK puts it at 0, 0)
+        _far(position, origin, seq)
     return MissionItem(seq, kind, wire, position)
+
+
+def _no_circle(kind: ItemKind, radius: float) -> bool:
+    return kind == ItemKind.FENCE_CIRCLE and radius <= 0.0
+
+
+def fence_notes(items: Sequence[MissionItem]) -> list[str]:
+    """What an accepted fence upload holds that is not enforced: circles of radius <= 0."""
+    ignored = [str(it.seq) for it in items if _no_circle(it.kind, it.wire.param1)]
+    if not ignored:
+        return []
+    which = "item " + ignored[0] if len(ignored) == 1 else "items " + ", ".join(ignored)
+    return [f"geofence {which}: a circle of radius <= 0 is no circle, ignored"]
 
 
 def parse_rally_item(wire: WireItem, origin: tuple[float, float, float]) -> MissionItem:
@@ -192,7 +211,7 @@ class Geofence:
                 areas.append(Area(it.wire.command == CMD_POLYGON_INCLUSION, vertices))
                 seq += n
                 continue
-            if it.kind == ItemKind.FENCE_CIRCLE:
+            if it.kind == ItemKind.FENCE_CIRCLE and not _no_circle(it.kind, it.wire.param1):
                 inclusion = it.wire.command == CMD_CIRCLE_INCLUSION
                 areas.append(Area(inclusion, centre=_xy(it, origin), radius_m=float(it.wire.param1)))
             seq += 1
@@ -210,7 +229,7 @@ class Geofence:
             if not a.inclusion:
                 d = -a.signed_distance(p)
                 if d > worst:
-                    worst, what = d, f"{-d:.1f} m inside an exclusion area of the fence"
+                    worst, what = d, f"{d:.1f} m inside an exclusion area of the fence"
         return worst, what
 
 
@@ -221,13 +240,32 @@ def _xy(item: MissionItem, origin: tuple[float, float, float]) -> Vector2:
     return (x, y)
 
 
-def rally_points(
-    items: Sequence[MissionItem], origin: tuple[float, float, float], home: Vector3
-) -> list[Vector3]:
-    """Rally points in the paper frame (relative altitudes above ``home``)."""
+@dataclass(frozen=True)
+class RallyPoint:
+    """A rally point in the paper frame: x, y (m) and its altitude as the item gives it, resolved
+    against the home of the moment (a relative altitude follows home, as PX4 reads it at RTL)."""
+
+    x: float
+    y: float
+    altitude_m: float  # above home if ``relative``, else the paper frame's z (up from the origin)
+    relative: bool
+
+    def z(self, home: Vector3) -> float:
+        return home[2] + self.altitude_m if self.relative else self.altitude_m
+
+
+def rally_points(items: Sequence[MissionItem], origin: tuple[float, float, float]) -> list[RallyPoint]:
+    """The rally plan's points (global frames; an altitude not given is home's)."""
     points = []
     for it in items:
-        if it.position is not None:
-            x, y, z = it.position.to_paper(origin, home)
-            points.append((x, y, home[2] if math.isnan(z) else z))
+        position = it.position
+        if position is None:
+            continue
+        x, y, _ = position.to_paper(origin, (0.0, 0.0, 0.0))
+        if math.isnan(position.c):
+            points.append(RallyPoint(x, y, 0.0, True))
+        elif position.kind == PositionKind.GLOBAL_AMSL:
+            points.append(RallyPoint(x, y, position.c - origin[2], False))
+        else:
+            points.append(RallyPoint(x, y, position.c, True))
     return points

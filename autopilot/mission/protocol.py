@@ -16,9 +16,10 @@ Upload (ground station -> vehicle)::
   or timeout leaves the previous mission intact (received items are kept aside until then).
 * Out-of-sequence items are dropped (an item after a gap re-requests the expected one at once;
   a repeated earlier item is ignored, so duplicates cannot start a request storm).
-* Timeouts, wall clock (``now``): the expected item is re-requested every ``retry_s`` (0.5 s,
-  PX4's retry timeout) up to ``max_retries`` (5) times; after that the upload is cancelled with
-  ``MISSION_ACK(MAV_MISSION_OPERATION_CANCELLED)`` and a STATUSTEXT. PX4 only sends the
+* Timeouts, wall clock (``now``), PX4's rule (``mavlink_mission``: retry timeout 250 ms,
+  protocol timeout 5 s): the expected item is re-requested every ``retry_s`` (0.25 s) for as long
+  as the client keeps sending; ``protocol_timeout_s`` (5 s) without an item from it cancels the
+  upload with ``MISSION_ACK(MAV_MISSION_OPERATION_CANCELLED)`` and a STATUSTEXT. PX4 only sends the
   STATUSTEXT ("Operation timeout"); the ACK is what the mission service prescribes for a
   cancelled operation, and tells a still-listening client at once.
 * A repeated ``MISSION_COUNT`` from the uploading client restarts its upload (it evidently gave
@@ -59,10 +60,10 @@ from enum import Enum
 
 from ..mavlink.codec import mavlink as m
 from .items import ItemRejected, MissionItem, WireItem, parse_item
-from .plans import check_fence, parse_fence_item, parse_rally_item
+from .plans import check_fence, fence_notes, parse_fence_item, parse_rally_item
 
-RETRY_S = 0.5
-MAX_RETRIES = 5
+RETRY_S = 0.25  # PX4's MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT
+PROTOCOL_TIMEOUT_S = 5.0  # PX4's MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: silence ends an upload
 DOWNLOAD_TIMEOUT_S = 5.0
 MAX_ITEMS = 10_000  # 1000 s of a timed curve sampled at 10 Hz
 MAX_PLAN_ITEMS = 256  # fence and rally items (the fence is checked every control step)
@@ -123,7 +124,7 @@ class MissionProtocol:
         origin: tuple[float, float, float],
         check: MissionCheck | None = None,
         retry_s: float = RETRY_S,
-        max_retries: int = MAX_RETRIES,
+        protocol_timeout_s: float = PROTOCOL_TIMEOUT_S,
         download_timeout_s: float = DOWNLOAD_TIMEOUT_S,
         max_items: int = MAX_ITEMS,
     ) -> None:
@@ -135,7 +136,7 @@ class MissionProtocol:
         self.origin = origin
         self.check = check
         self.retry_s = retry_s
-        self.max_retries = max_retries
+        self.protocol_timeout_s = protocol_timeout_s
         self.download_timeout_s = download_timeout_s
         self.max_items = max_items
         self.plans: dict[int, Mission] = {t: Mission() for t in PLAN_TYPES}
@@ -189,7 +190,7 @@ class MissionProtocol:
         """Timeouts and retries; call often (every <= 0.1 s). Replies go to :attr:`partner`."""
         out = Output()
         if self.state == TransferState.RECEIVING and now - self._last_sent >= self.retry_s:
-            if self._retries < self.max_retries:
+            if now - self._last_received < self.protocol_timeout_s:
                 self._retries += 1
                 self._request(now, out)
             else:
@@ -330,6 +331,8 @@ class MissionProtocol:
         self._store(self._type, Mission(items, current), out)
         out.replies.append(self._ack(self.partner, m.MAV_MISSION_ACCEPTED, self._type))
         out.notices.append((SEVERITY_INFO, f"{_PLAN_NAMES[self._type]} of {len(items)} items accepted"))
+        if self._type == FENCE:
+            out.notices.extend((SEVERITY_INFO, note) for note in fence_notes(items))
         self._completed_upload = (self.partner, self._count - 1)
         self._idle()
 

@@ -120,11 +120,9 @@ class MissionService:
             )
             self.commander.set_mission(t, executor)
         if out.fence is not None:
-            self.commander.set_geofence(Geofence.from_items(out.fence.items, self.origin))
+            self.commander.set_geofence(t, Geofence.from_items(out.fence.items, self.origin))
         if out.rally is not None:
-            home = self.commander.home or (0.0, 0.0, 0.0)
-            points = rally_points(out.rally.items, self.origin, home)
-            self.commander.set_rally_points([(x, y) for x, y, _ in points])
+            self.commander.set_rally_points(rally_points(out.rally.items, self.origin))
         if out.set_current is not None:
             self.commander.mission_set_current(t, out.set_current)
         self._drain_commander_events()

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from quadcommon.config import Rates
+from quadcommon.config import Rates, VehicleConfig
 
 from ..control import registry
 from ..control.config import ControllerConfig
@@ -28,6 +28,20 @@ from .store import INT32, ParameterStore, ParamSpec
 DLL_NONE, DLL_HOLD, DLL_RTL, DLL_LAND = 0, 1, 2, 3
 # GF_ACTION (geofence breach action): PX4's values; 4 (terminate) is not supported here.
 GF_NONE, GF_WARN, GF_HOLD, GF_RTL, GF_TERMINATE, GF_LAND = 0, 1, 2, 3, 4, 5
+# NAV_RCL_ACT (manual control loss action in a manual mode): PX4's values (1 hold, 2 return, 3 land;
+# 5 terminate and 6 disarm are refused here).
+RCL_HOLD, RCL_RTL, RCL_LAND = 1, 2, 3
+# COM_RC_OVERRIDE bits: moving sticks take over the AUTO modes, OFFBOARD.
+RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD = 1, 2
+# RTL_TYPE (PX4's values): 0 closest of home and rally points; 1 closest rally point (else home: no
+# mission landing here); 3 closest of home, rally points (and a mission landing, which missions here
+# do not have); 5 closest rally point, or land where the vehicle is if there is none.
+RTL_HOME_OR_RALLY, RTL_RALLY_OR_HOME, RTL_CLOSEST, RTL_RALLY_ONLY = 0, 1, 3, 5
+RTL_TYPES_REFUSED = {
+    2: "the mission-path return is not supported (missions have no landing pattern here)",
+    4: "the mission-path return is not supported (missions have no landing pattern here)",
+    6: "the battery-aware return needs a battery model, which this vehicle has not",
+}
 
 COMMANDER_PARAMS = (
     ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.2, 100.0, unit="m", description="takeoff altitude above home"),
@@ -38,15 +52,41 @@ COMMANDER_PARAMS = (
     ParamSpec("MPC_TKO_SPEED", 1.0, 0.1, 5.0, unit="m/s", description="takeoff climb speed"),
     ParamSpec("MPC_LAND_SPEED", 0.7, 0.1, 3.0, unit="m/s", description="landing descent speed"),
     ParamSpec("MPC_YAWRAUTO_MAX", 1.0, 0.1, 6.0, unit="rad/s", description="yaw rate limit"),
-    # POSCTL on the sticks (MANUAL_CONTROL): autopilot/guidance/manual.py. PX4's names and units;
-    # MPC_VEL_MANUAL defaults to this project's MPC_XY_VEL_MAX (PX4: 10 m/s).
+    # The manual modes (MANUAL_CONTROL): autopilot/guidance/manual.py, docs/manual-control.md.
+    # PX4's names, units and defaults, except MPC_VEL_MANUAL (this project's MPC_XY_VEL_MAX; PX4:
+    # 10 m/s) and MPC_THR_HOVER (this vehicle's hover thrust: manual_params()).
     ParamSpec("MPC_VEL_MANUAL", 2.0, 0.1, 20.0, unit="m/s", description="POSCTL speed at full stick"),
-    ParamSpec("MPC_MAN_Y_MAX", 150.0, 1.0, 400.0, unit="deg/s", description="POSCTL yaw rate at full stick"),
-    ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 0.9, description="stick deadzone (fraction of full deflection)"),
-    ParamSpec(
-        "COM_RC_LOSS_T", 0.5, 0.1, 35.0, unit="s", description="sticks older than this read as centred (hold)"
-    ),
-    ParamSpec("RTL_RETURN_ALT", 5.0, 0.5, 150.0, unit="m", description="return altitude above home"),
+    ParamSpec("MPC_MAN_Y_MAX", 150.0, 1.0, 400.0, unit="deg/s",
+              description="POSCTL, ALTCTL, STABILIZED: yaw rate at full stick"),
+    ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 0.9,
+              description="stick deadzone (fraction of full deflection): POSCTL, the ALTCTL throttle"),
+    ParamSpec("MPC_MAN_TILT_MAX", 35.0, 1.0, 80.0, unit="deg",
+              description="ALTCTL, STABILIZED: tilt at full roll/pitch stick"),
+    ParamSpec("MPC_MANTHR_MIN", 0.08, 0.0, 1.0,
+              description="STABILIZED, ACRO: thrust at the throttle's bottom (of U1_max, the vehicle's "
+                          "thrust_max_n)"),
+    ParamSpec("MPC_THR_MAX", 1.0, 0.0, 1.0, description="STABILIZED, ACRO: thrust at the throttle's top "
+                                                        "(of U1_max)"),
+    ParamSpec("MPC_THR_CURVE", 0, 0, 1, kind=INT32,
+              description="STABILIZED, ACRO throttle: 0 rescale (centre = MPC_THR_HOVER), 1 linear"),
+    ParamSpec("MC_ACRO_R_MAX", 100.0, 0.0, 1800.0, unit="deg/s", description="ACRO: roll rate, full stick"),
+    ParamSpec("MC_ACRO_P_MAX", 100.0, 0.0, 1800.0, unit="deg/s", description="ACRO: pitch rate, full stick"),
+    ParamSpec("MC_ACRO_Y_MAX", 100.0, 0.0, 1800.0, unit="deg/s", description="ACRO: yaw rate, full stick"),
+    ParamSpec("MC_ACRO_EXPO", 0.0, 0.0, 1.0, description="ACRO roll/pitch expo: 0 linear, 1 cubic"),
+    ParamSpec("MC_ACRO_EXPO_Y", 0.0, 0.0, 1.0, description="ACRO yaw expo: 0 linear, 1 cubic"),
+    ParamSpec("MC_ACRO_SUPEXPO", 0.0, 0.0, 0.95, description="ACRO roll/pitch super-expo"),
+    ParamSpec("MC_ACRO_SUPEXPOY", 0.0, 0.0, 0.95, description="ACRO yaw super-expo"),
+    ParamSpec("ACRO_TILT_LIM", 60.0, 10.0, 80.0, unit="deg",
+              description="not in PX4: ACRO's attitude stays within this roll and pitch (the attitude "
+                          "law's Euler angles are singular at 90 deg: no flips)"),
+    ParamSpec("COM_RC_LOSS_T", 0.5, 0.1, 35.0, unit="s",
+              description="no MANUAL_CONTROL for this long (sim time): manual control lost"),
+    ParamSpec("RTL_RETURN_ALT", 5.0, 0.5, 150.0, unit="m",
+              description="return altitude above the return destination (home or rally point)"),
+    ParamSpec("RTL_TYPE", RTL_HOME_OR_RALLY, 0, 6, kind=INT32,
+              description="return destination: 0 closest of home and rally points, 1 closest rally "
+                          "point (home if none), 3 as 0, 5 closest rally point (land here if none)",
+              refused={float(v): why for v, why in RTL_TYPES_REFUSED.items()}),
     ParamSpec("NAV_ACC_RAD", 0.2, 0.01, 20.0, unit="m", description="waypoint acceptance radius"),
     ParamSpec(
         "NAV_REF_MAX_DIST",
@@ -118,6 +158,17 @@ FAILSAFE_PARAMS = (
         unit="s",
         description="no sensor frame for this long (wall): simulator lost, motors off",
     ),
+    ParamSpec(
+        "NAV_RCL_ACT", RCL_RTL, 1, 6, kind=INT32,
+        description="manual control lost in a manual mode: 1 hold, 2 return (RTL), 3 land (PX4 values)",
+        refused={4.0: "not a PX4 action", 5.0: "flight termination is not supported",
+                 6.0: "disarming in flight is not supported"},
+    ),  # fmt: skip
+    ParamSpec("COM_RC_OVERRIDE", RC_OVERRIDE_AUTO, 0, 3, kind=INT32,
+              description="moving sticks take over (into POSCTL): bit 0 the AUTO modes, bit 1 OFFBOARD"),
+    ParamSpec("COM_RC_STICK_OV", 30.0, 5.0, 80.0, unit="%",
+              description="stick override threshold: a stick moving faster than this (of full travel "
+                          "per second, filtered over 0.1 s)"),
     ParamSpec(
         "GF_MAX_HOR_DIST",
         0.0,
@@ -195,12 +246,29 @@ ESTIMATOR_SWITCH = ParamSpec(
 )  # fmt: skip
 
 
+def hover_thrust_param(vehicle: VehicleConfig | None = None) -> ParamSpec:
+    """``MPC_THR_HOVER``: the normalised thrust (U1 / U1_max) of the centred throttle in STABILIZED and
+    ACRO. PX4's default is 0.5 (its airframes'); here it is the vehicle's own hover thrust, the
+    nominal ``m g / thrust_max_n`` (0.259 for the paper's quadrotor), when the vehicle is known."""
+    hover = 0.5
+    if vehicle is not None:
+        nominal = vehicle.nominal
+        hover = nominal.mass_kg * nominal.gravity_m_s2 / vehicle.actuation.thrust_max_n
+    return ParamSpec("MPC_THR_HOVER", round(min(max(hover, 0.1), 0.8), 3), 0.1, 0.8,
+                     description="STABILIZED, ACRO: thrust at the centred throttle (of U1_max); default: "
+                                 "the vehicle's m g / U1_max")  # fmt: skip
+
+
 def default_parameters(
-    controller: ControllerConfig | None = None, rates: Rates | None = None, estimator: bool = False
+    controller: ControllerConfig | None = None,
+    rates: Rates | None = None,
+    estimator: bool = False,
+    vehicle: VehicleConfig | None = None,
 ) -> ParameterStore:
     """Commander and failsafe parameters, plus the gains of ``controller`` and ``rates`` if given,
-    and the estimator's (EKF2_EN and the EKF2_* of :mod:`autopilot.estimation.parameters`)."""
-    specs = [*COMMANDER_PARAMS, *FAILSAFE_PARAMS, *LOGGER_PARAMS]
+    and the estimator's (EKF2_EN and the EKF2_* of :mod:`autopilot.estimation.parameters`);
+    ``vehicle`` gives ``MPC_THR_HOVER`` its default (:func:`hover_thrust_param`)."""
+    specs = [*COMMANDER_PARAMS, hover_thrust_param(vehicle), *FAILSAFE_PARAMS, *LOGGER_PARAMS]
     if controller is not None:
         specs += controller_params(controller)
     if rates is not None:

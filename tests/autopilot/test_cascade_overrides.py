@@ -14,8 +14,14 @@ HOVER_REF = Reference((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.
 AT_REF = StateEstimate((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 
-@pytest.fixture(params=["intbs_nlhinf", "intbs", "bs_nlhinf"])
+@pytest.fixture(params=["intbs_nlhinf", "intbs", "bs_nlhinf", "px4_pid", "se3"])
 def cascade(request) -> Cascade:
+    return Cascade(load_controller(request.param), load_vehicle("paper_quad"), 0.002)
+
+
+@pytest.fixture(params=["intbs_nlhinf", "intbs", "bs_nlhinf"])
+def backstepping(request) -> Cascade:
+    """The backstepping cascades, whose six law states (integrals) the last test reads by index."""
     return Cascade(load_controller(request.param), load_vehicle("paper_quad"), 0.002)
 
 
@@ -40,8 +46,9 @@ def test_a_thrust_replaces_the_laws_and_is_saturated(cascade):
     assert cascade.step(AT_REF, HOVER_REF, thrust_n=1e6).thrust_n == pytest.approx(28.0)
 
 
-def test_the_overrides_leave_the_compiled_path_in_step_with_the_laws(cascade):
+def test_the_overrides_leave_the_compiled_path_in_step_with_the_laws(backstepping):
     """An overridden step and then plain steps: the laws' states carry across (no reset)."""
+    cascade = backstepping
     for _ in range(50):
         cascade.step(AT_REF._replace(position_m=(0.0, 0.0, 0.9)), HOVER_REF)
     names, before = cascade.law_states()

@@ -3,12 +3,13 @@
 For each (phase, event) pair the table defines, a fresh commander is flown into the phase along a
 route of table rows (each step of the route is itself checked), the event is made to happen (a
 command is fired; an internal event is provoked: a plan is let run out, setpoints stop, the
-vehicle touches down, the geofence is breached) and the phase and mode afterwards must be the
-row's. The vehicle follows its reference exactly and stops at the ground, as in the other
-commander tests.
+vehicle touches down, the geofence is breached or changed, the sticks move or raise the throttle)
+and the phase and mode afterwards must be the row's. The vehicle follows its reference exactly and
+stops at the ground, as in the other commander tests.
 """
 
 import math
+from dataclasses import replace
 
 import pytest
 
@@ -27,9 +28,11 @@ from autopilot.commander.transitions import (
     lookup,
 )
 from autopilot.guidance.offboard import OffboardSetpoint
+from autopilot.guidance.sticks import Sticks
 from autopilot.mavlink.codec import mavlink as m
 from autopilot.mission.executor import MissionExecutor
 from autopilot.mission.items import WireItem, parse_item
+from autopilot.mission.plans import Area, Geofence
 from autopilot.params.definitions import GF_HOLD, GF_LAND, GF_RTL, default_parameters
 from quadcommon import frames
 from quadcommon.trajectories import Hover
@@ -37,8 +40,8 @@ from quadcommon.trajectories import Hover
 HOME = (47.397742, 8.545594, 488.0)
 DT = 0.002
 E, P = Event, Phase
-SCENARIO_THEN = FlightMode.POSCTL  # distinct from the modes the table sets itself
-HOLD_ASKED = FlightMode.POSCTL
+SCENARIO_THEN = FlightMode.AUTO_LOITER  # the hold a scenario hands over to
+MANUAL_ASKED = FlightMode.ALTCTL  # distinct from POSCTL, which the stick override sets itself
 
 # How to reach each phase from a fresh (disarmed) commander: events, each a row of the table.
 ROUTES: dict[Phase, list[Event]] = {
@@ -53,6 +56,7 @@ ROUTES: dict[Phase, list[Event]] = {
     P.RTL: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.RTL],
     P.RTL_LAND: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.RTL, E.PLAN_DONE],
     P.LANDED: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.LAND, E.TOUCHDOWN],
+    P.MANUAL: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.MANUAL],
 }
 FAILSAFE_ACTION = {E.FAILSAFE_HOLD: GF_HOLD, E.FAILSAFE_RTL: GF_RTL, E.FAILSAFE_LAND: GF_LAND}
 
@@ -82,6 +86,7 @@ class Flight:
         self.c = Commander(default_parameters())
         self.t = 0.0
         self.feed_setpoints = True
+        self.sticks = Sticks(0.0)  # fed every step (a MANUAL_CONTROL stream), moved by happen()
         self._state((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         self.c.set_mission(0.0, _mission(mission_end))
 
@@ -91,6 +96,7 @@ class Flight:
     def step(self) -> None:
         if self.feed_setpoints:
             self.c.offboard_setpoint(OffboardSetpoint(self.t, position=(0.0, 0.0, 2.5)))
+        self.c.manual_sticks(replace(self.sticks, time_s=self.t))
         out = self.c.step(self.t, DT)
         if out.motors == Motors.FLY:
             ref = out.reference
@@ -110,10 +116,30 @@ class Flight:
     def height(self) -> float:
         return self.c.state.position_m[2]
 
+    def prepare(self, event: Event) -> None:
+        """What ``event`` needs besides the phase: a manual mode on the ground for the sticks to take
+        off in, the override of OFFBOARD enabled, the throttle down to land on the sticks."""
+        c = self.c
+        if event == E.STICK_TAKEOFF:
+            assert c.set_mode(self.t, MANUAL_ASKED).accepted
+        elif event == E.RC_OVERRIDE and c.phase == P.OFFBOARD:
+            c.params.set("COM_RC_OVERRIDE", 3)
+        elif event == E.TOUCHDOWN and c.phase == P.MANUAL:
+            self.sticks = replace(self.sticks, up=-1.0)
+
     def happen(self, event: Event) -> None:
         """Make ``event`` happen in the current phase."""
         c, phase = self.c, self.c.phase
-        if event == E.PLAN_DONE:
+        if event == E.STICK_TAKEOFF:
+            self.sticks = replace(self.sticks, up=0.5)
+            self.step_until(lambda: c.phase != phase, seconds=1.0)
+        elif event == E.RC_OVERRIDE:
+            self.step()  # the stream as it was
+            self.sticks = replace(self.sticks, forward=0.5)  # then a stick moves (held, it would not)
+            self.step_until(lambda: c.phase != phase, seconds=1.0)
+        elif event == E.MISSION_INVALID:  # a fence that excludes the mission's waypoint (1, 0)
+            c.set_geofence(self.t, Geofence((Area(False, centre=(1.0, 0.0), radius_m=0.3),)))
+        elif event == E.PLAN_DONE:
             self.step_until(lambda: c.phase != phase)
         elif event == E.TOUCHDOWN:
             self.step_until(lambda: c.phase == P.LANDED)
@@ -134,12 +160,13 @@ class Flight:
         else:  # a command
             args = {
                 E.DISARM: {"force": True, "why": "disarmed"},
-                E.HOLD: {"mode": HOLD_ASKED},
+                E.MANUAL: {"mode": MANUAL_ASKED},
                 E.SCENARIO: {"trajectory": Hover((0.0, 0.0, 1.5), 0.0, 1.0), "then": SCENARIO_THEN},
                 E.REPOSITION: {"target": (1.0, 0.0, 2.0), "speed_m_s": None, "yaw_rad": None},
             }.get(event, {})
             if self.feed_setpoints:  # a fresh setpoint: OFFBOARD needs a stream
                 c.offboard_setpoint(OffboardSetpoint(self.t, position=(0.0, 0.0, 2.5)))
+            c.manual_sticks(replace(self.sticks, time_s=self.t))  # the manual modes need the sticks
             assert c._fire(self.t, event, **args).accepted, c.events[-1:]
 
 
@@ -163,11 +190,12 @@ def _fly_to(phase: Phase, mission_end: int) -> Flight:
 def test_every_row_of_the_table(phase: Phase, event: Event) -> None:
     row = TRANSITIONS[(phase, event)]
     flight = _fly_to(phase, m.MAV_CMD_NAV_RETURN_TO_LAUNCH if event == E.MISSION_RTL else m.MAV_CMD_NAV_LAND)
+    flight.prepare(event)
     mode_before = flight.c.mode
     flight.happen(event)
     c = flight.c
     assert c.phase == (phase if not isinstance(row.to, Phase) else row.to)
-    expected_mode = {KEEP: mode_before, ASKED: HOLD_ASKED, AFTER: SCENARIO_THEN}.get(row.mode, row.mode)
+    expected_mode = {KEEP: mode_before, ASKED: MANUAL_ASKED, AFTER: SCENARIO_THEN}.get(row.mode, row.mode)
     assert c.mode == expected_mode
     assert c.armed == (c.phase != P.DISARMED)
 

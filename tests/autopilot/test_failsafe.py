@@ -6,6 +6,7 @@ import pytest
 from autopilot.commander.commander import ACCEPTED, DENIED, Commander, Motors, Phase, VehicleState
 from autopilot.commander.failsafe import FailsafeMonitor, fence_excess, prearm_problem
 from autopilot.commander.modes import FlightMode
+from autopilot.guidance.sticks import Sticks
 from autopilot.params.definitions import default_parameters
 
 DT = 0.002
@@ -15,15 +16,19 @@ def state(t, p=(0.0, 0.0, 0.0), v=(0.0, 0.0, 0.0), yaw=0.0):
     return VehicleState(t, p, v, (0.0, 0.0, yaw), (0.0, 0.0, 0.0))
 
 
-def fly(c: Commander, t0: float, seconds: float, drift=(0.0, 0.0, 0.0), heartbeat_every=None):
-    """Step the commander; the vehicle follows its reference exactly, plus ``drift`` m/s."""
+def fly(c: Commander, t0: float, seconds: float, drift=(0.0, 0.0, 0.0), heartbeat_every=None, sticks=False):
+    """Step the commander; the vehicle follows its reference exactly, plus ``drift`` m/s; with
+    ``sticks``, centred sticks at 10 Hz (a pilot's stream, for the manual modes)."""
     t = t0
     offset = [0.0, 0.0, 0.0]
-    next_hb = t0
+    next_hb = next_sticks = t0
     for _ in range(int(round(seconds / DT))):
         if heartbeat_every is not None and t >= next_hb:
             c.gcs_heartbeat(t)
             next_hb = t + heartbeat_every
+        if sticks and t >= next_sticks:
+            c.manual_sticks(Sticks(t))
+            next_sticks = t + 0.1
         out = c.step(t, DT)
         if out.reference is not None and out.motors == Motors.FLY:
             offset = [o + d * DT for o, d in zip(offset, drift, strict=True)]
@@ -74,12 +79,13 @@ def test_link_loss_without_any_heartbeat_never_triggers():
 )
 def test_link_loss_action_is_taken_once_and_announced(action, mode, phase):
     c, t = airborne(NAV_DLL_ACT=action, COM_DL_LOSS_T=5)
+    c.manual_sticks(Sticks(t))
     assert c.set_mode(t, FlightMode.POSCTL).accepted  # some other mode, to see the switch
     c.drain_events()
-    t = fly(c, t, 3.0, heartbeat_every=1.0)  # heartbeats flowing: nothing
+    t = fly(c, t, 3.0, heartbeat_every=1.0, sticks=True)  # heartbeats flowing: nothing
     assert c.mode == FlightMode.POSCTL and texts(c) == []
     last_hb = t - 1.0
-    t = fly(c, t, 5.5)  # > 5 s after the last heartbeat
+    t = fly(c, t, 5.5, sticks=True)  # > 5 s after the last heartbeat
     events = texts(c)
     lost = [e for e in events if e.startswith("GCS connection lost")]
     assert len(lost) == 1 and f"NAV_DLL_ACT {action}" in lost[0]
@@ -88,7 +94,7 @@ def test_link_loss_action_is_taken_once_and_announced(action, mode, phase):
     # Taken once: a user may switch mode back and the loss does not fight them.
     if phase == Phase.HOLD:
         c.set_mode(t, FlightMode.POSCTL)
-        fly(c, t, 2.0)
+        fly(c, t, 2.0, sticks=True)
         assert c.mode == FlightMode.POSCTL
         assert not any(e.startswith("GCS connection lost") for e in texts(c))
     # A heartbeat ends the loss.
@@ -102,9 +108,10 @@ def test_link_loss_action_is_taken_once_and_announced(action, mode, phase):
 )
 def test_vertical_fence_breach_takes_the_action_once(action, mode):
     c, t = airborne(GF_MAX_VER_DIST=4.0, RTL_RETURN_ALT=3.0, GF_ACTION=action)
-    c.set_mode(t, FlightMode.POSCTL)
+    c.manual_sticks(Sticks(t))
+    assert c.set_mode(t, FlightMode.POSCTL).accepted
     c.drain_events()
-    t = fly(c, t, 6.0, drift=(0.0, 0.0, 0.5))  # pushed up at 0.5 m/s beyond the reference
+    t = fly(c, t, 6.0, drift=(0.0, 0.0, 0.5), sticks=True)  # pushed up at 0.5 m/s beyond the reference
     events = texts(c)
     breached = [e for e in events if e.startswith("geofence breached")]
     assert len(breached) == 1, events

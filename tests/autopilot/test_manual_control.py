@@ -1,51 +1,83 @@
-"""POSCTL on the sticks: MANUAL_CONTROL flies the vehicle as PX4's position mode does (in
-simulation time, the whole stack in-process, the messages as a ground station sends them)."""
+"""MANUAL_CONTROL on the wire: POSCTL flown from the sticks as PX4's position mode, and the sticks'
+bad input (out of range, not an integer, a flood, a manual mode or an arm without a stream),
+refused with a reason and never a crash. In simulation time, the whole stack in-process, the
+messages as a ground station sends them. The other manual modes: test_manual_modes.py; the
+override and the loss of the stream: test_rc_override_loss.py."""
+
+from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import pytest
 from pymavlink.dialects.v20 import common as m
 
-from autopilot.commander.modes import FlightMode
-from autopilot.guidance.manual import ManualGuidance, ManualLimits, Sticks
+from autopilot.commander.modes import (
+    MAIN_ACRO,
+    MAIN_ALTCTL,
+    MAIN_MANUAL,
+    MAIN_POSCTL,
+    MAIN_STABILIZED,
+    FlightMode,
+)
+from autopilot.guidance.manual import ManualGuidance, ManualLimits
+from autopilot.guidance.sticks import Sticks
+from autopilot.mavlink.manual import decode_sticks
 from quadcommon.trajectories import Reference
 
 from ..sitl.test_params_failsafes import take_off
 from ..stack import Gcs, make_stack
 
 POSCTL = FlightMode.POSCTL.custom_mode
+LOITER = FlightMode.AUTO_LOITER.custom_mode
 ZERO3 = (0.0, 0.0, 0.0)
+MANUAL_MAINS = (MAIN_MANUAL, MAIN_STABILIZED, MAIN_ALTCTL, MAIN_POSCTL, MAIN_ACRO)
 
 
-def airborne():
-    """A vehicle holding at 2.5 m in AUTO.LOITER (the takeoff the failsafe tests use)."""
-    stack = make_stack()
+# -- helpers shared by the manual-mode tests ----------------------------------------------------------
+def airborne(altitude: float = 2.5, controller: str = "intbs_nlhinf"):
+    """A vehicle holding at ``altitude`` in AUTO.LOITER (the takeoff the failsafe tests use)."""
+    stack = make_stack(controller=controller)
     gcs = Gcs(stack)
     gcs.wait_heartbeat()
-    take_off(gcs, 2.5)
+    take_off(gcs, altitude)
     return stack, gcs
 
 
-def flying_in_posctl():
-    stack, gcs = airborne()
-    assert gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 3, 0).result == m.MAV_RESULT_ACCEPTED  # POSCTL
-    gcs.wait(lambda g: g.custom_mode == POSCTL, sim_timeout=2.0, what="POSCTL in the heartbeat")
-    stack.run_for(2.0)
-    return stack, gcs
-
-
-def hold_sticks(stack, gcs, seconds: float, x=0, y=0, z=500, r=0, every_s: float = 0.1) -> None:
-    """MANUAL_CONTROL at 10 Hz (as MAVSDK's example sends it) for ``seconds`` of simulation."""
-    end = stack.t + seconds
+def hold_sticks(stack, gcs, seconds: float, x=0, y=0, z=500, r=0, every_s: float = 0.1, sample=None) -> None:
+    """MANUAL_CONTROL every ``every_s`` (10 Hz, as MAVSDK's example sends it) for ``seconds`` of
+    simulation; ``sample(stack)`` after each."""
+    end = stack.t + seconds - 1e-9
     while stack.t < end:
         gcs.conn.mav.manual_control_send(gcs.system_id, x, y, z, r, 0)
         stack.run_for(every_s)
+        if sample is not None:
+            sample(stack)
+
+
+def enter_mode(stack, gcs, main: int) -> None:
+    """The sticks streaming, then DO_SET_MODE to a manual mode (accepted)."""
+    hold_sticks(stack, gcs, 0.3)
+    assert gcs.command(m.MAV_CMD_DO_SET_MODE, 1, main, 0).result == m.MAV_RESULT_ACCEPTED
+    assert stack.autopilot.commander.mode == FlightMode.from_px4(main, 0)
 
 
 def truth(stack):
     return stack.sim.plant.truth()
 
 
+def texts(gcs) -> str:
+    return "".join(gcs.statustext)
+
+
+def flying_in_posctl():
+    stack, gcs = airborne()
+    enter_mode(stack, gcs, MAIN_POSCTL)
+    hold_sticks(stack, gcs, 2.0)
+    return stack, gcs
+
+
+# -- POSCTL -----------------------------------------------------------------------------------------
 def test_sticks_fly_forward_left_up_and_yaw_in_the_heading_frame_then_hold():
     stack, gcs = flying_in_posctl()
     start = truth(stack).position_m
@@ -80,58 +112,33 @@ def test_sticks_fly_forward_left_up_and_yaw_in_the_heading_frame_then_hold():
     assert stack.autopilot.commander.mode == FlightMode.POSCTL
 
 
-def test_stale_sticks_read_as_centred_and_the_vehicle_says_so_once():
-    stack, gcs = flying_in_posctl()
-    hold_sticks(stack, gcs, 1.0, x=1000)
-    stack.run_for(6.0)  # no MANUAL_CONTROL for 6 s (COM_RC_LOSS_T 0.5 s): brake and hold
-    held = truth(stack).position_m
-    stack.run_for(2.0)
-    assert math.dist(truth(stack).position_m, held) < 0.02
-    gcs.wait(lambda g: any("manual control lost" in s for s in g.statustext), sim_timeout=1.0,
-             what="the loss notice")  # fmt: skip
-    assert sum("manual control lost" in s for s in gcs.statustext) == 1
-
-
-def test_sticks_outside_posctl_are_kept_but_not_flown():
+def test_posctl_holds_until_a_stick_moves():
     stack, gcs = airborne()
-    stack.run_for(2.0)  # AUTO.LOITER
     held = truth(stack).position_m
-    hold_sticks(stack, gcs, 2.0, x=1000)
-    assert math.dist(truth(stack).position_m, held) < 0.05
+    enter_mode(stack, gcs, MAIN_POSCTL)
+    hold_sticks(stack, gcs, 3.0, x=50)  # inside the deadzone: held as AUTO.LOITER would
+    assert math.dist(truth(stack).position_m, held) < 0.02
 
 
-@pytest.mark.parametrize("axis, value", [("x", 1001), ("y", -32768), ("r", 5000), ("z", 1200)])
-def test_a_stick_outside_its_range_is_refused_with_its_axis_named(axis, value):
-    stack, gcs = flying_in_posctl()
+def test_held_deflection_in_hold_does_not_move_the_vehicle():
+    stack, gcs = airborne()
     held = truth(stack).position_m
-    sticks = {"x": 0, "y": 0, "z": 500, "r": 0, axis: value}
-    for _ in range(20):
-        gcs.conn.mav.manual_control_send(gcs.system_id, sticks["x"], sticks["y"], sticks["z"], sticks["r"], 0)
-        stack.run_for(0.1)
+    hold_sticks(stack, gcs, 3.0, x=1000)  # deflected from the stream's first sample: no movement
+    assert stack.autopilot.commander.mode == FlightMode.AUTO_LOITER
     assert math.dist(truth(stack).position_m, held) < 0.05
-    gcs.wait(lambda g: any(f"MANUAL_CONTROL {axis}={value}" in s for s in g.statustext), sim_timeout=2.0,
-             what="the refusal")  # fmt: skip
-
-
-def test_an_axis_sent_as_int16_max_is_not_sent_it_reads_as_centred():
-    stack, gcs = flying_in_posctl()
-    start = truth(stack).position_m
-    hold_sticks(stack, gcs, 2.0, x=1000, y=32767, z=32767, r=32767)  # only the pitch stick is sent
-    stack.run_for(3.0)
-    end = truth(stack).position_m
-    assert end[0] - start[0] > 1.0 and abs(end[1] - start[1]) < 0.05 and abs(end[2] - start[2]) < 0.05
 
 
 def test_the_reference_is_smooth_within_the_limits_and_never_below_ground():
     limits = ManualLimits(speed_horizontal=2.0, acceleration=2.0, speed_down=1.0)
     guidance = ManualGuidance()
     ref = Reference((0.0, 0.0, 0.3), ZERO3, ZERO3, 0.0, 0.0, 0.0)
+    state = SimpleNamespace(position_m=ref.position_m, velocity_m_s=ZERO3, euler_rad=ZERO3)
     dt = 0.002
-    guidance.update(Sticks(0.0, forward=1.0, up=-1.0))
-    assert guidance.engage_if_moved(0.0, limits)
+    sticks = Sticks(0.0, forward=1.0, up=-1.0)
+    assert guidance.engage_if_moved(sticks, limits)
     speeds = []
-    for k in range(1000):
-        new = guidance.reference(k * dt * 0.2, dt, ref, limits)  # fresh: t stays within the loss time
+    for _ in range(1000):
+        new = guidance.position(dt, ref, state, sticks, limits).reference
         dv = math.dist(new.velocity_m_s, ref.velocity_m_s)
         assert dv <= limits.acceleration * dt * math.sqrt(3) + 1e-12
         assert new.position_m[2] >= 0.0
@@ -141,7 +148,89 @@ def test_the_reference_is_smooth_within_the_limits_and_never_below_ground():
     assert ref.position_m[2] == 0.0 and ref.velocity_m_s[2] == 0.0
     # inside the deadzone: centred
     inside = ManualGuidance()
-    inside.update(Sticks(10.0, forward=0.09, left=-0.09, up=0.05, yaw=0.1))
-    assert not inside.engage_if_moved(10.0, limits)
-    inside.update(Sticks(10.1, forward=0.11))
-    assert inside.engage_if_moved(10.1, limits)
+    assert not inside.engage_if_moved(Sticks(10.0, forward=0.09, left=-0.09, up=0.05, yaw=0.1), limits)
+    assert inside.engage_if_moved(Sticks(10.1, forward=0.11), limits)
+    assert not ManualGuidance().engage_if_moved(None, limits)
+
+
+# -- bad input ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("axis, value", [("x", 1001), ("y", -32768), ("r", 5000), ("z", 1200)])
+def test_a_stick_outside_its_range_is_refused_with_its_axis_named(axis, value):
+    stack, gcs = flying_in_posctl()
+    held = truth(stack).position_m
+    sticks = {"x": 0, "y": 0, "z": 500, "r": 0, axis: value}
+    for _ in range(3):  # the good stream goes on (else the loss would act), the bad one is refused
+        gcs.conn.mav.manual_control_send(gcs.system_id, sticks["x"], sticks["y"], sticks["z"], sticks["r"], 0)
+        hold_sticks(stack, gcs, 0.1)
+    assert math.dist(truth(stack).position_m, held) < 0.05
+    gcs.wait(lambda g: f"MANUAL_CONTROL {axis}={value}" in texts(g), sim_timeout=2.0, what="the refusal")
+    assert stack.autopilot.commander.mode == FlightMode.POSCTL
+
+
+def test_an_axis_sent_as_int16_max_is_not_sent_it_reads_as_centred():
+    stack, gcs = flying_in_posctl()
+    start = truth(stack).position_m
+    hold_sticks(stack, gcs, 2.0, x=1000, y=32767, z=32767, r=32767)  # only the pitch stick is sent
+    hold_sticks(stack, gcs, 3.0)
+    end = truth(stack).position_m
+    assert end[0] - start[0] > 1.0 and abs(end[1] - start[1]) < 0.05 and abs(end[2] - start[2]) < 0.05
+
+
+def test_a_value_that_is_not_an_integer_is_refused_at_the_edge():
+    """pymavlink decodes int16, so this only reaches an in-process caller: refused all the same."""
+    for bad in (math.nan, math.inf, 0.5):
+        msg = SimpleNamespace(x=0, y=bad, z=500, r=0)
+        sticks, reason = decode_sticks(msg, 1.0)
+        assert sticks is None and "MANUAL_CONTROL y=" in reason and "not an integer" in reason
+    below = decode_sticks(SimpleNamespace(x=0, y=0, z=-400, r=0), 1.0)[0]  # PX4 clamps z < 0: full down
+    assert below is not None and below.up == -1.0
+
+
+def test_a_flood_of_sticks_is_bounded_the_latest_counts():
+    stack, gcs = flying_in_posctl()
+    start = truth(stack).position_m
+    ap = stack.autopilot
+    refusals_before = sum(1 for t in gcs.statustext if "MANUAL_CONTROL" in t)
+    for k in range(5000):  # one frame's worth of traffic: 5,000 MANUAL_CONTROL, every other bad
+        if k % 2:
+            gcs.conn.mav.manual_control_send(gcs.system_id, 2000, 0, 500, 0, 0)
+        else:
+            gcs.conn.mav.manual_control_send(gcs.system_id, 0, 0, 500, 0, 0)
+    gcs.conn.mav.manual_control_send(gcs.system_id, 1000, 0, 500, 0, 0)  # the latest: full forward
+    stack.run_for(0.05)
+    assert ap.refusals.refused >= 2500  # every bad one refused
+    assert ap.commander.sticks.sticks.forward == 1.0  # of the good ones, the latest counts
+    stack.run_for(0.4)
+    assert truth(stack).velocity_m_s[0] > 0.1
+    refusals = sum(1 for t in gcs.statustext if "MANUAL_CONTROL" in t) - refusals_before
+    assert refusals <= 2  # the refusal is said once a second, not 2,500 times
+    assert not ap.faults.counts
+    hold_sticks(stack, gcs, 2.0, x=1000)
+    assert truth(stack).position_m[0] - start[0] > 0.5  # the stream flies on, from the latest sticks
+    assert ap.commander.mode == FlightMode.POSCTL
+
+
+@pytest.mark.parametrize("main", MANUAL_MAINS)
+def test_a_manual_mode_without_sticks_is_refused_with_the_reason(main):
+    stack, gcs = airborne()
+    ack = gcs.command(m.MAV_CMD_DO_SET_MODE, 1, main, 0)
+    assert ack.result == m.MAV_RESULT_DENIED
+    name = FlightMode.from_px4(main, 0).px4_name
+    gcs.wait(lambda g: f"Switching to {name} is currently not possible: no manual control input" in texts(g),
+             sim_timeout=1.0, what="the refusal")  # fmt: skip
+    stack.run_for(1.0)
+    assert gcs.custom_mode == LOITER
+
+
+def test_arming_in_a_manual_mode_needs_the_sticks():
+    stack = make_stack()
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    enter_mode(stack, gcs, MAIN_ALTCTL)  # selected on the ground, with the sticks
+    stack.run_for(1.0)  # the sticks stop
+    ack = gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert ack.result == m.MAV_RESULT_DENIED
+    gcs.wait(lambda g: "arming refused: no manual control input (ALTCTL" in texts(g), sim_timeout=1.0,
+             what="the refusal")  # fmt: skip
+    hold_sticks(stack, gcs, 0.3)
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED

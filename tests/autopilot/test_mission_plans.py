@@ -113,7 +113,6 @@ def _vertex(seq, count, north=0.0, east=0.0, command=m.MAV_CMD_NAV_FENCE_POLYGON
             m.MAV_MISSION_INVALID_PARAM1,
         ),
         ([_vertex(0, 3.5), _vertex(1, 3.5, 5.0), _vertex(2, 3.5, 5.0, 5.0)], m.MAV_MISSION_INVALID_PARAM1),
-        ([fitem(0, m.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, 0.0, 0.0, 0.0)], m.MAV_MISSION_INVALID_PARAM1),
         ([fitem(0, m.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, math.nan, 0.0, 0.0)], m.MAV_MISSION_INVALID_PARAM1),
         ([fitem(0, m.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, math.inf, 0.0, 0.0)], m.MAV_MISSION_INVALID_PARAM1),
         ([fitem(0, m.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, 5.0, 0.0, 0.0, frame=m.MAV_FRAME_LOCAL_NED)],
@@ -130,6 +129,29 @@ def test_bad_fence_plans_are_refused_and_the_old_one_kept(proto, items, result):
     outs = upload(proto, items)
     assert next(acks(o) for o in outs if acks(o)) == [result]
     assert proto.plans[FENCE] is old and proto.state == TransferState.IDLE
+
+
+def test_a_circle_of_radius_zero_or_less_is_no_circle_accepted_ignored_and_noted(proto):
+    """MAVSDK's geofence example sends its polygon and Circle(Point(0, 0), 0): "no circle"."""
+    no_circle = m.MAVLink_mission_item_int_message(  # at latitude 0, longitude 0: 5,000 km away
+        SYS, COMP, 4, GLOBAL, CIRCLE_IN, 0, 1, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0, FENCE
+    )
+    negative = fitem(5, m.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, -3.0, 0.0, 0.0)
+    sent = [*square_fence(10.0), no_circle, negative]
+    outs = upload(proto, sent)
+    assert acks(outs[-1]) == [m.MAV_MISSION_ACCEPTED]
+    assert (6, "geofence items 4, 5: a circle of radius <= 0 is no circle, ignored") in outs[-1].notices
+    got = download(proto, FENCE)  # stored and downloaded back as uploaded
+    assert [[getattr(g, f) for f in FIELDS] for g in got] == [[getattr(s, f) for f in FIELDS] for s in sent]
+    fence = Geofence.from_items(outs[-1].fence.items, HOME)
+    assert len(fence.areas) == 1  # the square only: neither circle encloses or excludes anything
+    assert fence.excess((0.0, 0.0, 1.0))[0] < 0.0 < fence.excess((15.0, 0.0, 1.0))[0]
+    alone = m.MAVLink_mission_item_int_message(
+        SYS, COMP, 0, GLOBAL, CIRCLE_IN, 0, 1, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0, FENCE
+    )
+    only = upload(proto, [alone])
+    assert acks(only[-1]) == [m.MAV_MISSION_ACCEPTED]
+    assert Geofence.from_items(only[-1].fence.items, HOME).areas == ()  # no fence at all
 
 
 def test_bad_rally_points_are_refused(proto):

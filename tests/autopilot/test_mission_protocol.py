@@ -121,7 +121,8 @@ def test_a_bad_item_rejects_the_upload_and_keeps_the_old_mission(proto, bad, res
     assert acks(outs[3]) == [m.MAV_MISSION_ERROR]  # a stray item after the rejection
 
 
-def test_timeout_after_five_retries_cancels_and_keeps_the_old_mission(proto):
+def test_retries_every_250_ms_then_5_s_of_silence_cancels_and_keeps_the_old_mission(proto):
+    """PX4's rule (mavlink_mission: retry timeout 250 ms, protocol timeout 5 s)."""
     upload(proto, waypoints(2))
     old = proto.mission
     proto.handle(wire(m.MAVLink_mission_count_message(SYS, COMP, 5)), 10.0)
@@ -136,9 +137,9 @@ def test_timeout_after_five_retries_cancels_and_keeps_the_old_mission(proto):
                 requests.append((round(t, 2), msg.seq))
             else:
                 cancelled = (round(t, 2), msg.type)
-    assert [seq for _, seq in requests] == [3] * 5
-    assert requests[0][0] == pytest.approx(10.52, abs=0.06)
-    assert cancelled == (pytest.approx(13.02, abs=0.06), m.MAV_MISSION_OPERATION_CANCELLED)
+    assert {seq for _, seq in requests} == {3} and 18 <= len(requests) <= 20
+    assert requests[0][0] == pytest.approx(10.27, abs=0.06)
+    assert cancelled == (pytest.approx(15.02, abs=0.06), m.MAV_MISSION_OPERATION_CANCELLED)
     assert proto.mission is old and proto.state == TransferState.IDLE
 
 

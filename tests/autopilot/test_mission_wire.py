@@ -99,10 +99,11 @@ def test_missing_items_time_out_and_the_old_mission_stays(vehicle):
             ack = msg
     elapsed = stack.t - start
     assert ack is not None and ack.type == m.MAV_MISSION_OPERATION_CANCELLED
-    assert len(requests) == 1 + 5  # the request itself, then 5 retries 0.5 s apart
+    # PX4's rule: the request, then a retry every 250 ms (polled every 50 ms: at most 0.3 s apart) until
+    # 5 s without an item from the client
     gaps = [b - a for a, b in zip(requests, requests[1:], strict=False)]
-    assert all(0.49 < g < 0.52 for g in gaps), gaps
-    assert 2.99 < elapsed < 3.1  # cancelled 0.5 s after the last retry (transfers polled every 50 ms)
+    assert len(requests) >= 15 and all(0.24 < g < 0.31 for g in gaps), gaps
+    assert 4.99 < elapsed < 5.4
     assert download_equals(vehicle, old)
 
 
@@ -118,7 +119,7 @@ def test_out_of_sequence_item_is_rerequested_then_times_out(vehicle):
     vehicle.mav.send(new[2].message(vehicle.target, 2))  # wrong seq: dropped, 1 asked for again at once
     again = wait_for(vehicle, "MISSION_REQUEST_INT", 0.3)
     assert again is not None and again.seq == 1
-    ack = wait_for(vehicle, "MISSION_ACK", 5.0)
+    ack = wait_for(vehicle, "MISSION_ACK", 6.0)
     assert ack is not None and ack.type == m.MAV_MISSION_OPERATION_CANCELLED
     assert download_equals(vehicle, old)
 

@@ -9,8 +9,16 @@ script and the vehicle inside a loopback-only network namespace (test_mavsdk3.py
 no quadsitl import: it is what a user's script would be, unchanged against PX4 SITL.
 
 One JSON object per line on stdout (``{"event": ..., "t": wall s, ...}``), the last ``done`` or
-``error``; steps: telemetry, params, geofence, plan_import (QGC .plan with rally points), mission
-(gimbal and camera items), goto, offboard (position, velocity), mission_raw, manual_control, land.
+``error``; steps: telemetry, params, geofence_example, geofence, plan_import (QGC .plan with rally
+points), mission (gimbal and camera items), goto, offboard (position, velocity), mission_raw,
+manual_control, land, manual_control_example.
+
+``geofence_example`` and ``manual_control_example`` are MAVSDK-Python's ``examples/geofence.py`` and
+``examples/manual_control.py`` (tag 3.15.3), call for call with their values (the example files are
+not copied here): the geofence of a polygon about home plus ``Circle(Point(0, 0), 0)``, the
+example's way of saying "no circle"; one stick input, arm, takeoff, 5 s, one input,
+``start_position_control``, then the example's random inputs at 10 Hz (seeded here, so a failure
+can be replayed; the example loops forever, this runs it for 6 s), after which the sticks stop.
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ import asyncio
 import json
 import math
 import os
+import random
 import sys
 import time
 import traceback
@@ -78,6 +87,65 @@ async def params(drone: System) -> None:
     names = [p.name for p in all_params.int_params] + [p.name for p in all_params.float_params]
     wanted = ("MPC_XY_VEL_MAX", "GF_ACTION", "NAV_ACC_RAD")
     emit("params", count=len(names), has=[n for n in wanted if n in names])
+
+
+async def geofence_example(drone: System) -> None:
+    """examples/geofence.py: a polygon 0.0001 deg about home and the "no circle" circle."""
+    async for terrain_info in drone.telemetry.home():
+        latitude = terrain_info.latitude_deg
+        longitude = terrain_info.longitude_deg
+        break
+    await asyncio.sleep(1)
+    p1 = Point(latitude - 0.0001, longitude - 0.0001)
+    p2 = Point(latitude + 0.0001, longitude - 0.0001)
+    p3 = Point(latitude + 0.0001, longitude + 0.0001)
+    p4 = Point(latitude - 0.0001, longitude + 0.0001)
+    polygon = Polygon([p1, p2, p3, p4], FenceType.INCLUSION)
+    circle = Circle(Point(0, 0), 0, FenceType.INCLUSION)
+    geofenceData = GeofenceData([polygon], [circle])  # noqa: N806 (the example's name)
+    await drone.geofence.upload_geofence(geofenceData)
+    downloaded = await drone.mission_raw.download_geofence()
+    emit("geofence_example", uploaded=True, downloaded=len(downloaded),
+         commands=[i.command for i in downloaded], radii=[i.param1 for i in downloaded])  # fmt: skip
+
+
+# The example's stick inputs: [roll, pitch, throttle, yaw].
+MANUAL_INPUTS = [[0, 0, 0.5, 0], [-1, 0, 0.5, 0], [1, 0, 0.5, 0], [0, -1, 0.5, 0], [0, 1, 0.5, 0],
+                 [0, 0, 0.5, -1], [0, 0, 0.5, 1], [0, 0, 1, 0], [0, 0, 0, 0]]  # fmt: skip
+EXAMPLE_INPUTS_S = 6.0
+
+
+async def manual_control_example(drone: System) -> None:
+    """examples/manual_control.py on the landed, disarmed vehicle (COM_RC_LOSS_T 1 s: see
+    manual_control); then the sticks stop."""
+    await drone.manual_control.set_manual_control_input(float(0), float(0), 0.5, float(0))
+    await drone.action.arm()
+    await drone.action.takeoff()
+    await asyncio.sleep(5)
+    await drone.manual_control.set_manual_control_input(float(0), float(0), 0.5, float(0))
+    await drone.manual_control.start_position_control()
+    modes, in_air = set(), set()
+
+    async def watch(stream, seen: set, shown=str) -> None:
+        async for value in stream:
+            seen.add(shown(value))
+
+    watchers = [asyncio.create_task(watch(drone.telemetry.flight_mode(), modes)),
+                asyncio.create_task(watch(drone.telemetry.in_air(), in_air, bool))]  # fmt: skip
+    rng = random.Random(3)  # the example draws unseeded
+    end = time.monotonic() + EXAMPLE_INPUTS_S
+    while time.monotonic() < end:
+        input_list = MANUAL_INPUTS[rng.randint(0, len(MANUAL_INPUTS) - 1)]
+        roll, pitch, throttle, yaw = (float(v) for v in input_list)
+        await drone.manual_control.set_manual_control_input(pitch, roll, throttle, yaw)
+        await asyncio.sleep(0.1)
+    for task in watchers:
+        task.cancel()
+    emit("manual_control_example", modes=sorted(modes), in_air=sorted(in_air))
+    # The sticks stop: manual control lost in POSCTL -> NAV_RCL_ACT (2, return), and it lands.
+    returned = await first(drone.telemetry.flight_mode(), lambda m: str(m) == "RETURN_TO_LAUNCH", 10.0)
+    await first(drone.telemetry.armed(), lambda armed: not armed, 90.0)
+    emit("manual_control_lost", mode=str(returned), disarmed=True)
 
 
 async def geofence(drone: System) -> None:
@@ -184,6 +252,9 @@ async def mission_raw(drone: System) -> None:
 
 
 async def manual_control(drone: System) -> None:
+    # The vehicle runs at --speed 2: a 10 Hz (wall) joystick is 5 Hz of simulation time, so the
+    # loss timeout is doubled to keep PX4's margin of a real-time vehicle (5 samples).
+    await drone.param.set_param_float("COM_RC_LOSS_T", 1.0)
     for _ in range(5):
         await drone.manual_control.set_manual_control_input(0.0, 0.0, 0.5, 0.0)
         await asyncio.sleep(0.1)
@@ -217,8 +288,8 @@ async def main(url: str) -> None:
     await drone.connect(system_address=url)
     await first(drone.core.connection_state(), lambda s: s.is_connected, 20.0)
     emit("connected")
-    for step in (telemetry, params, geofence, plan_import, takeoff, mission, goto, offboard, mission_raw,
-                 manual_control, land):  # fmt: skip
+    for step in (telemetry, params, geofence_example, geofence, plan_import, takeoff, mission, goto, offboard,
+                 mission_raw, manual_control, land, manual_control_example):  # fmt: skip
         started = time.monotonic()
         try:
             await step(drone)

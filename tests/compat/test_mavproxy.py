@@ -43,7 +43,7 @@ INSTANCE = 5  # of the compat port block (PX4 instance 105's ports); sysid 6
 SYSID = 1 + INSTANCE
 ALT = 3.0
 WAYPOINTS_NE = [(0.0, 0.0), (3.0, 0.0), (3.0, 3.0)]  # line 0 is flown: PX4 semantics
-POSCTL, LOITER = 3 << 16, (4 << 16) | (3 << 24)  # PX4 custom_mode of POSCTL, AUTO.LOITER
+RTL, LOITER = (4 << 16) | (5 << 24), (4 << 16) | (3 << 24)  # PX4 custom_mode of AUTO.RTL, AUTO.LOITER
 COMPLETE = 5  # MISSION_STATE_COMPLETE
 
 
@@ -91,7 +91,7 @@ def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config, flight_logs):
 
             # Modes: "mode NAME" first, as a user would type it. MAVProxy announces "Mode X" at
             # most every 2 s, so the mode it sees is read back with "status HEARTBEAT".
-            mp.send("mode POSCTL")
+            mp.send("mode RTL")  # (POSCTL would need the sticks: MAVProxy sends none here)
             line = mp.expect(r"ERROR in command|Got COMMAND_ACK: DO_SET_MODE", 5)
             if line.group(0).startswith("ERROR"):
                 warnings.warn(
@@ -99,8 +99,8 @@ def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config, flight_logs):
                     "passed as a float); using 'long DO_SET_MODE 1 MAIN SUB'",
                     stacklevel=1,
                 )
-                mp.command("long DO_SET_MODE 1 3 0", r"Got COMMAND_ACK: DO_SET_MODE: ACCEPTED", 5)
-            wait_status(mp, "HEARTBEAT", lambda f: f["custom_mode"] == POSCTL, "POSCTL")
+                mp.command("long DO_SET_MODE 1 4 5", r"Got COMMAND_ACK: DO_SET_MODE: ACCEPTED", 5)
+            wait_status(mp, "HEARTBEAT", lambda f: f["custom_mode"] == RTL, "AUTO.RTL")
             mp.command("long DO_SET_MODE 1 4 3", r"Got COMMAND_ACK: DO_SET_MODE: ACCEPTED", 5)
             wait_status(mp, "HEARTBEAT", lambda f: f["custom_mode"] == LOITER, "AUTO.LOITER")
 

@@ -1,8 +1,9 @@
 """MAVSDK-Python 3 (gRPC API, ``from mavsdk import System``) flies a quadsitl vehicle as it flies PX4
 SITL: the flows of ``mavsdk3_flows.py`` (what MAVSDK-Python's examples do: telemetry, all params,
-geofence upload, a QGC .plan with rally points, takeoff, a mission with gimbal and camera items,
-goto, offboard position and velocity, mission_raw, manual control, land), in sequence against one
-vehicle.
+the geofence example (a polygon and the "no circle" circle), a geofence upload, a QGC .plan with
+rally points, takeoff, a mission with gimbal and camera items, goto, offboard position and
+velocity, mission_raw, manual control, land, the manual control example and the loss of its
+sticks), in sequence against one vehicle.
 
 MAVSDK-Python 3 starts a ``mavsdk_server`` that listens for gRPC on every interface, so the test
 runs it and the vehicle (``quadsitl up``, default instance 0: the default ports MAVSDK expects)
@@ -82,13 +83,18 @@ def test_mavsdk_python3_examples_fly_in_a_loopback_only_namespace(tmp_path):
     wall = time.monotonic() - started
     events = [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
     transcript = "\n".join(line[:400] for line in result.stdout.splitlines()[-60:])
-    up_log = log.read_text()[-3000:] if log.exists() else ""
+    full_log = log.read_text() if log.exists() else ""
+    up_log = full_log[-3000:]
     detail = f"rc {result.returncode}\n{transcript}\n--- quadsitl up:\n{up_log}"
     by_name = {e["event"]: e for e in events}
     assert "done" in by_name and not [e for e in events if e["event"] == "step_error"], detail
     assert by_name["telemetry"]["local_ok"] and abs(by_name["telemetry"]["lat"] - 47.397742) < 1e-5
     assert by_name["params"]["count"] > 50 and len(by_name["params"]["has"]) == 3
     assert by_name["geofence"]["downloaded"] == 5 and by_name["geofence"]["commands"][-1] == 5004
+    example = by_name["geofence_example"]  # examples/geofence.py: accepted, stored as uploaded
+    assert example["downloaded"] == 5 and example["commands"] == [5001] * 4 + [5003]
+    assert example["radii"][-1] == 0.0
+    assert "geofence item 4: a circle of radius <= 0 is no circle, ignored" in full_log
     assert by_name["plan_import"]["rally"] == 2 and by_name["plan_import"]["rally_downloaded"] == 2
     mission = by_name["mission"]
     assert mission["finished"] and mission["total"] == 3
@@ -98,6 +104,12 @@ def test_mavsdk_python3_examples_fly_in_a_loopback_only_namespace(tmp_path):
     assert by_name["manual_control"]["mode"] == "POSCTL"
     assert by_name["manual_control"]["north_moved"] > 1.0 > abs(by_name["manual_control"]["east_moved"])
     assert by_name["land"]["disarmed"]
+    sticks = by_name["manual_control_example"]  # examples/manual_control.py, 6 s of its inputs
+    assert "POSCTL" in sticks["modes"] and set(sticks["modes"]) <= {"HOLD", "POSCTL"}, sticks
+    assert sticks["in_air"] == [True]
+    lost = by_name["manual_control_lost"]  # then the sticks stop: NAV_RCL_ACT 2, return and land
+    assert lost["mode"] == "RETURN_TO_LAUNCH" and lost["disarmed"]
+    assert "manual control lost in POSCTL: returning to launch (NAV_RCL_ACT 2)" in full_log
     steps = {e["step"]: e["wall_s"] for e in events if e["event"] == "step_time"}
     print(f"MAVSDK-Python 3 flows: {wall:.1f} s wall in all; per step: {steps}")
     assert wall < WALL_LIMIT_S

@@ -32,9 +32,12 @@ def prose(text: str) -> str:
 
 def slug(heading: str) -> str:
     """The anchor Python-Markdown's toc extension (MkDocs) gives a heading."""
-    text = re.sub(r"`([^`]*)`", r"\1", heading)
-    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", text)  # a link's text
-    text = re.sub(r"[*_]{1,2}([^*_]+)[*_]{1,2}", r"\1", text)  # emphasis
+    parts = re.split(r"(`[^`]*`)", heading)  # emphasis and links only outside code spans
+    for i in range(0, len(parts), 2):
+        part = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", parts[i])  # a link's text
+        part = re.sub(r"\*{1,2}([^*]+)\*{1,2}", r"\1", part)
+        parts[i] = re.sub(r"(?<!\w)_{1,2}([^_]+)_{1,2}(?!\w)", r"\1", part)
+    text = "".join(p.strip("`") if p.startswith("`") else p for p in parts)
     text = re.sub(r"<[^>]+>", "", text)
     text = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
     text = re.sub(r"[^\w\s-]", "", text).strip().lower()
@@ -99,6 +102,9 @@ def test_slugs_are_mkdocs_anchors() -> None:
     assert slug("Specs (`config/campaigns/*.toml`)") == "specs-configcampaignstoml"
     assert slug("Starting a vehicle: `quadsitl up`") == "starting-a-vehicle-quadsitl-up"
     assert slug("The paper's ±30 % box") == "the-papers-30-box"
+    heading = "Stick override (`COM_RC_OVERRIDE`, `COM_RC_STICK_OV`)"
+    assert slug(heading) == "stick-override-com_rc_override-com_rc_stick_ov"
+    assert slug("**Bold** and _it_ [link](x.md)") == "bold-and-it-link"
 
 
 def test_every_page_is_in_the_navigation() -> None:

@@ -103,9 +103,11 @@ def test_assembler_stale_stream_does_not_hold_rows_back() -> None:
     a = sl.SessionAssembler(system_id=1, wall=0.0)
     a.add_controller(controller_rows(control_times(0.0, 10)), wall=0.0)  # then the autopilot goes quiet
     a.add_truth(truth_rows(control_times(0.0, 1000)), wall=5.0)
-    table = a.take(wall=5.1)  # controller stale (> 1 s): the truth alone sets the watermark
-    assert table.num_rows == 1000
-    assert np.isnan(table.column("x_ref_m").to_numpy()[10:]).all()
+    held = a.take(wall=4.9)  # controller silent for less than STALE_WALL_S: it holds the rest back
+    assert held.num_rows == 10 and not np.isnan(held.column("x_ref_m").to_numpy()).any()
+    table = a.take(wall=5.1)  # controller stale (> 5 s): the truth alone sets the watermark
+    assert table.num_rows == 990
+    assert np.isnan(table.column("x_ref_m").to_numpy()).all()
 
 
 def test_assembler_without_zenoh_falls_back_to_mavlink_rows() -> None:

@@ -119,9 +119,12 @@ class ScriptedAutopilot:
     def step(self, frame: Frame, timeout: float = 2.0, **answer_kwargs) -> Frame:
         """Answer ``frame`` and return the next one (AssertionError if none comes)."""
         self.answer(frame.time_usec, **answer_kwargs)
-        nxt = self.recv_frame(timeout)
-        assert nxt is not None, f"no frame after answering t={frame.time_usec} us"
-        return nxt
+        deadline = time.monotonic() + timeout
+        while True:  # copies of frames answered already (resent while we were slow) are skipped
+            nxt = self.recv_frame(max(deadline - time.monotonic(), 0.0))
+            assert nxt is not None, f"no frame after answering t={frame.time_usec} us"
+            if nxt.time_usec > frame.time_usec:
+                return nxt
 
 
 def sitl_toml_with(tmp_path: Path, **lockstep: float) -> Path:

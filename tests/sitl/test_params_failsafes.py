@@ -267,11 +267,19 @@ def test_gcs_heartbeat_loss_with_hold_action(vehicle):
     assert value_of(param_set(gcs, "NAV_DLL_ACT", 1, INT32)) == 1
     assert value_of(param_set(gcs, "COM_DL_LOSS_T", 5, INT32)) == 5
     take_off(gcs, 2.0, link)
+    sticks: dict = {}
+
+    def joystick(g: Gcs) -> None:  # centred sticks at 10 Hz: POSCTL flies on them
+        if g.sim_time - sticks.get("t", -1.0) >= 0.1:
+            g.conn.mav.manual_control_send(g.system_id, 0, 0, 500, 0, 0)
+            sticks["t"] = g.sim_time
+
+    wait_sim(gcs, 0.3, link, feed=joystick)
     assert gcs.command(m.MAV_CMD_DO_SET_MODE, 1, 3, 0).result == m.MAV_RESULT_ACCEPTED  # POSCTL
-    wait_sim(gcs, 2.0, link)
+    wait_sim(gcs, 2.0, link, feed=joystick)
     assert gcs.custom_mode == POSCTL and "GCS connection lost" not in texts(gcs)
     last_heartbeat = link["hb"]
-    gcs.wait(lambda g: g.custom_mode == LOITER, sim_timeout=10, what="hold after link loss")
+    gcs.wait(lambda g: joystick(g) or g.custom_mode == LOITER, sim_timeout=10, what="hold after link loss")
     # (the autopilot stamps the heartbeat on arrival, a little after the telemetry time we saw)
     assert 4.5 < gcs.sim_time - last_heartbeat < 7.0
     gcs.wait(lambda g: "GCS connection lost" in texts(g), sim_timeout=2, what="announcement")
