@@ -2,7 +2,8 @@
 #   make demo   set everything up (.venv) and run the main job: the paper's experiment in-process
 #               (out/paper) and through the SITL, three cascades, recorded and analysed (out/demo),
 #               then a 200-run Monte Carlo campaign of the +-30 % box (out/campaign)
-#   make test   set everything up (.venv, test tools) and run lint + the test suite
+#   make test   set everything up (.venv, test tools) and run lint, the docs' strict build and the test suite
+#   make docs   build the documentation site (out/site) with --strict: a broken link or reference fails
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -10,12 +11,12 @@ STAMP  := $(VENV)/.installed
 
 VIEW_VENDOR := gcs_scripts/view/static/vendor/MANIFEST.json
 
-.PHONY: demo test paper lint bench clean view browser
+.PHONY: demo test paper lint docs bench clean view browser
 
 $(STAMP): pyproject.toml setup.py
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,campaign,cluster]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,docs,campaign,cluster]'
 	# MAVProxy without its GUI dependencies (wxPython, opencv, ...: ~1 GB); the tests drive it headless.
 	$(BIN)/python -m pip install --quiet --no-deps 'MAVProxy>=1.8'
 	@touch $(STAMP)
@@ -55,8 +56,12 @@ paper: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+
 test: $(STAMP) $(VIEW_VENDOR) browser $(MAVSDK3)
 	$(BIN)/ruff check .
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 	$(BIN)/python -m tests.suite
 
 bench: $(STAMP)

@@ -27,7 +27,7 @@ The process shell (:mod:`autopilot.app`) owns the sockets, the selector and the 
 in-process runner (:mod:`sitl.inprocess`) couples this core with the simulator's through the same
 bytes.
 
-(~600 lines: the core is the autopilot's one composition point, wiring commander, guidance,
+(One module: the core is the autopilot's one composition point, wiring commander, guidance,
 missions, parameters, estimator, telemetry and signing to the links; the behaviour itself lives in
 those modules.)
 """

@@ -18,8 +18,8 @@ Usage::
     link.arm(); link.takeoff(2.5)
     link.wait_until(lambda l: l.position_paper[2] > 2.4, sim_timeout_s=20, what="climb")
 
-(One module of ~700 lines: every flying script imports just this client; its waits, commands and
-setpoint encoding share the telemetry state.)
+(One module: every flying script imports just this client; its waits, commands and setpoint
+encoding share the telemetry state.)
 """
 
 from __future__ import annotations

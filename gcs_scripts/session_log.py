@@ -25,7 +25,7 @@ latest time every live stream has reached, so the exact join never splits a row 
 parts. Part files (``NAME.parts/part-000001.parquet``...) are each a complete Parquet file with
 the same schema; :func:`merge_parts` streams them into ``NAME.parquet``.
 
-(One module of ~600 lines: the join, the part files and their merge are one on-disk format and
+(One module: the join, the part files and their merge are one on-disk format and
 change together.)
 """
 

@@ -40,7 +40,7 @@ MISSION_ITEM_REACHED until the mission is complete (and, if it ends with a landi
 Exit status: 0 success; 1 the vehicle refused (the MAV_MISSION_RESULT is printed) or a timeout;
 2 bad arguments or file; 3 no vehicle.
 
-(One script of ~600 lines, as the other flying scripts: the file formats, the client side of
+(One script, as the other flying scripts: the file formats, the client side of
 the mission protocol and the command line a user reads together in one place.)
 """
 

@@ -7,7 +7,7 @@ other directly (a zenoh router does not forward between peers, so a plain peer m
 A ``router`` endpoint in ``config/sitl.toml`` (multi-host runs) makes sessions connect there
 instead, in client mode.
 
-Rules learned the hard way (see the measurements in the README's notes on zenoh):
+Rules for using zenoh from Python here, each for a reason:
 
 * always set ``listen/endpoints`` (the default listens on every interface) and switch multicast
   scouting off;

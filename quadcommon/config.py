@@ -31,16 +31,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from . import environment
 from .impairment import LINKS, ImpairConfig, parse_impairment
 from .schema import ConfigError, Section, load_toml
 
 Vector3 = tuple[float, float, float]
 
-CONFIG_ENV = "QUADSITL_CONFIG_DIR"  # the user's configuration directories, joined by os.pathsep
+CONFIG_ENV = environment.CONFIG_DIR  # the user's configuration directories, joined by os.pathsep
 # Overrides [lockstep] spin_s of sitl.toml for every process started with it in the environment:
 # on a machine with fewer free cores than lockstep processes (several vehicles, a test suite beside
 # other jobs) a busy-waiting process takes the core its peer needs; 0 turns the spin off there.
-SPIN_ENV = "QUADSITL_LOCKSTEP_SPIN_S"
+SPIN_ENV = environment.LOCKSTEP_SPIN
 SHIPPED_PACKAGE = "quadsitl_config"  # config/ as installed (pyproject.toml: package-dir)
 
 
@@ -65,11 +66,8 @@ def config_dirs(environ: Mapping[str, str] | None = None) -> tuple[Path, ...]:
     """The directories a name is looked up in, first match wins: those in ``QUADSITL_CONFIG_DIR``
     (``--config-dir`` puts its directory first there), then the shipped defaults. A directory
     in the variable that does not exist is a :class:`ConfigError` naming it."""
-    environ = os.environ if environ is None else environ
     dirs: list[Path] = []
-    for text in environ.get(CONFIG_ENV, "").split(os.pathsep):
-        if not text.strip():
-            continue
+    for text in environment.config_dir_list(environ):
         path = Path(text).expanduser()
         if not path.is_dir():
             raise ConfigError(f"{CONFIG_ENV}: {text} is not a directory")
@@ -508,8 +506,9 @@ def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
         raise sec.error("resend_s", resend, f"less than timeout_s ({timeout:g} s)")
     impair = load_impair(root.section("impair", optional=True))
     root.finish()
-    if os.environ.get(SPIN_ENV):
-        spin = _spin_from_environment(os.environ[SPIN_ENV])
+    spin_text = environment.lockstep_spin()
+    if spin_text is not None:
+        spin = _spin_from_environment(spin_text)
     return SitlConfig(rates, hil, gcs, api, home, zenoh_port, router, timeout, spin, resend, impair)
 
 

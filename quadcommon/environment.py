@@ -1,5 +1,8 @@
-"""Every environment variable quadsitl reads, in one place (the docs' table is generated from
-:data:`VARIABLES`). Modules read them through the functions here, never through ``os.environ``.
+"""Every environment variable quadsitl reads, in one place: :data:`VARIABLES` names and explains
+each (the table in docs/configuration.md is :func:`markdown_table`'s output, checked by a test).
+Modules read them through the functions here, never through ``os.environ``.
+
+``python -m quadcommon.environment`` prints the table.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ PURE_PYTHON = "QUADSITL_PURE_PYTHON"
 CONFIG_DIR = "QUADSITL_CONFIG_DIR"
 LOCKSTEP_SPIN = "QUADSITL_LOCKSTEP_SPIN_S"
 KERNEL_CACHE = "QUADSITL_KERNEL_CACHE"
+NUMBA_CACHE = "NUMBA_CACHE_DIR"
+XDG_CACHE = "XDG_CACHE_HOME"
 
 VARIABLES: dict[str, str] = {
     PURE_PYTHON: "`1`: run every equation as plain Python, numba unused (the reference path; slower). "
@@ -23,6 +28,10 @@ VARIABLES: dict[str, str] = {
     "turns the lockstep's busy-wait off where cores are scarce (a test suite, several vehicles).",
     KERNEL_CACHE: "Where the compiled kernels' entry modules and numba's cache of them live. Default: "
     "`$XDG_CACHE_HOME/quadsitl/kernels` (`~/.cache/quadsitl/kernels`).",
+    NUMBA_CACHE: "numba's own: where numba keeps every compiled kernel when set (numba reads it; quadsitl "
+    "reads it to tell whether a kernel is compiled already). Default: beside the entry modules.",
+    XDG_CACHE: "The user's cache directory (the XDG convention), the default home of the kernel cache. "
+    "Default: `~/.cache`.",
 }
 
 
@@ -32,6 +41,31 @@ def pure_python(environ: Mapping[str, str] | None = None) -> bool:
     return environ.get(PURE_PYTHON, "") == "1"
 
 
+def lockstep_spin(environ: Mapping[str, str] | None = None) -> str | None:
+    """The text of ``QUADSITL_LOCKSTEP_SPIN_S`` (seconds), or None when unset or empty."""
+    environ = os.environ if environ is None else environ
+    return environ.get(LOCKSTEP_SPIN) or None
+
+
+def config_dir_list(environ: Mapping[str, str] | None = None) -> list[str]:
+    """The entries of ``QUADSITL_CONFIG_DIR`` (joined by ``os.pathsep``), empty ones left out."""
+    environ = os.environ if environ is None else environ
+    return [text for text in environ.get(CONFIG_DIR, "").split(os.pathsep) if text.strip()]
+
+
+def numba_cache_dir(environ: Mapping[str, str] | None = None) -> Path | None:
+    """numba's cache directory when ``NUMBA_CACHE_DIR`` sets one, else None."""
+    environ = os.environ if environ is None else environ
+    return Path(environ[NUMBA_CACHE]) if environ.get(NUMBA_CACHE) else None
+
+
+def markdown_table() -> str:
+    """The variables as a Markdown table (the one in docs/configuration.md)."""
+    rows = ["| variable | meaning |", "|---|---|"]
+    rows += [f"| `{name}` | {text} |" for name, text in VARIABLES.items()]
+    return "\n".join(rows)
+
+
 def kernel_cache_dir(environ: Mapping[str, str] | None = None) -> Path:
     """The directory of the compiled kernels' entry modules (created; a temporary one when the
     user's cache directory cannot be written)."""
@@ -39,7 +73,7 @@ def kernel_cache_dir(environ: Mapping[str, str] | None = None) -> Path:
     if environ.get(KERNEL_CACHE):
         path = Path(environ[KERNEL_CACHE]).expanduser()
     else:
-        base = Path(environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+        base = Path(environ.get(XDG_CACHE) or Path.home() / ".cache")
         path = base / "quadsitl" / "kernels"
     try:
         path.mkdir(parents=True, exist_ok=True)
@@ -50,3 +84,7 @@ def kernel_cache_dir(environ: Mapping[str, str] | None = None) -> Path:
         path = Path(tempfile.gettempdir()) / f"quadsitl-kernels-{os.getuid()}"
         path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+if __name__ == "__main__":
+    print(markdown_table())

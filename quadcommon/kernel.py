@@ -251,8 +251,9 @@ def cached(fn: Callable[..., Any], *bound: Callable[..., Any], nogil: bool = Fal
     compilation); without importing numba."""
     name, _ = _entry_name(fn, tuple(bound), nogil)
     pattern = f"{name}.entry-*.nbi"
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return any(Path(os.environ["NUMBA_CACHE_DIR"]).rglob(pattern))
+    numba_cache = environment.numba_cache_dir()
+    if numba_cache is not None:
+        return any(numba_cache.rglob(pattern))
     return any((environment.kernel_cache_dir() / "__pycache__").glob(pattern))
 
 

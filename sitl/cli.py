@@ -366,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     _estimation_arguments(p)
     p.set_defaults(func=_cmd_run)
 
-    from .campaign.cli import add_campaign_parser  # issue 11: Monte Carlo campaigns
+    from .campaign.cli import add_campaign_parser  # Monte Carlo campaigns
 
     add_campaign_parser(sub)
 

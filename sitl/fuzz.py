@@ -1,5 +1,5 @@
-"""The project's own fuzzer: seeded, reproducible hostile input against the cores in-process, and
-(``--udp``) against running processes.
+"""The project's own fuzzer: seeded, reproducible hostile input against the cores in-process
+(``python -m sitl.spray`` sends hostile traffic to running processes over UDP).
 
 ``python -m sitl.fuzz --inputs 100000 --seed 1`` flies a vehicle in-process (simulator core and
 autopilot core in lockstep, real MAVLink bytes), takes off, uploads a mission, then, while it
@@ -34,7 +34,7 @@ What is checked (:func:`fuzz_autopilot` raises :class:`FuzzFailure` naming the s
 NaN/inf/huge controls, wrong flags, stale times; would-be autopilot hellos; gust uploads of any
 bytes): no exception, the plant stays finite, the controls it applies stay in range.
 
-(~650 lines: the input generators, the checks after every frame and the report are one tool
+(One module: the input generators, the checks after every frame and the report are one tool
 with one seed; they change together.)
 """
 

@@ -404,7 +404,7 @@ def check_launch(specs: Sequence[VehicleSpec], running: Sequence[VehicleSpec] = 
 
 def spin_environment(vehicles: int, environ: dict[str, str] | None = None, cores: int | None = None):
     """The children's environment with the lockstep spin off when the vehicles' processes (two each)
-    outnumber the cores: a busy-waiting process would take the core its peer needs (README,
+    outnumber the cores: a busy-waiting process would take the core its peer needs (docs/running.md,
     "Several vehicles"); None (inherit) otherwise, or when the user set the spin already."""
     environ = dict(os.environ) if environ is None else environ
     cores = cores if cores is not None else (os.cpu_count() or 1)

@@ -1,7 +1,7 @@
 """Process loss under ``quadsitl up``: the survivor's failsafe acts, then the lost process restarts.
 
-Each vehicle is two processes, and each one has a failsafe for losing the other (README,
-"Parameters and failsafes"): the simulator lands the vehicle when its autopilot stops answering
+Each vehicle is two processes, and each one has a failsafe for losing the other (docs/parameters.md,
+"Failsafes"): the simulator lands the vehicle when its autopilot stops answering
 (``[lockstep] timeout_s``, 2 s wall), and the autopilot announces "simulator lost" and keeps
 answering ground stations when frames stop (``COM_SIM_LOSS_T``, 1 s wall). So when one process
 dies the supervisor leaves the other one running and:

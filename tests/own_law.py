@@ -1,5 +1,5 @@
 """A researcher's own control law, as the tests write it: one file in a configuration directory's
-laws/ and a controller file naming it (README "Adding a control law")."""
+laws/ and a controller file naming it (docs/controllers.md, "Adding a control law")."""
 
 from __future__ import annotations
 

@@ -14,8 +14,8 @@
   loopback). Where no namespace can be made, the compat tests run in the processes session.
 
 The lockstep processes the tests start do not busy-wait for their peer (``QUADSITL_LOCKSTEP_SPIN_S=0``,
-README "Speed"): the sessions share 2 cores here, and a spinning process takes the core its peer or
-another session needs (measured: the suite 447 s -> 319 s wall, 13.8 -> 9.7 CPU minutes). The
+docs/running.md, "Several vehicles"): the sessions share 2 cores here, and a spinning process takes
+the core its peer or another session needs (the suite takes about a third more wall time spinning). The
 benchmarks measure the SITL with its default spin.
 
 Each session's output goes to ``out/tests/<session>.log`` and is printed when it ends; the exit code

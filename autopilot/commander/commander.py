@@ -20,7 +20,7 @@ modes and OFFBOARD into POSCTL by ``COM_RC_OVERRIDE`` (:mod:`autopilot.guidance.
 
 Every change of phase or mode goes through the one table in :mod:`.transitions`; this module
 decides which event happened and carries out the row's action (the plans and the guards).
-(~550 lines in one module: the decisions and the actions share the commander's state; the
+(One module: the decisions and the actions share the commander's state; the
 transitions themselves are the table.)
 """
 

@@ -199,7 +199,8 @@ def lookup(phase: Phase, event: Event) -> Transition | None:
 
 
 def describe() -> str:
-    """The table as Markdown (README, closing notes): one line per row."""
+    """The table as Markdown, one line per row (``python -c "from autopilot.commander.transitions import
+    describe; print(describe())"``)."""
     groups = {ARMED: "armed (any)", FLYING: "flying (any)", NOT_BUSY: "flying, not returning or landing",
               AUTOMATIC + (P.OFFBOARD,): "flying an AUTO mode or OFFBOARD"}
     lines = ["| from | event | to | mode | action |", "|---|---|---|---|---|"]

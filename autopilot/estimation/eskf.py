@@ -58,7 +58,7 @@ with small numpy arrays than in floats, and ``F P F^T + Q`` several times more a
 products than compiled with F's structure. A prediction costs a few microseconds, so the
 covariance is predicted at every IMU sample (PX4's 100 Hz down-sampling is not needed).
 
-(~1,150 lines in one module on purpose: every fusion is written out element by element in plain
+(One module on purpose: every fusion is written out element by element in plain
 floats for speed, and they share the covariance layout; split, the index bookkeeping would be
 spread over files.)
 """

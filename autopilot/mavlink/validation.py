@@ -1,5 +1,5 @@
-"""What the autopilot accepts from a ground station, decided in one place (README "Security and
-robustness" has the table).
+"""What the autopilot accepts from a ground station, decided in one place (docs/security.md has the
+table).
 
 * **Commands** (COMMAND_LONG / COMMAND_INT): :data:`COMMAND_RULES` says, per MAV_CMD the autopilot
   handles, what each parameter it reads may be (MAV_BOOL values, integers in an enum's range,

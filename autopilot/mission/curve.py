@@ -53,8 +53,8 @@ def preload() -> None:
 
     The mission service calls it when an upload begins (MISSION_COUNT): the items then take a
     round trip each, and a fit at the end of the upload that comes before the import is done waits
-    for it (Python's import lock). Why not at every start, as before: most autopilots never fly a
-    timed mission (measured: an autopilot core's start 1.08 -> 0.95 s of CPU without it).
+    for it (Python's import lock). Not at every start: most autopilots never fly a timed mission,
+    and the import is about an eighth of an autopilot core's start-up CPU.
     """
     global _loader
     if _loader is None and "scipy.interpolate" not in sys.modules:

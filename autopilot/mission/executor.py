@@ -36,7 +36,7 @@ DO_CHANGE_SPEED for every later leg):
 An item with ``autocontinue = 0`` is reached and then held until the ground station sets the
 current item (MISSION_SET_CURRENT) or restarts the mission.
 
-(One module of ~550 lines: the legs of every item kind share the reference continuity rules and
+(One module: the legs of every item kind share the reference continuity rules and
 the executor's state; split by item kind, each part would need all of it.)
 """
 

@@ -79,7 +79,7 @@ def paper_tables_markdown(results: Results, scenarios: Sequence[str], controller
         "Errors are actual − desired. ISE = ∫e² dt over the run (m²s, rad²s); IADU = ∫|du/dt| dt "
         "(total variation of the control sampled at the control rate). The paper's tables are for "
         "its helix experiment; its absolute values are not reproducible from what it prints "
-        "(see README, 'How our numbers differ from the paper's')."
+        "(see the documentation, The paper in code: 'How our numbers differ from the paper's')."
     )
     for scenario in scenarios:
         paper = scenario == PAPER_SCENARIO

@@ -52,8 +52,8 @@ def run_command(args: argparse.Namespace) -> int:
     try:
         import numba  # noqa: F401
     except ImportError:
-        print("quadsitl campaign needs the batch engine: pip install 'quadsitl[campaign]' (numba, tqdm)",
-              file=sys.stderr)  # fmt: skip
+        print("quadsitl campaign needs numba for its batch engine (a dependency of quadsitl: reinstall "
+              "quadsitl, or pip install numba)", file=sys.stderr)  # fmt: skip
         return 2
     from . import full_stack
     from .report import write_report

@@ -37,7 +37,7 @@ a distribution: ``[[disturbances.step]]`` (``channel``, ``start_s``, ``value``, 
 ``mean_wind_m_s``, ``warm_start``; its ``seed`` is drawn per run unless fixed). Each run's
 profile is then validated by the gust-profile parser itself.
 
-(~560 lines: one schema, validated in one place, with the messages naming file, key, value and
+(One module: one schema, validated in one place, with the messages naming file, key, value and
 range.)
 """
 

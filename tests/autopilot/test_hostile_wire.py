@@ -1,4 +1,4 @@
-"""One regression test per finding of issue 9 ("anything on the wire may be hostile"), against the
+"""One regression test per way the wire may be hostile (anything on it may be), against the
 whole stack in-process (simulator core + autopilot core, real MAVLink bytes, simulation time).
 
 Findings 9 (process loss under the launcher) and 11 (instance ports) are about processes and
@@ -216,7 +216,7 @@ def test_10_after_a_simulator_restart_telemetry_resumes_at_once(flight):
     assert faults(stack) == {}
 
 
-# Resource bounds (issue 9, "what to build" 3) ---------------------------------------------------------
+# Resource bounds ---------------------------------------------------------------------------------------
 def test_missions_beyond_mis_items_max_get_no_space_and_far_items_invalid_param5():
     stack = make_stack()
     stack.autopilot.params.values["MIS_ITEMS_MAX"] = 5.0

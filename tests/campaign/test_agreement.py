@@ -1,4 +1,4 @@
-"""The batch engine flies exactly what the scalar runner flies, run for run (issue 11).
+"""The batch engine flies exactly what the scalar runner flies, run for run.
 
 * wire on (what campaigns fly): against ``sitl.inprocess.run_scenario`` itself, the whole flight
   stack in-process (simulator core, MAVLink frames, autopilot core with its commander and

@@ -1,5 +1,5 @@
 """Faults on the helix with the ``gps`` profile (see test_helix): each injected by the sensor
-models 15 s into the helix, and handled as issue 10 states."""
+models 15 s into the helix, and handled as docs/estimation.md states."""
 
 from __future__ import annotations
 

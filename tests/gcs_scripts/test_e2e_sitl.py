@@ -30,7 +30,7 @@ WALL_LIMIT_S = 60.0
 @contextmanager
 def _sitl(instance: int, scenario: str, speed: str = "4", log_dir: Path | None = None) -> Iterator[Launcher]:
     # --speed 4, not max: the scripts stream setpoints paced on the telemetry but must still get the
-    # CPU; at max the 1 s offboard timeout is ~50 ms of wall time (README "Time and speed").
+    # CPU; at max the 1 s offboard timeout is ~50 ms of wall time (docs/running.md, "Time and speed").
     spec = VehicleSpec(instance=instance, scenario=scenario, speed=speed,
                        log_dir=str(log_dir) if log_dir is not None else None)  # fmt: skip
     with Launcher() as launcher:

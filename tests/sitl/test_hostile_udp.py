@@ -1,4 +1,4 @@
-"""Issue 9's real-socket check: a vehicle flown over UDP by one ground station while another
+"""Hostile traffic on a real socket: a vehicle flown over UDP by one ground station while another
 client (``python -m sitl.spray hostile``, its own process, 1,000 datagrams a second from 300
 source ports) sprays datagrams at the same GCS port that must each be refused or ignored. The
 flight goes as commanded (takeoff, offboard to a point, land there), telemetry keeps flowing

@@ -1,4 +1,4 @@
-"""The package works wherever it is installed (issue 13): the wheel, built from this checkout,
+"""The package works wherever it is installed : the wheel, built from this checkout,
 installed into a fresh virtual environment outside it, run from an empty directory.
 
 Isolation: the venv is new (``python -m venv --without-pip``) and quadsitl goes into it from the
@@ -135,11 +135,11 @@ def test_up_links_and_stops_at_its_duration(installed):
 
 @pytest.mark.timeout(120)
 def test_up_then_fly_setpoints_flies_the_square(installed):
-    """The README's first flight, as installed: ``quadsitl up`` and ``quadsitl fly setpoints``."""
+    """The first flight of the README, as installed: ``quadsitl up`` and ``quadsitl fly setpoints``."""
     n = str(FLY_INSTANCE)
     # --speed 4, not max: the script streams setpoints paced on the telemetry, but it must still get
     # the CPU; at max (~20x here) the offboard-loss timeout (1 s simulated) is ~50 ms of wall time,
-    # and beside the rest of the suite the script was once starved that long (README "Time and speed").
+    # and beside the rest of the suite the script can be starved that long (docs/running.md).
     up = Child("quadsitl up", [str(installed.bin / "quadsitl"), "up", "--instance", n, "--speed", "4"],
                cwd=installed.empty, env=installed.env)  # fmt: skip
     try:

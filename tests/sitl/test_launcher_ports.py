@@ -1,4 +1,4 @@
-"""Ports by role and the launcher's port checks (finding 11), without processes: ports are
+"""Ports by role and the launcher's port checks, without processes: ports are
 computed, and "in use" is a socket this test binds on loopback itself.
 
 Instances: 80-89 and the ones that share ports with them (40 = 80 - 40, 50 = 80 - 30, 70 = 80 - 10).
@@ -119,7 +119,7 @@ def test_a_ground_station_on_a_client_port_is_normal():
 
 
 def test_client_port_that_is_a_running_instance_s_own_port_is_refused():
-    """Finding 11: instance 80's API client port 14620 is instance 40's autopilot API link."""
+    """Instance 80's API client port 14620 is instance 40's autopilot API link."""
     other = wire.ports(40)
     with (
         bound(other.hil, other.gcs_local, other.api_local),

@@ -1,4 +1,4 @@
-"""The restart policy and the supervisor's decisions (finding 9), without processes: fake children
+"""The restart policy and the supervisor's decisions, without processes: fake children
 print what the real ones print, and time is given (monotonic seconds), never slept.
 Real processes killed with SIGKILL under ``quadsitl up``: test_up_process_loss.py.
 """

@@ -1,5 +1,5 @@
 """`quadsitl up` as a user runs it: banner with the endpoints and the restart policy, clean stop, no
-orphans, port clashes (its own instance running; another instance sharing its ports, finding 11).
+orphans, port clashes (its own instance running; another instance sharing its ports).
 Process loss under it: test_up_process_loss.py."""
 
 import os
@@ -93,7 +93,7 @@ def test_up_leaves_no_orphan_when_the_launcher_is_killed():
 
 
 def test_up_refuses_an_instance_whose_ports_a_running_instance_uses():
-    """Finding 11: instance 80's API client port 14620 is instance 40's autopilot API link. With
+    """Instance 80's API client port 14620 is instance 40's autopilot API link. With
     instance 40 running (its sockets bound here, as its processes would), instance 80 is refused
     before anything starts, naming both instances, the port and the roles; so is a launch of 11."""
     other = wire.ports(40)

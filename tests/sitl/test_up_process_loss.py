@@ -1,4 +1,4 @@
-"""Process loss under ``quadsitl up`` for real (finding 9): kill -9 one process, the other one's
+"""Process loss under ``quadsitl up`` for real: kill -9 one process, the other one's
 failsafe acts, the launcher reports the loss and restarts the lost one, which links again.
 
 Each test runs ``quadsitl up`` on its own instance (80, 82-85; 81 belongs to
