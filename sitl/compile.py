@@ -3,10 +3,10 @@
 numba compiles each kernel entry (:mod:`quadcommon.kernel`) the first time a process needs it and
 caches it on disk, so after an install, an upgrade or an edited equation the first simulator,
 autopilot or campaign of each controller spends seconds compiling (~3-10 s per entry). Here the
-entries a flight needs are compiled up front, one process per core: the plant, the estimator, the
-cascade of each controller and the campaign engine's flight of each controller. Already cached
-entries cost a fraction of a second each. ``make test`` runs it before the suite, so no test's
-process waits on a compilation.
+entries a flight needs are compiled up front, one process per core: the plant, the sensor models,
+the estimator, the cascade of each controller and the campaign engine's flight of each
+controller. Already cached entries cost a fraction of a second each. ``make test`` runs it
+before the suite, so no test's process waits on a compilation.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 
 def targets(controllers: Sequence[str], campaign: bool = True) -> list[str]:
-    """What to compile: ``plant``, ``estimator``, ``cascade:NAME`` and ``campaign:NAME``, the slowest
-    first (they are handed out in this order)."""
-    out = ["plant", "estimator"]
+    """What to compile: ``plant``, ``estimator``, ``sensors``, ``cascade:NAME`` and ``campaign:NAME``,
+    the slowest first (they are handed out in this order)."""
+    out = ["plant", "estimator", "sensors"]
     if campaign:
         out += [f"campaign:{name}" for name in controllers]
     return out + [f"cascade:{name}" for name in controllers]
@@ -40,6 +40,10 @@ def compile_target(target: str) -> tuple[str, float]:
         from autopilot.estimation.eskf import ErrorStateEkf
 
         ErrorStateEkf()
+    elif kind == "sensors":
+        from simulator.sensors.models import sensor_entries
+
+        sensor_entries()
     elif kind == "cascade":
         from autopilot.control.cascade import Cascade
         from autopilot.control.config import load_controller
@@ -70,6 +74,10 @@ def entries_of(target: str) -> list[tuple]:
         from autopilot.estimation import kernels
 
         return [(kernels.predict,), (kernels.prior_variances,), (kernels.joseph_update,)]
+    if kind == "sensors":
+        from simulator.sensors.models import sensor_kernels
+
+        return [(fn,) for fn in sensor_kernels()]
     from autopilot.control import registry
     from autopilot.control.cascade import buffered_step
     from autopilot.control.config import load_controller

@@ -39,6 +39,7 @@ PROCESS_MODULES = {
     "tests/sitl/test_own_law_sitl.py",
     "tests/sitl/test_up_cli.py",
     "tests/sitl/test_up_process_loss.py",
+    "tests/sitl/test_estimator_accuracy_sitl.py",
     "tests/campaign/test_dask.py",
 }
 

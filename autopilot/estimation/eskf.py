@@ -1080,6 +1080,10 @@ class ErrorStateEkf:
             reason = f"yaw not converged (1-sigma {math.degrees(yaw):.2f} deg > {limit:g} deg)"
         elif pos_h > p.converged_pos_m:
             reason = f"horizontal position not converged (1-sigma {pos_h:.2f} m > {p.converged_pos_m:g} m)"
+        elif pos_v > p.converged_vpos_m:
+            # Just after the alignment the height is one GNSS fix (0.5-1 m 1-sigma): not fit to
+            # arm on until a few fixes and the baro have brought it down.
+            reason = f"vertical position not converged (1-sigma {pos_v:.2f} m > {p.converged_vpos_m:g} m)"
         flags = ESTIMATOR_ATTITUDE
         if not dead_reckoning:
             flags |= ESTIMATOR_VELOCITY_HORIZ | ESTIMATOR_POS_HORIZ_REL | ESTIMATOR_PRED_POS_HORIZ_REL

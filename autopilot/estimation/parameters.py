@@ -17,7 +17,10 @@ m/s^2/sqrt(Hz); likewise for the bias random walks (EKF2_GYR_B_NOISE 1e-3 rad/s^
 per sqrt(s)). The same parameter values then mean the same filter as PX4's, whatever our rate.
 
 Measurement noises are floors, as in PX4: a GPS fix's reported ``eph``/``epv``/speed accuracy and a
-vision pose's reported standard deviations are used when larger (EKF2_EV_NOISE_MD = 0).
+vision pose's reported standard deviations are used when larger (EKF2_EV_NOISE_MD = 0). A floor
+above the sensor's real noise makes the filter report a larger error than it has (the accuracies
+ground stations and failsafes read): an estimator profile sets the floors at or below its sensors'
+figures (``config/estimator/mocap.toml``).
 
 Parameters PX4 does not have carry the prefix ``EST_``.
 """
@@ -241,8 +244,10 @@ ESTIMATOR_PARAMS: tuple[ParamSpec, ...] = (
         kind=INT32,
         description="0: the reported noise with the parameters as floor, 1: the parameters only",
     ),
-    ParamSpec("EKF2_EVP_NOISE", 0.1, 0.01, 10.0, unit="m", description="vision position noise"),
-    ParamSpec("EKF2_EVA_NOISE", 0.1, 0.05, 1.0, unit="rad", description="vision angle (yaw) noise"),
+    # PX4's minimums are 0.01 m and 0.05 rad; a motion capture reports a millimetre and a few mrad,
+    # and with those minimums as floors the filter would claim ten times its real error.
+    ParamSpec("EKF2_EVP_NOISE", 0.1, 0.0001, 10.0, unit="m", description="vision position noise"),
+    ParamSpec("EKF2_EVA_NOISE", 0.1, 0.0005, 1.0, unit="rad", description="vision angle (yaw) noise"),
     ParamSpec("EKF2_EVP_GATE", 5.0, 1.0, 100.0, unit="SD", description="gate of the vision position test"),
     # -- health and start-up ----------------------------------------------------------------
     ParamSpec(
@@ -272,6 +277,14 @@ ESTIMATOR_PARAMS: tuple[ParamSpec, ...] = (
         50.0,
         unit="m",
         description="converged: horizontal position 1-sigma below this",
+    ),
+    ParamSpec(
+        "EST_CONV_VPOS",
+        0.3,
+        0.01,
+        50.0,
+        unit="m",
+        description="converged: vertical position 1-sigma below this",
     ),
 )
 
@@ -332,6 +345,7 @@ class EstimatorParams:
     converged_tilt_rad: float
     converged_yaw_rad: float
     converged_pos_m: float
+    converged_vpos_m: float
 
 
 def estimator_params(values: Mapping[str, float] | ParameterStore | None = None) -> EstimatorParams:
@@ -390,6 +404,7 @@ def estimator_params(values: Mapping[str, float] | ParameterStore | None = None)
         converged_tilt_rad=math.radians(v["EST_CONV_TILT"]),
         converged_yaw_rad=math.radians(v["EST_CONV_YAW"]),
         converged_pos_m=v["EST_CONV_POS"],
+        converged_vpos_m=v["EST_CONV_VPOS"],
     )
 
 

@@ -23,21 +23,36 @@ truth; a sensor samples when its period has elapsed and the sample is *delivered
 after the time it is valid for (the frame whose time first reaches it). Every reading carries its
 validity time ``time_s``; the wire carries the delivery (frame) time, as on a real vehicle.
 
-Noise is drawn from one :class:`random.Random` seeded from the config, so a run is repeatable; a
-sensor whose noise is zero draws nothing (an exact sensor costs one tuple).
+What a sample is (truth + bias + noise, the ISA, the Gauss-Markov errors) is written once as
+kernels in :mod:`.kernels`; this module decides when each sensor samples and what it delivers,
+and calls their entries. Noise is drawn from one seeded stream (:mod:`quadcommon.rng`, seeded
+from the config), so a run is repeatable, and a batch engine calling the same kernels with the
+same seed draws the same noise; a sensor whose noise is zero draws nothing.
 """
 
 from __future__ import annotations
 
+import functools
 import math
-import random
 from collections import deque
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
-from quadcommon.frames import wrap_pi
+from quadcommon import rng as random_stream
+from quadcommon.kernel import compiled, compiling, freeze
 
 from ..dynamics.plant import TruthState
+from . import kernels
 from .config import SensorConfig, SensorFault
+from .kernels import (  # noqa: F401 - part of this module's interface
+    ISA_EXPONENT,
+    ISA_LAPSE_RATE_K_M,
+    ISA_SEA_LEVEL_PRESSURE_HPA,
+    ISA_SEA_LEVEL_TEMPERATURE_C,
+    ISA_SEA_LEVEL_TEMPERATURE_K,
+    isa_altitude_m,
+    isa_pressure_hpa,
+    isa_temperature_c,
+)
 
 Vector3 = tuple[float, float, float]
 _Z3: Vector3 = (0.0, 0.0, 0.0)
@@ -45,31 +60,6 @@ _EPS_S = 1e-9  # time comparisons on a float grid
 
 GPS_FIX_NONE = 1  # MAVLink GPS_FIX_TYPE_NO_FIX: the receiver talks but has no position
 GPS_FIX_3D = 3
-
-# ISA troposphere (ICAO Doc 7488): p = p0 (1 - L h / T0)^(g M / (R L)).
-ISA_SEA_LEVEL_PRESSURE_HPA = 1013.25
-ISA_SEA_LEVEL_TEMPERATURE_C = 15.0
-ISA_LAPSE_RATE_K_M = 0.0065
-ISA_SEA_LEVEL_TEMPERATURE_K = 288.15
-ISA_EXPONENT = 5.255877  # g M / (R L)
-
-
-def isa_pressure_hpa(altitude_amsl_m: float) -> float:
-    """Static pressure (hPa) at ``altitude_amsl_m`` (m) in the ISA troposphere (< 11 km)."""
-    ratio = 1.0 - ISA_LAPSE_RATE_K_M * altitude_amsl_m / ISA_SEA_LEVEL_TEMPERATURE_K
-    return ISA_SEA_LEVEL_PRESSURE_HPA * ratio**ISA_EXPONENT
-
-
-def isa_altitude_m(pressure_hpa: float) -> float:
-    """Pressure altitude (m AMSL) of ``pressure_hpa`` (hPa): the inverse of :func:`isa_pressure_hpa`."""
-    ratio = (pressure_hpa / ISA_SEA_LEVEL_PRESSURE_HPA) ** (1.0 / ISA_EXPONENT)
-    return (1.0 - ratio) * ISA_SEA_LEVEL_TEMPERATURE_K / ISA_LAPSE_RATE_K_M
-
-
-def isa_temperature_c(altitude_amsl_m: float) -> float:
-    """Air temperature (deg C) at ``altitude_amsl_m`` (m) in the ISA troposphere."""
-    return ISA_SEA_LEVEL_TEMPERATURE_C - ISA_LAPSE_RATE_K_M * altitude_amsl_m
-
 
 class ImuReading(NamedTuple):
     specific_force_m_s2: Vector3  # body, front-left-up (+g up at rest)
@@ -188,31 +178,31 @@ class SensorSuite:
         self.config = config
         self.home_altitude_m = home_altitude_m
         self.imu_rate_hz = imu_rate_hz
-        self.rng = rng = random.Random(config.seed)
-        gauss = rng.gauss
+        self.rng = rng = random_stream.stream(config.seed)
+        self._k = k = sensor_entries()
         a, g = config.accelerometer, config.gyroscope
         # Switch-on biases: the fixed part plus a draw of the random part (same seed, same bias).
-        self.accel_bias = _add(a.bias, _draw3(gauss, a.turn_on_bias_std))
-        self.gyro_bias = _add(g.bias, _draw3(gauss, g.turn_on_bias_std))
+        self.accel_bias = _add(_floats(a.bias), k.draw3(rng, float(a.turn_on_bias_std)))
+        self.gyro_bias = _add(_floats(g.bias), k.draw3(rng, float(g.turn_on_bias_std)))
         self._accel_std = a.noise_density * math.sqrt(imu_rate_hz)
         self._gyro_std = g.noise_density * math.sqrt(imu_rate_hz)
         self._mag = config.magnetometer
         self.mag_bias = _add(
-            config.magnetometer.bias_gauss, _draw3(gauss, config.magnetometer.turn_on_bias_std_gauss)
+            _floats(config.magnetometer.bias_gauss),
+            k.draw3(rng, float(config.magnetometer.turn_on_bias_std_gauss)),
         )
-        self._field = config.magnetometer.earth_field_world_gauss
+        self._field = _floats(config.magnetometer.earth_field_world_gauss)
         self._baro = config.barometer
         self.baro_drift_hpa = 0.0
         self._gps = gps = config.gps
         self._vision = config.vision
         # Gauss-Markov GPS errors start from their stationary distribution.
-        self.gps_position_error = (
-            gauss(0.0, gps.horizontal_noise_std_m) if gps.horizontal_noise_std_m > 0.0 else 0.0,
-            gauss(0.0, gps.horizontal_noise_std_m) if gps.horizontal_noise_std_m > 0.0 else 0.0,
-            gauss(0.0, gps.vertical_noise_std_m) if gps.vertical_noise_std_m > 0.0 else 0.0,
-        )
-        s = gps.velocity_noise_std_m_s
-        self.gps_velocity_error = _draw3(gauss, s) if s > 0.0 else _Z3
+        sh, sv = float(gps.horizontal_noise_std_m), float(gps.vertical_noise_std_m)
+        self._gps_position_std = (sh, sh, sv)
+        s = float(gps.velocity_noise_std_m_s)
+        self._gps_velocity_std = (s, s, s)
+        self.gps_position_error = k.stationary(rng, self._gps_position_std)
+        self.gps_velocity_error = k.stationary(rng, self._gps_velocity_std)
         self.faults: list[SensorFault] = list(config.faults)
         self._t_last: float | None = None
         self._mag_s = _Schedule(self._mag.rate_hz, self._mag.latency_s)
@@ -254,7 +244,6 @@ class SensorSuite:
     # -- the timed interface ------------------------------------------------------------------------
     def step(self, t_s: float, truth: TruthState) -> SensorFrame:
         """Advance the sensors' random walks to ``t_s`` and return what is delivered at ``t_s``."""
-        rng = self.rng
         if self._t_last is not None:
             dt = t_s - self._t_last
             if dt > 0.0:
@@ -278,7 +267,7 @@ class SensorSuite:
         elif gps_s.pending:
             gps = gps_s.pop(t_s)
         if self._vision.enabled and vision_s.due(t_s) and not self._fault_active("vision_outage", t_s):
-            vision = vision_s.deliver(t_s, self._vision_pose(truth, t_s, rng))
+            vision = vision_s.deliver(t_s, self._vision_pose(truth, t_s))
         elif vision_s.pending:
             vision = vision_s.pop(t_s)
 
@@ -292,57 +281,35 @@ class SensorSuite:
         return SensorFrame(t_s, imu, readings, mag, baro, gps, vision)
 
     def _advance_biases(self, dt: float) -> None:
-        gauss = self.rng.gauss
+        k, rng = self._k, self.rng
         a, g = self.config.accelerometer, self.config.gyroscope
         if a.bias_random_walk > 0.0:
-            self.accel_bias = _add(self.accel_bias, _draw3(gauss, a.bias_random_walk * math.sqrt(dt)))
+            self.accel_bias = k.random_walk(rng, self.accel_bias, a.bias_random_walk, dt)
         if g.bias_random_walk > 0.0:
-            self.gyro_bias = _add(self.gyro_bias, _draw3(gauss, g.bias_random_walk * math.sqrt(dt)))
+            self.gyro_bias = k.random_walk(rng, self.gyro_bias, g.bias_random_walk, dt)
         if self._baro.drift_hpa_rthz > 0.0:
-            self.baro_drift_hpa += gauss(0.0, self._baro.drift_hpa_rthz * math.sqrt(dt))
+            self.baro_drift_hpa += self._baro.drift_hpa_rthz * math.sqrt(dt) * self._k.normal(rng)
 
     def _imu(self, truth: TruthState, t: float) -> ImuReading:
         ba, bg = self.imu_biases(t) if self.faults else (self.accel_bias, self.gyro_bias)
-        return ImuReading(
-            self._perturb(truth.specific_force_body_m_s2, ba, self._accel_std),
-            self._perturb(truth.body_rates_rad_s, bg, self._gyro_std),
-            t,
-        )
-
-    def _perturb(self, v: Vector3, bias: Vector3, std: float) -> Vector3:
-        if std > 0.0:
-            gauss = self.rng.gauss
-            return (
-                v[0] + bias[0] + gauss(0.0, std),
-                v[1] + bias[1] + gauss(0.0, std),
-                v[2] + bias[2] + gauss(0.0, std),
-            )
-        return (v[0] + bias[0], v[1] + bias[1], v[2] + bias[2])
+        force, rates = self._k.imu_reading(self.rng, truth.specific_force_body_m_s2, truth.body_rates_rad_s,
+                                           ba, bg, self._accel_std, self._gyro_std)  # fmt: skip
+        return ImuReading(force, rates, t)
 
     def _magnetometer(self, truth: TruthState, t: float) -> Vector3:
-        # Earth field into the body: R^T b_world (R maps body to world; rotation_from_quaternion's
-        # entries written out, the same operations: the magnetometer may sample every frame).
-        w, x, y, z = truth.quaternion
-        xx, yy, zz = x * x, y * y, z * z
-        xy, xz, yz = x * y, x * z, y * z
-        wx, wy, wz = w * x, w * y, w * z
-        bx, by, bz = self._field
-        field_body = (
-            (1.0 - 2.0 * (yy + zz)) * bx + 2.0 * (xy + wz) * by + 2.0 * (xz - wy) * bz,
-            2.0 * (xy - wz) * bx + (1.0 - 2.0 * (xx + zz)) * by + 2.0 * (yz + wx) * bz,
-            2.0 * (xz + wy) * bx + 2.0 * (yz - wx) * by + (1.0 - 2.0 * (xx + yy)) * bz,
-        )
         bias = self.mag_bias
         if self.faults:
             bias = _add(bias, self._fault_sum("mag_disturbance", t))
-        return self._perturb(field_body, bias, self._mag.noise_std_gauss)
+        return self._k.magnetometer_reading(self.rng, truth.quaternion, self._field, bias,
+                                            float(self._mag.noise_std_gauss))  # fmt: skip
 
     def _barometer(self, truth: TruthState, t: float) -> BaroReading:
         altitude = self.home_altitude_m + truth.position_m[2]
-        pressure = isa_pressure_hpa(altitude) + self._baro.bias_hpa + self.baro_drift_hpa
-        if self._baro.noise_std_hpa > 0.0:
-            pressure += self.rng.gauss(0.0, self._baro.noise_std_hpa)
-        return BaroReading(pressure, isa_altitude_m(pressure), isa_temperature_c(altitude), t)
+        baro = self._baro
+        pressure, pressure_altitude, temperature = self._k.barometer_reading(
+            self.rng, altitude, float(baro.bias_hpa), self.baro_drift_hpa, float(baro.noise_std_hpa)
+        )
+        return BaroReading(pressure, pressure_altitude, temperature, t)
 
     def _gps_fix(self, truth: TruthState, t: float) -> GpsReading:
         gps = self._gps
@@ -372,41 +339,18 @@ class SensorSuite:
         return fix
 
     def _advance_gps_errors(self, dt: float) -> None:
-        """First-order Gauss-Markov, exact discretisation: x <- a x + s sqrt(1 - a^2) n, a = e^(-dt/tau)."""
-        gps = self._gps
-        gauss = self.rng.gauss
-        e = self.gps_position_error
-        tau = gps.position_correlation_time_s
-        a = math.exp(-dt / tau) if tau > 0.0 else 0.0
-        k = math.sqrt(1.0 - a * a)
-        sh, sv = gps.horizontal_noise_std_m, gps.vertical_noise_std_m
-        self.gps_position_error = (
-            a * e[0] + k * gauss(0.0, sh) if sh > 0.0 else 0.0,
-            a * e[1] + k * gauss(0.0, sh) if sh > 0.0 else 0.0,
-            a * e[2] + k * gauss(0.0, sv) if sv > 0.0 else 0.0,
-        )
-        s = gps.velocity_noise_std_m_s
-        if s > 0.0:
-            u = self.gps_velocity_error
-            tau = gps.velocity_correlation_time_s
-            a = math.exp(-dt / tau) if tau > 0.0 else 0.0
-            k = math.sqrt(1.0 - a * a)
-            self.gps_velocity_error = (
-                a * u[0] + k * gauss(0.0, s),
-                a * u[1] + k * gauss(0.0, s),
-                a * u[2] + k * gauss(0.0, s),
-            )
+        """The Gauss-Markov position and velocity errors over ``dt`` (:func:`.kernels.gauss_markov`)."""
+        gps, k, rng = self._gps, self._k, self.rng
+        tau_p, tau_v = float(gps.position_correlation_time_s), float(gps.velocity_correlation_time_s)
+        e, u = self.gps_position_error, self.gps_velocity_error
+        self.gps_position_error = k.gauss_markov(rng, e, dt, tau_p, self._gps_position_std)
+        self.gps_velocity_error = k.gauss_markov(rng, u, dt, tau_v, self._gps_velocity_std)
 
-    def _vision_pose(self, truth: TruthState, t: float, rng: random.Random) -> VisionReading:
+    def _vision_pose(self, truth: TruthState, t: float) -> VisionReading:
         vis = self._vision
-        p = truth.position_m
-        s = vis.position_noise_std_m
-        if s > 0.0:
-            p = (p[0] + rng.gauss(0.0, s), p[1] + rng.gauss(0.0, s), p[2] + rng.gauss(0.0, s))
-        yaw = truth.euler_rad[2]
-        if vis.yaw_noise_std_rad > 0.0:
-            yaw = wrap_pi(yaw + rng.gauss(0.0, vis.yaw_noise_std_rad))
-        return VisionReading(t, p, yaw, s, vis.yaw_noise_std_rad)
+        s, s_yaw = float(vis.position_noise_std_m), float(vis.yaw_noise_std_rad)
+        p, yaw = self._k.vision_reading(self.rng, truth.position_m, truth.euler_rad[2], s, s_yaw)
+        return VisionReading(t, p, yaw, s, s_yaw)
 
     # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------
     def sample(self, truth: TruthState) -> SensorReadings:
@@ -424,7 +368,50 @@ def _add(a: Vector3, b: Vector3) -> Vector3:
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-def _draw3(gauss, std: float) -> Vector3:
-    if std <= 0.0:
-        return _Z3
-    return (gauss(0.0, std), gauss(0.0, std), gauss(0.0, std))
+def _floats(v) -> Vector3:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+class SensorEntries(NamedTuple):
+    """What :class:`SensorSuite` calls: the entries of :mod:`.kernels` (and of the stream's
+    :func:`~quadcommon.rng.normal`), or the kernels themselves where nothing compiles."""
+
+    draw3: Any
+    stationary: Any
+    random_walk: Any
+    normal: Any
+    imu_reading: Any
+    magnetometer_reading: Any
+    barometer_reading: Any
+    gauss_markov: Any
+    vision_reading: Any
+
+
+def sensor_kernels() -> SensorEntries:
+    """The kernels themselves (what Python runs where nothing compiles)."""
+    return SensorEntries(
+        *(getattr(random_stream, n) if n == "normal" else getattr(kernels, n) for n in SensorEntries._fields)
+    )
+
+
+@functools.cache
+def sensor_entries() -> SensorEntries:
+    """The entries, compiled (or loaded from numba's cache) and called once now on a scratch
+    stream, then frozen (an argument of another type is refused instead of stalling a flight for
+    a compilation). Once per process."""
+    entries = SensorEntries(*(compiled(fn) for fn in sensor_kernels()))
+    if compiling():
+        rng = random_stream.stream(0)
+        z3, q = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)
+        entries.draw3(rng, 1.0)
+        entries.stationary(rng, z3)
+        entries.random_walk(rng, z3, 1.0, 0.002)
+        entries.normal(rng)
+        entries.imu_reading(rng, z3, z3, z3, z3, 1.0, 1.0)
+        entries.magnetometer_reading(rng, q, z3, z3, 1.0)
+        entries.barometer_reading(rng, 488.0, 0.0, 0.0, 1.0)
+        entries.gauss_markov(rng, z3, 0.1, 0.1, z3)
+        entries.vision_reading(rng, z3, 0.0, 1.0, 1.0)
+        for entry in entries:
+            freeze(entry)
+    return entries

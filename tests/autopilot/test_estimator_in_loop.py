@@ -150,7 +150,7 @@ def test_non_finite_sensor_samples_are_refused_at_the_edge_and_the_flight_goes_o
     monkeypatch.setattr(suite, "_magnetometer", lambda truth, t: (nan, 0.2, 0.4))
     monkeypatch.setattr(suite, "_barometer", lambda truth, t: barometer(truth, t)._replace(
         pressure_altitude_m=math.inf))  # fmt: skip
-    monkeypatch.setattr(suite, "_vision_pose", lambda truth, t, rng: vision(truth, t, rng)._replace(
+    monkeypatch.setattr(suite, "_vision_pose", lambda truth, t: vision(truth, t)._replace(
         position_m=(nan, 0.0, 1.0)))  # fmt: skip
     stack.run_for(0.1)
     for name, original in (("_magnetometer", magnetometer), ("_barometer", barometer),

@@ -210,6 +210,10 @@ def test_alignment_at_rest_gives_tilt_and_heading_then_converges():
     assert ekf.initialised
     est = ekf.estimate()
     assert est.euler_rad == pytest.approx((0.05, -0.08, 2.0), abs=1e-6)  # exact sensors
+    # The height is one fix (epv 0.8 m) so far: not fit to arm on until a few more have come.
+    assert not ekf.status().converged and "vertical position not converged" in ekf.status().reason
+    static_run(ekf, q, 1.0, t0=t)
+    assert ekf.status().pos_vert_accuracy_m <= ekf.params.converged_vpos_m
     assert ekf.status().converged and ekf.status().reason == ""
 
 

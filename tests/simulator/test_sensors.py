@@ -304,3 +304,34 @@ def test_a_fault_from_config_is_read(tmp_path):
     (fault,) = load_sensors(path).faults
     assert fault == SensorFault("gps_outage", 10.0, 10.0, (0.0, 0.0, 0.0))
     assert fault.active(10.0) and fault.active(19.99) and not fault.active(20.0)
+
+
+def test_the_suite_draws_the_same_readings_compiled_and_in_python(monkeypatch):
+    """The readings are the kernels of simulator.sensors.kernels fed by the seeded stream: run by
+    Python instead of their compiled entries, the same seed gives the same readings, bit for bit
+    (what lets a batch engine's compiled loop fly the SITL's noise)."""
+    from quadcommon import rng
+    from simulator.sensors import models
+
+    config = load_sensors("gps")
+    vision = replace(load_sensors("mocap").vision, rate_hz=50.0)
+    fault = SensorFault("mag_disturbance", 0.5, 0.3, (0.1, 0.0, 0.0))
+    config = replace(config, vision=vision, faults=(fault,))
+    native = SensorSuite(config, HOME_ALT, RATE)
+    python_kernels = models.sensor_kernels()
+    monkeypatch.setattr(models, "sensor_entries", lambda: python_kernels)
+    monkeypatch.setattr(models.random_stream, "stream", rng.seeded_state)  # a list of floats
+    python = SensorSuite(config, HOME_ALT, RATE)
+    assert python._k is python_kernels and isinstance(python.rng, list)
+    assert (python.accel_bias, python.gyro_bias, python.mag_bias) == (native.accel_bias, native.gyro_bias,
+                                                                      native.mag_bias)  # fmt: skip
+    assert python.accel_bias != (0.0, 0.0, 0.0)
+    truth = truth_at()
+    seen = {"gps": 0, "vision": 0, "baro": 0, "mag": 0}
+    for k in range(1000):
+        t = k * DT
+        a, b = python.step(t, truth), native.step(t, truth)
+        assert a == b, t
+        for name in seen:
+            seen[name] += getattr(a, name) is not None
+    assert all(count > 10 for count in seen.values())
