@@ -5,9 +5,8 @@ goes into the core with the wall clock, and whatever the core returns goes out o
 its link. A lockstep frame is answered before anything else is sent (the simulator is waiting).
 Every 50 ms of wall time the core's housekeeping runs, its controller internals go to zenoh, the
 flight log it wrote goes to the log writer's thread (:mod:`autopilot.logger.storage`: the
-files, off the lockstep's critical path) and the info queryable is answered. While a log is
-open, the simulator's truth on zenoh gives the log the disturbance the simulator applies. Nothing
-here decides anything about the vehicle.
+files, off the lockstep's critical path) and the info queryable is answered. Nothing here
+decides anything about the vehicle.
 
 With an impairment (``[impair]`` of sitl.toml, ``--impair``, or ``quadsitl impair`` on zenoh's
 ``quadsitl/<N>/impair`` while running) every send goes through the link's outgoing channel and every
@@ -24,7 +23,7 @@ import selectors
 import time
 
 from quadcommon import bus, wire
-from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC, TRUTH_CODEC, TRUTH_FIELDS
+from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC
 from quadcommon.impaired_udp import ImpairedLinks, ImpairedReceiver, ImpairedSender, wait_s
 from quadcommon.udp import bind_udp
 
@@ -46,9 +45,6 @@ MAX_DATAGRAM = 65535
 # beyond it waits in the socket's buffer, which the kernel caps (and drops from), so it cannot
 # starve the control loop: measured by benchmarks/hostile_load.py.
 GCS_DATAGRAMS_PER_FRAME = 8
-# The truth row's columns the flight log's sim_disturbance reads (time, applied force and torque).
-DISTURBANCE_COLUMNS = [TRUTH_FIELDS.index(name) for name in
-                       ("time_s", "Ax_n", "Ay_n", "Az_n", "Ap_n_m", "Aq_n_m", "Ar_n_m")]  # fmt: skip
 
 
 class Autopilot:
@@ -69,7 +65,6 @@ class Autopilot:
         self.hil_only = selectors.DefaultSelector()  # while the GCS links' budgets are spent
         self.gcs_budget: dict[int, int] = {}
         self.session = self.controller_pub = self.estimator_pub = self.info_queryable = None
-        self.truth_sub = None  # the simulator's truth, for the flight log's disturbance
         self.impair_queryable = None
         self.impaired = ImpairedLinks(setup.sitl.impair, "autopilot")  # live: quadsitl/<N>/impair
         self.senders: dict[int, ImpairedSender] = {}
@@ -109,10 +104,6 @@ class Autopilot:
             self.info_queryable = self.session.declare_queryable(
                 wire.zenoh_key(n, "autopilot/info"), zenoh.handlers.FifoChannel(16)
             )
-            if self.log_writer is not None:
-                self.truth_sub = self.session.declare_subscriber(
-                    wire.zenoh_key(n, "truth"), zenoh.handlers.FifoChannel(1024)
-                )
             self.impair_queryable = self.session.declare_queryable(
                 wire.zenoh_key(n, "impair"), zenoh.handlers.FifoChannel(16)
             )
@@ -172,31 +163,11 @@ class Autopilot:
     def _write_log(self) -> None:
         """The flight log the core wrote since the last call, to the writer's thread; a write
         failure is announced once (STATUSTEXT), and the vehicle flies on."""
-        self._feed_disturbance()
         self.log_writer.handle(self.core.take_log())
         error = self.log_writer.error
         if error is not None and not self._log_error_reported:
             self._log_error_reported = True
             self.core.statustext(mavlink.MAV_SEVERITY_CRITICAL, f"flight log not written: {error}"[:200])
-
-    def _feed_disturbance(self) -> None:
-        sub = self.truth_sub
-        if sub is None:
-            return
-        logging = self.core.flight_log.logging
-        for _ in range(1024):  # bounded: what arrived since the last tick
-            try:
-                sample = sub.try_recv()
-            except Exception:
-                return  # session closing under us at shutdown
-            if sample is None:
-                return
-            if logging:
-                try:
-                    rows = TRUTH_CODEC.decode(sample.payload.to_bytes())
-                except ValueError:
-                    continue
-                self.core.flight_log.disturbance(rows[:, DISTURBANCE_COLUMNS].tolist())
 
     def info(self) -> dict:
         """The answer of ``quadsitl/<N>/autopilot/info``: the core's, and the links' impairment."""

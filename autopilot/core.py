@@ -58,7 +58,7 @@ from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
 from .mavlink.dispatch import FaultLog, MessageDispatcher
-from .mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
+from .mavlink.hil import DISTURBANCE_ID, ActuatorEncoder, CorruptFrame, decode_frame, disturbance_of
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.manual import decode_sticks
@@ -536,11 +536,18 @@ class AutopilotCore:
         self.log_transfer.pump(LOG_MESSAGES_PER_FRAME)
 
     def _log_frame(self, frame, guidance, output) -> None:
-        """The frame into the flight log (autopilot/logger/), when one is open."""
+        """The frame into the flight log (autopilot/logger/), when one is open; the simulator's
+        disturbance when the frame reports it (kept while no log is open: a log starts with it)."""
         log = self.flight_log
-        if log.frame(
-            frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1], frame.parts
-        ):  # the periodic topics are due (one frame in ten, at most)
+        parts = frame.parts
+        due = log.frame(
+            frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1], parts
+        )
+        if parts is not None and DISTURBANCE_ID in parts:  # a change, or a reminder (quadcommon.wire)
+            report = disturbance_of(parts)
+            if report is not None:
+                log.disturbance(*report)
+        if due:  # the periodic topics (one frame in ten, at most)
             s = log.snapshot
             s.estimate = frame.state
             s.reference = guidance.reference

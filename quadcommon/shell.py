@@ -16,6 +16,8 @@ def exit_process(code: int | None) -> NoReturn:
     plant exits 0.34 s after its last line, one that has only imported numpy 0.01 s; numba's and
     LLVM's finalisers), which every run and every test that starts a process would wait for.
     """
+    if sys.getprofile() is not None:  # under cProfile (benchmarks/sitl_rtf.py --profile): let it
+        sys.exit(code or 0)  # write its statistics as the interpreter ends
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

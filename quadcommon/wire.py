@@ -32,6 +32,15 @@ coarse for the paper's millimetre results, so the frame also carries ``ODOMETRY`
 NED position, FRD body, as a motion-capture system feeds PX4). The autopilot's state source
 is ``ODOMETRY`` by default, ``HIL_STATE_QUATERNION`` on request (``[autopilot] state_source``).
 
+The frame also carries the disturbance the simulator applies, as a ``DEBUG_FLOAT_ARRAY`` named
+``DISTURB`` (``array_id`` 0; ``data[0:3]`` the force at the centre of mass, N, world NED;
+``data[3:6]`` the torque on the Euler coordinates, N m, MAVLink's Euler convention; ``time_usec``
+the sample's time, the frame's or, when a changing value settles, the frame it settled at), at
+every change after a steady stretch, every 10 ms while it keeps changing, when it settles, and at
+least every :data:`DISTURBANCE_REPORT_EVERY_S` of simulated time (an autopilot that starts late
+learns it); a receiver holds the last report (``simulator.core.DisturbanceReport``). The flight
+log's ``sim_disturbance`` comes from it.
+
 ``HIL_ACTUATOR_CONTROLS``: ``mode`` has ``MAV_MODE_FLAG_SAFETY_ARMED`` when armed;
 ``flags`` bit 0 = lockstep (always set), bit 1 = ``controls`` are a normalised wrench
 (``actuation = "wrench"``: U1/U1_max, then tau_x, tau_y, tau_z / tau_max in FRD body axes),
@@ -69,6 +78,10 @@ INSTANCE_MIN, INSTANCE_MAX = 0, 99  # --instance N
 # MAVLink ids.
 AUTOPILOT_COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
 SIMULATOR_COMPONENT_ID = 51  # a component of the same system on the HIL link (not on GCS links)
+
+# The applied disturbance in the lockstep frame (see the module's docstring).
+DISTURBANCE_NAME = b"DISTURB"
+DISTURBANCE_REPORT_EVERY_S = 1.0
 
 HIL_FLAG_LOCKSTEP = 1
 HIL_FLAG_WRENCH = 2

@@ -92,6 +92,49 @@ class SimulatorSetup:
         )  # fmt: skip
 
 
+class DisturbanceReport:
+    """When a frame reports the applied disturbance (``DISTURB``, :mod:`quadcommon.wire`), and
+    with which sample time: the autopilot holds the last report, so the reports alone draw the
+    disturbance as applied, at a few bytes per change instead of one message a frame.
+
+    A value is reported
+
+    * at the first frame, and at least every ``DISTURBANCE_REPORT_EVERY_S`` (a late listener);
+    * at an onset: the first frame that differs from a value that was reported and held since;
+    * while it keeps changing (a ramp, a gust), at most every ``interval_us``;
+    * when it settles: the first value that stays, stamped with the frame it was first applied
+      (the previous one), so the end of a ramp is where it happened.
+    """
+
+    def __init__(self, interval_us: int = 10_000) -> None:
+        self.interval_us = interval_us
+        self._reported = None  # the last value reported, and its sample time
+        self._reported_usec = 0
+        self._previous = None  # the previous frame's value and time
+        self._previous_usec = 0
+
+    def due(self, time_usec: int, value: tuple) -> tuple[int, tuple] | None:
+        """``(sample time, value)`` to report in the frame at ``time_usec``, or None."""
+        previous, previous_usec = self._previous, self._previous_usec
+        self._previous, self._previous_usec = value, time_usec
+        reported = self._reported
+        if value == reported:  # steady and known: a reminder now and then
+            if time_usec - self._reported_usec < 1e6 * wire.DISTURBANCE_REPORT_EVERY_S:
+                return None
+            stamp = time_usec
+        elif reported is None or (previous == reported and self._reported_usec < previous_usec):
+            # the first frame, or an onset: a change after a value held (and reported) for a while
+            stamp = time_usec
+        elif value == previous:  # settled on a value not reported yet: it applied since then
+            stamp = previous_usec
+        elif time_usec - self._reported_usec >= self.interval_us:  # still changing
+            stamp = time_usec
+        else:
+            return None
+        self._reported, self._reported_usec = value, stamp
+        return stamp, value
+
+
 class SimulatorCore:
     def __init__(self, setup: SimulatorSetup, log: Callable[[str], None] = lambda text: None) -> None:
         self.setup = setup
@@ -121,6 +164,7 @@ class SimulatorCore:
         self.k = 0  # the frame being flown
         self.time_usec = 0
         self.truth_row: tuple[float, ...] = ()
+        self.disturbance_report = DisturbanceReport()
         self.frame_datagram = b""  # the current frame's, as sent: a resend repeats it byte for byte
         self.resends = 0  # frames sent again for want of an answer (a lost frame or answer)
         self.resend_after_s = resend_after_s(setup.sitl)
@@ -151,7 +195,10 @@ class SimulatorCore:
         force, torque, wind = self.schedule.evaluate(t)
         sensed = self.sensors.step(t, truth)
         self.truth_row = truth_row(t, truth, force, torque, wind)
-        datagram = self.encoder.encode(time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision)
+        report = self.disturbance_report.due(time_usec, (force, torque))
+        datagram = self.encoder.encode(
+            time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision, report
+        )
         self.frame_datagram = datagram
         return datagram
 

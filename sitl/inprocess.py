@@ -71,7 +71,6 @@ from simulator.sensors import load_sensors  # noqa: E402
 HOUSEKEEPING_S = 0.05  # the autopilot's tick, as its process runs it (here in simulation time)
 _T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 _C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
-_DISTURBANCE = [_T[name] for name in ("time_s", "Ax_n", "Ay_n", "Az_n", "Ap_n_m", "Aq_n_m", "Ar_n_m")]
 _ports = itertools.count(20000)
 
 
@@ -295,7 +294,6 @@ class Lockstep:
                     sim.answers_again(data)
             elif data is None or (answer := sim.answer_to_frame(data)) is None:
                 raise RuntimeError(f"the autopilot did not answer frame t={t:.3f} s")
-            self._log_disturbance()
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
@@ -365,17 +363,10 @@ class Lockstep:
         datagram = sim.begin_frame()
         ap.on_hil_datagram(datagram, t)
         self._dispatch(ap.after_frame())
-        self._log_disturbance()
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
             self.estimator_rows.extend(ap.take_estimator_rows())
-
-    def _log_disturbance(self) -> None:
-        """The simulator's disturbance into the flight log, as the SITL's truth on zenoh gives it."""
-        if self.autopilot.flight_log.logging:
-            truth = self.sim.truth_row
-            self.autopilot.flight_log.disturbance(([truth[i] for i in _DISTURBANCE],))
 
     def close(self) -> list:
         """End the flight log that is open and write what is left; the logs written (paths)."""

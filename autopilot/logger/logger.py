@@ -14,13 +14,13 @@ says. A mode change takes effect at the next frame.
 
 A log holds the definitions (formats, info, every parameter's value at the start), then samples
 of :data:`~.topics.TOPICS` at their rates, every STATUSTEXT as a logged string with its
-severity, every parameter change, and, when given, the simulator's disturbance.
+severity, every parameter change, and the simulator's disturbance as the frames report it.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -31,7 +31,7 @@ from .topics import TOPICS, Snapshot
 SDLOG_OFF, SDLOG_WHILE_ARMED, SDLOG_BOOT_UNTIL_DISARM, SDLOG_BOOT_UNTIL_SHUTDOWN = -1, 0, 1, 2
 SDLOG_FIRST_ARM_UNTIL_SHUTDOWN = 4
 SYNC_EVERY_US = 1_000_000  # a sync marker per second of log (lets a reader resynchronise)
-DISTURBANCE_INTERVAL_US = 10_000  # sim_disturbance: at most this often, and at every onset
+DISTURBANCE_INTERVAL_US = 10_000  # the simulator's disturbance reports while it changes
 
 
 @dataclass(frozen=True)
@@ -144,9 +144,8 @@ class FlightLogger:
         self._status_mode: float | None = None  # the row's custom_mode and armed at the last status
         self._status_armed: float | None = None
         self._disturbance: ulog.Topic | None = None
-        self._disturbance_last: tuple = ()
-        self._disturbance_logged: tuple = ()
-        self._disturbance_next_us = 0
+        self._disturbance_held: tuple | None = None  # the simulator's last report (held between)
+        self._disturbance_logged_us = 0
         self._next_due_us = 0
         self._next_sync_us = 0
         self._start_us = 0
@@ -246,24 +245,30 @@ class FlightLogger:
             spec = self.params.specs.get(name)
             self._buffer += ulog.parameter(name, value, spec is not None and spec.kind == INT32)
 
-    def disturbance(self, rows: Iterable[Sequence[float]]) -> None:
-        """The simulator's applied disturbance, ``(time_s, Fx, Fy, Fz, Tphi, Ttheta, Tpsi)`` rows
-        in the paper's frames: logged at most every 10 ms and at every onset (the first sample
-        that differs from a constant stretch), so the analysis finds the events where they are."""
+    def disturbance(self, t_us: int, force: Sequence[float], torque: Sequence[float]) -> None:
+        """A report of the simulator's applied disturbance (force, world; torque on the Euler
+        coordinates; the paper's frames) sampled at ``t_us``. The simulator reports changes (at
+        an onset, every 10 ms while it changes, where it settles) and a steady value now and then
+        (``DISTURB``, :mod:`quadcommon.wire`); between reports it holds. Each report is logged;
+        before an onset, the value held until just before it (when it was last logged longer ago
+        than the reports' 10 ms), so that a step is drawn as a step by plotting tools that join
+        samples with lines. The last report is kept while no log is open: a log starts with it."""
+        values = (*force, *torque)
+        held, self._disturbance_held = self._disturbance_held, values
         if not self.logging:
             return
+        # Not before what this log has (a ULog topic's time only goes forward): a value that
+        # settled in the frame before the log started is logged as of the start.
+        t_us = max(t_us, self._disturbance_logged_us)
         topic = self._disturbance
-        for row in rows:
-            t_us = round(row[0] * 1e6)
-            if t_us < self._start_us or t_us > self._last_t_us + DISTURBANCE_INTERVAL_US:
-                continue  # before this log, or a late row of a finished one
-            values = tuple(row[1:7])
-            onset = values != self._disturbance_last and self._disturbance_last == self._disturbance_logged
-            self._disturbance_last = values
-            if onset or t_us >= self._disturbance_next_us:
-                self._buffer += topic.sample((t_us, *values))
-                self._disturbance_logged = values
-                self._disturbance_next_us = t_us + DISTURBANCE_INTERVAL_US
+        if (
+            held is not None
+            and values != held
+            and t_us - self._disturbance_logged_us > DISTURBANCE_INTERVAL_US
+        ):
+            self._buffer += topic.sample((t_us - 1, *held))
+        self._buffer += topic.sample((t_us, *values))
+        self._disturbance_logged_us = t_us
 
     def stop(self) -> None:
         """End the open log (disarm, shutdown, a simulator restart); nothing if none is open."""
@@ -343,8 +348,9 @@ class FlightLogger:
         self._next_due_us = t_us
         self._next_sync_us = t_us
         self._status_mode = self._status_armed = None
-        self._disturbance_last = self._disturbance_logged = ()
-        self._disturbance_next_us = t_us
+        self._disturbance_logged_us = t_us
+        if self._disturbance_held is not None:  # what applies as the log starts
+            self._buffer += self._disturbance.sample((t_us, *self._disturbance_held))
 
     def _law_state_values(self) -> tuple[float, ...]:
         return self.law_states()[1]

@@ -30,6 +30,7 @@ _ID_STATE = mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION
 _ID_ODOMETRY = mavlink.MAVLINK_MSG_ID_ODOMETRY
 _ID_GPS = mavlink.MAVLINK_MSG_ID_HIL_GPS
 _ID_VISION = mavlink.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
+_ID_DISTURBANCE = mavlink.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 _CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
@@ -212,6 +213,34 @@ def gps_fields(parts: dict) -> GpsFields | None:
     if raw is None:
         return None
     return GpsFields(*_fields(_GPS, raw, _GPS_RAW_FIELDS))
+
+
+_DISTURBANCE = FastDecoder(mavlink.MAVLink_debug_float_array_message)
+_DISTURBANCE_NAME = _where(_DISTURBANCE, "name")[0]
+_DISTURBANCE_DATA = _DISTURBANCE.slices["data"].start
+
+
+DISTURBANCE_ID = _ID_DISTURBANCE
+
+
+def disturbance_of(parts: dict) -> tuple[int, Vector3, Vector3] | None:
+    """The disturbance the simulator reports in this frame (``DISTURB``, see
+    :mod:`quadcommon.wire`): its sample time (µs), force (N, world) and torque on the Euler
+    coordinates (N m) in the paper's frames; None when the frame carries none, or one that is
+    corrupt, named otherwise or not finite (never logged)."""
+    raw = parts.get(_ID_DISTURBANCE)
+    if raw is None:
+        return None
+    try:
+        values = _DISTURBANCE.unpack(raw)
+    except DecodeError:
+        return None
+    if values[_DISTURBANCE_NAME].rstrip(b"\0") != wire.DISTURBANCE_NAME:
+        return None
+    data = values[_DISTURBANCE_DATA : _DISTURBANCE_DATA + 6]
+    if not math.isfinite(sum(data)):
+        return None
+    return values[0], frames.vector_from_ned(data[0:3]), frames.euler_from_ned(data[3:6])
 
 
 def _attitude(q_ned, rates_frd):

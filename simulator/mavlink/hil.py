@@ -24,6 +24,9 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
   in ``child_frame_id``; a world-frame twist is exact without a rotation on either side); the
   angular rates are body FRD (the only frame in which MAVLink carries rates). Covariances unknown
   (first element NaN), ``estimator_type = MAV_ESTIMATOR_TYPE_MOCAP``, ``quality = 100``.
+* ``DEBUG_FLOAT_ARRAY`` ``DISTURB`` (when the core reports the disturbance, see
+  :mod:`quadcommon.wire`): force (N, world NED) and torque on the Euler coordinates (N m, NED's
+  Euler convention) in ``data[0:6]``.
 * ``HIL_GPS`` (when a fix is delivered): the reading's fix type (3D, or 1 "no fix" in an
   outage), lat/lon/alt as above but from the (noisy) GPS
   reading, eph/epv in cm (PX4 reads them as cm), ground speed and NED velocity (cm/s), course
@@ -104,6 +107,11 @@ class HilFrameEncoder:
         self._g = _slots(self._gps, "time_usec", "lat", "lon", "alt", "eph", "epv", "vel", "vn", "ve", "vd",
                          "cog", "satellites_visible")  # fmt: skip
         self._g_fix = _slots(self._gps, "fix_type")[0]
+        disturbance = mavlink.MAVLink_debug_float_array_message(0, wire.DISTURBANCE_NAME, 0, [0.0] * 58)
+        self._disturbance = FastEncoder(mavlink.MAVLink_debug_float_array_message, *ids, disturbance)
+        self._disturbance.values[self._disturbance.slices["name"]] = wire.DISTURBANCE_NAME
+        self._d_time = _slots(self._disturbance, "time_usec")[0]
+        self._d_data = self._disturbance.slices["data"]
 
     def _frame(self, encoder: FastEncoder) -> bytes:
         data = encoder.frame(self.seq)
@@ -118,9 +126,11 @@ class HilFrameEncoder:
         wind_world_m_s: Vector3 = (0.0, 0.0, 0.0),
         gps: GpsReading | None = None,
         vision: VisionReading | None = None,
+        disturbance: tuple[int, tuple[Vector3, Vector3]] | None = None,
     ) -> bytes:
         """One datagram: HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``,
-        + VISION_POSITION_ESTIMATE when ``vision``)."""
+        + VISION_POSITION_ESTIMATE when ``vision``, + the ``DISTURB`` array when ``disturbance``:
+        its sample time (µs) and (force (world), torque (Euler coordinates)) in the paper's frames)."""
         to_ned = frames.vector_to_ned
         q_ned = frames.quaternion_to_ned(truth.quaternion)
         rates_frd = to_ned(truth.body_rates_rad_s)
@@ -174,6 +184,12 @@ class HilFrameEncoder:
         if vision is not None:
             self._fill_vision(time_usec, vision)
             datagram += self._frame(self._vision)
+        if disturbance is not None:
+            stamp_usec, (force, torque) = disturbance
+            v = self._disturbance.values
+            v[self._d_time] = stamp_usec
+            v[self._d_data.start : self._d_data.start + 6] = (*to_ned(force), *frames.euler_to_ned(torque))
+            datagram += self._frame(self._disturbance)
         return datagram
 
     def _fill_vision(self, time_usec: int, reading: VisionReading) -> None:
