@@ -7,8 +7,7 @@ machine is shared, CPU time moves less than the wall time). Two figures:
 
 * the ratio of the CPU time per run, on / off (the median of the pairs). An upper bound of what
   logging adds to the lockstep: here the log's bytes are also written to disk in the loop (the
-  SITL's autopilot writes them in a thread), the simulator's disturbance is logged from every frame
-  (the SITL feeds it in batches from zenoh), and the denominator has no MAVLink transport;
+  SITL's autopilot writes them in a thread), and the denominator has no MAVLink transport;
 * the time inside the core's per-frame logging (``AutopilotCore._log_frame``: every sample the
   frame gives, its bytes packed; wall time of each call, summed) per control step, and the whole
   lockstep's CPU per control step with the log off, for scale.
