@@ -25,7 +25,6 @@ encoding share the telemetry state.)
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 from collections import deque
@@ -33,10 +32,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-# pymavlink picks its dialect and MAVLink version from the environment AT IMPORT: set both first
-# (see /work/notes/zenoh_pymavlink.md B). MAVLink 2 + common is what the autopilot speaks.
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("MAVLINK_DIALECT", "common")
+from quadcommon import environment
+
+environment.use_mavlink2()  # before pymavlink is imported (it reads them then)
 
 from pymavlink import mavutil  # noqa: E402
 

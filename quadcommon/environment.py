@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Mapping, MutableMapping
 from pathlib import Path
 
 PURE_PYTHON = "QUADSITL_PURE_PYTHON"
@@ -18,6 +18,11 @@ LOCKSTEP_SPIN = "QUADSITL_LOCKSTEP_SPIN_S"
 KERNEL_CACHE = "QUADSITL_KERNEL_CACHE"
 NUMBA_CACHE = "NUMBA_CACHE_DIR"
 XDG_CACHE = "XDG_CACHE_HOME"
+MAVLINK20 = "MAVLINK20"
+MAVLINK_DIALECT = "MAVLINK_DIALECT"
+# What pymavlink must find when it is first imported: MAVLink 2 and the common dialect, what the
+# autopilot speaks (use_mavlink2).
+PYMAVLINK_SETTINGS = {MAVLINK20: "1", MAVLINK_DIALECT: "common"}
 
 VARIABLES: dict[str, str] = {
     PURE_PYTHON: "`1`: run every equation as plain Python, numba unused (the reference path; slower). "
@@ -32,6 +37,10 @@ VARIABLES: dict[str, str] = {
     "reads it to tell whether a kernel is compiled already). Default: beside the entry modules.",
     XDG_CACHE: "The user's cache directory (the XDG convention), the default home of the kernel cache. "
     "Default: `~/.cache`.",
+    MAVLINK20: "pymavlink's own: `1` selects MAVLink 2 when pymavlink is first imported. quadsitl's "
+    "ground-station modules set it to `1` when it is unset (the autopilot speaks MAVLink 2).",
+    MAVLINK_DIALECT: "pymavlink's own: the dialect its `mavutil` loads. quadsitl's ground-station modules "
+    "set it to `common` when it is unset.",
 }
 
 
@@ -57,6 +66,15 @@ def numba_cache_dir(environ: Mapping[str, str] | None = None) -> Path | None:
     """numba's cache directory when ``NUMBA_CACHE_DIR`` sets one, else None."""
     environ = os.environ if environ is None else environ
     return Path(environ[NUMBA_CACHE]) if environ.get(NUMBA_CACHE) else None
+
+
+def use_mavlink2(environ: MutableMapping[str, str] | None = None) -> None:
+    """Have pymavlink speak MAVLink 2 with the common dialect, as the autopilot does: it reads
+    ``MAVLINK20`` and ``MAVLINK_DIALECT`` once, when first imported, so call this before that
+    import. A value the user set stays."""
+    environ = os.environ if environ is None else environ
+    for name, value in PYMAVLINK_SETTINGS.items():
+        environ.setdefault(name, value)
 
 
 def markdown_table() -> str:

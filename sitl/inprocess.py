@@ -34,14 +34,15 @@ from __future__ import annotations
 
 import itertools
 import json
-import os
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-os.environ.setdefault("MAVLINK20", "1")
+from quadcommon import environment
+
+environment.use_mavlink2()  # before pymavlink is imported (it reads them then)
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from autopilot.commander.modes import FlightMode  # noqa: E402

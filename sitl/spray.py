@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import random
 import signal
 import struct
@@ -31,8 +30,9 @@ import threading
 import time
 from collections import Counter
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("MAVLINK_DIALECT", "common")
+from quadcommon import environment
+
+environment.use_mavlink2()  # before pymavlink is imported (it reads them then)
 from pymavlink.dialects.v20 import common as m  # noqa: E402
 
 from quadcommon import wire  # noqa: E402
