@@ -71,9 +71,9 @@ def entries_of(target: str) -> list[tuple]:
 
         return [(equations.physics_steps,), (equations.advance,), (equations.truth,)]
     if kind == "estimator":
-        from autopilot.estimation import kernels
+        from autopilot.estimation.eskf import filter_kernels
 
-        return [(kernels.predict,), (kernels.prior_variances,), (kernels.joseph_update,)]
+        return [(fn,) for fn in filter_kernels()]
     if kind == "sensors":
         from simulator.sensors.models import sensor_kernels
 
