@@ -132,6 +132,27 @@ def config_array(config: SensorConfig, home_altitude_m: float, imu_rate_hz: floa
     return C
 
 
+def new_sensors(config: SensorConfig, home_altitude_m: float, imu_rate_hz: float,
+                initial_state_entry: Any = None) -> tuple[Any, np.ndarray, np.ndarray]:  # fmt: skip
+    """``(rng, S, C)`` of sensors switched on: the stream of ``config.seed`` and the state after
+    :func:`initial_state` (called through ``initial_state_entry``, a compiled entry of it, when
+    given), the figures of :func:`config_array`."""
+    from quadcommon.rng import stream
+
+    rng = stream(config.seed)
+    C = config_array(config, home_altitude_m, imu_rate_hz)
+    S = np.zeros(S_SIZE)
+    a, g, m = config.accelerometer, config.gyroscope, config.magnetometer
+
+    def f3(v: Any) -> Vector3:
+        return (float(v[0]), float(v[1]), float(v[2]))
+
+    (initial_state_entry or initial_state)(rng, C, f3(a.bias), f3(g.bias), f3(m.bias_gauss),
+                                           float(a.turn_on_bias_std), float(g.turn_on_bias_std),
+                                           float(m.turn_on_bias_std_gauss), S)  # fmt: skip
+    return rng, S, C
+
+
 def fault_array(faults) -> np.ndarray:  # noqa: ANN001 - a sequence of SensorFault
     """Injected faults (:class:`~.config.SensorFault`) as rows of :func:`sensor_frame`'s table."""
     rows = np.zeros((len(faults), FAULT_SIZE))

@@ -140,16 +140,10 @@ class SensorSuite:
         self.config = config
         self.home_altitude_m = home_altitude_m
         self.imu_rate_hz = imu_rate_hz
-        self.rng = random_stream.stream(config.seed)
         self._k = k = sensor_entries()
-        self._C = frame.config_array(config, home_altitude_m, imu_rate_hz)
-        self._S = np.zeros(frame.S_SIZE)
-        self._out = np.zeros(frame.O_SIZE)
-        a, g, m = config.accelerometer, config.gyroscope, config.magnetometer
         # Switch-on biases: the fixed part plus a draw of the random part (same seed, same bias).
-        k.initial_state(self.rng, self._C, _floats(a.bias), _floats(g.bias), _floats(m.bias_gauss),
-                        float(a.turn_on_bias_std), float(g.turn_on_bias_std), float(m.turn_on_bias_std_gauss),
-                        self._S)  # fmt: skip
+        self.rng, self._S, self._C = frame.new_sensors(config, home_altitude_m, imu_rate_hz, k.initial_state)
+        self._out = np.zeros(frame.O_SIZE)
         self.faults: list[SensorFault] = []
         self._faults = frame.fault_array(())
         for fault in config.faults:
