@@ -10,9 +10,7 @@ multiple recursive random number generators*, Operations Research 47(1), 1999): 
 third-order recurrences modulo primes just below 2^32, combined; period about 2^191; it passes
 TestU01's BigCrush. It is written for double-precision arithmetic: every product is below 2^53,
 so Python floats and compiled float64 give the same bits. Its state is six floats in a kernel
-buffer (:func:`stream`), advanced in place. Normal deviates by Box-Muller: two uniforms give two
-deviates (the cosine one, then the sine one, kept in the buffer's last two floats), which halves
-the logarithms, roots and uniforms a vehicle's sensors cost per frame.
+buffer (:func:`stream`), advanced in place. Normal deviates by Box-Muller, one per two uniforms.
 """
 
 from __future__ import annotations
@@ -24,8 +22,7 @@ import numpy as np
 
 from .kernel import kernel, vector
 
-SIZE = 8  # floats of state: s10, s11, s12 (component 1), s20, s21, s22 (component 2), has spare, spare
-SPARE_HELD, SPARE = 6, 7
+SIZE = 6  # floats of state: s10, s11, s12 (component 1), s20, s21, s22 (component 2)
 
 M1 = 4294967087.0
 M2 = 4294944443.0
@@ -61,20 +58,14 @@ def uniform(state: Any) -> float:
 
 @kernel
 def normal(state: Any) -> float:
-    """The next standard normal deviate (Box-Muller: two uniforms per pair of deviates)."""
-    if state[SPARE_HELD] != 0.0:
-        state[SPARE_HELD] = 0.0
-        return state[SPARE]
+    """The next standard normal deviate (Box-Muller, two uniforms per deviate)."""
     radius = math.sqrt(-2.0 * math.log(uniform(state)))
-    angle = TWO_PI * uniform(state)
-    state[SPARE_HELD] = 1.0
-    state[SPARE] = radius * math.sin(angle)
-    return radius * math.cos(angle)
+    return radius * math.cos(TWO_PI * uniform(state))
 
 
 def seeded_state(seed: int) -> list[float]:
-    """The state floats for ``seed`` (any non-negative integer), spread by numpy's SeedSequence
-    so that nearby seeds give unrelated streams (no spare deviate held)."""
+    """The six state floats for ``seed`` (any non-negative integer), spread by numpy's
+    SeedSequence so that nearby seeds give unrelated streams."""
     words = np.random.SeedSequence(int(seed)).generate_state(6, dtype=np.uint64)
     first = [float(int(w) % int(M1)) for w in words[:3]]
     second = [float(int(w) % int(M2)) for w in words[3:]]
@@ -82,7 +73,7 @@ def seeded_state(seed: int) -> list[float]:
         first[0] = 1.0
     if not any(second):
         second[0] = 1.0
-    return first + second + [0.0, 0.0]
+    return first + second
 
 
 def stream(seed: int) -> Any:

@@ -83,7 +83,8 @@ ITEM = 13  # delivery time + up to 12 floats of reading
 Q_HEAD, Q_COUNT, Q_ITEMS = 0, 1, 2
 QUEUE = 2 + PENDING * ITEM
 S_QUEUES = 35  # 4 queues
-S_SIZE = S_QUEUES + 4 * QUEUE
+S_READING = S_QUEUES + 4 * QUEUE  # 12: the reading being made (room the frame needs, not state)
+S_SIZE = S_READING + 12
 
 # -- faults ---------------------------------------------------------------------------------------
 F_KIND, F_START, F_DURATION, F_VALUE = 0, 1, 2, 3
@@ -372,7 +373,7 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
         out[O_FORCE + i] = force[i]
         out[O_RATE + i] = rates[i]
 
-    reading = np.empty(12)
+    reading = S[S_READING : S_READING + 12]
     if due(S, C, MAG, t):
         m = magnetometer(rng, S, C, faults, q, t)
         reading[0], reading[1], reading[2], reading[3] = t, m[0], m[1], m[2]

@@ -162,3 +162,18 @@ def test_campaign_runs_agree_with_the_in_process_stack(tmp_path, sensors, extra,
         # ... and the run flew on the estimate: its estimate is not the truth.
         assert np.abs(rows[10:, 23:26] - rows[10:, 1:4]).max() > 1e-3
         assert math.isfinite(rows[-1, 23])
+
+
+def test_paper_box_gps_is_the_paper_box_on_the_estimate():
+    """Same scenario, cascades, plant box, seed and limits as paper_box, so a run's plant and
+    disturbances are the same in both tables; flown on the gps profile and its EKF profile."""
+    box, gps = load_campaign("paper_box"), load_campaign("paper_box_gps")
+    assert gps.estimator == "ekf" and box.estimator == "truth"
+    assert gps.estimation.sensors_name == "gps"
+    assert gps.controller_names == box.controller_names and gps.runs == box.runs == 1000
+    for key in ("seed", "failure", "duration_s", "wire_float32", "plant", "initial", "base_profile"):
+        assert getattr(gps, key) == getattr(box, key), key
+    for run in (0, 17):
+        a, b = sample_run(box, run), sample_run(gps, run)
+        assert a.plant_vehicle == b.plant_vehicle and a.gusts == b.gusts
+        assert b.sensors is not None and b.sensors.gps.enabled
