@@ -170,12 +170,13 @@ def gps_position_through_wire(S, position):
 
 
 @kernel
-def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, t_previous, rng, sensor, sensor_figures,
-             faults, delivered, F, Pf, ring, A):  # fmt: skip
+def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_previous, rng, sensor,
+             sensor_figures, faults, delivered, F, Pf, ring, A):  # fmt: skip
     """Step ``k``'s sensor samples (:func:`simulator.sensors.frame.sensor_frame` on the truth at
-    ``t``), then the state the controllers fly on: at step 0 the frame's pose (``c_*``), from
-    which the filter starts (:func:`~autopilot.estimation.filter.reset_state`); afterwards the
-    filter's prediction on the IMU sample. Returns ``(position, velocity, euler, euler rates,
+    ``t``), then the state the controllers fly on: at step 0 the frame's state (``c_*``, from
+    ODOMETRY through the wire), from whose pose the filter starts
+    (:func:`~autopilot.estimation.filter.reset_state`); afterwards the filter's prediction on the
+    IMU sample. Returns ``(position, velocity, euler, euler rates,
     the autopilot's time of the step)``."""
     wire = S[S_WIRE] != 0.0
     for i in range(s.shape[0]):
@@ -199,8 +200,7 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, t_previous
         ekf.reset_state(F, Pf, A, c_pos, c_vel, q, 0.1, 0.1, offset)
         ekf.start(F, ring, t_autopilot, dt, rate, force)
         F[ekf.X_IMU_SAMPLES] += 1.0
-        rates = euler_rates_from_body_rates(c_euler[0], c_euler[1], ekf.vec3(F, ekf.X_RATE))
-        return c_pos, c_vel, c_euler, rates, t_autopilot
+        return c_pos, c_vel, c_euler, c_rates, t_autopilot  # the frame's pose flies this step
     ekf.predict_step(F, Pf, ring, A, t_autopilot, t_autopilot - t_previous, rate, force)
     q = ekf.quat(F, ekf.X_Q)
     euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
@@ -345,7 +345,7 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
             c_rates = euler_rates_from_body_rates(euler[0], euler[1], (p_w, q_w, r_w))
         if estimated:
             c_pos, c_vel, c_euler, c_rates, t_estimator = estimate(
-                k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, t_estimator, rng, sensor,
+                k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_estimator, rng, sensor,
                 sensor_figures, faults, delivered, F, Pf, ring, A)  # fmt: skip
             ex, ey, ez = c_pos[0] - pos[0], c_pos[1] - pos[1], c_pos[2] - pos[2]
             squared_error += ex * ex + ey * ey + ez * ez

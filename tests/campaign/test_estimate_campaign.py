@@ -6,11 +6,13 @@ scalar in-process stack flies with the same seeds."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from autopilot.control.config import load_controller
 from quadcommon.schema import ConfigError
 from sitl.campaign import batch
 from sitl.campaign import engine as eng
@@ -144,14 +146,22 @@ def fly_both(spec, run: int):
     return rows, np.asarray(stack.truth_rows), np.asarray(stack.controller_rows)
 
 
-@pytest.mark.parametrize(("sensors", "extra", "runs"), [("gps", DRAWS, (0, 3)), ("mocap", "", (2,))])
-def test_campaign_runs_agree_with_the_in_process_stack(tmp_path, sensors, extra, runs):
+@pytest.mark.parametrize(
+    ("sensors", "extra", "runs", "controller"),
+    [
+        ("gps", DRAWS, (0, 3), "intbs_nlhinf"),
+        ("mocap", "", (2,), "intbs_nlhinf"),
+        ("gps", "", (1,), "px4_pid"),
+    ],
+)
+def test_campaign_runs_agree_with_the_in_process_stack(tmp_path, sensors, extra, runs, controller):
     """Tolerance: the position and attitude of the vehicle at every frame agree to 1e-9 (m, rad),
     i.e. to round-off: both paths run the same kernels (sensor frame, filter, cascade, plant) on
     the same seeds, and the batch engine reproduces what the wire does to the samples (float32
     HIL_SENSOR and vision, HIL_GPS in 1e-7 deg, mm, cm/s and cm). Measured: identical bits.
     Flown in simulation time (6 s of flight per run)."""
-    spec = load_campaign(write(tmp_path, sensors=sensors, extra=extra))
+    spec = load_campaign(write(tmp_path, sensors=sensors, extra=extra.replace("intbs_nlhinf", controller)))
+    spec = replace(spec, controllers=(load_controller(controller),))
     for run in runs:
         rows, truth, _ = fly_both(spec, run)
         assert len(truth) == len(rows)
