@@ -245,17 +245,65 @@ def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
         ekf.fuse_vision(F, Pf, ring, stats, windows, A, t, position, yaw, position_std, yaw_std)
 
 
+@kernel
+def estimator_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics):
+    """After the controllers' answer: the step's aiding into the filter (as the autopilot fuses it),
+    then the step's share of the estimation metrics (time not converged, worst test ratio)."""
+    if k > 0:
+        fuse_aiding(t_estimator, S, delivered, F, Pf, ring, stats, windows, A)
+    if ekf.not_converged(F, Pf, A) != ekf.CONVERGED:
+        metrics[M_EST_T_NOT_CONVERGED] += dt
+    for j in range(stats.shape[0]):
+        if stats[j, ekf.ST_TEST_RATIO] > metrics[M_EST_MAX_RATIO]:
+            metrics[M_EST_MAX_RATIO] = stats[j, ekf.ST_TEST_RATIO]
+
+
+@kernel
+def estimator_rejected(stats):
+    """Samples the gates and the quality checks rejected over the flight."""
+    rejected = 0.0
+    for j in range(stats.shape[0]):
+        rejected += stats[j, ekf.ST_REJECTED] + stats[j, ekf.ST_CHECK_REJECTED]
+    return rejected
+
+
+# A flight on the truth binds these in their place (:func:`sitl.campaign.engine.entry`): the flight
+# numba compiles then holds no sensor model and no filter, and compiles in a fraction of the time.
+@kernel
+def truth_estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_previous, rng, sensor,
+                   sensor_figures, faults, delivered, F, Pf, ring, A):  # fmt: skip
+    """On the truth: the frame's state as it is."""
+    return c_pos, c_vel, c_euler, c_rates, t_previous
+
+
+@kernel
+def truth_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics):
+    """On the truth: nothing to fuse."""
+    return
+
+
+@kernel
+def truth_rejected(stats):
+    """On the truth: nothing rejected."""
+    return 0.0
+
+
+ON_ESTIMATE = (estimate, estimator_after_step, estimator_rejected)
+ON_TRUTH = (truth_estimate, truth_after_step, truth_rejected)
+
+
 # -------------------------------------------------------------------------------------------------
 # One flight
 # -------------------------------------------------------------------------------------------------
 # An entry per law pair: compiled(simulate, translational.step, rotational.step, nogil=True) (nogil:
 # a Dask worker with several threads flies several runs at once; nothing here touches Python objects).
 @kernel
-def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, steps_tab, ramps_tab,
-             gusts_tab, dryden, record, est):  # noqa: C901  # fmt: skip
+def simulate(translational, rotational, estimate_step, after_step, rejected, state0, P, K, gt, gr, nxt, nxr,
+             ref, S, steps_tab, ramps_tab, gusts_tab, dryden, record, est):  # noqa: C901  # fmt: skip
     """Fly one run from ``state0`` with the laws ``translational`` and ``rotational`` (their gains
     ``gt``, ``gr``; ``nxt``, ``nxr`` entries of state); return the metrics row (layout ``M_*``,
-    ``M_EST_SIZE`` long).
+    ``M_EST_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``: :data:`ON_ESTIMATE`
+    for a flight on the estimate, :data:`ON_TRUTH` (no sensors, no filter) for one on the truth.
 
     As ``sitl.inprocess.run_scenario`` flies the whole stack: per control step k (t = k dt), read
     the state, take the reference (row k of ``ref``: p_d, p_d', p_d'', yaw, yaw', yaw'', sampled by
@@ -344,7 +392,7 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
             c_pos, c_vel, c_euler = pos, vel, euler
             c_rates = euler_rates_from_body_rates(euler[0], euler[1], (p_w, q_w, r_w))
         if estimated:
-            c_pos, c_vel, c_euler, c_rates, t_estimator = estimate(
+            c_pos, c_vel, c_euler, c_rates, t_estimator = estimate_step(
                 k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_estimator, rng, sensor,
                 sensor_figures, faults, delivered, F, Pf, ring, A)  # fmt: skip
             ex, ey, ez = c_pos[0] - pos[0], c_pos[1] - pos[1], c_pos[2] - pos[2]
@@ -444,15 +492,8 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
             metrics[M_T_SAT] += dt
         if tilt_lim:
             metrics[M_T_TILT] += dt
-        if estimated:
-            # The step's aiding, fused after the controllers' answer (as the autopilot does).
-            if k > 0:
-                fuse_aiding(t_estimator, S, delivered, F, Pf, ring, stats, windows, A)
-            if ekf.not_converged(F, Pf, A) != ekf.CONVERGED:
-                metrics[M_EST_T_NOT_CONVERGED] += dt
-            for j in range(stats.shape[0]):
-                if stats[j, ekf.ST_TEST_RATIO] > metrics[M_EST_MAX_RATIO]:
-                    metrics[M_EST_MAX_RATIO] = stats[j, ekf.ST_TEST_RATIO]
+        if estimated:  # the step's aiding, fused after the controllers' answer (as the autopilot does)
+            after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics)
 
         # -- actuator controls into the plant (Plant.set_actuator_controls), float32 on the wire --
         c0, c1, c2, c3 = controls[0], controls[1], controls[2], controls[3]
@@ -477,8 +518,7 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
     if estimated:
         samples = int(round(t / dt)) + 1
         metrics[M_EST_RMS] = math.sqrt(squared_error / samples)
-        for j in range(stats.shape[0]):
-            metrics[M_EST_REJECTED] += stats[j, ekf.ST_REJECTED] + stats[j, ekf.ST_CHECK_REJECTED]
+        metrics[M_EST_REJECTED] = rejected(stats)
     else:
         metrics[M_EST_RMS] = metrics[M_EST_MAX_RATIO] = metrics[M_EST_T_NOT_CONVERGED] = np.nan
         metrics[M_EST_REJECTED] = np.nan
