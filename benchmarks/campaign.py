@@ -11,7 +11,10 @@ the process pool, numba compilation, the flights, the Parquet parts and the fina
 
 Measured twice, each in a fresh process: with an empty cache (the controller's law pair compiled
 from scratch: ``numba_compile_time`` is what a new law costs once), then with the cache the first
-measurement left (what every later campaign pays). The machine is
+measurement left (what every later campaign pays). With ``--estimator ekf --sensors NAME`` a third
+fresh process flies the same campaign on the estimate (the sensor profile NAME and the autopilot's
+EKF, each run with its own noise; the same compiled flight), and its wall time is printed beside
+the truth campaign's with their ratio, measured in the same run. The machine is
 shared: the CPU seconds (this process and its workers) and the load average before each
 measurement are printed too, so a wall time taken under someone else's load can be read. Last
 lines ``name: value unit``.
@@ -31,6 +34,7 @@ from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+NAMES = {"cold": "cold numba cache", "warm": "warm numba cache", "ekf": "on the EKF, warm numba cache"}
 
 
 def _cpu_s() -> float:
@@ -44,13 +48,14 @@ def child(args: argparse.Namespace) -> None:
     start = time.perf_counter()
     load_before = os.getloadavg()[0]
     from sitl.campaign.runner import run_campaign
-    from sitl.campaign.spec import load_campaign
+    from sitl.campaign.spec import estimation_spec, load_campaign
 
     spec = load_campaign(args.spec, runs=args.runs)
     spec = replace(
         spec,
         controllers=tuple(c for c in spec.controllers if c.name == args.controller),
         wire_float32=args.wire == "on",
+        estimation=estimation_spec(args.sensors) if args.estimator == "ekf" else None,
     )
     with tempfile.TemporaryDirectory() as out:
         result = run_campaign(spec, out, workers=args.workers, progress=False)
@@ -76,6 +81,13 @@ def main() -> None:
     parser.add_argument("--spec", default="paper_box")
     parser.add_argument("--controller", default="intbs_nlhinf")
     parser.add_argument("--wire", choices=("on", "off"), default="on", help="float32 wire emulation")
+    parser.add_argument(
+        "--estimator",
+        choices=("truth", "ekf"),
+        default="truth",
+        help="ekf: also fly the campaign on the EKF and print it beside the truth's",
+    )
+    parser.add_argument("--sensors", default="gps", help="the EKF campaign's sensor profile (default gps)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -84,19 +96,22 @@ def main() -> None:
 
     cmd = [
         sys.executable, __file__, "--child", "--runs", str(args.runs), "--workers", str(args.workers),
-        "--spec", args.spec, "--controller", args.controller, "--wire", args.wire,
+        "--spec", args.spec, "--controller", args.controller, "--wire", args.wire, "--sensors", args.sensors,
     ]  # fmt: skip
     results = {}
+    labels = ("cold", "warm", "ekf") if args.estimator == "ekf" else ("cold", "warm")
     with tempfile.TemporaryDirectory() as cache:
         # An empty cache for both the generated entry modules and numba's compiled code: the first
         # child compiles the law pair's flight from scratch (what a new law costs once).
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, QUADSITL_KERNEL_CACHE=cache)
-        for label in ("cold", "warm"):
-            out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True, timeout=1800)
+        for label in labels:
+            estimator = ["--estimator", "ekf" if label == "ekf" else "truth"]
+            out = subprocess.run(cmd + estimator, env=env, capture_output=True, text=True, check=True,
+                                 timeout=3600)  # fmt: skip
             results[label] = json.loads(out.stdout.strip().splitlines()[-1])
             r = results[label]
             print(
-                f"{label} numba cache: {r['wall_s']:.1f} s wall for {r['rows']} runs "
+                f"{NAMES[label]}: {r['wall_s']:.1f} s wall for {r['rows']} runs "
                 f"({r['warm_up_s']:.1f} s of it compiling or loading the kernels; {r['failed']} failed); "
                 f"{r['cpu_s']:.1f} CPU s in all; load average before {r['load_before']:.2f}",
                 flush=True,
@@ -113,6 +128,13 @@ def main() -> None:
     print(f"numba_cache_load_time: {warm['warm_up_s']:.2f} s")
     print(f"campaign_cpu_time_warm_cache: {warm['cpu_s']:.1f} s")
     print(f"campaign_vehicle_steps_per_s_warm: {physics_steps / warm['wall_s']:.3g} steps/s")
+    if "ekf" in results:
+        ekf = results["ekf"]
+        print(f"on the estimate: sensors {args.sensors}, the autopilot's EKF; {ekf['failed']} failed")
+        print(f"campaign_wall_time_truth: {warm['wall_s']:.1f} s")
+        print(f"campaign_wall_time_ekf: {ekf['wall_s']:.1f} s")
+        print(f"campaign_cpu_time_ekf: {ekf['cpu_s']:.1f} s")
+        print(f"campaign_ekf_to_truth_ratio: {ekf['wall_s'] / warm['wall_s']:.2f} x")
 
 
 if __name__ == "__main__":

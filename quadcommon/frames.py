@@ -97,13 +97,20 @@ def ned_to_geodetic(
     millimetres over the few kilometres a SITL flies.
     """
     lat0, lon0, alt0 = home
+    return ned_to_geodetic_about(north_m, east_m, down_m, lat0, lon0, alt0, *_home_terms(lat0, lon0))
+
+
+@kernel
+def ned_to_geodetic_about(north_m: float, east_m: float, down_m: float, lat0: float, lon0: float,
+                          alt0: float, lon0_r: float, sin_lat0: float,
+                          cos_lat0: float) -> tuple[float, float, float]:  # fmt: skip
+    """:func:`ned_to_geodetic` with the home's terms (:func:`_home_terms`) computed beforehand."""
     x_rad = north_m / EARTH_RADIUS_M
     y_rad = east_m / EARTH_RADIUS_M
     c = math.hypot(x_rad, y_rad)
     if c == 0.0:
         return (lat0, lon0, alt0 - down_m)
     sin_c, cos_c = math.sin(c), math.cos(c)
-    lon0_r, sin_lat0, cos_lat0 = _home_terms(lat0, lon0)
     lat = math.asin(cos_c * sin_lat0 + (x_rad * sin_c * cos_lat0) / c)
     lon = lon0_r + math.atan2(y_rad * sin_c, c * cos_lat0 * cos_c - x_rad * sin_lat0 * sin_c)
     return (math.degrees(lat), math.degrees(lon), alt0 - down_m)
@@ -113,7 +120,13 @@ def geodetic_to_ned(
     lat_deg: float, lon_deg: float, alt_m: float, home: tuple[float, float, float]
 ) -> tuple[float, float, float]:
     """(lat_deg, lon_deg, alt_m) to the local NED offset from ``home`` (inverse of the above)."""
-    lat0, lon0, alt0 = home
+    return geodetic_to_ned_about(lat_deg, lon_deg, alt_m, home[0], home[1], home[2])
+
+
+@kernel
+def geodetic_to_ned_about(lat_deg: float, lon_deg: float, alt_m: float, lat0: float, lon0: float,
+                          alt0: float) -> tuple[float, float, float]:  # fmt: skip
+    """:func:`geodetic_to_ned` (a kernel: the campaign engine carries GNSS fixes across the wire)."""
     lat0_r, lon0_r = math.radians(lat0), math.radians(lon0)
     lat_r, lon_r = math.radians(lat_deg), math.radians(lon_deg)
     sin_lat0, cos_lat0 = math.sin(lat0_r), math.cos(lat0_r)

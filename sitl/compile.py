@@ -71,9 +71,9 @@ def entries_of(target: str) -> list[tuple]:
 
         return [(equations.physics_steps,), (equations.advance,), (equations.truth,)]
     if kind == "estimator":
-        from autopilot.estimation import kernels
+        from autopilot.estimation.eskf import filter_kernels
 
-        return [(kernels.predict,), (kernels.prior_variances,), (kernels.joseph_update,)]
+        return [(fn,) for fn in filter_kernels()]
     if kind == "sensors":
         from simulator.sensors.models import sensor_kernels
 
@@ -87,9 +87,9 @@ def entries_of(target: str) -> list[tuple]:
             registry.law(registry.ROTATIONAL, config.rotational.law).step)  # fmt: skip
     if kind == "cascade":
         return [(buffered_step, *laws)]
-    from sitl.campaign.kernels import simulate
+    from sitl.campaign.kernels import ON_TRUTH, simulate
 
-    return [(simulate, *laws, True)]  # nogil
+    return [(simulate, *laws, *ON_TRUTH, True)]  # nogil; a campaign on the estimate compiles its own
 
 
 def missing(names: Sequence[str]) -> list[str]:

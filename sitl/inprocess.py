@@ -67,7 +67,7 @@ from quadcommon.trajectories import trajectory_from_spec  # noqa: E402
 from quadcommon.wire import new_parser, parse_datagram  # noqa: E402
 from simulator.core import SimulatorCore, SimulatorSetup, as_nominal  # noqa: E402
 from simulator.environment.gust_profile import GustProfile, load_gust_profile  # noqa: E402
-from simulator.sensors import load_sensors  # noqa: E402
+from simulator.sensors import SensorConfig, load_sensors  # noqa: E402
 
 HOUSEKEEPING_S = 0.05  # the autopilot's tick, as its process runs it (here in simulation time)
 _T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
@@ -407,6 +407,7 @@ class RunOptions:
     rates: Rates | None = None  # default: config/sitl.toml
     gusts: GustProfile | None = None  # default: the scenario's profile
     sensors: str | None = None  # config/sensors/NAME.toml; None: the scenario's profile
+    sensor_config: SensorConfig | None = None  # the sensors as given (a campaign run's), else ``sensors``
     estimator: str | None = None  # "truth" or "ekf" (the autopilot flies on its EKF); None: the scenario's
     true_plant: VehicleConfig | None = None  # a campaign's drawn plant (else the scenario's uncertainty)
     initial_velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -428,8 +429,9 @@ def paper_stack(
     if options.nominal_plant:
         vehicle = as_nominal(vehicle)
     gusts = options.gusts if options.gusts is not None else load_gust_profile(scenario.gusts)
-    sim = SimulatorSetup(sitl, scenario, vehicle, load_sensors(options.sensors or scenario.sensors), gusts,
-                         nominal_plant=options.nominal_plant, true_plant=options.true_plant,
+    sensor_config = options.sensor_config or load_sensors(options.sensors or scenario.sensors)
+    sim = SimulatorSetup(sitl, scenario, vehicle, sensor_config, gusts, nominal_plant=options.nominal_plant,
+                         true_plant=options.true_plant,
                          initial_velocity_m_s=options.initial_velocity_m_s)  # fmt: skip
     sensors = options.sensors or scenario.sensors
     ap = AutopilotSetup(sitl, vehicle, controller, autostart=trajectory_from_spec(scenario.trajectory),

@@ -34,15 +34,16 @@ from __future__ import annotations
 
 import functools
 import math
-from collections import deque
 from typing import Any, NamedTuple
+
+import numpy as np
 
 from quadcommon import rng as random_stream
 from quadcommon.kernel import compiled, compiling, freeze
 
 from ..dynamics.plant import TruthState
-from . import kernels
-from .config import SensorConfig, SensorFault
+from . import frame, kernels
+from .config import SensorConfig, SensorFault, load_sensors
 from .kernels import (  # noqa: F401 - part of this module's interface
     ISA_EXPONENT,
     ISA_LAPSE_RATE_K_M,
@@ -55,11 +56,10 @@ from .kernels import (  # noqa: F401 - part of this module's interface
 )
 
 Vector3 = tuple[float, float, float]
-_Z3: Vector3 = (0.0, 0.0, 0.0)
-_EPS_S = 1e-9  # time comparisons on a float grid
 
 GPS_FIX_NONE = 1  # MAVLink GPS_FIX_TYPE_NO_FIX: the receiver talks but has no position
 GPS_FIX_3D = 3
+
 
 class ImuReading(NamedTuple):
     specific_force_m_s2: Vector3  # body, front-left-up (+g up at rest)
@@ -128,96 +128,62 @@ class SensorFrame(NamedTuple):
     vision: VisionReading | None = None
 
 
-class _Schedule:
-    """Samples at ``k / rate`` and delivers each ``latency`` later (a FIFO of pending readings)."""
-
-    __slots__ = ("period", "latency", "k", "pending")
-
-    def __init__(self, rate_hz: float, latency_s: float) -> None:
-        self.period = 1.0 / rate_hz
-        self.latency = latency_s
-        self.k = 0
-        self.pending: deque = deque()
-
-    def due(self, t: float) -> bool:
-        """True (once) when the next sample's time has been reached."""
-        if t + _EPS_S >= self.k * self.period:
-            # Skip samples a coarse caller jumped over: one sample per call at most.
-            self.k = int((t + _EPS_S) / self.period) + 1
-            return True
-        return False
-
-    def push(self, t_valid: float, reading) -> None:
-        self.pending.append((t_valid + self.latency, reading))
-
-    def deliver(self, t_valid: float, reading):
-        """:meth:`push` then :meth:`pop` at ``t_valid``: without latency and with nothing pending
-        (the ideal profile, every frame) the reading itself, without the queue."""
-        if self.latency == 0.0 and not self.pending:
-            return reading
-        self.push(t_valid, reading)
-        return self.pop(t_valid)
-
-    def pop(self, t: float):
-        """The newest reading whose delivery time has come (older ones in the same frame are dropped)."""
-        out = None
-        pending = self.pending
-        while pending and pending[0][0] <= t + _EPS_S:
-            out = pending.popleft()[1]
-        return out
-
-
 class SensorSuite:
     """The vehicle's sensors: :meth:`step` once per frame; ``sample``/``sample_gps`` read instantly.
 
-    ``imu_rate_hz`` is the frame rate (the IMU samples once per frame); it sets the per-sample
-    white noise of the IMU from its density.
+    A thin shell around the kernel :func:`.frame.sensor_frame` (rates, latencies, faults, the
+    draws), whose memory it holds; ``imu_rate_hz`` is the frame rate (the IMU samples once per
+    frame): it sets the per-sample white noise of the IMU from its density.
     """
 
     def __init__(self, config: SensorConfig, home_altitude_m: float, imu_rate_hz: float = 500.0) -> None:
         self.config = config
         self.home_altitude_m = home_altitude_m
         self.imu_rate_hz = imu_rate_hz
-        self.rng = rng = random_stream.stream(config.seed)
         self._k = k = sensor_entries()
-        a, g = config.accelerometer, config.gyroscope
         # Switch-on biases: the fixed part plus a draw of the random part (same seed, same bias).
-        self.accel_bias = _add(_floats(a.bias), k.draw3(rng, float(a.turn_on_bias_std)))
-        self.gyro_bias = _add(_floats(g.bias), k.draw3(rng, float(g.turn_on_bias_std)))
-        self._accel_std = a.noise_density * math.sqrt(imu_rate_hz)
-        self._gyro_std = g.noise_density * math.sqrt(imu_rate_hz)
-        self._mag = config.magnetometer
-        self.mag_bias = _add(
-            _floats(config.magnetometer.bias_gauss),
-            k.draw3(rng, float(config.magnetometer.turn_on_bias_std_gauss)),
-        )
-        self._field = _floats(config.magnetometer.earth_field_world_gauss)
-        self._baro = config.barometer
-        self.baro_drift_hpa = 0.0
-        self._gps = gps = config.gps
-        self._vision = config.vision
-        # Gauss-Markov GPS errors start from their stationary distribution.
-        sh, sv = float(gps.horizontal_noise_std_m), float(gps.vertical_noise_std_m)
-        self._gps_position_std = (sh, sh, sv)
-        s = float(gps.velocity_noise_std_m_s)
-        self._gps_velocity_std = (s, s, s)
-        self.gps_position_error = k.stationary(rng, self._gps_position_std)
-        self.gps_velocity_error = k.stationary(rng, self._gps_velocity_std)
-        self.faults: list[SensorFault] = list(config.faults)
-        self._t_last: float | None = None
-        self._mag_s = _Schedule(self._mag.rate_hz, self._mag.latency_s)
-        self._baro_s = _Schedule(self._baro.rate_hz, self._baro.latency_s)
-        self._gps_s = _Schedule(gps.rate_hz, gps.latency_s)
-        self._vision_s = _Schedule(self._vision.rate_hz, self._vision.latency_s)
-        self._t_gps: float | None = None
-        self._held_mag: Vector3 | None = None
-        self._held_baro: BaroReading | None = None
-        self._last_fix: GpsReading | None = None
+        self.rng, self._S, self._C = frame.new_sensors(config, home_altitude_m, imu_rate_hz, k.initial_state)
+        self._out = np.zeros(frame.O_SIZE)
+        self.faults: list[SensorFault] = []
+        self._faults = frame.fault_array(())
+        for fault in config.faults:
+            self.add_fault(fault)
+
+    # -- the state, read from the kernel's memory -----------------------------------------------------
+    def _vector(self, at: int) -> Vector3:
+        s = self._S
+        return (float(s[at]), float(s[at + 1]), float(s[at + 2]))
+
+    @property
+    def accel_bias(self) -> Vector3:
+        """Switch-on bias + random walk so far (without injected steps)."""
+        return self._vector(frame.S_ACCEL_BIAS)
+
+    @property
+    def gyro_bias(self) -> Vector3:
+        return self._vector(frame.S_GYRO_BIAS)
+
+    @property
+    def mag_bias(self) -> Vector3:
+        return self._vector(frame.S_MAG_BIAS)
+
+    @property
+    def baro_drift_hpa(self) -> float:
+        return float(self._S[frame.S_BARO_DRIFT])
+
+    @property
+    def gps_position_error(self) -> Vector3:
+        return self._vector(frame.S_GPS_POS_ERR)
+
+    @property
+    def gps_velocity_error(self) -> Vector3:
+        return self._vector(frame.S_GPS_VEL_ERR)
 
     # -- faults -----------------------------------------------------------------------------------
     def add_fault(self, fault: SensorFault) -> None:
         """Inject ``fault`` (see :data:`~simulator.sensors.config.FAULT_KINDS`)."""
         self.faults.append(fault)
+        self._faults = frame.fault_array(self.faults)
 
     def gps_outage(self, start_s: float, duration_s: float = math.inf) -> None:
         """No GPS fix over ``[start_s, start_s + duration_s)`` (on demand)."""
@@ -238,130 +204,59 @@ class SensorSuite:
                 x, y, z = x + f.value[0], y + f.value[1], z + f.value[2]
         return (x, y, z)
 
-    def _fault_active(self, kind: str, t: float) -> bool:
-        return any(f.kind == kind and f.active(t) for f in self.faults)
-
     # -- the timed interface ------------------------------------------------------------------------
     def step(self, t_s: float, truth: TruthState) -> SensorFrame:
         """Advance the sensors' random walks to ``t_s`` and return what is delivered at ``t_s``."""
-        if self._t_last is not None:
-            dt = t_s - self._t_last
-            if dt > 0.0:
-                self._advance_biases(dt)
-        self._t_last = t_s
-        imu = self._imu(truth, t_s)
-
-        mag = baro = gps = vision = None
-        mag_s, baro_s = self._mag_s, self._baro_s
-        if mag_s.due(t_s):
-            mag = mag_s.deliver(t_s, MagReading(t_s, self._magnetometer(truth, t_s)))
-        elif mag_s.pending:
-            mag = mag_s.pop(t_s)
-        if baro_s.due(t_s):
-            baro = baro_s.deliver(t_s, self._barometer(truth, t_s))
-        elif baro_s.pending:
-            baro = baro_s.pop(t_s)
-        gps_s, vision_s = self._gps_s, self._vision_s
-        if self._gps.enabled and gps_s.due(t_s):
-            gps = gps_s.deliver(t_s, self._gps_fix(truth, t_s))
-        elif gps_s.pending:
-            gps = gps_s.pop(t_s)
-        if self._vision.enabled and vision_s.due(t_s) and not self._fault_active("vision_outage", t_s):
-            vision = vision_s.deliver(t_s, self._vision_pose(truth, t_s))
-        elif vision_s.pending:
-            vision = vision_s.pop(t_s)
-
-        if mag is not None:
-            self._held_mag = mag.field_gauss
-        if baro is not None:
-            self._held_baro = baro
-        held_mag = self._held_mag if self._held_mag is not None else self._magnetometer(truth, t_s)
-        held_baro = self._held_baro if self._held_baro is not None else self._barometer(truth, t_s)
-        readings = SensorReadings(imu, held_mag, held_baro, mag is not None, baro is not None)
+        self._k.sensor_frame(self.rng, self._S, self._C, self._faults, t_s, truth.specific_force_body_m_s2,
+                             truth.body_rates_rad_s, truth.quaternion, truth.position_m, truth.velocity_m_s,
+                             truth.euler_rad[2], self._out)  # fmt: skip
+        o = self._out.tolist()
+        imu = ImuReading((o[0], o[1], o[2]), (o[3], o[4], o[5]), t_s)
+        mag = MagReading(o[7], (o[8], o[9], o[10])) if o[6] else None
+        baro = BaroReading(o[13], o[14], o[15], o[12]) if o[11] else None
+        gps = None
+        if o[16]:
+            gps = GpsReading((o[18], o[19], o[20]), (o[21], o[22], o[23]), o[24], o[25], int(o[26]), o[17],
+                             o[27], int(o[28]))  # fmt: skip
+        vision = VisionReading(o[30], (o[31], o[32], o[33]), o[34], o[35], o[36]) if o[29] else None
+        held_baro = BaroReading(o[41], o[42], o[43], o[40])
+        readings = SensorReadings(imu, (o[37], o[38], o[39]), held_baro, mag is not None, baro is not None)
         return SensorFrame(t_s, imu, readings, mag, baro, gps, vision)
 
-    def _advance_biases(self, dt: float) -> None:
-        k, rng = self._k, self.rng
-        a, g = self.config.accelerometer, self.config.gyroscope
-        if a.bias_random_walk > 0.0:
-            self.accel_bias = k.random_walk(rng, self.accel_bias, a.bias_random_walk, dt)
-        if g.bias_random_walk > 0.0:
-            self.gyro_bias = k.random_walk(rng, self.gyro_bias, g.bias_random_walk, dt)
-        if self._baro.drift_hpa_rthz > 0.0:
-            self.baro_drift_hpa += self._baro.drift_hpa_rthz * math.sqrt(dt) * self._k.normal(rng)
+    # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------
+    def _time(self) -> float:
+        t = float(self._S[frame.S_T_LAST])
+        return 0.0 if math.isnan(t) else t
 
     def _imu(self, truth: TruthState, t: float) -> ImuReading:
-        ba, bg = self.imu_biases(t) if self.faults else (self.accel_bias, self.gyro_bias)
+        ba, bg = self.imu_biases(t)
+        std_a, std_g = float(self._C[frame.C_ACCEL_STD]), float(self._C[frame.C_GYRO_STD])
         force, rates = self._k.imu_reading(self.rng, truth.specific_force_body_m_s2, truth.body_rates_rad_s,
-                                           ba, bg, self._accel_std, self._gyro_std)  # fmt: skip
+                                           ba, bg, std_a, std_g)  # fmt: skip
         return ImuReading(force, rates, t)
 
     def _magnetometer(self, truth: TruthState, t: float) -> Vector3:
-        bias = self.mag_bias
-        if self.faults:
-            bias = _add(bias, self._fault_sum("mag_disturbance", t))
-        return self._k.magnetometer_reading(self.rng, truth.quaternion, self._field, bias,
-                                            float(self._mag.noise_std_gauss))  # fmt: skip
+        return self._k.magnetometer(self.rng, self._S, self._C, self._faults, truth.quaternion, t)
 
     def _barometer(self, truth: TruthState, t: float) -> BaroReading:
-        altitude = self.home_altitude_m + truth.position_m[2]
-        baro = self._baro
-        pressure, pressure_altitude, temperature = self._k.barometer_reading(
-            self.rng, altitude, float(baro.bias_hpa), self.baro_drift_hpa, float(baro.noise_std_hpa)
-        )
-        return BaroReading(pressure, pressure_altitude, temperature, t)
+        pressure, altitude, temperature = self._k.barometer(self.rng, self._S, self._C, truth.position_m[2])
+        return BaroReading(pressure, altitude, temperature, t)
 
-    def _gps_fix(self, truth: TruthState, t: float) -> GpsReading:
-        gps = self._gps
-        if self._t_gps is not None:
-            self._advance_gps_errors(t - self._t_gps)
-        self._t_gps = t
-        if self._fault_active("gps_outage", t):
-            # No fix: the receiver repeats its last position (home before any), with no accuracy.
-            position = self._last_fix.position_m if self._last_fix is not None else _Z3
-            return GpsReading(position, _Z3, 99.99, 99.99, 0, t, 99.99, GPS_FIX_NONE)
-        e, u = self.gps_position_error, self.gps_velocity_error
-        p, v = truth.position_m, truth.velocity_m_s
-        position = (p[0] + e[0], p[1] + e[1], p[2] + e[2])
-        if self.faults:
-            position = _add(position, self._fault_sum("gps_glitch", t))
-        fix = GpsReading(
-            position,
-            (v[0] + u[0], v[1] + u[1], v[2] + u[2]),
-            gps.reported_eph_m,
-            gps.reported_epv_m,
-            gps.satellites_visible,
-            t,
-            gps.reported_speed_accuracy_m_s,
-            GPS_FIX_3D,
-        )
-        self._last_fix = fix
-        return fix
-
-    def _advance_gps_errors(self, dt: float) -> None:
-        """The Gauss-Markov position and velocity errors over ``dt`` (:func:`.kernels.gauss_markov`)."""
-        gps, k, rng = self._gps, self._k, self.rng
-        tau_p, tau_v = float(gps.position_correlation_time_s), float(gps.velocity_correlation_time_s)
-        e, u = self.gps_position_error, self.gps_velocity_error
-        self.gps_position_error = k.gauss_markov(rng, e, dt, tau_p, self._gps_position_std)
-        self.gps_velocity_error = k.gauss_markov(rng, u, dt, tau_v, self._gps_velocity_std)
-
-    def _vision_pose(self, truth: TruthState, t: float) -> VisionReading:
-        vis = self._vision
-        s, s_yaw = float(vis.position_noise_std_m), float(vis.yaw_noise_std_rad)
-        p, yaw = self._k.vision_reading(self.rng, truth.position_m, truth.euler_rad[2], s, s_yaw)
-        return VisionReading(t, p, yaw, s, s_yaw)
-
-    # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------
     def sample(self, truth: TruthState) -> SensorReadings:
         """IMU, magnetometer and barometer readings for ``truth`` now (no rate, latency or drift)."""
-        t = self._t_last if self._t_last is not None else 0.0
+        t = self._time()
         return SensorReadings(self._imu(truth, t), self._magnetometer(truth, t), self._barometer(truth, t))
 
     def sample_gps(self, truth: TruthState) -> GpsReading:
         """One GPS fix for ``truth`` now (no latency; the Gauss-Markov errors advance one period)."""
-        t = (self._t_gps + self._gps_s.period) if self._t_gps is not None else 0.0
-        return self._gps_fix(truth, t)
+        t_gps = float(self._S[frame.S_T_GPS])
+        t = 0.0 if math.isnan(t_gps) else t_gps + float(self._C[frame.C_PERIOD + frame.GPS])
+        r = np.empty(12)
+        self._k.gps_fix(self.rng, self._S, self._C, self._faults, t, truth.position_m, truth.velocity_m_s, r)
+        o = r.tolist()
+        return GpsReading(
+            (o[1], o[2], o[3]), (o[4], o[5], o[6]), o[7], o[8], int(o[9]), o[0], o[10], int(o[11])
+        )
 
 
 def _add(a: Vector3, b: Vector3) -> Vector3:
@@ -385,13 +280,26 @@ class SensorEntries(NamedTuple):
     barometer_reading: Any
     gauss_markov: Any
     vision_reading: Any
+    initial_state: Any
+    sensor_frame: Any
+    gps_fix: Any
+    magnetometer: Any
+    barometer: Any
 
 
 def sensor_kernels() -> SensorEntries:
     """The kernels themselves (what Python runs where nothing compiles)."""
-    return SensorEntries(
-        *(getattr(random_stream, n) if n == "normal" else getattr(kernels, n) for n in SensorEntries._fields)
-    )
+
+    def source(name: str) -> Any:
+        if name == "normal":
+            return random_stream
+        return kernels if name in _ARITHMETIC else frame
+
+    return SensorEntries(*(getattr(source(name), name) for name in SensorEntries._fields))
+
+
+_ARITHMETIC = ("draw3", "stationary", "random_walk", "imu_reading", "magnetometer_reading",
+               "barometer_reading", "gauss_markov", "vision_reading")  # fmt: skip
 
 
 @functools.cache
@@ -412,6 +320,14 @@ def sensor_entries() -> SensorEntries:
         entries.barometer_reading(rng, 488.0, 0.0, 0.0, 1.0)
         entries.gauss_markov(rng, z3, 0.1, 0.1, z3)
         entries.vision_reading(rng, z3, 0.0, 1.0, 1.0)
+        config = load_sensors("gps")
+        C = frame.config_array(config, 488.0, 500.0)
+        S, out, faults = np.zeros(frame.S_SIZE), np.zeros(frame.O_SIZE), frame.fault_array(config.faults)
+        entries.initial_state(rng, C, z3, z3, z3, 0.1, 0.1, 0.1, S)
+        entries.sensor_frame(rng, S, C, faults, 0.0, (0.0, 0.0, 9.81), z3, q, z3, z3, 0.0, out)
+        entries.gps_fix(rng, S, C, faults, 0.1, z3, z3, np.empty(12))
+        entries.magnetometer(rng, S, C, faults, q, 0.0)
+        entries.barometer(rng, S, C, 1.0)
         for entry in entries:
             freeze(entry)
     return entries

@@ -50,14 +50,35 @@ def flights(spec: CampaignSpec, sample: RunSample) -> dict[str, eng.Flight]:
         sample.plant_vehicle, dtp, sc.initial_position_m, sc.initial_euler_rad, sample.initial_velocity_m_s
     )
     steps, ramps, gusts, dryden, window = eng.disturbance_tables(sample.gusts, dtp, spec.duration_s)
-    S = eng.sim_array(rates, spec.duration_s, spec.wire_float32, spec.failure, window)
+    estimated = spec.estimation is not None
+    S = eng.sim_array(rates, spec.duration_s, spec.wire_float32, spec.failure, window, estimated)
     T = _reference(sc.trajectory, rates, spec.duration_s, spec.wire_float32)
     return {
         c.name: eng.Flight(
-            state0, P, _controller(c, spec.vehicle, dt_control), T, S, steps, ramps, gusts, dryden
-        )
+            state0,
+            P,
+            _controller(c, spec.vehicle, dt_control),
+            T,
+            S,
+            steps,
+            ramps,
+            gusts,
+            dryden,
+            estimation(spec, sample) if estimated else (),
+        )  # fmt: skip
         for c in spec.controllers
     }
+
+
+def estimation(spec: CampaignSpec, sample: RunSample) -> tuple:
+    """A fresh memory of the run's sensors and filter (each controller's flight writes into its own)."""
+    assert spec.estimation is not None and sample.sensors is not None
+    return eng.estimator_memory(sample.sensors, spec.estimation.params, spec.vehicle.nominal.gravity_m_s2,
+                                _home_altitude(), spec.rates.control_hz)  # fmt: skip
+
+
+def _home_altitude() -> float:
+    return eng.home()[2]
 
 
 def run_chunk(spec: CampaignSpec, runs: Sequence[int]) -> list[dict[str, Any]]:
@@ -97,7 +118,15 @@ def warm_up(spec: CampaignSpec) -> float:
     steps, ramps, gusts, dryden, window = eng.disturbance_tables(GustProfile(), dtp, 0.004)
     S = eng.sim_array(rates, 0.004, True, eng.FailureLimits(), window)
     T = eng.reference_table(scenario.trajectory, rates, 0.004, True)
+    estimated = spec.estimation is not None
+    if estimated:
+        S = eng.sim_array(rates, 0.004, True, eng.FailureLimits(), window, True)
     for controller in spec.controllers:
         C = _controller(controller, spec.vehicle, 1.0 / rates.control_hz)
-        eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden))
+        est = ()
+        if estimated:
+            assert spec.estimation is not None
+            e = spec.estimation
+            est = eng.estimator_memory(e.sensors, e.params, 9.81, _home_altitude(), rates.control_hz)
+        eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden, est))
     return time.perf_counter() - start

@@ -19,13 +19,18 @@ import numpy as np
 from autopilot.control import registry
 from autopilot.control.cascade import pack
 from autopilot.control.config import ControllerConfig
+from autopilot.estimation import filter as ekf
+from autopilot.estimation.eskf import DEFAULT_EARTH_FIELD_WORLD_GAUSS
+from autopilot.estimation.parameters import EstimatorParams
 from gcs_scripts.analysis.record import FlightRecord
-from quadcommon.config import Rates, TrajectorySpec, VehicleConfig
+from quadcommon.config import Rates, TrajectorySpec, VehicleConfig, load_sitl
 from quadcommon.kernel import compiled
 from quadcommon.trajectories import trajectory_from_spec
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
 from simulator.environment.gust_profile import GustProfile, element_rows
+from simulator.sensors import SensorConfig
+from simulator.sensors import frame as sensor_frame
 
 from . import kernels as lay
 
@@ -45,6 +50,10 @@ METRIC_COLUMNS = (
     "ise_x", "ise_y", "ise_z", "ise_phi", "ise_theta", "ise_psi",
     "iadu_U1", "iadu_tau_phi", "iadu_tau_theta", "iadu_tau_psi",
     "max_position_error_m", "max_tilt_rad", "time_saturated_s", "time_tilt_limited_s",
+)  # fmt: skip
+# On the estimate, after those (layout M_EST_*).
+ESTIMATION_COLUMNS = (
+    "estimate_rms_error_m", "worst_test_ratio", "time_not_converged_s", "rejected_samples",
 )  # fmt: skip
 
 
@@ -84,6 +93,7 @@ class Flight:
     ramps: np.ndarray
     gusts: np.ndarray
     dryden: np.ndarray
+    estimation: tuple = ()  # the run's sensors and filter (estimator_memory()); () on the truth
 
     @property
     def samples(self) -> int:
@@ -165,6 +175,7 @@ def sim_array(
     wire_float32: bool,
     limits: FailureLimits,
     dryden_window: tuple[float, ...],
+    estimated: bool = False,
 ) -> np.ndarray:
     """Timing, the wire switch and the failure limits (layout ``S_*``), as ``run_scenario`` times."""
     dt_control = 1.0 / rates.control_hz
@@ -179,6 +190,8 @@ def sim_array(
     S[lay.S_MAX_POS_ERR] = limits.max_position_error_m
     S[lay.S_MAX_TILT] = limits.max_tilt_rad
     S[lay.S_AIRBORNE] = limits.airborne_height_m
+    S[lay.S_ESTIMATED] = 1.0 if estimated else 0.0
+    S[lay.S_HOME : lay.S_HOME + 3] = home()
     (
         S[lay.S_DRYDEN_ON],
         S[lay.S_DRYDEN_T0],
@@ -187,6 +200,33 @@ def sim_array(
         S[lay.S_DRYDEN_STEP],
     ) = dryden_window
     return S
+
+
+def estimator_memory(sensors: SensorConfig, params: EstimatorParams, gravity_m_s2: float,
+                     home_altitude_m: float, imu_rate_hz: float) -> tuple:  # fmt: skip
+    """The memory of one flight's sensors and filter, as :func:`~sitl.campaign.kernels.simulate`
+    takes it: the sensors switched on as :class:`~simulator.sensors.SensorSuite` switches them on
+    (same seed, same switch-on biases and GNSS errors), a filter not yet started with the
+    autopilot's parameters and field. Fresh per flight: the flight writes into it."""
+    rng, S, C = sensor_frame.new_sensors(sensors, home_altitude_m, imu_rate_hz)
+    faults = sensor_frame.fault_array(sensors.faults)
+    F, P, ring, stats, windows = ekf.new_memory()
+    A = ekf.parameter_array(params, gravity_m_s2, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
+    return (np.asarray(rng, dtype=float), S, C, faults, np.zeros(sensor_frame.O_SIZE), F, P, ring, stats,
+            windows, A)  # fmt: skip
+
+
+def no_estimation() -> tuple:
+    """Placeholder memory of a flight on the truth (the types :func:`estimator_memory`'s has)."""
+    one, square = np.zeros(1), np.zeros((1, 1))
+    return (one, one, one, np.zeros((0, sensor_frame.FAULT_SIZE)), one, one, square, square, square,
+            square, one)  # fmt: skip
+
+
+@functools.cache
+def home() -> tuple[float, float, float]:
+    """The SITL's geodetic home (``config/sitl.toml``), as the simulator's GNSS fixes carry it."""
+    return load_sitl().home
 
 
 def dt_physics_of(rates: Rates) -> float:
@@ -198,21 +238,24 @@ def dt_physics_of(rates: Rates) -> float:
 # Flying
 # -------------------------------------------------------------------------------------------------
 @functools.cache
-def entry(translational: str, rotational: str):
-    """The compiled flight of a law pair (numba compiles it on its first call in a process, or loads
-    it from its cache)."""
+def entry(translational: str, rotational: str, estimated: bool = False):
+    """The compiled flight of a law pair, on the truth or on the estimate (numba compiles it on its
+    first call in a process, or loads it from its cache; the flight on the truth holds no sensors
+    and no filter, and compiles several times faster)."""
     tr = registry.law(registry.TRANSLATIONAL, translational)
     rot = registry.law(registry.ROTATIONAL, rotational)
-    return compiled(lay.simulate, tr.step, rot.step, nogil=True)
+    estimator = lay.ON_ESTIMATE if estimated else lay.ON_TRUTH
+    return compiled(lay.simulate, tr.step, rot.step, *estimator, nogil=True)
 
 
 def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Fly one packed run: ``(metrics row, recorded rows or None)``."""
     rows = np.zeros((flight.samples if record else 0, lay.R_SIZE))
     c = flight.controller
-    metrics = entry(c.translational, c.rotational)(
+    estimation = flight.estimation or no_estimation()
+    metrics = entry(c.translational, c.rotational, bool(flight.estimation))(
         flight.state0, flight.plant, c.K, c.gt, c.gr, c.nxt, c.nxr, flight.reference, flight.sim,
-        flight.steps, flight.ramps, flight.gusts, flight.dryden, rows,
+        flight.steps, flight.ramps, flight.gusts, flight.dryden, rows, estimation,
     )  # fmt: skip
     if not record:
         return metrics, None
@@ -251,4 +294,7 @@ def metrics_dict(metrics: np.ndarray) -> dict[str, float | bool | str]:
     out["failed"] = code != lay.FAIL_NONE
     out["failure"] = FAILURE_NAMES[code]
     out["failure_time_s"] = float(metrics[lay.M_T_FAIL])
+    if metrics.shape[0] >= lay.M_EST_SIZE and not math.isnan(metrics[lay.M_EST_RMS]):
+        for i, name in enumerate(ESTIMATION_COLUMNS):
+            out[name] = float(metrics[lay.M_EST_RMS + i])
     return out

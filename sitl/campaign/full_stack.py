@@ -5,7 +5,8 @@ equal to it (``tests/campaign/test_agreement.py``). This check repeats that proo
 campaign: K of its runs, spread evenly over the campaign, are flown again by
 :func:`sitl.inprocess.paper_stack` (simulator core, every frame MAVLink-encoded and decoded,
 autopilot core with its commander and cascade, the run's drawn plant, initial state and
-disturbances) and their indices are compared with the campaign's table.
+disturbances; on the estimate, the run's sensors and the autopilot's EKF) and their indices are
+compared with the campaign's table.
 
 Two runs agree when every index matches to ``rel_tol`` (default 1e-6: the two paths agree to
 rounding, measured ~1e-12) and the failure verdict is the same. A run that failed in the batch
@@ -81,8 +82,10 @@ def fly_full_stack(spec: CampaignSpec, run: int, controller: str) -> dict[str, f
 
     sample = sample_run(spec, run)
     law = next(c for c in spec.controllers if c.name == controller)
+    est = spec.estimation
     options = RunOptions(
-        duration_s=spec.duration_s, rates=spec.rates, gusts=sample.gusts, estimator="truth",
+        duration_s=spec.duration_s, rates=spec.rates, gusts=sample.gusts, estimator=spec.estimator,
+        sensors=est.sensors_name if est is not None else None, sensor_config=sample.sensors,
         true_plant=sample.plant_vehicle, initial_velocity_m_s=sample.initial_velocity_m_s,
     )  # fmt: skip
     stack = paper_stack(sample.scenario, law, options, sample.vehicle)

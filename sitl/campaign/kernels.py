@@ -34,10 +34,16 @@ import numpy as np
 from autopilot.control.allocation import OUT_SIZE
 from autopilot.control.cascade import cascade_step
 from autopilot.control.command_filter import S_SIZE as FILTER_STATE_SIZE
-from quadcommon.frames import wrap_pi
+from autopilot.estimation import filter as ekf
+from quadcommon.frames import geodetic_to_ned_about, ned_to_geodetic_about, wrap_pi
 from quadcommon.kernel import borrowed, kernel
 from quadcommon.numerics import clip
-from quadcommon.rigid_body import euler_from_quaternion, euler_from_rotation, euler_rates_from_body_rates
+from quadcommon.rigid_body import (
+    euler_from_quaternion,
+    euler_from_rotation,
+    euler_rates_from_body_rates,
+    quaternion_from_euler,
+)
 from simulator.dynamics.equations import (  # the plant (what the simulator steps)
     P_GROUND,
     P_ROTOR_MODE,
@@ -55,8 +61,10 @@ from simulator.dynamics.equations import (  # the plant (what the simulator step
     ground_contact,
     motion_of_O,
     rk4_step,
+    truth,
 )
 from simulator.environment.gust_profile import one_minus_cosine_wind, steps_and_ramps
+from simulator.sensors import frame as sensors
 
 # =================================================================================================
 # Where each number sits in the flat float64 arrays simulate() takes and returns.
@@ -77,7 +85,9 @@ S_DRYDEN_T0 = 10  # start_time + dryden.start_s (s)
 S_DRYDEN_FROM = 11  # profile time window of the turbulence
 S_DRYDEN_UNTIL = 12
 S_DRYDEN_STEP = 13
-S_SIZE = 14
+S_ESTIMATED = 14  # 1.0: the controllers fly on the EKF fed by the sensor models (the est arrays)
+S_HOME = 15  # 3: the geodetic home (lat deg, lon deg, alt m) the GNSS fixes cross the wire about
+S_SIZE = 18
 
 # -- metrics (one row per run, see engine.METRIC_NAMES) -------------------------------------------
 M_FINAL = 0  # 3: final position error x, y, z
@@ -91,13 +101,19 @@ M_FAIL = 17  # failure code (FAIL_*)
 M_T_FAIL = 18  # time of the failure (s), NaN when none
 M_T_END = 19  # last sample's time (s)
 M_SIZE = 20
+# -- on the estimate (S_ESTIMATED) --
+M_EST_RMS = 20  # RMS of |estimated - true position| over the samples flown (m)
+M_EST_MAX_RATIO = 21  # largest innovation test ratio of any fusion (gate at 1)
+M_EST_T_NOT_CONVERGED = 22  # time the filter's verdict was "not converged" (s)
+M_EST_REJECTED = 23  # samples rejected by the gates or the quality checks
+M_EST_SIZE = 24
 
 FAIL_NONE, FAIL_NONFINITE, FAIL_POSITION, FAIL_TILT, FAIL_GROUND = 0, 1, 2, 3, 4
 
 # -- recorded time series (run_scenario's columns, one row per control step) ----------------------
 RECORD_COLUMNS = (
     "t", "x", "y", "z", "xd", "yd", "zd", "phi", "theta", "psi", "phid", "thetad", "psid",
-    "U1", "tau_phi", "tau_theta", "tau_psi", "Ax", "Ay", "Az", "Ap", "Aq", "Ar",
+    "U1", "tau_phi", "tau_theta", "tau_psi", "Ax", "Ay", "Az", "Ap", "Aq", "Ar", "x_est", "y_est", "z_est",
 )  # fmt: skip
 R_SIZE = len(RECORD_COLUMNS)
 
@@ -130,21 +146,183 @@ def disturbance(t, u, steps, ramps, gusts, dryden, S):
 
 
 # -------------------------------------------------------------------------------------------------
+# The sensors and the filter (on the estimate)
+# -------------------------------------------------------------------------------------------------
+@kernel
+def _wire3(wire: bool, v: tuple) -> tuple:
+    """A vector as a float32 MAVLink field carries it (the NED/FRD sign flips are exact)."""
+    if wire:
+        return (_f32(v[0]), _f32(v[1]), _f32(v[2]))
+    return (v[0], v[1], v[2])
+
+
+@kernel
+def gps_position_through_wire(S, position):
+    """A fix's position as HIL_GPS carries it: geodetic about the home, latitude and longitude in
+    1e-7 deg, altitude in mm (:mod:`simulator.mavlink.hil` and the autopilot's decoding)."""
+    lat0, lon0, alt0 = S[S_HOME], S[S_HOME + 1], S[S_HOME + 2]
+    lat0_r = math.radians(lat0)
+    lat, lon, alt = ned_to_geodetic_about(position[0], -position[1], -position[2], lat0, lon0, alt0,
+                                          math.radians(lon0), math.sin(lat0_r), math.cos(lat0_r))  # fmt: skip
+    ned = geodetic_to_ned_about(round(lat * 1e7) * 1e-7, round(lon * 1e7) * 1e-7, round(alt * 1000.0) * 1e-3,
+                                lat0, lon0, alt0)  # fmt: skip
+    return (ned[0], -ned[1], -ned[2])
+
+
+@kernel
+def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_previous, rng, sensor,
+             sensor_figures, faults, delivered, F, Pf, ring, A):  # fmt: skip
+    """Step ``k``'s sensor samples (:func:`simulator.sensors.frame.sensor_frame` on the truth at
+    ``t``), then the state the controllers fly on: at step 0 the frame's state (``c_*``, from
+    ODOMETRY through the wire), from whose pose the filter starts
+    (:func:`~autopilot.estimation.filter.reset_state`); afterwards the filter's prediction on the
+    IMU sample. Returns ``(position, velocity, euler, euler rates,
+    the autopilot's time of the step)``."""
+    wire = S[S_WIRE] != 0.0
+    for i in range(s.shape[0]):
+        plant_work[0, i] = s[i]
+    tr = truth(plant_work, P, u)  # what the simulator's frame reads: the inputs held since the last step
+    sensors.sensor_frame(rng, sensor, sensor_figures, faults, t, tr[7], tr[5], tr[3], tr[0], tr[1], tr[4][2],
+                         delivered)  # fmt: skip
+    t_autopilot = round(k * S[S_USEC_PER_FRAME]) * 1e-6 if wire else t
+    force = _wire3(
+        wire, (delivered[sensors.O_FORCE], delivered[sensors.O_FORCE + 1], delivered[sensors.O_FORCE + 2])
+    )
+    rate = _wire3(
+        wire, (delivered[sensors.O_RATE], delivered[sensors.O_RATE + 1], delivered[sensors.O_RATE + 2])
+    )
+    if k == 0:
+        offset = 0.0
+        if delivered[sensors.O_BARO] != 0.0:
+            height = delivered[sensors.O_BARO + 3]
+            offset = (_f32(height) if wire else height) - c_pos[2]
+        q = quaternion_from_euler(c_euler[0], c_euler[1], c_euler[2])
+        ekf.reset_state(F, Pf, A, c_pos, c_vel, q, 0.1, 0.1, offset)
+        ekf.start(F, ring, t_autopilot, dt, rate, force)
+        F[ekf.X_IMU_SAMPLES] += 1.0
+        return c_pos, c_vel, c_euler, c_rates, t_autopilot  # the frame's pose flies this step
+    ekf.predict_step(F, Pf, ring, A, t_autopilot, t_autopilot - t_previous, rate, force)
+    q = ekf.quat(F, ekf.X_Q)
+    euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
+    rates = euler_rates_from_body_rates(euler[0], euler[1], ekf.vec3(F, ekf.X_RATE))
+    return ekf.vec3(F, ekf.X_P), ekf.vec3(F, ekf.X_V), euler, rates, t_autopilot
+
+
+@kernel
+def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
+    """The step's magnetometer, barometer, GNSS and vision samples into the filter, in the
+    autopilot's order (:meth:`~autopilot.estimation.loop.EstimatorLoop.fuse`), as the wire
+    delivers them."""
+    wire = S[S_WIRE] != 0.0
+    d = delivered
+    if d[sensors.O_MAG] != 0.0:
+        m = _wire3(wire, (d[sensors.O_MAG + 2], d[sensors.O_MAG + 3], d[sensors.O_MAG + 4]))
+        ekf.fuse_mag(F, Pf, ring, stats, windows, A, t, m)
+    if d[sensors.O_BARO] != 0.0:
+        height = d[sensors.O_BARO + 3]
+        ekf.fuse_baro(F, Pf, ring, stats, windows, A, t, _f32(height) if wire else height)
+    g = sensors.O_GPS + 1  # time, position, velocity, eph, epv, satellites, speed accuracy, fix type
+    if d[sensors.O_GPS] != 0.0:
+        position = (d[g + 1], d[g + 2], d[g + 3])
+        velocity = (d[g + 4], d[g + 5], d[g + 6])
+        eph, epv, speed_accuracy = d[g + 7], d[g + 8], d[g + 10]
+        if wire:  # HIL_GPS: 1e-7 deg and mm, cm/s, cm, and no speed accuracy field
+            position = gps_position_through_wire(S, position)
+            velocity = (round(velocity[0] * 100.0) * 0.01, round(velocity[1] * 100.0) * 0.01,
+                        round(velocity[2] * 100.0) * 0.01)  # fmt: skip
+            eph, epv, speed_accuracy = round(eph * 100.0) * 0.01, round(epv * 100.0) * 0.01, 0.0
+        fix_type, satellites = d[g + 11], d[g + 9]
+        ekf.fuse_gps(F, Pf, ring, stats, windows, A, t, position, velocity, eph, epv, speed_accuracy,
+                     fix_type, satellites)  # fmt: skip
+    v = sensors.O_VISION + 1  # time, position, yaw, position std, yaw std
+    if d[sensors.O_VISION] != 0.0:
+        position = _wire3(wire, (d[v + 1], d[v + 2], d[v + 3]))
+        yaw, position_std, yaw_std = d[v + 4], d[v + 5], d[v + 6]
+        if wire:  # VISION_POSITION_ESTIMATE: float32 yaw and variances
+            yaw = _f32(yaw)
+            position_std = math.sqrt(_f32(position_std * position_std))
+            yaw_std = math.sqrt(_f32(yaw_std * yaw_std))
+        ekf.fuse_vision(F, Pf, ring, stats, windows, A, t, position, yaw, position_std, yaw_std)
+
+
+@kernel
+def estimator_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics):
+    """After the controllers' answer: the step's aiding into the filter (as the autopilot fuses it),
+    then the step's share of the estimation metrics (time not converged, worst test ratio)."""
+    if k > 0:
+        fuse_aiding(t_estimator, S, delivered, F, Pf, ring, stats, windows, A)
+    if ekf.not_converged(F, Pf, A) != ekf.CONVERGED:
+        metrics[M_EST_T_NOT_CONVERGED] += dt
+    for j in range(stats.shape[0]):
+        if stats[j, ekf.ST_TEST_RATIO] > metrics[M_EST_MAX_RATIO]:
+            metrics[M_EST_MAX_RATIO] = stats[j, ekf.ST_TEST_RATIO]
+
+
+@kernel
+def estimator_rejected(stats):
+    """Samples the gates and the quality checks rejected over the flight."""
+    rejected = 0.0
+    for j in range(stats.shape[0]):
+        rejected += stats[j, ekf.ST_REJECTED] + stats[j, ekf.ST_CHECK_REJECTED]
+    return rejected
+
+
+# A flight on the truth binds these in their place (:func:`sitl.campaign.engine.entry`): the flight
+# numba compiles then holds no sensor model and no filter, and compiles in a fraction of the time.
+@kernel
+def truth_estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_previous, rng, sensor,
+                   sensor_figures, faults, delivered, F, Pf, ring, A):  # fmt: skip
+    """On the truth: the frame's state as it is."""
+    return c_pos, c_vel, c_euler, c_rates, t_previous
+
+
+@kernel
+def truth_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics):
+    """On the truth: nothing to fuse."""
+    return
+
+
+@kernel
+def truth_rejected(stats):
+    """On the truth: nothing rejected."""
+    return 0.0
+
+
+ON_ESTIMATE = (estimate, estimator_after_step, estimator_rejected)
+ON_TRUTH = (truth_estimate, truth_after_step, truth_rejected)
+
+
+# -------------------------------------------------------------------------------------------------
 # One flight
 # -------------------------------------------------------------------------------------------------
 # An entry per law pair: compiled(simulate, translational.step, rotational.step, nogil=True) (nogil:
 # a Dask worker with several threads flies several runs at once; nothing here touches Python objects).
 @kernel
-def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, steps_tab, ramps_tab,
-             gusts_tab, dryden, record):  # noqa: C901  # fmt: skip
+def simulate(translational, rotational, estimate_step, after_step, rejected, state0, P, K, gt, gr, nxt, nxr,
+             ref, S, steps_tab, ramps_tab, gusts_tab, dryden, record, est):  # noqa: C901  # fmt: skip
     """Fly one run from ``state0`` with the laws ``translational`` and ``rotational`` (their gains
-    ``gt``, ``gr``; ``nxt``, ``nxr`` entries of state); return the metrics row (layout ``M_*``).
+    ``gt``, ``gr``; ``nxt``, ``nxr`` entries of state); return the metrics row (layout ``M_*``,
+    ``M_EST_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``: :data:`ON_ESTIMATE`
+    for a flight on the estimate, :data:`ON_TRUTH` (no sensors, no filter) for one on the truth.
 
     As ``sitl.inprocess.run_scenario`` flies the whole stack: per control step k (t = k dt), read
     the state, take the reference (row k of ``ref``: p_d, p_d', p_d'', yaw, yaw', yaw'', sampled by
     the project's own trajectory at the time the controller sees), run the cascade, record the row
     (``record`` when it has rows), then hold the controls over ``substeps`` RK4 steps, evaluating
     the disturbance at every one.
+
+    On the estimate (``S[S_ESTIMATED]``), ``est`` is the memory of the run's sensors and filter:
+    ``(rng, sensor state, sensor figures, faults, sensor delivery, F, P, ring, stats, windows,
+    filter parameters)`` (:mod:`simulator.sensors.frame`, :mod:`autopilot.estimation.filter`);
+    per step the sensors sample the truth the simulator's frame reads (the plant with the inputs
+    held since the last physics step: :func:`~simulator.dynamics.equations.truth`), and the
+    controllers fly on the filter as the autopilot runs it (:class:`~autopilot.estimation.loop.
+    EstimatorLoop`): at step 0 started from the frame's pose (the in-air start), then per step a
+    prediction on the IMU sample, the controllers, and the fusions of the step's magnetometer,
+    barometer, GNSS and vision samples. Through the wire (``S_WIRE``) the samples are what
+    HIL_SENSOR, HIL_GPS and VISION_POSITION_ESTIMATE carry: float32, velocities in cm/s, eph/epv
+    in cm, no speed accuracy, the GNSS position in 1e-7 deg and mm about the home ``S_HOME``.
+    Otherwise ``est`` holds placeholder arrays and is not read.
     """
     dt = S[S_DT_CONTROL]
     dt_phys = S[S_DT_PHYSICS]
@@ -176,7 +354,18 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
     ptm0, ptm1, ptm2 = P[P_TORQUE_MAX], P[P_TORQUE_MAX + 1], P[P_TORQUE_MAX + 2]
     wmin, wmax = P[P_WMIN], P[P_WMAX]
 
-    metrics = np.zeros(M_SIZE)
+    estimated = S[S_ESTIMATED] != 0.0
+    rng, sensor, sensor_figures, faults, delivered = est[0], est[1], est[2], est[3], est[4]
+    F, Pf, ring, stats, windows, A = est[5], est[6], est[7], est[8], est[9], est[10]
+    rng, sensor, sensor_figures = borrowed(rng), borrowed(sensor), borrowed(sensor_figures)
+    faults, delivered = borrowed(faults), borrowed(delivered)
+    F, Pf, ring, stats, windows, A = (borrowed(F), borrowed(Pf), borrowed(ring), borrowed(stats),
+                                      borrowed(windows), borrowed(A))  # fmt: skip
+    plant_work = np.zeros((2, n))  # truth()'s state and derivative
+    t_estimator = 0.0
+    squared_error = 0.0
+
+    metrics = np.zeros(M_EST_SIZE)
     metrics[M_T_FAIL] = np.nan
     # tilt = acos(R22) (the body z axis against the vertical): tracked as the smallest R22.
     min_cos_tilt = 1.0
@@ -202,14 +391,44 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
         else:
             c_pos, c_vel, c_euler = pos, vel, euler
             c_rates = euler_rates_from_body_rates(euler[0], euler[1], (p_w, q_w, r_w))
+        if estimated:
+            c_pos, c_vel, c_euler, c_rates, t_estimator = estimate_step(
+                k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_estimator, rng, sensor,
+                sensor_figures, faults, delivered, F, Pf, ring, A)  # fmt: skip
+            ex, ey, ez = c_pos[0] - pos[0], c_pos[1] - pos[1], c_pos[2] - pos[2]
+            squared_error += ex * ex + ey * ey + ez * ez
         rp = (ref[k, 0], ref[k, 1], ref[k, 2])
         rv = (ref[k, 3], ref[k, 4], ref[k, 5])
         ra = (ref[k, 6], ref[k, 7], ref[k, 8])
         yaw, yaw_rate, yaw_acc = ref[k, 9], ref[k, 10], ref[k, 11]
 
         # -- the cascade (what the autopilot flies) --
-        o = cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, c_pos, c_vel, c_euler, c_rates,
-                         rp, rv, ra, yaw, yaw_rate, yaw_acc, True, 0, no_tilt, no_attitude, 0.0, controls)
+        o = cascade_step(
+            translational,
+            rotational,
+            K,
+            gt,
+            xt,
+            gr,
+            xr,
+            filt,
+            c_pos,
+            c_vel,
+            c_euler,
+            c_rates,
+            rp,
+            rv,
+            ra,
+            yaw,
+            yaw_rate,
+            yaw_acc,
+            True,
+            0,
+            no_tilt,
+            no_attitude,
+            0.0,
+            controls,
+        )
         thrust_a, tq0, tq1, tq2, phi_d, theta_d = o[0], o[1], o[2], o[3], o[7], o[8]
         sat, tilt_lim = o[18] != 0.0, o[19] != 0.0
 
@@ -225,6 +444,7 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
             row[13], row[14], row[15], row[16] = thrust_a, tq0, tq1, tq2
             for j in range(6):
                 row[17 + j] = u[U_FORCE + j]
+            row[23], row[24], row[25] = c_pos[0], c_pos[1], c_pos[2]
         ex, ey, ez = pos[0] - rp[0], pos[1] - rp[1], pos[2] - rp[2]
         ephi = wrap_pi(euler[0] - phi_d)
         etheta = wrap_pi(euler[1] - theta_d)
@@ -272,6 +492,8 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
             metrics[M_T_SAT] += dt
         if tilt_lim:
             metrics[M_T_TILT] += dt
+        if estimated:  # the step's aiding, fused after the controllers' answer (as the autopilot does)
+            after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics)
 
         # -- actuator controls into the plant (Plant.set_actuator_controls), float32 on the wire --
         c0, c1, c2, c3 = controls[0], controls[1], controls[2], controls[3]
@@ -293,6 +515,14 @@ def simulate(translational, rotational, state0, P, K, gt, gr, nxt, nxr, ref, S, 
             if P[P_GROUND] != 0.0 and ground_contact(s, P) and airborne:
                 touched = True
     metrics[M_MAX_TILT] = math.acos(clip(min_cos_tilt, -1.0, 1.0))
+    if estimated:
+        samples = int(round(t / dt)) + 1
+        metrics[M_EST_RMS] = math.sqrt(squared_error / samples)
+        metrics[M_EST_REJECTED] = rejected(stats)
+    else:
+        metrics[M_EST_RMS] = metrics[M_EST_MAX_RATIO] = metrics[M_EST_T_NOT_CONVERGED] = np.nan
+        metrics[M_EST_REJECTED] = np.nan
     metrics[M_FAIL] = fail
-    metrics[M_T_END] = t + 0.0 * work.shape[0]  # (a read of work: its arrays stay alive until here)
+    # (reads of work, plant_work and est: their arrays stay alive until here)
+    metrics[M_T_END] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + est[0].shape[0] + est[6].shape[0])
     return metrics

@@ -23,6 +23,7 @@ import numpy as np
 
 from quadcommon.config import ScenarioConfig, VehicleConfig, apply_uncertainty
 from simulator.environment.gust_profile import GustProfile, gust_profile_from_mapping, profile_to_mapping
+from simulator.sensors.config import SensorConfig, SensorFault
 
 from .spec import CampaignSpec, Distribution
 
@@ -44,6 +45,7 @@ class RunSample:
     plant_vehicle: VehicleConfig  # the true plant flown (apply_uncertainty + rotor scaling)
     initial_velocity_m_s: Vector3
     gusts: GustProfile
+    sensors: SensorConfig | None = None  # on the estimate: the run's sensors (seed, figures, faults)
 
 
 def stream(seed: int, run: int, name: str) -> np.random.Generator:
@@ -122,7 +124,53 @@ def sample_run(spec: CampaignSpec, run: int) -> RunSample:
             ),
         )
     gusts = _sample_profile(spec, run, draw)
-    return RunSample(run, draw.values, scenario, vehicle, plant_vehicle, velocity, gusts)
+    sensors = _sample_sensors(spec, run, draw)
+    return RunSample(run, draw.values, scenario, vehicle, plant_vehicle, velocity, gusts, sensors)
+
+
+def _sample_sensors(spec: CampaignSpec, run: int, draw: _Draw) -> SensorConfig | None:
+    """The run's sensors: the profile with its own noise seed, the drawn figures and faults."""
+    est = spec.estimation
+    if est is None:
+        return None
+    seed = int(stream(spec.seed, run, "sensor_seed").integers(2**62))
+    draw.values["sensor_seed"] = float(seed)
+    c = est.sensors
+    v = {key: draw(key, dist) for key, dist in est.parameters.items()}
+    accel, gyro, mag, baro, gps, vision = (
+        c.accelerometer,
+        c.gyroscope,
+        c.magnetometer,
+        c.barometer,
+        c.gps,
+        c.vision,
+    )
+    accel = replace(accel, noise_density=v.get("accel_noise_density", accel.noise_density),
+                    turn_on_bias_std=v.get("accel_turn_on_bias_std", accel.turn_on_bias_std))  # fmt: skip
+    gyro = replace(gyro, noise_density=v.get("gyro_noise_density", gyro.noise_density),
+                   turn_on_bias_std=v.get("gyro_turn_on_bias_std", gyro.turn_on_bias_std))  # fmt: skip
+    mag = replace(mag, noise_std_gauss=v.get("mag_noise_std_gauss", mag.noise_std_gauss))
+    baro = replace(baro, noise_std_hpa=v.get("baro_noise_std_hpa", baro.noise_std_hpa))
+    gps = replace(
+        gps,
+        horizontal_noise_std_m=v.get("gps_horizontal_noise_std_m", gps.horizontal_noise_std_m),
+        vertical_noise_std_m=v.get("gps_vertical_noise_std_m", gps.vertical_noise_std_m),
+        velocity_noise_std_m_s=v.get("gps_velocity_noise_std_m_s", gps.velocity_noise_std_m_s),
+    )
+    vision = replace(
+        vision, position_noise_std_m=v.get("vision_position_noise_std_m", vision.position_noise_std_m)
+    )
+    faults = list(c.faults)
+    for i, f in enumerate(est.faults):
+        prefix = f"fault{i}_{f.kind}"
+        start = draw(f"{prefix}_start_s", f.start_s)
+        duration = (
+            draw(f"{prefix}_duration_s", f.duration_s) if f.duration_s is not None else spec.duration_s + 1.0
+        )
+        value = draw.vector(tuple(f"{prefix}_value_{a}" for a in AXES), f.value)
+        faults.append(SensorFault(f.kind, start, duration, value))
+    return replace(c, seed=seed, accelerometer=accel, gyroscope=gyro, magnetometer=mag, barometer=baro,
+                   gps=gps, vision=vision, faults=tuple(faults))  # fmt: skip
 
 
 def _sample_profile(spec: CampaignSpec, run: int, draw: _Draw) -> GustProfile:

@@ -37,6 +37,19 @@ a distribution: ``[[disturbances.step]]`` (``channel``, ``start_s``, ``value``, 
 ``mean_wind_m_s``, ``warm_start``; its ``seed`` is drawn per run unless fixed). Each run's
 profile is then validated by the gust-profile parser itself.
 
+On the estimate: ``estimator = "ekf"`` with ``sensors = "NAME"`` (a sensor profile,
+``config/sensors``) flies the controllers on the autopilot's filter (its parameters:
+``config/estimator/NAME.toml`` when there is one, as ``quadsitl up --sensors NAME`` picks them)
+fed by the sensor models, each run with its own noise stream (``sensor_seed``, drawn per run).
+``[sensor_parameters]`` draws the profile's figures per run (default: the profile's):
+``accel_noise_density``, ``gyro_noise_density``, ``accel_turn_on_bias_std``,
+``gyro_turn_on_bias_std``, ``mag_noise_std_gauss``, ``baro_noise_std_hpa``,
+``gps_horizontal_noise_std_m``, ``gps_vertical_noise_std_m``, ``gps_velocity_noise_std_m_s``,
+``vision_position_noise_std_m`` (a GNSS profile that reports its accuracy honestly reports the
+drawn one). ``[[sensor_faults]]`` add faults per run: ``kind`` (``gps_glitch``, ``gps_outage``,
+``mag_disturbance``, ``vision_outage``, ``accel_bias_step``, ``gyro_bias_step``), ``start_s``,
+``duration_s`` (default: to the end), ``value`` (three distributions: m, gauss, m/s^2 or rad/s).
+
 (One module: one schema, validated in one place, with the messages naming file, key, value and
 range.)
 """
@@ -45,17 +58,19 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from autopilot.control.config import ControllerConfig, load_controller
+from autopilot.estimation.parameters import EstimatorParams, load_estimator_params
 from quadcommon.config import (
     SHIPPED_CONFIG_DIR,
     Rates,
     ScenarioConfig,
     VehicleConfig,
     config_path,
+    estimator_profile_for,
     load_rates,
     load_scenario,
     load_sitl,
@@ -83,6 +98,7 @@ from simulator.environment.gust_profile import (
     GustProfile,
     load_gust_profile,
 )
+from simulator.sensors.config import FAULT_KINDS, SensorConfig, load_sensors
 
 from .engine import FailureLimits
 
@@ -90,7 +106,7 @@ CAMPAIGN_DIR = SHIPPED_CONFIG_DIR / "campaigns"  # the shipped campaigns
 MAX_RUNS = 1_000_000
 # Bumped whenever the kernels or the sampling change what a run produces (results on disk from
 # another version are then not mixed in on resume).
-ENGINE_VERSION = "campaign-engine-2"
+ENGINE_VERSION = "campaign-engine-3"
 MAX_TIME_S = 1e6
 
 
@@ -257,6 +273,43 @@ class DrydenSpec:
     values: dict[str, Any]  # key -> Distribution / tuple / bool; "seed" None = drawn per run
 
 
+# [sensor_parameters]: key -> (lower bound, upper bound, unit) of a draw.
+SENSOR_PARAMETERS = {
+    "accel_noise_density": (0.0, 1.0, "m/s^2/sqrt(Hz)"),
+    "gyro_noise_density": (0.0, 0.1, "rad/s/sqrt(Hz)"),
+    "accel_turn_on_bias_std": (0.0, 1.0, "m/s^2"),
+    "gyro_turn_on_bias_std": (0.0, 0.2, "rad/s"),
+    "mag_noise_std_gauss": (0.0, 0.1, "gauss"),
+    "baro_noise_std_hpa": (0.0, 1.0, "hPa"),
+    "gps_horizontal_noise_std_m": (0.0, 20.0, "m"),
+    "gps_vertical_noise_std_m": (0.0, 20.0, "m"),
+    "gps_velocity_noise_std_m_s": (0.0, 5.0, "m/s"),
+    "vision_position_noise_std_m": (0.0, 1.0, "m"),
+}
+FAULT_VALUE_LIMIT = 1e3  # |value| per axis (m, gauss, m/s^2 or rad/s)
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """One randomised sensor fault of ``[[sensor_faults]]``."""
+
+    kind: str
+    start_s: Distribution
+    duration_s: Distribution | None  # None: to the end of the run
+    value: tuple[Distribution, ...]
+
+
+@dataclass(frozen=True)
+class EstimationSpec:
+    """The sensors and the filter the controllers fly on (``estimator = "ekf"``)."""
+
+    sensors_name: str
+    sensors: SensorConfig  # the profile as shipped (a run's: drawn figures, its own seed)
+    params: EstimatorParams
+    parameters: dict[str, Distribution]  # [sensor_parameters]: key -> distribution
+    faults: tuple[FaultSpec, ...]
+
+
 @dataclass(frozen=True)
 class CampaignSpec:
     path: str
@@ -280,6 +333,11 @@ class CampaignSpec:
     dryden: DrydenSpec | None
     text: str = field(repr=False, default="")  # the file as read (for the results' manifest)
     warnings: tuple[str, ...] = ()
+    estimation: EstimationSpec | None = None  # None: the controllers fly on the truth
+
+    @property
+    def estimator(self) -> str:
+        return "truth" if self.estimation is None else "ekf"
 
     @property
     def controller_names(self) -> tuple[str, ...]:
@@ -294,7 +352,7 @@ class CampaignSpec:
         decisive = (
             ENGINE_VERSION, self.scenario, self.vehicle, self.controllers, self.seed, self.duration_s,
             self.wire_float32, self.rates, self.failure, self.plant, self.initial, self.base_profile,
-            self.elements, self.dryden,
+            self.elements, self.dryden, self.estimation,
         )  # fmt: skip
         return hashlib.sha256(repr(decisive).encode()).hexdigest()[:16]
 
@@ -355,6 +413,7 @@ def load_campaign(name_or_path: str | Path, runs: int | None = None) -> Campaign
 
     plant = _read_plant(root.section("plant", optional=True), vehicle)
     initial = _read_initial(root.section("initial_state", optional=True), scenario, vehicle)
+    estimation = _read_estimation(root, path, duration)
     warnings: list[str] = []
     if root.has("disturbances"):
         base_name, base, elements, dryden = _read_disturbances(root.section("disturbances"), scenario)
@@ -392,7 +451,56 @@ def load_campaign(name_or_path: str | Path, runs: int | None = None) -> Campaign
         dryden=dryden,
         text=text,
         warnings=tuple(warnings),
+        estimation=estimation,
     )
+
+
+def _read_estimation(root: Section, path: Path, duration_s: float) -> EstimationSpec | None:
+    """``estimator``, ``sensors``, ``[sensor_parameters]`` and ``[[sensor_faults]]``."""
+    estimator = root.choice("estimator", ("truth", "ekf"), "truth")
+    if estimator == "truth":
+        for key in ("sensors", "sensor_parameters", "sensor_faults"):
+            if root.has(key):
+                allowed = 'nothing on the truth: set estimator = "ekf" to fly on sensors'
+                raise root.error(key, root.data[key], allowed)
+        return None
+    if not root.has("sensors"):
+        raise ConfigError(f'{path}: key \'sensors\' is missing; estimator = "ekf" needs a sensor profile '
+                          "(config/sensors NAME, e.g. \"gps\")")  # fmt: skip
+    name = root.string("sensors")
+    try:
+        base = estimation_spec(name)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: key 'sensors' = {name!r}: {exc}") from None
+    sec = root.section("sensor_parameters", optional=True)
+    parameters = {}
+    for key, (lo, hi, unit) in SENSOR_PARAMETERS.items():
+        if sec.has(key):
+            parameters[key] = read_distribution(sec, key, None, lo, hi, unit)
+    sec.finish()
+    raw = root.data.get("sensor_faults", [])
+    root._used.add("sensor_faults")  # noqa: SLF001
+    if not isinstance(raw, list) or not all(isinstance(item, dict) for item in raw):
+        raise root.error("sensor_faults", raw, "a list of tables ([[sensor_faults]])")
+    faults = []
+    for i, item in enumerate(raw):
+        fs = Section(item, root.source, f"sensor_faults[{i}].")
+        kind = fs.choice("kind", FAULT_KINDS)
+        start = read_distribution(fs, "start_s", None, 0.0, duration_s, "s")
+        length = None
+        if fs.has("duration_s"):
+            length = read_distribution(fs, "duration_s", None, 0.0, MAX_TIME_S, "s")
+        value = read_distributions(fs, "value", (0.0, 0.0, 0.0), -FAULT_VALUE_LIMIT, FAULT_VALUE_LIMIT)
+        fs.finish()
+        faults.append(FaultSpec(kind, start, length, value))
+    return replace(base, parameters=parameters, faults=tuple(faults))
+
+
+def estimation_spec(sensors: str) -> EstimationSpec:
+    """Flying on the filter with the sensor profile ``sensors`` as shipped (nothing drawn but
+    the noise), with the filter's parameters ``quadsitl up --sensors NAME`` gives the autopilot."""
+    params = load_estimator_params(estimator_profile_for(sensors))
+    return EstimationSpec(sensors, load_sensors(sensors), params, {}, ())
 
 
 def _read_plant(sec: Section, vehicle: VehicleConfig) -> PlantDistributions:
@@ -546,4 +654,3 @@ def _read_dryden(sec: Section) -> DrydenSpec:
         values["end_s"] = read_distribution(sec, "end_s", None, 0.0, MAX_TIME_S, "s")
     sec.finish()
     return DrydenSpec(values)
-

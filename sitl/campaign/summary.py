@@ -9,7 +9,9 @@ themselves with their parameters.
 
 Indices (CONTROL.md, Tables I-III): final position error (norm, mm), ISE of position (x + y + z,
 m^2 s) and attitude (phi + theta + psi, rad^2 s), IADU of U1 and of the torques, the largest
-position error (mm) and tilt (deg) along the run, the time an actuator limit was active.
+position error (mm) and tilt (deg) along the run, the time an actuator limit was active; on the
+estimate also the filter's: the RMS error of its position, its worst innovation test ratio, the
+time it was not converged and the samples it rejected.
 """
 
 from __future__ import annotations
@@ -48,6 +50,16 @@ def derived_columns(table: pa.Table) -> dict[str, np.ndarray]:
         "iadu_U1": col["iadu_U1"],
         "iadu_torque": col["iadu_tau_phi"] + col["iadu_tau_theta"] + col["iadu_tau_psi"],
         "time_saturated_s": col["time_saturated_s"],
+        **(
+            {
+                "estimate_rms_error_mm": col["estimate_rms_error_m"] * 1000.0,
+                "worst_test_ratio": col["worst_test_ratio"],
+                "time_not_converged_s": col["time_not_converged_s"],
+                "rejected_samples": col["rejected_samples"],
+            }
+            if "estimate_rms_error_m" in col
+            else {}
+        ),
     }
 
 
@@ -61,6 +73,13 @@ INDEX_LABELS = {
     "iadu_torque": "IADU τφ+τθ+τψ (N m)",
     "time_saturated_s": "time in saturation (s)",
 }
+# On the estimate (estimator = "ekf"): the filter's own figures per run.
+ESTIMATION_LABELS = {
+    "estimate_rms_error_mm": "estimate's RMS position error (mm)",
+    "worst_test_ratio": "worst innovation test ratio (gate: 1)",
+    "time_not_converged_s": "time not converged (s)",
+    "rejected_samples": "samples rejected (gates, checks)",
+}
 
 
 def parameter_names(table: pa.Table) -> list[str]:
@@ -69,6 +88,8 @@ def parameter_names(table: pa.Table) -> list[str]:
     params = names[names.index("controller") + 1 : names.index(PARAMETER_COLUMNS_END)]
     out = []
     for name in params:
+        if name == "sensor_seed":  # a noise stream's seed: no quantity to correlate with
+            continue
         values = np.array(table.column(name).to_pylist(), dtype=float)
         if np.nanmax(values) != np.nanmin(values):
             out.append(name)
@@ -138,6 +159,14 @@ def summary_markdown(
         f"- physics {spec.rates.physics_hz:g} Hz (RK4, float64), control {spec.rates.control_hz:g} Hz, "
         f"MAVLink wire float32 emulation {'on' if spec.wire_float32 else 'off'}",
         f"- randomised: {', '.join(params) if params else 'nothing'}",
+        *(
+            [
+                f"- flown on the estimate: sensors `{spec.estimation.sensors_name}` (each run its own noise "
+                "stream), the autopilot's EKF"
+            ]
+            if spec.estimation is not None
+            else []
+        ),  # fmt: skip
         f"- failure: position error > {spec.failure.max_position_error_m:g} m, tilt > "
         f"{spec.failure.max_tilt_rad:g} rad, non-finite state, or ground contact after take-off; a "
         "failed run stops there and is left out of the statistics below (counted in the failure rate)",
@@ -164,7 +193,10 @@ def summary_markdown(
     lines += ["", "## Every index (completed runs: median / p95 / worst)", ""]
     lines.append("| index | " + " | ".join(title(c) for c in controllers) + " |")
     lines.append("|---|" + "---:|" * len(controllers))
-    for key, label in INDEX_LABELS.items():
+    for key, label in {
+        **INDEX_LABELS,
+        **{k: v for k, v in ESTIMATION_LABELS.items() if k in derived},
+    }.items():
         cells = []
         for c in controllers:
             med, p95, worst = _stats(derived[key][(names == c) & ~failed])

@@ -141,21 +141,29 @@ def test_non_finite_sensor_samples_are_refused_at_the_edge_and_the_flight_goes_o
     stack = Lockstep(sim, replace(ap, autostart=trajectory_from_spec(load_scenario("helix").trajectory)))
     stack.run_for(2.0)
     suite, nan = stack.sim.sensors, math.nan
-    imu, magnetometer, barometer = suite._imu, suite._magnetometer, suite._barometer
-    vision = suite._vision_pose
-    monkeypatch.setattr(suite, "_imu", lambda truth, t: imu(truth, t)._replace(
-        specific_force_m_s2=(nan, 0.0, 9.8)))  # fmt: skip
+    step, broken = suite.step, set()
+
+    def broken_step(t, truth):  # the suite's frame with the broken fields
+        f = step(t, truth)
+        r = f.readings
+        if "imu" in broken:
+            imu = f.imu._replace(specific_force_m_s2=(nan, 0.0, 9.8))
+            f, r = f._replace(imu=imu), r._replace(imu=imu)
+        if "aiding" in broken:
+            r = r._replace(
+                magnetic_field_gauss=(nan, 0.2, 0.4), baro=r.baro._replace(pressure_altitude_m=math.inf)
+            )
+            if f.vision is not None:
+                f = f._replace(vision=f.vision._replace(position_m=(nan, 0.0, 1.0)))
+        return f._replace(readings=r)
+
+    monkeypatch.setattr(suite, "step", broken_step)
+    broken.add("imu")
     stack.run_for(0.01)  # 5 frames
-    monkeypatch.setattr(suite, "_imu", imu)
-    monkeypatch.setattr(suite, "_magnetometer", lambda truth, t: (nan, 0.2, 0.4))
-    monkeypatch.setattr(suite, "_barometer", lambda truth, t: barometer(truth, t)._replace(
-        pressure_altitude_m=math.inf))  # fmt: skip
-    monkeypatch.setattr(suite, "_vision_pose", lambda truth, t: vision(truth, t)._replace(
-        position_m=(nan, 0.0, 1.0)))  # fmt: skip
+    broken.clear()
+    broken.add("aiding")
     stack.run_for(0.1)
-    for name, original in (("_magnetometer", magnetometer), ("_barometer", barometer),
-                           ("_vision_pose", vision)):  # fmt: skip
-        monkeypatch.setattr(suite, name, original)
+    broken.clear()
     stack.run_for(2.0)
     dropped = stack.autopilot.dropped
     assert dropped["HIL frame with a non-finite imu sample"] == 5

@@ -1,0 +1,945 @@
+"""The filter's steps, written once as kernels: prediction with the delayed-state buffer, the
+fusions of GNSS, barometer, magnetometer and vision with their gates, checks and resets, and the
+convergence verdict.
+
+:class:`~.eskf.ErrorStateEkf` is a thin shell around these functions (it keeps the alignment at
+rest, the records it reports and the messages); a batch engine calls them from its own compiled
+loop (:func:`sitl.campaign.kernels.simulate_estimated`), so both fly one filter. The equations
+are those of :mod:`.eskf`'s docstring; the arithmetic of the prediction and of the Joseph update
+is in :mod:`.kernels`.
+
+A filter's memory is five float arrays (:func:`new_memory`), each laid out by the constants below:
+
+* ``F`` (``X_SIZE``): the nominal state, the trapezoid's previous sample, the cumulative
+  corrections the buffered states are brought forward with, the clocks of the last aiding, the
+  fusion-rate limits, the step's process noise, counters;
+* ``P`` (19 x 19): the error-state covariance (order :data:`.kernels.STATE_NAMES`);
+* ``ring`` (``RING`` x ``RING_SIZE``): the delayed-state buffer, one row per IMU step;
+* ``stats`` (10 x ``ST_SIZE``): per measurement kind (:data:`.status.SOURCE_NAMES`' order)
+  the counters and last innovation :class:`~.status.SourceStats` reports;
+* ``windows`` (2 x ``W_SIZE``): the recent normalised vertical innovations (GNSS vertical
+  velocity, vision height) the bad-vertical-acceleration check averages;
+
+and the parameters are one more (``A``, :func:`parameter_array`). Flags and counts are floats
+in these arrays (``int(F[X_HEAD])``): one array type for everything.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from quadcommon.frames import wrap_pi
+from quadcommon.kernel import kernel
+from quadcommon.rigid_body import (
+    Quaternion,
+    Vector3,
+    euler_from_quaternion,
+    matrix_times,
+    quaternion_conjugate,
+    quaternion_exp,
+    quaternion_multiply,
+    quaternion_normalised,
+    rotation_from_quaternion,
+)
+
+from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N, joseph_update, predict, prior_variances
+from .parameters import EstimatorParams
+
+# -- the parameters (EstimatorParams' fields in this order, then the constants of the vehicle) ----
+PARAMETER_FIELDS = (
+    "gyro_noise_density", "accel_noise_density", "gyro_bias_rw", "accel_bias_rw", "mag_bias_rw",
+    "baro_bias_rw", "gyro_bias_init", "accel_bias_init", "tilt_init",
+    "gps_ctrl", "gps_delay_s", "gps_pos_noise_m", "gps_vel_noise_m_s", "gps_pos_gate", "gps_vel_gate",
+    "gps_req_eph_m", "gps_req_epv_m", "gps_req_nsats",
+    "baro_enabled", "baro_period_s", "baro_delay_s", "baro_noise_m", "baro_gate",
+    "mag_type", "mag_period_s", "mag_bias_init_gauss", "mag_delay_s", "mag_noise_gauss", "mag_gate",
+    "heading_noise_rad", "heading_gate", "mag_check", "mag_strength_tol_gauss", "mag_inclination_tol_rad",
+    "ev_ctrl", "ev_delay_s", "ev_noise_mode", "ev_pos_noise_m", "ev_yaw_noise_rad", "ev_pos_gate",
+    "no_aid_timeout_s", "align_time_s", "pos_reset_timeout_s",
+    "converged_tilt_rad", "converged_yaw_rad", "converged_pos_m", "converged_vpos_m",
+)  # fmt: skip
+(A_GYRO_NOISE, A_ACCEL_NOISE, A_GYRO_BIAS_RW, A_ACCEL_BIAS_RW, A_MAG_BIAS_RW, A_BARO_BIAS_RW,
+ A_GYRO_BIAS_INIT, A_ACCEL_BIAS_INIT, A_TILT_INIT,
+ A_GPS_CTRL, A_GPS_DELAY, A_GPS_POS_NOISE, A_GPS_VEL_NOISE, A_GPS_POS_GATE, A_GPS_VEL_GATE,
+ A_GPS_REQ_EPH, A_GPS_REQ_EPV, A_GPS_REQ_NSATS,
+ A_BARO_ENABLED, A_BARO_PERIOD, A_BARO_DELAY, A_BARO_NOISE, A_BARO_GATE,
+ A_MAG_TYPE, A_MAG_PERIOD, A_MAG_BIAS_INIT, A_MAG_DELAY, A_MAG_NOISE, A_MAG_GATE,
+ A_HEADING_NOISE, A_HEADING_GATE, A_MAG_CHECK, A_MAG_STRENGTH_TOL, A_MAG_INCLINATION_TOL,
+ A_EV_CTRL, A_EV_DELAY, A_EV_NOISE_MODE, A_EV_POS_NOISE, A_EV_YAW_NOISE, A_EV_POS_GATE,
+ A_NO_AID_TIMEOUT, A_ALIGN_TIME, A_POS_RESET_TIMEOUT,
+ A_CONV_TILT, A_CONV_YAW, A_CONV_POS, A_CONV_VPOS) = range(len(PARAMETER_FIELDS))  # fmt: skip
+A_GRAVITY = len(PARAMETER_FIELDS)
+A_FIELD = A_GRAVITY + 1  # 3: the earth field at home, world frame (gauss)
+A_FIELD_STRENGTH = A_FIELD + 3
+A_FIELD_INCLINATION = A_FIELD + 4  # positive: pointing down
+A_FIELD_HEADING = A_FIELD + 5  # -declination in the paper's frame (z up)
+A_SIZE = A_FIELD + 6
+
+# EKF2_* bit fields and values (see .parameters).
+GPS_CTRL_HPOS, GPS_CTRL_VPOS, GPS_CTRL_VEL = 1, 2, 4
+EV_CTRL_HPOS, EV_CTRL_VPOS, EV_CTRL_YAW = 1, 2, 8
+MAG_TYPE_HEADING, MAG_TYPE_NONE = 1, 5
+MAG_CHECK_STRENGTH, MAG_CHECK_INCLINATION = 1, 2
+GPS_FIX_3D = 3
+
+# -- the state F ---------------------------------------------------------------------------------
+X_P, X_V, X_Q, X_BG, X_BA, X_BM, X_BH = 0, 3, 6, 10, 13, 16, 19
+X_PREV_RATE = 20  # 3: raw gyro of the previous sample
+X_PREV_FORCE = 23  # 3: raw accelerometer of the previous sample
+X_PREV_ACC = 26  # 3: R (f - b_a) of the previous sample
+X_RATE = 29  # 3: bias-corrected rate of the last sample (what the controllers get)
+X_CP, X_CV, X_CQ = 32, 35, 38  # cumulative corrections (3, 3, 4) for the buffered states
+X_TIME = 42
+X_DT_AVG = 43
+X_HEAD = 44  # ring: index of the newest row
+X_COUNT = 45  # ring: rows held
+X_LAST_H_AID = 46  # times of the last fusions that constrain the horizontal, vertical drift
+X_LAST_V_AID = 47
+X_LAST_GPS_POS = 48
+X_BAD_ACCEL_UNTIL = 49
+X_BAD_ACCEL_DETECTIONS = 50
+X_NEXT_MAG = 51  # fusion-rate limits (EKF2_MAG_RATE, EKF2_BARO_RATE)
+X_NEXT_BARO = 52
+X_Q_DT = 53  # the dt the process noise was derived for (-1: derive again)
+X_IMU_SAMPLES = 54
+X_IMU_DT_REJECTED = 55
+X_QDIAG = 56  # N: the step's process noise variances
+X_SIZE = X_QDIAG + N
+
+# -- the delayed-state buffer: per IMU step t, p, v, q, cp, cv, cq ---------------------------------
+RING = 4096  # IMU steps (8 s at 500 Hz; the EKF2_*_DELAY parameters stop at 300 ms); a power of two
+RING_MASK = RING - 1
+R_T, R_P, R_V, R_Q, R_CP, R_CV, R_CQ = 0, 1, 4, 7, 11, 14, 17
+RING_SIZE = 21
+
+# -- per measurement kind (rows in SOURCE_NAMES' order) ---------------------------------------------
+SRC_GPS_POS, SRC_GPS_HGT, SRC_GPS_VEL, SRC_GPS_VVEL, SRC_BARO = 0, 1, 2, 3, 4
+SRC_MAG, SRC_HEADING, SRC_EV_POS, SRC_EV_HGT, SRC_EV_YAW = 5, 6, 7, 8, 9
+SOURCES = 10
+STATS_FIELDS = (
+    "fused", "rejected", "check_rejected", "too_old", "skipped", "test_ratio", "innovation",
+    "normalized_innovation", "last_tested_s", "last_fused_s", "last_rejected_s", "rejecting_since_s",
+    "resets",
+)  # fmt: skip
+(ST_FUSED, ST_REJECTED, ST_CHECK_REJECTED, ST_TOO_OLD, ST_SKIPPED, ST_TEST_RATIO, ST_INNOVATION,
+ ST_NORMALIZED, ST_LAST_TESTED, ST_LAST_FUSED, ST_LAST_REJECTED, ST_REJECTING_SINCE,
+ ST_RESETS) = range(len(STATS_FIELDS))  # fmt: skip
+ST_SIZE = len(STATS_FIELDS)
+STATS_INITIAL = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, -1.0, 0.0)
+
+# -- the innovation windows of the bad-vertical-acceleration check ---------------------------------
+WINDOW = 256  # samples held (then the oldest goes)
+W_TIMES, W_VALUES = 0, WINDOW
+W_START, W_COUNT, W_TOTAL, W_APPENDS = 2 * WINDOW, 2 * WINDOW + 1, 2 * WINDOW + 2, 2 * WINDOW + 3
+W_SIZE = 2 * WINDOW + 4
+W_GPS_VVEL, W_EV_HGT = 0, 1
+
+MAX_IMU_DT_S = 0.1  # a longer gap is a lost link, not an interval to integrate across
+MIN_VARIANCE = 1e-12  # floor of a scalar innovation variance (guards a degenerate P)
+# Bad vertical acceleration (PX4's bad_acc_vertical): vertical velocity and height innovations
+# both gated out with the same sign mean the accelerometer, not the aiding, is wrong. Then, for
+# BAD_ACCEL_HOLD_S, the vertical velocity gets PX4's BADACC_BIAS_PNOISE (4.9 m/s^2 per 10 ms
+# prediction, i.e. 0.49 m/s^2/sqrt(Hz)) and the z accelerometer bias a fast random walk, so the
+# aiding is accepted again and the new bias is learned instead of the filter diverging.
+BAD_ACCEL_VEL_DENSITY = 0.49  # m/s^2/sqrt(Hz)
+BAD_ACCEL_BIAS_RW = 0.1  # m/s^2/sqrt(s)
+BAD_ACCEL_HOLD_S = 1.0
+BAD_ACCEL_WINDOW_S = 1.0  # the mean of the normalised vertical innovations over this window ...
+BAD_ACCEL_MEAN = 1.5  # ... beyond this (4.7 sigma of the mean of 10 GPS fixes)
+BAD_ACCEL_MIN_SAMPLES = 8
+
+# The convergence verdict (not_converged): why the filter is not fit to fly on.
+CONVERGED, DEAD_RECKONING, TILT, YAW, POSITION, HEIGHT = 0, 1, 2, 3, 4, 5
+
+
+# =================================================================================================
+# Memory and parameters (Python)
+# =================================================================================================
+def parameter_array(params: EstimatorParams, gravity_m_s2: float, earth_field: Vector3) -> np.ndarray:
+    """The parameters as the kernels read them (layout ``A_*``)."""
+    names = [f.name for f in dataclasses.fields(EstimatorParams)]
+    if sorted(names) != sorted(PARAMETER_FIELDS):
+        raise RuntimeError(f"EstimatorParams' fields {names} are not the kernels' {PARAMETER_FIELDS}")
+    A = np.zeros(A_SIZE)
+    for i, name in enumerate(PARAMETER_FIELDS):
+        A[i] = float(getattr(params, name))
+    mx, my, mz = (float(c) for c in earth_field)
+    A[A_GRAVITY] = gravity_m_s2
+    A[A_FIELD : A_FIELD + 3] = (mx, my, mz)
+    A[A_FIELD_STRENGTH] = math.sqrt(mx * mx + my * my + mz * mz)
+    A[A_FIELD_INCLINATION] = math.atan2(-mz, math.hypot(mx, my))
+    A[A_FIELD_HEADING] = math.atan2(my, mx)
+    return A
+
+
+def new_memory() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(F, P, ring, stats, windows)`` of a filter not yet started."""
+    F = np.zeros(X_SIZE)
+    F[X_Q] = F[X_CQ] = 1.0
+    F[X_DT_AVG] = 0.002
+    F[X_LAST_H_AID] = F[X_LAST_V_AID] = F[X_LAST_GPS_POS] = -1.0
+    F[X_BAD_ACCEL_UNTIL] = F[X_NEXT_MAG] = F[X_NEXT_BARO] = -math.inf
+    F[X_Q_DT] = -1.0
+    stats = np.tile(np.array(STATS_INITIAL), (SOURCES, 1))
+    return F, np.zeros((N, N)), np.zeros((RING, RING_SIZE)), stats, np.zeros((2, W_SIZE))
+
+
+# =================================================================================================
+# Small pieces
+# =================================================================================================
+@kernel
+def vec3(a: Any, i: int) -> Vector3:
+    return (a[i], a[i + 1], a[i + 2])
+
+
+@kernel
+def set3(a: Any, i: int, v: Vector3) -> None:
+    a[i], a[i + 1], a[i + 2] = v[0], v[1], v[2]
+
+
+@kernel
+def quat(a: Any, i: int) -> Quaternion:
+    return (a[i], a[i + 1], a[i + 2], a[i + 3])
+
+
+@kernel
+def set4(a: Any, i: int, q: Quaternion) -> None:
+    a[i], a[i + 1], a[i + 2], a[i + 3] = q[0], q[1], q[2], q[3]
+
+
+@kernel
+def yaw_of(q: Quaternion) -> float:
+    """The paper's psi of a body-to-world quaternion (ZYX Euler): ``atan2(R10, R00)`` with the two
+    entries of :func:`~quadcommon.rigid_body.rotation_from_quaternion` it reads (per fusion)."""
+    w, x, y, z = q
+    return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
+
+
+@kernel
+def yaw_jacobian(q: Quaternion) -> Vector3:
+    """d psi / d dtheta for the global angular error (``R <- (I + [dtheta]_x) R``).
+
+    With ``psi = atan2(R10, R00)``: ``dR00 = -dth_z R10 + dth_y R20``, ``dR10 = dth_z R00 -
+    dth_x R20``, so ``dpsi = dth_z - (R00 R20 dth_x + R10 R20 dth_y) / (R00^2 + R10^2)``.
+    """
+    R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
+    r00, r10, r20 = R[0][0], R[1][0], R[2][0]
+    d = r00 * r00 + r10 * r10
+    if d < 1e-9:  # pitch at +-90 deg: yaw undefined; fall back to the level-flight Jacobian
+        return (0.0, 0.0, 1.0)
+    return (-r00 * r20 / d, -r10 * r20 / d, 1.0)
+
+
+@kernel
+def mag_model(
+    q: Quaternion, earth_field: Vector3, bias: Vector3
+) -> tuple[Vector3, tuple[Vector3, Vector3, Vector3]]:
+    """Predicted body field ``R^T m_e + b_m`` and its Jacobian ``R^T [m_e]_x`` on the global
+    attitude error (``R <- (I + [dtheta]_x) R`` gives ``R^T m_e <- R^T m_e + R^T [m_e]_x dtheta``);
+    the Jacobian on ``b_m`` is the identity."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_from_quaternion(q[0], q[1], q[2], q[3])
+    ex, ey, ez = earth_field
+    pred = (
+        r00 * ex + r10 * ey + r20 * ez + bias[0],
+        r01 * ex + r11 * ey + r21 * ez + bias[1],
+        r02 * ex + r12 * ey + r22 * ez + bias[2],
+    )
+    # Row i of R^T [m_e]_x is (column i of R) x m_e.
+    H = (
+        (r10 * ez - r20 * ey, r20 * ex - r00 * ez, r00 * ey - r10 * ex),
+        (r11 * ez - r21 * ey, r21 * ex - r01 * ez, r01 * ey - r11 * ex),
+        (r12 * ez - r22 * ey, r22 * ex - r02 * ez, r02 * ey - r12 * ex),
+    )
+    return pred, H
+
+
+@kernel
+def mag_heading(A: Any, m: Vector3, phi: float, theta: float, bias: Vector3) -> float:
+    """The yaw that turns the tilt-compensated body field onto the earth field's heading."""
+    cx, cy, cz = m[0] - bias[0], m[1] - bias[1], m[2] - bias[2]
+    sf, cf = math.sin(phi), math.cos(phi)
+    st, ct = math.sin(theta), math.cos(theta)
+    # Level-frame field: Ry(theta) Rx(phi) m (yaw left out).
+    lx = ct * cx + st * sf * cy + st * cf * cz
+    ly = cf * cy - sf * cz
+    return wrap_pi(A[A_FIELD_HEADING] - math.atan2(ly, lx))
+
+
+@kernel
+def gps_variances(A: Any, eph: float, epv: float, speed_accuracy: float) -> Vector3:
+    """Horizontal, vertical position and velocity variances of a fix: the reported accuracies
+    with the parameters as floors (PX4: the vertical floor 1.5x the horizontal)."""
+    h = max(eph, A[A_GPS_POS_NOISE])
+    v = max(epv, 1.5 * A[A_GPS_POS_NOISE])
+    s = max(speed_accuracy, A[A_GPS_VEL_NOISE])
+    return (h * h, v * v, s * s)
+
+
+@kernel
+def gps_usable(A: Any, fix_type: float, eph: float, epv: float, satellites: float) -> bool:
+    return (
+        fix_type >= GPS_FIX_3D
+        and eph <= A[A_GPS_REQ_EPH]
+        and epv <= A[A_GPS_REQ_EPV]
+        and satellites >= A[A_GPS_REQ_NSATS]
+    )
+
+
+@kernel
+def ev_pos_variance(A: Any, position_std: float) -> float:
+    """EKF2_EV_NOISE_MD 0: the reported 1-sigma with EKF2_EVP_NOISE as its floor; 1: the parameter."""
+    s = A[A_EV_POS_NOISE] if A[A_EV_NOISE_MODE] != 0.0 else max(position_std, A[A_EV_POS_NOISE])
+    return s * s
+
+
+@kernel
+def ev_yaw_variance(A: Any, yaw_std: float) -> float:
+    s = A[A_EV_YAW_NOISE] if A[A_EV_NOISE_MODE] != 0.0 else max(yaw_std, A[A_EV_YAW_NOISE])
+    return s * s
+
+
+@kernel
+def world_force(F: Any, force: Vector3) -> Vector3:
+    """``R (f - b_a)``: a body specific force in the world frame."""
+    q = quat(F, X_Q)
+    R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
+    return matrix_times(R, (force[0] - F[X_BA], force[1] - F[X_BA + 1], force[2] - F[X_BA + 2]))
+
+
+@kernel
+def restart_trapezoid(F: Any, rate: Vector3, force: Vector3) -> None:
+    """The trapezoid starts again from this sample (after a gap, at the start, after a reset)."""
+    set3(F, X_PREV_RATE, rate)
+    set3(F, X_PREV_FORCE, force)
+    set3(F, X_PREV_ACC, world_force(F, force))
+    set3(F, X_RATE, (rate[0] - F[X_BG], rate[1] - F[X_BG + 1], rate[2] - F[X_BG + 2]))
+
+
+@kernel
+def store(F: Any, ring: Any, row: int) -> None:
+    """The nominal state and the corrections so far into the buffer's ``row``."""
+    r = ring[row]
+    r[R_T] = F[X_TIME]
+    for i in range(3):
+        r[R_P + i] = F[X_P + i]
+        r[R_V + i] = F[X_V + i]
+        r[R_CP + i] = F[X_CP + i]
+        r[R_CV + i] = F[X_CV + i]
+    for i in range(4):
+        r[R_Q + i] = F[X_Q + i]
+        r[R_CQ + i] = F[X_CQ + i]
+
+
+# =================================================================================================
+# Start and prediction
+# =================================================================================================
+@kernel
+def start(F: Any, ring: Any, t: float, dt: float, rate: Vector3, force: Vector3) -> None:
+    """The filter starts at this IMU sample with the state and covariance set (the alignment's or
+    :func:`reset_state`'s): the trapezoid, the buffer and the aiding clocks start here."""
+    if 0.0 < dt <= MAX_IMU_DT_S:
+        F[X_DT_AVG] = dt
+    F[X_TIME] = t
+    restart_trapezoid(F, rate, force)
+    set3(F, X_CP, (0.0, 0.0, 0.0))
+    set3(F, X_CV, (0.0, 0.0, 0.0))
+    set4(F, X_CQ, (1.0, 0.0, 0.0, 0.0))
+    F[X_LAST_H_AID] = t
+    F[X_LAST_V_AID] = t
+    store(F, ring, 0)
+    F[X_HEAD] = 0.0
+    F[X_COUNT] = 1.0
+
+
+@kernel
+def reset_state(F: Any, P: Any, A: Any, position: Vector3, velocity: Vector3, q: Quaternion,
+                position_std: float, velocity_std: float, baro_offset: float) -> None:  # fmt: skip
+    """A known state (an in-air start, a test): attitude uncertainty from EKF2_ANGERR_INIT (tilt)
+    and 5 deg of yaw, biases zero with their EKF2_*BIAS_INIT priors; ``baro_offset``: the baro
+    height minus ``position``'s z (0 without a baro sample). Then :func:`start`."""
+    set3(F, X_P, position)
+    set3(F, X_V, velocity)
+    n = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    set4(F, X_Q, (q[0] * n, q[1] * n, q[2] * n, q[3] * n))
+    for i in range(9):
+        F[X_BG + i] = 0.0
+    F[X_BH] = baro_offset
+    for i in range(N):
+        for j in range(N):
+            P[i, j] = 0.0
+    for i in range(3):
+        P[IP + i, IP + i] = position_std * position_std
+        P[IV + i, IV + i] = velocity_std * velocity_std
+        P[IBG + i, IBG + i] = A[A_GYRO_BIAS_INIT] ** 2
+        P[IBA + i, IBA + i] = A[A_ACCEL_BIAS_INIT] ** 2
+        P[IBM + i, IBM + i] = A[A_MAG_BIAS_INIT] ** 2
+    P[ITH, ITH] = A[A_TILT_INIT] ** 2
+    P[ITH + 1, ITH + 1] = A[A_TILT_INIT] ** 2
+    P[ITH + 2, ITH + 2] = math.radians(5.0) ** 2
+    P[IBH, IBH] = position_std * position_std + A[A_BARO_NOISE] ** 2
+
+
+@kernel
+def process_noise(F: Any, A: Any, dt: float) -> None:
+    """The step's process noise variances (``Q`` of :mod:`.eskf`'s docstring) into ``F``."""
+    for i in range(N):
+        F[X_QDIAG + i] = 0.0
+    for i in range(3):
+        F[X_QDIAG + IV + i] = A[A_ACCEL_NOISE] ** 2 * dt
+        F[X_QDIAG + ITH + i] = A[A_GYRO_NOISE] ** 2 * dt
+        F[X_QDIAG + IBG + i] = A[A_GYRO_BIAS_RW] ** 2 * dt
+        F[X_QDIAG + IBA + i] = A[A_ACCEL_BIAS_RW] ** 2 * dt
+        F[X_QDIAG + IBM + i] = A[A_MAG_BIAS_RW] ** 2 * dt
+    F[X_QDIAG + IBH] = A[A_BARO_BIAS_RW] ** 2 * dt
+    F[X_Q_DT] = dt
+
+
+@kernel
+def predict_step(
+    F: Any, P: Any, ring: Any, A: Any, t: float, dt: float, rate: Vector3, force: Vector3
+) -> None:
+    """One IMU sample (raw gyro ``rate``, accelerometer ``force``) at ``t``, ``dt`` after the
+    previous: the nominal state and P predicted (:func:`.kernels.predict`), then buffered."""
+    F[X_IMU_SAMPLES] += 1.0
+    if not 0.0 < dt <= MAX_IMU_DT_S:
+        # Not an interval to integrate across: restart the trapezoid from this sample.
+        F[X_IMU_DT_REJECTED] += 1.0
+        F[X_TIME] = t
+        restart_trapezoid(F, rate, force)
+        return
+    F[X_TIME] = t
+    F[X_DT_AVG] += 0.01 * (dt - F[X_DT_AVG])
+    if abs(dt - F[X_Q_DT]) > 1e-9:  # time stamps jitter in the last bits: keep the noise
+        process_noise(F, A, dt)
+    bg = vec3(F, X_BG)
+    q, p, v, a1 = predict(P, F[X_QDIAG : X_QDIAG + N], dt, A[A_GRAVITY], rate, force, vec3(F, X_PREV_RATE),
+                          vec3(F, X_PREV_ACC), bg, vec3(F, X_BA), quat(F, X_Q), vec3(F, X_P),
+                          vec3(F, X_V))  # fmt: skip
+    set4(F, X_Q, q)
+    set3(F, X_P, p)
+    set3(F, X_V, v)
+    set3(F, X_PREV_ACC, a1)
+    set3(F, X_PREV_RATE, rate)
+    set3(F, X_PREV_FORCE, force)
+    set3(F, X_RATE, (rate[0] - bg[0], rate[1] - bg[1], rate[2] - bg[2]))
+    if t < F[X_BAD_ACCEL_UNTIL]:
+        P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
+        P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
+    head = (int(F[X_HEAD]) + 1) & RING_MASK
+    store(F, ring, head)
+    F[X_HEAD] = head
+    if F[X_COUNT] < RING:
+        F[X_COUNT] += 1.0
+
+
+# =================================================================================================
+# The delayed-state buffer
+# =================================================================================================
+@kernel
+def state_at(F: Any, ring: Any, t_m: float) -> tuple[bool, Vector3, Vector3, Quaternion, float]:
+    """``(found, p, v, q, D)`` at ``t_m`` (corrected since), ``D = now - t_m``; not found when
+    older than the buffer."""
+    now = F[X_TIME]
+    if t_m >= now - 1e-9:
+        return True, vec3(F, X_P), vec3(F, X_V), quat(F, X_Q), 0.0
+    dt_avg = F[X_DT_AVG]
+    count, head = int(F[X_COUNT]), int(F[X_HEAD])
+    k = int((now - t_m) / dt_avg + 0.5)
+    none = (False, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)
+    if k >= count:
+        return none
+    row = (head - k) & RING_MASK
+    # The step is nearly uniform; walk at most a few entries to the nearest time.
+    while ring[row, R_T] > t_m and k + 1 < count:
+        nxt = (head - k - 1) & RING_MASK
+        if abs(ring[nxt, R_T] - t_m) >= abs(ring[row, R_T] - t_m):
+            break
+        k += 1
+        row = nxt
+    while ring[row, R_T] < t_m and k > 0:
+        nxt = (head - k + 1) & RING_MASK
+        if abs(ring[nxt, R_T] - t_m) >= abs(ring[row, R_T] - t_m):
+            break
+        k -= 1
+        row = nxt
+    r = ring[row]
+    te = r[R_T]
+    if t_m < te - 2.0 * dt_avg:
+        return none  # older than the buffer's oldest entry
+    dtm = t_m - te
+    pm = (
+        r[R_P] + F[X_CP] - r[R_CP] + r[R_V] * dtm,
+        r[R_P + 1] + F[X_CP + 1] - r[R_CP + 1] + r[R_V + 1] * dtm,
+        r[R_P + 2] + F[X_CP + 2] - r[R_CP + 2] + r[R_V + 2] * dtm,
+    )
+    vm = (
+        r[R_V] + F[X_CV] - r[R_CV],
+        r[R_V + 1] + F[X_CV + 1] - r[R_CV + 1],
+        r[R_V + 2] + F[X_CV + 2] - r[R_CV + 2],
+    )
+    q = quat(r, R_Q)
+    cq, cq_now = quat(r, R_CQ), quat(F, X_CQ)
+    if cq != cq_now:  # corrected since it was stored: the corrections since, cq_now (x) cq^-1
+        q = quaternion_multiply(quaternion_multiply(cq_now, quaternion_conjugate(cq)), q)
+    return True, pm, vm, q, now - t_m
+
+
+# =================================================================================================
+# Fusion
+# =================================================================================================
+@kernel
+def window_append(W: Any, w: int, t: float, value: float) -> None:
+    """``(t, value)`` into window ``w`` (the oldest goes when full); its running sum is summed
+    again every ``WINDOW`` appends, so round-off cannot build up."""
+    row = W[w]
+    start, count = int(row[W_START]), int(row[W_COUNT])
+    if count >= WINDOW:
+        row[W_TOTAL] -= row[W_VALUES + start]
+        start = (start + 1) % WINDOW
+        count -= 1
+    i = (start + count) % WINDOW
+    row[W_TIMES + i] = t
+    row[W_VALUES + i] = value
+    count += 1
+    row[W_TOTAL] += value
+    row[W_START], row[W_COUNT] = start, count
+    row[W_APPENDS] += 1.0
+    if row[W_APPENDS] >= WINDOW:
+        row[W_APPENDS] = 0.0
+        total = 0.0
+        for j in range(count):
+            total += row[W_VALUES + (start + j) % WINDOW]
+        row[W_TOTAL] = total
+
+
+@kernel
+def window_mean_since(W: Any, w: int, t: float) -> tuple[int, float]:
+    """Drop the samples of window ``w`` older than ``t``; ``(samples left, their mean)``."""
+    row = W[w]
+    start, count = int(row[W_START]), int(row[W_COUNT])
+    while count > 0 and row[W_TIMES + start] < t:
+        row[W_TOTAL] -= row[W_VALUES + start]
+        start = (start + 1) % WINDOW
+        count -= 1
+    row[W_START], row[W_COUNT] = start, count
+    return count, (row[W_TOTAL] / count if count > 0 else 0.0)
+
+
+@kernel
+def window_of(source: int) -> int:
+    """The innovation window a kind feeds (-1: none)."""
+    if source == SRC_GPS_VVEL:
+        return W_GPS_VVEL
+    if source == SRC_EV_HGT:
+        return W_EV_HGT
+    return -1
+
+
+@kernel
+def fuse(F: Any, P: Any, stats: Any, W: Any, H: Any, r: Any, y: Any, row_group: Any, group_source: Any,
+         group_gate: Any, accepted: Any) -> None:  # fmt: skip
+    """Gate, then fuse one measurement: rows ``H`` (m x N) with noise variances ``r``,
+    innovations ``y``, each row in group ``row_group[k]`` (groups in order, rows of a group
+    consecutive); a group is one kind's axes (``group_source``, gate ``group_gate``).
+
+    Each group passes or fails its gate as a whole on the prior innovation variances, as PX4
+    does (``accepted`` 1/0 per group); the accepted rows are then fused in one batch, in Joseph
+    form (:func:`.kernels.joseph_update`, Solà §6.1), and the error ``K y`` injected
+    (:func:`inject`). A batch equals the sequence of scalar updates for a linear ``h`` and costs
+    one set of 19x19 products instead of one per axis.
+    """
+    m = H.shape[0]
+    groups = group_source.shape[0]
+    prior = np.empty(m)
+    prior_variances(P, H, prior)
+    now = F[X_TIME]
+    kept = 0
+    k = 0
+    for g in range(groups):
+        src = int(group_source[g])
+        gate = group_gate[g]
+        first = k
+        while k < m and int(row_group[k]) == g:
+            k += 1
+        worst = 0.0
+        for j in range(first, k):
+            ratio = y[j] * y[j] / (gate * gate * max(prior[j] + r[j], MIN_VARIANCE))
+            if ratio > worst:
+                worst = ratio
+        last = k - 1
+        s = stats[src]
+        s[ST_TEST_RATIO] = worst
+        s[ST_INNOVATION] = y[last]
+        s[ST_NORMALIZED] = y[last] / math.sqrt(max(prior[last] + r[last], MIN_VARIANCE))
+        s[ST_LAST_TESTED] = now
+        w = window_of(src)
+        if w >= 0:
+            window_append(W, w, now, s[ST_NORMALIZED])
+        if worst > 1.0:
+            s[ST_REJECTED] += 1.0
+            s[ST_LAST_REJECTED] = now
+            if s[ST_REJECTING_SINCE] < 0.0:
+                s[ST_REJECTING_SINCE] = now
+            accepted[g] = 0.0
+        else:
+            s[ST_REJECTING_SINCE] = -1.0
+            s[ST_FUSED] += 1.0
+            s[ST_LAST_FUSED] = now
+            accepted[g] = 1.0
+            kept += k - first
+    if kept == 0:
+        return
+    Hk = np.empty((kept, N))
+    rk = np.empty(kept)
+    yk = np.empty(kept)
+    i = 0
+    for j in range(m):
+        if accepted[int(row_group[j])] != 0.0:
+            for c in range(N):
+                Hk[i, c] = H[j, c]
+            rk[i] = r[j]
+            yk[i] = y[j]
+            i += 1
+    dx = np.empty(N)
+    joseph_update(P, Hk, rk, yk, dx)
+    inject(F, P, dx)
+
+
+@kernel
+def inject(F: Any, P: Any, dx: Any) -> None:
+    """Nominal state <- nominal (+) dx (Solà §6.2, global attitude error), then the reset."""
+    for i in range(3):
+        F[X_P + i] += dx[i]
+        F[X_V + i] += dx[3 + i]
+        F[X_BG + i] += dx[9 + i]
+        F[X_BA + i] += dx[12 + i]
+        F[X_BM + i] += dx[15 + i]
+        # Bookkeeping for the buffered past states.
+        F[X_CP + i] += dx[i]
+        F[X_CV + i] += dx[3 + i]
+    F[X_BH] += dx[18]
+    dq = quaternion_exp(dx[6], dx[7], dx[8])
+    set4(F, X_Q, quaternion_normalised(quaternion_multiply(dq, quat(F, X_Q))))
+    set4(F, X_CQ, quaternion_multiply(dq, quat(F, X_CQ)))
+    # The previous sample's world force and the reported rate follow the new q and biases.
+    set3(F, X_PREV_ACC, world_force(F, vec3(F, X_PREV_FORCE)))
+    for i in range(3):
+        F[X_RATE + i] = F[X_PREV_RATE + i] - F[X_BG + i]
+    # Reset, Solà §7.3.3: P <- G P G^T with G_theta = I + [dtheta/2]_x. Below 1 mrad, G - I
+    # changes P by less than 0.05 %: skipped there (it costs as much as a fusion).
+    hx, hy, hz = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
+    if hx * hx + hy * hy + hz * hz > 0.25e-6:
+        for j in range(N):  # rows: G P
+            a, b, c = P[ITH, j], P[ITH + 1, j], P[ITH + 2, j]
+            P[ITH, j] = a - hz * b + hy * c
+            P[ITH + 1, j] = hz * a + b - hx * c
+            P[ITH + 2, j] = -hy * a + hx * b + c
+        for i in range(N):  # columns: (G P) G^T
+            a, b, c = P[i, ITH], P[i, ITH + 1], P[i, ITH + 2]
+            P[i, ITH] = a - hz * b + hy * c
+            P[i, ITH + 1] = hz * a + b - hx * c
+            P[i, ITH + 2] = -hy * a + hx * b + c
+
+
+@kernel
+def maybe_reset_position(
+    F: Any, P: Any, stats: Any, A: Any, source: int, target: Vector3, var: float
+) -> None:
+    """After EST_POS_RST_T of continuous rejections of a good source, the horizontal position
+    jumps to it (PX4 does)."""
+    s = stats[source]
+    since = s[ST_REJECTING_SINCE]
+    if since < 0.0 or F[X_TIME] - since < A[A_POS_RESET_TIMEOUT]:
+        return
+    for i in range(2):
+        delta = target[i] - F[X_P + i]
+        F[X_P + i] += delta
+        F[X_CP + i] += delta
+        for j in range(N):
+            P[IP + i, j] = 0.0
+            P[j, IP + i] = 0.0
+        P[IP + i, IP + i] = var
+    s[ST_RESETS] += 1.0
+    s[ST_REJECTING_SINCE] = -1.0
+
+
+@kernel
+def check_vertical_accel(F: Any, stats: Any, W: Any) -> None:
+    """Bad vertical acceleration (PX4's bad_acc_vertical, made statistical): the mean of the
+    normalised vertical velocity innovations (GPS) over the last BAD_ACCEL_WINDOW_S is beyond
+    BAD_ACCEL_MEAN and the height innovation agrees in sign; or, without a velocity source,
+    the mean of the normalised vision height innovations is. For a consistent filter the
+    mean of n samples has a standard deviation 1/sqrt(n) (0.32 at 10 GPS fixes): by chance
+    the test fires about once in 10^5 windows; a vertical accelerometer fault (a bias step the
+    random-walk model cannot follow) trips it within about a second."""
+    now = F[X_TIME]
+    bad = False
+    if stats[SRC_GPS_VVEL, ST_LAST_TESTED] == now:
+        n, mean = window_mean_since(W, W_GPS_VVEL, now - BAD_ACCEL_WINDOW_S)
+        if n >= BAD_ACCEL_MIN_SAMPLES and abs(mean) >= BAD_ACCEL_MEAN:
+            # The height source tested last (GNSS height first on a tie) agrees in sign.
+            hgt, baro = stats[SRC_GPS_HGT], stats[SRC_BARO]
+            latest = -1
+            if hgt[ST_LAST_TESTED] >= 0.0:
+                latest = SRC_GPS_HGT
+            if baro[ST_LAST_TESTED] >= 0.0 and (latest < 0 or baro[ST_LAST_TESTED] > hgt[ST_LAST_TESTED]):
+                latest = SRC_BARO
+            bad = latest >= 0 and stats[latest, ST_INNOVATION] * mean > 0.0
+    if stats[SRC_EV_HGT, ST_LAST_TESTED] == now:
+        n, mean = window_mean_since(W, W_EV_HGT, now - BAD_ACCEL_WINDOW_S)
+        if n >= BAD_ACCEL_MIN_SAMPLES and abs(mean) >= BAD_ACCEL_MEAN:
+            bad = True
+    if bad:
+        if now >= F[X_BAD_ACCEL_UNTIL]:
+            F[X_BAD_ACCEL_DETECTIONS] += 1.0
+        F[X_BAD_ACCEL_UNTIL] = now + BAD_ACCEL_HOLD_S
+
+
+@kernel
+def position_rows(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: int, D: float,
+                  innovation: float, var: float) -> int:  # fmt: skip
+    """Row ``k``: a position axis measured ``D`` s ago (``dp(t_m) = dp - D dv``); the next row."""
+    H[k, IP + axis] = 1.0
+    H[k, IV + axis] = -D
+    r[k], y[k], row_group[k] = var, innovation, g
+    return k + 1
+
+
+@kernel
+def velocity_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: int, innovation: float,
+                 var: float) -> int:  # fmt: skip
+    H[k, IV + axis] = 1.0
+    r[k], y[k], row_group[k] = var, innovation, g
+    return k + 1
+
+
+@kernel
+def yaw_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, q: Quaternion, innovation: float,
+            var: float) -> int:  # fmt: skip
+    J = yaw_jacobian(q)
+    H[k, ITH], H[k, ITH + 1], H[k, ITH + 2] = J[0], J[1], J[2]
+    r[k], y[k], row_group[k] = var, innovation, g
+    return k + 1
+
+
+@kernel
+def fuse_gps(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, position: Vector3,
+             velocity: Vector3, eph: float, epv: float, speed_accuracy: float, fix_type: float,
+             satellites: float) -> None:  # fmt: skip
+    """GNSS position (horizontal, height) and velocity arrived at ``t``, valid EKF2_GPS_DELAY before."""
+    if not gps_usable(A, fix_type, eph, epv, satellites):
+        stats[SRC_GPS_POS, ST_CHECK_REJECTED] += 1.0
+        return
+    found, pm, vm, _, D = state_at(F, ring, t - A[A_GPS_DELAY])
+    if not found:
+        stats[SRC_GPS_POS, ST_TOO_OLD] += 1.0
+        return
+    hv, vv, sv = gps_variances(A, eph, epv, speed_accuracy)
+    ctrl = int(A[A_GPS_CTRL])
+    H, r, y, row_group = np.zeros((6, N)), np.empty(6), np.empty(6), np.empty(6)
+    group_source, group_gate = np.empty(4), np.empty(4)
+    k = g = 0
+    if ctrl & GPS_CTRL_HPOS:
+        k = position_rows(H, r, y, row_group, k, g, 0, D, position[0] - pm[0], hv)
+        k = position_rows(H, r, y, row_group, k, g, 1, D, position[1] - pm[1], hv)
+        group_source[g], group_gate[g] = SRC_GPS_POS, A[A_GPS_POS_GATE]
+        g += 1
+    if ctrl & GPS_CTRL_VPOS:
+        k = position_rows(H, r, y, row_group, k, g, 2, D, position[2] - pm[2], vv)
+        group_source[g], group_gate[g] = SRC_GPS_HGT, A[A_BARO_GATE]
+        g += 1
+    if ctrl & GPS_CTRL_VEL:
+        # Horizontal and vertical velocity gated apart (as PX4 does), so that a vertical
+        # accelerometer fault does not also cut the horizontal aiding.
+        k = velocity_row(H, r, y, row_group, k, g, 0, velocity[0] - vm[0], sv)
+        k = velocity_row(H, r, y, row_group, k, g, 1, velocity[1] - vm[1], sv)
+        group_source[g], group_gate[g] = SRC_GPS_VEL, A[A_GPS_VEL_GATE]
+        g += 1
+        k = velocity_row(H, r, y, row_group, k, g, 2, velocity[2] - vm[2], sv * 2.25)  # PX4: 1.5x
+        group_source[g], group_gate[g] = SRC_GPS_VVEL, A[A_GPS_VEL_GATE]
+        g += 1
+    if g == 0:
+        return
+    accepted = np.zeros(g)
+    fuse(F, P, stats, W, H[:k], r[:k], y[:k], row_group[:k], group_source[:g], group_gate[:g], accepted)
+    now = F[X_TIME]
+    for j in range(g):
+        src, ok = int(group_source[j]), accepted[j] != 0.0
+        if src == SRC_GPS_POS:
+            if ok:
+                F[X_LAST_H_AID] = now
+                F[X_LAST_GPS_POS] = now
+            else:
+                target = (position[0] + F[X_P] - pm[0], position[1] + F[X_P + 1] - pm[1], 0.0)
+                maybe_reset_position(F, P, stats, A, SRC_GPS_POS, target, hv)
+        elif ok and (src in (SRC_GPS_HGT, SRC_GPS_VVEL)):
+            F[X_LAST_V_AID] = now
+        elif ok and src == SRC_GPS_VEL:
+            F[X_LAST_H_AID] = now
+    check_vertical_accel(F, stats, W)
+
+
+@kernel
+def fuse_baro(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, height: float) -> None:
+    """Barometric height arrived at ``t``: ``h = z + b_h`` (the offset is a state), at most EKF2_BARO_RATE."""
+    if A[A_BARO_ENABLED] == 0.0:
+        return
+    s = stats[SRC_BARO]
+    if t < F[X_NEXT_BARO]:
+        s[ST_SKIPPED] += 1.0
+        return
+    F[X_NEXT_BARO] = t + A[A_BARO_PERIOD] - 1e-9
+    found, pm, _, _, D = state_at(F, ring, t - A[A_BARO_DELAY])
+    if not found:
+        s[ST_TOO_OLD] += 1.0
+        return
+    H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
+    H[0, IP + 2], H[0, IV + 2], H[0, IBH] = 1.0, -D, 1.0
+    r[0], y[0] = A[A_BARO_NOISE] ** 2, height - pm[2] - F[X_BH]
+    accepted = np.zeros(1)
+    fuse(
+        F, P, stats, W, H, r, y, row_group, np.full(1, float(SRC_BARO)), np.full(1, A[A_BARO_GATE]), accepted
+    )
+    if accepted[0] != 0.0:
+        F[X_LAST_V_AID] = F[X_TIME]
+    check_vertical_accel(F, stats, W)
+
+
+@kernel
+def mag_checks(F: Any, stats: Any, A: Any, source: int, m: Vector3, q: Quaternion) -> bool:
+    """PX4's EKF2_MAG_CHECK: the corrected field's strength and inclination against the model."""
+    c = (m[0] - F[X_BM], m[1] - F[X_BM + 1], m[2] - F[X_BM + 2])
+    strength = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+    check = int(A[A_MAG_CHECK])
+    ok = True
+    if check & MAG_CHECK_STRENGTH and abs(strength - A[A_FIELD_STRENGTH]) > A[A_MAG_STRENGTH_TOL]:
+        ok = False
+    if ok and check & MAG_CHECK_INCLINATION and strength > 0.0:
+        R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
+        wz = R[2][0] * c[0] + R[2][1] * c[1] + R[2][2] * c[2]
+        inclination = math.asin(max(-1.0, min(1.0, -wz / strength)))
+        ok = abs(inclination - A[A_FIELD_INCLINATION]) <= A[A_MAG_INCLINATION_TOL]
+    if not ok:
+        stats[source, ST_CHECK_REJECTED] += 1.0
+        stats[source, ST_LAST_REJECTED] = F[X_TIME]
+    return ok
+
+
+@kernel
+def fuse_mag(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, m: Vector3) -> None:
+    """Magnetometer arrived at ``t``, at most EKF2_MAG_RATE: the 3-axis field ``m = R^T m_earth +
+    b_m`` (EKF2_MAG_TYPE 0) or the tilt-compensated heading (1)."""
+    mag_type = int(A[A_MAG_TYPE])
+    if mag_type == MAG_TYPE_NONE:
+        return
+    src = SRC_HEADING if mag_type == MAG_TYPE_HEADING else SRC_MAG
+    if t < F[X_NEXT_MAG]:
+        stats[src, ST_SKIPPED] += 1.0
+        return
+    F[X_NEXT_MAG] = t + A[A_MAG_PERIOD] - 1e-9
+    found, _, _, q, _ = state_at(F, ring, t - A[A_MAG_DELAY])
+    if not found:
+        stats[src, ST_TOO_OLD] += 1.0
+        return
+    if not mag_checks(F, stats, A, src, m, q):
+        return
+    if mag_type == MAG_TYPE_HEADING:
+        H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
+        phi, theta, _ = euler_from_quaternion(q[0], q[1], q[2], q[3])
+        measured = mag_heading(A, m, phi, theta, vec3(F, X_BM))
+        yaw_row(H, r, y, row_group, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[A_HEADING_NOISE] ** 2)
+        source, gate = np.full(1, float(SRC_HEADING)), np.full(1, A[A_HEADING_GATE])
+        fuse(F, P, stats, W, H, r, y, row_group, source, gate, np.zeros(1))
+        return
+    pred, J = mag_model(q, vec3(A, A_FIELD), vec3(F, X_BM))
+    H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
+    var = A[A_MAG_NOISE] ** 2
+    for i in range(3):
+        H[i, ITH], H[i, ITH + 1], H[i, ITH + 2] = J[i][0], J[i][1], J[i][2]
+        H[i, IBM + i] = 1.0
+        r[i], y[i] = var, m[i] - pred[i]
+    fuse(
+        F, P, stats, W, H, r, y, row_group, np.full(1, float(SRC_MAG)), np.full(1, A[A_MAG_GATE]), np.zeros(1)
+    )
+
+
+@kernel
+def fuse_vision(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, position: Vector3,
+                yaw: float, position_std: float, yaw_std: float) -> None:  # fmt: skip
+    """Motion capture / vision position and yaw arrived at ``t``, valid EKF2_EV_DELAY before."""
+    found, pm, _, qm, D = state_at(F, ring, t - A[A_EV_DELAY])
+    if not found:
+        stats[SRC_EV_POS, ST_TOO_OLD] += 1.0
+        return
+    var = ev_pos_variance(A, position_std)
+    ctrl = int(A[A_EV_CTRL])
+    H, r, y, row_group = np.zeros((4, N)), np.empty(4), np.empty(4), np.empty(4)
+    group_source, group_gate = np.empty(3), np.empty(3)
+    k = g = 0
+    if ctrl & EV_CTRL_HPOS:
+        k = position_rows(H, r, y, row_group, k, g, 0, D, position[0] - pm[0], var)
+        k = position_rows(H, r, y, row_group, k, g, 1, D, position[1] - pm[1], var)
+        group_source[g], group_gate[g] = SRC_EV_POS, A[A_EV_POS_GATE]
+        g += 1
+    if ctrl & EV_CTRL_VPOS:
+        k = position_rows(H, r, y, row_group, k, g, 2, D, position[2] - pm[2], var)
+        group_source[g], group_gate[g] = SRC_EV_HGT, A[A_EV_POS_GATE]
+        g += 1
+    if ctrl & EV_CTRL_YAW:
+        k = yaw_row(H, r, y, row_group, k, g, qm, wrap_pi(yaw - yaw_of(qm)), ev_yaw_variance(A, yaw_std))
+        group_source[g], group_gate[g] = SRC_EV_YAW, A[A_HEADING_GATE]
+        g += 1
+    if g == 0:
+        return
+    accepted = np.zeros(g)
+    fuse(F, P, stats, W, H[:k], r[:k], y[:k], row_group[:k], group_source[:g], group_gate[:g], accepted)
+    now = F[X_TIME]
+    for j in range(g):
+        src, ok = int(group_source[j]), accepted[j] != 0.0
+        if src == SRC_EV_POS:
+            if ok:
+                F[X_LAST_H_AID] = now
+            else:
+                target = (position[0] + F[X_P] - pm[0], position[1] + F[X_P + 1] - pm[1], 0.0)
+                maybe_reset_position(F, P, stats, A, SRC_EV_POS, target, var)
+        elif ok and src == SRC_EV_HGT:
+            F[X_LAST_V_AID] = now
+    check_vertical_accel(F, stats, W)
+
+
+# =================================================================================================
+# Health
+# =================================================================================================
+@kernel
+def accuracies(P: Any) -> tuple[float, float, float, float, float]:
+    """1-sigma horizontal position, vertical position, velocity, tilt and yaw of ``P``."""
+    return (
+        math.sqrt(max(P[0, 0] + P[1, 1], 0.0)),
+        math.sqrt(max(P[2, 2], 0.0)),
+        math.sqrt(max(P[3, 3] + P[4, 4] + P[5, 5], 0.0)),
+        math.sqrt(max(P[6, 6] + P[7, 7], 0.0)),
+        math.sqrt(max(P[8, 8], 0.0)),
+    )
+
+
+@kernel
+def not_converged(F: Any, P: Any, A: Any) -> int:
+    """Why the estimate is not fit to fly on (``CONVERGED``: it is): no aiding for EKF2_NOAID_TOUT,
+    else the first 1-sigma above its EST_CONV_* threshold (tilt, yaw, horizontal position, height:
+    just after the alignment the height is one GNSS fix, 0.5-1 m 1-sigma)."""
+    if F[X_TIME] - F[X_LAST_H_AID] > A[A_NO_AID_TIMEOUT]:
+        return DEAD_RECKONING
+    pos_h, pos_v, _, tilt, yaw = accuracies(P)
+    if tilt > A[A_CONV_TILT]:
+        return TILT
+    if yaw > A[A_CONV_YAW]:
+        return YAW
+    if pos_h > A[A_CONV_POS]:
+        return POSITION
+    if pos_v > A[A_CONV_VPOS]:
+        return HEIGHT
+    return CONVERGED

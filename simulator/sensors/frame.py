@@ -1,0 +1,427 @@
+"""One frame of the vehicle's sensors, written once as a kernel: when each sensor samples, what
+it delivers after its latency, the biases' random walks, the GNSS errors and the injected faults.
+
+:class:`~.models.SensorSuite` (the simulator) is a thin shell around :func:`sensor_frame`; a
+batch engine calls it from its own compiled loop (:func:`sitl.campaign.kernels.simulate_estimated`),
+so a seed gives the same readings in both. What a sample is (truth + bias + noise, the ISA,
+the Gauss-Markov errors) is :mod:`.kernels`. The draws come from one stream
+(:mod:`quadcommon.rng`) in a fixed order per frame: the biases' walks, the IMU, the
+magnetometer, the barometer, the GNSS, the vision, then (until the first magnetometer or
+barometer sample) the held readings' stand-ins.
+
+Rates and latency: a sensor samples when ``t`` reaches its next multiple of the period (one
+sample per frame at most: a coarse caller skips samples), and the sample is delivered
+``latency`` after the time it is valid for (the first frame whose time reaches it; of two due in
+one frame, the newer). The memory is float arrays laid out by the constants below:
+
+* ``C`` (``C_SIZE``, :func:`config_array`): the sensors' figures;
+* ``S`` (``S_SIZE``, :func:`initial_state`): biases, GNSS errors, held readings, the schedules
+  and the queues of readings in flight;
+* ``faults`` (n x ``FAULT_SIZE``): kind, start, duration, value (3) per injected fault;
+* ``out`` (``O_SIZE``): what the frame delivers (a flag per sensor: 1 when it delivered).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from quadcommon.kernel import kernel
+from quadcommon.rigid_body import Quaternion, Vector3
+from quadcommon.rng import normal
+
+from .config import FAULT_KINDS, SensorConfig
+from .kernels import (
+    barometer_reading,
+    draw3,
+    gauss_markov,
+    imu_reading,
+    magnetometer_reading,
+    random_walk,
+    stationary,
+    vision_reading,
+)
+
+EPS_S = 1e-9  # time comparisons on a float grid
+GPS_FIX_NONE = 1.0  # MAVLink GPS_FIX_TYPE_NO_FIX: the receiver talks but has no position
+GPS_FIX_3D = 3.0
+NO_FIX_ACCURACY = 99.99  # eph, epv and speed accuracy of a "no fix" report
+
+MAG, BARO, GPS, VISION = 0, 1, 2, 3  # the scheduled sensors
+
+# -- C: the sensors' figures ---------------------------------------------------------------------
+C_ACCEL_STD, C_GYRO_STD, C_ACCEL_RW, C_GYRO_RW = 0, 1, 2, 3  # per-sample std; random-walk densities
+C_BARO_DRIFT = 4  # hPa/sqrt(s)
+C_MAG_STD = 5
+C_FIELD = 6  # 3: earth field, world (gauss)
+C_BARO_BIAS, C_BARO_STD, C_HOME_ALTITUDE = 9, 10, 11
+C_GPS_TAU_P, C_GPS_TAU_V = 12, 13
+C_GPS_STD_P = 14  # 3: stationary std of the position errors per axis
+C_GPS_STD_V = 17  # 3
+C_GPS_EPH, C_GPS_EPV, C_GPS_SPEED_ACCURACY, C_GPS_SATELLITES = 20, 21, 22, 23
+C_GPS_ON, C_VISION_ON, C_VISION_STD, C_VISION_YAW_STD = 24, 25, 26, 27
+C_PERIOD = 28  # 4: per scheduled sensor
+C_LATENCY = 32  # 4
+C_SIZE = 36
+
+# -- S: the sensors' state -----------------------------------------------------------------------
+S_ACCEL_BIAS, S_GYRO_BIAS, S_MAG_BIAS = 0, 3, 6
+S_BARO_DRIFT = 9
+S_GPS_POS_ERR, S_GPS_VEL_ERR = 10, 13
+S_T_LAST, S_T_GPS = 16, 17  # NaN: none yet
+S_LAST_FIX = 18  # 3: the last good fix's position
+S_HAS_FIX = 21
+S_HELD_MAG = 22  # 3: the last magnetometer reading (what HIL_SENSOR repeats between samples)
+S_HAS_MAG = 25
+S_HELD_BARO = 26  # 4: time, pressure, pressure altitude, temperature
+S_HAS_BARO = 30
+S_NEXT = 31  # 4: per scheduled sensor, the index of its next sample
+PENDING = 16  # readings in flight per sensor (latency / period; 0.3 s at 50 Hz is 15)
+ITEM = 13  # delivery time + up to 12 floats of reading
+Q_HEAD, Q_COUNT, Q_ITEMS = 0, 1, 2
+QUEUE = 2 + PENDING * ITEM
+S_QUEUES = 35  # 4 queues
+S_READING = S_QUEUES + 4 * QUEUE  # 12: the reading being made (room the frame needs, not state)
+S_SIZE = S_READING + 12
+
+# -- faults ---------------------------------------------------------------------------------------
+F_KIND, F_START, F_DURATION, F_VALUE = 0, 1, 2, 3
+FAULT_SIZE = 6
+GPS_OUTAGE, GPS_GLITCH, VISION_OUTAGE, MAG_DISTURBANCE, ACCEL_BIAS_STEP, GYRO_BIAS_STEP = range(6)
+
+# -- out: one frame's delivery ---------------------------------------------------------------------
+O_FORCE, O_RATE = 0, 3  # the IMU sample
+O_MAG = 6  # fresh flag, time, field (3)
+O_BARO = 11  # fresh flag, time, pressure, pressure altitude, temperature
+O_GPS = 16  # fresh flag, time, position (3), velocity (3), eph, epv, satellites, speed accuracy, fix type
+O_VISION = 29  # fresh flag, time, position (3), yaw, position std, yaw std
+O_HELD_MAG = 37  # 3
+O_HELD_BARO = 40  # 4: time, pressure, pressure altitude, temperature
+O_SIZE = 44
+READING_SIZE = (4, 4, 12, 7)  # floats of a reading per scheduled sensor (out's after the flag)
+OUT_AT = (O_MAG, O_BARO, O_GPS, O_VISION)
+
+
+# =================================================================================================
+# Python: the arrays from a SensorConfig
+# =================================================================================================
+def config_array(config: SensorConfig, home_altitude_m: float, imu_rate_hz: float) -> np.ndarray:
+    """The sensors' figures as :func:`sensor_frame` reads them (the IMU's per-sample noise from its
+    density at ``imu_rate_hz``, the frame rate)."""
+    a, g, m, b, gps, v = (config.accelerometer, config.gyroscope, config.magnetometer, config.barometer,
+                          config.gps, config.vision)  # fmt: skip
+    C = np.zeros(C_SIZE)
+    C[C_ACCEL_STD] = a.noise_density * math.sqrt(imu_rate_hz)
+    C[C_GYRO_STD] = g.noise_density * math.sqrt(imu_rate_hz)
+    C[C_ACCEL_RW], C[C_GYRO_RW], C[C_BARO_DRIFT] = a.bias_random_walk, g.bias_random_walk, b.drift_hpa_rthz
+    C[C_MAG_STD] = m.noise_std_gauss
+    C[C_FIELD : C_FIELD + 3] = [float(c) for c in m.earth_field_world_gauss]
+    C[C_BARO_BIAS], C[C_BARO_STD], C[C_HOME_ALTITUDE] = b.bias_hpa, b.noise_std_hpa, home_altitude_m
+    C[C_GPS_TAU_P], C[C_GPS_TAU_V] = gps.position_correlation_time_s, gps.velocity_correlation_time_s
+    sh, sv, s = gps.horizontal_noise_std_m, gps.vertical_noise_std_m, gps.velocity_noise_std_m_s
+    C[C_GPS_STD_P : C_GPS_STD_P + 3] = (sh, sh, sv)
+    C[C_GPS_STD_V : C_GPS_STD_V + 3] = (s, s, s)
+    C[C_GPS_EPH], C[C_GPS_EPV] = gps.reported_eph_m, gps.reported_epv_m
+    C[C_GPS_SPEED_ACCURACY], C[C_GPS_SATELLITES] = gps.reported_speed_accuracy_m_s, gps.satellites_visible
+    C[C_GPS_ON], C[C_VISION_ON] = float(gps.enabled), float(v.enabled)
+    C[C_VISION_STD], C[C_VISION_YAW_STD] = v.position_noise_std_m, v.yaw_noise_std_rad
+    for i, model in enumerate((m, b, gps, v)):
+        C[C_PERIOD + i] = 1.0 / model.rate_hz
+        C[C_LATENCY + i] = model.latency_s
+    return C
+
+
+def new_sensors(config: SensorConfig, home_altitude_m: float, imu_rate_hz: float,
+                initial_state_entry: Any = None) -> tuple[Any, np.ndarray, np.ndarray]:  # fmt: skip
+    """``(rng, S, C)`` of sensors switched on: the stream of ``config.seed`` and the state after
+    :func:`initial_state` (called through ``initial_state_entry``, a compiled entry of it, when
+    given), the figures of :func:`config_array`."""
+    from quadcommon.rng import stream
+
+    rng = stream(config.seed)
+    C = config_array(config, home_altitude_m, imu_rate_hz)
+    S = np.zeros(S_SIZE)
+    a, g, m = config.accelerometer, config.gyroscope, config.magnetometer
+
+    def f3(v: Any) -> Vector3:
+        return (float(v[0]), float(v[1]), float(v[2]))
+
+    (initial_state_entry or initial_state)(rng, C, f3(a.bias), f3(g.bias), f3(m.bias_gauss),
+                                           float(a.turn_on_bias_std), float(g.turn_on_bias_std),
+                                           float(m.turn_on_bias_std_gauss), S)  # fmt: skip
+    return rng, S, C
+
+
+def fault_array(faults) -> np.ndarray:  # noqa: ANN001 - a sequence of SensorFault
+    """Injected faults (:class:`~.config.SensorFault`) as rows of :func:`sensor_frame`'s table."""
+    rows = np.zeros((len(faults), FAULT_SIZE))
+    for i, f in enumerate(faults):
+        rows[i] = (FAULT_KINDS.index(f.kind), f.start_s, f.duration_s, *(float(c) for c in f.value))
+    return rows
+
+
+# =================================================================================================
+# Kernels
+# =================================================================================================
+@kernel
+def initial_state(rng: Any, C: Any, accel_bias: Vector3, gyro_bias: Vector3, mag_bias: Vector3,
+                  accel_bias_std: float, gyro_bias_std: float, mag_bias_std: float,
+                  S: Any) -> None:  # fmt: skip
+    """``S`` at switch-on: the fixed biases plus a draw of their random part (same seed, same
+    biases), the GNSS errors drawn from their stationary distribution, nothing sampled yet."""
+    for i in range(S.shape[0]):
+        S[i] = 0.0
+    n = draw3(rng, accel_bias_std)
+    for i in range(3):
+        S[S_ACCEL_BIAS + i] = accel_bias[i] + n[i]
+    n = draw3(rng, gyro_bias_std)
+    for i in range(3):
+        S[S_GYRO_BIAS + i] = gyro_bias[i] + n[i]
+    n = draw3(rng, mag_bias_std)
+    for i in range(3):
+        S[S_MAG_BIAS + i] = mag_bias[i] + n[i]
+    e = stationary(rng, (C[C_GPS_STD_P], C[C_GPS_STD_P + 1], C[C_GPS_STD_P + 2]))
+    u = stationary(rng, (C[C_GPS_STD_V], C[C_GPS_STD_V + 1], C[C_GPS_STD_V + 2]))
+    for i in range(3):
+        S[S_GPS_POS_ERR + i] = e[i]
+        S[S_GPS_VEL_ERR + i] = u[i]
+    S[S_T_LAST] = math.nan
+    S[S_T_GPS] = math.nan
+
+
+@kernel
+def at3(a: Any, i: int) -> Vector3:
+    return (a[i], a[i + 1], a[i + 2])
+
+
+@kernel
+def fault_sum(faults: Any, kind: int, t: float) -> Vector3:
+    """The summed value of the faults of ``kind`` active at ``t`` (``[start, start + duration)``)."""
+    x = y = z = 0.0
+    for i in range(faults.shape[0]):
+        f = faults[i]
+        if int(f[F_KIND]) == kind and f[F_START] <= t < f[F_START] + f[F_DURATION]:
+            x += f[F_VALUE]
+            y += f[F_VALUE + 1]
+            z += f[F_VALUE + 2]
+    return (x, y, z)
+
+
+@kernel
+def fault_active(faults: Any, kind: int, t: float) -> bool:
+    for i in range(faults.shape[0]):
+        f = faults[i]
+        if int(f[F_KIND]) == kind and f[F_START] <= t < f[F_START] + f[F_DURATION]:
+            return True
+    return False
+
+
+@kernel
+def due(S: Any, C: Any, sensor: int, t: float) -> bool:
+    """True (once) when the sensor's next sample time has been reached; a coarse caller's skipped
+    samples are skipped (one sample per call at most)."""
+    period = C[C_PERIOD + sensor]
+    if t + EPS_S >= S[S_NEXT + sensor] * period:
+        S[S_NEXT + sensor] = float(int((t + EPS_S) / period) + 1)
+        return True
+    return False
+
+
+@kernel
+def enqueue(S: Any, C: Any, sensor: int, t_valid: float, reading: Any, size: int) -> None:
+    """A reading valid at ``t_valid`` into the sensor's queue (delivered its latency later)."""
+    q = S_QUEUES + sensor * QUEUE
+    head, count = int(S[q + Q_HEAD]), int(S[q + Q_COUNT])
+    if count >= PENDING:  # full (a latency far beyond the period): the oldest is lost
+        head = (head + 1) % PENDING
+        count -= 1
+    at = q + Q_ITEMS + ((head + count) % PENDING) * ITEM
+    S[at] = t_valid + C[C_LATENCY + sensor]
+    for i in range(size):
+        S[at + 1 + i] = reading[i]
+    S[q + Q_HEAD], S[q + Q_COUNT] = head, count + 1
+
+
+@kernel
+def dequeue(S: Any, sensor: int, t: float, out: Any, size: int) -> bool:
+    """The newest reading whose delivery time has come into ``out`` (older ones in the same
+    frame are dropped); False when none has."""
+    q = S_QUEUES + sensor * QUEUE
+    head, count = int(S[q + Q_HEAD]), int(S[q + Q_COUNT])
+    found = False
+    while count > 0:
+        at = q + Q_ITEMS + head * ITEM
+        if S[at] > t + EPS_S:
+            break
+        for i in range(size):
+            out[i] = S[at + 1 + i]
+        found = True
+        head = (head + 1) % PENDING
+        count -= 1
+    S[q + Q_HEAD], S[q + Q_COUNT] = head, count
+    return found
+
+
+@kernel
+def deliver(S: Any, C: Any, sensor: int, t: float, reading: Any, out: Any) -> None:
+    """A reading sampled at ``t``: delivered now without latency (and nothing in flight), else
+    queued; the frame's delivery (if any) into ``out`` (flag, then the reading)."""
+    size = READING_SIZE[sensor]
+    at = OUT_AT[sensor]
+    q = S_QUEUES + sensor * QUEUE
+    if C[C_LATENCY + sensor] == 0.0 and S[q + Q_COUNT] == 0.0:
+        for i in range(size):
+            out[at + 1 + i] = reading[i]
+        out[at] = 1.0
+        return
+    enqueue(S, C, sensor, t, reading, size)
+    out[at] = 1.0 if dequeue(S, sensor, t, out[at + 1 : at + 1 + size], size) else 0.0
+
+
+@kernel
+def pending(S: Any, sensor: int, t: float, out: Any) -> None:
+    """A frame in which the sensor does not sample: what of its queue is due now."""
+    at = OUT_AT[sensor]
+    q = S_QUEUES + sensor * QUEUE
+    out[at] = 0.0
+    if S[q + Q_COUNT] > 0.0:
+        size = READING_SIZE[sensor]
+        out[at] = 1.0 if dequeue(S, sensor, t, out[at + 1 : at + 1 + size], size) else 0.0
+
+
+@kernel
+def magnetometer(rng: Any, S: Any, C: Any, faults: Any, q: Quaternion, t: float) -> Vector3:
+    bias = (S[S_MAG_BIAS], S[S_MAG_BIAS + 1], S[S_MAG_BIAS + 2])
+    d = fault_sum(faults, MAG_DISTURBANCE, t)
+    bias = (bias[0] + d[0], bias[1] + d[1], bias[2] + d[2])
+    return magnetometer_reading(rng, q, (C[C_FIELD], C[C_FIELD + 1], C[C_FIELD + 2]), bias, C[C_MAG_STD])
+
+
+@kernel
+def barometer(rng: Any, S: Any, C: Any, height: float) -> tuple[float, float, float]:
+    """``(pressure, pressure altitude, temperature)`` at ``height`` (m above home)."""
+    return barometer_reading(rng, C[C_HOME_ALTITUDE] + height, C[C_BARO_BIAS], S[S_BARO_DRIFT], C[C_BARO_STD])
+
+
+@kernel
+def gps_fix(rng: Any, S: Any, C: Any, faults: Any, t: float, position: Vector3, velocity: Vector3,
+            reading: Any) -> None:  # fmt: skip
+    """A fix at ``t`` into ``reading`` (time, position, velocity, eph, epv, satellites, speed
+    accuracy, fix type): the Gauss-Markov errors advanced since the last fix; in an outage "no
+    fix", the last good position repeated (home before any)."""
+    if not math.isnan(S[S_T_GPS]):
+        dt = t - S[S_T_GPS]
+        e = gauss_markov(rng, at3(S, S_GPS_POS_ERR), dt, C[C_GPS_TAU_P], at3(C, C_GPS_STD_P))
+        u = gauss_markov(rng, at3(S, S_GPS_VEL_ERR), dt, C[C_GPS_TAU_V], at3(C, C_GPS_STD_V))
+        for i in range(3):
+            S[S_GPS_POS_ERR + i] = e[i]
+            S[S_GPS_VEL_ERR + i] = u[i]
+    S[S_T_GPS] = t
+    reading[0] = t
+    if fault_active(faults, GPS_OUTAGE, t):
+        for i in range(3):
+            reading[1 + i] = S[S_LAST_FIX + i] if S[S_HAS_FIX] != 0.0 else 0.0
+            reading[4 + i] = 0.0
+        reading[7], reading[8], reading[9] = NO_FIX_ACCURACY, NO_FIX_ACCURACY, 0.0
+        reading[10], reading[11] = NO_FIX_ACCURACY, GPS_FIX_NONE
+        return
+    glitch = fault_sum(faults, GPS_GLITCH, t)
+    for i in range(3):
+        p = position[i] + S[S_GPS_POS_ERR + i] + glitch[i]
+        reading[1 + i] = p
+        reading[4 + i] = velocity[i] + S[S_GPS_VEL_ERR + i]
+        S[S_LAST_FIX + i] = p
+    S[S_HAS_FIX] = 1.0
+    reading[7], reading[8], reading[9] = C[C_GPS_EPH], C[C_GPS_EPV], C[C_GPS_SATELLITES]
+    reading[10], reading[11] = C[C_GPS_SPEED_ACCURACY], GPS_FIX_3D
+
+
+@kernel
+def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force: Vector3,
+                 body_rates: Vector3, q: Quaternion, position: Vector3, velocity: Vector3, yaw: float,
+                 out: Any) -> None:  # fmt: skip
+    """Advance the sensors to ``t`` (the truth of O: specific force and rates in the body,
+    attitude, position and velocity in the world, the paper's yaw) and write what is delivered
+    at ``t`` into ``out`` (layout ``O_*``)."""
+    # The biases' random walks and the baro drift since the last frame.
+    if not math.isnan(S[S_T_LAST]):
+        dt = t - S[S_T_LAST]
+        if dt > 0.0:
+            if C[C_ACCEL_RW] > 0.0:
+                b = random_walk(
+                    rng, (S[S_ACCEL_BIAS], S[S_ACCEL_BIAS + 1], S[S_ACCEL_BIAS + 2]), C[C_ACCEL_RW], dt
+                )
+                S[S_ACCEL_BIAS], S[S_ACCEL_BIAS + 1], S[S_ACCEL_BIAS + 2] = b[0], b[1], b[2]
+            if C[C_GYRO_RW] > 0.0:
+                b = random_walk(
+                    rng, (S[S_GYRO_BIAS], S[S_GYRO_BIAS + 1], S[S_GYRO_BIAS + 2]), C[C_GYRO_RW], dt
+                )
+                S[S_GYRO_BIAS], S[S_GYRO_BIAS + 1], S[S_GYRO_BIAS + 2] = b[0], b[1], b[2]
+            if C[C_BARO_DRIFT] > 0.0:
+                S[S_BARO_DRIFT] += C[C_BARO_DRIFT] * math.sqrt(dt) * normal(rng)
+    S[S_T_LAST] = t
+
+    # IMU: every frame (biases with the injected steps).
+    sa = fault_sum(faults, ACCEL_BIAS_STEP, t)
+    sg = fault_sum(faults, GYRO_BIAS_STEP, t)
+    ba = (S[S_ACCEL_BIAS] + sa[0], S[S_ACCEL_BIAS + 1] + sa[1], S[S_ACCEL_BIAS + 2] + sa[2])
+    bg = (S[S_GYRO_BIAS] + sg[0], S[S_GYRO_BIAS + 1] + sg[1], S[S_GYRO_BIAS + 2] + sg[2])
+    force, rates = imu_reading(rng, specific_force, body_rates, ba, bg, C[C_ACCEL_STD], C[C_GYRO_STD])
+    for i in range(3):
+        out[O_FORCE + i] = force[i]
+        out[O_RATE + i] = rates[i]
+
+    reading = S[S_READING : S_READING + 12]
+    if due(S, C, MAG, t):
+        m = magnetometer(rng, S, C, faults, q, t)
+        reading[0], reading[1], reading[2], reading[3] = t, m[0], m[1], m[2]
+        deliver(S, C, MAG, t, reading, out)
+    else:
+        pending(S, MAG, t, out)
+    if due(S, C, BARO, t):
+        p, h, temperature = barometer(rng, S, C, position[2])
+        reading[0], reading[1], reading[2], reading[3] = t, p, h, temperature
+        deliver(S, C, BARO, t, reading, out)
+    else:
+        pending(S, BARO, t, out)
+    if C[C_GPS_ON] != 0.0 and due(S, C, GPS, t):
+        gps_fix(rng, S, C, faults, t, position, velocity, reading)
+        deliver(S, C, GPS, t, reading, out)
+    else:
+        pending(S, GPS, t, out)
+    if C[C_VISION_ON] != 0.0 and due(S, C, VISION, t) and not fault_active(faults, VISION_OUTAGE, t):
+        p3, y = vision_reading(rng, position, yaw, C[C_VISION_STD], C[C_VISION_YAW_STD])
+        reading[0], reading[1], reading[2], reading[3] = t, p3[0], p3[1], p3[2]
+        reading[4], reading[5], reading[6] = y, C[C_VISION_STD], C[C_VISION_YAW_STD]
+        deliver(S, C, VISION, t, reading, out)
+    else:
+        pending(S, VISION, t, out)
+
+    # What HIL_SENSOR carries between samples: the last magnetometer and barometer readings
+    # (before the first, a reading of now).
+    if out[O_MAG] != 0.0:
+        S[S_HELD_MAG], S[S_HELD_MAG + 1], S[S_HELD_MAG + 2] = out[O_MAG + 2], out[O_MAG + 3], out[O_MAG + 4]
+        S[S_HAS_MAG] = 1.0
+    if out[O_BARO] != 0.0:
+        for i in range(4):
+            S[S_HELD_BARO + i] = out[O_BARO + 1 + i]
+        S[S_HAS_BARO] = 1.0
+    if S[S_HAS_MAG] != 0.0:
+        for i in range(3):
+            out[O_HELD_MAG + i] = S[S_HELD_MAG + i]
+    else:
+        m = magnetometer(rng, S, C, faults, q, t)
+        out[O_HELD_MAG], out[O_HELD_MAG + 1], out[O_HELD_MAG + 2] = m[0], m[1], m[2]
+    if S[S_HAS_BARO] != 0.0:
+        for i in range(4):
+            out[O_HELD_BARO + i] = S[S_HELD_BARO + i]
+    else:
+        p, h, temperature = barometer(rng, S, C, position[2])
+        out[O_HELD_BARO], out[O_HELD_BARO + 1], out[O_HELD_BARO + 2], out[O_HELD_BARO + 3] = (
+            t,
+            p,
+            h,
+            temperature,
+        )
