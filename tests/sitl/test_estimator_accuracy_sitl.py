@@ -7,7 +7,7 @@ One flight per shipped sensor profile (``default`` is an alias of ``ideal``). On
 at most 3x the RMS error of its axes (horizontal, vertical). On ``ideal`` the sensors are exact
 and the GPS reports a 1 m accuracy (a receiver never claims less than its resolution): the
 estimate is the truth to a millimetre, so only the first half applies (never optimistic). The
-statistics over seeds (NEES) are in tests/estimation/test_accuracy.py, in simulation time.
+statistics over seeds (NEES) are in tests/autopilot/estimation/test_accuracy.py, in simulation time.
 
 Instances 55-57. Waits are bounded on the wall clock; every check is on recorded, simulation-time
 rows.
