@@ -32,12 +32,16 @@ import re
 import time
 import warnings
 
+import pytest
+
 from quadcommon import frames
 from quadcommon.config import load_sitl
 
 from ..ulog_check import check_ulog
 from .mavproxy_driver import MavProxy
 from .vehicles import TruthTap, ports, sitl_output, vehicle, vehicle_logs
+
+pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
 
 INSTANCE = 5  # of the compat port block (PX4 instance 105's ports); sysid 6
 SYSID = 1 + INSTANCE

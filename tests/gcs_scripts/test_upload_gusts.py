@@ -12,6 +12,8 @@ from gcs_scripts import upload_gusts as ug
 from quadcommon.config import CONFIG_DIR
 from simulator.environment.gust_profile import load_gust_profile, profile_to_mapping
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 
 def test_toml_and_json_files_parse_to_the_same_mapping(tmp_path: Path) -> None:
     toml_path = CONFIG_DIR / "gusts" / "mixed.toml"

@@ -10,6 +10,8 @@ import pytest
 
 from .sim_harness import REPO, ScriptedAutopilot, SimProcess
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 
 def test_config_dir_is_where_configuration_is_read(tmp_path):
     config = tmp_path / "config"

@@ -26,6 +26,8 @@ import pytest
 from quadcommon import wire
 from sitl.launcher import Child
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 REPO = Path(__file__).resolve().parents[2]
 INSTANCE = 16
 FLY_INSTANCE = 18

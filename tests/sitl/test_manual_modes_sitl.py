@@ -31,6 +31,8 @@ from sitl.launcher import VehicleSpec
 
 from .harness import UdpGcs, running
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 INSTANCE = 12
 DEG = math.radians(1.0)
 TILT_MAX = math.radians(35.0)  # MPC_MAN_TILT_MAX

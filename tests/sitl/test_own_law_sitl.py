@@ -14,6 +14,8 @@ from tests.own_law import write_overlay
 
 from .harness import running
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 DURATION = 6.0
 
 
