@@ -5,7 +5,7 @@ would see from PX4: arming refused with the filter's reason while it aligns, acc
 has converged; ESTIMATOR_STATUS; and GLOBAL_POSITION_INT that is the estimate, so off the ground
 truth (read from zenoh at the same simulation instant) by a small, non-zero amount.
 
-Instance 23 on the default port block (HIL 4583, GCS 14573, zenoh 7470). Waits are bounded on
+Instance 23 (on the test process's port block, tests/ports.py). Waits are bounded on
 the wall clock but every check is on simulation-time stamps.
 """
 

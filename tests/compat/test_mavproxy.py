@@ -43,7 +43,7 @@ from .vehicles import TruthTap, ports, sitl_output, vehicle, vehicle_logs
 
 pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
 
-INSTANCE = 5  # of the compat port block (PX4 instance 105's ports); sysid 6
+INSTANCE = 5  # sysid 6
 SYSID = 1 + INSTANCE
 ALT = 3.0
 WAYPOINTS_NE = [(0.0, 0.0), (3.0, 0.0), (3.0, 3.0)]  # line 0 is flown: PX4 semantics

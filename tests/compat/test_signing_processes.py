@@ -11,7 +11,7 @@
   but its ``arm throttle`` is refused; after ``signing key PASSPHRASE`` (the same passphrase) it arms.
 * MAVSDK, which has no signing: it reads the vehicle, its ``arm()`` times out.
 
-Instances 70-72 on the default ports (the port block given to signing's process tests).
+Instances 70-72 (on the test process's port block, tests/ports.py).
 """
 
 from __future__ import annotations

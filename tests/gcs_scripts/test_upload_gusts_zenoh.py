@@ -26,7 +26,7 @@ from tests.ports import instance_ports
 
 pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
-INSTANCE = 81  # tests use instances 80-89 (zenoh ports 7527-7536) to stay clear of real vehicles
+INSTANCE = 81  # (its zenoh port on the test process's port block: tests/ports.py)
 
 
 class ServedSimulator:
