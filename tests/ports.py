@@ -29,10 +29,11 @@ from quadcommon import environment, wire
 from quadcommon.config import SHIPPED_CONFIG_DIR
 
 # Below Linux's ephemeral range (32768-60999), so no client's random source port lands in a
-# block. A block: HIL base+0..99, API base+300..439 (remote, local), GCS base+310..409 and
-# +4330..4429 (remote, local), zenoh base+500..599; blocks 600 apart, the GCS local ranges of
-# all of them above the last block's others.
-BLOCK_STARTS = tuple(20000 + 600 * k for k in range(7))
+# block, and clear of the default bases' ports (4560+, 7447+, 14540-14679, 18570+). A block:
+# HIL base+0..99, zenoh base+100..199, API base+300..439 (remote, local), GCS base+310..409 and
+# base+4330..4429 (remote, local); blocks 450 apart, in two runs of nine whose GCS local ranges lie
+# above the run's other ports (tests/test_ports.py checks they never meet).
+BLOCK_STARTS = tuple(first + 450 * k for first in (10000, 20000) for k in range(9))
 LOCK_DIR = Path(tempfile.gettempdir()) / "quadsitl-test-ports"
 
 _held: list[IO[str]] = []  # the claimed block's lock file, open for the life of the process
@@ -41,7 +42,7 @@ _claimed: list[Path] = []  # the configuration directory holding its sitl.toml
 
 def bases(start: int) -> dict[str, int]:
     """The ``[ports]`` keys of the block at ``start``."""
-    return {"hil_base": start, "api_base": start + 300, "gcs_base": start + 310, "zenoh_base": start + 500}
+    return {"hil_base": start, "zenoh_base": start + 100, "api_base": start + 300, "gcs_base": start + 310}
 
 
 def block_ports(start: int) -> set[tuple[str, int]]:
