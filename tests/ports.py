@@ -18,9 +18,11 @@ ports there exactly as with the defaults, and the launcher's port rules are test
 
 from __future__ import annotations
 
+import atexit
 import fcntl
 import os
 import re
+import shutil
 import tempfile
 from pathlib import Path
 from typing import IO
@@ -91,6 +93,7 @@ def claim_block() -> tuple[int, Path]:
             continue
         _held.append(lock)
         directory = Path(tempfile.mkdtemp(prefix=f"quadsitl-test-ports-{start}-"))
+        atexit.register(shutil.rmtree, directory, ignore_errors=True)
         (directory / "sitl.toml").write_text(sitl_toml(start))
         _claimed.append(directory)
         os.environ[environment.CONFIG_DIR] = os.pathsep.join(
