@@ -122,3 +122,8 @@ def shipped_ports_environment() -> dict[str, str]:
     else:
         env.pop(environment.CONFIG_DIR, None)
     return env
+
+
+def block_config_dir() -> Path | None:
+    """The configuration directory of this process's block (only its ``sitl.toml``), if claimed."""
+    return _claimed[0] if _claimed else None
