@@ -127,7 +127,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / time.strftime("paper_%Y%m%d_%H%M%S")
     out.parent.mkdir(parents=True, exist_ok=True)
     link = upload_mission.connect(None, args.instance)
-    session = bus.open_peer(wire.ports(args.instance).zenoh)
+    from quadcommon.config import load_sitl
+
+    session = bus.open_peer(load_sitl().ports(args.instance).zenoh)
     recorder = None
     try:
         say(link, f"connected; flying the paper's {scenario.name} (duration {scenario.duration_s:g} s)")

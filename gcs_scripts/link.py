@@ -42,8 +42,6 @@ from quadcommon import frames  # noqa: E402
 
 Vector3 = tuple[float, float, float]
 
-API_PORT_BASE = 14540  # offboard/API scripts listen here (+N), as MAVSDK does
-GCS_PORT_BASE = 14550  # ground stations (QGC) listen here (+N)
 GCS_SYSTEM_ID = 255  # conventional ground-station system id
 GCS_COMPONENT_ID = 190  # MAV_COMP_ID_MISSIONPLANNER
 
@@ -109,13 +107,19 @@ class CommandFailed(LinkError):
 
 
 def api_url(instance: int) -> str:
-    """Where a flying script listens for vehicle ``instance`` (MAVSDK's default, +N)."""
-    return f"udpin:127.0.0.1:{API_PORT_BASE + instance}"
+    """Where a flying script listens for vehicle ``instance``: the API port of ``sitl.toml``'s
+    ``[ports]`` + N (MAVSDK's default 14540 + N unless configured otherwise)."""
+    from quadcommon.config import load_sitl
+
+    return f"udpin:127.0.0.1:{load_sitl().ports(instance).api_remote}"
 
 
 def gcs_url(instance: int) -> str:
-    """Where a ground station (or the recorder) listens for vehicle ``instance`` (QGC's, +N)."""
-    return f"udpin:127.0.0.1:{GCS_PORT_BASE + instance}"
+    """Where a ground station (or the recorder) listens for vehicle ``instance``: the GCS port of
+    ``sitl.toml``'s ``[ports]`` + N (QGroundControl's 14550 + N unless configured otherwise)."""
+    from quadcommon.config import load_sitl
+
+    return f"udpin:127.0.0.1:{load_sitl().ports(instance).gcs_remote}"
 
 
 def custom_mode(name: str) -> tuple[int, int, int]:

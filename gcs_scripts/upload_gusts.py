@@ -167,7 +167,9 @@ def upload_gusts(
     and :class:`quadcommon.bus.BusError` when no session can be opened.
     """
     key = wire.zenoh_key(instance, "sim/gusts")
-    port = wire.ports(instance).zenoh
+    from quadcommon.config import load_sitl
+
+    port = load_sitl().ports(instance).zenoh  # sitl.toml's [ports] zenoh_base + N
     where = f"zenoh key '{key}' (" + (f"router {router})" if router else f"hub tcp/{wire.LOOPBACK}:{port})")
     payload = build_request(profile_mapping, start)
     own = session is None

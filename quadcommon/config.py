@@ -31,7 +31,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from . import environment
+from . import environment, wire
 from .impairment import LINKS, ImpairConfig, parse_impairment
 from .schema import ConfigError, Section, load_toml
 
@@ -448,6 +448,11 @@ class SitlConfig:
     lockstep_spin_s: float = 0.002  # busy-wait for the peer's datagram this long before blocking
     lockstep_resend_s: float = 0.01  # wall: a frame unanswered this long is sent again
     impair: ImpairConfig = ImpairConfig()  # loss, delay ... per link ([impair], --impair)
+
+    def ports(self, instance: int) -> wire.Ports:
+        """Every port of vehicle ``instance`` under this file's ``[ports]`` bases (each base + N)."""
+        return wire.ports(instance, self.hil_port_base, self.gcs_port_base, self.api_port_base,
+                          self.zenoh_port_base)  # fmt: skip
 
 
 def load_rates(sec: Section) -> Rates:

@@ -227,9 +227,7 @@ class VehicleSpec:
         return common + (["--sitl-config", self.sitl_config] if self.sitl_config else [])
 
     def ports(self) -> wire.Ports:
-        cfg = load_sitl(self.sitl_config)
-        return wire.ports(self.instance, cfg.hil_port_base, cfg.gcs_port_base, cfg.api_port_base,
-                          cfg.zenoh_port_base)  # fmt: skip
+        return load_sitl(self.sitl_config).ports(self.instance)
 
 
 def port_in_use(proto: str, port: int) -> bool:

@@ -36,6 +36,7 @@ environment.use_mavlink2()  # before pymavlink is imported (it reads them then)
 from pymavlink.dialects.v20 import common as m  # noqa: E402
 
 from quadcommon import wire  # noqa: E402
+from quadcommon.config import load_sitl  # noqa: E402
 from quadcommon.udp import bind_udp  # noqa: E402
 
 LOOPBACK = "127.0.0.1"
@@ -261,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     if not 1 <= getattr(args, "sources", 1) <= 2000 or not 1 <= getattr(args, "clients", 1) <= 64:
         parser.error("--sources must be in [1, 2000] and --clients in [1, 64]")
     try:
-        ports = wire.ports(args.instance)
+        ports = load_sitl().ports(args.instance)  # sitl.toml's [ports] bases + N
     except ValueError as exc:
         parser.error(str(exc))
     system_id = wire.system_id(args.instance)

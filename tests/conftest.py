@@ -1,88 +1,71 @@
-"""Suite-wide wiring: the ``processes``, ``compat`` and ``second_namespace`` markers.
+"""Suite-wide wiring: the kernels compiled once, a port block per pytest process, the heavy tests
+scheduled first.
 
-The tests that start processes or bind the SITL's fixed ports (:data:`PROCESS_MODULES`) get the
-marker ``processes``; of those, the ones in :data:`COMPAT_MODULES` also ``compat``, and of those,
-the ones in :data:`SECOND_NAMESPACE` also ``second_namespace``. ``make test`` runs the suite as
-pytest sessions side by side on these markers (:mod:`tests.suite`): the in-process tests (in
-simulation time: the large majority), the process tests one after another (their instances were
-chosen not to collide with each other one at a time, and a lockstep pair of processes wants a core
-of its own), and the compat tests in two network namespaces. A plain ``pytest`` runs everything
-in order."""
+The test command is one pytest run over both cores (``pytest -n 2``, pytest-xdist; CONTRIBUTING.md).
+Test modules that start processes say so themselves (``pytestmark = pytest.mark.processes``; those
+with third-party clients ``compat`` as well): ``-m "not processes"`` runs the in-process tests alone.
+
+* Before any test, in the process that runs or dispatches them (xdist's controller), ``quadsitl
+  compile`` fills numba's cache: else the workers' first processes would compile the same kernels
+  at once (seconds each) while their tests wait.
+* Each process that runs tests claims a port block of its own (:mod:`tests.ports`) and points
+  ``QUADSITL_CONFIG_DIR`` at a ``sitl.toml`` with those bases: every vehicle a test starts, and
+  every port a test computes with ``load_sitl().ports(n)``, is on it. No test binds a fixed port.
+* The lockstep processes the tests start do not busy-wait for their peer
+  (``QUADSITL_LOCKSTEP_SPIN_S=0``, docs/running.md): two workers share two cores, and a spinning
+  process takes the core its peer or the other worker needs. The benchmarks measure the SITL with
+  its default spin.
+* The modules marked ``processes`` are collected first: they wait on real processes and the wall
+  clock, so xdist hands them out before the short in-process ones that fill the gaps.
+"""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import pytest
 
-PROCESS_MODULES = {
-    "tests/compat/",  # MAVSDK, MAVProxy, several vehicles, signing with real clients
-    "tests/compat/test_mavsdk3.py",  # MAVSDK-Python 3 + quadsitl up in a network namespace
-    "tests/view/test_browser_sitl.py",
-    "tests/view/test_live_sitl.py",
-    "tests/view/test_server.py",
-    "tests/gcs_scripts/test_e2e_sitl.py",
-    "tests/gcs_scripts/test_record_process.py",
-    "tests/gcs_scripts/test_upload_gusts.py",
-    "tests/gcs_scripts/test_upload_gusts_zenoh.py",
-    "tests/gcs_scripts/test_upload_mission.py",
-    "tests/simulator/test_sim_cli.py",
-    "tests/simulator/test_sim_process.py",
-    "tests/sitl/test_flight_log_process.py",
-    "tests/sitl/test_hostile_udp.py",
-    "tests/sitl/test_installed_wheel.py",
-    "tests/sitl/test_launcher_ports.py",
-    "tests/sitl/test_manual_modes_sitl.py",
-    "tests/sitl/test_links_processes.py",
-    "tests/sitl/test_paper_through_sitl.py",
-    "tests/sitl/test_params_failsafes.py",
-    "tests/sitl/test_signing_cli.py",
-    "tests/sitl/test_sitl_vs_inprocess.py",
-    "tests/sitl/test_own_law_sitl.py",
-    "tests/sitl/test_up_cli.py",
-    "tests/sitl/test_up_process_loss.py",
-    "tests/sitl/test_estimator_accuracy_sitl.py",
-    "tests/campaign/test_dask.py",
-}
+from quadcommon import environment
 
 
-# Of those, the third session's (marker ``compat``, tests/suite.py): it runs in a network namespace
-# of its own (``unshare -n``), so its ports never meet the other sessions' and its tests may use any
-# instance. In it: the client-compatibility tests (MAVSDK, MAVProxy, several vehicles: they mostly
-# wait on real clients paced to the wall clock; their port block is PX4's instances 100-119,
-# tests/compat/vehicles.py) and, to balance the sessions' wall times (measured: the process session
-# was the longest by ~150 s), signing with real clients (instances 70-72) and the view's tests on a
-# live SITL (instances 65-69). Without namespaces they all run in the process session.
-COMPAT_MODULES = {
-    "tests/compat/", "tests/view/test_browser_sitl.py", "tests/view/test_live_sitl.py",
-    "tests/sitl/test_installed_wheel.py", "tests/sitl/test_paper_through_sitl.py",
-    "tests/sitl/test_manual_modes_sitl.py",  # the sticks paced on telemetry: a namespace of its own
-}  # fmt: skip
-NOT_COMPAT: set[str] = set()
-# Of the compat tests, these (marker ``second_namespace``) run in a session of their own, in a
-# namespace of its own too: MAVSDK's wait on real clients paced to the wall clock (~100 s of the
-# ~220 s the compat session took alone, measured), so two namespaces side by side halve that wait
-# for a little more CPU; the installed wheel (~30 s) and the paper through the SITL (~25 s) moved
-# here and to the compat session from the process session, which was then the suite's last.
-SECOND_NAMESPACE = {
-    "tests/compat/test_mavsdk.py", "tests/compat/test_mavsdk3.py", "tests/sitl/test_installed_wheel.py",
-}  # fmt: skip
+def _runs_tests(config: pytest.Config) -> bool:
+    """False in xdist's controller (it only dispatches); True in a worker or a plain run."""
+    if hasattr(config, "workerinput"):
+        return True
+    return not getattr(config.option, "numprocesses", None)
 
 
-def _listed(nodeid: str, entries: set[str]) -> bool:
-    path = nodeid.split("::", 1)[0]
-    return any(path == entry or (entry.endswith("/") and path.startswith(entry)) for entry in entries)
+def pytest_configure(config: pytest.Config) -> None:
+    os.environ.setdefault(environment.LOCKSTEP_SPIN, "0")
+    # Bytecode cached (in __pycache__, ignored by git) even where the environment says not to: each
+    # of the ~90 processes the tests start would compile the project's modules again.
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+    if _runs_tests(config):
+        from tests.ports import claim_block
+
+        start, directory = claim_block()
+        config.stash[_PORT_BLOCK] = (start, directory)
 
 
-def _uses_processes(nodeid: str) -> bool:
-    return _listed(nodeid, PROCESS_MODULES)
+_PORT_BLOCK = pytest.StashKey[tuple]()
 
 
-@pytest.hookimpl(tryfirst=True)  # before -m selects on the marker
+def pytest_report_header(config: pytest.Config) -> str | None:
+    block = config.stash.get(_PORT_BLOCK, None)
+    return None if block is None else f"quadsitl test ports: block {block[0]} ({block[1]}/sitl.toml)"
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    if hasattr(session.config, "workerinput") or environment.pure_python():
+        return
+    compiled = subprocess.run([sys.executable, "-m", "sitl.compile"], capture_output=True, text=True,
+                              timeout=1200)  # fmt: skip
+    if compiled.returncode != 0:
+        raise pytest.UsageError(f"quadsitl compile failed:\n{compiled.stdout}{compiled.stderr}")
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    for item in items:
-        if _uses_processes(item.nodeid):
-            item.add_marker(pytest.mark.processes)
-            if _listed(item.nodeid, COMPAT_MODULES) and not _listed(item.nodeid, NOT_COMPAT):
-                item.add_marker(pytest.mark.compat)
-                if _listed(item.nodeid, SECOND_NAMESPACE):
-                    item.add_marker(pytest.mark.second_namespace)
-
+    # Stable: the order within each group stays pytest's.
+    items.sort(key=lambda item: item.get_closest_marker("processes") is None)

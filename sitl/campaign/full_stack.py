@@ -1,7 +1,8 @@
 """``quadsitl campaign --full-stack K``: fly K sampled runs through the whole in-process stack.
 
-The batch engine (:mod:`.kernels`) is a transcription of the flight stack's control path, tested
-equal to it (``tests/campaign/test_agreement.py``). This check repeats that proof on the user's own
+The batch engine (:mod:`.kernels`) flies the same kernels as the flight stack (the plant, the laws,
+on the estimate the sensor models and the filter), and is tested equal to it
+(``tests/sitl/campaign/test_agreement.py``). This check repeats that proof on the user's own
 campaign: K of its runs, spread evenly over the campaign, are flown again by
 :func:`sitl.inprocess.paper_stack` (simulator core, every frame MAVLink-encoded and decoded,
 autopilot core with its commander and cascade, the run's drawn plant, initial state and

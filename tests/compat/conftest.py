@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from .vehicles import write_sitl_config
+from quadcommon.config import find_config
 
 
 @pytest.fixture(scope="session")
@@ -33,6 +33,6 @@ def flight_logs(tmp_path_factory) -> list:
 
 
 @pytest.fixture(scope="session")
-def compat_sitl_config(tmp_path_factory):
-    """A sitl.toml putting every vehicle of these tests on the ports of PX4 instances 100-119."""
-    return write_sitl_config(tmp_path_factory.mktemp("compat"))
+def compat_sitl_config():
+    """The sitl.toml of this pytest process's port block (tests/ports.py), named explicitly."""
+    return find_config("", "sitl")

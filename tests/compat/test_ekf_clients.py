@@ -5,7 +5,7 @@ would see from PX4: arming refused with the filter's reason while it aligns, acc
 has converged; ESTIMATOR_STATUS; and GLOBAL_POSITION_INT that is the estimate, so off the ground
 truth (read from zenoh at the same simulation instant) by a small, non-zero amount.
 
-Instance 23 on the default port block (HIL 4583, GCS 14573, zenoh 7470). Waits are bounded on
+Instance 23 (on the test process's port block, tests/ports.py). Waits are bounded on
 the wall clock but every check is on simulation-time stamps.
 """
 
@@ -22,8 +22,11 @@ from gcs_scripts.link import mavutil
 from quadcommon import bus, frames, wire
 from quadcommon.bus_records import TRUTH_CODEC, TRUTH_FIELDS
 from sitl.launcher import Child
+from tests.ports import instance_ports
 
 from ..ulog_check import check_ulog
+
+pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
 
 INSTANCE = 23
 SPEED = "2"  # wall-clock pacing: pymavlink in Python keeps up with every message; the flow ~10 s
@@ -95,7 +98,7 @@ class Truth:
     def __init__(self, instance: int) -> None:
         import zenoh
 
-        self.session = bus.open_peer(wire.ports(instance).zenoh)
+        self.session = bus.open_peer(instance_ports(instance).zenoh)
         self.sub = self.session.declare_subscriber(
             wire.zenoh_key(instance, "truth"), zenoh.handlers.FifoChannel(100_000)
         )
@@ -128,7 +131,7 @@ def _estimate_minus_truth(gpi, home, truth: np.ndarray) -> np.ndarray:
 
 @pytest.mark.timeout(60)
 def test_a_pymavlink_client_arms_only_on_the_aligned_ekf_and_sees_the_estimate(tmp_path) -> None:
-    ports = wire.ports(INSTANCE)
+    ports = instance_ports(INSTANCE)
     sysid = wire.system_id(INSTANCE)
     # Listening before the vehicle starts (the GCS client port is the client's, not the launcher's):
     # the first arming request then goes out in the vehicle's first simulated second, before the

@@ -32,6 +32,8 @@ import re
 import time
 import warnings
 
+import pytest
+
 from quadcommon import frames
 from quadcommon.config import load_sitl
 
@@ -39,7 +41,9 @@ from ..ulog_check import check_ulog
 from .mavproxy_driver import MavProxy
 from .vehicles import TruthTap, ports, sitl_output, vehicle, vehicle_logs
 
-INSTANCE = 5  # of the compat port block (PX4 instance 105's ports); sysid 6
+pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
+
+INSTANCE = 5  # sysid 6
 SYSID = 1 + INSTANCE
 ALT = 3.0
 WAYPOINTS_NE = [(0.0, 0.0), (3.0, 0.0), (3.0, 3.0)]  # line 0 is flown: PX4 semantics

@@ -26,6 +26,8 @@ import pytest
 from ..ulog_check import check_ulog
 from .vehicles import TruthTap, ports, run_flow, sitl_output, vehicle, vehicle_logs
 
+pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
+
 HOME = (47.397742, 8.545594)  # config/sitl.toml [home]
 FLOW_TIMEOUT_S = 50.0
 

@@ -5,9 +5,10 @@ rally points, takeoff, a mission with gimbal and camera items, goto, offboard po
 velocity, mission_raw, manual control, land, the manual control example and the loss of its
 sticks), in sequence against one vehicle.
 
-MAVSDK-Python 3 starts a ``mavsdk_server`` that listens for gRPC on every interface, so the test
-runs it and the vehicle (``quadsitl up``, default instance 0: the default ports MAVSDK expects)
-inside a network namespace of their own with only loopback up (``unshare -n``). Where namespaces
+MAVSDK-Python 3 starts a ``mavsdk_server`` that listens for gRPC on every interface (a fixed port), so
+the test runs it and the vehicle (``quadsitl up``, default instance 0 on the shipped default ports
+MAVSDK expects, not the test process's port block) inside a network namespace of their own with only
+loopback up (``unshare -n``): the one namespace of the suite. Where namespaces
 are unavailable (not root, no user namespaces) the test is skipped, saying so. The client runs
 from ``.venv-mavsdk3`` (``make .venv-mavsdk3``, which ``make test`` makes).
 """
@@ -16,17 +17,23 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shlex
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from tests.ports import shipped_ports_environment
+
+pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
+
 REPO = Path(__file__).resolve().parents[2]
 CLIENT = REPO / ".venv-mavsdk3" / "bin" / "python"
 FLOWS = Path(__file__).with_name("mavsdk3_flows.py")
-QUADSITL = REPO / ".venv" / "bin" / "quadsitl"
+QUADSITL = f"{shlex.quote(sys.executable)} -m sitl.cli"  # quadsitl, from this checkout
 WALL_LIMIT_S = 240
 # MAVSDK-Python 3.15.3's own examples/logfile_download.py, byte for byte (upstream/README.md).
 LOG_EXAMPLE = Path(__file__).with_name("upstream") / "logfile_download.py"
@@ -36,7 +43,7 @@ LOG_EXAMPLE_LIMIT_S = 60
 INSIDE = """
 set -u
 ip link set lo up
-"{quadsitl}" up --speed 2 --no-log > "{log}" 2>&1 &
+{quadsitl} up --speed 2 --no-log > "{log}" 2>&1 &
 up=$!
 timeout {limit} "{client}" "{flows}" udpin://0.0.0.0:14540
 rc=$?
@@ -49,7 +56,7 @@ exit $rc
 INSIDE_LOG_EXAMPLE = """
 set -u
 ip link set lo up
-"{quadsitl}" up --speed 2 --log-dir "{log_dir}" > "{log}" 2>&1 &
+{quadsitl} up --speed 2 --log-dir "{log_dir}" > "{log}" 2>&1 &
 up=$!
 cd "{downloads}"
 timeout {limit} "{client}" "{example}"
@@ -78,7 +85,8 @@ def test_mavsdk_python3_examples_fly_in_a_loopback_only_namespace(tmp_path):
     script = INSIDE.format(quadsitl=QUADSITL, log=log, limit=WALL_LIMIT_S, client=CLIENT, flows=FLOWS)
     started = time.monotonic()
     result = subprocess.run(
-        ["unshare", "-n", "bash", "-c", script], capture_output=True, text=True, timeout=WALL_LIMIT_S + 30
+        ["unshare", "-n", "bash", "-c", script], capture_output=True, text=True, timeout=WALL_LIMIT_S + 30,
+        cwd=REPO, env=shipped_ports_environment(),
     )
     wall = time.monotonic() - started
     events = [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
@@ -139,7 +147,7 @@ def test_mavsdk_python3s_own_log_download_example_runs_unchanged(tmp_path, fligh
                                        downloads=downloads, limit=LOG_EXAMPLE_LIMIT_S, client=CLIENT,
                                        example=LOG_EXAMPLE)  # fmt: skip
     result = subprocess.run(["unshare", "-n", "bash", "-c", script], capture_output=True, text=True,
-                            timeout=LOG_EXAMPLE_LIMIT_S + 30)  # fmt: skip
+                            timeout=LOG_EXAMPLE_LIMIT_S + 30, env=shipped_ports_environment())  # fmt: skip
     detail = (
         f"rc {result.returncode}\n{result.stdout[-3000:]}\n{result.stderr[-2000:]}\n--- quadsitl up:\n"
         + (up_log.read_text()[-3000:] if up_log.exists() else "")

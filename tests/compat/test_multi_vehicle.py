@@ -37,7 +37,9 @@ from sitl.launcher import Child, LaunchError, VehicleSpec, check_ports  # noqa: 
 
 from .vehicles import ports  # noqa: E402
 
-FIRST = 7  # instances 7 and 8 of the compat port block (PX4 instances 107, 108): sysids 8, 9
+pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
+
+FIRST = 7  # instances 7 and 8: sysids 8, 9
 TARGETS = {7: (2.0, 0.0, 2.5), 8: (0.0, -2.0, 3.5)}  # paper frame (x north, y west, z up), m
 ALIEN = (-3.0, 3.0, 1.0)  # a setpoint addressed to the OTHER vehicle's sysid
 OFFBOARD = (6 << 16) | 0

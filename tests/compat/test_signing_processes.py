@@ -11,7 +11,7 @@
   but its ``arm throttle`` is refused; after ``signing key PASSPHRASE`` (the same passphrase) it arms.
 * MAVSDK, which has no signing: it reads the vehicle, its ``arm()`` times out.
 
-Instances 70-72 on the default ports (the port block given to signing's process tests).
+Instances 70-72 (on the test process's port block, tests/ports.py).
 """
 
 from __future__ import annotations
@@ -31,9 +31,12 @@ from pymavlink import mavutil  # noqa: E402
 from autopilot.mavlink.signing import passphrase_to_key  # noqa: E402
 from quadcommon import bus, wire  # noqa: E402
 from sitl.launcher import Child, Launcher, VehicleSpec  # noqa: E402
+from tests.ports import instance_ports  # noqa: E402
 
 from .mavproxy_driver import MavProxy  # noqa: E402
 from .vehicles import run_flow  # noqa: E402
+
+pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
 
 PASSPHRASE = "quadsitl-signing-test"
 REQUEST_MESSAGE = mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE
@@ -45,7 +48,7 @@ class InfoTap:
 
     def __init__(self, instance: int) -> None:
         self.instance = instance
-        self.session = bus.open_peer(wire.ports(instance).zenoh)
+        self.session = bus.open_peer(instance_ports(instance).zenoh)
 
     def get(self, timeout_s: float = 10.0) -> dict:
         deadline = time.monotonic() + timeout_s
@@ -232,7 +235,7 @@ def test_quadsitl_up_with_a_passphrase_file_and_mavproxy_signing_key(tmp_path):
         info = InfoTap(instance)
         # Without the key MAVProxy reads the (signed) telemetry, but gets no parameters: its
         # requests are refused, as every frame it sends.
-        mp = start_mavproxy(wire.ports(instance).gcs_remote, tmp_path, sysid, parameters=False)
+        mp = start_mavproxy(instance_ports(instance).gcs_remote, tmp_path, sysid, parameters=False)
         mp.send("arm throttle")  # unsigned: refused, no ACK
         with pytest.raises(AssertionError, match="no line matching"):
             mp.expect(r"COMMAND_ACK|^ARMED", 3)

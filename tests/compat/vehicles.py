@@ -1,11 +1,8 @@
 """Vehicles for the client-compatibility tests: real ``quadsitl up`` processes on their own ports.
 
-The compat tests own the port block of PX4 instances 100-119 (HIL 4660+, API 14640+, GCS 14650+,
-zenoh 7547+). ``--instance`` itself is limited to [0, 99] by :func:`quadcommon.wire.ports` (and
-tests elsewhere assert that), so instead of instance 100 + k they run instance k with a
-``sitl.toml`` whose port bases are shifted by +100: the same ports, sysid 1 + k. Everything else in
-that file is copied from ``config/sitl.toml``, so the vehicles behave exactly like a default
-``quadsitl up``.
+The vehicles run on this pytest process's port block (tests/ports.py: a ``sitl.toml`` with the
+shipped settings and the block's port bases, first in ``QUADSITL_CONFIG_DIR``), so they behave
+exactly like a default ``quadsitl up``, on ports no other test run uses.
 
 Only instances 0-9 are used: the API port of instance k + 10 is the GCS port of instance k
 (PX4's scheme overlaps the same way), and two clients must never share a port.
@@ -15,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import subprocess
 import sys
 import time
@@ -24,39 +20,15 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from quadcommon import wire
-from quadcommon.config import CONFIG_DIR
 from sitl.launcher import Launcher, VehicleSpec
+from tests.ports import instance_ports
 
 REPO = Path(__file__).resolve().parents[2]
-PORT_SHIFT = 100
 FLOWS = Path(__file__).with_name("mavsdk_flows.py")
 
 
-def write_sitl_config(directory: Path) -> Path:
-    """``config/sitl.toml`` with every port base + PORT_SHIFT, written into ``directory``."""
-    text = (CONFIG_DIR / "sitl.toml").read_text()
-    for key, base in (
-        ("hil_base", wire.HIL_PORT_BASE),
-        ("gcs_base", wire.GCS_REMOTE_BASE),
-        ("api_base", wire.API_REMOTE_BASE),
-        ("zenoh_base", wire.ZENOH_PORT_BASE),
-    ):
-        text, count = re.subn(rf"(?m)^{key}\s*=\s*{base}\b", f"{key} = {base + PORT_SHIFT}", text)
-        if count != 1:
-            raise AssertionError(f"config/sitl.toml: cannot shift {key} (expected '{key} = {base}')")
-    path = directory / "sitl_compat.toml"
-    path.write_text(text)
-    return path
-
-
 def ports(instance: int) -> wire.Ports:
-    return wire.ports(
-        instance,
-        wire.HIL_PORT_BASE + PORT_SHIFT,
-        wire.GCS_REMOTE_BASE + PORT_SHIFT,
-        wire.API_REMOTE_BASE + PORT_SHIFT,
-        wire.ZENOH_PORT_BASE + PORT_SHIFT,
-    )
+    return instance_ports(instance)
 
 
 @contextmanager
@@ -69,7 +41,7 @@ def vehicle(
     ``speed`` is the wall-clock pacing: MAVSDK and MAVProxy time out on the wall clock, so they run
     at a modest factor, never at ``max``. ``log_dir``: its flight logs (default: none).
     """
-    assert 0 <= instance <= 9, "compat tests use instances 0-9 of the shifted port block"
+    assert 0 <= instance <= 9, "compat tests use instances 0-9"
     spec = VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config),
                        log_dir=str(log_dir) if log_dir is not None else None, impair=impair)  # fmt: skip
     with Launcher() as sitl:

@@ -24,6 +24,8 @@ from ..stack import connect, make_stack
 from ..ulog_check import check_ulog
 from .test_ulog_analysis import assert_same_indices
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 WALL_LIMIT_S = 60.0
 
 

@@ -27,8 +27,11 @@ from gcs_scripts.link import mavutil
 from quadcommon import bus, wire
 from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC, ESTIMATOR_FIELDS, TRUTH_CODEC
 from sitl.launcher import Child, python_script
+from tests.ports import instance_ports
 
 from .helpers import Vehicle, control_times, controller_rows, ref_x, truth_rows
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 SIM_INFO = {"instance": 0, "vehicle": "paper_quad", "scenario": "circle", "actuation": "wrench",
             "physics_hz": 1000.0, "control_hz": 500.0, "speed": "max", "sim_time_s": 0.0}  # fmt: skip
@@ -40,7 +43,7 @@ class FakeSitl:
 
     def __init__(self, instance: int, estimator: bool = False) -> None:
         self.instance = instance
-        ports = wire.ports(instance)
+        ports = instance_ports(instance)
         self.session = bus.open_hub(ports.zenoh)
         self.truth_pub = self.session.declare_publisher(wire.zenoh_key(instance, "truth"))
         self.ctrl_pub = self.session.declare_publisher(wire.zenoh_key(instance, "controller"))

@@ -22,6 +22,7 @@ from gcs_scripts.link import (
     mavutil,
     mode_name,
 )
+from quadcommon.config import load_sitl
 
 
 # -- paper frame -> NED ------------------------------------------------------------------------
@@ -64,7 +65,9 @@ def test_mode_names_follow_px4_and_pymavlink() -> None:
 
 
 def test_urls_are_per_instance_and_loopback_only() -> None:
-    assert api_url(3) == "udpin:127.0.0.1:14543" and gcs_url(3) == "udpin:127.0.0.1:14553"
+    ports = load_sitl().ports(3)  # sitl.toml's [ports] bases + 3 (the tests' own block: tests/ports.py)
+    assert api_url(3) == f"udpin:127.0.0.1:{ports.api_remote}"
+    assert gcs_url(3) == f"udpin:127.0.0.1:{ports.gcs_remote}"
     _check_loopback("udpin:127.0.0.1:14540")
     for bad in ("udpin:0.0.0.0:14540", "tcp:127.0.0.1:5760", "udpout:10.0.0.2:14550"):
         with pytest.raises(ValueError):
@@ -185,7 +188,7 @@ def test_fly_trajectory_bad_arguments_exit_2(argv, message, capsys) -> None:
 # -- record --------------------------------------------------------------------------------------
 def test_record_paths_and_default_url(tmp_path: Path) -> None:
     rec = record.Recorder(record.RecorderOptions(instance=7, out=tmp_path / "runs" / "a.parquet"))
-    assert rec.url == "udpin:127.0.0.1:14557"
+    assert rec.url == f"udpin:127.0.0.1:{load_sitl().ports(7).gcs_remote}"
     assert rec.tlog_path == tmp_path / "runs" / "a.tlog"
     assert rec.parquet_path == tmp_path / "runs" / "a.parquet"
     assert rec.parts_dir == tmp_path / "runs" / "a.parts"

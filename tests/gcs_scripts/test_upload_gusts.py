@@ -11,6 +11,9 @@ import pytest
 from gcs_scripts import upload_gusts as ug
 from quadcommon.config import CONFIG_DIR
 from simulator.environment.gust_profile import load_gust_profile, profile_to_mapping
+from tests.ports import instance_ports
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 
 def test_toml_and_json_files_parse_to_the_same_mapping(tmp_path: Path) -> None:
@@ -70,5 +73,5 @@ def test_exit_2_naming_key_and_port_when_no_simulator_answers(capsys: pytest.Cap
     elapsed = time.monotonic() - begin
     assert code == 2
     err = capsys.readouterr().err
-    assert "quadsitl/89/sim/gusts" in err and "tcp/127.0.0.1:7536" in err
+    assert "quadsitl/89/sim/gusts" in err and f"tcp/127.0.0.1:{instance_ports(89).zenoh}" in err
     assert elapsed < 3.0  # open (<= 0.5 s scouting) + the 0.3 s timeout

@@ -22,8 +22,11 @@ from simulator.core import SimulatorCore, SimulatorSetup
 from simulator.environment.gust_profile import GustProfile, load_gust_profile, profile_to_mapping
 from simulator.environment.gust_upload import handle_gust_request
 from simulator.truth_bus import GustUploadServer
+from tests.ports import instance_ports
 
-INSTANCE = 81  # tests use instances 80-89 (zenoh ports 7527-7536) to stay clear of real vehicles
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
+INSTANCE = 81  # (its zenoh port on the test process's port block: tests/ports.py)
 
 
 class ServedSimulator:
@@ -31,7 +34,7 @@ class ServedSimulator:
     bounded background loop (the simulator's loop); uploads land in the core as in the process."""
 
     def __init__(self, instance: int) -> None:
-        self.session = bus.open_hub(wire.ports(instance).zenoh)
+        self.session = bus.open_hub(instance_ports(instance).zenoh)
         # The circle's profile is paper_steps; a vehicle with drag, so wind is accepted silently.
         self.core = SimulatorCore(SimulatorSetup.load(scenario="circle", vehicle="paper_quad_drag"))
         self.core.k = round(10.0 / self.core.dt_control)
@@ -107,7 +110,7 @@ def test_rejected_upload_returns_the_exact_validation_message(simulator: ServedS
 
 
 def test_reusing_an_open_session(simulator: ServedSimulator) -> None:
-    session = bus.open_peer(wire.ports(INSTANCE).zenoh)
+    session = bus.open_peer(instance_ports(INSTANCE).zenoh)
     try:
         for at in (20.0, 30.0):
             answer = ug.upload_gusts({}, INSTANCE, {"at_s": at}, timeout=5.0, session=session)

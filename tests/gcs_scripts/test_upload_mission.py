@@ -24,6 +24,8 @@ from gcs_scripts.upload_mission import (
 from quadcommon.trajectories import circle
 from sitl.launcher import Launcher
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "gcs_scripts" / "upload_mission.py"
 HOME = (47.397742, 8.545594, 488.0)

@@ -15,10 +15,11 @@ from pathlib import Path
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import wire
+from quadcommon.config import find_config
 from sitl.launcher import Child
+from tests.ports import instance_ports
 
 REPO = Path(__file__).resolve().parents[2]
-SITL_TOML = REPO / "config" / "sitl.toml"
 
 
 class SimProcess(Child):
@@ -26,7 +27,7 @@ class SimProcess(Child):
 
     def __init__(self, instance: int, *args: str, speed: str = "max") -> None:
         self.instance = instance
-        self.ports = wire.ports(instance)
+        self.ports = instance_ports(instance)
         cmd = [sys.executable, "-u", "-m", "simulator", "--instance", str(instance), "--speed", speed, *args]
         super().__init__(f"simulator[{instance}]", cmd)
 
@@ -54,7 +55,7 @@ class ScriptedAutopilot:
     """A minimal autopilot: says hello, receives frames, answers HIL_ACTUATOR_CONTROLS by hand."""
 
     def __init__(self, instance: int) -> None:
-        self.address = (wire.LOOPBACK, wire.ports(instance).hil)
+        self.address = (wire.LOOPBACK, instance_ports(instance).hil)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((wire.LOOPBACK, 0))
         self.mav = mavlink.MAVLink(None, srcSystem=wire.system_id(instance), srcComponent=1)
@@ -128,8 +129,9 @@ class ScriptedAutopilot:
 
 
 def sitl_toml_with(tmp_path: Path, **lockstep: float) -> Path:
-    """A copy of config/sitl.toml with ``[lockstep]`` values replaced (e.g. timeout_s=0.3)."""
-    text = SITL_TOML.read_text()
+    """A copy of the sitl.toml in use (the shipped one on this test process's ports: tests/ports.py)
+    with ``[lockstep]`` values replaced (e.g. timeout_s=0.3)."""
+    text = find_config("", "sitl").read_text()
     for key, value in lockstep.items():
         lines = []
         for line in text.splitlines():

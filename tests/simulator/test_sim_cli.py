@@ -8,12 +8,17 @@ import sys
 
 import pytest
 
+from quadcommon.config import find_config
+
 from .sim_harness import REPO, ScriptedAutopilot, SimProcess
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 
 def test_config_dir_is_where_configuration_is_read(tmp_path):
     config = tmp_path / "config"
     shutil.copytree(REPO / "config", config)
+    shutil.copy(find_config("", "sitl"), config / "sitl.toml")  # on this test process's ports
     hover = config / "scenarios" / "hover.toml"
     text = hover.read_text().replace(
         "[initial_state]\nposition_m = [0.0, 0.0, 0.0]", "[initial_state]\nposition_m = [0.5, 0.0, 1.5]"

@@ -17,8 +17,11 @@ import pytest
 from quadcommon import bus, frames, wire
 from quadcommon.bus_records import TRUTH_CODEC, TRUTH_FIELDS
 from quadcommon.config import load_sitl
+from tests.ports import instance_ports
 
 from .sim_harness import ScriptedAutopilot, SimProcess, sitl_toml_with
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 RATES = load_sitl().rates
 FRAME_USEC = round(1e6 / RATES.control_hz)
@@ -36,7 +39,7 @@ def test_timeout_is_reported_then_simulation_goes_on_and_link_recovers(tmp_path)
         stuck = frame.time_usec
         line = sim.wait_line("no HIL_ACTUATOR_CONTROLS", timeout=3.0)
         assert f"t={stuck * 1e-6:.3f} s within 0.3 s" in line
-        assert f"udp 127.0.0.1:{wire.ports(42).hil}" in line and "autopilot running" in line
+        assert f"udp 127.0.0.1:{instance_ports(42).hil}" in line and "autopilot running" in line
         sim.wait_line("autopilot lost: vehicle disarmed, motors off", timeout=1.0)
         # Until then the unanswered frame was sent again every [lockstep] resend_s (byte for byte)
         resent, later = 0, []
@@ -90,7 +93,7 @@ def test_truth_stream_and_info_on_zenoh():
     n = 45
     with SimProcess(n) as sim:
         sim.wait_line("waiting for the autopilot")
-        session = bus.open_peer(wire.ports(n).zenoh)
+        session = bus.open_peer(instance_ports(n).zenoh)
         try:
             sub = session.declare_subscriber(wire.zenoh_key(n, "truth"), bus.zenoh.handlers.FifoChannel(256))
             info = None
@@ -153,7 +156,7 @@ def test_signal_stops_cleanly_while_linked(sig):
 def test_sigterm_while_waiting_for_the_autopilot():
     with SimProcess(48) as sim:
         line = sim.wait_line("waiting for the autopilot")
-        assert f"udp 127.0.0.1:{wire.ports(48).hil}" in line
+        assert f"udp 127.0.0.1:{instance_ports(48).hil}" in line
         assert sim.terminate(timeout=2.0) == 0
         sim.wait_line("simulator: stopped at t=0.000 s")
 
@@ -175,7 +178,7 @@ def test_duration_stops_after_the_final_frame():
 
 def test_hil_port_in_use_exits_2_naming_the_port():
     n = 51
-    port = wire.ports(n).hil
+    port = instance_ports(n).hil
     blocker = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     blocker.bind((wire.LOOPBACK, port))
     try:
@@ -188,7 +191,7 @@ def test_hil_port_in_use_exits_2_naming_the_port():
 
 def test_zenoh_port_in_use_exits_2_naming_the_port():
     n = 52
-    port = wire.ports(n).zenoh
+    port = instance_ports(n).zenoh
     blocker = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     blocker.bind((wire.LOOPBACK, port))
     blocker.listen(1)

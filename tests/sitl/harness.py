@@ -21,6 +21,7 @@ from pymavlink import mavutil  # noqa: E402
 from quadcommon import bus, wire  # noqa: E402
 from quadcommon.bus_records import CONTROLLER_CODEC, TRUTH_CODEC  # noqa: E402
 from sitl.launcher import Launcher, VehicleSpec  # noqa: E402
+from tests.ports import instance_ports  # noqa: E402
 
 
 class ZenohTap:
@@ -33,7 +34,7 @@ class ZenohTap:
     def __init__(self, instance: int, leaf: str = "truth", ports: wire.Ports | None = None) -> None:
         import zenoh
 
-        ports = ports or wire.ports(instance)
+        ports = ports or instance_ports(instance)
         self.instance, self.codec = instance, TRUTH_CODEC if leaf == "truth" else CONTROLLER_CODEC
         self.session = bus.open_peer(ports.zenoh)
         self._sub = self.session.declare_subscriber(

@@ -7,7 +7,7 @@ One flight per shipped sensor profile (``default`` is an alias of ``ideal``). On
 at most 3x the RMS error of its axes (horizontal, vertical). On ``ideal`` the sensors are exact
 and the GPS reports a 1 m accuracy (a receiver never claims less than its resolution): the
 estimate is the truth to a millimetre, so only the first half applies (never optimistic). The
-statistics over seeds (NEES) are in tests/estimation/test_accuracy.py, in simulation time.
+statistics over seeds (NEES) are in tests/autopilot/estimation/test_accuracy.py, in simulation time.
 
 Instances 55-57. Waits are bounded on the wall clock; every check is on recorded, simulation-time
 rows.
@@ -24,11 +24,11 @@ import pytest
 from gcs_scripts import fly_setpoints, record
 from gcs_scripts.analysis.log_reader import read_session
 from gcs_scripts.link import mavutil
-from quadcommon import wire
 from quadcommon.bus_records import ESTIMATOR_FIELDS
 from sitl.launcher import Launcher, VehicleSpec, python_script
+from tests.ports import instance_ports
 
-pytestmark = pytest.mark.timeout(150)
+pytestmark = [pytest.mark.processes, pytest.mark.timeout(150)]
 
 PROFILES = {"gps": 55, "mocap": 56, "ideal": 57}
 _E = {n: i for i, n in enumerate(ESTIMATOR_FIELDS)}
@@ -38,7 +38,8 @@ def _wait_fit_to_arm(instance: int, wall_timeout_s: float) -> None:
     """SYS_STATUS with the AHRS healthy (the filter converged) on the API port, then let it go for
     the script."""
     m = mavutil.mavlink
-    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{wire.ports(instance).api_remote}", source_system=254)
+    url = f"udpin:127.0.0.1:{instance_ports(instance).api_remote}"
+    conn = mavutil.mavlink_connection(url, source_system=254)
     try:
         deadline = time.monotonic() + wall_timeout_s
         while time.monotonic() < deadline:

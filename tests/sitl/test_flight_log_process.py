@@ -20,6 +20,8 @@ from quadcommon.bus_records import CONTROLLER_CODEC
 from sitl.launcher import Launcher, VehicleSpec
 from tests.ulog_check import check_ulog
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 INSTANCE = 76
 ALL = 0xFFFFFFFF
 

@@ -24,6 +24,8 @@ from sitl.launcher import Child, VehicleSpec
 
 from .harness import UdpGcs, running
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 INSTANCE = 93
 OFFBOARD = FlightMode.OFFBOARD.custom_mode
 TARGET = (1.0, 1.0, 2.0)  # paper frame: x forward, y left, z up (m)

@@ -23,8 +23,10 @@ from pathlib import Path
 
 import pytest
 
-from quadcommon import wire
 from sitl.launcher import Child
+from tests.ports import block_config_dir, instance_ports
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 REPO = Path(__file__).resolve().parents[2]
 INSTANCE = 16
@@ -42,6 +44,9 @@ class Installed:
         self.empty = root / "empty"
         self.empty.mkdir()
         self.env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "QUADSITL_CONFIG_DIR")}
+        block = block_config_dir()  # the test process's ports (a sitl.toml alone: the rest is the wheel's)
+        if block is not None:
+            self.env["QUADSITL_CONFIG_DIR"] = str(block)
         self.env.update(PATH=f"{self.bin}{os.pathsep}{os.environ['PATH']}", VIRTUAL_ENV=str(self.venv))
 
     def run(self, *args: str, timeout: float = 60.0, env: dict[str, str] | None = None):
@@ -130,7 +135,7 @@ def test_up_links_and_stops_at_its_duration(installed):
     assert f"vehicle {INSTANCE} is up" in result.stdout
     assert "simulator: linked with autopilot" in result.stdout
     assert "the simulator reached --duration 2 s" in result.stdout
-    assert wire.ports(INSTANCE).hil == 4560 + INSTANCE
+    assert f"udp {instance_ports(INSTANCE).gcs_remote}" in result.stdout  # sitl.toml's [ports] followed
 
 
 @pytest.mark.timeout(120)

@@ -16,13 +16,16 @@ import pytest
 from gcs_scripts import fly_setpoints, impair, upload_mission
 from quadcommon import bus, wire
 from sitl.launcher import Launcher, VehicleSpec, python_script
+from tests.ports import instance_ports
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 LOSSY = "loss=5%,delay=50ms"
 WALL_LIMIT_S = 90.0
 
 
 def _info(instance: int, leaf: str) -> dict:
-    session = bus.open_peer(wire.ports(instance).zenoh)
+    session = bus.open_peer(instance_ports(instance).zenoh)
     try:
         deadline = time.monotonic() + 20.0
         while time.monotonic() < deadline:  # a fresh session may not know the queryable yet: no reply

@@ -5,7 +5,7 @@ telemetry shows), a manual mode refused without sticks, then the sticks lost: NA
 and lands. The in-process tests measure the same behaviour closely (tests/autopilot/test_manual_*);
 this one checks it holds across real processes and sockets.
 
-It runs in a network namespace of its own (tests/conftest.py: COMPAT_MODULES) at ``--speed 2``; the
+It runs at ``--speed 2``; the
 sticks are paced on the telemetry's simulation time, and COM_RC_LOSS_T is raised to 1 s so that a
 loaded machine's scheduling (0.5 s of wall time) is not taken for a lost joystick."""
 
@@ -30,6 +30,8 @@ from quadcommon import wire
 from sitl.launcher import VehicleSpec
 
 from .harness import UdpGcs, running
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 INSTANCE = 12
 DEG = math.radians(1.0)

@@ -2,10 +2,13 @@
 over UDP, lockstep) exactly as it flies the whole stack in-process: the ground truth of every frame
 agrees to 1e-9 m."""
 
+import os
+
 import numpy as np
 import pytest
 
 from autopilot.control.config import load_controller
+from quadcommon import environment
 from quadcommon.bus_records import TRUTH_FIELDS
 from quadcommon.config import load_scenario
 from sitl.inprocess import RunOptions, paper_stack
@@ -14,12 +17,16 @@ from tests.own_law import write_overlay
 
 from .harness import running
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 DURATION = 6.0
 
 
 @pytest.mark.timeout(240)
 def test_a_law_from_a_configuration_directory_flies_the_sitl_as_in_process(tmp_path, monkeypatch):
-    monkeypatch.setenv("QUADSITL_CONFIG_DIR", str(tmp_path))  # the processes inherit it
+    # The processes inherit it; the test process's port block (tests/ports.py) stays behind it.
+    dirs = [str(tmp_path), *environment.config_dir_list()]
+    monkeypatch.setenv("QUADSITL_CONFIG_DIR", os.pathsep.join(dirs))
     name = write_overlay(tmp_path, "toy_pd_sitl")
     stack = paper_stack(load_scenario("helix"), load_controller(name), RunOptions())
     steps = round(DURATION / stack.sim.dt_control)

@@ -20,6 +20,8 @@ from sitl.inprocess import run_scenario
 
 from ..stack import Gcs, make_stack
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 TRANSIENT_S = 4.0
 

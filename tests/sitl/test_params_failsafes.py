@@ -24,6 +24,8 @@ from sitl.launcher import REPO, VehicleSpec
 
 from ..stack import Gcs, make_stack
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 LOITER = FlightMode.AUTO_LOITER.custom_mode
 POSCTL = FlightMode.POSCTL.custom_mode
 RTL = FlightMode.AUTO_RTL.custom_mode

@@ -4,9 +4,13 @@ socket is bound or process started. (The processes themselves: tests/compat/test
 
 from __future__ import annotations
 
+import pytest
+
 from autopilot.__main__ import main as autopilot_main
 from sitl import cli
 from sitl.launcher import VehicleSpec
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 
 def test_vehicle_spec_passes_the_key_file_to_the_autopilot():

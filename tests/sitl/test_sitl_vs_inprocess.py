@@ -18,6 +18,8 @@ from sitl.launcher import VehicleSpec
 
 from .harness import running
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
 DURATION = 12.0  # covers the take-off transient and the disturbances at 5 and 10 s

@@ -10,8 +10,13 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from quadcommon import wire
 from sitl.launcher import Child
+from tests.ports import instance_ports
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 INSTANCE = 9
 
@@ -56,15 +61,16 @@ def test_up_prints_endpoints_stops_cleanly_and_refuses_a_port_clash():
         up.wait_line("Ctrl-C stops", 30.0)
         text = up.output
         assert f"vehicle {INSTANCE} is up (MAVLink sysid {INSTANCE + 1}" in text
-        assert f"udp {14550 + INSTANCE}" in text and f"udpin://0.0.0.0:{14540 + INSTANCE}" in text
-        assert f"tcp/127.0.0.1:{7447 + INSTANCE}" in text
+        ports = instance_ports(INSTANCE)
+        assert f"udp {ports.gcs_remote}" in text and f"udpin://0.0.0.0:{ports.api_remote}" in text
+        assert f"tcp/127.0.0.1:{ports.zenoh}" in text
         assert "then the lost process is restarted (at most 3 restarts per 60 s; --no-restart" in text
         kids = children_of(up.process.pid)
         assert len(kids) == 2, kids  # simulator and autopilot
 
         clash = start_up()
         assert clash.wait(30.0) == 2
-        pattern = rf"port {4560 + INSTANCE} .*already in use.*--instance {INSTANCE}"
+        pattern = rf"port {ports.hil} .*already in use.*--instance {INSTANCE}"
         assert re.search(pattern, clash.output), clash.output
     finally:
         up.signal(signal.SIGTERM)
@@ -93,10 +99,10 @@ def test_up_leaves_no_orphan_when_the_launcher_is_killed():
 
 
 def test_up_refuses_an_instance_whose_ports_a_running_instance_uses():
-    """Instance 80's API client port 14620 is instance 40's autopilot API link. With
+    """Instance 80's API client port (14620 with the default bases) is instance 40's autopilot API link. With
     instance 40 running (its sockets bound here, as its processes would), instance 80 is refused
     before anything starts, naming both instances, the port and the roles; so is a launch of 11."""
-    other = wire.ports(40)
+    other = instance_ports(40)
     socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(3)]
     try:
         for sock, port in zip(socks, (other.hil, other.gcs_local, other.api_local), strict=True):
@@ -106,11 +112,13 @@ def test_up_refuses_an_instance_whose_ports_a_running_instance_uses():
     finally:
         for sock in socks:
             sock.close()
-    assert "UDP 14620: instance 80's API client port is instance 40's autopilot API link" in up.output
+    api_80 = instance_ports(80).api_remote
+    assert f"UDP {api_80}: instance 80's API client port is instance 40's autopilot API link" in up.output
     assert "instances 10, 30 or 40 apart share ports" in up.output
     assert "[simulator[80]]" not in up.output and "[autopilot[80]]" not in up.output  # nothing started
     many = Child(
         "quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", "80", "--count", "11"]
     )
     assert many.wait(30.0) == 2
-    assert "UDP 14630: instance 90's API client port is instance 80's GCS client port" in many.output
+    api_90 = instance_ports(90).api_remote
+    assert f"UDP {api_90}: instance 90's API client port is instance 80's GCS client port" in many.output

@@ -17,15 +17,20 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("MAVLINK_DIALECT", "common")
 from pymavlink.dialects.v20 import common as m  # noqa: E402
 
 from quadcommon import wire  # noqa: E402
 from sitl.launcher import Child  # noqa: E402
+from tests.ports import instance_ports  # noqa: E402
 
 from .harness import UdpGcs, ZenohTap  # noqa: E402
 from .test_up_cli import alive, children_of  # noqa: E402
+
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
 
 ARMED = m.MAV_MODE_FLAG_SAFETY_ARMED
 
@@ -68,7 +73,7 @@ def ctrl_c(up: Child) -> tuple[int, list[int]]:
 
 
 def gcs_for(instance: int) -> UdpGcs:
-    return UdpGcs(wire.ports(instance).gcs_remote, wire.system_id(instance))
+    return UdpGcs(instance_ports(instance).gcs_remote, wire.system_id(instance))
 
 
 def fresh(gcs: UdpGcs, kinds: tuple[str, ...], wall_s: float) -> None:
@@ -193,7 +198,7 @@ def test_a_process_that_keeps_dying_is_left_down_after_the_cap():
         deadline = time.monotonic() + 5.0
         while True:
             try:
-                taken.bind((wire.LOOPBACK, wire.ports(n).gcs_local))
+                taken.bind((wire.LOOPBACK, instance_ports(n).gcs_local))
                 break
             except OSError:
                 assert time.monotonic() < deadline, "the killed autopilot's port never came free"

@@ -19,8 +19,9 @@ from gcs_scripts.view.live import VIEW_SYSTEM_ID
 from gcs_scripts.view.server import LiveSource
 from quadcommon import wire
 from sitl.launcher import Launcher, VehicleSpec
+from tests.ports import instance_ports
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = [pytest.mark.processes, pytest.mark.timeout(180)]
 INSTANCE = 66  # of the view tests: 65-69 (tests/gcs_scripts/test_e2e_sitl.py uses 60-62)
 
 
@@ -44,7 +45,7 @@ def _tick_until(source: LiveSource, predicate, wall_s: float, period_s: float = 
 
 
 def test_view_is_a_peer_on_its_own_port_and_leaves_the_ground_station_port_alone(vehicle):
-    ports = wire.ports(INSTANCE)
+    ports = instance_ports(INSTANCE)
     qgc = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     qgc.bind(("127.0.0.1", ports.gcs_remote))  # as QGC would: must stay possible with the view running
     qgc.settimeout(3.0)

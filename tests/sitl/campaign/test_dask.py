@@ -24,6 +24,8 @@ from sitl.campaign.spec import load_campaign  # noqa: E402
 
 from . import specs  # noqa: E402
 
+pytestmark = pytest.mark.processes  # (tests/conftest.py: the markers)
+
 DASK = str(Path(sys.executable).with_name("dask"))
 START_TIMEOUT_S = 90.0
 

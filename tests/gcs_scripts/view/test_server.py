@@ -16,7 +16,7 @@ from gcs_scripts.view.server import ReplaySource, main
 from .helpers import served
 from .test_replay import _session
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.processes, pytest.mark.timeout(60)]
 
 
 def _get(url: str) -> tuple[int, str, bytes]:

@@ -24,7 +24,7 @@ import pytest
 
 from .helpers import ARTIFACTS, REPO, browser_page, served, view_state
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.processes, pytest.mark.timeout(300)]
 INSTANCE = 67  # of the view tests: 65-69 (tests/gcs_scripts/test_e2e_sitl.py uses 60-62)
 SPEED = "2"
 QUIET_S = 3.0  # wall seconds of OFFBOARD in which the update rate is measured

@@ -150,7 +150,7 @@ CHILD = textwrap.dedent("""
     from autopilot.estimation import load_estimator_params
     from quadcommon.kernel import compiling
     from simulator.sensors import load_sensors
-    from tests.estimation.helpers import run_filter
+    from tests.autopilot.estimation.helpers import run_filter
 
     assert not compiling()
     truth, profile, out = pickle.load(open(sys.argv[1], "rb"))

@@ -5,7 +5,7 @@
   cascade), on sampled runs of a +-30 % box with random initial states and random disturbances,
   all three cascades, 40 s: trajectories agree to 1e-9 m (measured: bit for bit), and so do the
   indices (to rounding of the sums);
-* wire off: against the plant and the cascade coupled directly (``tests/campaign/reference.py``),
+* wire off: against the plant and the cascade coupled directly (``tests/sitl/campaign/reference.py``),
   40 s, same tolerance;
 * what ``run_scenario`` cannot take (rotor constants unknown to the allocator, an initial
   velocity, drag with 1-cos gusts, ramps and Dryden turbulence, CoM and crossed inertia): against

@@ -13,7 +13,7 @@ import pytest
 
 from gcs_scripts.view.server import LiveSource, ReplaySource, ViewServer
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 ARTIFACTS = REPO / "out" / "test-artifacts" / "view"
 CHROMIUM = "/usr/bin/chromium"
 # What works on these machines (no GPU, closed network): see the machine notes.
