@@ -188,7 +188,12 @@ def test_a_pymavlink_client_arms_only_on_the_aligned_ekf_and_sees_the_estimate(t
                                               m.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0)  # fmt: skip
             client.wait(lambda: "HOME_POSITION" in client.last, "HOME_POSITION", 3.0)
         home = client.last["HOME_POSITION"]
-        rows = truth.rows()
+        # The truth comes in batches of ten frames: wait for the one holding the last telemetry's instant.
+        last_s = client.global_positions[-1].time_boot_ms * 1e-3
+        rows, deadline = truth.rows(), time.monotonic() + 5.0
+        while (len(rows) == 0 or rows[-1, 0] < last_s) and time.monotonic() < deadline:
+            time.sleep(0.01)
+            rows = truth.rows()
         diffs = np.array([_estimate_minus_truth(g, home, rows) for g in client.global_positions[5:]])
         assert len(diffs) > 5
         error = np.linalg.norm(diffs, axis=1)
