@@ -405,14 +405,15 @@ async def flow_mission(system, args) -> None:
         progress: list[tuple[int, int]] = []
         start = time.monotonic()
         finished = False
-        while time.monotonic() - start < 40.0:
+        while not finished and time.monotonic() - start < 40.0:
+            # Ask "finished?" before reading the progress, so the last progress read comes after
+            # the answer: the mission can finish between the two calls.
+            finished = await mission.is_mission_finished()
             p = await mission.mission_progress()
             if not progress or progress[-1] != (p.current, p.total):
                 progress.append((p.current, p.total))
-            if await mission.is_mission_finished():
-                finished = True
-                break
-            await asyncio.sleep(0.1)
+            if not finished:
+                await asyncio.sleep(0.1)
         closest = [
             min(distance(q[1:], t) for q in watch.positions) if watch.positions else None for t in targets
         ]
