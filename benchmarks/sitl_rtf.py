@@ -12,11 +12,13 @@ Run: ``.venv/bin/python benchmarks/sitl_rtf.py [--duration 40] [--rates 250 500 
 ``--sensors`` profile; default: truth only), so the cost of the EKF is a ratio within one run.
 Besides the wall time, the CPU time of both processes (user + system, start-up included) per
 simulated second is reported: on a shared machine it moves less than the wall time.
-``--log``: each run twice, with the autopilot's flight log (ULog, SDLOG_MODE 0: the flight is
-armed from t = 0, so the whole run is logged) off and on, alternating, ``--repeat`` times; the
-last lines add the ratio of the real-time factors (on / off, the median of the pairs), the ratio
-of the two processes' CPU time (steadier than the wall time on a shared machine) and the log's
-size per simulated second. In both runs of a pair this process subscribes to the simulator's
+``--log``: each run three times, with the autopilot's flight log (ULog, SDLOG_MODE 0: the flight
+is armed from t = 0, so the whole run is logged) off, on and off again (the order rotates),
+``--repeat`` times; the last lines add the ratio of the real-time factors (on over the mean of the
+two offs, the median of the repetitions), the same ratio of two runs with the log off (off over
+off: what this machine's noise alone gives, the resolution of the first figure), the ratio of
+the two processes' CPU time (steadier than the wall time on a shared machine) and the log's size
+per simulated second. In both runs of a pair this process subscribes to the simulator's
 truth on zenoh, as a recorder would: whether the truth has a subscriber changes the simulator's
 timing by itself (measured: with none, the HIL round trip sat at ~1 ms in some runs).
 The wall time of a run is the simulator's own clock on its frame loop (its exit summary):
@@ -158,40 +160,46 @@ def main() -> None:
 
 
 def log_pairs(args, tmpdir: Path) -> None:
-    """The flight log's cost: runs with it off and on, alternating (the machine's load moves
-    slowly, so neighbours compare), per rate and estimator."""
+    """The flight log's cost: runs with it off, on and off again (the machine's load moves slowly,
+    so neighbours compare; the order rotates so that no run is always first), per rate and
+    estimator. The two offs of a repetition give the noise floor: their ratio would be 1 on a
+    quiet, steady machine."""
     import statistics
 
+    orders = (("off", "on", "off2"), ("on", "off", "off2"), ("off", "off2", "on"))
     lines = []
     for rate in args.rates:
         for estimator in args.estimator:
-            ratios, cpu_ratios, sizes = [], [], []
+            ratios, floor, cpu_ratios, sizes = [], [], [], []
             for k in range(args.repeat):
                 rtf, cpu_s = {}, {}
-                for on in (False, True) if k % 2 == 0 else (True, False):  # neither always first
+                for run in orders[k % len(orders)]:
+                    on = run == "on"
                     log_dir = tmpdir / f"log_{rate}_{estimator}_{k}" if on else None
                     config = sitl_toml(tmpdir, rate)
                     elapsed, median, p99, cpu = run_once(config, args.duration, None, estimator, args.sensors,
                                                          args.instance, log_dir,
                                                          truth_subscriber=True)  # fmt: skip
-                    rtf[on], cpu_s[on] = args.duration / elapsed, cpu
-                    print(f"{rate:5d} Hz on {estimator}, flight log {'on ' if on else 'off'}: "
-                          f"{rtf[on]:.1f}x, CPU {cpu:.1f} s, HIL round trip median {median} us, p99 {p99} us",
-                          flush=True)  # fmt: skip
+                    rtf[run], cpu_s[run] = args.duration / elapsed, cpu
+                    state = "on " if on else "off"
+                    print(f"{rate:5d} Hz on {estimator}, flight log {state}: {rtf[run]:.1f}x, "
+                          f"CPU {cpu:.1f} s, HIL round trip median {median} us, p99 {p99} us", flush=True)
                     if on:
                         sizes += [f.stat().st_size for f in log_dir.rglob("*.ulg")]
-                ratios.append(rtf[True] / rtf[False])
-                cpu_ratios.append(cpu_s[True] / cpu_s[False])
+                ratios.append(rtf["on"] / statistics.mean((rtf["off"], rtf["off2"])))
+                floor.append(rtf["off2"] / rtf["off"])
+                cpu_ratios.append(cpu_s["on"] / statistics.mean((cpu_s["off"], cpu_s["off2"])))
             suffix = "" if estimator == "truth" else "_ekf"
             name = f"{rate}hz{suffix}_log_on_over_off"
-            lines.append(f"sitl_rtf_{name}: {statistics.median(ratios):.3f} ratio")
+            lines.append(f"sitl_rtf_{rate}hz{suffix}_log_off_over_off: {statistics.median(floor):.3f} ratio "
+                         f"(noise floor; {min(floor):.3f} to {max(floor):.3f})")  # fmt: skip
             lines.append(f"sitl_cpu_{name}: {statistics.median(cpu_ratios):.3f} ratio")
             if sizes:
                 per_s = statistics.median(sizes) / args.duration
                 lines.append(f"ulog_bytes_per_sim_s_{rate}hz{suffix}: {per_s:.0f} B")
+            lines.append(f"sitl_rtf_{name}: {statistics.median(ratios):.3f} ratio")
     print()
     print("\n".join(lines))
-
 
 if __name__ == "__main__":
     main()
