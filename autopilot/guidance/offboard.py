@@ -9,8 +9,12 @@ MAVLink edge (:mod:`autopilot.mavlink.offboard`):
 * position + velocity (+ acceleration): a trajectory sample used as is, with the velocity and
   acceleration as feedforward; between samples it is extrapolated (p + v tau + a tau^2 / 2) so a
   50 Hz stream gives the 500 Hz cascade a continuous reference;
-* velocity (+ acceleration) without position: the position reference integrates the velocity;
-* yaw: absolute, or a yaw rate integrated; when neither is given the yaw reference is kept.
+* velocity (+ acceleration) without position: the reference velocity moves to the setpoint's
+  at most at ``MPC_ACC_HOR`` (a step in the setpoint becomes a ramp, never a step in p_d': that
+  would be an impulse in p_d'' for the position law), and the position reference integrates it;
+* yaw: absolute, or a yaw rate integrated; when neither is given the yaw reference is kept. Outside
+  a planned transition an absolute yaw is reached the shorter way round at the planner's yaw rate
+  limit, never in one step.
 
 Bounded whatever arrives (PX4 does the same in its position controller): feedforward velocities
 are limited to ``MPC_XY_VEL_MAX`` / ``MPC_Z_VEL_MAX_UP`` / ``MPC_Z_VEL_MAX_DN`` and accelerations to
@@ -72,17 +76,17 @@ class OffboardGuidance:
         if sp is None:
             return Reference(previous.position_m, ZERO3, ZERO3, previous.yaw_rad, 0.0, 0.0)
         yaw, yaw_rate = previous.yaw_rad, 0.0
-        if sp.yaw is not None:
-            yaw = sp.yaw
+        if sp.yaw is not None:  # (a planned transition turns to it; other references slew to it)
+            yaw, yaw_rate = _toward_yaw(previous.yaw_rad, sp.yaw, self.limits.yaw_rate * dt, dt)
         elif sp.yaw_rate is not None:
             yaw_rate = sp.yaw_rate
             yaw = math.remainder(previous.yaw_rad + yaw_rate * dt, 2.0 * math.pi)
 
         if sp.position is not None and sp.velocity is None and sp.acceleration is None:
-            target = (sp.position, yaw)
+            target = (sp.position, yaw if sp.yaw is None else sp.yaw)
             if self._plan is None or self._target is None or _moved(self._target, target):
                 self._target = target
-                self._plan = transition(previous, sp.position, self.limits, yaw)
+                self._plan = transition(previous, sp.position, self.limits, target[1])
                 self._plan_start = t
             ref = self._plan.sample(t - self._plan_start)
             if sp.yaw is None and sp.yaw_rate is not None:
@@ -98,9 +102,10 @@ class OffboardGuidance:
             )
             velocity = tuple(v + a * tau for v, a in zip(vel, acc, strict=True))
             if self._joining or math.dist(position, previous.position_m) > JUMP_M:
-                return self._join(t, previous, position, yaw)  # type: ignore[arg-type]
+                return self._join(t, previous, position, yaw if sp.yaw is None else sp.yaw)  # type: ignore[arg-type]
         elif sp.velocity is not None:
-            velocity = _limit_velocity(sp.velocity, self.limits)
+            target_velocity = _limit_velocity(sp.velocity, self.limits)
+            velocity, acc = _toward_velocity(previous.velocity_m_s, target_velocity, acc, self.limits, dt)
             position = tuple(p + v * dt for p, v in zip(previous.position_m, velocity, strict=True))
         else:  # acceleration only
             velocity = tuple(v + a * dt for v, a in zip(previous.velocity_m_s, acc, strict=True))
@@ -133,6 +138,32 @@ def _limit_velocity(v: Vector3, limits: Limits) -> Vector3:
     h = math.hypot(v[0], v[1])
     scale = limits.speed_horizontal / h if h > limits.speed_horizontal else 1.0
     return (v[0] * scale, v[1] * scale, min(max(v[2], -limits.speed_down), limits.speed_up))
+
+
+def _toward_velocity(
+    current: Vector3, target: Vector3, feedforward: Vector3, limits: Limits, dt: float
+) -> tuple[Vector3, Vector3]:
+    """The reference velocity one step closer to ``target`` (at most ``limits.acceleration``) and
+    the reference acceleration that moves it: the ramp's while on the way, the setpoint's
+    ``feedforward`` once there."""
+    dv = tuple(b - a for a, b in zip(current, target, strict=True))
+    gap = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
+    reach = limits.acceleration * dt
+    if gap <= reach:
+        return target, feedforward
+    scale = limits.acceleration / gap
+    acc = (dv[0] * scale, dv[1] * scale, dv[2] * scale)
+    return tuple(v + a * dt for v, a in zip(current, acc, strict=True)), acc  # type: ignore[return-value]
+
+
+def _toward_yaw(current: float, target: float, reach: float, dt: float) -> tuple[float, float]:
+    """The yaw one step closer to ``target`` the shorter way round (at most ``reach`` rad) and
+    its rate; ``target`` itself (wrapped) once within reach."""
+    error = math.remainder(target - current, 2.0 * math.pi)
+    if abs(error) <= reach:
+        return math.remainder(target, 2.0 * math.pi), 0.0
+    step = math.copysign(reach, error)
+    return math.remainder(current + step, 2.0 * math.pi), step / dt
 
 
 def _limit_acceleration(a: Vector3, limits: Limits) -> Vector3:

@@ -116,7 +116,7 @@ EXAMPLE_INPUTS_S = 6.0
 
 
 async def manual_control_example(drone: System) -> None:
-    """examples/manual_control.py on the landed, disarmed vehicle (COM_RC_LOSS_T 1 s: see
+    """examples/manual_control.py on the landed, disarmed vehicle (COM_RC_LOSS_T 2 s: see
     manual_control); then the sticks stop."""
     await drone.manual_control.set_manual_control_input(float(0), float(0), 0.5, float(0))
     await drone.action.arm()
@@ -252,9 +252,11 @@ async def mission_raw(drone: System) -> None:
 
 
 async def manual_control(drone: System) -> None:
-    # The vehicle runs at --speed 2: a 10 Hz (wall) joystick is 5 Hz of simulation time, so the
-    # loss timeout is doubled to keep PX4's margin of a real-time vehicle (5 samples).
-    await drone.param.set_param_float("COM_RC_LOSS_T", 1.0)
+    # The vehicle runs at --speed 2: a 10 Hz (wall) joystick is 5 Hz of simulation time. The flow
+    # sends no sticks while it awaits start_position_control's answer (a script would send them
+    # from a task of its own), which on a loaded machine can take half a second of wall time: the
+    # loss timeout is 2 s of simulation time (1 s of wall time; PX4's default is 0.5 s).
+    await drone.param.set_param_float("COM_RC_LOSS_T", 2.0)
     for _ in range(5):
         await drone.manual_control.set_manual_control_input(0.0, 0.0, 0.5, 0.0)
         await asyncio.sleep(0.1)
