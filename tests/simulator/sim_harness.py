@@ -91,8 +91,10 @@ class ScriptedAutopilot:
         messages = self.parser.parse_buffer(data) or []
         return Frame((m.get_type(), m) for m in messages)
 
-    def link(self, timeout: float = 8.0) -> Frame:
-        """HEARTBEAT every 0.1 s until the first frame arrives (what the real autopilot does)."""
+    def link(self, timeout: float = 30.0) -> Frame:
+        """HEARTBEAT every 0.1 s until the first frame arrives (what the real autopilot does). The
+        wait covers the simulator's start: about a second here, more than 8 s with two suites
+        running at once on two cores."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             self.hello()

@@ -172,7 +172,7 @@ def test_duration_stops_after_the_final_frame():
                 break
             times.append(frame.time_usec)
         assert times == [k * FRAME_USEC for k in range(11)]
-        assert sim.wait(3.0) == 0
+        assert sim.wait(10.0) == 0
         sim.wait_line("simulator: stopped at t=0.020 s")
 
 
@@ -183,7 +183,7 @@ def test_hil_port_in_use_exits_2_naming_the_port():
     blocker.bind((wire.LOOPBACK, port))
     try:
         with SimProcess(n) as sim:
-            assert sim.wait(8.0) == 2
+            assert sim.wait(20.0) == 2
             assert str(port) in sim.output and "--instance 51" in sim.output
     finally:
         blocker.close()
@@ -197,7 +197,7 @@ def test_zenoh_port_in_use_exits_2_naming_the_port():
     blocker.listen(1)
     try:
         with SimProcess(n) as sim:
-            assert sim.wait(8.0) == 2
+            assert sim.wait(20.0) == 2
             assert f"zenoh port {port}" in sim.output and "--instance 52" in sim.output
     finally:
         blocker.close()

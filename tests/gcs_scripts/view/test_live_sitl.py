@@ -1,7 +1,9 @@
 """The view's live source against a real vehicle (no browser): ports, rates, telemetry, failsafe.
 
-A real SITL (instance 66: simulator + autopilot processes, real UDP and zenoh) at ``--speed max``;
-the view's :class:`LiveSource` ticked as the server ticks it. A socket on the ground-station port
+A real SITL (instance 66: simulator + autopilot processes, real UDP and zenoh) at ``--speed 4``
+(ticks of the view wait on the wall clock: a vehicle at ``max`` would take both cores from the rest
+of the suite for the module's whole run, to fly the same checks); the view's :class:`LiveSource`
+ticked as the server ticks it. A socket on the ground-station port
 14550+N stands for QGroundControl, bound before the view starts.
 """
 
@@ -23,12 +25,13 @@ from tests.ports import instance_ports
 
 pytestmark = [pytest.mark.processes, pytest.mark.timeout(180)]
 INSTANCE = 66  # of the view tests: 65-69 (tests/gcs_scripts/test_e2e_sitl.py uses 60-62)
+SPEED = "4"
 
 
 @pytest.fixture(scope="module")
 def vehicle():
     with Launcher() as launcher:
-        launcher.start_vehicles([VehicleSpec(instance=INSTANCE, speed="max")])
+        launcher.start_vehicles([VehicleSpec(instance=INSTANCE, speed=SPEED)])
         yield launcher
 
 
@@ -81,7 +84,8 @@ def test_frames_carry_decimated_samples_and_the_description(vehicle):
         times = [f["v"][0]["s"]["t"] for f in with_sample]
         assert times == sorted(times) and len(set(times)) == len(times)
         # Each sample is the newest at its tick, however many control steps passed in between
-        # (dozens at --speed max): the view decimates, it does not queue.
+        # (~65 at --speed 4: 2,000 steps per wall second, 30 ticks): the view decimates, it does
+        # not queue.
         assert source.vehicles[0].sampler.truth_rows > 3 * len(with_sample)
         sample = with_sample[-1]["v"][0]["s"]
         assert len(sample["p"]) == 3 and len(sample["q"]) == 4 and sample["ground"] is True
@@ -152,9 +156,9 @@ def test_two_vehicles_in_one_page_each_with_its_colour(vehicle):
     from .helpers import ARTIFACTS, browser_page, served, view_state
 
     second = 68
-    # At a finite speed: the fixture's vehicle at --speed max already keeps a core busy, and a second
-    # one at max would take the other core from Chromium (2 cores here; the page then took > 60 s to
-    # start under the rest of the suite). Colours and cards do not depend on the speed.
+    # At a finite speed, as the fixture's: one at max would take a core from Chromium (2 cores here;
+    # the page then took > 60 s to start under the rest of the suite). Colours and cards do not
+    # depend on the speed.
     with Launcher() as launcher:
         spec = VehicleSpec(instance=second, speed="4", scenario="circle", autostart=True)
         launcher.start_vehicles([spec])
