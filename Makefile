@@ -3,7 +3,7 @@
 #               (out/paper) and through the SITL, three cascades, recorded and analysed (out/demo),
 #               then a 200-run Monte Carlo campaign of the +-30 % box (out/campaign)
 #   make test   set everything up (.venv, test tools) and run lint, the docs' strict build and the test suite
-#               (one pytest run over the 2 cores: pytest -n 2, CONTRIBUTING.md)
+#               (one pytest run, three workers over the 2 cores: pytest -n 3, CONTRIBUTING.md)
 #   make docs   build the documentation site (out/site) with --strict: a broken link or reference fails
 PYTHON ?= python3
 VENV   ?= .venv
@@ -63,7 +63,7 @@ docs: $(STAMP)
 test: $(STAMP) $(VIEW_VENDOR) browser $(MAVSDK3)
 	$(BIN)/ruff check .
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
-	$(BIN)/python -m pytest -n 2
+	$(BIN)/python -m pytest -n 3
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/inprocess.py

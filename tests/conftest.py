@@ -1,7 +1,8 @@
 """Suite-wide wiring: the kernels compiled once, a port block per pytest process, the heavy tests
 scheduled first.
 
-The test command is one pytest run over both cores (``pytest -n 2``, pytest-xdist; CONTRIBUTING.md).
+The test command is one pytest run, three workers over two cores (``pytest -n 3``, pytest-xdist;
+CONTRIBUTING.md).
 Test modules that start processes say so themselves (``pytestmark = pytest.mark.processes``; those
 with third-party clients ``compat`` as well): ``-m "not processes"`` runs the in-process tests alone.
 
@@ -12,8 +13,8 @@ with third-party clients ``compat`` as well): ``-m "not processes"`` runs the in
   ``QUADSITL_CONFIG_DIR`` at a ``sitl.toml`` with those bases: every vehicle a test starts, and
   every port a test computes with ``load_sitl().ports(n)``, is on it. No test binds a fixed port.
 * The lockstep processes the tests start do not busy-wait for their peer
-  (``QUADSITL_LOCKSTEP_SPIN_S=0``, docs/running.md): two workers share two cores, and a spinning
-  process takes the core its peer or the other worker needs. The benchmarks measure the SITL with
+  (``QUADSITL_LOCKSTEP_SPIN_S=0``, docs/running.md): three workers share two cores, and a spinning
+  process takes the core its peer or the other workers need. The benchmarks measure the SITL with
   its default spin.
 * The modules marked ``processes`` are collected first: they wait on real processes and the wall
   clock, so xdist hands them out before the short in-process ones that fill the gaps.
