@@ -18,7 +18,7 @@ is armed from t = 0, so the whole run is logged) off, on and off again (the orde
 two offs, the median of the repetitions), the same ratio of two runs with the log off (off over
 off: what this machine's noise alone gives, the resolution of the first figure), the ratio of
 the two processes' CPU time (steadier than the wall time on a shared machine) and the log's size
-per simulated second. In both runs of a pair this process subscribes to the simulator's
+per simulated second. In every run this process subscribes to the simulator's
 truth on zenoh, as a recorder would: whether the truth has a subscriber changes the simulator's
 timing by itself (measured: with none, the HIL round trip sat at ~1 ms in some runs).
 The wall time of a run is the simulator's own clock on its frame loop (its exit summary):
@@ -191,8 +191,9 @@ def log_pairs(args, tmpdir: Path) -> None:
                 cpu_ratios.append(cpu_s["on"] / statistics.mean((cpu_s["off"], cpu_s["off2"])))
             suffix = "" if estimator == "truth" else "_ekf"
             name = f"{rate}hz{suffix}_log_on_over_off"
-            lines.append(f"sitl_rtf_{rate}hz{suffix}_log_off_over_off: {statistics.median(floor):.3f} ratio "
-                         f"(noise floor; {min(floor):.3f} to {max(floor):.3f})")  # fmt: skip
+            print(f"{rate} Hz on {estimator}, per repetition: off over off (the noise floor) "
+                  f"{min(floor):.3f} to {max(floor):.3f}, on over off {min(ratios):.3f} to {max(ratios):.3f}")
+            lines.append(f"sitl_rtf_{rate}hz{suffix}_log_off_over_off: {statistics.median(floor):.3f} ratio")
             lines.append(f"sitl_cpu_{name}: {statistics.median(cpu_ratios):.3f} ratio")
             if sizes:
                 per_s = statistics.median(sizes) / args.duration
@@ -200,6 +201,7 @@ def log_pairs(args, tmpdir: Path) -> None:
             lines.append(f"sitl_rtf_{name}: {statistics.median(ratios):.3f} ratio")
     print()
     print("\n".join(lines))
+
 
 if __name__ == "__main__":
     main()
