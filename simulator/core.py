@@ -183,7 +183,8 @@ class SimulatorCore:
 
     # -- the lockstep period --------------------------------------------------------------------
     def begin_frame(self) -> bytes:
-        """Frame ``k``'s datagram; also sets :attr:`truth_row`. Raises PlantDiverged."""
+        """Frame ``k``'s datagram; also sets :attr:`truth_row`. Raises PlantDiverged when the state
+        is not finite or too large for the wire."""
         if self._pending_schedule is not None:
             self.schedule, self._pending_schedule = self._pending_schedule, None
         k, t = self.k, self.k * self.dt_control
@@ -196,9 +197,12 @@ class SimulatorCore:
         sensed = self.sensors.step(t, truth)
         self.truth_row = truth_row(t, truth, force, torque, wind)
         report = self.disturbance_report.due(time_usec, (force, torque))
-        datagram = self.encoder.encode(
-            time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision, report
-        )
+        try:
+            datagram = self.encoder.encode(
+                time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision, report
+            )
+        except OverflowError as exc:  # finite but past float32: a blow-up a frame or two away
+            raise PlantDiverged(f"the plant state no longer fits the wire's float32 at t={t:.3f} s") from exc
         self.frame_datagram = datagram
         return datagram
 

@@ -290,6 +290,9 @@ class Watch:
                 raise FuzzFailure(f"{context}: the vehicle sent an unparseable frame")
             kind = msg.get_type()
             allowed = NAN_ALLOWED.get(kind, ())
+            if kind == "PARAM_VALUE" and msg.param_type != m.MAV_PARAM_TYPE_REAL32:
+                # An integer parameter travels bytewise (PX4): -1 is 0xffffffff, a NaN as a float.
+                allowed = ("param_value",)
             for name, ftype in zip(msg.fieldnames, msg.fieldtypes, strict=True):
                 if ftype not in ("float", "double") or name in allowed:
                     continue

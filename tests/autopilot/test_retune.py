@@ -77,7 +77,7 @@ def random_attitude(rng):
     [
         nlhinf_gains(0.1, 3.0, 4.0, 1.5),  # lower omega3 (k_p and K_I)
         nlhinf_gains(0.1, 3.0, 9.0, 0.8),  # omega_u: the integral enters through (C + w_u^-2) k_p
-        nlhinf_gains(0.2, 5.0, 20.0, 3.0),  # everything
+        nlhinf_gains(0.2, 5.0, 20.0, 1.2),  # everything
     ],
 )
 def test_nlhinf_integral_torque_is_continuous_at_the_state_of_the_change(new):
@@ -92,6 +92,27 @@ def test_nlhinf_integral_torque_is_continuous_at_the_state_of_the_change(new):
         law.retune(new)
         assert np.allclose(state_term(law, args), before, rtol=0, atol=1e-9)
         law.retune(old)  # and back
+
+
+@pytest.mark.parametrize("omega_u", [3.0, 900.0])
+def test_raising_omega_u_keeps_the_integrals_share_of_s_and_its_torque_shrinks(omega_u):
+    """A larger w_u would need a larger integral for the same torque (and s = ... + k_p int enters
+    tau through C s too): the integral's share of s is kept, so at hover its torque scales by
+    w_u^2 / w_u'^2 and never grows."""
+    rng = np.random.default_rng(5)
+    law = rotational("intbs_nlhinf")
+    old = law.gains
+    hover = (Z3, Z3, Z3, Z3, Z3, Z3, DT, False)
+    for _ in range(10):
+        law.state = list(rng.normal(scale=0.2, size=3))
+        law.step(*random_attitude(rng))  # the latest state
+        share = old.k_p * np.array(law.state)
+        shrunk = state_term(law, hover) * (old.omega_u / omega_u) ** 2
+        law.retune(replace(old, omega_u=omega_u))
+        assert np.allclose(law.gains.k_p * np.array(law.state), share, rtol=1e-12, atol=0)
+        assert np.allclose(state_term(law, hover), shrunk, rtol=1e-9, atol=1e-15)
+        law.retune(old)  # and back: lowering w_u keeps the (smaller) torque
+        assert np.allclose(state_term(law, hover), shrunk, rtol=1e-9, atol=1e-15)
 
 
 def test_nlhinf_torque_is_continuous_on_the_reference_when_the_gains_change():
@@ -109,8 +130,8 @@ def test_nlhinf_torque_is_continuous_on_the_reference_when_the_gains_change():
 def test_nlhinf_retune_before_any_state_uses_the_hover_approximation():
     law = rotational("intbs_nlhinf")
     law.state = [1.0, 2.0, 3.0]
-    law.retune(nlhinf_gains(0.1, 3.0, 4.5, 3.0))
-    scale = (90.0 / 1.5**2) / (45.0 / 3.0**2)
+    law.retune(nlhinf_gains(0.1, 3.0, 4.5, 1.0))
+    scale = (90.0 / 1.5**2) / (45.0 / 1.0**2)
     assert law.state == pytest.approx([scale, 2 * scale, 3 * scale])
 
 

@@ -240,6 +240,16 @@ def test_a_diverged_plant_is_reported_not_encoded():
         core.begin_frame()
 
 
+def test_a_state_past_float32_is_reported_not_raised_from_the_encoder():
+    """Finite but beyond what HIL's float32 fields carry (a tumble through the Euler torque
+    disturbance's gimbal lock gets there): the simulator stops with a reason, not a traceback."""
+    core = core_for()
+    core.plant.state[3] = 1e39  # a velocity
+    assert math.isfinite(core.plant.truth().velocity_m_s[0])
+    with pytest.raises(PlantDiverged, match="no longer fits the wire's float32 at t=0.000 s"):
+        core.begin_frame()
+
+
 def test_wind_on_a_drag_free_vehicle_is_warned():
     core = core_for()
     profile = load_gust_profile("gust_1cos_x")

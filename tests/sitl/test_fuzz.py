@@ -6,12 +6,22 @@ behind its rules)."""
 from __future__ import annotations
 
 import math
+import struct
 
 import pytest
+from pymavlink.dialects.v20 import common as m
 
 from autopilot.mavlink import telemetry
 from autopilot.params.store import ParameterStore
-from sitl.fuzz import AUTOPILOT_KINDS, SIMULATOR_KINDS, FuzzFailure, fuzz_autopilot, fuzz_simulator
+from sitl.fuzz import (
+    AUTOPILOT_KINDS,
+    SIMULATOR_KINDS,
+    FuzzFailure,
+    FuzzReport,
+    Watch,
+    fuzz_autopilot,
+    fuzz_simulator,
+)
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -46,6 +56,20 @@ def test_the_fuzzer_catches_a_nan_on_the_wire(monkeypatch):
     monkeypatch.setitem(telemetry.BUILDERS, telemetry.m.MAVLINK_MSG_ID_VFR_HUD, nan_climb)
     with pytest.raises(FuzzFailure, match="VFR_HUD.climb"):
         fuzz_autopilot(200, seed=2)
+
+
+def test_an_integer_parameter_sent_bytewise_is_not_taken_for_a_nan():
+    """PX4 sends INT32 parameters bytewise: SDLOG_MODE = -1 is 0xffffffff, a NaN read as a float.
+    The watch reads it as the integer it is, and still catches a REAL32 NaN."""
+    mav = m.MAVLink(None, srcSystem=1, srcComponent=1)
+    mav.robust_parsing = True
+    minus_one = struct.unpack("<f", struct.pack("<i", -1))[0]
+    watch = Watch(FuzzReport(0), set())
+    sdlog = m.MAVLink_param_value_message(b"SDLOG_MODE", minus_one, m.MAV_PARAM_TYPE_INT32, 200, 7)
+    watch(0, ("127.0.0.1", 14550), sdlog.pack(mav), "bytewise")
+    real = m.MAVLink_param_value_message(b"MPC_XY_VEL_MAX", math.nan, m.MAV_PARAM_TYPE_REAL32, 200, 8)
+    with pytest.raises(FuzzFailure, match="PARAM_VALUE.param_value = nan"):
+        watch(0, ("127.0.0.1", 14550), real.pack(mav), "real32")
 
 
 def test_the_fuzzer_catches_a_parameter_set_behind_its_rules(monkeypatch):

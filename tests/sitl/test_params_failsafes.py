@@ -227,6 +227,28 @@ def test_gain_change_in_flight_changes_the_flight_without_a_jump(vehicle):
     assert error_at(t2 + 3.0) > 2.5 * error_at(t1 + 3.0), (error_at(t1 + 3.0), error_at(t2 + 3.0))
 
 
+def test_raising_nlh_wu_in_flight_under_a_torque_push_keeps_the_vehicle_upright(vehicle):
+    """NLH_WU multiplies w_u^-2 into the attitude integral's torque. With a 0.05 N m roll push held
+    by the integral, raising NLH_WU from 1.5 to 900 (inside its range) in flight: keeping that
+    torque exactly would take a ~3.6e5 times larger integral, which the law's C(eta, eta') s term
+    turns into a runaway; the integral's share of s is kept, and the vehicle stays upright."""
+    stack, gcs = vehicle
+    take_off(gcs, 2.0)
+    push = {"description": "test", "step": [{"channel": "torque_roll", "start_s": 0.0, "value": 0.05}]}
+    push_now(stack, push)
+    wait_sim(gcs, 4.0)
+    echo = param_set(gcs, "NLH_WU", 900.0)
+    assert value_of(echo) == pytest.approx(900.0)
+    t_change = gcs.sim_time
+    wait_sim(gcs, 3.0)
+    truth = np.asarray(stack.truth_rows)
+    after = truth[:, TRUTH["time_s"]] > t_change
+    tilt = np.hypot(truth[after, TRUTH["phi_rad"]], truth[after, TRUTH["theta_rad"]])
+    assert tilt.max() < 0.1, tilt.max()
+    drift = np.hypot(truth[after, TRUTH["x_m"]], truth[after, TRUTH["y_m"]])
+    assert drift.max() < 0.2, drift.max()
+
+
 def test_saved_parameters_persist_across_a_restart(vehicle, tmp_path):
     stack, gcs = vehicle  # a first vehicle without --params: saving is refused with the reason
     ack = gcs.command(m.MAV_CMD_PREFLIGHT_STORAGE, 1)

@@ -162,16 +162,26 @@ class NonlinearHinfAttitude:
         the new integral I' (C at the (eta, eta') of the latest step, so the integral term is
         exactly continuous there; by the next step the state has moved one control period, an
         O(dt) difference). A singular system falls back to the small-rate scaling; k_p' = 0 removes
-        the integral action and the integral."""
+        the integral action and the integral.
+
+        That continuity is kept only while it does not grow the integral's part of s, ``k_p I``:
+        a larger w_u (a smaller w_u^-2) would need a proportionally larger s for the same torque,
+        and s also enters tau through ``C s``, which grows with the rates (from w_u = 1.5 to 900,
+        s would grow ~3.6e5 times and the vehicle tumble within 0.1 s). Then s is kept instead
+        (``k_p' I' = k_p I``): tau steps by ``(w_u^-2 - w_u'^-2) k_p I``, at most the integral's
+        torque before the change."""
         if new.k_p == 0.0:
             return [0.0, 0.0, 0.0]
+        kept_s = [v * old.k_p / new.k_p for v in state]
         inertia = context.inertia_kg_m2
         target = matrix_times(integral_matrix(old, inertia, euler, euler_rates), tuple(state))
         try:
             solved = solve3(integral_matrix(new, inertia, euler, euler_rates), target)
-            if all(math.isfinite(v) for v in solved):
-                return list(solved)
         except ZeroDivisionError:
-            pass
-        scale = (old.k_p * old.r_inv) / (new.k_p * new.r_inv)
-        return [v * scale for v in state]
+            solved = None
+        if solved is None or not all(math.isfinite(v) for v in solved):
+            scale = (old.k_p * old.r_inv) / (new.k_p * new.r_inv)
+            solved = tuple(v * scale for v in state)
+        if max(abs(v) for v in solved) > max(abs(v) for v in kept_s):
+            return kept_s
+        return list(solved)
