@@ -1,6 +1,7 @@
-"""A researcher's law, written into a configuration directory, flies the SITL (two processes, MAVLink
-over UDP, lockstep) exactly as it flies the whole stack in-process: the ground truth of every frame
-agrees to 1e-9 m."""
+"""A researcher's law, written into a configuration directory, and the two baselines (PX4-style PID,
+geometric SE(3)) fly the SITL (two processes, MAVLink over UDP, lockstep) exactly as they fly the
+whole stack in-process: the ground truth of every frame agrees to 1e-9 m. (The paper's cascade
+flies the whole helix through the processes in test_paper_through_sitl.py.)"""
 
 import os
 
@@ -23,11 +24,15 @@ DURATION = 6.0
 
 
 @pytest.mark.timeout(240)
-def test_a_law_from_a_configuration_directory_flies_the_sitl_as_in_process(tmp_path, monkeypatch):
-    # The processes inherit it; the test process's port block (tests/ports.py) stays behind it.
-    dirs = [str(tmp_path), *environment.config_dir_list()]
-    monkeypatch.setenv("QUADSITL_CONFIG_DIR", os.pathsep.join(dirs))
-    name = write_overlay(tmp_path, "toy_pd_sitl")
+@pytest.mark.parametrize("law", ["a law from a configuration directory", "se3", "px4_pid"])
+def test_the_law_flies_the_sitl_as_in_process(tmp_path, monkeypatch, law):
+    if law in ("se3", "px4_pid"):
+        name = law
+    else:
+        # The processes inherit it; the test process's port block (tests/ports.py) stays behind it.
+        dirs = [str(tmp_path), *environment.config_dir_list()]
+        monkeypatch.setenv("QUADSITL_CONFIG_DIR", os.pathsep.join(dirs))
+        name = write_overlay(tmp_path, "toy_pd_sitl")
     stack = paper_stack(load_scenario("helix"), load_controller(name), RunOptions())
     steps = round(DURATION / stack.sim.dt_control)
     for _ in range(steps):
