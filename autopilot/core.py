@@ -495,6 +495,7 @@ class AutopilotCore:
         self.commander.estimator_problem = loop.problem()
         self._status.estimator = loop.last_status
         self._status.imu = loop.last_imu
+        self._status.mag_gauss, self._status.baro_height_m = loop.last_mag_gauss, loop.last_baro_height_m
         self._estimator_done = (t, est, loop)  # its row is written after the answer is out
         return est
 

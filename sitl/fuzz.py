@@ -2,7 +2,8 @@
 (``python -m sitl.spray`` sends hostile traffic to running processes over UDP).
 
 ``python -m sitl.fuzz --inputs 100000 --seed 1`` flies a vehicle in-process (simulator core and
-autopilot core in lockstep, real MAVLink bytes), takes off, uploads a mission, then, while it
+autopilot core in lockstep, real MAVLink bytes; ``--controller NAME``, ``--sensors PROFILE`` to fly
+on the EKF), takes off, uploads a mission, then, while it
 hovers, delivers the inputs to its ground-station links from up to 2,000 source addresses, a few
 per frame. The kinds (:data:`AUTOPILOT_KINDS`):
 
@@ -77,6 +78,7 @@ SIMULATOR_KINDS = (
 )
 INPUTS_PER_FRAME = 20  # a flood: ~10,000 datagrams per simulated second on the GCS links
 SOURCE_PORTS = 2000
+EKF_ALIGN_S = 12.0  # on the EKF: at rest this long before arming (the filter aligns and converges)
 NAN_ALLOWED = {"MISSION_ITEM_INT": {"param1", "param2", "param3", "param4"},
                "MISSION_ITEM": {"param1", "param2", "param3", "param4"}}  # fmt: skip
 
@@ -316,18 +318,25 @@ def _name(enum: str, value: int) -> str:
     return entry.name if entry is not None else str(value)
 
 
-def _stack(log=lambda text: None) -> Lockstep:
-    sim = SimulatorSetup.load(scenario="hover")
-    ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller("intbs_nlhinf"), default_remotes=False)
-    return Lockstep(sim, ap, log=log)
+def _stack(log=lambda text: None, controller: str = "intbs_nlhinf", sensors: str | None = None) -> Lockstep:
+    """The vehicle on the ground; with ``sensors``, flying on the EKF over that sensor profile (its
+    estimator profile of the same name), aligned at rest before the flight starts."""
+    sim = SimulatorSetup.load(scenario="hover", sensors=sensors)
+    estimation = {} if sensors is None else {"estimator": "ekf", "estimator_profile": sensors}
+    ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller(controller), default_remotes=False,
+                        **estimation)  # fmt: skip
+    stack = Lockstep(sim, ap, log=log)
+    if sensors is not None:
+        stack.run_for(EKF_ALIGN_S)
+    return stack
 
 
 class _Flight:
     """The vehicle in the air: taken off and holding, a mission stored, a clean ground station
     (GCS link) heartbeating; the fuzzer's traffic comes on top of that."""
 
-    def __init__(self, log) -> None:
-        self.stack = stack = _stack(log)
+    def __init__(self, log, controller: str = "intbs_nlhinf", sensors: str | None = None) -> None:
+        self.stack = stack = _stack(log, controller, sensors)
         self.ap = ap = stack.autopilot
         self.pilot = stack.ground_station(GCS_LINK)
         stack.run_for(1.0)
@@ -363,11 +372,18 @@ def _bounds(ap) -> tuple[float, float, float]:
     return (p["NAV_REF_MAX_DIST"], p["MPC_XY_VEL_MAX"], max(p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_DN"]))
 
 
-def fuzz_autopilot(inputs: int = 100_000, seed: int = 1, log=lambda text: None) -> FuzzReport:
+def fuzz_autopilot(
+    inputs: int = 100_000,
+    seed: int = 1,
+    log=lambda text: None,
+    controller: str = "intbs_nlhinf",
+    sensors: str | None = None,
+) -> FuzzReport:
     """``inputs`` hostile datagrams against a flying vehicle in-process (see the module), then
-    a clean landing, then a twentieth as many hostile HIL frames; a :class:`FuzzReport`."""
+    a clean landing, then a twentieth as many hostile HIL frames; a :class:`FuzzReport`. The
+    vehicle flies ``controller`` on the truth, or on the EKF over the ``sensors`` profile."""
     texts: list[str] = []
-    flight = _Flight(lambda text: (texts.append(text), log(text)))
+    flight = _Flight(lambda text: (texts.append(text), log(text)), controller, sensors)
     stack, ap = flight.stack, flight.ap
     report = FuzzReport(seed)
     ports = [("127.0.0.1", 40000 + k) for k in range(SOURCE_PORTS)]
@@ -644,9 +660,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--inputs", type=int, default=100_000, help="inputs against the autopilot core")
     parser.add_argument("--sim-inputs", type=int, default=20_000, help="inputs against the simulator core")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--controller", default="intbs_nlhinf", help="the cascade the vehicle flies")
+    parser.add_argument("--sensors", default=None, metavar="PROFILE",
+                        help="fly on the EKF over this sensor profile (gps, mocap, ...); default: truth")
     args = parser.parse_args(argv)
     try:
-        report = fuzz_autopilot(args.inputs, args.seed)
+        report = fuzz_autopilot(args.inputs, args.seed, controller=args.controller, sensors=args.sensors)
         print("autopilot core:", *report.lines(), sep="\n")
         sim_report = fuzz_simulator(args.sim_inputs, args.seed)
         print("simulator core:", *sim_report.lines(), sep="\n")

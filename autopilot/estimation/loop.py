@@ -47,6 +47,8 @@ class EstimatorLoop:
         self._frames = 0
         self.last_status: EstimatorStatus | None = None
         self.last_imu: ImuSample | None = None
+        self.last_mag_gauss: tuple[float, float, float] | None = None  # the last magnetometer sample read
+        self.last_baro_height_m: float | None = None  # the last pressure altitude read
         self._pending: SensorSamples | None = None  # the aiding of the last predict(), not yet fused
 
     def step(self, t: float, samples: SensorSamples) -> StateEstimate | None:
@@ -79,8 +81,10 @@ class EstimatorLoop:
             return
         ekf, t = self.ekf, self._last_t
         if samples.mag_gauss is not None:
+            self.last_mag_gauss = samples.mag_gauss
             ekf.fuse_mag(MagSample(t, samples.mag_gauss))
         if samples.baro_height_m is not None:
+            self.last_baro_height_m = samples.baro_height_m
             ekf.fuse_baro(BaroSample(t, samples.baro_height_m))
         if samples.gps is not None:
             ekf.fuse_gps(samples.gps._replace(time_s=t))

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 from quadcommon import frames
+from quadcommon.atmosphere import isa_pressure_hpa, isa_temperature_c
 from quadcommon.rigid_body import quaternion_from_euler
 from quadcommon.trajectories import Reference
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
@@ -86,6 +87,8 @@ class VehicleStatus:
     flight_sw_version: int = 0x01000000
     estimator: EstimatorStatus | None = None  # flying on the EKF: its last status (else None)
     imu: ImuSample | None = None  # the EKF's last IMU sample (HIGHRES_IMU)
+    mag_gauss: Vector3 | None = None  # the EKF's last magnetometer sample, body FLU (HIGHRES_IMU)
+    baro_height_m: float | None = None  # the EKF's last pressure altitude, m AMSL (HIGHRES_IMU)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -306,16 +309,32 @@ def odometry(s: VehicleStatus):
 
 
 def highres_imu(s: VehicleStatus):
-    """The EKF's last IMU sample (FRD), on request; None on truth (no IMU is read then)."""
+    """The EKF's last IMU, magnetometer and barometer samples (FRD), on request, as PX4 reports
+    its sensors; None on truth (no sensor is read then). The pressure and the temperature are the
+    ISA's at the pressure altitude read (the simulator's barometer is an ISA one). A field without
+    a sample yet is 0 with its ``fields_updated`` bit clear; there is no airspeed sensor."""
     imu = s.imu
     if imu is None:
         return None
     ax, ay, az = frames.vector_to_ned(imu.specific_force_m_s2)
     gx, gy, gz = frames.vector_to_ned(imu.angular_rate_rad_s)
-    nan = math.nan
+    updated = _HIGHRES_ACC_GYRO
+    mx = my = mz = pressure = altitude = temperature = 0.0
+    if s.mag_gauss is not None:
+        mx, my, mz = frames.vector_to_ned(s.mag_gauss)
+        updated |= _HIGHRES_MAG
+    if s.baro_height_m is not None:
+        altitude = s.baro_height_m
+        pressure, temperature = isa_pressure_hpa(altitude), isa_temperature_c(altitude)
+        updated |= _HIGHRES_BARO
     return m.MAVLink_highres_imu_message(  # specific force FRD: -g on z at rest, as HIL_SENSOR
-        s.time_usec, ax, ay, az, gx, gy, gz, nan, nan, nan, nan, nan, nan, nan, 0b111111, 0
+        s.time_usec, ax, ay, az, gx, gy, gz, mx, my, mz, pressure, 0.0, altitude, temperature, updated, 0
     )
+
+
+_HIGHRES_ACC_GYRO = 0b111111  # HIGHRES_IMU_UPDATED_FLAGS: x/y/z acc, x/y/z gyro
+_HIGHRES_MAG = 0b111 << 6  # x/y/z mag
+_HIGHRES_BARO = (1 << 9) | (1 << 11) | (1 << 12)  # abs_pressure, pressure_alt, temperature
 
 
 BUILDERS = {

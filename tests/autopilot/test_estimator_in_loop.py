@@ -13,6 +13,7 @@ from pymavlink.dialects.v20 import common as m
 
 from autopilot.control.config import load_controller
 from autopilot.core import AutopilotSetup
+from quadcommon.atmosphere import isa_altitude_m
 from simulator.core import SimulatorSetup
 from simulator.sensors import SensorFault
 from sitl.inprocess import Lockstep
@@ -176,3 +177,29 @@ def test_non_finite_sensor_samples_are_refused_at_the_edge_and_the_flight_goes_o
     ref = np.asarray(stack.controller_rows)[-1, 1:4]
     assert np.linalg.norm(truth[-1, 1:4] - ref) < 0.01  # still on the helix
     assert not stack.autopilot.faults.counts
+
+
+@pytest.mark.parametrize("sensors", ["gps", "mocap"])
+def test_highres_imu_on_request_reports_the_sensors_the_filter_read(sensors):
+    """HIGHRES_IMU (MAVSDK's Telemetry.imu) as PX4 fills it: acceleration and rates, the
+    magnetometer and the barometer the filter read, finite, with their fields_updated bits;
+    pressure and temperature the ISA's at that pressure altitude."""
+    stack = ekf_stack(sensors)
+    gcs = Gcs(stack)
+    gcs.wait(lambda g: "SYS_STATUS" in g.last, what="SYS_STATUS")
+    stack.run_for(2.0)  # at rest on the ground: the magnetometer and the barometer have sampled
+    request = gcs.command(m.MAV_CMD_REQUEST_MESSAGE, m.MAVLINK_MSG_ID_HIGHRES_IMU)
+    assert request.result == m.MAV_RESULT_ACCEPTED
+    gcs.wait(lambda g: "HIGHRES_IMU" in g.last, sim_timeout=0.5, what="HIGHRES_IMU")
+    imu = gcs.last["HIGHRES_IMU"]
+    values = [getattr(imu, name) for name in imu.fieldnames if name not in ("time_usec", "fields_updated")]
+    assert all(math.isfinite(v) for v in values), imu
+    assert imu.fields_updated == 0b1101111111111  # acc, gyro, mag, abs_pressure, pressure_alt, temperature
+    assert imu.zacc == pytest.approx(-9.81, abs=0.3)  # specific force FRD at rest
+    field = stack.sim.sensors.config.earth_field_world_gauss  # paper world (x north, y west, z up)
+    level_north = (field[0], -field[1], -field[2])  # body FRD = NED, level and facing north
+    assert (imu.xmag, imu.ymag, imu.zmag) == pytest.approx(level_north, abs=0.05)
+    assert imu.pressure_alt == pytest.approx(stack.autopilot.setup.sitl.home[2], abs=5.0)  # a baro offset
+    assert isa_altitude_m(imu.abs_pressure) == pytest.approx(imu.pressure_alt, abs=0.01)
+    assert imu.temperature == pytest.approx(11.8, abs=0.1)  # ISA at ~488 m: 15 - 6.5 K/km
+    assert imu.diff_pressure == 0.0  # no airspeed sensor: its bit is clear

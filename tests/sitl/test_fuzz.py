@@ -39,6 +39,14 @@ def test_the_autopilot_core_takes_100000_hostile_inputs_and_still_lands():
     assert any(reason.startswith("setpoint refused") for reason in report.refusals)
 
 
+@pytest.mark.parametrize("sensors", ["gps"])
+def test_the_autopilot_core_on_its_ekf_takes_20000_hostile_inputs(sensors):
+    """On the estimate, fed by the sensor models (seed 15 asks for HIGHRES_IMU, among the rest: the
+    sensors the filter read come back finite)."""
+    report = fuzz_autopilot(20_000, seed=15, sensors=sensors)
+    assert report.results["COMMAND_ACK MAV_RESULT_ACCEPTED"] > 100
+
+
 def test_the_simulator_core_takes_20000_hostile_inputs():
     report = fuzz_simulator(20_000, seed=1)
     assert set(report.inputs) == set(SIMULATOR_KINDS)
