@@ -17,16 +17,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from quadcommon.atmosphere import (  # noqa: F401 (the sensors' ISA names, re-exported)
-    ISA_EXPONENT,
-    ISA_LAPSE_RATE_K_M,
-    ISA_SEA_LEVEL_PRESSURE_HPA,
-    ISA_SEA_LEVEL_TEMPERATURE_C,
-    ISA_SEA_LEVEL_TEMPERATURE_K,
-    isa_altitude_m,
-    isa_pressure_hpa,
-    isa_temperature_c,
-)
+from quadcommon.atmosphere import isa_altitude_m, isa_pressure_hpa, isa_temperature_c
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
 from quadcommon.rigid_body import Quaternion, Vector3, rotation_from_quaternion, transpose_times

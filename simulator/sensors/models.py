@@ -39,12 +39,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from quadcommon import rng as random_stream
-from quadcommon.kernel import compiled, compiling, freeze
-
-from ..dynamics.plant import TruthState
-from . import frame, kernels
-from .config import SensorConfig, SensorFault, load_sensors
-from .kernels import (  # noqa: F401 - part of this module's interface
+from quadcommon.atmosphere import (  # noqa: F401 - part of this module's interface
     ISA_EXPONENT,
     ISA_LAPSE_RATE_K_M,
     ISA_SEA_LEVEL_PRESSURE_HPA,
@@ -54,6 +49,11 @@ from .kernels import (  # noqa: F401 - part of this module's interface
     isa_pressure_hpa,
     isa_temperature_c,
 )
+from quadcommon.kernel import compiled, compiling, freeze
+
+from ..dynamics.plant import TruthState
+from . import frame, kernels
+from .config import SensorConfig, SensorFault, load_sensors
 
 Vector3 = tuple[float, float, float]
 
