@@ -116,11 +116,17 @@ def wait(clients, what: str, predicate, timeout_s: float, each=None) -> None:
     raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
-def start_up(config) -> tuple[Child, Child]:
+def start_up(config, params_dir) -> tuple[Child, Child]:
     """``quadsitl up --instance 7 --count 2``, the command a user types; returns it twice (as the
-    process and as its collected output: one Child is both)."""
+    process and as its collected output: one Child is both). Each vehicle's COM_OF_LOSS_T is 5 s
+    of simulation time: the test is about addressing, and its one thread streams both vehicles'
+    setpoints on the wall clock, which a loaded machine (two checkouts testing at once) can stall
+    for longer than PX4's 1 s (0.5 s of wall time at --speed 2)."""
+    for n in (FIRST, FIRST + 1):
+        (params_dir / f"params-{n}.toml").write_text("COM_OF_LOSS_T = 5.0\n")
     cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(FIRST), "--count", "2",
-           "--speed", "2", "--sitl-config", str(config), "--no-log"]  # fmt: skip
+           "--speed", "2", "--sitl-config", str(config), "--no-log",
+           "--params", str(params_dir / "params-{instance}.toml")]  # fmt: skip
     up = Child("quadsitl up", cmd)
     try:
         up.wait_line("Ctrl-C stops every process", 30.0)
@@ -163,9 +169,9 @@ class SharedBus:
         self.session.close()
 
 
-def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config):
+def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config, tmp_path):
     started = time.monotonic()
-    proc, output = start_up(compat_sitl_config)
+    proc, output = start_up(compat_sitl_config, tmp_path)
     clients: list[Client] = []
     shared = None
     try:
@@ -176,6 +182,7 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config):
             assert f"vehicle {n} is up (MAVLink sysid {n + 1}," in text
             assert f"udpin://0.0.0.0:{p.api_remote}" in text and f"udp {p.gcs_remote}" in text
             assert f"tcp/127.0.0.1:{p.zenoh}   keys quadsitl/{n}/truth" in text
+            assert f"1 parameters loaded from {tmp_path / f'params-{n}.toml'}" in text  # COM_OF_LOSS_T
 
         clients = [Client(FIRST), Client(FIRST + 1)]
         one, two = clients
