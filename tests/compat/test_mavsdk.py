@@ -121,7 +121,10 @@ def test_offboard_position_and_position_velocity(compat_sitl_config):
     assert closest < 0.02  # the real vehicle was there (paper frame: y = -east, z = -down)
 
     line = result.event("line_done")
-    assert line["samples"] > 10 and line["max_tracking_error_m"] < 0.1
+    # The flow computes each sample from the telemetry's clock and streams it on its own (wall)
+    # clock, so its stalls add to the error it measures: ~5 cm alone, ~10 cm with two checkouts
+    # testing at once.
+    assert line["samples"] > 10 and line["max_tracking_error_m"] < 0.15
     assert math.dist(line["ned"], line["end"]) < 0.05
 
     stopped = result.event("offboard_stopped")
