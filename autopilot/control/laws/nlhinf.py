@@ -168,8 +168,8 @@ class NonlinearHinfAttitude:
         a larger w_u (a smaller w_u^-2) would need a proportionally larger s for the same torque,
         and s also enters tau through ``C s``, which grows with the rates (from w_u = 1.5 to 900,
         s would grow ~3.6e5 times and the vehicle tumble within 0.1 s). Then s is kept instead
-        (``k_p' I' = k_p I``): tau steps by ``(w_u^-2 - w_u'^-2) k_p I``, at most the integral's
-        torque before the change."""
+        (``k_p' I' = k_p I``): tau steps by ``(w_u^-2 - w_u'^-2) k_p I``, which for a larger w_u
+        is at most the integral's torque before the change."""
         if new.k_p == 0.0:
             return [0.0, 0.0, 0.0]
         kept_s = [v * old.k_p / new.k_p for v in state]
