@@ -81,9 +81,10 @@ class OffboardGuidance:
         elif sp.yaw_rate is not None:
             yaw_rate = sp.yaw_rate
             yaw = math.remainder(previous.yaw_rad + yaw_rate * dt, 2.0 * math.pi)
+        planned_yaw = yaw if sp.yaw is None else sp.yaw  # where a planned transition ends
 
         if sp.position is not None and sp.velocity is None and sp.acceleration is None:
-            target = (sp.position, yaw if sp.yaw is None else sp.yaw)
+            target = (sp.position, planned_yaw)
             if self._plan is None or self._target is None or _moved(self._target, target):
                 self._target = target
                 self._plan = transition(previous, sp.position, self.limits, target[1])
@@ -102,7 +103,7 @@ class OffboardGuidance:
             )
             velocity = tuple(v + a * tau for v, a in zip(vel, acc, strict=True))
             if self._joining or math.dist(position, previous.position_m) > JUMP_M:
-                return self._join(t, previous, position, yaw if sp.yaw is None else sp.yaw)  # type: ignore[arg-type]
+                return self._join(t, previous, position, planned_yaw)  # type: ignore[arg-type]
         elif sp.velocity is not None:
             target_velocity = _limit_velocity(sp.velocity, self.limits)
             velocity, acc = _toward_velocity(previous.velocity_m_s, target_velocity, acc, self.limits, dt)
