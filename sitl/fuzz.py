@@ -3,9 +3,9 @@
 
 ``python -m sitl.fuzz --inputs 100000 --seed 1`` flies a vehicle in-process (simulator core and
 autopilot core in lockstep, real MAVLink bytes; ``--controller NAME``, ``--sensors PROFILE`` to fly
-on the EKF), takes off, uploads a mission, then, while it
-hovers, delivers the inputs to its ground-station links from up to 2,000 source addresses, a few
-per frame. The kinds (:data:`AUTOPILOT_KINDS`):
+on the EKF), takes off, uploads a mission, then, while it hovers, delivers the inputs to its
+ground-station links from up to 2,000 source addresses, a few per frame. The kinds
+(:data:`AUTOPILOT_KINDS`):
 
 * ``random bytes``: 0-300 random bytes, some starting with a MAVLink 1 or 2 marker;
 * ``corrupted frame`` / ``truncated frame``: a valid frame with bytes flipped / cut short;

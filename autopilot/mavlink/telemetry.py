@@ -308,6 +308,11 @@ def odometry(s: VehicleStatus):
     )  # fmt: skip
 
 
+_HIGHRES_ACC_GYRO = 0b111111  # HIGHRES_IMU_UPDATED_FLAGS: x/y/z acc, x/y/z gyro
+_HIGHRES_MAG = 0b111 << 6  # x/y/z mag
+_HIGHRES_BARO = (1 << 9) | (1 << 11) | (1 << 12)  # abs_pressure, pressure_alt, temperature
+
+
 def highres_imu(s: VehicleStatus):
     """The EKF's last IMU, magnetometer and barometer samples (FRD), on request, as PX4 reports
     its sensors; None on truth (no sensor is read then). The pressure and the temperature are the
@@ -330,11 +335,6 @@ def highres_imu(s: VehicleStatus):
     return m.MAVLink_highres_imu_message(  # specific force FRD: -g on z at rest, as HIL_SENSOR
         s.time_usec, ax, ay, az, gx, gy, gz, mx, my, mz, pressure, 0.0, altitude, temperature, updated, 0
     )
-
-
-_HIGHRES_ACC_GYRO = 0b111111  # HIGHRES_IMU_UPDATED_FLAGS: x/y/z acc, x/y/z gyro
-_HIGHRES_MAG = 0b111 << 6  # x/y/z mag
-_HIGHRES_BARO = (1 << 9) | (1 << 11) | (1 << 12)  # abs_pressure, pressure_alt, temperature
 
 
 BUILDERS = {

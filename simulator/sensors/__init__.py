@@ -2,6 +2,8 @@
 pure functions of the ground truth and time; parameters from ``config/sensors/`` (profiles
 ``ideal``, ``mocap``, ``gps``)."""
 
+from quadcommon.atmosphere import isa_altitude_m, isa_pressure_hpa, isa_temperature_c
+
 from .config import EXACT, FAULT_KINDS, SensorConfig, SensorFault, load_sensors
 from .models import (
     BaroReading,
@@ -12,9 +14,6 @@ from .models import (
     SensorReadings,
     SensorSuite,
     VisionReading,
-    isa_altitude_m,
-    isa_pressure_hpa,
-    isa_temperature_c,
 )
 
 __all__ = [

@@ -23,11 +23,12 @@ truth; a sensor samples when its period has elapsed and the sample is *delivered
 after the time it is valid for (the frame whose time first reaches it). Every reading carries its
 validity time ``time_s``; the wire carries the delivery (frame) time, as on a real vehicle.
 
-What a sample is (truth + bias + noise, the ISA, the Gauss-Markov errors) is written once as
-kernels in :mod:`.kernels`; this module decides when each sensor samples and what it delivers,
-and calls their entries. Noise is drawn from one seeded stream (:mod:`quadcommon.rng`, seeded
-from the config), so a run is repeatable, and a batch engine calling the same kernels with the
-same seed draws the same noise; a sensor whose noise is zero draws nothing.
+What a sample is (truth + bias + noise, the Gauss-Markov errors) is written once as kernels in
+:mod:`.kernels`, the ISA in :mod:`quadcommon.atmosphere`; this module decides when each sensor
+samples and what it delivers, and calls their entries. Noise is drawn from one seeded stream
+(:mod:`quadcommon.rng`, seeded from the config), so a run is repeatable, and a batch engine
+calling the same kernels with the same seed draws the same noise; a sensor whose noise is zero
+draws nothing.
 """
 
 from __future__ import annotations
@@ -39,16 +40,6 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from quadcommon import rng as random_stream
-from quadcommon.atmosphere import (  # noqa: F401 - part of this module's interface
-    ISA_EXPONENT,
-    ISA_LAPSE_RATE_K_M,
-    ISA_SEA_LEVEL_PRESSURE_HPA,
-    ISA_SEA_LEVEL_TEMPERATURE_C,
-    ISA_SEA_LEVEL_TEMPERATURE_K,
-    isa_altitude_m,
-    isa_pressure_hpa,
-    isa_temperature_c,
-)
 from quadcommon.kernel import compiled, compiling, freeze
 
 from ..dynamics.plant import TruthState
