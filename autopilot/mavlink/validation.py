@@ -238,7 +238,7 @@ def slots(command: int) -> Slots:
 
 def slots_table(commands: Iterable[int]) -> str:
     """The commands' slots as a Markdown table (the ones in docs/security.md and docs/missions.md)."""
-    rows = ["| MAV_CMD | id | used | unused: 0 or NaN only |", "|---|---:|---|---|"]
+    rows = ["| MAV_CMD | id | slots used | unused: must be unset |", "|---|---:|---|---|"]
     for command in sorted(commands):
         s = slots(command)
         used = ", ".join(str(slot) for slot in sorted(s.used)) or "none"
