@@ -648,7 +648,7 @@ class AutopilotCore:
         request = request_from_message(msg, link, address)
         self.vehicle_commands.after_ack = None
         known = request.command in self.commands.handlers  # an unknown one is UNSUPPORTED, not DENIED
-        problem = check_command(request.command, request.params) if known else None
+        problem = check_command(request.command, request.params, request.frame is not None) if known else None
         if problem:
             name = getattr(m.enums["MAV_CMD"].get(request.command), "name", f"command {request.command}")
             result, reason = m.MAV_RESULT_DENIED, f"{name} refused: {problem}"

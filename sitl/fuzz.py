@@ -15,7 +15,8 @@ ground-station links from up to 2,000 source addresses, a few per frame. The kin
 * ``handled message``: the same for the messages the autopilot handles, mostly addressed to it
   (parameter names real half the time, so some PARAM_SETs are valid and must take effect);
 * ``command``: COMMAND_LONG / COMMAND_INT for every command the autopilot handles, parameters
-  random as above, or valid for the command half the time;
+  random as above, or plausible for the command half the time (small integers and NaN, the
+  slots its MAVLink definition leaves unused unset: 0 or NaN, x/y 0 or INT32_MAX);
 * ``hil frame``: a corrupted or random lockstep frame to the autopilot's HIL entry point.
 
 What is checked (:func:`fuzz_autopilot` raises :class:`FuzzFailure` naming the seed and input):
@@ -56,6 +57,7 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.control.config import load_controller
 from autopilot.core import AutopilotSetup
 from autopilot.mavlink.params import float32_shortest
+from autopilot.mavlink.validation import INT32_MAX, slots
 from autopilot.params.store import INT32
 from gcs_scripts.upload_mission import MissionLink, make_item
 from quadcommon import wire
@@ -239,17 +241,21 @@ class AutopilotInputs:
     def command(self) -> bytes:
         rng, values = self.rng, self.values
         command = rng.choice(self.commands)
-        if rng.random() < 0.5:  # plausible parameters: small integers and NaN where "unset"
+        if rng.random() < 0.5:  # plausible parameters: small integers, NaN where "unset", unused slots unset
+            unused = slots(command).unused
             params = [
-                rng.choice((0.0, 1.0, 2.0, 6.0, math.nan, float(rng.randint(0, 300)))) for _ in range(7)
-            ]
+                rng.choice((0.0, math.nan)) if slot in unused
+                else rng.choice((0.0, 1.0, 2.0, 6.0, math.nan, float(rng.randint(0, 300))))
+                for slot in range(1, 8)
+            ]  # fmt: skip
         else:
             params = [values.float_() for _ in range(7)]
         target = self.system_id if rng.random() < 0.9 else values.int_("uint8_t")
         if rng.random() < 0.5:
             msg = m.MAVLink_command_long_message(target, 1, command, 0, *params)
-        else:
-            x, y = (int(v) if math.isfinite(v) and abs(v) < 2**31 else 0 for v in params[4:6])
+        else:  # x/y not an int32 (NaN, inf, huge): COMMAND_INT's "unset", 0 or INT32_MAX
+            unset = (0, INT32_MAX)
+            x, y = (int(v) if math.isfinite(v) and abs(v) < 2**31 else rng.choice(unset) for v in params[4:6])
             msg = m.MAVLink_command_int_message(
                 target, 1, rng.choice((0, 1, 3, 6)), command, 0, 0, *params[:4], x, y, params[6]
             )

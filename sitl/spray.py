@@ -5,8 +5,9 @@ sends seeded datagrams that a correct autopilot must refuse or ignore, from ``--
 different UDP source ports, to the vehicle's GCS port: random bytes, truncated and corrupted
 frames, MAVLink 1 frames and dialect messages it does not handle, valid commands addressed to
 another system or component, and every handled request with a field it must refuse (ARM_DISARM
-with param1 2, inf or NaN; a setpoint 10^9 m away or non-finite; a mode that does not exist;
-PARAM_SET to NaN or inf; SET_MESSAGE_INTERVAL NaN; a 65,535-item mission). None of them, taken
+with param1 2, inf or NaN; NAV_LAND, RTL or AUTO.LAND with a value in a parameter slot MAVLink
+leaves unused; a setpoint 10^9 m away or non-finite; a mode that does not exist; PARAM_SET to NaN
+or inf; SET_MESSAGE_INTERVAL NaN; a 65,535-item mission). None of them, taken
 alone, is a request a flight controller should honour, so a vehicle flown by another ground
 station during the spray must fly exactly as without it.
 
@@ -35,6 +36,7 @@ from quadcommon import environment
 environment.use_mavlink2()  # before pymavlink is imported (it reads them then)
 from pymavlink.dialects.v20 import common as m  # noqa: E402
 
+from autopilot.mavlink.validation import slots  # noqa: E402
 from quadcommon import wire  # noqa: E402
 from quadcommon.config import load_sitl  # noqa: E402
 from quadcommon.udp import bind_udp  # noqa: E402
@@ -43,6 +45,7 @@ LOOPBACK = "127.0.0.1"
 HOSTILE_KINDS = (
     "random bytes", "truncated frame", "corrupted frame", "mavlink1 frame", "unhandled message",
     "command to another system", "command to another component", "arm with an invalid bool",
+    "value in an unused slot",
     "setpoint out of bounds", "setpoint non-finite", "invalid mode", "param set non-finite",
     "message interval NaN", "mission too large",
 )  # fmt: skip
@@ -139,6 +142,14 @@ class HostileTraffic:
             return kind, self._command(m.MAV_CMD_NAV_LAND, [], component=rng.choice((2, 77, 154, 200)))
         if kind == "arm with an invalid bool":
             return kind, self._command(m.MAV_CMD_COMPONENT_ARM_DISARM, [rng.choice((2.0, -1.0, 0.5, *bad))])
+        if kind == "value in an unused slot":  # honoured, each would land or return the vehicle
+            auto_land = [1.0, 4.0, 6.0]  # DO_SET_MODE: custom mode, AUTO, LAND
+            commands = ((m.MAV_CMD_NAV_LAND, []), (m.MAV_CMD_NAV_RETURN_TO_LAUNCH, []),
+                        (m.MAV_CMD_DO_SET_MODE, auto_land))  # fmt: skip
+            command, params = rng.choice(commands)
+            params = params + [0.0] * (7 - len(params))
+            params[rng.choice(slots(command).unused) - 1] = rng.choice((1.0, -1.0, 21196.0, math.inf, 1e30))
+            return kind, self._command(command, params)
         if kind in ("setpoint out of bounds", "setpoint non-finite"):
             far = rng.choice((1e9, -1e9, 5e4)) if kind == "setpoint out of bounds" else rng.choice(bad)
             xyz = [rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(-3, -1)]

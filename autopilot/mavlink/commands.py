@@ -2,7 +2,9 @@
 
 Handlers are registered per MAV_CMD id and return ``(MAV_RESULT, reason)``; an unknown command is
 answered ``MAV_RESULT_UNSUPPORTED``. Handlers live with the code that owns the behaviour
-(the autopilot shell registers commander, stream and mission handlers here).
+(the autopilot shell registers commander, stream and mission handlers here); a command is
+registered only if :data:`~.validation.COMMAND_RULES` lists it, the one table of what each handled
+command's parameters may be and which of its slots it uses.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from .codec import mavlink
+from .validation import COMMAND_RULES
 
 
 class CommandRequest(NamedTuple):
@@ -52,6 +55,8 @@ class CommandDispatcher:
         self.handlers: dict[int, Handler] = {}
 
     def register(self, command: int, handler: Handler) -> None:
+        if command not in COMMAND_RULES:  # a programming error: found when the autopilot starts
+            raise ValueError(f"MAV_CMD {command} is not in validation.COMMAND_RULES: add its rules there")
         self.handlers[command] = handler
 
     def dispatch(self, request: CommandRequest) -> tuple[int, str]:

@@ -19,12 +19,11 @@ from ..commander.modes import FlightMode
 from . import telemetry
 from .codec import mavlink as m
 from .commands import CommandDispatcher, CommandRequest
-from .validation import FORCE_MAGIC, reference_problem
+from .validation import FORCE_MAGIC, INT32_MAX, reference_problem
 
 if TYPE_CHECKING:
     from ..core import AutopilotCore
 
-INT32_MAX = 2**31 - 1  # COMMAND_INT x/y "unset" (MAVLink)
 REPOSITION_FRAMES = {  # COMMAND_INT frame -> altitude relative to home?
     m.MAV_FRAME_GLOBAL: False,
     m.MAV_FRAME_GLOBAL_INT: False,

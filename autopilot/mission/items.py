@@ -52,6 +52,13 @@ MISSION_ITEM_INT, x and y of every global frame are degrees * 1e7 (also for the 
 variants: PX4, MAVSDK and QGC encode them that way). Items without a position accept any of
 these frames and ``MAV_FRAME_MISSION``. Other frames: ``MAV_MISSION_UNSUPPORTED_FRAME``.
 
+Parameter slots: a slot MAVLink's definition of the item's command leaves unused ("Empty",
+"Reserved", ...) must be unset: 0 or NaN (x, y: 0 or ``INT32_MAX``), whatever the frame, or the
+upload ends with ``MAV_MISSION_INVALID_PARAMn`` for the first such slot (checked right after the
+command is known, before its frame and values: :func:`check_unused_slots`, the rule and its
+exceptions in :mod:`autopilot.mavlink.validation`). The other slots are read as above or, where
+this vehicle has no use for them (a fixed wing's pass radius, a camera's id), stored and ignored.
+
 Positions are resolved to the paper frame only when the mission is flown
 (:meth:`ItemPosition.to_paper`), because "relative to home" depends on where the vehicle armed.
 """
@@ -66,6 +73,7 @@ from typing import NamedTuple
 from quadcommon import frames
 
 from ..mavlink.codec import mavlink as m
+from ..mavlink.validation import slots
 
 Vector3 = tuple[float, float, float]
 
@@ -128,6 +136,11 @@ class WireItem(NamedTuple):
     y: int
     z: float
     mission_type: int = m.MAV_MISSION_TYPE_MISSION
+
+    @property
+    def slots(self) -> tuple[float, float, float, float, int, int, float]:
+        """param1..param7 as MAVLink numbers them (param5/6: the int32 x, y)."""
+        return (self.param1, self.param2, self.param3, self.param4, self.x, self.y, self.z)
 
     @classmethod
     def from_message(cls, msg) -> WireItem:
@@ -265,6 +278,22 @@ def _invalid(result: int, reason: str) -> ItemRejected:
     return ItemRejected(result, reason)
 
 
+# Slot n (1-7) -> the MAV_MISSION_RESULT naming it.
+SLOT_RESULTS = (
+    m.MAV_MISSION_INVALID_PARAM1, m.MAV_MISSION_INVALID_PARAM2, m.MAV_MISSION_INVALID_PARAM3,
+    m.MAV_MISSION_INVALID_PARAM4, m.MAV_MISSION_INVALID_PARAM5_X, m.MAV_MISSION_INVALID_PARAM6_Y,
+    m.MAV_MISSION_INVALID_PARAM7,
+)  # fmt: skip
+
+
+def check_unused_slots(wire: WireItem) -> None:
+    """Raise ``INVALID_PARAMn`` for the first slot MAVLink leaves unused that holds a value."""
+    problem = slots(wire.command).problem(wire.slots, integer_xy=True)
+    if problem is not None:
+        slot, reason = problem
+        raise _invalid(SLOT_RESULTS[slot - 1], f"item {wire.seq}: {reason}")
+
+
 def _optional_yaw(value: float, seq: int) -> float | None:
     """param4 yaw (deg, NED, clockwise) -> paper yaw (rad); NaN -> None (keep heading)."""
     if math.isnan(value):
@@ -329,6 +358,7 @@ def parse_item(
     kind = _KINDS.get(wire.command)
     if kind is None:
         raise _invalid(m.MAV_MISSION_UNSUPPORTED, f"item {seq}: command {wire.command} not supported")
+    check_unused_slots(wire)
     if kind == ItemKind.PAYLOAD:
         return _payload(wire, origin)
     frames_ok = _POSITION_FRAMES if kind in _POSITIONAL else _ANY_FRAMES
@@ -396,10 +426,6 @@ def parse_item(
 
 
 MAX_ITEMS_SEQ = 65_535  # a seq is uint16; the whole-mission check asks for a target in the mission
-_PARAM_RESULTS = (
-    m.MAV_MISSION_INVALID_PARAM1, m.MAV_MISSION_INVALID_PARAM2, m.MAV_MISSION_INVALID_PARAM3,
-    m.MAV_MISSION_INVALID_PARAM4,
-)  # fmt: skip
 _ROI_MODES_MISSION_FRAME = (m.MAV_ROI_NONE, m.MAV_ROI_WPNEXT, m.MAV_ROI_WPINDEX)
 
 
@@ -408,7 +434,7 @@ def _payload(wire: WireItem, origin: tuple[float, float, float]) -> MissionItem:
     seq = wire.seq
     for i, value in enumerate((wire.param1, wire.param2, wire.param3, wire.param4)):
         if math.isinf(value):
-            raise _invalid(_PARAM_RESULTS[i], f"item {seq}: param{i + 1} is {value}")
+            raise _invalid(SLOT_RESULTS[i], f"item {seq}: param{i + 1} is {value}")
     global_frame = wire.frame in _POSITION_FRAMES and wire.frame != FRAME_LOCAL_NED
     if wire.command == CMD_DO_SET_ROI_LOCATION or (
         wire.command in ROI_MODE_COMMANDS and global_frame and wire.param1 == m.MAV_ROI_LOCATION

@@ -4,7 +4,9 @@ They travel through the same mission protocol as the mission (:mod:`.protocol`),
 on its own, and go back on download exactly as uploaded (the stored wire fields).
 
 Fence items (PX4's set), in ``MAV_FRAME_GLOBAL(_INT)`` or ``MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT)``
-(the altitude is not used: the fence is horizontal; ``GF_MAX_VER_DIST`` limits the height):
+(the fence is horizontal, ``GF_MAX_VER_DIST`` limits the height; MAVLink reserves the polygons' and
+circles' z, which must be 0 or NaN like every slot MAVLink leaves unused, see
+:mod:`autopilot.mission.items`):
 
 =====================================  =====  ===================================================
 NAV_FENCE_POLYGON_VERTEX_INCLUSION     5001   p1 = vertex count n (>= 3); n consecutive items of
@@ -47,6 +49,7 @@ from .items import (
     MissionItem,
     PositionKind,
     WireItem,
+    check_unused_slots,
 )
 
 Vector2 = tuple[float, float]
@@ -69,6 +72,8 @@ _FENCE_KINDS = {
     CMD_CIRCLE_INCLUSION: ItemKind.FENCE_CIRCLE,
     CMD_CIRCLE_EXCLUSION: ItemKind.FENCE_CIRCLE,
 }
+FENCE_COMMANDS = frozenset(_FENCE_KINDS)
+RALLY_COMMANDS = frozenset((CMD_RALLY_POINT,))
 _GLOBAL_FRAMES = {f for f in _POSITION_FRAMES if f != FRAME_LOCAL_NED}
 
 
@@ -100,6 +105,7 @@ def parse_fence_item(wire: WireItem, origin: tuple[float, float, float]) -> Miss
     kind = _FENCE_KINDS.get(wire.command)
     if kind is None:
         raise ItemRejected(m.MAV_MISSION_UNSUPPORTED, f"fence item {seq}: command {wire.command} unsupported")
+    check_unused_slots(wire)
     position = _global_position(wire)
     p1 = wire.param1
     if kind == ItemKind.FENCE_POLYGON:
@@ -132,6 +138,7 @@ def parse_rally_item(wire: WireItem, origin: tuple[float, float, float]) -> Miss
     seq = wire.seq
     if wire.command != CMD_RALLY_POINT:
         raise ItemRejected(m.MAV_MISSION_UNSUPPORTED, f"rally item {seq}: command {wire.command} unsupported")
+    check_unused_slots(wire)
     position = _global_position(wire)
     _far(position, origin, seq)
     return MissionItem(seq, ItemKind.RALLY_POINT, wire, position)

@@ -71,7 +71,7 @@ def _mission(last_command: int) -> MissionExecutor:
     wires = [
         _item(0, m.MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 2.5)),
         _item(1, m.MAV_CMD_NAV_WAYPOINT, (1.0, 0.0, 2.5)),
-        _item(2, last_command, (1.0, 0.0, 0.0)),
+        _item(2, last_command, (1.0, 0.0, 0.0) if last_command == m.MAV_CMD_NAV_LAND else (0.0, 0.0, 0.0)),
     ]
     items = []
     for w in wires:

@@ -61,4 +61,6 @@ def test_a_flight_under_hostile_traffic_is_the_flight_without_it():
     )  # fmt: skip
     for reason in reasons:
         assert any(reason in key for key in refused), (reason, refused)
+    for name in ("NAV_LAND", "NAV_RETURN_TO_LAUNCH", "DO_SET_MODE"):  # a value in an unused slot
+        assert any(f"{name} refused: param" in key and ": unused (" in key for key in refused), name
     assert info["peers"] and all(len(peers) <= 16 for peers in info["peers"].values())

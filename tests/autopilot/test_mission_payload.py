@@ -151,7 +151,9 @@ def executor(*wires):
 
 
 def payload_wire(seq, command):
-    return WireItem(seq, MISSION, command, 0, 1, 0.0, 0.0, 1.0, NAN, 0, 0, 0.0)
+    """param3 = 1 (one picture, pitch rate) where the command has a param3; NaN where it is reserved."""
+    p3 = 1.0 if command != m.MAV_CMD_IMAGE_STOP_CAPTURE else NAN
+    return WireItem(seq, MISSION, command, 0, 1, 0.0, 0.0, p3, NAN, 0, 0, 0.0)
 
 
 @pytest.fixture

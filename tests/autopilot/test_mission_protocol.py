@@ -106,7 +106,7 @@ def test_download_returns_the_upload_exactly(proto):
         (item(1, frame=m.MAV_FRAME_GLOBAL_INT, x=473977420, y=1900000000), m.MAV_MISSION_INVALID_PARAM6_Y),
         (item(1, z=math.nan), m.MAV_MISSION_INVALID_PARAM7),
         (
-            item(1, command=m.MAV_CMD_DO_CHANGE_SPEED, frame=2, p=(1.0, 0.0, -1.0, 0.0)),
+            item(1, command=m.MAV_CMD_DO_CHANGE_SPEED, frame=2, p=(1.0, 0.0, -1.0, 0.0), x=0, z=0.0),
             m.MAV_MISSION_INVALID_PARAM2,
         ),
     ],

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from autopilot.mavlink import validation
+from autopilot.mission import items, plans
 from quadcommon import environment
 
 REPO = Path(__file__).resolve().parents[2]
@@ -117,6 +119,17 @@ def test_every_page_is_in_the_navigation() -> None:
 def test_environment_table_is_the_modules() -> None:
     """docs/configuration.md shows quadcommon.environment.VARIABLES as they are."""
     assert environment.markdown_table() in (DOCS / "configuration.md").read_text()
+
+
+def test_parameter_slot_tables_are_the_modules() -> None:
+    """docs/security.md and docs/missions.md show the slots of the handled commands and items, and
+    the overrides, as autopilot.mavlink.validation derives them (print the tables with
+    ``validation.slots_table(...)`` / ``validation.overrides_table()`` to update the pages)."""
+    security, missions = (DOCS / "security.md").read_text(), (DOCS / "missions.md").read_text()
+    assert validation.slots_table(validation.COMMAND_RULES) in security
+    assert validation.overrides_table() in security
+    item_commands = items.SUPPORTED_COMMANDS | plans.FENCE_COMMANDS | plans.RALLY_COMMANDS
+    assert validation.slots_table(item_commands) in missions
 
 
 # Development history in user-facing text: issue numbers, review findings, dates of measurements,
