@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from quadcommon.config import VehicleConfig
-from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel, typing_error_cause
 from quadcommon.rigid_body import body_rates_from_euler_rates, euler_torque_from_body_torque
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
@@ -307,6 +307,14 @@ class Cascade:
         self.config, self.context = controller, context
 
 
+def not_compiled(laws: str, error: Exception) -> str:
+    """Why the law pair ``laws`` did not compile: the cause numba found (file, line, what it could
+    not type: :func:`quadcommon.kernel.typing_error_cause`), else the start of its error."""
+    cause = typing_error_cause(error) or "\n".join(str(error).strip().splitlines()[:12])
+    return (f"the laws {laws} do not compile with numba ({type(error).__name__}):\n{cause}\n"
+            "(QUADSITL_PURE_PYTHON=1 runs them as Python, slower)")  # fmt: skip
+
+
 def _entry(cascade: Cascade):
     """The step of ``cascade``'s law pair: compiled once per process (loaded from numba's cache
     after the first time), warmed up on a copy of the cascade's buffer at hover so nothing compiles
@@ -318,9 +326,7 @@ def _entry(cascade: Cascade):
             step(cascade.buffer.copy(), cascade._at, up, z3, z3, z3, up, z3, z3, 0.0, 0.0, 0.0, True)
         except Exception as error:  # numba's typing errors: a law it cannot compile
             laws = f"{cascade.translational.NAME} + {cascade.rotational.NAME}"
-            detail = "\n".join(str(error).strip().splitlines()[:12])
-            raise ConfigError(f"the laws {laws} do not compile with numba ({type(error).__name__}):\n"
-                              f"{detail}\n(QUADSITL_PURE_PYTHON=1 runs them as Python, slower)") from error
+            raise ConfigError(not_compiled(laws, error)) from error
         freeze(step)
         step._quadsitl_warm = True
     return step

@@ -16,9 +16,11 @@ from typing import Any
 
 import numpy as np
 
+from autopilot.control.cascade import not_compiled
 from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import VehicleConfig, load_scenario, load_vehicle
+from quadcommon.schema import ConfigError
 from simulator.environment.gust_profile import GustProfile
 
 from . import engine as eng
@@ -128,5 +130,9 @@ def warm_up(spec: CampaignSpec) -> float:
             assert spec.estimation is not None
             e = spec.estimation
             est = eng.estimator_memory(e.sensors, e.params, 9.81, _home_altitude(), rates.control_hz)
-        eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden, est))
+        try:
+            eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden, est))
+        except Exception as error:  # noqa: BLE001 - numba's typing errors: a law pair it cannot compile
+            laws = f"{C.translational} + {C.rotational}"
+            raise ConfigError(f"controller {controller.name}: {not_compiled(laws, error)}") from error
     return time.perf_counter() - start
