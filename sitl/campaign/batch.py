@@ -91,7 +91,7 @@ def run_chunk(spec: CampaignSpec, runs: Sequence[int]) -> list[dict[str, Any]]:
         for name, flight in flights(spec, sample).items():
             metrics, _ = eng.fly(flight)
             rows.append(
-                {"run": int(run), "controller": name, **sample.parameters, **eng.metrics_dict(metrics)}
+                {"run": int(run), "controller": name, **sample.parameters, **eng.metrics_dict(metrics, name)}
             )
     return rows
 
@@ -104,13 +104,14 @@ def fly_recorded(spec: CampaignSpec, run: int, controller: str) -> tuple[FlightR
     record = eng.record_to_flight_record(
         rows, f"{controller} (run {run})", spec.scenario.name, controller, sample.gusts.event_times()
     )
-    return record, eng.metrics_dict(metrics)
+    return record, eng.metrics_dict(metrics, controller)
 
 
 def warm_up(spec: CampaignSpec) -> float:
     """Compile the flight of each of the spec's law pairs now (or load it from numba's cache), in
     this process before the workers fork; returns the seconds it took. Flies a two-step hover with
-    each controller."""
+    each controller; a pair numba cannot compile is a ConfigError naming the controller and the
+    cause (:func:`~autopilot.control.cascade.not_compiled`)."""
     start = time.perf_counter()
     vehicle = load_vehicle("paper_quad")
     scenario = load_scenario("hover")
