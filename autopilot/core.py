@@ -170,6 +170,9 @@ class AutopilotCore:
         self._estimator_done: tuple | None = None  # (t, estimate, loop) of the frame, for its row
         self._statustext_id = 0
         self._frame_truth: StateEstimate | None = None  # the frame's truth (before the EKF's estimate)
+        # The latest flight terminated because a law failed: (simulation time s, the failure). The
+        # process flies on; an in-process experiment ends there (sitl.inprocess).
+        self.controller_failure: tuple[float, ControllerFailure] | None = None
 
         self.params = default_parameters(setup.controller, sitl.rates, estimator=True, vehicle=setup.vehicle)
         self.params.values["MAV_SYS_ID"] = float(self.system_id)
@@ -451,6 +454,7 @@ class AutopilotCore:
         PX4's failure detector terminates; the process flies on, the reason on every link."""
         self.statustext(m.MAV_SEVERITY_EMERGENCY, f"flight terminated: {failure}"[:200])
         self.log(f"flight terminated: {failure}")
+        self.controller_failure = (t, failure)
         self.commander.disarm(t, force=True)
         self._flying = False
         self.cascade.reset()

@@ -1,17 +1,23 @@
 """Campaign speed: 1,000 runs of the coupled plant, wall time on this machine.
 
-Run: ``.venv/bin/python benchmarks/campaign.py [--runs 1000] [--workers 2] [--controller NAME]``.
+Run: ``.venv/bin/python benchmarks/campaign.py [--runs 1000] [--workers 2] [--controller NAME]
+[--spec NAME] [--config-dir DIR]``.
 
-What is flown: ``config/campaigns/paper_box.toml`` restricted to one controller (IntBS-NLHinf by
-default; any controller, a researcher's own included, with ``--controller``): the helix of
-Section IV, 40 s, the paper's disturbances on six axes, the true plant's mass and each inertia
+What is flown: the runs of a campaign spec (``config/campaigns/paper_box.toml`` by default) with
+one controller (IntBS-NLHinf by default). ``--controller NAME`` takes any controller found by
+name, a researcher's own included (``controllers/NAME.toml`` and its laws in ``--config-dir DIR``
+or ``QUADSITL_CONFIG_DIR``): one in the spec's list flies as the spec gives it, one not in the
+spec's list flies the spec's runs alone (the runs' plants and disturbances do not depend on the
+controllers); a name found nowhere is refused before anything is flown. paper_box is the helix
+of Section IV, 40 s, the paper's disturbances on six axes, the true plant's mass and each inertia
 uniform within +-30 %, RK4 in float64 at 1 kHz physics, 500 Hz control, the MAVLink wire's float32
 quantisation on. Everything a user's ``quadsitl campaign`` does is counted: spec loading, sampling,
 the process pool, numba compilation, the flights, the Parquet parts and the final table.
 
 Measured twice, each in a fresh process: with an empty cache (the controller's law pair compiled
 from scratch: ``numba_compile_time`` is what a new law costs once), then with the cache the first
-measurement left (what every later campaign pays). With ``--estimator ekf --sensors NAME`` two
+measurement left (what every later campaign pays). A measurement that fails stops the benchmark
+with that process's error. With ``--estimator ekf --sensors NAME`` two
 more fresh processes fly the same campaign on the estimate (the sensor profile NAME and the
 autopilot's EKF, each run with its own noise): the first compiles the flight on the estimate (an
 entry of its own), the second's wall time is printed beside the truth campaign's warm one with
@@ -45,20 +51,30 @@ def _cpu_s() -> float:
     return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def child(args: argparse.Namespace) -> None:
-    sys.path.insert(0, str(ROOT))
-    start = time.perf_counter()
-    load_before = os.getloadavg()[0]
-    from sitl.campaign.runner import run_campaign
-    from sitl.campaign.spec import estimation_spec, load_campaign
+def _project_on_path() -> None:
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
 
-    spec = load_campaign(args.spec, runs=args.runs)
-    spec = replace(
+
+def flown_spec(args: argparse.Namespace):
+    """The campaign the benchmark flies: the spec's runs with ``--controller`` alone
+    (:func:`sitl.campaign.spec.flown_by`), the wire and the estimator as asked."""
+    from sitl.campaign.spec import estimation_spec, flown_by, load_campaign
+
+    spec = flown_by(load_campaign(args.spec, runs=args.runs), args.controller)
+    return replace(
         spec,
-        controllers=tuple(c for c in spec.controllers if c.name == args.controller),
         wire_float32=args.wire == "on",
         estimation=estimation_spec(args.sensors) if args.estimator == "ekf" else None,
     )
+
+
+def child(args: argparse.Namespace) -> None:
+    start = time.perf_counter()
+    load_before = os.getloadavg()[0]
+    from sitl.campaign.runner import run_campaign
+
+    spec = flown_spec(args)
     with tempfile.TemporaryDirectory() as out:
         result = run_campaign(spec, out, workers=args.workers, progress=False)
     wall = time.perf_counter() - start
@@ -74,14 +90,19 @@ def child(args: argparse.Namespace) -> None:
     print(json.dumps(report))
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--runs", type=int, default=1000)
-    parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--spec", default="paper_box")
-    parser.add_argument("--controller", default="intbs_nlhinf")
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="benchmarks/campaign.py", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("--runs", type=int, default=1000, help="runs of the spec flown (default 1000)")
+    parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--spec", default="paper_box", metavar="NAME",
+                        help="the campaign spec whose runs are flown (config/campaigns; default paper_box)")
+    parser.add_argument("--controller", default="intbs_nlhinf", metavar="NAME",
+                        help="the controller flown (default intbs_nlhinf): any found by name, yours "
+                        "included; one not in the spec's list flies the spec's runs alone")  # fmt: skip
+    parser.add_argument("--config-dir", metavar="DIR", default=None,
+                        help="a configuration directory looked in first, as quadsitl --config-dir "
+                        "(your controllers/ and laws/; default: QUADSITL_CONFIG_DIR, then the shipped)")
     parser.add_argument("--wire", choices=("on", "off"), default="on", help="float32 wire emulation")
     parser.add_argument(
         "--estimator",
@@ -91,10 +112,25 @@ def main() -> None:
     )
     parser.add_argument("--sensors", default="gps", help="the EKF campaign's sensor profile (default gps)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
-    args = parser.parse_args()
-    if args.child:
-        child(args)
-        return
+    return parser
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = build_parser().parse_args(argv)
+    _project_on_path()
+    from quadcommon.config import with_config_dir
+    from quadcommon.schema import ConfigError
+
+    try:
+        if args.config_dir is not None:  # in the environment: the measurements' processes look there too
+            os.environ.update(with_config_dir(args.config_dir, os.environ))
+        if args.child:
+            child(args)
+            return
+        spec = flown_spec(args)  # refused here, before any measurement, when it names what does not exist
+    except ConfigError as exc:
+        print(f"benchmarks/campaign.py: configuration error: {exc}", file=sys.stderr)
+        sys.exit(2)
 
     cmd = [
         sys.executable, __file__, "--child", "--runs", str(args.runs), "--workers", str(args.workers),
@@ -110,8 +146,12 @@ def main() -> None:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, QUADSITL_KERNEL_CACHE=cache)
         for label in labels:
             estimator = ["--estimator", "ekf" if label.startswith("ekf") else "truth"]
-            out = subprocess.run(cmd + estimator, env=env, capture_output=True, text=True, check=True,
-                                 timeout=3600)  # fmt: skip
+            out = subprocess.run(cmd + estimator, env=env, capture_output=True, text=True, timeout=3600)
+            if out.returncode != 0:
+                sys.stderr.write(out.stderr)
+                print(f"benchmarks/campaign.py: the {NAMES[label]} measurement failed "
+                      f"(exit {out.returncode})", file=sys.stderr)  # fmt: skip
+                sys.exit(1)
             results[label] = json.loads(out.stdout.strip().splitlines()[-1])
             r = results[label]
             print(
@@ -120,10 +160,11 @@ def main() -> None:
                 f"{r['cpu_s']:.1f} CPU s in all; load average before {r['load_before']:.2f}",
                 flush=True,
             )
-    physics_steps = args.runs * 40_000
+    rates = spec.rates
+    physics_steps = spec.runs * round(spec.duration_s * rates.control_hz * rates.physics_steps_per_control)
     cold, warm = results["cold"], results["warm"]
     print(
-        f"runs: {args.runs} x {args.controller}, {args.workers} workers, "
+        f"runs: {spec.runs} of {spec.name} x {args.controller}, {args.workers} workers, "
         f"wire float32 {args.wire}, RK4 float64"
     )
     print(f"campaign_wall_time_cold_cache: {cold['wall_s']:.1f} s")

@@ -34,6 +34,7 @@ import hashlib
 import importlib.util
 import inspect
 import os
+import re
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -122,6 +123,37 @@ def freeze(entry: Callable[..., Any]) -> None:
     disable = getattr(entry, "disable_compile", None)
     if disable is not None:
         disable()
+
+
+_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
+_LOCATION = re.compile(r'^\s*File "(?P<file>[^"]+)", line (?P<line>\d+):', re.M)
+_PIPELINE = re.compile(r"Failed in \w+ mode pipeline \(step: [^)]*\)\s*$", re.M)
+
+
+def typing_error_cause(error: BaseException) -> str | None:
+    """The cause of a numba compilation error, as a kernel's author wants it: ``FILE, line N: what
+    numba could not type`` and that line of source. numba nests the error of a kernel called by a
+    kernel inside its caller's (an entry, the cascade, the law: each adds its own frames and
+    candidate signatures), and prints the innermost location first: that location, and the message
+    just before it, are the cause. None when ``error``'s text carries no source location."""
+    text = _COLOUR.sub("", str(error))
+    location = _LOCATION.search(text)
+    if location is None:
+        return None
+    before = text[: location.start()]
+    pipelines = list(_PIPELINE.finditer(before))
+    start = pipelines[-1].end() if pipelines else 0
+    message = " ".join(line.strip() for line in before[start:].splitlines() if line.strip())
+    path = os.path.normpath(os.path.join(os.getcwd(), location["file"]))  # numba prints it relative
+    line = int(location["line"])
+    try:
+        source = Path(path).read_text().splitlines()[line - 1].strip()
+    except (OSError, IndexError, UnicodeDecodeError):
+        source = ""
+    hint = ""
+    if "Untyped global name" in message and "<class 'function'>" in message:
+        hint = " (a function a kernel calls must be a kernel too: decorate it with @kernel)"
+    return f"{path}, line {line}: {message}{hint}" + (f"\n    {source}" if source else "")
 
 
 # -------------------------------------------------------------------------------------------------

@@ -24,6 +24,7 @@ from importlib import metadata
 from pathlib import Path
 
 from autopilot.control.config import CONTROLLER_NAMES
+from autopilot.control.registry import ControllerFailure
 from quadcommon.cli_help import HelpFormatter
 from quadcommon.schema import ConfigError
 
@@ -420,6 +421,9 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"quadsitl: configuration error: {exc}", file=sys.stderr)
         return 2
+    except ControllerFailure as exc:  # an in-process run whose law failed (run, paper)
+        print(f"quadsitl: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("quadsitl: interrupted", file=sys.stderr)
         return 130

@@ -51,13 +51,10 @@ def compile_target(target: str) -> tuple[str, float]:
 
         Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
     elif kind == "campaign":
-        from dataclasses import replace
-
-        from autopilot.control.config import load_controller
         from sitl.campaign.batch import warm_up
-        from sitl.campaign.spec import load_campaign
+        from sitl.campaign.spec import flown_by, load_campaign
 
-        warm_up(replace(load_campaign("paper_box", runs=1), controllers=(load_controller(name),)))
+        warm_up(flown_by(load_campaign("paper_box", runs=1), name))
     else:
         raise ValueError(f"unknown target {target!r}")
     return target, time.perf_counter() - start

@@ -27,7 +27,11 @@ next frame. A ``script(gcs, t)`` callback runs once per frame; :meth:`Lockstep.r
 a predicate or a time.
 
 :func:`run_scenario` is the paper's experiment on it (armed at t = 0, flying the scenario's
-trajectory: ``--autostart``), returning the time series as a FlightRecord.
+trajectory: ``--autostart``), returning the time series as a FlightRecord. An experiment's stack
+(:func:`paper_stack`, :func:`fly_mission_experiment`) ends where the autopilot terminates the flight
+because a law failed (a non-finite output: the SITL's STATUSTEXT, flight termination):
+:meth:`Lockstep.step` raises :class:`~autopilot.control.registry.ControllerFailure` with the
+autopilot's reason, instead of flying on to indices of NaN.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from autopilot.commander.modes import FlightMode  # noqa: E402
 from autopilot.control.config import ControllerConfig  # noqa: E402
+from autopilot.control.registry import ControllerFailure  # noqa: E402
 from autopilot.core import AutopilotCore, AutopilotSetup  # noqa: E402
 from autopilot.logger.logger import LogOptions  # noqa: E402
 from autopilot.logger.storage import LogDirectory, LogWriter  # noqa: E402
@@ -197,6 +202,9 @@ class Lockstep:
         self._hil_direct: dict[str, list[bytes]] = {"sim->ap": [], "ap->sim": []}  # unimpaired way
         self._next_tick = 0.0
         self.frames = 0
+        # True: a flight the autopilot terminates because a law failed ends the run (step() raises
+        # ControllerFailure); False: the autopilot flies on, as its process does.
+        self.stop_on_controller_failure = False
 
     @property
     def t(self) -> float:
@@ -304,6 +312,12 @@ class Lockstep:
             ap.estimator_rows.clear()
         sim.end_frame(answer)
         self.frames += 1
+        if self.stop_on_controller_failure and ap.controller_failure is not None:
+            self._controller_failed()
+
+    def _controller_failed(self) -> None:
+        t_failed, failure = self.autopilot.controller_failure
+        raise ControllerFailure(f"flight terminated at t={t_failed:.3f} s: {failure}") from failure
 
     def _impaired_exchange(self, datagram: bytes, t: float):
         """The frame and its answer over the impaired HIL link, as the two processes exchange them
@@ -368,6 +382,8 @@ class Lockstep:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
             self.estimator_rows.extend(ap.take_estimator_rows())
+        if self.stop_on_controller_failure and ap.controller_failure is not None:
+            self._controller_failed()
 
     def close(self) -> list:
         """End the flight log that is open and write what is left; the logs written (paths)."""
@@ -438,7 +454,9 @@ def paper_stack(
                         default_remotes=False, estimator=options.estimator or scenario.estimator,
                         estimator_profile=estimator_profile_for(sensors),
                         log=LogOptions(options.log_dir))  # fmt: skip
-    return Lockstep(sim, ap, impair=options.impair)
+    stack = Lockstep(sim, ap, impair=options.impair)
+    stack.stop_on_controller_failure = True
+    return stack
 
 
 def run_scenario(
@@ -448,16 +466,21 @@ def run_scenario(
     vehicle: VehicleConfig | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> FlightRecord:
-    """Fly ``scenario`` with ``controller`` through the whole stack; the time series per frame."""
+    """Fly ``scenario`` with ``controller`` through the whole stack; the time series per frame.
+    A flight terminated because a law failed raises ControllerFailure naming the scenario, the
+    time and the controller."""
     stack = paper_stack(scenario, controller, options, vehicle)
     duration = options.duration_s if options.duration_s is not None else scenario.duration_s
     steps = int(round(duration / stack.sim.dt_control))
     report_every = max(steps // 20, 1)
-    for k in range(steps):
-        stack.step()
-        if progress is not None and k % report_every == 0:
-            progress(k / steps)
-    stack.final_frame()
+    try:
+        for k in range(steps):
+            stack.step()
+            if progress is not None and k % report_every == 0:
+                progress(k / steps)
+        stack.final_frame()
+    except ControllerFailure as failure:
+        raise ControllerFailure(f"{scenario.name}: {failure}") from failure
     if progress is not None:
         progress(1.0)
     return flight_record(stack, scenario.name, controller.name, nominal=options.nominal_plant)
@@ -490,6 +513,7 @@ def fly_mission_experiment(
                         estimator=options.estimator or scenario.estimator,
                         estimator_profile=estimator_profile_for(sensor_profile))  # fmt: skip
     stack = Lockstep(sim, ap)
+    stack.stop_on_controller_failure = True
     link = upload_mission.MissionLink(StackConnection(stack), 0)
     link.wait_heartbeat(5.0)
     trajectory = trajectory_from_spec(scenario.trajectory)

@@ -8,6 +8,10 @@ Writes to the output directory:
   the three cascades overlaid, disturbance instants dotted);
 * ``runs/<scenario>_<controller>.parquet``: the time series of every run (readable by
   ``quadsitl analyze``).
+
+A run whose law fails in flight (the autopilot terminates the flight: a non-finite output) ends the
+experiment with :class:`~autopilot.control.registry.ControllerFailure` naming the scenario and the
+controller (``quadsitl paper`` exits 1); no table is written.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from autopilot.control.config import CONTROLLER_NAMES, load_controller
+from autopilot.control.registry import ControllerFailure
 from gcs_scripts.analysis.figures import paper_figures
 from gcs_scripts.analysis.metrics import Indices, indices
 from gcs_scripts.analysis.record import FlightRecord
@@ -72,9 +77,13 @@ def run_paper(
     if workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             results = pool.map(run_job, jobs)
-            for done, (scenario, controller, record, seconds) in enumerate(results, 1):
-                records[(scenario, controller)] = record
-                _report(log, done, len(jobs), scenario, controller, record, seconds)
+            try:
+                for done, (scenario, controller, record, seconds) in enumerate(results, 1):
+                    records[(scenario, controller)] = record
+                    _report(log, done, len(jobs), scenario, controller, record, seconds)
+            except ControllerFailure:  # the runs not started yet are not flown
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
     else:
         for done, job in enumerate(jobs, 1):
             scenario, controller, record, seconds = run_job(job)

@@ -3,7 +3,12 @@ laws/ and a controller file naming it (docs/controllers.md, "Adding a control la
 
 from __future__ import annotations
 
-from quadcommon.config import config_path
+import contextlib
+import os
+import sys
+
+from autopilot.control import registry
+from quadcommon.config import CONFIG_ENV, config_path
 
 TOY_LAW = '''
 """A toy translational law: a = p_d'' - kp e1 - kd e1' (no integral), then eqs. 23-29."""
@@ -77,3 +82,36 @@ def write_overlay(directory, name: str, failure: str = "pass", kp: float = 4.0) 
     toml = toml.replace('name = "intbs_nlhinf"', f'name = "{name}"')
     (directory / "controllers" / f"{name}.toml").write_text(toml)
     return name
+
+
+def nan_above(height_m: float) -> str:
+    """A ``failure`` for :func:`write_overlay`: the law's output turns NaN once the vehicle is above
+    ``height_m`` (it passes the check at hover, 1 m, when it loads, then fails in flight)."""
+    return f"if position[2] > {height_m}:\n        az = math.nan"
+
+
+@contextlib.contextmanager
+def laws_forgotten_afterwards(directory):
+    """``directory`` as the only configuration directory (QUADSITL_CONFIG_DIR) for the block; the
+    environment, the laws its files registered and the record of files that did not load restored
+    afterwards."""
+    registry.names(registry.TRANSLATIONAL)  # the built-in laws loaded before the snapshot
+    before = {loop: dict(laws) for loop, laws in registry._LAWS.items()}
+    broken = dict(registry._BROKEN)
+    environment = os.environ.get(CONFIG_ENV)
+    os.environ[CONFIG_ENV] = str(directory)
+    try:
+        yield directory
+    finally:
+        if environment is None:
+            os.environ.pop(CONFIG_ENV, None)
+        else:
+            os.environ[CONFIG_ENV] = environment
+        for loop, laws in before.items():
+            registry._LAWS[loop].clear()
+            registry._LAWS[loop].update(laws)
+        registry._BROKEN.clear()
+        registry._BROKEN.update(broken)
+        for module in [name for name in sys.modules if name.startswith(registry.USER_PACKAGE + ".")]:
+            del sys.modules[module]
+        registry.user_package()

@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from quadcommon.config import VehicleConfig
-from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel, typing_error_cause
 from quadcommon.rigid_body import body_rates_from_euler_rates, euler_torque_from_body_torque
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
@@ -37,7 +37,7 @@ from . import command_filter as cf
 from . import registry
 from .allocation import A_SIZE, OUT_SIZE, actuator_numbers, allocate_rotors, saturate_wrench
 from .config import ControllerConfig
-from .registry import ROTATIONAL, TRANSLATIONAL, ControllerFailure, LawContext
+from .registry import ROTATIONAL, TRANSLATIONAL, ControllerFailure, LawContext, non_finite_output
 
 Vector3 = tuple[float, float, float]
 
@@ -92,6 +92,15 @@ def cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, v
     return (thrust_a, te0, te1, te2, ta0, ta1, ta2, eta_d[0], eta_d[1], eta_d[2], eta_d_dot[0], eta_d_dot[1],
             eta_d_dot[2], roll_r, pitch_r, a_x, a_y, a_z,
             1.0 if (saturated != 0.0 or thrust_limited != 0.0) else 0.0, tilt_limited)  # fmt: skip
+
+
+@kernel
+def output_finite(o):
+    """False when the wrench a cascade step applies is not finite (``o``: :func:`cascade_step`'s
+    outputs; U1 and the body torque): a NaN or inf anywhere in it shows in their sum (saturation
+    lets NaN through). The one check of a law's output, wherever the cascade flies: the autopilot
+    (:meth:`Cascade.step`) and the campaign engine (:func:`sitl.campaign.kernels.simulate`)."""
+    return math.isfinite(o[0] + o[4] + o[5] + o[6])
 
 
 # What a step is given instead of computing it (Cascade.step's overrides), as numbers: the flags
@@ -261,9 +270,8 @@ class Cascade:
                            ref.yaw_rad, ref.yaw_rate_rad_s, ref.yaw_acceleration_rad_s2, integrate)
         except Exception as error:  # noqa: BLE001 - a law (maybe a user's) failed: the failsafe acts
             raise ControllerFailure(f"controller {self.name}: {type(error).__name__}: {error}") from error
-        # A NaN or inf anywhere in the applied wrench shows in this sum (saturation lets NaN through).
-        if not math.isfinite(o[0] + o[4] + o[5] + o[6]):
-            raise ControllerFailure(f"controller {self.name}: non-finite output (U1 {o[0]}, tau {o[4:7]})")
+        if not output_finite(o):
+            raise ControllerFailure(f"{non_finite_output(self.name)} (U1 {o[0]}, tau {o[4:7]})")
         self._last = (state.euler_rad, state.euler_rates_rad_s)
         return CascadeOutput(
             o[0], (o[1], o[2], o[3]), (o[4], o[5], o[6]), (o[20], o[21], o[22], o[23]),
@@ -307,6 +315,14 @@ class Cascade:
         self.config, self.context = controller, context
 
 
+def not_compiled(laws: str, error: Exception) -> str:
+    """Why the law pair ``laws`` did not compile: the cause numba found (file, line, what it could
+    not type: :func:`quadcommon.kernel.typing_error_cause`), else the start of its error."""
+    cause = typing_error_cause(error) or "\n".join(str(error).strip().splitlines()[:12])
+    return (f"the laws {laws} do not compile with numba ({type(error).__name__}):\n{cause}\n"
+            "(QUADSITL_PURE_PYTHON=1 runs them as Python, slower)")  # fmt: skip
+
+
 def _entry(cascade: Cascade):
     """The step of ``cascade``'s law pair: compiled once per process (loaded from numba's cache
     after the first time), warmed up on a copy of the cascade's buffer at hover so nothing compiles
@@ -318,9 +334,7 @@ def _entry(cascade: Cascade):
             step(cascade.buffer.copy(), cascade._at, up, z3, z3, z3, up, z3, z3, 0.0, 0.0, 0.0, True)
         except Exception as error:  # numba's typing errors: a law it cannot compile
             laws = f"{cascade.translational.NAME} + {cascade.rotational.NAME}"
-            detail = "\n".join(str(error).strip().splitlines()[:12])
-            raise ConfigError(f"the laws {laws} do not compile with numba ({type(error).__name__}):\n"
-                              f"{detail}\n(QUADSITL_PURE_PYTHON=1 runs them as Python, slower)") from error
+            raise ConfigError(not_compiled(laws, error)) from error
         freeze(step)
         step._quadsitl_warm = True
     return step

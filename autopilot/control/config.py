@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from quadcommon.config import config_path
-from quadcommon.schema import load_toml
+from quadcommon.schema import ConfigError, Section, load_toml
 
 from . import registry
 
@@ -52,13 +52,13 @@ def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConf
     description = root.string("description", "")
 
     sec = root.section("translational")
-    law = registry.law(registry.TRANSLATIONAL, sec.choice("law", registry.names(registry.TRANSLATIONAL)))
+    law = _law(sec, registry.TRANSLATIONAL)
     tilt_max = sec.number("tilt_max_rad", 0.7, lo=0.05, hi=1.4, unit="rad")
     translational = law.load_gains(sec)
     sec.finish()
 
     sec = root.section("rotational")
-    law = registry.law(registry.ROTATIONAL, sec.choice("law", registry.names(registry.ROTATIONAL)))
+    law = _law(sec, registry.ROTATIONAL)
     rotational = law.load_gains(sec)
     sec.finish()
 
@@ -71,3 +71,14 @@ def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConf
     sec.finish()
     root.finish()
     return ControllerConfig(name, description, translational, rotational, command_filter, tilt_max)
+
+
+def _law(section: Section, loop: str) -> type:
+    """The ``loop`` law named by ``section``'s key ``law``; ConfigError naming the file and key: an
+    unknown name lists the known ones, a law in a file that did not import gives that file's error."""
+    name = section.string("law")
+    try:
+        return registry.law(loop, name)
+    except (KeyError, ConfigError) as error:
+        key = section.key_name("law")
+        raise ConfigError(f"{section.source}: key '{key}' = {name!r}: {error.args[0]}") from None

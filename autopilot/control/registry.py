@@ -34,9 +34,12 @@ Where laws are found, by name: the built-in ones (every module of ``autopilot/co
 the ``laws/`` directory of each configuration directory (``--config-dir``,
 ``QUADSITL_CONFIG_DIR``), imported as ``quadsitl_laws.<file name>``; installed packages that
 declare an entry point in the group ``quadsitl.laws`` (the module is imported, its ``@register``
-lines run). A law that breaks the contract is refused with the reason when it registers or when a
-controller loads it (:func:`check`); one that produces a non-finite output in flight trips the
-autopilot's failsafe (:class:`ControllerFailure`).
+lines run). A law file that does not import (a syntax error, an exception) takes only its own laws
+with it: it is reported once (:class:`LawFileWarning`, naming the file, line and error), the
+other laws load, and asking for a law of that file gives the file's error. A law that breaks the
+contract is refused with the reason when it registers or when a controller loads it
+(:func:`check`); one that produces a non-finite output in flight trips the autopilot's failsafe
+(:class:`ControllerFailure`, named by :func:`non_finite_output`).
 """
 
 from __future__ import annotations
@@ -46,8 +49,11 @@ import importlib.metadata
 import inspect
 import math
 import pkgutil
+import re
 import sys
+import traceback
 import types
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,6 +77,7 @@ STEP_OUTPUTS = {TRANSLATIONAL: 8, ROTATIONAL: 3}
 
 _LAWS: dict[str, dict[str, type]] = {TRANSLATIONAL: {}, ROTATIONAL: {}}
 _loaded = False
+_BROKEN: dict[str, BrokenLawFile] = {}  # by module name: the law files that did not import
 
 
 class LawError(ValueError):
@@ -79,6 +86,30 @@ class LawError(ValueError):
 
 class ControllerFailure(RuntimeError):
     """A law produced a non-finite output, or raised, in flight (the autopilot's failsafe acts)."""
+
+
+def non_finite_output(controller: str) -> str:
+    """How a controller whose applied U1 or torque is NaN or inf is named, by every runner that
+    catches it (the cascade's check: the autopilot's flight termination, the in-process runs, the
+    campaigns' failure reason)."""
+    return f"controller {controller}: non-finite output"
+
+
+class LawFileWarning(UserWarning):
+    """A law file that did not import: its laws are unavailable, the other laws load."""
+
+
+@dataclass(frozen=True)
+class BrokenLawFile:
+    """A law file (or an entry point's module) that did not import."""
+
+    where: str  # the file (its line when known), or the entry point's module
+    error: str  # the exception, "Type: message"
+    names: tuple[str, ...]  # the law names its text gives (NAME = "..."), and the file's own name
+    stamp: float  # the file's modification time: an edited file is imported again
+
+    def message(self) -> str:
+        return f"control law file {self.where}: {self.error}"
 
 
 @dataclass(frozen=True)
@@ -119,12 +150,19 @@ def names(loop: str) -> tuple[str, ...]:
 
 
 def law(loop: str, name: str) -> type:
-    """The class of law ``name`` of ``loop`` (KeyError with the available names)."""
+    """The class of law ``name`` of ``loop``: KeyError with the available names (and the law files
+    that did not load), or ConfigError with the error of the file that did not load and whose text
+    gives that name."""
     _load()
     try:
         return _LAWS[loop][name]
     except KeyError:
-        raise KeyError(f"no {loop} law {name!r}; available: {', '.join(_LAWS[loop])}") from None
+        pass
+    broken = [b for b in _BROKEN.values() if name in b.names]
+    if broken:
+        raise ConfigError(f"{loop} law {name!r} is in a file that did not load: {broken[0].message()}")
+    not_loaded = "".join(f"; not loaded: {b.message()}" for b in _BROKEN.values())
+    raise KeyError(f"no {loop} law {name!r}; available: {', '.join(_LAWS[loop])}{not_loaded}")
 
 
 def check(loop: str, cls: type, gains: Any, context: LawContext) -> tuple[float, ...]:
@@ -227,7 +265,8 @@ def _check_class(loop: str, cls: type) -> None:
 
 def _load() -> None:
     """Import every law: the built-in ones and the entry points once, the configuration
-    directories' files whenever a new one appears (a directory can be added while running)."""
+    directories' files whenever a new one appears (a directory can be added while running) or a
+    file that did not import changes."""
     global _loaded
     if not _loaded:
         _loaded = True
@@ -241,14 +280,67 @@ def _load() -> None:
         for path in sorted(Path(directory).glob("*.py")):
             module = f"{USER_PACKAGE}.{path.stem}"
             if path.stem.isidentifier() and not path.stem.startswith("_") and module not in sys.modules:
-                _import_user_law(module, path)
+                broken = _BROKEN.get(module)
+                if broken is None or broken.stamp != _stamp(path):
+                    _import_user_law(module, path)
 
 
 def _import_user_law(module: str, path: Path | None) -> None:
+    """Import a user's law module; one that fails is recorded and reported, and the laws it had
+    registered before failing are withdrawn (its module is gone: nothing could import them)."""
     try:
         importlib.import_module(module)
     except Exception as error:  # noqa: BLE001 - a user's file: any failure is reported, named
-        raise ConfigError(f"control law {path or module}: {type(error).__name__}: {error}") from error
+        for laws in _LAWS.values():
+            for name in [n for n, cls in laws.items() if cls.__module__ == module]:
+                del laws[name]
+        line = _failing_line(error, path)
+        where = str(path or module) + (f", line {line}" if line else "")
+        names = _law_names(path) if path is not None else (module.rpartition(".")[2],)
+        broken = BrokenLawFile(where, f"{type(error).__name__}: {_reason(error)}", names,
+                               _stamp(path) if path is not None else 0.0)  # fmt: skip
+        _BROKEN[module] = broken
+        listed = ", ".join(repr(n) for n in names)
+        warnings.warn_explicit(f"{broken.message()}; its laws ({listed}) are not loaded, the other laws are",
+                               LawFileWarning, str(path or module), line or 0)  # fmt: skip
+    else:
+        _BROKEN.pop(module, None)
+
+
+def _reason(error: Exception) -> str:
+    if isinstance(error, SyntaxError):  # its str() repeats the file's name and line
+        return str(error.msg)
+    return str(error)
+
+
+def _failing_line(error: Exception, path: Path | None) -> int | None:
+    """The line of ``path`` where ``error`` arose (a syntax error's own, else the innermost frame
+    of the traceback in that file)."""
+    if path is None:
+        return None
+    path = path.resolve()
+    if isinstance(error, SyntaxError) and error.filename and Path(error.filename).resolve() == path:
+        return error.lineno
+    frames = [f for f in traceback.extract_tb(error.__traceback__) if Path(f.filename).resolve() == path]
+    return frames[-1].lineno if frames else None
+
+
+def _law_names(path: Path) -> tuple[str, ...]:
+    """The law names a file's text gives (``NAME = "..."``, read without importing it) and the
+    file's own name: what a file that does not import would have defined."""
+    try:
+        text = path.read_text(errors="replace")
+    except OSError:
+        text = ""
+    found = re.findall(r"""^\s*NAME\s*=\s*["']([A-Za-z_]\w*)["']""", text, flags=re.M)
+    return tuple(dict.fromkeys([*found, path.stem]))
+
+
+def _stamp(path: Path) -> float:
+    try:
+        return path.stat().st_mtime
+    except OSError:
+        return 0.0
 
 
 def user_package() -> types.ModuleType:

@@ -16,9 +16,11 @@ from typing import Any
 
 import numpy as np
 
+from autopilot.control.cascade import not_compiled
 from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import VehicleConfig, load_scenario, load_vehicle
+from quadcommon.schema import ConfigError
 from simulator.environment.gust_profile import GustProfile
 
 from . import engine as eng
@@ -89,7 +91,7 @@ def run_chunk(spec: CampaignSpec, runs: Sequence[int]) -> list[dict[str, Any]]:
         for name, flight in flights(spec, sample).items():
             metrics, _ = eng.fly(flight)
             rows.append(
-                {"run": int(run), "controller": name, **sample.parameters, **eng.metrics_dict(metrics)}
+                {"run": int(run), "controller": name, **sample.parameters, **eng.metrics_dict(metrics, name)}
             )
     return rows
 
@@ -102,13 +104,14 @@ def fly_recorded(spec: CampaignSpec, run: int, controller: str) -> tuple[FlightR
     record = eng.record_to_flight_record(
         rows, f"{controller} (run {run})", spec.scenario.name, controller, sample.gusts.event_times()
     )
-    return record, eng.metrics_dict(metrics)
+    return record, eng.metrics_dict(metrics, controller)
 
 
 def warm_up(spec: CampaignSpec) -> float:
     """Compile the flight of each of the spec's law pairs now (or load it from numba's cache), in
     this process before the workers fork; returns the seconds it took. Flies a two-step hover with
-    each controller."""
+    each controller; a pair numba cannot compile is a ConfigError naming the controller and the
+    cause (:func:`~autopilot.control.cascade.not_compiled`)."""
     start = time.perf_counter()
     vehicle = load_vehicle("paper_quad")
     scenario = load_scenario("hover")
@@ -128,5 +131,9 @@ def warm_up(spec: CampaignSpec) -> float:
             assert spec.estimation is not None
             e = spec.estimation
             est = eng.estimator_memory(e.sensors, e.params, 9.81, _home_altitude(), rates.control_hz)
-        eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden, est))
+        try:
+            eng.fly(eng.Flight(state0, P, C, T, S, steps, ramps, gusts, dryden, est))
+        except Exception as error:  # noqa: BLE001 - numba's typing errors: a law pair it cannot compile
+            laws = f"{C.translational} + {C.rotational}"
+            raise ConfigError(f"controller {controller.name}: {not_compiled(laws, error)}") from error
     return time.perf_counter() - start

@@ -42,7 +42,15 @@ FAILURE_NAMES = {
     lay.FAIL_POSITION: "diverged: position error above the limit",
     lay.FAIL_TILT: "diverged: tilt above the limit",
     lay.FAIL_GROUND: "crashed: ground contact after take-off",
-}
+}  # FAIL_CONTROLLER: named with the controller (failure_reason)
+
+
+def failure_reason(code: int, controller: str) -> str:
+    """A run's failure code (``FAIL_*``) as its reason; a non-finite output names the controller
+    as the autopilot names it when it terminates a flight (:func:`registry.non_finite_output`)."""
+    if code == lay.FAIL_CONTROLLER:
+        return registry.non_finite_output(controller)
+    return FAILURE_NAMES[code]
 
 # Names of the metric columns, in the order of the kernel's metrics row (layout M_*).
 METRIC_COLUMNS = (
@@ -285,14 +293,15 @@ def record_to_flight_record(
     )
 
 
-def metrics_dict(metrics: np.ndarray) -> dict[str, float | bool | str]:
-    """A metrics row as named columns (plus the final-error norm and the failure reason)."""
+def metrics_dict(metrics: np.ndarray, controller: str) -> dict[str, float | bool | str]:
+    """``controller``'s metrics row as named columns (plus the final-error norm and the failure
+    reason)."""
     out: dict[str, float | bool | str] = {name: float(metrics[i]) for i, name in enumerate(METRIC_COLUMNS)}
     fx, fy, fz = out["final_error_x_m"], out["final_error_y_m"], out["final_error_z_m"]
     out["final_error_m"] = math.sqrt(fx * fx + fy * fy + fz * fz)  # type: ignore[operator]
     code = int(metrics[lay.M_FAIL])
     out["failed"] = code != lay.FAIL_NONE
-    out["failure"] = FAILURE_NAMES[code]
+    out["failure"] = failure_reason(code, controller)
     out["failure_time_s"] = float(metrics[lay.M_T_FAIL])
     if metrics.shape[0] >= lay.M_EST_SIZE and not math.isnan(metrics[lay.M_EST_RMS]):
         for i, name in enumerate(ESTIMATION_COLUMNS):

@@ -12,7 +12,9 @@ compared with the campaign's table.
 Two runs agree when every index matches to ``rel_tol`` (default 1e-6: the two paths agree to
 rounding, measured ~1e-12) and the failure verdict is the same. A run that failed in the batch
 engine stops there; the full stack flies on, so for those only the verdict is compared (the
-full-stack record is judged by the same limits: position error, tilt, non-finite state).
+full-stack record is judged by the same limits: position error, tilt, non-finite state; a flight the
+autopilot terminates because the law's output is non-finite fails it, as the batch engine fails a
+run on the same check).
 """
 
 from __future__ import annotations
@@ -95,7 +97,7 @@ def fly_full_stack(spec: CampaignSpec, run: int, controller: str) -> dict[str, f
     for _ in range(steps):
         try:
             stack.step()
-        except Exception:  # noqa: BLE001 - PlantDiverged or a non-finite state: a failed run
+        except Exception:  # noqa: BLE001 - PlantDiverged, a non-finite state, a law's failure: a failed run
             diverged = True
             break
     if not diverged:

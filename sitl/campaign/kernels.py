@@ -22,7 +22,10 @@ Nothing here is a second copy of an equation: :func:`simulate` calls
 
 and accumulates the paper's indices while flying (final errors, ISE trapezoidal, IADU as total
 variation, the definitions of :mod:`gcs_scripts.analysis.metrics`). ``error_model="numpy"``: a
-division by zero gives inf/NaN, and a run that goes non-finite ends as "non-finite state".
+division by zero gives inf/NaN. A run whose plant state goes non-finite ends as the plant's failure
+(``FAIL_NONFINITE``); one whose cascade applies a non-finite U1 or torque to a finite state ends as
+the controller's (``FAIL_CONTROLLER``), by the check the autopilot makes
+(:func:`~autopilot.control.cascade.output_finite`).
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ import math
 import numpy as np
 
 from autopilot.control.allocation import OUT_SIZE
-from autopilot.control.cascade import cascade_step
+from autopilot.control.cascade import cascade_step, output_finite
 from autopilot.control.command_filter import S_SIZE as FILTER_STATE_SIZE
 from autopilot.estimation import filter as ekf
 from quadcommon.frames import geodetic_to_ned_about, ned_to_geodetic_about, wrap_pi
@@ -108,7 +111,7 @@ M_EST_T_NOT_CONVERGED = 22  # time the filter's verdict was "not converged" (s)
 M_EST_REJECTED = 23  # samples rejected by the gates or the quality checks
 M_EST_SIZE = 24
 
-FAIL_NONE, FAIL_NONFINITE, FAIL_POSITION, FAIL_TILT, FAIL_GROUND = 0, 1, 2, 3, 4
+FAIL_NONE, FAIL_NONFINITE, FAIL_POSITION, FAIL_TILT, FAIL_GROUND, FAIL_CONTROLLER = 0, 1, 2, 3, 4, 5
 
 # -- recorded time series (run_scenario's columns, one row per control step) ----------------------
 RECORD_COLUMNS = (
@@ -477,6 +480,8 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         # -- failures end the run at this sample --
         if not (math.isfinite(pos[0]) and math.isfinite(pos[1]) and math.isfinite(pos[2])):
             fail = FAIL_NONFINITE
+        elif not output_finite(o):  # a finite state in, a non-finite wrench out: the law's
+            fail = FAIL_CONTROLLER
         elif err > max_pos_err:
             fail = FAIL_POSITION
         elif cos_tilt < cos_max_tilt:

@@ -357,6 +357,16 @@ class CampaignSpec:
         return hashlib.sha256(repr(decisive).encode()).hexdigest()[:16]
 
 
+def flown_by(spec: CampaignSpec, controller: str) -> CampaignSpec:
+    """``spec`` flown by the controller ``controller`` alone: the spec's own entry when it lists
+    it, else the controller of that name from the configuration directories (a researcher's own
+    included). The runs are the spec's: a run's plant and disturbances do not depend on the
+    controllers (:mod:`.sampling`). A name found nowhere is a ConfigError listing the places
+    looked in and the names there."""
+    listed = [c for c in spec.controllers if c.name == controller]
+    return replace(spec, controllers=(listed[0] if listed else load_controller(controller),))
+
+
 def campaign_path(name_or_path: str | Path) -> Path:
     """A path, or ``campaigns/NAME.toml`` in the configuration directories."""
     return config_path("campaigns", name_or_path)

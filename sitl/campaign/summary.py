@@ -168,8 +168,9 @@ def summary_markdown(
             else []
         ),  # fmt: skip
         f"- failure: position error > {spec.failure.max_position_error_m:g} m, tilt > "
-        f"{spec.failure.max_tilt_rad:g} rad, non-finite state, or ground contact after take-off; a "
-        "failed run stops there and is left out of the statistics below (counted in the failure rate)",
+        f"{spec.failure.max_tilt_rad:g} rad, non-finite state, a controller's non-finite output, or ground "
+        "contact after take-off; a failed run stops there and is left out of the statistics below (counted "
+        "in the failure rate)",
         "",
         "## Headline",
         "",

@@ -5,7 +5,7 @@ autopilot lives on."""
 
 from __future__ import annotations
 
-import sys
+import re
 
 import pytest
 from pymavlink.dialects.v20 import common as m
@@ -16,26 +16,18 @@ from autopilot.control.config import load_controller
 from autopilot.control.registry import ControllerFailure, LawError
 from autopilot.params.definitions import controller_config_from_params, default_parameters
 from quadcommon.config import config_path, load_sitl, load_vehicle
-from quadcommon.kernel import kernel
+from quadcommon.kernel import compiling, kernel
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
-from tests.own_law import write_overlay
+from tests.own_law import laws_forgotten_afterwards, nan_above, write_overlay
 from tests.stack import Gcs, make_stack
 
 
 @pytest.fixture
-def overlay(tmp_path, monkeypatch):
+def overlay(tmp_path):
     """A configuration directory in QUADSITL_CONFIG_DIR; its laws forgotten afterwards."""
-    registry.names(registry.TRANSLATIONAL)  # the built-in laws loaded before the snapshot
-    monkeypatch.setenv("QUADSITL_CONFIG_DIR", str(tmp_path))
-    before = {loop: dict(laws) for loop, laws in registry._LAWS.items()}
-    yield tmp_path
-    for loop, laws in before.items():
-        registry._LAWS[loop].clear()
-        registry._LAWS[loop].update(laws)
-    for module in [name for name in sys.modules if name.startswith(registry.USER_PACKAGE + ".")]:
-        del sys.modules[module]
-    registry.user_package()
+    with laws_forgotten_afterwards(tmp_path):
+        yield tmp_path
 
 
 HOVER = Reference((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
@@ -65,11 +57,43 @@ def test_an_unknown_law_is_a_config_error_listing_the_known_ones(tmp_path):
         load_controller(path)
 
 
-def test_a_broken_law_file_is_named_in_the_error(overlay):
+def test_a_broken_law_file_stops_only_the_laws_it_defines_and_says_which(overlay):
+    """A syntax error in one file of laws/: the shipped laws and the directory's other laws still
+    load, the file is named with its error once, and asking for its law gives that error."""
+    write_overlay(overlay, "toy_pd")
+    write_overlay(overlay, "half_written", failure="def (:")  # its controller file names it
+    with pytest.warns(registry.LawFileWarning, match=r"half_written\.py.*SyntaxError.*'half_written'"):
+        translational = registry.names(registry.TRANSLATIONAL)
+    assert {"toy_pd", "integral_second_step", "px4_position"} <= set(translational)
+    assert "half_written" not in translational
+    assert load_controller("intbs_nlhinf").translational.law == "integral_second_step"
+    assert load_controller("toy_pd").translational.law == "toy_pd"
+    where = re.escape(str(overlay / "laws" / "half_written.py"))
+    with pytest.raises(ConfigError, match=rf"translational\.law' = 'half_written'.*{where}.*SyntaxError"):
+        load_controller("half_written")
+    with pytest.raises(ConfigError, match=rf"{where}.*SyntaxError"):
+        registry.law(registry.TRANSLATIONAL, "half_written")
+
+
+def test_a_law_file_that_fails_after_registering_takes_its_laws_with_it(overlay):
+    name = write_overlay(overlay, "toy_late")
+    with (overlay / "laws" / "toy_late.py").open("a") as law_file:
+        law_file.write("\nraise RuntimeError('not finished')\n")
+    with pytest.warns(registry.LawFileWarning, match=r"toy_late\.py.*RuntimeError: not finished"):
+        assert "toy_late" not in registry.names(registry.TRANSLATIONAL)
+    with pytest.raises(ConfigError, match=r"toy_late\.py.*RuntimeError: not finished"):
+        load_controller(name)
+
+
+def test_an_unknown_law_beside_a_broken_file_names_the_file(overlay):
     (overlay / "laws").mkdir()
-    (overlay / "laws" / "half_written.py").write_text("def step(:\n")
-    with pytest.raises(ConfigError, match=r"half_written\.py.*SyntaxError"):
-        registry.names(registry.TRANSLATIONAL)
+    (overlay / "laws" / "generated.py").write_text("NAMES = [f'law_{i}' for i in range(3)]\nimport nosuch\n")
+    (overlay / "controllers").mkdir()
+    text = config_path("controllers", "intbs").read_text()
+    (overlay / "controllers" / "mine.toml").write_text(text.replace('"integral_first_step"', '"law_1"'))
+    reason = r"'law_1'.*integral_second_step.*generated\.py, line 2: ModuleNotFoundError"
+    with pytest.warns(registry.LawFileWarning), pytest.raises(ConfigError, match=reason):
+        load_controller("mine")
 
 
 class Minimal:
@@ -123,10 +147,28 @@ def test_a_law_numba_cannot_compile_is_refused_with_the_reason(overlay):
         Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
 
 
+@pytest.mark.skipif(not compiling(), reason="numba compiles nothing here (QUADSITL_PURE_PYTHON=1)")
+def test_a_step_calling_a_plain_function_is_refused_with_the_file_line_and_name(overlay):
+    """numba's typing error, nested through the cascade's kernels, reduced to its cause: the law's
+    file and line, the name it could not type, and what to do."""
+    name = write_overlay(overlay, "toy_helper", failure="az = plain_helper(az)")
+    law_file = overlay / "laws" / "toy_helper.py"
+    law_file.write_text(law_file.read_text() + "\n\ndef plain_helper(a):\n    return 0.5 * a\n")
+    line = law_file.read_text().splitlines().index("    az = plain_helper(az)") + 1
+    with pytest.raises(ConfigError) as refused:
+        Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
+    text = str(refused.value)
+    assert "toy_helper + nlhinf do not compile with numba" in text
+    assert f"{law_file}, line {line}" in text
+    assert "plain_helper" in text and "az = plain_helper(az)" in text
+    assert "@kernel" in text  # the remedy
+    assert "\x1b[" not in text and "buffered_step" not in text  # no colour codes, no numba frames
+
+
 def test_a_law_failing_in_flight_terminates_the_flight_and_the_autopilot_lives_on(overlay):
     """NaN once the vehicle is 1.5 m above home: the cascade raises ControllerFailure, the autopilot
     stops the motors (disarmed), says why on every link, and keeps answering frames."""
-    name = write_overlay(overlay, "toy_nan", failure="if position[2] > 1.5:\n        az = math.nan")
+    name = write_overlay(overlay, "toy_nan", failure=nan_above(1.5))
     cascade = Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
     with pytest.raises(ControllerFailure, match="toy_nan.*non-finite output"):
         cascade.step(StateEstimate((0.0, 0.0, 1.6), (0.0,) * 3, (0.0,) * 3, (0.0,) * 3), HOVER)

@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 
 import pytest
 
+from autopilot.control import registry
 from quadcommon import config
 from quadcommon.cli_help import has_default_to_show
 from sitl import cli
+from tests.own_law import laws_forgotten_afterwards, nan_above, write_overlay
 
 SCRIPTS = ["fly_setpoints", "fly_trajectory", "fly_paper", "upload_mission", "upload_gusts", "record"]
 
@@ -142,3 +145,37 @@ def test_config_dir_overlays_and_a_missing_name_lists_the_places(tmp_path, capsy
 def test_config_dir_that_does_not_exist(tmp_path, capsys):
     assert cli.main(["--config-dir", str(tmp_path / "nope"), "config", "where"]) == 2
     assert "is not a directory" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("command", [["run", "hover", "--controller", "toy_nan_cli"],
+                                     ["paper", "--scenarios", "hover", "--controllers", "toy_nan_cli",
+                                      "--workers", "1"]])  # fmt: skip
+def test_a_law_giving_nan_in_process_is_an_error_naming_it(tmp_path, capsys, monkeypatch, command):
+    """``quadsitl run`` and ``quadsitl paper`` end where the autopilot terminates the flight, exit
+    non-zero and say which controller gave a non-finite output: no table of NaN is written."""
+    monkeypatch.setattr(cli.os, "environ", dict(cli.os.environ))  # --config-dir writes the environment
+    mine = tmp_path / "mine"
+    with laws_forgotten_afterwards(mine):
+        write_overlay(mine, "toy_nan_cli", failure=nan_above(1.5))
+        out = tmp_path / "out"
+        extra = ["--out", str(out)] if command[0] == "paper" else []
+        assert cli.main(["--config-dir", str(mine), *command, "--duration", "6", *extra]) == 1
+    captured = capsys.readouterr()
+    assert re.search(r"^quadsitl: hover: flight terminated at t=\S+ s: controller toy_nan_cli: non-finite "
+                     r"output \(U1 nan", captured.err, re.M), captured.err  # fmt: skip
+    assert "nan" not in captured.out and "Traceback" not in captured.err
+    assert not (out / "tables.md").exists()
+
+
+@pytest.mark.timeout(60)
+def test_a_broken_law_file_leaves_the_shipped_controllers_flying(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(cli.os, "environ", dict(cli.os.environ))
+    mine = tmp_path / "mine"
+    (mine / "laws").mkdir(parents=True)
+    (mine / "laws" / "draft.py").write_text('NAME = "draft"\ndef step(:\n')
+    reported = pytest.warns(registry.LawFileWarning, match=r"draft\.py, line 2: SyntaxError")
+    with laws_forgotten_afterwards(mine), reported:
+        assert cli.main(["--config-dir", str(mine), "run", "hover", "--controller", "intbs_nlhinf",
+                         "--duration", "0.5"]) == 0  # fmt: skip
+    assert capsys.readouterr().out.startswith("hover / intbs_nlhinf: final error")

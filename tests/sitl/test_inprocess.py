@@ -1,15 +1,18 @@
 """The paper's experiment in-process: the closed loops track, and the paper's pattern holds."""
 
+import re
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
 
 from autopilot.control.config import CONTROLLER_NAMES, PAPER_CONTROLLERS, load_controller
+from autopilot.control.registry import ControllerFailure
 from gcs_scripts.analysis.metrics import indices
 from quadcommon.config import load_scenario
 from sitl.inprocess import RunOptions, run_scenario
 from sitl.paper import run_job
+from tests.own_law import laws_forgotten_afterwards, nan_above, write_overlay
 
 # The module's runs (13 flights of 40 s, the EKF ones the slowest) take about 2 min on two cores, more
 # while numba compiles the law pairs for the first time.
@@ -118,3 +121,18 @@ def test_nominal_plant_option_flies_the_section_ii_model():
     )
     assert rec.source.endswith("(nominal plant)")
     assert np.abs(rec.position_error_m[-1]).max() < 5e-3
+
+
+@pytest.mark.timeout(120)
+def test_a_law_giving_nan_ends_the_run_with_an_error_naming_it(tmp_path):
+    """The autopilot terminates the flight (as the SITL does: flight termination, a STATUSTEXT
+    naming the controller); the in-process runner ends the run there with that reason instead of
+    flying on to a table of NaN."""
+    with laws_forgotten_afterwards(tmp_path):
+        name = write_overlay(tmp_path, "toy_nan_run", failure=nan_above(1.5))
+        with pytest.raises(ControllerFailure) as failure:
+            run_scenario(load_scenario("hover"), load_controller(name), RunOptions(duration_s=6.0))
+    text = str(failure.value)
+    assert re.match(r"hover: flight terminated at t=\d+\.\d+ s: controller toy_nan_run: non-finite output "
+                    r"\(U1 nan", text), text  # fmt: skip
+    assert 0.5 < float(re.search(r"t=(\S+) s", text).group(1)) < 6.0

@@ -67,7 +67,7 @@ def test_wire_on_equals_run_scenario(tmp_path, run):
         assert np.array_equal(rows[:, 20:23], record.disturbance_torque_n_m)
         # the indices accumulated in flight are the analysis package's indices of the record
         ref = indices(record)
-        got = eng.metrics_dict(metrics)
+        got = eng.metrics_dict(metrics, controller.name)
         for i, axis in enumerate("xyz"):
             assert got[f"final_error_{axis}_m"] == pytest.approx(ref.final_error_m[i], rel=1e-12, abs=1e-15)
         for name, value in ref.ise.items():

@@ -5,9 +5,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from autopilot.control.config import load_controller
 from quadcommon.schema import ConfigError
 from sitl.campaign.sampling import sample_run, stream
-from sitl.campaign.spec import CAMPAIGN_DIR, load_campaign
+from sitl.campaign.spec import CAMPAIGN_DIR, flown_by, load_campaign
+from tests.own_law import laws_forgotten_afterwards, write_overlay
 
 from . import specs
 
@@ -170,3 +172,21 @@ def test_dryden_seed_is_drawn_per_run(tmp_path):
     spec = load_campaign(specs.write(tmp_path, specs.WIND, "wind"))
     seeds = {sample_run(spec, r).gusts.dryden.seed for r in range(4)}
     assert len(seeds) == 4
+
+
+def test_a_spec_flown_by_one_controller_listed_or_not(tmp_path):
+    """What ``benchmarks/campaign.py --controller NAME`` and ``quadsitl compile`` fly: the spec's
+    runs with one controller, the spec's own entry or any controller found by name (a researcher's
+    from a configuration directory included); a name found nowhere is refused, naming it."""
+    box = load_campaign("paper_box", runs=3)
+    alone = flown_by(box, "se3")
+    assert alone.controllers == (box.controllers[box.controller_names.index("se3")],)
+    same = ("runs", "seed", "plant", "initial", "elements", "duration_s")
+    assert all(getattr(alone, field) == getattr(box, field) for field in same)
+    with laws_forgotten_afterwards(tmp_path):
+        name = write_overlay(tmp_path, "toy_pd_spec")
+        mine = flown_by(box, name)
+        assert mine.controller_names == (name,) and mine.controllers[0] == load_controller(name)
+        assert mine.fingerprint() != box.fingerprint()
+    with pytest.raises(ConfigError, match="no controllers named 'nosuch'"):
+        flown_by(box, "nosuch")
