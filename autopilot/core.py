@@ -472,6 +472,7 @@ class AutopilotCore:
         else:
             self.estimator = None
             self.commander.estimator_problem = None
+            self.commander.height_uncertainty_m = 0.0  # the truth
         self._status.estimator = None
         self.log(f"flying on {'the EKF estimate' if want else 'the simulator truth'} (EKF2_EN {int(want)})")
 
@@ -497,6 +498,7 @@ class AutopilotCore:
         else:
             est = loop.predict(t, samples)  # the frame's aiding is fused after the answer
         self.commander.estimator_problem = loop.problem()
+        self.commander.height_uncertainty_m = loop.height_uncertainty_m()
         self._status.estimator = loop.last_status
         self._status.imu = loop.last_imu
         self._status.mag_gauss, self._status.baro_height_m = loop.last_mag_gauss, loop.last_baro_height_m
@@ -582,7 +584,7 @@ class AutopilotCore:
             s.home_local = c.home
         s.reference = guidance.reference
         s.controls = self._controls
-        s.armable = not c.armed and not c.in_air() and c.estimator_problem is None
+        s.armable = not c.armed and c.arm_problem(self.sim_time) is None
         values = self.params.values
         s.geofence_enabled = values["GF_MAX_HOR_DIST"] > 0.0 or values["GF_MAX_VER_DIST"] > 0.0
         s.geofence_breached = c.failsafes.fence_breached

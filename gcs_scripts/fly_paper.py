@@ -8,7 +8,8 @@ Against ``quadsitl up --scenario helix`` (or ``circle``), this script, like any 
 3. uploads the scenario's trajectory as a mission: NAV_TAKEOFF to the height of p_d(0), then the
    curve sampled into timed items (MAV_CMD_WAYPOINT_USER_1, param1 = time from the mission start,
    ``--start-time`` + tau), then NAV_LAND; downloads it back and checks it is identical;
-4. arms and starts AUTO.MISSION; the autopilot takes off, joins the curve at rest at p_d(0) and
+4. waits until the vehicle is ready to arm, arms and starts AUTO.MISSION; the autopilot takes
+   off, joins the curve at rest at p_d(0) and
    flies it on the clock from t0 = (mission start) + ``--start-time``;
 5. uploads the paper's disturbance schedule anchored at t0, so the steps hit at the same
    trajectory times as in the in-process experiment (the mission start is read exactly from the
@@ -158,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
         for _ in range(100):
             if link.poll() == 0:
                 break
-        link.arm()
+        link.arm_when_ready()
         link.set_mode("AUTO.MISSION")
         start = _mission_start_time(session, args.instance, 30.0)
         t0 = start + args.start_time

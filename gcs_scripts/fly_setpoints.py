@@ -1,6 +1,8 @@
 """Fly a list of position setpoints in OFFBOARD, as a MAVSDK/pymavlink script would with PX4.
 
-Steps: connect, wait for the heartbeat, arm, take off (NAV_TAKEOFF), wait until at altitude,
+Steps: connect, wait for the heartbeat, wait until the vehicle is ready to arm (SYS_STATUS's
+pre-arm bit and on the ground: an EKF aligns and converges first; the reason is printed, and after
+30 s of simulation time the script fails with it), arm, take off (NAV_TAKEOFF), wait until at altitude,
 stream position setpoints (one per LOCAL_POSITION_NED received, requested at 50 Hz, so the
 stream is paced in simulation time at any --speed), switch to OFFBOARD, fly each setpoint in
 turn (reach it within --tolerance, hold it --hold seconds of simulation time), land (NAV_LAND),
@@ -204,6 +206,7 @@ class Flight:
         link, args = self.link, self.args
         link.set_message_interval(LOCAL_POSITION_NED_ID, STREAM_RATE_HZ)
         link.set_message_interval(EXTENDED_SYS_STATE_ID, 5.0)  # faster landing detection
+        link.wait_ready_to_arm()  # (at once if armed): an EKF has no position until it aligns
         link.wait_until(
             lambda lk: lk.position_paper is not None and lk.landed_state != 0,
             5.0,
@@ -212,7 +215,7 @@ class Flight:
         if link.armed and link.landed_state == mavlink_link.MAV_LANDED_STATE_IN_AIR:
             say(link, f"already flying ({link.mode}); skipping arming and takeoff")
             return
-        link.arm()
+        link.arm_when_ready()
         say(link, "armed")
         start = link.position_paper
         link.takeoff(args.takeoff_alt)
@@ -282,6 +285,14 @@ def run(args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
         print(f"fly_setpoints: cannot listen on {args.url or mavlink_link.api_url(args.instance)}: {exc}",
               file=sys.stderr)  # fmt: skip
         return 3
+    try:
+        return fly(link, args, setpoints)
+    finally:
+        link.close()
+
+
+def fly(link: Link, args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
+    """The whole flight on a connected ``link``; the exit status (see the module)."""
     say(link, f"connected to system {link.target_system} ({link.mode}, {link.landed_state_name})")
     flight = Flight(link, args)
     stream = None
@@ -305,8 +316,6 @@ def run(args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
             stream.stop()
         mavlink_link.emergency_land(link, "fly_setpoints")
         return 130
-    finally:
-        link.close()
 
 
 def main(argv: list[str] | None = None, prog: str = "fly_setpoints.py") -> int:

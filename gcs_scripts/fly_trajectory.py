@@ -2,8 +2,9 @@
 
 Steps: connect, wait for the heartbeat, request LOCAL_POSITION_NED at --rate (simulation Hz),
 stream position setpoints at the trajectory's start point p_d(0) (one setpoint per
-LOCAL_POSITION_NED received, so the stream is paced in simulation time at any --speed), arm on
-the ground (no takeoff: OFFBOARD lifts the vehicle to p_d(0)) and switch to OFFBOARD; once within
+LOCAL_POSITION_NED received, so the stream is paced in simulation time at any --speed), wait
+until the vehicle is ready to arm (as fly_setpoints.py does), arm on the ground (no takeoff:
+OFFBOARD lifts the vehicle to p_d(0)) and switch to OFFBOARD; once within
 --tolerance of p_d(0) and nearly still, hold it --settle seconds; then stream the trajectory:
 position + velocity + acceleration (feed-forward) + yaw, sampled at t - t0 where t0 is a
 simulation time planned just ahead (printed as ``t0=...``: the analysis aligns on it, e.g.
@@ -195,6 +196,7 @@ def fmt(p: tuple[float, ...]) -> str:
 def fly(link: Link, args: argparse.Namespace, flight: TrajectoryFlight) -> SetpointStream:
     link.set_message_interval(LOCAL_POSITION_NED_ID, args.rate)
     link.set_message_interval(EXTENDED_SYS_STATE_ID, 5.0)
+    link.wait_ready_to_arm()  # (at once if armed): an EKF has no position until it aligns
     link.wait_until(
         lambda lk: lk.position_paper is not None and lk.landed_state != 0,
         5.0,
@@ -205,7 +207,7 @@ def fly(link: Link, args: argparse.Namespace, flight: TrajectoryFlight) -> Setpo
     link.sleep_sim(0.5, "setpoint stream warm-up")  # PX4 refuses OFFBOARD without a stream
     flying = link.armed and link.landed_state == mavlink_link.MAV_LANDED_STATE_IN_AIR
     if not flying:
-        link.arm()
+        link.arm_when_ready()
         say(link, "armed on the ground")
     link.set_mode("OFFBOARD")
     link.wait_mode("OFFBOARD")

@@ -38,6 +38,7 @@ environment.use_mavlink2()  # before pymavlink is imported (it reads them then)
 
 from pymavlink import mavutil  # noqa: E402
 
+from gcs_scripts.view.telemetry import StatusTextAssembler  # noqa: E402
 from quadcommon import frames  # noqa: E402
 
 Vector3 = tuple[float, float, float]
@@ -77,6 +78,17 @@ IGNORE_ACCELERATION = 64 | 128 | 256
 IGNORE_YAW = 1024
 IGNORE_YAW_RATE = 2048
 
+MAV_LANDED_STATE_ON_GROUND = 1
+MAV_LANDED_STATE_IN_AIR = 2
+PREARM_CHECK = mavutil.mavlink.MAV_SYS_STATUS_PREARM_CHECK
+# How long (simulation time) a script waits for the vehicle to be ready to arm: an EKF aligns and
+# converges in a few seconds; one that cannot (no heading source, ...) fails with its reason.
+READY_TIMEOUT_S = 30.0
+# What the vehicle says about its readiness (autopilot/commander: PX4's "Preflight Fail: ..." while
+# disarmed, "arming refused: ..." on a refused arm, "ready to arm" once ready again).
+NOT_READY_PREFIXES = ("Preflight Fail: ", "arming refused: ")
+READY_TO_ARM = "ready to arm"
+CONFIRMING_READY = "the vehicle says it is ready to arm; its SYS_STATUS does not show it yet"
 LANDED_STATE_NAMES = {0: "UNDEFINED", 1: "ON_GROUND", 2: "IN_AIR", 3: "TAKEOFF", 4: "LANDING"}
 MAV_RESULT_NAMES = {
     0: "ACCEPTED",
@@ -211,6 +223,7 @@ class VehicleView:
     attitude: Any = None  # ATTITUDE
     extended_sys_state: Any = None
     home_position: Any = None
+    sys_status: Any = None  # SYS_STATUS: the pre-arm (armable) bit
 
 
 class Link:
@@ -248,6 +261,7 @@ class Link:
         self.log = log or (lambda text: None)
         self._acks: deque[tuple[Any, int]] = deque(maxlen=64)  # (COMMAND_ACK, texts so far)
         self._texts_seen = 0  # STATUSTEXT count, to find the ones that follow an ACK
+        self._texts = StatusTextAssembler()  # a long STATUSTEXT comes in chunks
         self._next_gcs_heartbeat = 0.0
         self.messages_received = 0
         self._poll_first_time: float | None = None  # first telemetry time of the latest poll()
@@ -282,9 +296,11 @@ class Link:
         self.messages_received += 1
         time_boot_ms = getattr(msg, "time_boot_ms", None)
         if time_boot_ms is not None:
-            self.sim_time_s = time_boot_ms * 1e-3
-            if self._poll_first_time is None:
-                self._poll_first_time = self.sim_time_s
+            self._saw_time(time_boot_ms * 1e-3)
+        elif kind == "ESTIMATOR_STATUS" and msg.time_usec * 1e-6 > (self.sim_time_s or -1.0):
+            # The one clock of a vehicle whose EKF has no estimate yet (no time_boot_ms streams
+            # before it has a state): a wait for it to become armable counts simulation time.
+            self._saw_time(msg.time_usec * 1e-6)
         if kind == "HEARTBEAT":
             if msg.get_srcComponent() == self.target_component:
                 self.view.heartbeat = msg
@@ -298,11 +314,25 @@ class Link:
             self.view.extended_sys_state = msg
         elif kind == "HOME_POSITION":
             self.view.home_position = msg
+        elif kind == "SYS_STATUS":
+            self.view.sys_status = msg
         elif kind == "COMMAND_ACK":
             self._acks.append((msg, self._texts_seen))
         elif kind == "STATUSTEXT":
-            text = msg.text if isinstance(msg.text, str) else msg.text.decode("utf-8", "replace")
-            self.statustext.append((self.sim_time_s or 0.0, msg.severity, text.rstrip("\x00")))
+            self._statustext(msg)
+
+    def _saw_time(self, sim_time_s: float) -> None:
+        self.sim_time_s = sim_time_s
+        if self._poll_first_time is None:
+            self._poll_first_time = sim_time_s
+
+    def _statustext(self, msg: Any) -> None:
+        """A STATUSTEXT, or a chunk of a longer one (joined by :class:`StatusTextAssembler`): a
+        text is recorded once whole."""
+        raw = msg.text.encode("utf-8", "replace") if isinstance(msg.text, str) else bytes(msg.text)
+        ident, seq = int(getattr(msg, "id", 0) or 0), int(getattr(msg, "chunk_seq", 0) or 0)
+        for severity, text in self._texts.add(int(msg.severity), raw, ident, seq):
+            self.statustext.append((self.sim_time_s or 0.0, severity, text))
             self._texts_seen += 1
             self.log(f"t={self.sim_time_s or 0.0:.2f} s vehicle: {text}")
 
@@ -355,6 +385,43 @@ class Link:
     @property
     def landed_state_name(self) -> str:
         return LANDED_STATE_NAMES.get(self.landed_state, str(self.landed_state))
+
+    @property
+    def armable(self) -> bool:
+        """The vehicle's pre-arm checks pass: SYS_STATUS ``onboard_control_sensors_health`` has
+        ``MAV_SYS_STATUS_PREARM_CHECK`` (what MAVSDK's ``health.is_armable`` reads)."""
+        status = self.view.sys_status
+        return status is not None and bool(status.onboard_control_sensors_health & PREARM_CHECK)
+
+    @property
+    def ready_to_arm(self) -> bool:
+        """Armable, and EXTENDED_SYS_STATE reports it on the ground (what PX4 clients wait for)."""
+        return self.armable and self.landed_state == MAV_LANDED_STATE_ON_GROUND
+
+    def not_ready_reason(self) -> str:
+        """Why the vehicle is not ready to arm, as well as is known: the vehicle's own words (its
+        latest ``Preflight Fail: ...`` or ``arming refused: ...`` STATUSTEXT not followed by
+        ``ready to arm``), else what its telemetry shows."""
+        said_ready = False
+        for _, _, text in reversed(self.statustext):
+            if text == READY_TO_ARM:
+                said_ready = True
+                break
+            for prefix in NOT_READY_PREFIXES:
+                if text.startswith(prefix):
+                    return text[len(prefix):]
+        status = self.view.sys_status
+        if status is None:
+            return "no SYS_STATUS from the vehicle yet"
+        if not status.onboard_control_sensors_health & PREARM_CHECK:
+            if said_ready:
+                return CONFIRMING_READY
+            if not status.onboard_control_sensors_health & mavutil.mavlink.MAV_SYS_STATUS_AHRS:
+                return "SYS_STATUS: pre-arm checks failing, attitude/position estimate (AHRS) not healthy"
+            return "SYS_STATUS: pre-arm checks failing"
+        if self.landed_state != MAV_LANDED_STATE_ON_GROUND:
+            return f"EXTENDED_SYS_STATE: landed state {self.landed_state_name}"
+        return "unknown"
 
     @property
     def home_altitude_amsl_m(self) -> float | None:
@@ -527,6 +594,36 @@ class Link:
     def arm(self, force: bool = False) -> None:
         self.command_long(mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 21196.0 if force else 0.0))
 
+    def wait_ready_to_arm(self, sim_timeout_s: float = READY_TIMEOUT_S) -> None:
+        """Until the vehicle is ready to arm (:attr:`ready_to_arm`), as PX4 clients wait (QGC's
+        "Ready To Fly", MAVSDK's ``health.is_armable``): an estimator still aligning or
+        converging after ``quadsitl up`` is waited for, not refused. Says what it waits for (and
+        again when the reason changes); :class:`LinkTimeout` with the reason after
+        ``sim_timeout_s`` of simulation time."""
+        if self.ready_to_arm or self.armed:
+            return
+        said = [""]
+
+        def ready(link: Link) -> bool:
+            if link.ready_to_arm or link.armed:
+                return True
+            reason = link.not_ready_reason()
+            if reason != CONFIRMING_READY and _figures_aside(reason) != _figures_aside(said[0]):
+                said[0] = reason
+                report(link, f"waiting for the vehicle to be ready to arm: {reason}")
+            return False
+
+        try:
+            self.wait_until(ready, sim_timeout_s, what="the vehicle to be ready to arm")
+        except LinkTimeout as exc:
+            raise LinkTimeout(f"{exc}: {self.not_ready_reason()}") from None
+
+    def arm_when_ready(self, sim_timeout_s: float = READY_TIMEOUT_S) -> None:
+        """:meth:`wait_ready_to_arm`, then arm (nothing if armed already)."""
+        self.wait_ready_to_arm(sim_timeout_s)
+        if not self.armed:
+            self.arm()
+
     def disarm(self, force: bool = False) -> None:
         self.command_long(mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0.0, 21196.0 if force else 0.0))
 
@@ -625,8 +722,9 @@ class SetpointStream:
             self.link.on_local_position = None
 
 
-MAV_LANDED_STATE_ON_GROUND = 1
-MAV_LANDED_STATE_IN_AIR = 2
+def _figures_aside(text: str) -> str:
+    """A reason without its figures (an alignment's elapsed time, a 1-sigma): the same reason."""
+    return "".join("#" if c.isdigit() else c for c in text)
 
 
 def report(link: Link | None, text: str) -> None:

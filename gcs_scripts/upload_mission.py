@@ -34,7 +34,9 @@ Sources (one of):
   NAV_LAND (``--end``).
 
 Other actions: ``--download`` (print the vehicle's mission; ``--save FILE`` writes it as QGC WPL),
-``--clear``. With ``--fly`` the script then arms, switches to AUTO.MISSION and reports every
+``--clear``. With ``--fly`` the script then waits until the vehicle is ready to arm (SYS_STATUS's
+pre-arm bit and on the ground; the reason is printed, and after 30 s of simulation time the script
+fails with it), arms, switches to AUTO.MISSION and reports every
 MISSION_ITEM_REACHED until the mission is complete (and, if it ends with a landing, disarmed).
 
 Exit status: 0 success; 1 the vehicle refused (the MAV_MISSION_RESULT is printed) or a timeout;
@@ -492,8 +494,7 @@ def fly(link: MissionLink, items: Sequence[Item], timeout_s: float) -> None:
     count = len(items)
     lands = bool(items) and items[-1].command in (m.MAV_CMD_NAV_LAND, m.MAV_CMD_NAV_RETURN_TO_LAUNCH)
     link.reached.clear()
-    if not link.armed:
-        link.arm()
+    link.arm_when_ready()  # (nothing if armed)
     link.set_mode("AUTO.MISSION")
     say(link, "mission started")
     shown = 0

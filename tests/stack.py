@@ -9,6 +9,8 @@ from autopilot.control.config import load_controller
 from autopilot.core import AutopilotSetup
 from autopilot.logger.logger import LogOptions
 from gcs_scripts.link import Link
+from gcs_scripts.view.telemetry import StatusTextAssembler
+from quadcommon.config import estimator_profile_for
 from simulator.core import SimulatorSetup
 from sitl.inprocess import API_LINK, Lockstep, StackConnection
 
@@ -21,15 +23,19 @@ def make_stack(
     vehicle: str | None = None,
     log=lambda text: None,
     log_dir: str | None = None,
+    estimator: str = "truth",
     **sitl_changes,
 ) -> Lockstep:
     """A vehicle on the ground (or where ``scenario`` puts it), nothing armed, no client yet;
-    ``log_dir``: its flight logs (ULog) go there (default: no flight log)."""
+    ``log_dir``: its flight logs (ULog) go there (default: no flight log); ``estimator="ekf"``:
+    it flies on its EKF, with the filter's parameters for ``sensors`` (as ``quadsitl up``)."""
     sim = SimulatorSetup.load(scenario=scenario, vehicle=vehicle, sensors=sensors)
     if sitl_changes:
         sim = replace(sim, sitl=replace(sim.sitl, **sitl_changes))
+    profile = estimator_profile_for(sensors or "default") if estimator == "ekf" else "default"
     ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller(controller), params_file=params_file,
-                        default_remotes=False, log=LogOptions(log_dir))  # fmt: skip
+                        default_remotes=False, log=LogOptions(log_dir), estimator=estimator,
+                        estimator_profile=profile)  # fmt: skip
     return Lockstep(sim, ap, log=log)
 
 
@@ -50,6 +56,7 @@ class Gcs:
         self.system_id = stack.autopilot.system_id
         self.last: dict[str, object] = {}
         self.statustext: list[str] = []
+        self._texts = StatusTextAssembler()
         self.acks: list = []
 
     @property
@@ -66,8 +73,10 @@ class Gcs:
             return msg
         kind = msg.get_type()
         self.last[kind] = msg
-        if kind == "STATUSTEXT":
-            self.statustext.append(msg.text)
+        if kind == "STATUSTEXT":  # a long text comes in chunks: recorded once whole
+            raw = msg.text.encode("utf-8", "replace") if isinstance(msg.text, str) else bytes(msg.text)
+            for _, text in self._texts.add(msg.severity, raw, msg.id, msg.chunk_seq):
+                self.statustext.append(text)
         elif kind == "COMMAND_ACK":
             self.acks.append(msg)
         return msg

@@ -27,6 +27,7 @@ transitions themselves are the table.)
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import NamedTuple
@@ -81,6 +82,14 @@ ON_GROUND_HEIGHT_M = 0.05  # O within this of the ground counts as touching it
 LANDED_SPEED_M_S = 0.1
 LANDED_CONFIRM_S = 0.3
 IN_AIR_HEIGHT_M = 0.1
+# On the ground, a height within this many standard deviations of the estimate's height (its
+# 1-sigma, 0 on the truth) above IN_AIR_HEIGHT_M is the ground (see Commander.in_air).
+GROUND_HEIGHT_SIGMAS = 3.0
+MOVING_SPEED_M_S = 0.2  # a vehicle on the ground faster than this is not at rest: arming refused
+# The pre-arm verdict, announced while disarmed (PX4's "Preflight Fail: ..." STATUSTEXT): checked
+# this often; the same verdict (its figures aside) not announced again within READINESS_REPEAT_S.
+READINESS_CHECK_S = 0.1
+READINESS_REPEAT_S = 10.0
 STICK_TAKEOFF_UP = 0.25  # throttle stick above 62.5 % of its travel takes off a manual mode (PX4)
 
 
@@ -116,6 +125,8 @@ class Outcome(NamedTuple):
         return self.result == ACCEPTED
 
 
+PREFLIGHT_FAIL = "Preflight Fail: "  # PX4's prefix of a pre-arm failure reported unasked
+_FIGURES = re.compile(r"\d+(?:\.\d+)?")  # the figures of a verdict (not part of which verdict it is)
 _FAILSAFE_EVENTS = {HOLD: Event.FAILSAFE_HOLD, RTL: Event.FAILSAFE_RTL, LAND: Event.FAILSAFE_LAND}
 _FAILSAFE_DOING = {HOLD: "holding", RTL: "returning to launch", LAND: "landing"}
 _MODE_EVENTS = {
@@ -163,6 +174,7 @@ class Commander:
         self.failsafes = FailsafeMonitor(params)
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
+        self.height_uncertainty_m = 0.0  # 1-sigma of the estimate's height (0: the truth); see in_air()
         self._trajectory: Trajectory | None = None  # what the trajectory phases fly
         self._trajectory_start = 0.0
         self._after_trajectory: FlightMode | None = None  # a scenario's hand-over mode (None: none)
@@ -170,6 +182,9 @@ class Commander:
         self._landed_since: float | None = None
         self._touchdown_at = 0.0
         self._setpoint_times: list[float] = []
+        self._next_readiness_check = 0.0
+        self._readiness_key: str | None = None  # the verdict last announced (None: ready, or none yet)
+        self._readiness_said: dict[str | None, float] = {}  # verdict -> when it was last announced
         params.on_change(self._on_param_change)
 
     # -- reading the state ----------------------------------------------------------------------
@@ -225,7 +240,25 @@ class Commander:
         )
 
     def in_air(self) -> bool:
-        return self.state is not None and not self._near_ground(self.state)
+        """Whether the vehicle is off the ground (flat, z = 0 in the local frame): its height at
+        least :data:`IN_AIR_HEIGHT_M`.
+
+        On the ground (disarmed, armed before a takeoff, landed) the height is the estimate's, and
+        a height the estimate cannot tell from the ground is the ground: the clearance grows by
+        :data:`GROUND_HEIGHT_SIGMAS` times the estimate's 1-sigma height uncertainty
+        (``height_uncertainty_m``; 0 on the truth). A filter that has just aligned on GNSS and a
+        barometer puts a vehicle resting on the ground tenths of a metre up, with as much
+        uncertainty, and it must not read as flying (PX4's land detector reports a disarmed
+        vehicle landed whatever its estimate says). In flight the plain clearance applies.
+        """
+        state = self.state
+        if state is None:
+            return False
+        clearance = IN_AIR_HEIGHT_M
+        if self.phase == Phase.DISARMED or self.phase in ON_GROUND:
+            sigma = self.height_uncertainty_m
+            clearance += GROUND_HEIGHT_SIGMAS * sigma if math.isfinite(sigma) else math.inf
+        return state.position_m[2] - GROUND_Z_M >= clearance
 
     def _near_ground(self, state: VehicleState) -> bool:
         return state.position_m[2] - GROUND_Z_M < IN_AIR_HEIGHT_M
@@ -497,6 +530,8 @@ class Commander:
         """Decide this control step (``dt`` = control period, s)."""
         self._check_sticks(t)
         state = self.state
+        if self.phase == Phase.DISARMED:
+            self._announce_readiness(t)
         if self.phase == Phase.DISARMED or state is None:
             return GuidanceOutput(Motors.OFF, None)
         if self.phase in FLYING:
@@ -621,25 +656,62 @@ class Commander:
         return t - self._landed_since >= LANDED_CONFIRM_S
 
     # -- actions (the table's last column); None or an accepted Outcome lets the transition happen --
+    def arm_problem(self, t: float) -> str | None:
+        """Why arming would be refused at ``t`` (the pre-arm checks, in order), or None: ready to
+        arm. The one verdict: the arming command, the armable bit of SYS_STATUS and the
+        "Preflight Fail" announcements all read it."""
+        state = self.state
+        if state is None or not self.position_valid:
+            why = self.estimator_problem or "no sensor frames from the simulator"
+            return f"no position ({why})"
+        if self.estimator_problem:  # before "not landed": that judges the estimate
+            return self.estimator_problem
+        if self.in_air():
+            return "vehicle not landed"
+        speed = math.hypot(*state.velocity_m_s)
+        if speed > MOVING_SPEED_M_S:
+            return f"vehicle not landed (moving at {speed:.2f} m/s)"
+        if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
+            return "OFFBOARD without a setpoint stream"
+        if self.mode.is_manual and self.sticks.fresh(t, self._manual_limits.loss_s) is None:
+            return f"no manual control input ({self.mode.px4_name} flies on MANUAL_CONTROL)"
+        return prearm_problem(
+            self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence
+        )
+
+    def _announce_readiness(self, t: float) -> None:
+        """While disarmed: a change of the pre-arm verdict as PX4 reports it, ``Preflight Fail:
+        <reason>`` (and ``ready to arm`` once a failure was announced), so a ground station sees
+        why the vehicle is not armable before it tries. A verdict whose figures alone changed (an
+        alignment's elapsed time, a 1-sigma) is the same verdict; none is repeated within
+        :data:`READINESS_REPEAT_S`."""
+        if t < self._next_readiness_check:
+            return
+        self._next_readiness_check = t + READINESS_CHECK_S
+        problem = self.arm_problem(t)
+        key = None if problem is None else _FIGURES.sub("#", problem)
+        if key == self._readiness_key:
+            return
+        last = self._readiness_said.get(key)
+        if last is not None and t - last < READINESS_REPEAT_S:
+            return
+        self._readiness_key = key
+        self._readiness_said[key] = t
+        if problem is None:
+            self._event(SEVERITY_INFO, "ready to arm")
+        else:
+            self._event(SEVERITY_WARNING, f"{PREFLIGHT_FAIL}{problem}")
+
     def _act_arm(self, t: float, force: bool = False, **_) -> Outcome | None:
         state = self.state
         if state is None or not self.position_valid:
             # Not even a forced arm: without a state there is nothing to control.
-            why = self.estimator_problem or "no sensor frames from the simulator"
-            return self._refuse(DENIED, f"arming refused: no position ({why})")
+            return self._refuse(DENIED, f"arming refused: {self.arm_problem(t)}")
         if not force:  # the pre-arm checks (a forced arm skips them, as in PX4)
-            if self.in_air() or math.hypot(*state.velocity_m_s) > 0.2:
-                return self._refuse(DENIED, "arming refused: vehicle not landed")
-            if self.mode == FlightMode.OFFBOARD and not self.offboard_stream_active(t):
-                return self._refuse(DENIED, "arming refused: OFFBOARD without a setpoint stream")
-            if self.mode.is_manual and self.sticks.fresh(t, self._manual_limits.loss_s) is None:
-                return self._refuse(DENIED, f"arming refused: no manual control input ({self.mode.px4_name} "
-                                            "flies on MANUAL_CONTROL)")  # fmt: skip
-            problem = self.estimator_problem or prearm_problem(
-                self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence
-            )
+            problem = self.arm_problem(t)
             if problem:
                 return self._refuse(DENIED, f"arming refused: {problem}")
+        self._readiness_key = None  # after this flight, the first failure is announced again
         self._armed_at = t
         self.home = state.position_m  # PX4 sets home where it arms
         self._landed_since = None

@@ -377,6 +377,8 @@ def statustext_messages(severity: int, text: str, ident: int) -> list:
     ``id`` 0 for a single message, ``chunk_seq`` 0, 1, ...)."""
     raw = text.encode("utf-8")[:STATUSTEXT_MAX]
     chunks = [raw[i : i + STATUSTEXT_CHUNK] for i in range(0, len(raw), STATUSTEXT_CHUNK)] or [b""]
+    if len(chunks) > 1 and len(chunks[-1]) == STATUSTEXT_CHUNK:
+        chunks.append(b"")  # a last chunk shorter than 50 bytes ends the text (its NUL)
     ident = ident if len(chunks) > 1 else 0
     return [m.MAVLink_statustext_message(severity, chunk, ident, seq) for seq, chunk in enumerate(chunks)]
 

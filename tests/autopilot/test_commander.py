@@ -52,6 +52,42 @@ def test_arm_refused_without_state_and_in_air():
     assert any("not landed" in text for _, text in c.drain_events())
 
 
+def test_on_the_ground_a_height_the_estimate_cannot_tell_from_the_ground_is_the_ground():
+    """A filter just aligned on GNSS and a barometer puts the resting vehicle 0.39 m up with a 1-sigma
+    of 0.3 m: on the ground, not flying, and it arms; the same height known to 1 cm is in the air."""
+    c = Commander(default_parameters())
+    c.update_state(state(0.0, p=(0.0, 0.0, 0.39)))
+    c.height_uncertainty_m = 0.3
+    assert not c.in_air() and c.landed_state == LandedState.ON_GROUND and c.arm_problem(0.0) is None
+    c.height_uncertainty_m = 0.01
+    assert c.in_air() and c.arm_problem(0.0) == "vehicle not landed"
+    c.height_uncertainty_m = math.inf  # no uncertainty known yet: nothing tells it from the ground
+    assert not c.in_air()
+    c.estimator_problem = "estimator not ready: aligning"
+    assert c.arm(0.0).reason == "arming refused: estimator not ready: aligning"  # the cause, first
+    c.estimator_problem, c.height_uncertainty_m = None, 0.3
+    assert c.arm(0.0).accepted
+    c.update_state(state(0.1, p=(0.0, 0.0, 0.39)))
+    assert c.landed_state == LandedState.ON_GROUND  # armed, not taken off: on the ground too
+
+
+def test_the_prearm_verdict_is_announced_when_it_changes_while_disarmed():
+    c = Commander(default_parameters())
+    c.update_state(state(0.0))
+    c.estimator_problem = "estimator not ready: aligning: IMU at rest for 0.2 s of 1.0 s"
+    t, _ = fly(c, 0.0, 0.5)
+    c.estimator_problem = "estimator not ready: aligning: IMU at rest for 0.7 s of 1.0 s"  # figures only
+    t, _ = fly(c, t, 0.5)
+    c.estimator_problem = None
+    t, _ = fly(c, t, 0.5)
+    assert [text for _, text in c.drain_events()] == [
+        "Preflight Fail: estimator not ready: aligning: IMU at rest for 0.2 s of 1.0 s",
+        "ready to arm",
+    ]
+    fly(c, t, 1.0)
+    assert c.drain_events() == []  # ready, and said so: nothing more
+
+
 def test_takeoff_climbs_to_takeoff_altitude_then_holds(commander):
     assert commander.arm(0.0).accepted
     assert commander.takeoff(0.0).accepted

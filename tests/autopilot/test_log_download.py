@@ -124,6 +124,8 @@ def test_logs_are_listed_and_downloaded_byte_identical(two_logs):
     # a range: entries start..end only (MAVSDK asks for all, QGC for ranges when it re-lists)
     assert [e.id for e in client.list(1, 1)] == [1]
     assert [e.id for e in client.list(5, 9)] == [1]  # beyond the logs: the one it clamps to
+    assert [e.id for e in client.list(1, 0)] == [1]  # an end before the start: the start's entry
+    assert [e.id for e in client.list(0, 7)] == [0, 1]  # an end past the last log stops there
     assert stack.autopilot.faults.counts == {}
 
 

@@ -11,7 +11,7 @@ import pytest
 from pymavlink.dialects.v20 import common as m
 
 from autopilot.control import registry
-from autopilot.control.cascade import Cascade, StateEstimate
+from autopilot.control.cascade import Cascade, StateEstimate, law_context
 from autopilot.control.config import load_controller
 from autopilot.control.registry import ControllerFailure, LawError
 from autopilot.params.definitions import controller_config_from_params, default_parameters
@@ -189,3 +189,90 @@ def test_the_papers_laws_are_registered():
     assert set(registry.names(registry.TRANSLATIONAL)) >= {"integral_second_step", "integral_first_step",
                                                            "backstepping"}  # fmt: skip
     assert set(registry.names(registry.ROTATIONAL)) >= {"nlhinf", "integral_backstepping"}
+
+
+BOTH_HALVES = '''
+"""A PD position law and a PD attitude law in one file, registered under one name."""
+import math
+from dataclasses import dataclass
+
+from autopilot.control.registry import ROTATIONAL, TRANSLATIONAL, register
+from autopilot.control.translational import thrust_and_tilt
+from autopilot.control.tunable import Tunable, TunableLaw
+from quadcommon.kernel import kernel
+
+
+@kernel
+def position_step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw,
+                  dt, integrate):
+    a = [ref_acceleration[i] - g[0] * (position[i] - ref_position[i]) - g[1] * (velocity[i] - ref_velocity[i])
+         for i in range(3)]
+    thrust, roll, pitch, thrust_limited, tilt_limited = thrust_and_tilt(g[2], g[3], g[4], g[5], a[0], a[1],
+                                                                        a[2], euler)
+    return thrust, roll, pitch, a[0], a[1], a[2], thrust_limited, tilt_limited
+
+
+@kernel
+def attitude_step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
+    return (-g[0] * (euler[0] - eta_d[0]) - g[1] * (euler_rates[0] - eta_d_dot[0]),
+            -g[0] * (euler[1] - eta_d[1]) - g[1] * (euler_rates[1] - eta_d_dot[1]),
+            -g[0] * (euler[2] - eta_d[2]) - g[1] * (euler_rates[2] - eta_d_dot[2]))
+
+
+@dataclass(frozen=True)
+class Gains:
+    law: str
+    kp: float
+    kd: float
+
+
+@register(TRANSLATIONAL)
+class Position(TunableLaw):
+    NAME = "both_pd"
+    GAINS = Gains
+    TUNABLE = (Tunable("kp", "BOTH_XY_KP", 0.0, 100.0), Tunable("kd", "BOTH_XY_KD", 0.0, 100.0))
+    step = staticmethod(position_step)
+
+    @staticmethod
+    def pack(gains, context):
+        return (gains.kp, gains.kd, context.mass_kg, context.gravity_m_s2, context.thrust_max_n,
+                math.sin(context.tilt_max_rad))
+
+
+@register(ROTATIONAL)
+class Attitude(TunableLaw):
+    NAME = "both_pd"
+    GAINS = Gains
+    TUNABLE = (Tunable("kp", "BOTH_ATT_KP", 0.0, 100.0), Tunable("kd", "BOTH_ATT_KD", 0.0, 100.0))
+    step = staticmethod(attitude_step)
+
+    @staticmethod
+    def pack(gains, context):
+        return (gains.kp, gains.kd)
+'''
+
+
+def test_one_file_may_register_both_halves_of_a_cascade_under_one_name(overlay):
+    """docs/controllers.md, "Both halves in one file": names are per loop."""
+    (overlay / "laws").mkdir()
+    (overlay / "laws" / "both_pd.py").write_text(BOTH_HALVES)
+    (overlay / "controllers").mkdir()
+    (overlay / "controllers" / "both_pd.toml").write_text(
+        'name = "both_pd"\n[translational]\nlaw = "both_pd"\nkp = 4.0\nkd = 3.0\n'
+        '[rotational]\nlaw = "both_pd"\nkp = 1.0\nkd = 0.1\n'
+        "[command_filter]\nnatural_frequency_rad_s = 60.0\ndamping = 0.9\n"
+    )
+    config = load_controller("both_pd")
+    assert (config.translational.kp, config.rotational.kp) == (4.0, 1.0)
+    assert registry.law(registry.TRANSLATIONAL, "both_pd") is not registry.law(registry.ROTATIONAL, "both_pd")
+    params = default_parameters(config, load_sitl().rates)
+    assert (params["BOTH_XY_KP"], params["BOTH_ATT_KP"]) == (4.0, 1.0)
+    context = law_context(config, load_vehicle("paper_quad"), 0.002)
+    position = registry.BoundLaw(registry.TRANSLATIONAL, config.translational, context)
+    attitude = registry.BoundLaw(registry.ROTATIONAL, config.rotational, context)
+    out = position.step((0.0, 0.0, 0.9), (0.0,) * 3, (0.0,) * 3, (0.0, 0.0, 1.0), (0.0,) * 3, (0.0,) * 3, 0.0,
+                        0.002, True)  # fmt: skip
+    assert out.acceleration_z_m_s2 == pytest.approx(4.0 * 0.1)  # kp * 0.1 m below
+    torque = attitude.step((0.1, 0.0, 0.0), (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, 0.002,
+                           True)  # fmt: skip
+    assert torque[0] == pytest.approx(-0.1)

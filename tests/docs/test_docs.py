@@ -175,6 +175,67 @@ def test_no_development_history_in_user_facing_text() -> None:
     assert hits == []
 
 
+# Narration in the pages a user reads: a diary of how the product got here instead of what it is
+# ("at the time of writing", "the earlier run found ...", "it is 5 s now", "no longer", ...).
+# Phrases, not words: "now" and "earlier" alone describe the product too ("what each channel does
+# now", "saturates earlier").
+DIARY = re.compile(
+    r"\bat the time of writing\b"
+    r"|\b(?:the|an|our|this) earlier (?:run|version|release|session|measurement|attempt|code|fix)s?\b"
+    r"|\b(?:it|this|that|which) (?:is|was) [\d.,]+ ?[a-zµ%]* now\b"
+    r"|\b(?:is|are) now\b|\bnow (?:does|uses|has|takes|flies|refuses|accepts|waits|works)\b"
+    r"|\bused to (?:be|have|take|give|fly|say|refuse|accept|wait|fail|work)\b"
+    r"|\bno longer\b|\bany ?more\b|\bpreviously\b|\bformerly\b|\brecently\b"
+    r"|\bas of (?:now|today|this|the (?:latest|current)|version|release|commit|v?\d"
+    r"|(?:jan|feb|mar|apr|may|jun|jul|aug|sep|oct|nov|dec)[a-z]*)\b"
+    r"|\b(?:this|last|the previous|the last) (?:session|sitting|wave)\b"
+    r"|\b(?:was|were|has been|have been) (?:fixed|changed|renamed|removed|added|rewritten|reworked|moved"
+    r"|introduced|dropped)\b",
+    re.IGNORECASE,
+)
+
+
+def narrated_pages() -> list[Path]:
+    return [REPO / "README.md", REPO / "CONTRIBUTING.md", *sorted(DOCS.rglob("*.md"))]
+
+
+def diary_in(path: Path) -> list[str]:
+    relative = str(path.relative_to(REPO))
+    return [
+        f"{relative}:{number}: {match.group(0)!r} in {line.strip()[:100]!r}"
+        for number, line in enumerate(path.read_text().splitlines(), 1)
+        for match in DIARY.finditer(line)
+    ]
+
+
+def test_no_narration_in_the_pages() -> None:
+    """README, CONTRIBUTING and docs/ say what the product is and does, not how it got there
+    (that is CHANGELOG.md's and git's)."""
+    hits = [hit for path in narrated_pages() for hit in diary_in(path)]
+    assert hits == []
+
+
+def test_the_narration_check_finds_narration() -> None:
+    planted = [
+        "Measured at the time of writing.", "The earlier run found 8 frames.", "It is 5 s now.",
+        "The recorder is now faster.", "It used to be 1 s.", "A stream no longer holds it back.",
+        "Previously the join waited.", "As of version 0.2 it waits.", "In this session we fixed it.",
+        "The timeout was changed to 5 s.", "It now takes 5 s.",
+    ]
+    fine = [
+        "The key used to sign the stream.", "What each channel does now:", "It saturates earlier.",
+        "The session's Parquet.", "A recorder session ends at the disarm.", "It is 5 s long.",
+    ]
+    probe = DOCS / "__probe_narration.md"
+    probe.write_text("\n".join(planted + fine) + "\n")
+    try:
+        hits = diary_in(probe)
+    finally:
+        probe.unlink()
+    assert len(hits) == len(planted), hits
+    assert all(f":{i}:" in hit for i, hit in enumerate(hits, 1)), hits
+
+
 def test_the_history_check_finds_history(tmp_path: Path) -> None:
     probe = tmp_path / "probe.md"
     probe.write_text("Fixed in issue 9.\nMeasured 2026-12-02.\nBefore: 3 s.\n(~800 lines)\nfine text\n")

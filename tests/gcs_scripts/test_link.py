@@ -139,3 +139,22 @@ def test_telemetry_accessors_in_both_frames() -> None:
     assert link.yaw_paper == pytest.approx(-0.3)
     assert link.armed and link.mode == "AUTO.LOITER" and link.landed_state_name == "IN_AIR"
     assert conn.sent("HEARTBEAT")[0].type == mavutil.mavlink.MAV_TYPE_GCS  # a GCS announces itself
+
+
+def test_a_refusal_longer_than_one_statustext_is_named_whole() -> None:
+    """A reason of more than 50 bytes comes in chunks (MAVLink 2 ``id``/``chunk_seq``): the client
+    joins them before naming the refusal."""
+    reason = "arming refused: estimator not ready: vertical position not converged (1-sigma 0.75 m > 0.3 m)"
+    raw = reason.encode()
+    chunks = [raw[i : i + 50] for i in range(0, len(raw), 50)]
+
+    def vehicle(conn, msg):
+        if msg.get_type() == "COMMAND_LONG":
+            texts = [VEHICLE.pack(mavlink2.MAVLink_statustext_message(4, chunk, 7, seq))
+                     for seq, chunk in enumerate(chunks)]  # fmt: skip
+            conn.deliver([_ack(msg.command, 2), *texts])
+
+    link = Link(ScriptedConnection(vehicle), instance=0)
+    with pytest.raises(CommandFailed, match=r"DENIED: arming refused: .*\(1-sigma 0\.75 m > 0\.3 m\)$"):
+        link.arm()
+    assert [text for _, _, text in link.statustext] == [reason]
