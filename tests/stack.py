@@ -21,11 +21,15 @@ def make_stack(
     vehicle: str | None = None,
     log=lambda text: None,
     log_dir: str | None = None,
+    battery: dict | None = None,
     **sitl_changes,
 ) -> Lockstep:
     """A vehicle on the ground (or where ``scenario`` puts it), nothing armed, no client yet;
-    ``log_dir``: its flight logs (ULog) go there (default: no flight log)."""
+    ``log_dir``: its flight logs (ULog) go there (default: no flight log); ``battery``: changes to
+    the vehicle's ``[battery]`` (``BatteryConfig`` fields), for both processes."""
     sim = SimulatorSetup.load(scenario=scenario, vehicle=vehicle, sensors=sensors)
+    if battery:
+        sim = replace(sim, vehicle=replace(sim.vehicle, battery=replace(sim.vehicle.battery, **battery)))
     if sitl_changes:
         sim = replace(sim, sitl=replace(sim.sitl, **sitl_changes))
     ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller(controller), params_file=params_file,
