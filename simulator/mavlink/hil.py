@@ -29,8 +29,8 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
   Euler convention) in ``data[0:6]``.
 * ``BATTERY_STATUS`` (at the battery monitor's rate, :mod:`simulator.battery`): the pack's voltage
   in ``voltages[0]`` (mV, MAVLink's split above 65 534 mV), current in cA (-1: not measured),
-  every other field "unknown" (see :mod:`quadcommon.wire`); a reading that is not a number goes
-  out as the unknowns.
+  every other field "unknown" (see :mod:`quadcommon.wire`); a reading that is not a finite number
+  goes out as the unknowns.
 * ``HIL_GPS`` (when a fix is delivered): the reading's fix type (3D, or 1 "no fix" in an
   outage), lat/lon/alt as above but from the (noisy) GPS
   reading, eph/epv in cm (PX4 reads them as cm), ground speed and NED velocity (cm/s), course
@@ -213,16 +213,17 @@ class HilFrameEncoder:
 
     def _fill_battery(self, reading: BatteryReading) -> None:
         """The monitor's reading as BATTERY_STATUS: mV in voltages[0] (and [1] past 65 534 mV),
-        cA; not a number: the field's unknown (65535 mV, -1 cA)."""
+        cA; not a finite number: the field's unknown (65535 mV, -1 cA)."""
         v, cells = self._battery.values, self._b_cells
-        volts = reading.voltage_v
-        millivolts = sat_u16(volts * 1000.0, 2 * CELL_VOLTAGE_MAX_MV) if volts == volts else UINT16_UNKNOWN
-        if volts == volts and millivolts > CELL_VOLTAGE_MAX_MV:
-            v[cells], v[cells + 1] = CELL_VOLTAGE_MAX_MV, millivolts - CELL_VOLTAGE_MAX_MV
+        volts, current = reading.voltage_v, reading.current_a
+        if not math.isfinite(volts):
+            v[cells], v[cells + 1] = UINT16_UNKNOWN, UINT16_UNKNOWN
         else:
-            v[cells], v[cells + 1] = millivolts, UINT16_UNKNOWN
-        current = reading.current_a
-        v[self._b_current] = sat_i16(current * 100.0) if current == current else -1
+            millivolts = sat_u16(volts * 1000.0, 2 * CELL_VOLTAGE_MAX_MV)
+            split = millivolts > CELL_VOLTAGE_MAX_MV
+            v[cells] = CELL_VOLTAGE_MAX_MV if split else millivolts
+            v[cells + 1] = millivolts - CELL_VOLTAGE_MAX_MV if split else UINT16_UNKNOWN
+        v[self._b_current] = sat_i16(current * 100.0) if math.isfinite(current) else -1
 
     def _fill_vision(self, time_usec: int, reading: VisionReading) -> None:
         """Position (NED) and yaw of the motion capture; its reported variances in the

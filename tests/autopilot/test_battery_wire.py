@@ -37,10 +37,11 @@ def test_the_reading_crosses_the_wire_to_the_millivolt_and_centiamp(volts, amps)
     assert report.current_a == pytest.approx(amps, abs=5e-3)
 
 
-def test_what_the_monitor_does_not_know_crosses_as_unknown():
-    assert math.isnan(battery_report(encoded(BatteryReading(11.1, math.nan))).current_a)
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_what_the_monitor_does_not_know_crosses_as_unknown(bad):
+    assert math.isnan(battery_report(encoded(BatteryReading(11.1, bad))).current_a)
     with pytest.raises(RefusedReport, match="no voltage"):
-        battery_report(encoded(BatteryReading(math.nan, math.nan)))
+        battery_report(encoded(BatteryReading(bad, 8.0)))
 
 
 def hostile(**fields) -> bytes:
