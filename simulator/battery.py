@@ -242,6 +242,20 @@ class BatteryModel:
             return BatteryReading(math.nan, math.nan)
         return BatteryReading(truth.terminal_v * WRONG_VOLTAGE_SCALE, current)  # FAILURE_WRONG
 
+    def info(self) -> dict:
+        """The pack's truth and the monitor's settings (``quadsitl/<N>/info``)."""
+        truth = self.truth
+        return {
+            "state_of_charge": truth.state_of_charge,
+            "voltage_v": truth.terminal_v,
+            "current_a": truth.current_a,
+            "charge_drawn_mah": truth.charge_drawn_c / MAH_TO_COULOMB,
+            "failure": FAILURES[self.failure],
+            "SIM_BAT_ENABLE": int(self.enabled),
+            "SIM_BAT_DRAIN": self.drain_s,
+            "SIM_BAT_MIN_PCT": 100.0 * self.drain_min,
+        }
+
     # -- what the autopilot's channel calls ------------------------------------------------------
     def inject_failure(self, failure_type: int) -> bool:
         """MAV_CMD_INJECT_FAILURE for the battery: ``failure_type`` a MAVLink FAILURE_TYPE

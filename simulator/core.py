@@ -376,6 +376,7 @@ class SimulatorCore:
             "control_hz": self.control_hz,
             "sim_time_s": self.t,
             "resends": self.resends,
+            "battery": self.battery.info(),
         }
 
 

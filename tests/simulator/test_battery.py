@@ -217,6 +217,10 @@ def test_the_simulator_core_takes_the_battery_parameters():
     assert core.set_battery_parameter("SIM_BAT_MIN_PCT", 12.5) and core.battery.drain_min == 0.125
     assert not core.set_battery_parameter("SIM_BAT_MIN_PCT", math.nan)
     assert core.battery.drain_min == 0.125
+    assert core.battery.inject_failure(m.FAILURE_TYPE_OFF)
+    battery = core.info()["battery"]
+    assert battery["SIM_BAT_MIN_PCT"] == 12.5 and battery["failure"] == "off (reads empty)"
+    assert battery["state_of_charge"] == 1.0
 
 
 def test_the_vehicle_files_battery_is_validated_naming_file_key_value_and_range(tmp_path):
