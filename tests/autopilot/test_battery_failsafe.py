@@ -191,9 +191,9 @@ def crossing(frames, t: float) -> tuple[float, float]:
 
 
 def test_a_draining_battery_warns_returns_then_lands_at_its_thresholds():
-    """COM_LOW_BAT_ACT 3, SIM_BAT_DRAIN 40 s to 0 %: at 15 % "Low battery level", at 7 % a return,
+    """COM_LOW_BAT_ACT 3, SIM_BAT_DRAIN 25 s to 0 %: at 15 % "Low battery level", at 7 % a return,
     at 5 % a landing where the vehicle is; in that order, each once, at the estimate's crossing."""
-    stack, frames, texts = drain_flight(3, drain_s=40.0, min_pct=0.0)
+    stack, frames, texts = drain_flight(3, drain_s=25.0, min_pct=0.0)
     low = announced(texts, "Low battery level, return advised")
     critical = announced(texts, "Failsafe activated due to critical battery level, triggering RTL")
     emergency = announced(texts, "Failsafe activated due to emergency battery level, triggering land")
@@ -213,7 +213,7 @@ def test_a_draining_battery_warns_returns_then_lands_at_its_thresholds():
 def test_a_critical_battery_returns_home_and_lands_there():
     """COM_LOW_BAT_ACT 3 with the drain held at 6 % (SIM_BAT_MIN_PCT, between the critical and the
     emergency levels): the vehicle 8 m away returns and lands at home; no emergency."""
-    stack, frames, texts = drain_flight(3, drain_s=45.0, min_pct=6.0, away_m=8.0, until_s=110.0)
+    stack, frames, texts = drain_flight(3, drain_s=30.0, min_pct=6.0, away_m=8.0)
     assert len(announced(texts, "Failsafe activated due to critical battery level, triggering RTL")) == 1
     assert announced(texts, "Failsafe activated due to emergency") == []
     assert not stack.autopilot.commander.armed
