@@ -44,6 +44,7 @@ from quadcommon.config import SitlConfig, VehicleConfig, config_path, load_scena
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
+from .battery.estimator import BatteryEstimator
 from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
 from .control.cascade import AttitudeReference, Cascade, StateEstimate
@@ -58,7 +59,16 @@ from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
 from .mavlink.dispatch import FaultLog, MessageDispatcher
-from .mavlink.hil import DISTURBANCE_ID, ActuatorEncoder, CorruptFrame, decode_frame, disturbance_of
+from .mavlink.hil import (
+    BATTERY_ID,
+    DISTURBANCE_ID,
+    ActuatorEncoder,
+    CorruptFrame,
+    RefusedReport,
+    battery_report,
+    decode_frame,
+    disturbance_of,
+)
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.manual import decode_sticks
@@ -187,6 +197,7 @@ class AutopilotCore:
         for problem in consistency_problems(self.params):
             log(f"warning: parameters inconsistent (arming refused until fixed): {problem}")
         self.commander = Commander(self.params)
+        self.battery = BatteryEstimator(self.params)  # the one estimate of the flight battery
         gains = controller_config_from_params(setup.controller, self.params)
         self.cascade = Cascade(gains, setup.vehicle, self.dt)
         self._thrust_max_n = setup.vehicle.actuation.thrust_max_n  # U1_max: the manual modes' thrust scale
@@ -394,6 +405,7 @@ class AutopilotCore:
         self.log("simulator time went backwards: simulator restarted; resetting")
         self.commander.disarm(self.sim_time, force=True)
         self.commander.home = None
+        self.battery.reset()
         self.last_time_usec = -1
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
@@ -414,6 +426,7 @@ class AutopilotCore:
             commander.update_state(
                 VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
             )
+        self._battery_step(t, frame.parts)
         if self.frames == 0 and self.setup.autostart is not None:
             commander.start_scenario(t, self.setup.autostart)
         self.frames += 1
@@ -436,6 +449,19 @@ class AutopilotCore:
         self._frame_done = (frame, guidance, output)
         self._last_answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
         return self._last_answer
+
+    def _battery_step(self, t: float, parts: dict | None) -> None:
+        """The frame's battery report (if any) into the estimate, refused at the edge when it is no
+        reading (counted); the estimate to the commander."""
+        raw = parts.get(BATTERY_ID) if parts is not None else None
+        if raw is not None:
+            try:
+                report = battery_report(raw)
+            except RefusedReport as refused:
+                self.on_foreign_datagram(f"HIL BATTERY_STATUS refused: {refused}")
+            else:
+                self.battery.update(t, report.voltage_v, report.current_a, self.commander.armed)
+        self.commander.update_battery(self.battery.status, self.battery.unhealthy(t))
 
     def _cascade_step(self, est: StateEstimate, guidance):
         """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'
@@ -561,6 +587,7 @@ class AutopilotCore:
             s.output = output
             s.controls = self._controls
             s.estimator = self.estimator.last_status if self.estimator is not None else None
+            s.battery = self.battery.status
             log.sample_due(frame.parts)
 
     @property
@@ -588,6 +615,8 @@ class AutopilotCore:
         values = self.params.values
         s.geofence_enabled = values["GF_MAX_HOR_DIST"] > 0.0 or values["GF_MAX_VER_DIST"] > 0.0
         s.geofence_breached = c.failsafes.fence_breached
+        s.battery = self.battery.status
+        s.battery_unhealthy = c.battery.unhealthy
         if output is not None:
             s.euler_ref = output.euler_ref_rad
             s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n
@@ -726,7 +755,7 @@ class AutopilotCore:
                 self.statustext(m.MAV_SEVERITY_CRITICAL, f"retune failed: {exc}")
         if name.startswith(("EKF2_", "EST_")) and self.estimator is not None:
             self.estimator.ekf.set_params(estimator_params(self.params))
-        if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_")):
+        if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_", "BAT")):
             for problem in consistency_problems(self.params):
                 self.statustext(
                     m.MAV_SEVERITY_WARNING, f"parameters inconsistent (arming refused): {problem}"

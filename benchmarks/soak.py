@@ -2,7 +2,9 @@
 
 One vehicle (instance 66: simulator + autopilot, lockstep, ``--speed max`` by default) flies the
 same mission again and again (takeoff to 2.5 m, a 4 m square at 2.5 m, land; uploaded once,
-flown, disarmed, flown again) until ``--sim-hours`` of simulation time have passed, with the
+flown, disarmed, flown again) until ``--sim-hours`` of simulation time have passed, on a 100 Ah
+pack (``paper_quad`` otherwise: about 11 hours of hover; the shipped 2.2 Ah pack would refuse to
+arm after a quarter of an hour), with the
 recorder (``python -m gcs_scripts.record``: tlog + Parquet) and the live view server
 (``python -m gcs_scripts.view``: zenoh truth + controller, the MAVLink telemetry, pushing to any
 page) attached for the whole run. ``--impair LINK:SPEC`` passes faults to ``quadsitl up``'s
@@ -43,6 +45,7 @@ sys.path.insert(0, str(REPO))
 
 from gcs_scripts import upload_mission  # noqa: E402
 from quadcommon import bus, wire  # noqa: E402
+from quadcommon.config import config_path  # noqa: E402
 from sitl.launcher import Launcher, VehicleSpec  # noqa: E402
 
 INSTANCE = 66
@@ -119,7 +122,12 @@ def main() -> int:
     target_s = args.sim_hours * 3600.0
     out = Path(args.out or tempfile.mkdtemp(prefix="quadsitl-soak-"))
     out.mkdir(parents=True, exist_ok=True)
-    spec = VehicleSpec(instance=INSTANCE, scenario="hover", speed=args.speed, impair=tuple(args.impair))
+    vehicle = out / "soak_quad.toml"  # paper_quad on a pack that lasts the soak
+    vehicle.write_text(config_path("vehicle", "paper_quad").read_text()
+                       .replace('name = "paper_quad"', 'name = "soak_quad"')
+                       .replace("capacity_mah = 2200.0", "capacity_mah = 100000.0"))  # fmt: skip
+    spec = VehicleSpec(instance=INSTANCE, vehicle=str(vehicle), scenario="hover", speed=args.speed,
+                       impair=tuple(args.impair))  # fmt: skip
     python = [sys.executable, "-u", "-m"]
     env_note = f"speed {args.speed}, impair {' '.join(args.impair) or 'none'}"
     print(f"soak: {args.sim_hours:g} h simulated, {env_note}; recording in {out}", flush=True)

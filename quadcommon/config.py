@@ -3,7 +3,8 @@
 Files and what they hold:
 
 * ``config/vehicle/NAME.toml``: the nominal model the controllers know (Section IV), the "true"
-  plant the simulator flies (CoM offset, products of inertia, drag), actuation and rotors.
+  plant the simulator flies (CoM offset, products of inertia, drag), actuation, rotors and the
+  battery.
 * ``config/controllers/NAME.toml``: read by :mod:`autopilot.control.config` (the laws' own schemas).
 * ``config/scenarios/NAME.toml``: trajectory, initial state, parametric uncertainty, gust profile,
   duration.
@@ -198,6 +199,38 @@ class Rotors:
     speed_max_rad_s: float
 
 
+# PX4's battery-simulator parameters, their ranges (PX4's) and what they set in ``[battery]``: the
+# vehicle file gives their values at start; the autopilot declares them (autopilot.params) and the
+# simulator's model takes them (simulator.battery.BatteryModel.set_parameter).
+SIM_BATTERY_PARAMETERS = {  # name: (lo, hi, unit, [battery] key)
+    "SIM_BAT_ENABLE": (0.0, 1.0, "", "enabled"),
+    "SIM_BAT_DRAIN": (0.0, 86400.0, "s", "drain_s"),
+    "SIM_BAT_MIN_PCT": (0.0, 100.0, "%", "drain_min_pct"),
+}
+
+
+@dataclass(frozen=True)
+class BatteryConfig:
+    """The flight battery (``[battery]``): the pack the simulator flies (:mod:`simulator.battery`),
+    and the defaults of the autopilot's battery parameters (``BAT1_*``, ``BAT_AVRG_CURRENT``,
+    ``SIM_BAT_*``) for this vehicle. Every key has a default: a 3S 2200 mAh LiPo."""
+
+    cells: int = 3  # in series (BAT1_N_CELLS)
+    capacity_mah: float = 2200.0  # BAT1_CAPACITY
+    initial_charge: float = 1.0  # state of charge at the start, 0-1
+    internal_resistance_ohm: float = 0.045  # the whole pack's: the terminal voltage sags I R
+    empty_cell_v: float = 3.6  # BAT1_V_EMPTY; SIM_BAT_DRAIN's voltage at 0 %
+    charged_cell_v: float = 4.05  # BAT1_V_CHARGED; SIM_BAT_DRAIN's voltage at 100 %
+    avionics_power_w: float = 3.0  # flight controller, receiver, GPS: drawn whenever powered
+    motor_efficiency: float = 0.75  # electrical to shaft power, motors and speed controllers
+    rotor_radius_m: float = 0.127  # actuation "wrench": the rotor disc of momentum theory
+    figure_of_merit: float = 0.4  # actuation "wrench": ideal over actual rotor power
+    average_current_a: float = 15.0  # BAT_AVRG_CURRENT: the expected current in flight
+    enabled: bool = True  # SIM_BAT_ENABLE: the monitor reports the pack
+    drain_s: float = 0.0  # SIM_BAT_DRAIN: 0 the pack model; > 0 PX4's linear drain, full to empty (s)
+    drain_min_pct: float = 50.0  # SIM_BAT_MIN_PCT: where PX4's linear drain stops (%)
+
+
 @dataclass(frozen=True)
 class VehicleConfig:
     name: str
@@ -205,6 +238,7 @@ class VehicleConfig:
     plant: PlantStructure
     actuation: Actuation
     rotors: Rotors
+    battery: BatteryConfig = BatteryConfig()
 
 
 def load_vehicle(name_or_path: str | Path = "paper_quad") -> VehicleConfig:
@@ -263,10 +297,43 @@ def load_vehicle(name_or_path: str | Path = "paper_quad") -> VehicleConfig:
     if rotors.speed_min_rad_s >= rotors.speed_max_rad_s:
         raise sec.error("speed_min_rad_s", rotors.speed_min_rad_s, "< rotors.speed_max_rad_s")
     sec.finish()
+    battery = load_battery(root.section("battery", optional=True))
     root.finish()
 
     _check_inertia_tensor(path, plant)
-    return VehicleConfig(name, nominal, plant, actuation, rotors)
+    return VehicleConfig(name, nominal, plant, actuation, rotors, battery)
+
+
+def load_battery(sec: Section) -> BatteryConfig:
+    """``[battery]`` of a vehicle file (every key optional: :class:`BatteryConfig`'s defaults)."""
+    d = BatteryConfig()
+    empty = sec.number("empty_cell_v", d.empty_cell_v, lo=2.5, hi=4.2, unit="V")
+    battery = BatteryConfig(
+        cells=sec.integer("cells", d.cells, lo=1, hi=16),
+        capacity_mah=sec.number("capacity_mah", d.capacity_mah, lo=0.0, lo_open=True, hi=100000.0,
+                                unit="mAh"),
+        initial_charge=sec.number("initial_charge", d.initial_charge, lo=0.0, hi=1.0),
+        internal_resistance_ohm=sec.number("internal_resistance_ohm", d.internal_resistance_ohm, lo=0.0,
+                                           hi=2.0, unit="ohm"),
+        empty_cell_v=empty,
+        charged_cell_v=sec.number("charged_cell_v", d.charged_cell_v, lo=empty, lo_open=True, hi=4.5,
+                                  unit="V"),
+        avionics_power_w=sec.number("avionics_power_w", d.avionics_power_w, lo=0.0, hi=1000.0, unit="W"),
+        motor_efficiency=sec.number("motor_efficiency", d.motor_efficiency, lo=0.0, lo_open=True, hi=1.0),
+        rotor_radius_m=sec.number("rotor_radius_m", d.rotor_radius_m, lo=0.0, lo_open=True, hi=2.0, unit="m"),
+        figure_of_merit=sec.number("figure_of_merit", d.figure_of_merit, lo=0.0, lo_open=True, hi=1.0),
+        average_current_a=sec.number("average_current_a", d.average_current_a, lo=0.0, hi=500.0, unit="A"),
+        enabled=sec.boolean("enabled", d.enabled),
+        drain_s=_sim_battery_number(sec, "SIM_BAT_DRAIN", d.drain_s),
+        drain_min_pct=_sim_battery_number(sec, "SIM_BAT_MIN_PCT", d.drain_min_pct),
+    )  # fmt: skip
+    sec.finish()
+    return battery
+
+
+def _sim_battery_number(sec: Section, parameter: str, default: float) -> float:
+    lo, hi, unit, key = SIM_BATTERY_PARAMETERS[parameter]
+    return sec.number(key, default, lo=lo, hi=hi, unit=unit)
 
 
 def _check_inertia_tensor(path: Path, plant: PlantStructure) -> None:

@@ -41,6 +41,16 @@ least every :data:`DISTURBANCE_REPORT_EVERY_S` of simulated time (an autopilot t
 learns it); a receiver holds the last report (``simulator.core.DisturbanceReport``). The flight
 log's ``sim_disturbance`` comes from it.
 
+The frame carries the flight battery as a power module measures it, a ``BATTERY_STATUS`` from
+the simulator's component at :data:`BATTERY_REPORT_HZ` (simulator.battery): ``voltages[0]`` the
+pack's voltage in mV (above 65 534 mV, 65 534 there and the rest in ``voltages[1]``, MAVLink's
+rule), the other cells ``UINT16_MAX``; ``current_battery`` in cA (-1: not measured); every other
+field MAVLink's "unknown" (``current_consumed`` and ``energy_consumed`` -1, ``battery_remaining``
+-1, ``temperature`` ``INT16_MAX``, ``charge_state`` UNDEFINED): the autopilot estimates the charge
+itself (autopilot.battery). A reading that is not a number goes out as those unknowns; the
+autopilot refuses a report without a voltage or with a current below -1 (counted), and a pack
+that stops reporting for 5 s is unhealthy there.
+
 ``HIL_ACTUATOR_CONTROLS``: ``mode`` has ``MAV_MODE_FLAG_SAFETY_ARMED`` when armed;
 ``flags`` bit 0 = lockstep (always set), bit 1 = ``controls`` are a normalised wrench
 (``actuation = "wrench"``: U1/U1_max, then tau_x, tau_y, tau_z / tau_max in FRD body axes),
@@ -82,6 +92,9 @@ SIMULATOR_COMPONENT_ID = 51  # a component of the same system on the HIL link (n
 # The applied disturbance in the lockstep frame (see the module's docstring).
 DISTURBANCE_NAME = b"DISTURB"
 DISTURBANCE_REPORT_EVERY_S = 1.0
+
+# The flight battery's monitor in the lockstep frame (see the module's docstring).
+BATTERY_REPORT_HZ = 20.0
 
 HIL_FLAG_LOCKSTEP = 1
 HIL_FLAG_WRENCH = 2

@@ -6,7 +6,8 @@ flown when the autopilot is lost. One lockstep period is two calls:
 
 1. :meth:`~SimulatorCore.begin_frame` ``() -> datagram``: the truth and sensor readings at the
    frame's time ``t = k / control_hz`` as ONE datagram (HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY,
-   and HIL_GPS at the GPS rate, all stamped ``time_usec = round(k * 1e6 / control_hz)``); the
+   HIL_GPS at the GPS rate and BATTERY_STATUS at the battery monitor's, all stamped
+   ``time_usec = round(k * 1e6 / control_hz)``); the
    frame's truth row (with the disturbance applied at ``t``) is :attr:`~SimulatorCore.truth_row`;
    If no answer comes within :attr:`~SimulatorCore.resend_after_s` (wall time in the process,
    simulation time in-process), :meth:`~SimulatorCore.resend_frame` gives the same datagram again
@@ -43,6 +44,7 @@ from quadcommon.config import (
 )
 from quadcommon.wire import new_parser, restart_parser
 
+from .battery import BatteryModel
 from .dynamics.plant import make_plant
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
 from .environment.gust_upload import handle_gust_request
@@ -158,6 +160,8 @@ class SimulatorCore:
         self.schedule = self._new_schedule(setup.gusts, 0.0)
         self._pending_schedule: DisturbanceSchedule | None = None
         self.sensors = SensorSuite(setup.sensors, setup.sitl.home[2], imu_rate_hz=rates.control_hz)
+        # The flight battery and its monitor; MAV_CMD_INJECT_FAILURE reaches battery.inject_failure.
+        self.battery = BatteryModel(self.plant_vehicle, setup.sitl.home[2], 1.0 / wire.BATTERY_REPORT_HZ)
         self.encoder = HilFrameEncoder(wire.system_id(setup.instance), setup.sitl.home)
         self.decoder = ActuatorDecoder()
         self._probe = new_parser()  # for is_autopilot: never touches the lockstep decoder
@@ -197,9 +201,10 @@ class SimulatorCore:
         sensed = self.sensors.step(t, truth)
         self.truth_row = truth_row(t, truth, force, torque, wind)
         report = self.disturbance_report.due(time_usec, (force, torque))
+        battery = self.battery.frame(t, self.dt_control if k > 0 else 0.0, truth, self._armed)
         try:
             datagram = self.encoder.encode(
-                time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision, report
+                time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision, report, battery
             )
         except OverflowError as exc:  # finite but past float32: a blow-up a frame or two away
             raise PlantDiverged(f"the plant state no longer fits the wire's float32 at t={t:.3f} s") from exc
@@ -344,6 +349,16 @@ class SimulatorCore:
             )
         return None
 
+    # -- the battery ----------------------------------------------------------------------------
+    def set_battery_parameter(self, name: str, value: float) -> bool:
+        """A PX4 battery-simulator parameter from the autopilot (``SIM_BAT_ENABLE``,
+        ``SIM_BAT_DRAIN``, ``SIM_BAT_MIN_PCT``): validated, applied from the next battery report;
+        False (nothing changed) for another name or a value out of PX4's range."""
+        accepted = self.battery.set_parameter(name, value)
+        if accepted:
+            self.log(f"battery: {name} = {value:g}")
+        return accepted
+
     def _new_schedule(self, profile: GustProfile, start_time_s: float) -> DisturbanceSchedule:
         """The one place schedules are built: evaluated at every physics step, in non-decreasing
         time (the Dryden turbulence samples at ``step_s`` and only runs forward)."""
@@ -361,6 +376,7 @@ class SimulatorCore:
             "control_hz": self.control_hz,
             "sim_time_s": self.t,
             "resends": self.resends,
+            "battery": self.battery.info(),
         }
 
 

@@ -24,12 +24,17 @@ def make_stack(
     log=lambda text: None,
     log_dir: str | None = None,
     estimator: str = "truth",
+    battery: dict | None = None,
     **sitl_changes,
 ) -> Lockstep:
     """A vehicle on the ground (or where ``scenario`` puts it), nothing armed, no client yet;
     ``log_dir``: its flight logs (ULog) go there (default: no flight log); ``estimator="ekf"``:
-    it flies on its EKF, with the filter's parameters for ``sensors`` (as ``quadsitl up``)."""
+    it flies on its EKF, with the filter's parameters for ``sensors`` (as ``quadsitl up``);
+    ``battery``: changes to the vehicle's ``[battery]`` (``BatteryConfig`` fields), for both
+    processes."""
     sim = SimulatorSetup.load(scenario=scenario, vehicle=vehicle, sensors=sensors)
+    if battery:
+        sim = replace(sim, vehicle=replace(sim.vehicle, battery=replace(sim.vehicle.battery, **battery)))
     if sitl_changes:
         sim = replace(sim, sitl=replace(sim.sitl, **sitl_changes))
     profile = estimator_profile_for(sensors or "default") if estimator == "ekf" else "default"

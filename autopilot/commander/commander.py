@@ -34,6 +34,7 @@ from typing import NamedTuple
 
 from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
 
+from ..battery.estimator import BatteryStatus
 from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
@@ -49,7 +50,17 @@ from ..mission.executor import (
 from ..mission.plans import Geofence, RallyPoint
 from ..params.definitions import RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD
 from ..params.store import ParameterStore
-from .failsafe import HOLD, LAND, RTL, WARN, FailsafeMonitor, fence_excess, prearm_problem, rc_loss_action
+from .failsafe import (
+    HOLD,
+    LAND,
+    RTL,
+    WARN,
+    BatteryWatch,
+    FailsafeMonitor,
+    fence_excess,
+    prearm_problem,
+    rc_loss_action,
+)
 from .modes import FlightMode, LandedState
 from .rtl import return_altitude, return_destination
 from .transitions import (
@@ -172,6 +183,7 @@ class Commander:
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
         self.rally_points: list[RallyPoint] = []  # the uploaded rally plan (RTL's destinations)
         self.failsafes = FailsafeMonitor(params)
+        self.battery = BatteryWatch(params)  # the battery's levels, checks and failsafe
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
         self.height_uncertainty_m = 0.0  # 1-sigma of the estimate's height (0: the truth); see in_air()
@@ -479,6 +491,12 @@ class Commander:
         for text in self.failsafes.gcs_heartbeat(t):
             self._event(SEVERITY_INFO, text)
 
+    def update_battery(self, status: BatteryStatus | None, unhealthy: bool) -> None:
+        """The battery's estimate at this control step (None: no battery has reported) and whether
+        its reports stopped (:mod:`autopilot.battery.estimator`); what changed is announced."""
+        for severity, text in self.battery.update(status, unhealthy, self.armed):
+            self._event(severity, text)
+
     def simulator_lost(self) -> None:
         """No sensor frames any more: the position is unknown until they resume (no arming)."""
         self.position_valid = False
@@ -512,18 +530,32 @@ class Commander:
         return self.phase in AUTOMATIC and bool(bits & RC_OVERRIDE_AUTO)
 
     def _check_failsafes(self, t: float, state: VehicleState) -> None:
-        """Data link loss and geofence (failsafe.py); once per step while flying."""
+        """Data link loss, geofence and battery (failsafe.py); once per step while flying."""
         for action, text in self.failsafes.check(t, state.position_m, self.home, self.in_air()):
             if action == WARN:
                 self._event(SEVERITY_WARNING, text)
                 continue
-            event = _FAILSAFE_EVENTS[action]
-            row = lookup(self.phase, event)
-            if row is not None and isinstance(row.to, Phase):
-                self._fire(t, event)
+            if self._failsafe(t, action):
                 self._event(SEVERITY_CRITICAL, f"{text}: {_FAILSAFE_DOING[action]}")
             else:  # the vehicle is already returning or landing: let it
                 self._event(SEVERITY_CRITICAL, f"{text} (already {self.mode.px4_name})")
+        battery = self.battery.action()
+        if battery is not None:
+            severity, (action, text) = battery
+            if action == WARN or self._failsafe(t, action):
+                self._event(severity, text)
+            else:  # a landing (or a return, for a return) under way goes on
+                self._event(severity, f"{text}: already {self.mode.px4_name}")
+
+    def _failsafe(self, t: float, action: str) -> bool:
+        """Take a failsafe's HOLD, RTL or LAND through the table; False when the row keeps the
+        phase (a return or landing under way goes on)."""
+        event = _FAILSAFE_EVENTS[action]
+        row = lookup(self.phase, event)
+        if row is not None and isinstance(row.to, Phase):
+            self._fire(t, event)
+            return True
+        return False
 
     # -- the per-step decision ------------------------------------------------------------------------
     def step(self, t: float, dt: float) -> GuidanceOutput:
@@ -677,7 +709,7 @@ class Commander:
             return f"no manual control input ({self.mode.px4_name} flies on MANUAL_CONTROL)"
         return prearm_problem(
             self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence
-        )
+        ) or self.battery.prearm_problem()
 
     def _announce_readiness(self, t: float) -> None:
         """While disarmed: a change of the pre-arm verdict as PX4 reports it, ``Preflight Fail:

@@ -22,6 +22,16 @@ Each failsafe is a parameter with PX4's name, values and default:
   excepting them).
 * Offboard setpoint loss (``COM_OF_LOSS_T``) and simulator loss (``COM_SIM_LOSS_T``) live in the
   commander and the process shell respectively.
+* Battery (:class:`BatteryWatch`, PX4's batteryCheck.cpp and failsafe.cpp on the estimate of
+  :mod:`autopilot.battery.estimator`): the warning level (low, critical, emergency below
+  ``BAT_LOW_THR``, ``BAT_CRIT_THR``, ``BAT_EMERGEN_THR``) only rises while armed (the hysteresis:
+  a sagging pack that recovers under a lighter load does not clear it), and follows the estimate
+  while disarmed; a pack connected at arming that disconnects counts as critical. Each level
+  reached while flying is announced once as PX4 words it and acts by ``COM_LOW_BAT_ACT``
+  (:data:`LOW_BATTERY_ACTIONS`), unless the level was there at arming already (then only
+  announced). A pack that stops reporting for 5 s is unhealthy (announced, no action: PX4's
+  warning after spool-up); faults (over-voltage) are announced. Arming is refused at the critical
+  level or below, with an unhealthy pack or a fault (PX4, ``COM_ARM_BAT_MIN`` unset).
 
 Actions are returned as :class:`FailsafeAction` records; the commander applies them (it knows how
 to hold, return and land) and a failsafe never overrides a landing or return already under way.
@@ -30,8 +40,17 @@ to hold, return and land) and a failsafe never overrides a landing or return alr
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
+from ..battery.estimator import (
+    FAULT_NAMES,
+    WARNING_CRITICAL,
+    WARNING_EMERGENCY,
+    WARNING_LOW,
+    WARNING_NONE,
+    BatteryStatus,
+)
 from ..mission.plans import Geofence
 from ..params.definitions import (
     DLL_HOLD,
@@ -41,6 +60,10 @@ from ..params.definitions import (
     GF_LAND,
     GF_RTL,
     GF_WARN,
+    LOW_BAT_LAND,
+    LOW_BAT_RTL,
+    LOW_BAT_RTL_THEN_LAND,
+    LOW_BAT_WARN,
     RCL_HOLD,
     RCL_LAND,
     RCL_RTL,
@@ -60,6 +83,120 @@ FENCE_REARM_M = 0.5  # back inside by this much (or 10 % of the limit if smaller
 class FailsafeAction(NamedTuple):
     action: str  # WARN, HOLD, RTL or LAND
     text: str  # for STATUSTEXT (the commander adds what it does)
+
+
+# MAV_SEVERITY
+EMERGENCY, CRITICAL, WARNING = 0, 2, 4
+# COM_LOW_BAT_ACT -> what each battery level does (PX4's failsafe.cpp, fromBatteryWarningActParam).
+_W, _R, _L, _RL = LOW_BAT_WARN, LOW_BAT_RTL, LOW_BAT_LAND, LOW_BAT_RTL_THEN_LAND
+# fmt: off
+LOW_BATTERY_ACTIONS = {  # level: {COM_LOW_BAT_ACT: action}
+    #                  0 warning, 1 return, 2 land,   3 return, then land
+    WARNING_LOW:       {_W: WARN, _R: WARN, _L: WARN, _RL: WARN},
+    WARNING_CRITICAL:  {_W: WARN, _R: RTL,  _L: LAND, _RL: RTL},
+    WARNING_EMERGENCY: {_W: WARN, _R: RTL,  _L: LAND, _RL: LAND},
+}
+# fmt: on
+# PX4's words for each level: the warning (severity, text), the failsafe's cause, the pre-arm check's.
+BATTERY_WARNINGS = {
+    WARNING_LOW: (WARNING, "Low battery level, return advised"),
+    WARNING_CRITICAL: (CRITICAL, "Critical battery level, land now"),
+    WARNING_EMERGENCY: (EMERGENCY, "Emergency battery level, land immediately"),
+}
+BATTERY_CAUSES = {WARNING_LOW: "low battery level", WARNING_CRITICAL: "critical battery level",
+                  WARNING_EMERGENCY: "emergency battery level"}  # fmt: skip
+BATTERY_CHECKS = {WARNING_LOW: "Low battery", WARNING_CRITICAL: "Critical battery",
+                  WARNING_EMERGENCY: "Emergency battery level"}  # fmt: skip
+_ACTION_WORDS = {RTL: "RTL", LAND: "land"}  # PX4's failsafe_action_t
+
+
+class BatteryWatch:
+    """The commander's view of the battery (see the module's docstring): :meth:`update` once per
+    control step with the estimate, :meth:`action` while flying, :meth:`prearm_problem` at arming.
+    """
+
+    def __init__(self, params: ParameterStore) -> None:
+        self.params = params
+        self.status: BatteryStatus | None = None
+        self.unhealthy = False
+        self.warning = WARNING_NONE  # rises only while armed
+        self._armed = False
+        self._warning_at_arming = WARNING_NONE
+        self._connected_at_arming = False
+        self._acted = WARNING_NONE  # the highest level announced in this armed period
+        self._told_unhealthy = False
+        self._told_faults = 0
+        self._told_disconnected = False
+
+    def update(
+        self, status: BatteryStatus | None, unhealthy: bool, armed: bool
+    ) -> Sequence[tuple[int, str]]:
+        """The estimate now; returns what to announce (severity, text): a pack that became
+        unhealthy, a new fault, a disconnection in flight."""
+        if status is self.status and unhealthy == self.unhealthy and armed == self._armed:
+            return ()  # most steps: no new report
+        notices: list[tuple[int, str]] = []
+        if armed != self._armed:
+            self._armed = armed
+            self._acted = WARNING_NONE
+            self._told_disconnected = False
+            if armed:
+                self._warning_at_arming = self.warning
+                self._connected_at_arming = status is not None and status.connected
+        worst = WARNING_NONE
+        self.status = status
+        if status is not None:
+            if status.connected:
+                worst = status.warning
+            elif armed and self._connected_at_arming:  # PX4: a critical warning, to act on it
+                worst = WARNING_CRITICAL
+                if not self._told_disconnected:
+                    self._told_disconnected = True
+                    notices.append((EMERGENCY, "Battery 1 disconnected"))
+            new_faults = status.faults & ~self._told_faults
+            self._told_faults = status.faults
+            for bit, name in FAULT_NAMES.items():
+                if new_faults & (1 << bit):
+                    notices.append((EMERGENCY, f"Battery 1: {name}." + (" Land now!" if armed else "")))
+        self.warning = max(self.warning, worst) if armed else worst
+        if unhealthy != self.unhealthy:
+            self.unhealthy = unhealthy
+            if unhealthy:
+                notices.append((CRITICAL, "Battery unhealthy: no battery report for 5 s"))
+        return notices
+
+    def action(self) -> tuple[int, FailsafeAction] | None:
+        """The level just reached while flying, once: (severity, what to do and say); None when
+        nothing new. A level no worse than at arming only warns (PX4)."""
+        level = self.warning
+        if level <= self._acted:
+            return None
+        self._acted = level
+        number = int(self.params["COM_LOW_BAT_ACT"])
+        action = LOW_BATTERY_ACTIONS[level].get(number, WARN) if level > self._warning_at_arming else WARN
+        if action == WARN:
+            severity, text = BATTERY_WARNINGS[level]
+            return severity, FailsafeAction(WARN, text)
+        text = f"Failsafe activated due to {BATTERY_CAUSES[level]}, triggering {_ACTION_WORDS[action]}"
+        return CRITICAL, FailsafeAction(action, f"{text} (COM_LOW_BAT_ACT {number})")
+
+    def prearm_problem(self) -> str | None:
+        """Why the battery refuses arming (PX4's batteryCheck), or None: critical or emergency
+        level, an unhealthy pack, a fault."""
+        status = self.status
+        if status is None:
+            return None  # no battery reported at all: nothing to check (PX4)
+        if self.unhealthy:
+            return "Battery unhealthy (no battery report for 5 s)"
+        for bit, name in FAULT_NAMES.items():
+            if status.faults & (1 << bit):
+                return f"Battery 1: {name}"
+        if self.warning >= WARNING_CRITICAL:
+            p = self.params
+            threshold = "BAT_EMERGEN_THR" if self.warning == WARNING_EMERGENCY else "BAT_CRIT_THR"
+            return (f"{BATTERY_CHECKS[self.warning]} (remaining {100.0 * status.remaining:.0f} % < "
+                    f"{threshold} {100.0 * p[threshold]:g} %)")  # fmt: skip
+        return None
 
 
 def rc_loss_action(params: ParameterStore) -> tuple[str, int]:

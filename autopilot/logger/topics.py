@@ -111,6 +111,7 @@ class Snapshot:
     controls: tuple = (0.0, 0.0, 0.0, 0.0)  # normalised actuator controls sent to the simulator
     commander: object = None  # the Commander (its landed state is read when a sample needs it)
     estimator: object = None  # EstimatorStatus | None (flying on truth: None)
+    battery: object = None  # autopilot.battery.estimator.BatteryStatus | None (no battery reported)
     parts: dict | None = None  # the frame's undecoded messages (sensor_combined reads HIL_SENSOR's)
     gps: object = None  # hil.GpsFields of this frame's HIL_GPS, or None
     thrust_max_n: float = 1.0
@@ -362,14 +363,27 @@ def vehicle_gps_position(s: Snapshot) -> tuple | None:
 
 
 BATTERY = (
-    "float voltage_v; float current_a; float current_average_a; float discharged_mah; float remaining; "
-    "float scale; float temperature; uint8_t cell_count; bool connected; uint8_t id; uint8_t warning"
+    "float voltage_v; float voltage_filtered_v; float current_a; float current_filtered_a; "
+    "float current_average_a; float discharged_mah; float remaining; float scale; float time_remaining_s; "
+    "float temperature; uint8_t cell_count; bool connected; uint8_t source; uint8_t priority; "
+    "uint16_t capacity; uint8_t id; uint8_t warning; uint16_t faults; float internal_resistance_estimate; "
+    "float ocv_estimate; float ocv_estimate_filtered; float volt_based_soc_estimate"
 )
+SOURCE_POWER_MODULE = 0  # battery_status.source
 
 
-def battery_status(s: Snapshot) -> tuple:
-    """The simulated vehicle has no battery model: a full, healthy 4S pack (as SYS_STATUS says)."""
-    return (s.t_us, 16.0, -1.0, -1.0, 0.0, 1.0, 1.0, NAN, 4, True, 0, 0)
+def battery_status(s: Snapshot) -> tuple | None:
+    """The battery's estimate (autopilot.battery.estimator: the one SYS_STATUS and BATTERY_STATUS
+    report), PX4's fields; None until a battery has reported. ``timestamp`` is the frame's, the
+    estimate is of the last report (20 Hz)."""
+    b = s.battery
+    if b is None:
+        return None
+    capacity = min(max(round(b.capacity_mah), 0), 65535)
+    return (s.t_us, b.voltage_v, b.voltage_filtered_v, b.current_a, b.current_filtered_a, b.current_average_a,
+            b.discharged_mah, b.remaining, b.scale, b.time_remaining_s, NAN, b.cell_count, b.connected,
+            SOURCE_POWER_MODULE, 0, capacity, 1, b.warning, b.faults, b.internal_resistance_estimate,
+            b.ocv_estimate, b.ocv_estimate_filtered, b.volt_based_soc_estimate)  # fmt: skip
 
 
 ESTIMATOR_STATUS = (

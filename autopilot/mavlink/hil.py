@@ -1,9 +1,9 @@
 """The autopilot's edge of the HIL link: frames in, actuator controls out (NED <-> paper here).
 
 A lockstep frame is one datagram with HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY and sometimes
-HIL_GPS, all stamped with the same ``time_usec`` (see :mod:`quadcommon.wire`). The state the
-controllers see comes from ODOMETRY (float32 local NED, millimetre-exact) or, on request, from
-HIL_STATE_QUATERNION (position quantised to 1e-7 deg ~ 1 cm, velocity to 1 cm/s).
+HIL_GPS and BATTERY_STATUS, all stamped with the same ``time_usec`` (see :mod:`quadcommon.wire`).
+The state the controllers see comes from ODOMETRY (float32 local NED, millimetre-exact) or, on
+request, from HIL_STATE_QUATERNION (position quantised to 1e-7 deg ~ 1 cm, velocity to 1 cm/s).
 """
 
 from __future__ import annotations
@@ -221,6 +221,48 @@ _DISTURBANCE_DATA = _DISTURBANCE.slices["data"].start
 
 
 DISTURBANCE_ID = _ID_DISTURBANCE
+BATTERY_ID = mavlink.MAVLINK_MSG_ID_BATTERY_STATUS
+_BATTERY = FastDecoder(mavlink.MAVLink_battery_status_message)
+_BATTERY_NUMBER, _BATTERY_CURRENT = _where(_BATTERY, "id", "current_battery")
+_BATTERY_CELLS = _BATTERY.slices["voltages"].start
+_MV_UNKNOWN = 65535
+_MV_SPLIT = 65534  # voltages[0] at this value: the rest of the voltage is in voltages[1]
+
+
+class BatteryReport(NamedTuple):
+    """The battery monitor's reading in a frame (``BATTERY_STATUS``, :mod:`quadcommon.wire`)."""
+
+    voltage_v: float  # the pack's
+    current_a: float  # drawn; NaN: not measured
+
+
+class RefusedReport(ValueError):
+    """A BATTERY_STATUS in a frame that is not a reading to use; the message says why (a few
+    fixed words: the refusals are counted by them)."""
+
+
+def battery_report(raw: bytes) -> BatteryReport:
+    """The reading in one BATTERY_STATUS frame of the HIL link (``Frame.parts[BATTERY_ID]``).
+    RefusedReport, saying why, when it is corrupt, not from the simulator's component, of another
+    battery than battery 0, without a voltage (``voltages[0]`` unknown) or with a current below -1 cA
+    (-1: not measured; a flying pack does not charge)."""
+    try:
+        values = _BATTERY.unpack(raw)
+    except DecodeError:
+        raise RefusedReport("corrupt") from None
+    if raw[6] != wire.SIMULATOR_COMPONENT_ID:
+        raise RefusedReport("not from the simulator's component")
+    if values[_BATTERY_NUMBER] != 0:
+        raise RefusedReport("not battery 0")
+    millivolts, rest = values[_BATTERY_CELLS], values[_BATTERY_CELLS + 1]
+    if millivolts == _MV_UNKNOWN:
+        raise RefusedReport("no voltage")
+    if millivolts == _MV_SPLIT and rest != _MV_UNKNOWN:
+        millivolts += rest
+    centiamps = values[_BATTERY_CURRENT]
+    if centiamps < -1:
+        raise RefusedReport("negative current")
+    return BatteryReport(millivolts * 1e-3, centiamps * 1e-2 if centiamps != -1 else math.nan)
 
 
 def disturbance_of(parts: dict) -> tuple[int, Vector3, Vector3] | None:

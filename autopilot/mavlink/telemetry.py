@@ -17,6 +17,13 @@ from quadcommon.rigid_body import quaternion_from_euler
 from quadcommon.trajectories import Reference
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
+from ..battery.estimator import (
+    CURRENT_UNKNOWN,
+    WARNING_CRITICAL,
+    WARNING_EMERGENCY,
+    WARNING_LOW,
+    BatteryStatus,
+)
 from ..control.cascade import StateEstimate
 from ..estimation.measurements import ImuSample
 from ..estimation.status import EstimatorStatus
@@ -57,6 +64,7 @@ DEFAULT_RATES_HZ = {
     m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
     m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
     m.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    m.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,  # PX4's rate (sent once a battery has reported)
     m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.0,
     m.MAVLINK_MSG_ID_ESTIMATOR_STATUS: 1.0,  # sent only when flying on the EKF
     m.MAVLINK_MSG_ID_ODOMETRY: 0.0,  # on request (SET_MESSAGE_INTERVAL / REQUEST_MESSAGE)
@@ -89,6 +97,8 @@ class VehicleStatus:
     imu: ImuSample | None = None  # the EKF's last IMU sample (HIGHRES_IMU)
     mag_gauss: Vector3 | None = None  # the EKF's last magnetometer sample, body FLU (HIGHRES_IMU)
     baro_height_m: float | None = None  # the EKF's last pressure altitude, m AMSL (HIGHRES_IMU)
+    battery: BatteryStatus | None = None  # the battery's estimate (None: no battery has reported)
+    battery_unhealthy: bool = False  # its reports stopped
     extra: dict = field(default_factory=dict)
 
     @property
@@ -122,7 +132,68 @@ def sys_status(s: VehicleStatus):
     # module otherwise announces "fence breach" on connecting).
     if not s.geofence_breached:
         health |= m.MAV_SYS_STATUS_GEOFENCE
-    return m.MAVLink_sys_status_message(present, enabled, health, 250, 16000, -1, 100, 0, 0, 0, 0, 0, 0)
+    b = s.battery
+    millivolts, centiamps, percent = 65535, -1, -1  # MAVLink's "unknown": no battery
+    if b is not None:
+        present |= m.MAV_SYS_STATUS_SENSOR_BATTERY
+        enabled |= m.MAV_SYS_STATUS_SENSOR_BATTERY
+        if battery_healthy(s):
+            health |= m.MAV_SYS_STATUS_SENSOR_BATTERY
+        millivolts, centiamps, percent = _battery_numbers(b)
+    return m.MAVLink_sys_status_message(
+        present, enabled, health, 250, millivolts, centiamps, percent, 0, 0, 0, 0, 0, 0
+    )
+
+
+def battery_healthy(s: VehicleStatus) -> bool:
+    """The battery's health bit (PX4's health report): reporting, connected, no fault, above the
+    critical level."""
+    b = s.battery
+    return (b is not None and b.connected and not s.battery_unhealthy and not b.faults
+            and b.warning < WARNING_CRITICAL)  # fmt: skip
+
+
+def _battery_numbers(b: BatteryStatus) -> tuple[int, int, int]:
+    """SYS_STATUS's voltage (mV), current (cA, -1 unknown) and remaining charge (%, -1 unknown)."""
+    millivolts = sat_u16(b.voltage_v * 1000.0)
+    centiamps = sat_i16(b.current_a * 100.0) if b.current_a != CURRENT_UNKNOWN else -1
+    percent = min(round(100.0 * b.remaining), 100) if b.remaining >= 0.0 and b.connected else -1
+    return millivolts, centiamps, percent
+
+
+_CHARGE_STATES = {
+    WARNING_LOW: m.MAV_BATTERY_CHARGE_STATE_LOW,
+    WARNING_CRITICAL: m.MAV_BATTERY_CHARGE_STATE_CRITICAL,
+    WARNING_EMERGENCY: m.MAV_BATTERY_CHARGE_STATE_EMERGENCY,
+}
+_CELL_MAX_MV = 65534  # BATTERY_STATUS voltages[0]: above it, the rest goes to voltages[1]
+
+
+def battery_status(s: VehicleStatus):
+    """BATTERY_STATUS of the battery's estimate (PX4's fields): the pack's voltage in voltages[0]
+    (MAVLink's split above 65 534 mV), current, consumed mAh, remaining %, time remaining, the
+    charge state of the warning level (unhealthy: stale reports or a fault) and the fault bits;
+    None until a battery has reported."""
+    b = s.battery
+    if b is None:
+        return None
+    millivolts, centiamps, percent = _battery_numbers(b)
+    total_mv = sat_u16(b.voltage_v * 1000.0, 2 * _CELL_MAX_MV)
+    cells = [65535] * 10
+    if total_mv > _CELL_MAX_MV:
+        cells[0], cells[1] = _CELL_MAX_MV, total_mv - _CELL_MAX_MV
+    else:
+        cells[0] = total_mv
+    consumed = round(b.discharged_mah) if b.current_a != CURRENT_UNKNOWN else -1
+    remaining_s = sat_i32(b.time_remaining_s) if math.isfinite(b.time_remaining_s) else 0
+    if s.battery_unhealthy or b.faults:
+        state = m.MAV_BATTERY_CHARGE_STATE_UNHEALTHY
+    else:
+        state = _CHARGE_STATES.get(b.warning, m.MAV_BATTERY_CHARGE_STATE_OK)
+    return m.MAVLink_battery_status_message(
+        0, m.MAV_BATTERY_FUNCTION_ALL, m.MAV_BATTERY_TYPE_LIPO, 32767, cells, centiamps, consumed, -1,
+        percent, max(remaining_s, 0), state, [0, 0, 0, 0], 0, b.faults,
+    )  # fmt: skip
 
 
 def extended_sys_state(s: VehicleStatus):
@@ -352,6 +423,7 @@ BUILDERS = {
     m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: servo_output_raw,
     m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: actuator_output_status,
     m.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+    m.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
     m.MAVLINK_MSG_ID_ESTIMATOR_STATUS: estimator_status,
     m.MAVLINK_MSG_ID_ODOMETRY: odometry,
     m.MAVLINK_MSG_ID_HIGHRES_IMU: highres_imu,
@@ -365,6 +437,7 @@ NEEDS_STATE = set(BUILDERS) - {
     m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS,
     m.MAVLINK_MSG_ID_ESTIMATOR_STATUS,
     m.MAVLINK_MSG_ID_HIGHRES_IMU,
+    m.MAVLINK_MSG_ID_BATTERY_STATUS,
 }
 
 

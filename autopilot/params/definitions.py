@@ -17,11 +17,11 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from quadcommon.config import Rates, VehicleConfig
+from quadcommon.config import SIM_BATTERY_PARAMETERS, BatteryConfig, Rates, VehicleConfig
 
 from ..control import registry
 from ..control.config import ControllerConfig
-from .store import INT32, ParameterStore, ParamSpec
+from .store import FLOAT, INT32, ParameterStore, ParamSpec
 
 # NAV_DLL_ACT (GCS data link loss action): PX4's enum values (0 disabled, 1 hold, 2 return,
 # 3 land; PX4's 5 terminate and 6 disarm are not supported here).
@@ -40,8 +40,11 @@ RTL_HOME_OR_RALLY, RTL_RALLY_OR_HOME, RTL_CLOSEST, RTL_RALLY_ONLY = 0, 1, 3, 5
 RTL_TYPES_REFUSED = {
     2: "the mission-path return is not supported (missions have no landing pattern here)",
     4: "the mission-path return is not supported (missions have no landing pattern here)",
-    6: "the battery-aware return needs a battery model, which this vehicle has not",
+    6: "the return chosen by the remaining flight time is not supported",
 }
+# COM_LOW_BAT_ACT (PX4's LowBatteryAction): what the critical and emergency battery levels do.
+# PX4 documents 0, 2 and 3; its code also takes 1 (return at both levels), and so does this one.
+LOW_BAT_WARN, LOW_BAT_RTL, LOW_BAT_LAND, LOW_BAT_RTL_THEN_LAND = 0, 1, 2, 3
 
 COMMANDER_PARAMS = (
     ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.2, 100.0, unit="m", description="takeoff altitude above home"),
@@ -196,6 +199,52 @@ FAILSAFE_PARAMS = (
     ),
 )
 
+def battery_params(vehicle: VehicleConfig | None = None) -> tuple[ParamSpec, ...]:
+    """The battery library's and the low-battery failsafe's parameters (PX4's names, ranges and
+    defaults; :mod:`autopilot.battery.estimator`), and PX4's battery-simulator parameters. The
+    vehicle's ``[battery]`` gives the defaults of the cell count, capacity, cell voltages, internal
+    resistance (its pack's, per cell), average current and the ``SIM_BAT_*``, as a PX4 airframe
+    file sets them. (PX4's default ``BAT1_R_INTERNAL`` is -1, estimated online: in a steady hover
+    the estimate barely leaves its 5 mOhm start, and the charge then reads low.)"""
+    b = vehicle.battery if vehicle is not None else BatteryConfig()
+
+    def sim(name: str, default: float, kind: str, description: str) -> ParamSpec:
+        lo, hi, unit, key = SIM_BATTERY_PARAMETERS[name]
+        return ParamSpec(name, default, lo, hi, kind=kind, unit=unit,
+                         description=f"{description} (the vehicle's [battery] {key} at start)")  # fmt: skip
+
+    return (
+        ParamSpec("BAT1_N_CELLS", b.cells, 0, 16, kind=INT32,
+                  description="cells in series (0: not configured, no charge estimate)"),
+        ParamSpec("BAT1_V_EMPTY", b.empty_cell_v, 2.5, 4.2, unit="V",
+                  description="cell voltage at 0 % charge"),
+        ParamSpec("BAT1_V_CHARGED", b.charged_cell_v, 3.0, 4.5, unit="V",
+                  description="cell voltage at 100 % charge, under a mild load"),
+        ParamSpec("BAT1_CAPACITY", b.capacity_mah, -1.0, 100000.0, unit="mAh",
+                  description="capacity (-1: unknown: the charge from the voltage alone, no time remaining)"),
+        ParamSpec("BAT1_R_INTERNAL", round(min(b.internal_resistance_ohm / b.cells, 0.2), 6), -1.0, 0.2,
+                  unit="Ohm",
+                  description="internal resistance per cell for the load compensation (negative: estimated "
+                              "online)"),
+        ParamSpec("BAT_LOW_THR", 0.15, 0.12, 0.5, unit="norm",
+                  description="low battery below this charge (warning); above BAT_CRIT_THR"),
+        ParamSpec("BAT_CRIT_THR", 0.07, 0.05, 0.25, unit="norm",
+                  description="critical battery below this charge (COM_LOW_BAT_ACT; arming refused)"),
+        ParamSpec("BAT_EMERGEN_THR", 0.05, 0.03, 0.1, unit="norm",
+                  description="emergency battery below this charge (COM_LOW_BAT_ACT); below BAT_CRIT_THR"),
+        ParamSpec("BAT_AVRG_CURRENT", b.average_current_a, 0.0, 500.0, unit="A",
+                  description="expected current in flight: starts the average of the time remaining"),
+        ParamSpec("COM_LOW_BAT_ACT", LOW_BAT_WARN, 0, 3, kind=INT32,
+                  description="battery failsafe: 0 warning, 1 return, 2 land, 3 return at critical and land "
+                              "at emergency (PX4 values)"),
+        sim("SIM_BAT_ENABLE", 1 if b.enabled else 0, INT32, "simulated battery monitor on"),
+        sim("SIM_BAT_DRAIN", b.drain_s, FLOAT,
+            "simulated battery: 0 the pack model; > 0 PX4's linear drain, full to empty in this time "
+            "while armed"),
+        sim("SIM_BAT_MIN_PCT", b.drain_min_pct, FLOAT, "simulated battery: PX4's linear drain stops here"),
+    )  # fmt: skip
+
+
 # The flight log (autopilot/logger/): PX4's SDLOG_MODE values; 3 (by an RC switch) is not supported.
 LOGGER_PARAMS = (
     ParamSpec(
@@ -267,8 +316,10 @@ def default_parameters(
 ) -> ParameterStore:
     """Commander and failsafe parameters, plus the gains of ``controller`` and ``rates`` if given,
     and the estimator's (EKF2_EN and the EKF2_* of :mod:`autopilot.estimation.parameters`);
-    ``vehicle`` gives ``MPC_THR_HOVER`` its default (:func:`hover_thrust_param`)."""
-    specs = [*COMMANDER_PARAMS, hover_thrust_param(vehicle), *FAILSAFE_PARAMS, *LOGGER_PARAMS]
+    ``vehicle`` gives ``MPC_THR_HOVER`` its default (:func:`hover_thrust_param`) and the battery's
+    (:func:`battery_params`)."""
+    specs = [*COMMANDER_PARAMS, hover_thrust_param(vehicle), *FAILSAFE_PARAMS, *battery_params(vehicle),
+             *LOGGER_PARAMS]
     if controller is not None:
         specs += controller_params(controller)
     if rates is not None:
@@ -301,7 +352,9 @@ def consistency_problems(params: ParameterStore) -> list[str]:
 
     * with a vertical geofence, the takeoff altitude and the return altitude must lie inside it
       (else takeoff or RTL would breach the fence by themselves);
-    * the takeoff and landing speeds must respect the climb and descent limits.
+    * the takeoff and landing speeds must respect the climb and descent limits;
+    * the battery's levels in order (``BAT_EMERGEN_THR`` < ``BAT_CRIT_THR`` < ``BAT_LOW_THR``, as
+      PX4 asks) and its empty cell below its charged one.
     """
     p = params
     problems = []
@@ -324,4 +377,12 @@ def consistency_problems(params: ParameterStore) -> list[str]:
             f"MPC_LAND_SPEED {p['MPC_LAND_SPEED']:g} m/s exceeds "
             f"MPC_Z_VEL_MAX_DN {p['MPC_Z_VEL_MAX_DN']:g} m/s"
         )
+    if "BAT_LOW_THR" in p:
+        low, critical, emergency = p["BAT_LOW_THR"], p["BAT_CRIT_THR"], p["BAT_EMERGEN_THR"]
+        if not emergency < critical < low:
+            problems.append(f"battery levels out of order: BAT_EMERGEN_THR {emergency:g} < BAT_CRIT_THR "
+                            f"{critical:g} < BAT_LOW_THR {low:g} is needed")  # fmt: skip
+        if p["BAT1_V_EMPTY"] >= p["BAT1_V_CHARGED"]:
+            problems.append(f"BAT1_V_EMPTY {p['BAT1_V_EMPTY']:g} V is not below BAT1_V_CHARGED "
+                            f"{p['BAT1_V_CHARGED']:g} V")  # fmt: skip
     return problems

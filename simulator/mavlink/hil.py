@@ -27,6 +27,10 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
 * ``DEBUG_FLOAT_ARRAY`` ``DISTURB`` (when the core reports the disturbance, see
   :mod:`quadcommon.wire`): force (N, world NED) and torque on the Euler coordinates (N m, NED's
   Euler convention) in ``data[0:6]``.
+* ``BATTERY_STATUS`` (at the battery monitor's rate, :mod:`simulator.battery`): the pack's voltage
+  in ``voltages[0]`` (mV, MAVLink's split above 65 534 mV), current in cA (-1: not measured),
+  every other field "unknown" (see :mod:`quadcommon.wire`); a reading that is not a finite number
+  goes out as the unknowns.
 * ``HIL_GPS`` (when a fix is delivered): the reading's fix type (3D, or 1 "no fix" in an
   outage), lat/lon/alt as above but from the (noisy) GPS
   reading, eph/epv in cm (PX4 reads them as cm), ground speed and NED velocity (cm/s), course
@@ -46,6 +50,7 @@ from quadcommon import frames, wire
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
+from ..battery import BatteryReading
 from ..dynamics.plant import TruthState
 from ..sensors.models import GpsReading, SensorReadings, VisionReading
 
@@ -58,6 +63,8 @@ FIELDS_BARO = 0x1A00  # bits 9 (abs pressure), 11 (pressure altitude), 12 (tempe
 GPS_FIX_3D = 3
 _UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+UINT16_UNKNOWN = 65535
+CELL_VOLTAGE_MAX_MV = 65534  # BATTERY_STATUS voltages[0]: above it, the rest goes to voltages[1]
 _ID_CONTROLS = mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS
 
 
@@ -112,6 +119,13 @@ class HilFrameEncoder:
         self._disturbance.values[self._disturbance.slices["name"]] = wire.DISTURBANCE_NAME
         self._d_time = _slots(self._disturbance, "time_usec")[0]
         self._d_data = self._disturbance.slices["data"]
+        battery = mavlink.MAVLink_battery_status_message(
+            0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767, [UINT16_UNKNOWN] * 10,
+            -1, -1, -1, -1, 0, mavlink.MAV_BATTERY_CHARGE_STATE_UNDEFINED, [0, 0, 0, 0], 0, 0,
+        )  # fmt: skip
+        self._battery = FastEncoder(mavlink.MAVLink_battery_status_message, *ids, battery)
+        self._b_cells = self._battery.slices["voltages"].start
+        self._b_current = _slots(self._battery, "current_battery")[0]
 
     def _frame(self, encoder: FastEncoder) -> bytes:
         data = encoder.frame(self.seq)
@@ -127,10 +141,12 @@ class HilFrameEncoder:
         gps: GpsReading | None = None,
         vision: VisionReading | None = None,
         disturbance: tuple[int, tuple[Vector3, Vector3]] | None = None,
+        battery: BatteryReading | None = None,
     ) -> bytes:
         """One datagram: HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``,
         + VISION_POSITION_ESTIMATE when ``vision``, + the ``DISTURB`` array when ``disturbance``:
-        its sample time (µs) and (force (world), torque (Euler coordinates)) in the paper's frames)."""
+        its sample time (µs) and (force (world), torque (Euler coordinates)) in the paper's frames,
+        + BATTERY_STATUS when ``battery``)."""
         to_ned = frames.vector_to_ned
         q_ned = frames.quaternion_to_ned(truth.quaternion)
         rates_frd = to_ned(truth.body_rates_rad_s)
@@ -190,7 +206,24 @@ class HilFrameEncoder:
             v[self._d_time] = stamp_usec
             v[self._d_data.start : self._d_data.start + 6] = (*to_ned(force), *frames.euler_to_ned(torque))
             datagram += self._frame(self._disturbance)
+        if battery is not None:
+            self._fill_battery(battery)
+            datagram += self._frame(self._battery)
         return datagram
+
+    def _fill_battery(self, reading: BatteryReading) -> None:
+        """The monitor's reading as BATTERY_STATUS: mV in voltages[0] (and [1] past 65 534 mV),
+        cA; not a finite number: the field's unknown (65535 mV, -1 cA)."""
+        v, cells = self._battery.values, self._b_cells
+        volts, current = reading.voltage_v, reading.current_a
+        if not math.isfinite(volts):
+            v[cells], v[cells + 1] = UINT16_UNKNOWN, UINT16_UNKNOWN
+        else:
+            millivolts = sat_u16(volts * 1000.0, 2 * CELL_VOLTAGE_MAX_MV)
+            split = millivolts > CELL_VOLTAGE_MAX_MV
+            v[cells] = CELL_VOLTAGE_MAX_MV if split else millivolts
+            v[cells + 1] = millivolts - CELL_VOLTAGE_MAX_MV if split else UINT16_UNKNOWN
+        v[self._b_current] = sat_i16(current * 100.0) if math.isfinite(current) else -1
 
     def _fill_vision(self, time_usec: int, reading: VisionReading) -> None:
         """Position (NED) and yaw of the motion capture; its reported variances in the
