@@ -58,7 +58,15 @@ from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
 from .mavlink.dispatch import FaultLog, MessageDispatcher
-from .mavlink.hil import DISTURBANCE_ID, ActuatorEncoder, CorruptFrame, decode_frame, disturbance_of
+from .mavlink.failure_injection import FailureInjection
+from .mavlink.hil import (
+    DISTURBANCE_ID,
+    ActuatorEncoder,
+    CorruptFrame,
+    SimulatorRequests,
+    decode_frame,
+    disturbance_of,
+)
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.manual import decode_sticks
@@ -234,6 +242,13 @@ class AutopilotCore:
             refusals=self.refusals,
         )  # fmt: skip
         self.param_service.register(self.dispatcher, self.commands)
+        self.simulator_requests = SimulatorRequests(self.encoder, self.system_id)  # in the next answer
+        self.failure_injection = FailureInjection(
+            self.params,
+            lambda unit, kind, instance: self.simulator_requests.command(m.MAV_CMD_INJECT_FAILURE, unit, kind,
+                                                                         instance),
+            lambda: self.estimator is not None, self.refusals, self.statustext, self.wrench,
+        )  # fmt: skip
         self.vehicle_commands = VehicleCommands(self)
         self.vehicle_commands.register(self.commands)
         self.signing = Signing(setup.signing, self.encoder, self.links, self.statustext,
@@ -281,8 +296,10 @@ class AutopilotCore:
         except Exception as exc:
             self.faults.record(f"{gcs.name} parser", exc, now)
             messages = []
+        drops = self.failure_injection.drops
         for msg in messages:
-            self.dispatcher.dispatch(msg, gcs, address, now)
+            if not drops(msg):  # a link's injected failure (rc_signal, mavlink_signal)
+                self.dispatcher.dispatch(msg, gcs, address, now)
         return self._take()
 
     def tick(self, now: float) -> list[Outgoing]:
@@ -325,6 +342,7 @@ class AutopilotCore:
             "peers": {link.name: [f"{host}:{port}" for host, port in link.peers] for link in self.links},
             "signing": self.signing.info(),
             "flight_log": {"logging": self.flight_log.logging, "logs_started": self.flight_log.logs_started},
+            "failures": self.failure_injection.info(),
         }
 
     def on_foreign_datagram(self, what: str) -> None:
@@ -391,6 +409,7 @@ class AutopilotCore:
         self.log("simulator time went backwards: simulator restarted; resetting")
         self.commander.disarm(self.sim_time, force=True)
         self.commander.home = None
+        self.failure_injection.simulator_restarted()
         self.last_time_usec = -1
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
@@ -431,8 +450,11 @@ class AutopilotCore:
             controls = (0.0, 0.0, 0.0, 0.0)
         self._controls = controls
         self._frame_done = (frame, guidance, output)
-        self._last_answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
-        return self._last_answer
+        answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
+        if self.simulator_requests.pending:  # requests to the simulator ride in the answer
+            answer += self.simulator_requests.take()
+        self._last_answer = answer
+        return answer
 
     def _cascade_step(self, est: StateEstimate, guidance):
         """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'
@@ -485,8 +507,8 @@ class AutopilotCore:
             return None
         for name in samples.refused:  # never fed to the filter
             self.on_foreign_datagram(f"HIL frame with a non-finite {name} sample")
-        if "imu" in samples.refused:  # no prediction, no fusion this frame: fly on the filter as
-            est = loop.estimate()  # it is (the next sample integrates across the gap)
+        if "imu" in samples.refused or not samples.imu_fresh:  # no prediction, no fusion this frame:
+            est = loop.estimate()  # fly on the filter as it is (the next sample integrates across the gap)
         elif self.frames == 0 and frame.state.position_m[2] > IN_AIR_START_M:
             loop.start_in_air(t, samples, frame.state)  # the paper's experiments start in the air
             est = frame.state

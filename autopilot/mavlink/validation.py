@@ -95,6 +95,11 @@ COMMAND_RULES: dict[int, tuple[Param, ...]] = {
         Param(7, "altitude (m; NaN keep)", -1000.0, 10000.0, nan_ok=True),
     ),
     m.MAV_CMD_PREFLIGHT_STORAGE: (Param(1, "parameter storage action", values=(0.0, 1.0, 2.0, 4.0)),),
+    m.MAV_CMD_INJECT_FAILURE: (
+        Param(1, "failure unit (FAILURE_UNIT)", **_BYTE),
+        Param(2, "failure type (FAILURE_TYPE)", **_BYTE),
+        Param(3, "instance (0: all)", **_BYTE, nan_ok=True),
+    ),
 }
 
 
