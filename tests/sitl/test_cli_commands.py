@@ -13,7 +13,7 @@ from quadcommon import config
 from quadcommon.cli_help import has_default_to_show
 from sitl import cli
 
-SCRIPTS = ["fly_setpoints", "fly_trajectory", "fly_paper", "upload_mission", "upload_gusts", "record"]
+SCRIPTS = ["fly_setpoints", "fly_trajectory", "fly_paper", "upload_mission", "upload_gusts", "record", "fail"]
 
 
 def _parsers(parser: argparse.ArgumentParser, name: str):
@@ -73,6 +73,7 @@ def test_a_default_of_zero_is_shown():
         (["mission", "clear"], "upload_mission", ["--clear"]),
         (["gusts", "upload", "mixed", "--now"], "upload_gusts", ["mixed", "--now"]),
         (["record", "--duration", "3"], "record", ["--duration", "3"]),
+        (["fail", "gps", "off", "--enable"], "fail", ["gps", "off", "--enable"]),
     ],
 )
 def test_subcommands_delegate_to_the_scripts_with_their_flags(monkeypatch, argv, module, forwarded):
@@ -80,7 +81,7 @@ def test_subcommands_delegate_to_the_scripts_with_their_flags(monkeypatch, argv,
     mod = importlib.import_module(f"gcs_scripts.{module}")
     monkeypatch.setattr(mod, "main", lambda a, prog: calls.append((a, prog)) or 7)
     assert cli.main(argv) == 7
-    assert calls == [(forwarded, "quadsitl " + " ".join(argv[: 1 if argv[0] == "record" else 2]))]
+    assert calls == [(forwarded, "quadsitl " + " ".join(argv[: 1 if argv[0] in ("record", "fail") else 2]))]
 
 
 @pytest.mark.timeout(30)
@@ -142,3 +143,16 @@ def test_config_dir_overlays_and_a_missing_name_lists_the_places(tmp_path, capsy
 def test_config_dir_that_does_not_exist(tmp_path, capsys):
     assert cli.main(["--config-dir", str(tmp_path / "nope"), "config", "where"]) == 2
     assert "is not a directory" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(30)
+def test_fail_help_lists_px4s_units_and_types_and_what_is_modelled(capsys):
+    with pytest.raises(SystemExit) as info:
+        cli.main(["fail", "--help"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: quadsitl fail ") and "SYS_FAILURE_EN to 1 first" in out
+    assert "mavlink_signal" in out and "intermittent" in out and "gyro: ok, off, stuck" in out
+    with pytest.raises(SystemExit) as info:
+        cli.main(["fail", "propeller", "off"])
+    assert info.value.code == 2 and "invalid choice: 'propeller'" in capsys.readouterr().err
