@@ -146,15 +146,15 @@ FAILURES: dict[Unit, UnitModel] = {
     m.unit: m
     for m in (
         UnitModel(Unit.gyro, Where.SENSORS, 1, _imu(
-            "gyro", f"+-{GYRO_RANGE_RAD_S:.1f} rad/s (+-2000 deg/s)", GYRO_RANGE_RAD_S,
+            "gyro", f"±{GYRO_RANGE_RAD_S:.1f} rad/s (±2000 deg/s)", GYRO_RANGE_RAD_S,
             "+0.1 rad/s (5.7 deg/s) on each axis", 0.1), "the IMU's gyroscope (every frame)"),
         UnitModel(Unit.accel, Where.SENSORS, 1, _imu(
-            "accelerometer", f"+-{ACCEL_RANGE_M_S2:.0f} m/s^2 (+-16 g)", ACCEL_RANGE_M_S2,
+            "accelerometer", f"±{ACCEL_RANGE_M_S2:.0f} m/s^2 (±16 g)", ACCEL_RANGE_M_S2,
             "+0.5 m/s^2 on each axis", 0.5), "the IMU's accelerometer (every frame)"),
         UnitModel(Unit.mag, Where.SENSORS, 1, {
             Type.off: Effect("never fresh in `HIL_SENSOR.fields_updated` (bits 6-8)"),
             Type.stuck: Effect("the last sample before the failure, at its rate"),
-            Type.garbage: Effect("uniform noise over +-4 gauss per axis", (4.0, 0.0, 0.0)),
+            Type.garbage: Effect("uniform noise over ±4 gauss per axis", (4.0, 0.0, 0.0)),
             Type.wrong: Effect("+0.2 gauss on body x (a hard-iron change)", (0.2, 0.0, 0.0)),
             Type.slow: _slow("at a fifth of its rate"),
             Type.delayed: Effect(f"+{EXTRA_LATENCY_S:g} s latency", (EXTRA_LATENCY_S, 0.0, 0.0)),
@@ -172,7 +172,7 @@ FAILURES: dict[Unit, UnitModel] = {
         UnitModel(Unit.gps, Where.SENSORS, 1, {
             Type.off: Effect("no `HIL_GPS` at all"),
             Type.stuck: Effect("the last fix before the failure, at its rate"),
-            Type.garbage: Effect("position +-1000 m and velocity +-50 m/s uniform per axis, accuracy "
+            Type.garbage: Effect("position ±1000 m and velocity ±50 m/s uniform per axis, accuracy "
                                  "as good", (1000.0, 50.0, 0.0)),
             Type.wrong: Effect("position 20 m north of the truth, fix and accuracy as good",
                                (20.0, 0.0, 0.0)),
@@ -183,12 +183,12 @@ FAILURES: dict[Unit, UnitModel] = {
         UnitModel(Unit.vio, Where.SENSORS, 1, {
             Type.off: Effect("no `VISION_POSITION_ESTIMATE` at all"),
             Type.stuck: Effect("the last pose before the failure, at its rate"),
-            Type.garbage: Effect("position +-10 m per axis and yaw +-180 deg, uniform", (10.0, 0.0, 0.0)),
+            Type.garbage: Effect("position ±10 m per axis and yaw ±180 deg, uniform", (10.0, 0.0, 0.0)),
             Type.wrong: Effect("position 0.5 m north of the truth", (0.5, 0.0, 0.0)),
             Type.slow: _slow("at a fifth of its rate"),
             Type.delayed: Effect(f"+{EXTRA_LATENCY_S:g} s latency", (EXTRA_LATENCY_S, 0.0, 0.0)),
             Type.intermittent: _INTERMITTENT,
-        }, "vision / motion capture (a sensor profile with [vision], e.g. mocap)"),
+        }, "vision / motion capture (a sensor profile with `[vision]`, e.g. mocap)"),
         UnitModel(Unit.motor, Where.PLANT, 4, {
             Type.off: Effect("the rotor gives no thrust and no reaction torque (effectiveness 0)"),
         }, "a rotor, numbered as PX4's quadrotor + (1 right, 2 left, 3 front, 4 rear); "
