@@ -328,9 +328,12 @@ class SimulatorRequests:
     def command(self, command: int, *params: float) -> None:
         """A COMMAND_LONG for the simulator (param1.. as given, the rest 0)."""
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
-        message = mavlink.MAVLink_command_long_message(
-            self.system_id, wire.SIMULATOR_COMPONENT_ID, command, 0, *p
-        )
+        target = (self.system_id, wire.SIMULATOR_COMPONENT_ID)
+        self.send(mavlink.MAVLink_command_long_message(*target, command, 0, *p))
+
+    def send(self, message) -> None:
+        """Any message for the simulator (pymavlink, its target the simulator's component: a
+        ``PARAM_SET`` of a ``SIM_*`` parameter, say), packed now, sent in the next answer."""
         self.pending.append(self.encoder.pack_unsigned(message))
 
     def take(self) -> bytes:
