@@ -244,10 +244,8 @@ class AutopilotCore:
         self.param_service.register(self.dispatcher, self.commands)
         self.simulator_requests = SimulatorRequests(self.encoder, self.system_id)  # in the next answer
         self.failure_injection = FailureInjection(
-            self.params,
-            lambda unit, kind, instance: self.simulator_requests.command(m.MAV_CMD_INJECT_FAILURE, unit, kind,
-                                                                         instance),
-            lambda: self.estimator is not None, self.refusals, self.statustext, self.wrench,
+            self.params, self._request_failure, lambda: self.estimator is not None, self.refusals,
+            self.statustext, self.wrench,
         )  # fmt: skip
         self.vehicle_commands = VehicleCommands(self)
         self.vehicle_commands.register(self.commands)
@@ -684,6 +682,14 @@ class AutopilotCore:
             link.send_to(self.encoder.pack(self.vehicle_commands.after_ack), address)
             self.vehicle_commands.after_ack = None
         self.send_events()
+
+    def _request_failure(self, unit: int, failure_type: int, instance: int) -> bool:
+        """MAV_CMD_INJECT_FAILURE for the simulator, in the next answer; False when too many wait."""
+        requests = self.simulator_requests
+        if requests.full:
+            return False
+        requests.command(m.MAV_CMD_INJECT_FAILURE, unit, failure_type, instance)
+        return True
 
     def _on_set_mode_message(self, msg, link: GcsLink, address: Address) -> None:
         if not self._for_us(msg):

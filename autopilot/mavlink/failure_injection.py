@@ -10,6 +10,8 @@ answers it:
   unit does not have, and for a sensor failure while the vehicle flies on the simulator's state
   (``EKF2_EN`` 0: it does not fly on its sensors, so a sensor failure would change nothing it
   uses: start with ``--estimator ekf``);
+* ``TEMPORARILY_REJECTED`` while too many requests wait for the simulator (PX4's answer when its
+  table of failures is full);
 * ``ACCEPTED`` otherwise, announced by STATUSTEXT as PX4 words it (``Injected: gps off, all
   instances``, ``Cleared: gps, all instances``; the flight log keeps it with every STATUSTEXT).
 
@@ -50,14 +52,15 @@ class FailureInjection:
     """The autopilot's failure injection: answers the command, keeps the active failures, drops
     the links' messages while their failure is active.
 
-    ``to_simulator(unit, type, instance)`` queues the request for the simulator;
-    ``flying_on_ekf()`` says whether the vehicle flies on its EKF; ``refuse(text)`` and
-    ``announce(severity, text)`` send STATUSTEXT (the first rate-limited)."""
+    ``to_simulator(unit, type, instance)`` queues the request for the simulator (False: the queue
+    is full, answered TEMPORARILY_REJECTED); ``flying_on_ekf()`` says whether the vehicle flies on
+    its EKF; ``refuse(text)`` and ``announce(severity, text)`` send STATUSTEXT (the first
+    rate-limited)."""
 
     def __init__(
         self,
         params: ParameterStore,
-        to_simulator: Callable[[int, int, int], None],
+        to_simulator: Callable[[int, int, int], bool],
         flying_on_ekf: Callable[[], bool],
         refuse: Callable[[str], None],
         announce: Callable[[int, str], None],
@@ -102,8 +105,9 @@ class FailureInjection:
                 self.rc_signal_lost = lost
             else:
                 self.mavlink_signal_lost = lost
-        else:
-            self.to_simulator(unit, failure_type, number)
+        elif not self.to_simulator(unit, failure_type, number):
+            return self._refused(m.MAV_RESULT_TEMPORARILY_REJECTED, "failure injection: too many requests "
+                                 "waiting for the simulator; try again")  # fmt: skip
         keep_active(self.active, unit, failure_type, number)
         self.announce(m.MAV_SEVERITY_WARNING, announcement(unit, failure_type, number))
         return m.MAV_RESULT_ACCEPTED, ""

@@ -318,12 +318,19 @@ class ActuatorEncoder:
 class SimulatorRequests:
     """Requests to the simulator, carried in the lockstep answer after its HIL_ACTUATOR_CONTROLS
     (:mod:`quadcommon.wire`): MAVLink 2 frames from the autopilot, addressed to the simulator's
-    component, never signed; at most ``MAX_REQUESTS_PER_ANSWER`` per answer, the rest in the next."""
+    component, never signed; at most ``MAX_REQUESTS_PER_ANSWER`` per answer, the rest in the next;
+    at most :data:`MAX_PENDING` waiting (a flood of commands cannot grow the queue)."""
+
+    MAX_PENDING = 64
 
     def __init__(self, encoder: Encoder, system_id: int) -> None:
         self.encoder = encoder
         self.system_id = system_id
         self.pending: list[bytes] = []
+
+    @property
+    def full(self) -> bool:
+        return len(self.pending) >= self.MAX_PENDING
 
     def command(self, command: int, *params: float) -> None:
         """A COMMAND_LONG for the simulator (param1.. as given, the rest 0)."""

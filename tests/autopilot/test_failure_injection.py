@@ -326,3 +326,13 @@ def test_the_flight_log_keeps_the_announcements(tmp_path):
     logged = [msg.message for msg in ULog(str(path)).logged_messages]
     assert "Injected: rc_signal off, all instances" in logged
     assert "Cleared: rc_signal, all instances" in logged
+
+
+def test_a_flood_of_requests_is_bounded_and_temporarily_rejected():
+    stack, _ = ekf_stack()
+    injection = stack.autopilot.failure_injection
+    answers = [injection.command(Unit.gps, Type.off if i % 2 else Type.ok, 0)[0] for i in range(70)]
+    waiting = stack.autopilot.simulator_requests.MAX_PENDING
+    assert answers == [m.MAV_RESULT_ACCEPTED] * waiting + [m.MAV_RESULT_TEMPORARILY_REJECTED] * (70 - waiting)
+    stack.step()  # one answer carries a few of them
+    assert injection.command(Unit.gps, Type.ok, 0)[0] == m.MAV_RESULT_ACCEPTED
