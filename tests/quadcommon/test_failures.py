@@ -8,7 +8,8 @@ from quadcommon.failures import FAILURES, UNMODELLED, Refusal, Type, Unit, Where
 
 def test_the_units_and_types_are_mavlinks_with_px4s_names():
     assert {u.value: u.name for u in Unit}[mavlink.FAILURE_UNIT_SYSTEM_MAVLINK_SIGNAL] == "mavlink_signal"
-    assert [t.name for t in Type] == ["ok", "off", "stuck", "garbage", "wrong", "slow", "delayed", "intermittent"]
+    names = ["ok", "off", "stuck", "garbage", "wrong", "slow", "delayed", "intermittent"]
+    assert [t.name for t in Type] == names
     assert {u.value for u in Unit} == set(mavlink.enums["FAILURE_UNIT"]) - {mavlink.FAILURE_UNIT_ENUM_END}
     assert set(FAILURES) | set(UNMODELLED) == set(Unit) and not set(FAILURES) & set(UNMODELLED)
 

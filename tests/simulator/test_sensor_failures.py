@@ -33,6 +33,7 @@ CONFIG = replace(
     vision=VisionModel(True, 100.0, 0.0, 0.0, 0.0),
 )
 SENSOR_PAIRS = [(m.unit.name, t) for m in FAILURES.values() if m.where is Where.SENSORS for t in m.effects]
+PAIR_IDS = [f"{unit}-{t.name}" for unit, t in SENSOR_PAIRS]
 
 
 def truth_at(t: float) -> TruthState:
@@ -88,7 +89,7 @@ def window(rows, unit, lo, hi):
     return [sample(f, unit) for f in rows[round(lo / DT) : round(hi / DT)]]
 
 
-@pytest.mark.parametrize(("unit", "failure_type"), SENSOR_PAIRS, ids=[f"{u}-{t.name}" for u, t in SENSOR_PAIRS])
+@pytest.mark.parametrize(("unit", "failure_type"), SENSOR_PAIRS, ids=PAIR_IDS)
 def test_each_sensor_failure_changes_the_readings_as_the_table_says(unit, failure_type, twin):
     effect = FAILURES[Unit[unit]].effects[failure_type]
     rows = fly(unit, failure_type)
