@@ -83,4 +83,4 @@ def test_an_integer_parameter_sent_bytewise_is_not_taken_for_a_nan():
 def test_the_fuzzer_catches_a_parameter_set_behind_its_rules(monkeypatch):
     monkeypatch.setattr(ParameterStore, "validate", lambda self, name, value: None)  # checks nothing
     with pytest.raises(FuzzFailure, match="rules refuse|PARAM_VALUE.param_value"):
-        fuzz_autopilot(20_000, seed=3)
+        fuzz_autopilot(20_000, seed=1)
