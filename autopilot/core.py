@@ -59,12 +59,14 @@ from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
 from .mavlink.dispatch import FaultLog, MessageDispatcher
+from .mavlink.failure_injection import FailureInjection
 from .mavlink.hil import (
     BATTERY_ID,
     DISTURBANCE_ID,
     ActuatorEncoder,
     CorruptFrame,
     RefusedReport,
+    SimulatorRequests,
     battery_report,
     decode_frame,
     disturbance_of,
@@ -248,6 +250,11 @@ class AutopilotCore:
             refusals=self.refusals,
         )  # fmt: skip
         self.param_service.register(self.dispatcher, self.commands)
+        self.simulator_requests = SimulatorRequests(self.encoder, self.system_id)  # in the next answer
+        self.failure_injection = FailureInjection(
+            self.params, self._request_failure, lambda: self.estimator is not None, self.refusals,
+            self.statustext, self.wrench,
+        )  # fmt: skip
         self.vehicle_commands = VehicleCommands(self)
         self.vehicle_commands.register(self.commands)
         self.signing = Signing(setup.signing, self.encoder, self.links, self.statustext,
@@ -295,8 +302,10 @@ class AutopilotCore:
         except Exception as exc:
             self.faults.record(f"{gcs.name} parser", exc, now)
             messages = []
+        drops = self.failure_injection.drops
         for msg in messages:
-            self.dispatcher.dispatch(msg, gcs, address, now)
+            if not drops(msg):  # a link's injected failure (rc_signal, mavlink_signal)
+                self.dispatcher.dispatch(msg, gcs, address, now)
         return self._take()
 
     def tick(self, now: float) -> list[Outgoing]:
@@ -339,6 +348,7 @@ class AutopilotCore:
             "peers": {link.name: [f"{host}:{port}" for host, port in link.peers] for link in self.links},
             "signing": self.signing.info(),
             "flight_log": {"logging": self.flight_log.logging, "logs_started": self.flight_log.logs_started},
+            "failures": self.failure_injection.info(),
         }
 
     def on_foreign_datagram(self, what: str) -> None:
@@ -406,6 +416,7 @@ class AutopilotCore:
         self.commander.disarm(self.sim_time, force=True)
         self.commander.home = None
         self.battery.reset()
+        self.failure_injection.simulator_restarted()
         self.last_time_usec = -1
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
@@ -447,8 +458,11 @@ class AutopilotCore:
             controls = (0.0, 0.0, 0.0, 0.0)
         self._controls = controls
         self._frame_done = (frame, guidance, output)
-        self._last_answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
-        return self._last_answer
+        answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
+        if self.simulator_requests.pending:  # requests to the simulator ride in the answer
+            answer += self.simulator_requests.take()
+        self._last_answer = answer
+        return answer
 
     def _battery_step(self, t: float, parts: dict | None) -> None:
         """The frame's battery report (if any) into the estimate, refused at the edge when it is no
@@ -516,8 +530,8 @@ class AutopilotCore:
             return None
         for name in samples.refused:  # never fed to the filter
             self.on_foreign_datagram(f"HIL frame with a non-finite {name} sample")
-        if "imu" in samples.refused:  # no prediction, no fusion this frame: fly on the filter as
-            est = loop.estimate()  # it is (the next sample integrates across the gap)
+        if "imu" in samples.refused or not samples.imu_fresh:  # no prediction, no fusion this frame:
+            est = loop.estimate()  # fly on the filter as it is (the next sample integrates across the gap)
         elif self.frames == 0 and frame.state.position_m[2] > IN_AIR_START_M:
             loop.start_in_air(t, samples, frame.state)  # the paper's experiments start in the air
             est = frame.state
@@ -697,6 +711,14 @@ class AutopilotCore:
             link.send_to(self.encoder.pack(self.vehicle_commands.after_ack), address)
             self.vehicle_commands.after_ack = None
         self.send_events()
+
+    def _request_failure(self, unit: int, failure_type: int, instance: int) -> bool:
+        """MAV_CMD_INJECT_FAILURE for the simulator, in the next answer; False when too many wait."""
+        requests = self.simulator_requests
+        if requests.full:
+            return False
+        requests.command(m.MAV_CMD_INJECT_FAILURE, unit, failure_type, instance)
+        return True
 
     def _on_set_mode_message(self, msg, link: GcsLink, address: Address) -> None:
         if not self._for_us(msg):

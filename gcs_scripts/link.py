@@ -25,6 +25,7 @@ encoding share the telemetry state.)
 from __future__ import annotations
 
 import math
+import struct
 import sys
 import time
 from collections import deque
@@ -260,6 +261,7 @@ class Link:
         self.on_local_position: Callable[[Any], None] | None = None
         self.log = log or (lambda text: None)
         self._acks: deque[tuple[Any, int]] = deque(maxlen=64)  # (COMMAND_ACK, texts so far)
+        self._param_values: deque[Any] = deque(maxlen=64)  # PARAM_VALUE, newest last
         self._texts_seen = 0  # STATUSTEXT count, to find the ones that follow an ACK
         self._texts = StatusTextAssembler()  # a long STATUSTEXT comes in chunks
         self._next_gcs_heartbeat = 0.0
@@ -318,6 +320,8 @@ class Link:
             self.view.sys_status = msg
         elif kind == "COMMAND_ACK":
             self._acks.append((msg, self._texts_seen))
+        elif kind == "PARAM_VALUE":
+            self._param_values.append(msg)
         elif kind == "STATUSTEXT":
             self._statustext(msg)
 
@@ -537,19 +541,20 @@ class Link:
         cmd_name = name.name if name is not None else str(command)
         for attempt in range(attempts):
             self._acks.clear()
+            texts_before = self._texts_seen  # a refusal's reason may come just before the ACK
             self.mav.command_long_send(self.target_system, self.target_component, command, attempt, *p[:7])
             deadline = time.monotonic() + ack_timeout_s
             while time.monotonic() < deadline:
                 if self.poll() == 0:
                     time.sleep(0.0005)
-                for ack, texts_before in list(self._acks):
+                for ack, _ in list(self._acks):
                     if ack.command != command:
                         continue
                     if ack.result == mavutil.mavlink.MAV_RESULT_IN_PROGRESS:
                         deadline = time.monotonic() + ack_timeout_s
                         continue
                     if ack.result != mavutil.mavlink.MAV_RESULT_ACCEPTED and check:
-                        reasons = self._texts_after_ack(texts_before)
+                        reasons = self.texts_since(texts_before)
                         why = f": {reasons[-1]}" if reasons else ""
                         result = MAV_RESULT_NAMES.get(ack.result, str(ack.result))
                         raise CommandFailed(f"{cmd_name} {result}{why}", command, ack.result)
@@ -560,15 +565,51 @@ class Link:
             )
         return -1
 
-    def _texts_after_ack(self, texts_before: int, wall_s: float = 0.05) -> list[str]:
-        """STATUSTEXT that followed an ACK: PX4-like autopilots explain refusals there."""
+    @property
+    def texts_seen(self) -> int:
+        """How many STATUSTEXT have arrived so far (a mark for :meth:`texts_since`)."""
+        return self._texts_seen
+
+    def texts_since(self, texts_before: int, wall_s: float = 0.05) -> list[str]:
+        """The STATUSTEXT that arrived since the mark ``texts_before`` (:attr:`texts_seen`), waiting
+        up to ``wall_s`` for one: PX4-like autopilots explain a command's result there, just before
+        or after its ACK (the text may still be in the socket)."""
         deadline = time.monotonic() + wall_s
-        # The reason is sent right after the ACK; it may still be in the socket.
         while time.monotonic() < deadline and self._texts_seen == texts_before:
-            if self.poll() == 0:
+            if self.poll() == 0 and not self._steps_time:
                 time.sleep(0.001)
+        self.poll()  # a long text's further chunks, just behind its first
         new = min(self._texts_seen - texts_before, len(self.statustext))
         return [text for _, _, text in list(self.statustext)[len(self.statustext) - new :]]
+
+    def set_parameter(self, name: str, value: float, integer: bool = False, timeout_s: float = 1.0,
+                      attempts: int = 3) -> float:  # fmt: skip
+        """PARAM_SET (an ``integer`` parameter as PX4 sends it: MAV_PARAM_TYPE_INT32, its bytes in
+        the float field), waiting on the wall clock for the vehicle's PARAM_VALUE echo; returns the
+        value the vehicle reports (the old one when it refused: the reason is in STATUSTEXT).
+        :class:`LinkError` when no echo comes."""
+        mavlink = mavutil.mavlink
+        if integer:
+            sent = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+            param_type = mavlink.MAV_PARAM_TYPE_INT32
+        else:
+            sent, param_type = float(value), mavlink.MAV_PARAM_TYPE_REAL32
+        for _ in range(attempts):
+            self._param_values.clear()
+            self.mav.param_set_send(self.target_system, self.target_component, name.encode(), sent,
+                                    param_type)  # fmt: skip
+            deadline = time.monotonic() + timeout_s
+            while time.monotonic() < deadline:
+                if self.poll() == 0 and not self._steps_time:
+                    time.sleep(0.0005)
+                for echo in self._param_values:
+                    echo_name = echo.param_id if isinstance(echo.param_id, str) else echo.param_id.decode()
+                    if echo_name.rstrip("\x00") != name:
+                        continue
+                    if echo.param_type == mavlink.MAV_PARAM_TYPE_INT32:
+                        return float(struct.unpack("<i", struct.pack("<f", echo.param_value))[0])
+                    return float(echo.param_value)
+        raise LinkError(f"PARAM_SET {name}: no PARAM_VALUE after {attempts} attempts of {timeout_s:g} s")
 
     def set_message_interval(self, msg_id: int, rate_hz: float) -> None:
         """MAV_CMD_SET_MESSAGE_INTERVAL on this link (rate in Hz of simulation time)."""

@@ -57,6 +57,23 @@ that stops reporting for 5 s is unhealthy there.
 clear = normalised rotor speeds Omega_i/Omega_max for rotors 1-4. The simulator refuses a frame
 whose bit 1 disagrees with its own vehicle config.
 
+Requests to the simulator: the autopilot is the one that hears the ground stations, and some of
+what they ask is the simulator's to carry out (``MAV_CMD_INJECT_FAILURE``: a sensor, a rotor or
+the battery fails, :mod:`quadcommon.failures`). The autopilot puts such a request into the answer
+datagram, after the ``HIL_ACTUATOR_CONTROLS``, as a MAVLink 2 frame from itself (system 1 + N,
+component :data:`AUTOPILOT_COMPONENT_ID`, never signed) addressed to the simulator
+(``target_system`` 1 + N, ``target_component`` :data:`SIMULATOR_COMPONENT_ID`); at most
+:data:`MAX_REQUESTS_PER_ANSWER` per answer (more wait for the next one). Requests now:
+``COMMAND_LONG`` ``MAV_CMD_INJECT_FAILURE`` (param1 unit, param2 type, param3 instance, as the
+ground station sent them). The simulator takes requests only from the answer it accepts for the
+current frame, once: an answer's ``time_usec`` applies its requests only if it is later than the
+last one that did, so the copy of an answer that a resent frame brings back (the autopilot
+answers a resent frame with the same bytes) never applies twice. They apply from the next frame
+on (the frame after the answer that carried them), in both runners alike. Anything else after the
+controls (a frame that fails its checksum, comes from another sender, is addressed elsewhere, is
+not a request, has a non-finite parameter, or bytes that are not MAVLink 2) is refused and
+counted (``quadsitl/<N>/info``: ``requests``), never applied.
+
 Values on the wire: integer fields saturate at their type's range instead of failing to pack
 (a vehicle 10 000 km away is still reported, at the edge), NaN goes out as the field's
 "unknown" (0, or UINT16_MAX where MAVLink defines it) -- :func:`sat_i16`, :func:`sat_u16`,
@@ -98,6 +115,9 @@ BATTERY_REPORT_HZ = 20.0
 
 HIL_FLAG_LOCKSTEP = 1
 HIL_FLAG_WRENCH = 2
+
+# Requests to the simulator in an answer (see the module's docstring).
+MAX_REQUESTS_PER_ANSWER = 4
 
 
 def spin_until_readable(sock, seconds: float) -> bool:

@@ -22,6 +22,10 @@ answer (:meth:`~SimulatorCore.answer_to_frame` picks it out of any datagram): th
 process over UDP with a wall-clock timeout and pacing (:mod:`simulator.app`), the in-process
 runner by calling the autopilot's core directly (:mod:`sitl.inprocess`). That is the one
 lockstep loop; both paths run it, so their trajectories are identical.
+
+The autopilot's requests to the simulator ride in the answer (:mod:`quadcommon.wire`):
+:meth:`~SimulatorCore.end_frame` takes those of the answer it applies, once, and carries them out
+from the next frame on (:meth:`~SimulatorCore.inject_failure`: a sensor, a rotor, the battery).
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from quadcommon import wire
+from quadcommon import failures, wire
 from quadcommon.config import (
     ScenarioConfig,
     SitlConfig,
@@ -45,10 +49,17 @@ from quadcommon.config import (
 from quadcommon.wire import new_parser, restart_parser
 
 from .battery import BatteryModel
-from .dynamics.plant import make_plant
+from .dynamics.plant import ROTOR_POSITIONS, make_plant
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
 from .environment.gust_upload import handle_gust_request
-from .mavlink.hil import ActuatorAnswer, ActuatorDecoder, HilFrameEncoder
+from .mavlink.hil import (
+    ActuatorAnswer,
+    ActuatorDecoder,
+    HilFrameEncoder,
+    InjectFailure,
+    Request,
+    RequestDecoder,
+)
 from .safety import MOTORS_OFF, emergency_descent, touched_down
 from .sensors import SensorConfig, SensorSuite, load_sensors
 from .truth_bus import truth_row
@@ -164,6 +175,11 @@ class SimulatorCore:
         self.battery = BatteryModel(self.plant_vehicle, setup.sitl.home[2], 1.0 / wire.BATTERY_REPORT_HZ)
         self.encoder = HilFrameEncoder(wire.system_id(setup.instance), setup.sitl.home)
         self.decoder = ActuatorDecoder()
+        self.requests = RequestDecoder(wire.system_id(setup.instance))  # the autopilot's, in its answers
+        self.requests_applied = 0
+        self._requests_usec = -1  # the answer whose requests applied last (a copy never applies twice)
+        self._late_answer: ActuatorAnswer | None = None  # its requests apply at the next end_frame
+        self.failures: dict[str, str] = {}  # active injected failures: unit -> type (PX4's names)
         self._probe = new_parser()  # for is_autopilot: never touches the lockstep decoder
         self.k = 0  # the frame being flown
         self.time_usec = 0
@@ -240,7 +256,8 @@ class SimulatorCore:
         return answer if answer is not None and answer.time_usec == self.time_usec else None
 
     def end_frame(self, answer: ActuatorAnswer | None) -> None:
-        """Apply ``answer`` (None: the emergency descent, while lost) and step the plant."""
+        """Apply ``answer`` (None: the emergency descent, while lost) and step the plant; the
+        answer's requests (or those of the answer that ended an outage) apply from the next frame."""
         plant = self.plant
         if self.emergency or answer is None:
             plant.set_actuator_controls(self._emergency_controls())
@@ -249,6 +266,68 @@ class SimulatorCore:
         t, dt, evaluate = self.t, self.dt_physics, self.schedule.evaluate
         plant.advance([evaluate(t + j * dt) for j in range(self.substeps)])
         self.k += 1
+        carrier = answer if answer is not None else self._late_answer
+        self._late_answer = None
+        if carrier is not None and carrier.others:
+            self._take_requests(carrier)
+
+    # -- the autopilot's requests -----------------------------------------------------------------
+    def _take_requests(self, answer: ActuatorAnswer) -> None:
+        """The requests an answer carries, once: a copy of an answer that applied already (the
+        answer to a resent frame) applies nothing."""
+        if answer.time_usec <= self._requests_usec:
+            return
+        self._requests_usec = answer.time_usec
+        refused = self.requests.refused_total
+        for request in self.requests.decode(answer.others):
+            self.apply_request(request)
+        if self.requests.refused_total != refused:
+            self._warn_once("request", "a request in the autopilot's answer was refused (counted by reason "
+                            "in quadsitl/<N>/info: requests)")  # fmt: skip
+
+    def apply_request(self, request: Request) -> None:
+        """Carry out one request from now on (the frame :attr:`t`); one that cannot be is refused
+        and counted with its reason (``info()['requests']``)."""
+        if isinstance(request, InjectFailure):
+            problem = self.inject_failure(request.unit, request.failure_type, request.instance)
+        else:  # pragma: no cover - every Request type has its branch
+            problem = f"request {request!r} not handled"
+        if problem is None:
+            self.requests_applied += 1
+        else:
+            self.requests.refuse(problem)  # one count of the refusals on the channel
+
+    def inject_failure(self, unit: int, failure_type: int, instance: int) -> str | None:
+        """``MAV_CMD_INJECT_FAILURE`` (:mod:`quadcommon.failures`) from the current frame on: a
+        sensor of the sensor models, a rotor of the plant (PX4's motor numbers), the battery
+        model. None when applied, else why not."""
+        refusal = failures.refusal(unit, failure_type, instance)
+        if refusal is not None:
+            return refusal[1]
+        model = failures.FAILURES[failures.Unit(unit)]
+        name, type_name = model.unit.name, failures.Type(failure_type).name
+        where = model.where
+        if where is failures.Where.SENSORS:
+            self.sensors.inject_failure(name, failure_type, self.t)
+        elif where is failures.Where.PLANT:
+            if self.wrench:
+                return f"failure {name}: vehicle '{self.setup.vehicle.name}' has the wrench actuation"
+            motors = range(1, model.instances + 1) if instance == failures.ALL_INSTANCES else (instance,)
+            effectiveness = 1.0 if failure_type == failures.Type.ok else 0.0
+            for motor in motors:  # PX4's motor n sits at PX4_MOTOR_POSITIONS[n - 1] (quadrotor +)
+                rotor = ROTOR_POSITIONS.index(failures.PX4_MOTOR_POSITIONS[motor - 1]) + 1
+                self.plant.set_rotor_effectiveness(rotor, effectiveness)
+        elif where is failures.Where.BATTERY:
+            battery = self.battery
+            if battery is None:
+                return f"failure {name}: this simulator has no battery model"
+            if not battery.inject_failure(failure_type):
+                return f"failure {name} {type_name}: refused by the battery model"
+        else:
+            return f"failure {name}: the autopilot's own (its links), not the simulator's"
+        failures.keep_active(self.failures, unit, failure_type, instance)
+        self.log(f"t={self.t:.3f} s: {failures.announcement(unit, failure_type, instance)}")
+        return None
 
     def _controls(self, answer: ActuatorAnswer) -> Controls:
         """Zero unless armed, consistent with our actuation and finite."""
@@ -301,6 +380,7 @@ class SimulatorCore:
         answer = self.decoder.decode(datagram)
         if answer is None or answer.time_usec < self._lost_usec:
             return False
+        self._late_answer = answer
         self.emergency = self.emergency_landed = False
         self.log(f"link recovered: the autopilot answers again; resuming lockstep at t={self.t:.3f} s")
         return True
@@ -377,6 +457,8 @@ class SimulatorCore:
             "sim_time_s": self.t,
             "resends": self.resends,
             "battery": self.battery.info(),
+            "failures": dict(self.failures),
+            "requests": {"applied": self.requests_applied, "refused": dict(self.requests.refused)},
         }
 
 

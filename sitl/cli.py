@@ -9,6 +9,7 @@ quadsitl fly setpoints|trajectory|paper ...        fly a running SITL (gcs_scrip
 quadsitl mission upload|download|clear ...         the mission protocol (gcs_scripts/upload_mission.py)
 quadsitl gusts upload PROFILE ...                  disturbances (gcs_scripts/upload_gusts.py)
 quadsitl record [--out DIR/NAME] ...               record a session (gcs_scripts/record.py)
+quadsitl fail UNIT TYPE [--instance N] [--enable]  inject a failure, as PX4's failure command
 quadsitl config copy DIR [--force]                 write the shipped configuration out for editing
 
 Configuration names (scenarios, vehicles, gusts, ...) are looked up in --config-dir DIR, then in
@@ -41,6 +42,7 @@ DELEGATED: dict[tuple[str, str], tuple[str, tuple[str, ...], str]] = {
 }
 RECORD_MODULE = "record"
 IMPAIR_MODULE = "impair"
+FAIL_MODULE = "fail"
 GROUP_HELP = {
     "fly": "fly a running SITL: setpoints, trajectory, paper (quadsitl fly NAME --help)",
     "mission": "the vehicle's mission: upload, download, clear (quadsitl mission NAME --help)",
@@ -384,6 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("impair", help="change a running vehicle's link faults: quadsitl impair "
                        "api:loss=100%% (docs/links.md)", add_help=False)  # fmt: skip
     p.add_argument("rest", nargs=argparse.REMAINDER)
+    p = sub.add_parser("fail", help="inject a failure as PX4's failure command: quadsitl fail gps off "
+                       "[--enable] (quadsitl fail --help, docs/failures.md)", add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
 
     p = sub.add_parser("config", help="the configuration: copy the shipped files out, or list where names "
                        "are looked up")  # fmt: skip
@@ -446,6 +451,8 @@ def _dispatch(argv: list[str]) -> int:
         return _delegate(RECORD_MODULE, argv[1:], "quadsitl record")
     if argv[:1] == ["impair"]:
         return _delegate(IMPAIR_MODULE, argv[1:], "quadsitl impair")
+    if argv[:1] == ["fail"]:
+        return _delegate(FAIL_MODULE, argv[1:], "quadsitl fail")
     if tuple(argv[:2]) in DELEGATED:
         module, before, _ = DELEGATED[(argv[0], argv[1])]
         return _delegate(module, [*before, *argv[2:]], f"quadsitl {argv[0]} {argv[1]}")

@@ -48,6 +48,9 @@ class SensorSamples(NamedTuple):
     # What the edge refused of this frame (a non-finite value: never fed to the filter), by name:
     # "imu" (then the two IMU vectors are not to be used), "mag", "baro", "vision".
     refused: tuple[str, ...] = ()
+    # HIL_SENSOR's accelerometer and gyro bits (fields_updated 0-5) all set: the IMU sampled this
+    # frame; else it holds an old sample (a failure stopped it) and the two vectors are not new.
+    imu_fresh: bool = True
 
 
 class Frame(NamedTuple):
@@ -111,6 +114,7 @@ def _decode_frame(datagram: bytes, parser, home, use_odometry: bool, sensors: bo
 _SENSOR = FastDecoder(mavlink.MAVLink_hil_sensor_message)
 _GPS = FastDecoder(mavlink.MAVLink_hil_gps_message)
 _VISION = FastDecoder(mavlink.MAVLink_vision_position_estimate_message)
+_IMU_BITS = 0x3F  # HIL_SENSOR fields_updated: x/y/z accelerometer, x/y/z gyro
 _MAG_BITS = 0x1C0  # HIL_SENSOR fields_updated: x/y/z magnetometer
 _BARO_ALT_BIT = 0x800  # HIL_SENSOR fields_updated: pressure altitude
 
@@ -174,7 +178,7 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
         else:
             refused.append("vision")
     return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision,
-                         tuple(refused))  # fmt: skip
+                         tuple(refused), updated & _IMU_BITS == _IMU_BITS)  # fmt: skip
 
 
 _IMU_FIELDS = _where(_SENSOR, "xgyro", "ygyro", "zgyro", "xacc", "yacc", "zacc")
@@ -351,3 +355,38 @@ class ActuatorEncoder:
         data = self._fast.frame(mav.seq)
         mav.seq = (mav.seq + 1) % 256
         return data
+
+
+class SimulatorRequests:
+    """Requests to the simulator, carried in the lockstep answer after its HIL_ACTUATOR_CONTROLS
+    (:mod:`quadcommon.wire`): MAVLink 2 frames from the autopilot, addressed to the simulator's
+    component, never signed; at most ``MAX_REQUESTS_PER_ANSWER`` per answer, the rest in the next;
+    at most :data:`MAX_PENDING` waiting (a flood of commands cannot grow the queue)."""
+
+    MAX_PENDING = 64
+
+    def __init__(self, encoder: Encoder, system_id: int) -> None:
+        self.encoder = encoder
+        self.system_id = system_id
+        self.pending: list[bytes] = []
+
+    @property
+    def full(self) -> bool:
+        return len(self.pending) >= self.MAX_PENDING
+
+    def command(self, command: int, *params: float) -> None:
+        """A COMMAND_LONG for the simulator (param1.. as given, the rest 0)."""
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        target = (self.system_id, wire.SIMULATOR_COMPONENT_ID)
+        self.send(mavlink.MAVLink_command_long_message(*target, command, 0, *p))
+
+    def send(self, message) -> None:
+        """Any message for the simulator (pymavlink, its target the simulator's component: a
+        ``PARAM_SET`` of a ``SIM_*`` parameter, say), packed now, sent in the next answer."""
+        self.pending.append(self.encoder.pack_unsigned(message))
+
+    def take(self) -> bytes:
+        """The frames for this answer (removed from the queue)."""
+        taken = self.pending[: wire.MAX_REQUESTS_PER_ANSWER]
+        del self.pending[: wire.MAX_REQUESTS_PER_ANSWER]
+        return b"".join(taken)

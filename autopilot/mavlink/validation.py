@@ -109,6 +109,11 @@ COMMAND_RULES: dict[int, tuple[Param, ...]] = {
     m.MAV_CMD_NAV_RETURN_TO_LAUNCH: (),
     m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: (),
     m.MAV_CMD_GET_HOME_POSITION: (),
+    m.MAV_CMD_INJECT_FAILURE: (
+        Param(1, "failure unit (FAILURE_UNIT)", **_BYTE),
+        Param(2, "failure type (FAILURE_TYPE)", **_BYTE),
+        Param(3, "instance (0: all)", **_BYTE, nan_ok=True),
+    ),
 }
 
 

@@ -1,4 +1,5 @@
-"""The vehicle's MAV_CMDs (arming, takeoff, land, RTL, modes, message requests): wire -> commander.
+"""The vehicle's MAV_CMDs (arming, takeoff, land, RTL, modes, message requests, failure injection):
+wire -> commander.
 
 Each handler reads a :class:`~.commands.CommandRequest` as PX4 does, its parameters already
 validated (:mod:`.validation`), and returns ``(MAV_RESULT, reason)``; the dispatcher answers every
@@ -68,6 +69,12 @@ class VehicleCommands:
         commands.register(
             m.MAV_CMD_GET_HOME_POSITION, lambda r: self.send_requested(r, m.MAVLINK_MSG_ID_HOME_POSITION)
         )
+        commands.register(m.MAV_CMD_INJECT_FAILURE, self.inject_failure)
+
+    def inject_failure(self, r: CommandRequest) -> Result:
+        """MAV_CMD_INJECT_FAILURE (PX4's): param1 FAILURE_UNIT, param2 FAILURE_TYPE, param3 the
+        instance (0 or NaN: all), validated as bytes; :mod:`.failure_injection` answers it."""
+        return self.core.failure_injection.command(int(r.params[0]), int(r.params[1]), r.params[2])
 
     def arm_disarm(self, r: CommandRequest) -> Result:
         # MAVSDK sends param2 = NaN ("unset") with a plain arm; only 21196 means force.

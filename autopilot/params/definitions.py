@@ -255,6 +255,15 @@ LOGGER_PARAMS = (
     ),
 )  # fmt: skip
 
+# Failure injection (MAV_CMD_INJECT_FAILURE, autopilot/mavlink/failure_injection.py): PX4's switch.
+FAILURE_PARAMS = (
+    ParamSpec(
+        "SYS_FAILURE_EN", 0, 0, 1, kind=INT32,
+        description="enable failure injection (MAV_CMD_INJECT_FAILURE, quadsitl fail): 0 refused (PX4's "
+        "default), 1 accepted. The failures can easily cause crashes: use with caution",
+    ),
+)  # fmt: skip
+
 RATES_READ_ONLY = (
     "fixed by config/sitl.toml [rates] for simulator and autopilot (lockstep); edit it and restart"
 )
@@ -319,7 +328,7 @@ def default_parameters(
     ``vehicle`` gives ``MPC_THR_HOVER`` its default (:func:`hover_thrust_param`) and the battery's
     (:func:`battery_params`)."""
     specs = [*COMMANDER_PARAMS, hover_thrust_param(vehicle), *FAILSAFE_PARAMS, *battery_params(vehicle),
-             *LOGGER_PARAMS]
+             *LOGGER_PARAMS, *FAILURE_PARAMS]  # fmt: skip
     if controller is not None:
         specs += controller_params(controller)
     if rates is not None:

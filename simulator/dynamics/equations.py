@@ -55,7 +55,8 @@ P_ROTOR_MODE = 37  # 1.0 when actuation = "rotors"
 P_GROUND = 38  # 1.0 when ground contact is on
 P_HAS_DRAG = 39  # 1.0 when any drag coefficient is non-zero
 P_GROUND_REACH = 40  # |r_G| + 1 mm: with G higher than this above z = 0, O is in the air
-P_SIZE = 41
+P_EFFECTIVENESS = 41  # 4: each rotor's effectiveness in [0, 1] (1 healthy; 0 off: a motor failure)
+P_SIZE = 45
 
 # -- inputs u held over a physics step (zero-order hold) ------------------------------------------
 U_THRUST = 0  # wrench: U1 (saturated by Plant.set_wrench)
@@ -85,10 +86,12 @@ def com_offset(P) -> tuple:
 @kernel
 def rotor_wrench(P, s) -> tuple:
     """``(thrust, torque about O)`` of the rotors at the speeds of ``s``, + configuration (1 front,
-    2 right, 3 rear, 4 left; 1 and 3 counter-clockwise seen from above): thrust ``b Omega^2``,
-    reaction torque ``d Omega^2`` each."""
-    b, arm = P[P_B], P[P_ARM]
-    s1, s2, s3, s4 = s[13] * s[13], s[14] * s[14], s[15] * s[15], s[16] * s[16]
+    2 right, 3 rear, 4 left; 1 and 3 counter-clockwise seen from above): thrust ``e b Omega^2``,
+    reaction torque ``e d Omega^2`` each, ``e`` the rotor's effectiveness (``P_EFFECTIVENESS``:
+    1 healthy, 0 a motor that is off)."""
+    b, arm, e = P[P_B], P[P_ARM], P_EFFECTIVENESS
+    s1, s2 = P[e] * s[13] * s[13], P[e + 1] * s[14] * s[14]
+    s3, s4 = P[e + 2] * s[15] * s[15], P[e + 3] * s[16] * s[16]
     torque = (arm * b * (s4 - s2), arm * b * (s3 - s1), P[P_D] * (-s1 + s2 - s3 + s4))
     return b * (s1 + s2 + s3 + s4), torque
 

@@ -14,8 +14,10 @@ Coupled plant (``plant.model = "coupled"``, CONTROL.md "The more accurate plant"
 * ``actuation = "wrench"``: ``U1 in [0, U1_max]`` and body torques ``|tau_i| <= tau_max``
   applied directly (the idealised actuator the paper's experiment needs);
 * ``actuation = "rotors"``: four rotors in + configuration (1 front, 2 right, 3 rear, 4 left;
-  1 and 3 spin counter-clockwise seen from above), thrust ``b Omega^2``, reaction torque
-  ``d Omega^2``, first-order speed dynamics towards the command, speed limits, gyroscopic moment
+  1 and 3 spin counter-clockwise seen from above, :data:`ROTOR_POSITIONS`), thrust
+  ``e b Omega^2``, reaction torque ``e d Omega^2`` with each rotor's effectiveness ``e`` (1; 0 for
+  a motor that is off, :meth:`Plant.set_rotor_effectiveness`), first-order speed dynamics towards
+  the command, speed limits, gyroscopic moment
   ``J_r Omega_r (q, -p, 0)`` with ``Omega_r = -Omega1 + Omega2 - Omega3 + Omega4`` and the
   reaction to rotor acceleration ``J_r dOmega_r/dt`` about z;
 * disturbances: a force in the world frame applied at G (the ``[Ax, Ay, Az]`` of eq. 1), torques
@@ -51,6 +53,7 @@ from .equations import P_SIZE, U_FORCE, U_ROTOR, U_SIZE, U_TAU, U_THRUST, U_TORQ
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
+ROTOR_POSITIONS = ("front", "right", "rear", "left")  # rotors 1-4 of actuation "rotors"
 
 
 class TruthState(NamedTuple):
@@ -106,6 +109,7 @@ class Plant:
         self.rotor_inertia = rot.inertia_kg_m2
         self.rotor_tau = rot.time_constant_s
         self.speed_min, self.speed_max = rot.speed_min_rad_s, rot.speed_max_rad_s
+        self.rotor_effectiveness = [1.0, 1.0, 1.0, 1.0]  # rotors 1-4: 1 healthy, 0 off
         # Inputs held over the step.
         self.thrust_cmd = 0.0
         self.torque_cmd: Vector3 = ZERO3
@@ -142,7 +146,19 @@ class Plant:
         P[equations.P_GROUND] = 1.0 if self.ground_contact else 0.0
         P[equations.P_HAS_DRAG] = 1.0 if any(k != 0.0 for k in self.drag) else 0.0
         P[equations.P_GROUND_REACH] = math.sqrt(sum(c * c for c in self.com_offset)) + 1e-3
+        P[equations.P_EFFECTIVENESS : equations.P_EFFECTIVENESS + 4] = self.rotor_effectiveness
         return [float(x) for x in P]
+
+    def set_rotor_effectiveness(self, rotor: int, effectiveness: float) -> None:
+        """Rotor ``rotor`` (1-4, :data:`ROTOR_POSITIONS`) gives ``effectiveness`` (in [0, 1]) of its
+        thrust and reaction torque from the next step on: 0 is a motor that is off."""
+        if not self.rotor_mode:
+            raise ValueError("the wrench actuation has no rotors")
+        if not 0.0 <= effectiveness <= 1.0:
+            raise ValueError(f"rotor effectiveness {effectiveness!r} outside [0, 1]")
+        self._truth = None
+        self.rotor_effectiveness[rotor - 1] = float(effectiveness)
+        self._P[equations.P_EFFECTIVENESS + rotor - 1] = float(effectiveness)
 
     # -- state ------------------------------------------------------------------------------------
     def reset(

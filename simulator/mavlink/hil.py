@@ -13,7 +13,8 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
   (accel, gyro, mag, abs/diff pressure, pressure altitude, temperature): all set (0x1FFF) when
   every sensor sampled this frame, as PX4's Gazebo bridge sends them; the magnetometer bits (6-8)
   and the barometer bits (9, 11, 12) are cleared in frames where that sensor holds its last
-  sample (its rate below the frame rate), ``id`` 0.
+  sample (its rate below the frame rate), the accelerometer bits (0-2) and the gyro bits (3-5)
+  in frames where an injected failure stops it (:mod:`quadcommon.failures`), ``id`` 0.
 * ``HIL_STATE_QUATERNION`` (ground truth): attitude quaternion NED/FRD, body rates FRD,
   lat/lon (1e-7 deg) and alt (mm AMSL) of O from the local NED position about the configured
   home (:func:`quadcommon.frames.ned_to_geodetic`), velocity (cm/s, NED), specific force (mG, FRD,
@@ -60,6 +61,8 @@ STANDARD_GRAVITY_M_S2 = 9.80665  # 1 G for the mG fields of HIL_STATE_QUATERNION
 FIELDS_UPDATED_ALL = 0x1FFF  # HIL_SENSOR_UPDATED_{X,Y,Z}{ACC,GYRO,MAG}, ABS/DIFF_PRESSURE, PRESSURE_ALT, TEMP
 FIELDS_MAG = 0x1C0  # bits 6-8
 FIELDS_BARO = 0x1A00  # bits 9 (abs pressure), 11 (pressure altitude), 12 (temperature)
+FIELDS_ACCEL = 0x7  # bits 0-2
+FIELDS_GYRO = 0x38  # bits 3-5
 GPS_FIX_3D = 3
 _UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
@@ -159,6 +162,10 @@ class HilFrameEncoder:
             updated &= ~FIELDS_MAG
         if not readings.baro_fresh:
             updated &= ~FIELDS_BARO
+        if not readings.accel_fresh:
+            updated &= ~FIELDS_ACCEL
+        if not readings.gyro_fresh:
+            updated &= ~FIELDS_GYRO
         v[self._s_updated] = updated
         baro = readings.baro
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
@@ -268,6 +275,89 @@ class ActuatorAnswer(NamedTuple):
     armed: bool  # MAV_MODE_FLAG_SAFETY_ARMED in mode
     lockstep: bool  # flags bit 0
     wrench: bool  # flags bit 1: controls are a normalised wrench, else rotor speeds
+    # The rest of the datagram, undecoded: ``(message id, frame)`` of every other MAVLink 2 frame,
+    # and ``(NOT_MAVLINK, bytes)`` for bytes that are not frames (requests: RequestDecoder).
+    others: tuple[tuple[int, bytes], ...] = ()
+
+
+NOT_MAVLINK = -1  # ActuatorAnswer.others: bytes that are not a MAVLink 2 frame
+
+
+class InjectFailure(NamedTuple):
+    """The request ``MAV_CMD_INJECT_FAILURE`` (:mod:`quadcommon.failures`), as the ground station
+    sent it to the autopilot."""
+
+    unit: int  # FAILURE_UNIT
+    failure_type: int  # FAILURE_TYPE
+    instance: int  # 0: all
+
+
+Request = InjectFailure  # the requests to the simulator (quadcommon.wire); a new one: a type here
+
+
+class RequestDecoder:
+    """The requests to the simulator in an answer's other frames (:mod:`quadcommon.wire`): decoded
+    with their checksum, from this vehicle's autopilot, addressed to the simulator, known, finite.
+    Anything else is refused and counted by reason (:attr:`refused`); nothing here raises."""
+
+    def __init__(self, system_id: int) -> None:
+        self.sender = (system_id, wire.AUTOPILOT_COMPONENT_ID)
+        self.target = (system_id, wire.SIMULATOR_COMPONENT_ID)
+        self.refused: dict[str, int] = {}
+        self._command = FastDecoder(mavlink.MAVLink_command_long_message)
+        where = self._command.slices
+        self._c = tuple(where[name] for name in ("target_system", "target_component", "command", "param1",
+                                                 "param2", "param3"))  # fmt: skip
+        # message id -> how its frame becomes a request (a new request: one entry and a method)
+        self._decoders = {mavlink.MAVLINK_MSG_ID_COMMAND_LONG: self._command_long}
+
+    def decode(self, others: tuple[tuple[int, bytes], ...]) -> list[Request]:
+        requests: list[Request] = []
+        for i, (msg_id, frame) in enumerate(others):
+            if i >= wire.MAX_REQUESTS_PER_ANSWER:
+                self.refuse(f"more than {wire.MAX_REQUESTS_PER_ANSWER} requests in one answer")
+                continue
+            decoder = self._decoders.get(msg_id)
+            if msg_id == NOT_MAVLINK:
+                self.refuse("bytes that are not MAVLink 2 after the controls")
+            elif decoder is None:
+                self.refuse(f"message {msg_id}: not a request to the simulator")
+            elif (frame[5], frame[6]) != self.sender:
+                self.refuse(f"a request from system {frame[5]} component {frame[6]}, not the autopilot")
+            else:
+                try:
+                    request = decoder(frame)
+                except DecodeError:
+                    self.refuse(f"message {msg_id}: bad checksum or length")
+                    continue
+                if isinstance(request, str):
+                    self.refuse(request)
+                else:
+                    requests.append(request)
+        return requests
+
+    def _command_long(self, frame: bytes) -> Request | str:
+        v = self._command.unpack(frame)
+        system, component, command, unit, failure_type, instance = (v[i] for i in self._c)
+        if (system, component) != self.target:
+            return f"a command to system {system} component {component}, not the simulator"
+        if command != mavlink.MAV_CMD_INJECT_FAILURE:
+            return f"command {command}: not a request to the simulator"
+        params = (unit, failure_type, instance)
+        if not all(math.isfinite(x) and 0.0 <= x <= 255.0 and x == int(x) for x in params):
+            return "MAV_CMD_INJECT_FAILURE with a parameter that is not an integer in [0, 255]"
+        return InjectFailure(int(unit), int(failure_type), int(instance))
+
+    @property
+    def refused_total(self) -> int:
+        return sum(self.refused.values())
+
+    def refuse(self, reason: str) -> None:
+        """Count a refused request (by reason; at most 64 reasons kept, the rest together)."""
+        if reason in self.refused or len(self.refused) < 64:  # bounded
+            self.refused[reason] = self.refused.get(reason, 0) + 1
+        else:
+            self.refused["(other reasons)"] = self.refused.get("(other reasons)", 0) + 1
 
 
 class ActuatorDecoder:
@@ -284,10 +374,15 @@ class ActuatorDecoder:
         self._mode, self._flags = where["mode"], where["flags"]
 
     def decode(self, datagram: bytes) -> ActuatorAnswer | None:
-        """The last actuator message in ``datagram``, or None when it holds none."""
+        """The last actuator message in ``datagram``, or None when it holds none; the datagram's
+        other frames (and bytes that are not frames) ride along, undecoded, in ``others``."""
         answer = None
+        others: list[tuple[int, bytes]] = []
+        consumed = 0
         for msg_id, frame in split_frames(datagram):
+            consumed += len(frame)
             if msg_id != _ID_CONTROLS:
+                others.append((msg_id, frame))
                 continue
             try:
                 v = self.decoder.unpack(frame)
@@ -302,4 +397,8 @@ class ActuatorDecoder:
                 bool(flags & wire.HIL_FLAG_LOCKSTEP),
                 bool(flags & wire.HIL_FLAG_WRENCH),
             )
+        if consumed != len(datagram):
+            others.append((NOT_MAVLINK, datagram[consumed:]))
+        if answer is not None and others:
+            answer = answer._replace(others=tuple(others))
         return answer

@@ -20,12 +20,13 @@ from pathlib import Path
 
 from quadcommon import frames
 from quadcommon.config import config_path
+from quadcommon.failures import effect_of_kind, sensor_fault_kinds
 from quadcommon.schema import ConfigError, Section, load_toml
 
 Vector3 = tuple[float, float, float]
 _Z3: Vector3 = (0.0, 0.0, 0.0)
 
-FAULT_KINDS = (
+PROFILE_FAULT_KINDS = (
     "gps_outage",  # no fix (the receiver reports fix type 1) while active
     "gps_glitch",  # position offset by `value` (m, world) while active; eph unchanged
     "vision_outage",  # no vision/mocap sample while active
@@ -33,6 +34,27 @@ FAULT_KINDS = (
     "accel_bias_step",  # accelerometer bias + `value` (m/s^2, body) from start_s on
     "gyro_bias_step",  # gyro bias + `value` (rad/s, body) from start_s on
 )
+# The failure unit (quadcommon.failures) each profile fault kind belongs to: a recovery of the
+# unit (type ok) ends them too.
+PROFILE_FAULT_UNITS = {
+    "gps_outage": "gps", "gps_glitch": "gps", "vision_outage": "vio", "mag_disturbance": "mag",
+    "accel_bias_step": "accel", "gyro_bias_step": "gyro",
+}  # fmt: skip
+# ... and the sensor failures of MAV_CMD_INJECT_FAILURE ("gps_off", "baro_stuck", ...: the table
+# of quadcommon.failures), `value` the table's figure unless given.
+FAULT_KINDS = PROFILE_FAULT_KINDS + sensor_fault_kinds()
+
+
+def fault_unit(kind: str) -> str:
+    """The failure unit (``gps``, ``mag``, ...) a fault kind acts on."""
+    failure = effect_of_kind(kind)
+    return failure[0].name if failure is not None else PROFILE_FAULT_UNITS[kind]
+
+
+def default_fault_value(kind: str) -> Vector3:
+    """A fault's ``value`` when the profile gives none: the table's figure for a failure, else 0."""
+    failure = effect_of_kind(kind)
+    return failure[2].value if failure is not None else _Z3
 
 
 @dataclass(frozen=True)
@@ -256,14 +278,15 @@ def load_sensors(name_or_path: str | Path = "ideal", _alias_depth: int = 0) -> S
 
     faults = []
     for fs in root.sections("faults"):
+        kind = fs.choice("kind", FAULT_KINDS)
         faults.append(
             SensorFault(
-                kind=fs.choice("kind", FAULT_KINDS),
+                kind=kind,
                 start_s=fs.number("start_s", lo=0.0, hi=1e6, unit="s"),
                 duration_s=fs.number("duration_s", math.inf, lo=0.0, lo_open=True, hi=math.inf, unit="s")
                 if fs.has("duration_s")
                 else math.inf,
-                value=fs.vector("value", 3, _Z3, lo=-1e4, hi=1e4),  # type: ignore[arg-type]
+                value=fs.vector("value", 3, default_fault_value(kind), lo=-1e4, hi=1e4),  # type: ignore
             )
         )
         fs.finish()

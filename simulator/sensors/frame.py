@@ -1,5 +1,6 @@
 """One frame of the vehicle's sensors, written once as a kernel: when each sensor samples, what
-it delivers after its latency, the biases' random walks, the GNSS errors and the injected faults.
+it delivers after its latency, the biases' random walks, the GNSS errors and the injected faults
+and failures.
 
 :class:`~.models.SensorSuite` (the simulator) is a thin shell around :func:`sensor_frame`; a
 batch engine calls it from its own compiled loop (:func:`sitl.campaign.kernels.simulate_estimated`),
@@ -19,6 +20,18 @@ one frame, the newer). The memory is float arrays laid out by the constants belo
   and the queues of readings in flight;
 * ``faults`` (n x ``FAULT_SIZE``): kind, start, duration, value (3) per injected fault;
 * ``out`` (``O_SIZE``): what the frame delivers (a flag per sensor: 1 when it delivered).
+
+Failures (``MAV_CMD_INJECT_FAILURE``'s sensor units, :mod:`quadcommon.failures`) are rows of the
+same fault table: kind :func:`fault_code` of ``"<unit>_<type>"`` (``gps_off``, ``baro_stuck``...),
+active over ``[start, start + duration)`` like any fault, the table's figure in ``value``. A profile's
+``[[faults]]``, a campaign's draws and a failure injected in flight (a row from its time on; a
+recovery ends the unit's active rows) are the same rows. A unit fails one way at a time: the
+latest-started active row of the unit decides (:func:`failure_of`). Per sample, as the table says:
+*off* no sample (and nothing in flight is delivered), *stuck* the values of the unit's last good
+sample, *garbage* uniform draws over the range, *wrong* the offset added, *slow* one due sample in
+``value[0]``, *delayed* ``value[0]`` s more latency, *intermittent* each due sample dropped with
+probability ``value[0]``. The draws of garbage and intermittent come from the sensors' stream
+after the sample's own.
 """
 
 from __future__ import annotations
@@ -28,9 +41,11 @@ from typing import Any
 
 import numpy as np
 
+from quadcommon.atmosphere import isa_altitude_m
+from quadcommon.failures import Type, effect_of_kind
 from quadcommon.kernel import kernel
 from quadcommon.rigid_body import Quaternion, Vector3
-from quadcommon.rng import normal
+from quadcommon.rng import normal, uniform
 
 from .config import FAULT_KINDS, SensorConfig
 from .kernels import (
@@ -78,18 +93,30 @@ S_HAS_MAG = 25
 S_HELD_BARO = 26  # 4: time, pressure, pressure altitude, temperature
 S_HAS_BARO = 30
 S_NEXT = 31  # 4: per scheduled sensor, the index of its next sample
-PENDING = 16  # readings in flight per sensor (latency / period; 0.3 s at 50 Hz is 15)
+PENDING = 128  # readings in flight per sensor (latency / period: 0.2 s delayed at 500 Hz is 100)
 ITEM = 13  # delivery time + up to 12 floats of reading
 Q_HEAD, Q_COUNT, Q_ITEMS = 0, 1, 2
 QUEUE = 2 + PENDING * ITEM
 S_QUEUES = 35  # 4 queues
 S_READING = S_QUEUES + 4 * QUEUE  # 12: the reading being made (room the frame needs, not state)
-S_SIZE = S_READING + 12
+GOOD = 12  # floats of a failing unit's last good sample (a reading's after its time)
+S_GOOD = S_READING + 12  # 6 x GOOD: per failing unit (FAILING), its last good sample
+S_HAS_GOOD = S_GOOD + 6 * GOOD  # 6
+S_SLOW_COUNT = S_HAS_GOOD + 6  # 6: due samples counted by a slow failure
+S_HELD_IMU = S_SLOW_COUNT + 6  # 6: the accelerometer's and the gyro's last delivered sample
+S_SIZE = S_HELD_IMU + 6
 
 # -- faults ---------------------------------------------------------------------------------------
 F_KIND, F_START, F_DURATION, F_VALUE = 0, 1, 2, 3
 FAULT_SIZE = 6
 GPS_OUTAGE, GPS_GLITCH, VISION_OUTAGE, MAG_DISTURBANCE, ACCEL_BIAS_STEP, GYRO_BIAS_STEP = range(6)
+# Failures: the failing units by their names in quadcommon.failures, and a failure's kind code.
+FAILING = ("accel", "gyro", "mag", "baro", "gps", "vio")
+F_ACCEL, F_GYRO, F_MAG, F_BARO, F_GPS, F_VIO = range(6)
+FAILURE_BASE = 100  # a failure's kind code: FAILURE_BASE + 8 * unit + type
+OK, OFF, STUCK, GARBAGE = int(Type.ok), int(Type.off), int(Type.stuck), int(Type.garbage)
+WRONG, SLOW = int(Type.wrong), int(Type.slow)
+DELAYED, INTERMITTENT = int(Type.delayed), int(Type.intermittent)
 
 # -- out: one frame's delivery ---------------------------------------------------------------------
 O_FORCE, O_RATE = 0, 3  # the IMU sample
@@ -99,7 +126,8 @@ O_GPS = 16  # fresh flag, time, position (3), velocity (3), eph, epv, satellites
 O_VISION = 29  # fresh flag, time, position (3), yaw, position std, yaw std
 O_HELD_MAG = 37  # 3
 O_HELD_BARO = 40  # 4: time, pressure, pressure altitude, temperature
-O_SIZE = 44
+O_ACCEL_FRESH, O_GYRO_FRESH = 44, 45  # 1 when the IMU's accelerometer / gyro sampled (else held)
+O_SIZE = 46
 READING_SIZE = (4, 4, 12, 7)  # floats of a reading per scheduled sensor (out's after the flag)
 OUT_AT = (O_MAG, O_BARO, O_GPS, O_VISION)
 
@@ -154,11 +182,21 @@ def new_sensors(config: SensorConfig, home_altitude_m: float, imu_rate_hz: float
     return rng, S, C
 
 
+def fault_code(kind: str) -> int:
+    """The kind code of a fault row: a profile fault's index in the kinds of the profile format,
+    a failure's ``FAILURE_BASE + 8 * unit + type``."""
+    failure = effect_of_kind(kind)
+    if failure is not None:
+        unit, failure_type, _ = failure
+        return FAILURE_BASE + 8 * FAILING.index(unit.name) + int(failure_type)
+    return FAULT_KINDS.index(kind)
+
+
 def fault_array(faults) -> np.ndarray:  # noqa: ANN001 - a sequence of SensorFault
     """Injected faults (:class:`~.config.SensorFault`) as rows of :func:`sensor_frame`'s table."""
     rows = np.zeros((len(faults), FAULT_SIZE))
     for i, f in enumerate(faults):
-        rows[i] = (FAULT_KINDS.index(f.kind), f.start_s, f.duration_s, *(float(c) for c in f.value))
+        rows[i] = (fault_code(f.kind), f.start_s, f.duration_s, *(float(c) for c in f.value))
     return rows
 
 
@@ -230,15 +268,15 @@ def due(S: Any, C: Any, sensor: int, t: float) -> bool:
 
 
 @kernel
-def enqueue(S: Any, C: Any, sensor: int, t_valid: float, reading: Any, size: int) -> None:
-    """A reading valid at ``t_valid`` into the sensor's queue (delivered its latency later)."""
+def enqueue(S: Any, sensor: int, t_due: float, reading: Any, size: int) -> None:
+    """A reading into the sensor's queue, to be delivered at ``t_due``."""
     q = S_QUEUES + sensor * QUEUE
     head, count = int(S[q + Q_HEAD]), int(S[q + Q_COUNT])
     if count >= PENDING:  # full (a latency far beyond the period): the oldest is lost
         head = (head + 1) % PENDING
         count -= 1
     at = q + Q_ITEMS + ((head + count) % PENDING) * ITEM
-    S[at] = t_valid + C[C_LATENCY + sensor]
+    S[at] = t_due
     for i in range(size):
         S[at + 1 + i] = reading[i]
     S[q + Q_HEAD], S[q + Q_COUNT] = head, count + 1
@@ -265,18 +303,20 @@ def dequeue(S: Any, sensor: int, t: float, out: Any, size: int) -> bool:
 
 
 @kernel
-def deliver(S: Any, C: Any, sensor: int, t: float, reading: Any, out: Any) -> None:
+def deliver(S: Any, C: Any, sensor: int, t: float, reading: Any, out: Any, extra_latency: float) -> None:
     """A reading sampled at ``t``: delivered now without latency (and nothing in flight), else
-    queued; the frame's delivery (if any) into ``out`` (flag, then the reading)."""
+    queued for its latency (plus ``extra_latency``, a delayed failure's); the frame's delivery (if
+    any) into ``out`` (flag, then the reading)."""
     size = READING_SIZE[sensor]
     at = OUT_AT[sensor]
     q = S_QUEUES + sensor * QUEUE
-    if C[C_LATENCY + sensor] == 0.0 and S[q + Q_COUNT] == 0.0:
+    latency = C[C_LATENCY + sensor] + extra_latency
+    if latency == 0.0 and S[q + Q_COUNT] == 0.0:
         for i in range(size):
             out[at + 1 + i] = reading[i]
         out[at] = 1.0
         return
-    enqueue(S, C, sensor, t, reading, size)
+    enqueue(S, sensor, t + latency, reading, size)
     out[at] = 1.0 if dequeue(S, sensor, t, out[at + 1 : at + 1 + size], size) else 0.0
 
 
@@ -289,6 +329,119 @@ def pending(S: Any, sensor: int, t: float, out: Any) -> None:
     if S[q + Q_COUNT] > 0.0:
         size = READING_SIZE[sensor]
         out[at] = 1.0 if dequeue(S, sensor, t, out[at + 1 : at + 1 + size], size) else 0.0
+
+
+@kernel
+def silence(S: Any, sensor: int, out: Any) -> None:
+    """An off sensor: nothing delivered this frame, nothing left in flight."""
+    S[S_QUEUES + sensor * QUEUE + Q_COUNT] = 0.0
+    out[OUT_AT[sensor]] = 0.0
+
+
+@kernel
+def failure_of(faults: Any, unit: int, t: float) -> tuple[int, int]:
+    """``(type, row)`` of the failure of ``unit`` (``FAILING``) active at ``t``: the latest-started
+    active row of the unit decides; ``(OK, -1)`` when none is."""
+    lo = FAILURE_BASE + 8 * unit
+    mode, row, start = OK, -1, -math.inf
+    for i in range(faults.shape[0]):
+        f = faults[i]
+        code = int(f[F_KIND])
+        if lo < code < lo + 8 and f[F_START] <= t < f[F_START] + f[F_DURATION] and f[F_START] >= start:
+            mode, row, start = code - lo, i, f[F_START]
+    return mode, row
+
+
+@kernel
+def sample_kept(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int) -> bool:
+    """Whether a sample due now is taken: not when off, one in ``value[0]`` when slow, with
+    probability ``1 - value[0]`` (a draw) when intermittent."""
+    if mode == OFF:
+        return False
+    if mode == SLOW:
+        count = S[S_SLOW_COUNT + unit] + 1.0
+        if count >= faults[row][F_VALUE]:
+            S[S_SLOW_COUNT + unit] = 0.0
+            return True
+        S[S_SLOW_COUNT + unit] = count
+        return False
+    if mode == INTERMITTENT:
+        return uniform(rng) >= faults[row][F_VALUE]
+    return True
+
+
+@kernel
+def extra_latency(faults: Any, mode: int, row: int) -> float:
+    return faults[row][F_VALUE] if mode == DELAYED else 0.0
+
+
+@kernel
+def spread(rng: Any, half_width: float) -> float:
+    """A uniform draw over ``[-half_width, half_width]``."""
+    return half_width * (2.0 * uniform(rng) - 1.0)
+
+
+@kernel
+def corrupt(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int, reading: Any, size: int) -> None:
+    """A sample of ``unit`` (``reading[1 : 1 + size]``, its values after the time) as the unit's
+    failure makes it: stuck repeats the last good sample, wrong adds the offset, garbage draws
+    over the range; otherwise it is true and becomes the last good sample."""
+    good = S_GOOD + unit * GOOD
+    if mode == STUCK and S[S_HAS_GOOD + unit] != 0.0:
+        for i in range(size):
+            reading[1 + i] = S[good + i]
+        return
+    if mode == WRONG:
+        f = faults[row]
+        if unit == F_BARO:  # the pressure (hPa); the altitude is what it means under the ISA
+            reading[1] += f[F_VALUE]
+            reading[2] = isa_altitude_m(reading[1])
+        else:  # the first three values: a vector (m/s^2, rad/s, gauss, m)
+            for i in range(3):
+                reading[1 + i] += f[F_VALUE + i]
+        return
+    if mode == GARBAGE:
+        f = faults[row]
+        if unit == F_BARO:  # uniform over [value[0], value[1]] hPa
+            reading[1] = f[F_VALUE] + (f[F_VALUE + 1] - f[F_VALUE]) * uniform(rng)
+            reading[2] = isa_altitude_m(reading[1])
+        elif unit == F_GPS:  # position +-value[0] m, velocity +-value[1] m/s about the truth
+            for i in range(3):
+                reading[1 + i] += spread(rng, f[F_VALUE])
+            for i in range(3):
+                reading[4 + i] += spread(rng, f[F_VALUE + 1])
+        elif unit == F_VIO:  # position +-value[0] m about the truth, any yaw
+            for i in range(3):
+                reading[1 + i] += spread(rng, f[F_VALUE])
+            reading[4] = spread(rng, math.pi)
+        else:  # accelerometer, gyro, magnetometer: anywhere in +-value[0]
+            for i in range(3):
+                reading[1 + i] = spread(rng, f[F_VALUE])
+        return
+    for i in range(size):
+        S[good + i] = reading[1 + i]
+    S[S_HAS_GOOD + unit] = 1.0
+
+
+@kernel
+def imu_sample(rng: Any, S: Any, faults: Any, unit: int, t: float, value: Vector3, reading: Any,
+               out: Any, at: int) -> float:  # fmt: skip
+    """The accelerometer's or the gyro's sample at ``t`` into ``out[at : at + 3]`` as its failure
+    makes it; 1.0 when it sampled, 0.0 when it holds its last sample (off, a skipped one)."""
+    held = S_HELD_IMU + 3 * (unit - F_ACCEL)
+    mode, row = failure_of(faults, unit, t)
+    if not sample_kept(rng, S, faults, unit, mode, row):
+        for i in range(3):
+            out[at + i] = S[held + i]
+        return 0.0
+    reading[0] = t
+    for i in range(3):
+        reading[1 + i] = value[i]
+    corrupt(rng, S, faults, unit, mode, row, reading, 3)
+    for i in range(3):
+        out[at + i] = reading[1 + i]
+        S[held + i] = reading[1 + i]
+    return 1.0
 
 
 @kernel
@@ -369,35 +522,53 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     ba = (S[S_ACCEL_BIAS] + sa[0], S[S_ACCEL_BIAS + 1] + sa[1], S[S_ACCEL_BIAS + 2] + sa[2])
     bg = (S[S_GYRO_BIAS] + sg[0], S[S_GYRO_BIAS + 1] + sg[1], S[S_GYRO_BIAS + 2] + sg[2])
     force, rates = imu_reading(rng, specific_force, body_rates, ba, bg, C[C_ACCEL_STD], C[C_GYRO_STD])
-    for i in range(3):
-        out[O_FORCE + i] = force[i]
-        out[O_RATE + i] = rates[i]
-
     reading = S[S_READING : S_READING + 12]
-    if due(S, C, MAG, t):
+    out[O_ACCEL_FRESH] = imu_sample(rng, S, faults, F_ACCEL, t, force, reading, out, O_FORCE)
+    out[O_GYRO_FRESH] = imu_sample(rng, S, faults, F_GYRO, t, rates, reading, out, O_RATE)
+
+    # The scheduled sensors: a sample when due (and kept by the unit's failure), made as the
+    # failure says, delivered after its latency (and a delayed failure's).
+    mode, row = failure_of(faults, F_MAG, t)
+    if due(S, C, MAG, t) and sample_kept(rng, S, faults, F_MAG, mode, row):
         m = magnetometer(rng, S, C, faults, q, t)
         reading[0], reading[1], reading[2], reading[3] = t, m[0], m[1], m[2]
-        deliver(S, C, MAG, t, reading, out)
+        corrupt(rng, S, faults, F_MAG, mode, row, reading, 3)
+        deliver(S, C, MAG, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, MAG, t, out)
-    if due(S, C, BARO, t):
+    if mode == OFF:
+        silence(S, MAG, out)
+    mode, row = failure_of(faults, F_BARO, t)
+    if due(S, C, BARO, t) and sample_kept(rng, S, faults, F_BARO, mode, row):
         p, h, temperature = barometer(rng, S, C, position[2])
         reading[0], reading[1], reading[2], reading[3] = t, p, h, temperature
-        deliver(S, C, BARO, t, reading, out)
+        corrupt(rng, S, faults, F_BARO, mode, row, reading, 3)
+        deliver(S, C, BARO, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, BARO, t, out)
-    if C[C_GPS_ON] != 0.0 and due(S, C, GPS, t):
+    if mode == OFF:
+        silence(S, BARO, out)
+    mode, row = failure_of(faults, F_GPS, t)
+    if C[C_GPS_ON] != 0.0 and due(S, C, GPS, t) and sample_kept(rng, S, faults, F_GPS, mode, row):
         gps_fix(rng, S, C, faults, t, position, velocity, reading)
-        deliver(S, C, GPS, t, reading, out)
+        corrupt(rng, S, faults, F_GPS, mode, row, reading, 11)
+        deliver(S, C, GPS, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, GPS, t, out)
-    if C[C_VISION_ON] != 0.0 and due(S, C, VISION, t) and not fault_active(faults, VISION_OUTAGE, t):
+    if mode == OFF:
+        silence(S, GPS, out)
+    mode, row = failure_of(faults, F_VIO, t)
+    if (C[C_VISION_ON] != 0.0 and due(S, C, VISION, t) and not fault_active(faults, VISION_OUTAGE, t)
+            and sample_kept(rng, S, faults, F_VIO, mode, row)):  # fmt: skip
         p3, y = vision_reading(rng, position, yaw, C[C_VISION_STD], C[C_VISION_YAW_STD])
         reading[0], reading[1], reading[2], reading[3] = t, p3[0], p3[1], p3[2]
         reading[4], reading[5], reading[6] = y, C[C_VISION_STD], C[C_VISION_YAW_STD]
-        deliver(S, C, VISION, t, reading, out)
+        corrupt(rng, S, faults, F_VIO, mode, row, reading, 6)
+        deliver(S, C, VISION, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, VISION, t, out)
+    if mode == OFF:
+        silence(S, VISION, out)
 
     # What HIL_SENSOR carries between samples: the last magnetometer and barometer readings
     # (before the first, a reading of now).

@@ -35,16 +35,18 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import replace
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from quadcommon import rng as random_stream
+from quadcommon.failures import Type
 from quadcommon.kernel import compiled, compiling, freeze
 
 from ..dynamics.plant import TruthState
 from . import frame, kernels
-from .config import SensorConfig, SensorFault, load_sensors
+from .config import SensorConfig, SensorFault, default_fault_value, fault_unit, load_sensors
 
 Vector3 = tuple[float, float, float]
 
@@ -74,7 +76,8 @@ class SensorReadings(NamedTuple):
     """What ``HIL_SENSOR`` carries: IMU, magnetometer and barometer of one frame.
 
     Between two magnetometer (barometer) samples the last one is held and ``mag_fresh``
-    (``baro_fresh``) is False: the encoder then clears those bits of ``fields_updated``.
+    (``baro_fresh``) is False: the encoder then clears those bits of ``fields_updated``. The IMU
+    samples at every frame unless a failure stops it (``accel_fresh``, ``gyro_fresh``).
     """
 
     imu: ImuReading
@@ -82,6 +85,8 @@ class SensorReadings(NamedTuple):
     baro: BaroReading
     mag_fresh: bool = True
     baro_fresh: bool = True
+    accel_fresh: bool = True  # False: the accelerometer holds its last sample (a failure: off, slow...)
+    gyro_fresh: bool = True
 
 
 class GpsReading(NamedTuple):
@@ -176,6 +181,18 @@ class SensorSuite:
         self.faults.append(fault)
         self._faults = frame.fault_array(self.faults)
 
+    def inject_failure(self, unit: str, failure_type: int, t_s: float) -> None:
+        """A failure of the sensor ``unit`` (``gps``, ``baro``, ... of :mod:`quadcommon.failures`)
+        from ``t_s`` on: the unit's active faults end at ``t_s``; unless ``failure_type`` is ok, a
+        fault of kind ``<unit>_<type>`` starts there with the table's figure."""
+        ended = [replace(f, duration_s=t_s - f.start_s) if fault_unit(f.kind) == unit and f.active(t_s) else f
+                 for f in self.faults]  # fmt: skip
+        if failure_type != Type.ok:
+            kind = f"{unit}_{Type(failure_type).name}"
+            ended.append(SensorFault(kind, t_s, math.inf, default_fault_value(kind)))
+        self.faults = ended
+        self._faults = frame.fault_array(self.faults)
+
     def gps_outage(self, start_s: float, duration_s: float = math.inf) -> None:
         """No GPS fix over ``[start_s, start_s + duration_s)`` (on demand)."""
         self.add_fault(SensorFault("gps_outage", start_s, duration_s))
@@ -211,7 +228,8 @@ class SensorSuite:
                              o[27], int(o[28]))  # fmt: skip
         vision = VisionReading(o[30], (o[31], o[32], o[33]), o[34], o[35], o[36]) if o[29] else None
         held_baro = BaroReading(o[41], o[42], o[43], o[40])
-        readings = SensorReadings(imu, (o[37], o[38], o[39]), held_baro, mag is not None, baro is not None)
+        readings = SensorReadings(imu, (o[37], o[38], o[39]), held_baro, mag is not None, baro is not None,
+                                  o[44] != 0.0, o[45] != 0.0)  # fmt: skip
         return SensorFrame(t_s, imu, readings, mag, baro, gps, vision)
 
     # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------

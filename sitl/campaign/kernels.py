@@ -179,8 +179,9 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
     ``t``), then the state the controllers fly on: at step 0 the frame's state (``c_*``, from
     ODOMETRY through the wire), from whose pose the filter starts
     (:func:`~autopilot.estimation.filter.reset_state`); afterwards the filter's prediction on the
-    IMU sample. Returns ``(position, velocity, euler, euler rates,
-    the autopilot's time of the step)``."""
+    IMU sample (none while an injected failure stops the IMU: the estimate as it is, the next
+    prediction spans the gap, as the autopilot's). Returns ``(position, velocity, euler, euler
+    rates, the autopilot's time of the last prediction)``."""
     wire = S[S_WIRE] != 0.0
     for i in range(s.shape[0]):
         plant_work[0, i] = s[i]
@@ -204,11 +205,20 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
         ekf.start(F, ring, t_autopilot, dt, rate, force)
         F[ekf.X_IMU_SAMPLES] += 1.0
         return c_pos, c_vel, c_euler, c_rates, t_autopilot  # the frame's pose flies this step
-    ekf.predict_step(F, Pf, ring, A, t_autopilot, t_autopilot - t_previous, rate, force)
+    if imu_fresh(delivered):
+        ekf.predict_step(F, Pf, ring, A, t_autopilot, t_autopilot - t_previous, rate, force)
+    else:
+        t_autopilot = t_previous
     q = ekf.quat(F, ekf.X_Q)
     euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
     rates = euler_rates_from_body_rates(euler[0], euler[1], ekf.vec3(F, ekf.X_RATE))
     return ekf.vec3(F, ekf.X_P), ekf.vec3(F, ekf.X_V), euler, rates, t_autopilot
+
+
+@kernel
+def imu_fresh(delivered) -> bool:
+    """Both the accelerometer and the gyro sampled this step (HIL_SENSOR's bits 0-5)."""
+    return delivered[sensors.O_ACCEL_FRESH] != 0.0 and delivered[sensors.O_GYRO_FRESH] != 0.0
 
 
 @kernel
@@ -252,7 +262,7 @@ def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
 def estimator_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics):
     """After the controllers' answer: the step's aiding into the filter (as the autopilot fuses it),
     then the step's share of the estimation metrics (time not converged, worst test ratio)."""
-    if k > 0:
+    if k > 0 and imu_fresh(delivered):  # (no IMU sample: no prediction, no fusion, as the autopilot)
         fuse_aiding(t_estimator, S, delivered, F, Pf, ring, stats, windows, A)
     if ekf.not_converged(F, Pf, A) != ekf.CONVERGED:
         metrics[M_EST_T_NOT_CONVERGED] += dt

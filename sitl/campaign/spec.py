@@ -47,8 +47,10 @@ fed by the sensor models, each run with its own noise stream (``sensor_seed``, d
 ``gps_horizontal_noise_std_m``, ``gps_vertical_noise_std_m``, ``gps_velocity_noise_std_m_s``,
 ``vision_position_noise_std_m`` (a GNSS profile that reports its accuracy honestly reports the
 drawn one). ``[[sensor_faults]]`` add faults per run: ``kind`` (``gps_glitch``, ``gps_outage``,
-``mag_disturbance``, ``vision_outage``, ``accel_bias_step``, ``gyro_bias_step``), ``start_s``,
-``duration_s`` (default: to the end), ``value`` (three distributions: m, gauss, m/s^2 or rad/s).
+``mag_disturbance``, ``vision_outage``, ``accel_bias_step``, ``gyro_bias_step``, or a sensor
+failure of :mod:`quadcommon.failures`: ``gps_off``, ``baro_stuck``, ...), ``start_s``,
+``duration_s`` (default: to the end), ``value`` (three distributions: m, gauss, m/s^2 or rad/s;
+default 0, a failure's the table's figure).
 
 (One module: one schema, validated in one place, with the messages naming file, key, value and
 range.)
@@ -98,7 +100,7 @@ from simulator.environment.gust_profile import (
     GustProfile,
     load_gust_profile,
 )
-from simulator.sensors.config import FAULT_KINDS, SensorConfig, load_sensors
+from simulator.sensors.config import FAULT_KINDS, SensorConfig, default_fault_value, load_sensors
 
 from .engine import FailureLimits
 
@@ -286,7 +288,7 @@ SENSOR_PARAMETERS = {
     "gps_velocity_noise_std_m_s": (0.0, 5.0, "m/s"),
     "vision_position_noise_std_m": (0.0, 1.0, "m"),
 }
-FAULT_VALUE_LIMIT = 1e3  # |value| per axis (m, gauss, m/s^2 or rad/s)
+FAULT_VALUE_LIMIT = 1e4  # |value| per axis (m, gauss, m/s^2, rad/s or hPa), as a sensor profile's
 
 
 @dataclass(frozen=True)
@@ -500,7 +502,8 @@ def _read_estimation(root: Section, path: Path, duration_s: float) -> Estimation
         length = None
         if fs.has("duration_s"):
             length = read_distribution(fs, "duration_s", None, 0.0, MAX_TIME_S, "s")
-        value = read_distributions(fs, "value", (0.0, 0.0, 0.0), -FAULT_VALUE_LIMIT, FAULT_VALUE_LIMIT)
+        limit = FAULT_VALUE_LIMIT
+        value = read_distributions(fs, "value", default_fault_value(kind), -limit, limit)
         fs.finish()
         faults.append(FaultSpec(kind, start, length, value))
     return replace(base, parameters=parameters, faults=tuple(faults))

@@ -245,3 +245,10 @@ def test_the_history_check_finds_history(tmp_path: Path) -> None:
         assert len(history_in(probe_in_repo)) == 4
     finally:
         probe_in_repo.unlink()
+
+
+def test_failure_table_is_the_modules():
+    """docs/failures.md shows quadcommon.failures.FAILURES as it is."""
+    from quadcommon import failures
+
+    assert failures.markdown_table() in (DOCS / "failures.md").read_text()

@@ -16,7 +16,7 @@ from quadcommon.cli_help import has_default_to_show
 from sitl import cli
 from tests.own_law import laws_forgotten_afterwards, nan_above, write_overlay
 
-SCRIPTS = ["fly_setpoints", "fly_trajectory", "fly_paper", "upload_mission", "upload_gusts", "record"]
+SCRIPTS = ["fly_setpoints", "fly_trajectory", "fly_paper", "upload_mission", "upload_gusts", "record", "fail"]
 
 
 def _parsers(parser: argparse.ArgumentParser, name: str):
@@ -76,6 +76,7 @@ def test_a_default_of_zero_is_shown():
         (["mission", "clear"], "upload_mission", ["--clear"]),
         (["gusts", "upload", "mixed", "--now"], "upload_gusts", ["mixed", "--now"]),
         (["record", "--duration", "3"], "record", ["--duration", "3"]),
+        (["fail", "gps", "off", "--enable"], "fail", ["gps", "off", "--enable"]),
     ],
 )
 def test_subcommands_delegate_to_the_scripts_with_their_flags(monkeypatch, argv, module, forwarded):
@@ -83,7 +84,7 @@ def test_subcommands_delegate_to_the_scripts_with_their_flags(monkeypatch, argv,
     mod = importlib.import_module(f"gcs_scripts.{module}")
     monkeypatch.setattr(mod, "main", lambda a, prog: calls.append((a, prog)) or 7)
     assert cli.main(argv) == 7
-    assert calls == [(forwarded, "quadsitl " + " ".join(argv[: 1 if argv[0] == "record" else 2]))]
+    assert calls == [(forwarded, "quadsitl " + " ".join(argv[: 1 if argv[0] in ("record", "fail") else 2]))]
 
 
 @pytest.mark.timeout(30)
@@ -179,3 +180,16 @@ def test_a_broken_law_file_leaves_the_shipped_controllers_flying(tmp_path, capsy
         assert cli.main(["--config-dir", str(mine), "run", "hover", "--controller", "intbs_nlhinf",
                          "--duration", "0.5"]) == 0  # fmt: skip
     assert capsys.readouterr().out.startswith("hover / intbs_nlhinf: final error")
+
+
+@pytest.mark.timeout(30)
+def test_fail_help_lists_px4s_units_and_types_and_what_is_modelled(capsys):
+    with pytest.raises(SystemExit) as info:
+        cli.main(["fail", "--help"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: quadsitl fail ") and "SYS_FAILURE_EN to 1 first" in out
+    assert "mavlink_signal" in out and "intermittent" in out and "gyro: ok, off, stuck" in out
+    with pytest.raises(SystemExit) as info:
+        cli.main(["fail", "propeller", "off"])
+    assert info.value.code == 2 and "invalid choice: 'propeller'" in capsys.readouterr().err

@@ -75,3 +75,59 @@ def test_under_hil_loss_the_sitl_flies_the_same_flight_as_without_it():
     assert gap <= 1e-9, f"largest difference in the truth rows: {gap:.2e}"
     resent = int(simulator.output.split(" frames resent")[0].rsplit(" ", 1)[1])
     assert 0.005 * steps < resent < 0.2 * steps, simulator.tail()  # ~2 %: either way lost (+ a slow answer)
+
+
+@pytest.mark.timeout(180)
+def test_with_a_failure_injected_in_flight_the_two_agree_from_the_frame_it_applies():
+    """A rotor stops in flight and restarts (MAV_CMD_INJECT_FAILURE from a ground station, as
+    MAVSDK sends it): the request rides in a lockstep answer to the simulator, which applies it from
+    the next frame and says at which. The in-process stack given the same command before the same
+    frame's answer flies the same flight, frame for frame."""
+    import re
+
+    from pymavlink.dialects.v20 import common as m
+
+    from gcs_scripts.link import connect
+    from quadcommon.config import load_vehicle
+    from quadcommon.failures import Type, Unit
+
+    duration, vehicle = 5.0, "paper_quad_rotors"
+    spec = VehicleSpec(instance=3, scenario="helix", vehicle=vehicle, speed="1", autostart=True,
+                       duration_s=duration)  # fmt: skip
+    with running(spec, leaves=("truth",)) as (launcher, taps):
+        link = connect(instance=spec.instance)
+        try:
+            assert link.set_parameter("SYS_FAILURE_EN", 1, integer=True) == 1.0
+            link.wait_until(lambda v: v.sim_time_s is not None and v.sim_time_s > 2.0, sim_timeout_s=10.0)
+            for failure_type in (Type.off, Type.ok):  # PX4's motor 1 (the right rotor), 0.2 s off
+                assert link.command_long(m.MAV_CMD_INJECT_FAILURE, (Unit.motor, failure_type, 1)) == 0
+                link.sleep_sim(0.2)
+        finally:
+            link.close()
+        simulator = launcher.child("simulator[3]")
+        assert simulator.wait(60.0) == 0
+        truth = taps["truth"].rows()
+        log = simulator.output
+    applied = [float(t) for t in re.findall(r"t=([\d.]+) s: (?:Injected|Cleared): motor", log)]
+    assert len(applied) == 2, log
+
+    stack = paper_stack(load_scenario("helix"), load_controller("intbs_nlhinf"), RunOptions(),
+                        vehicle=load_vehicle(vehicle))  # fmt: skip
+    stack.autopilot.params.set("SYS_FAILURE_EN", 1.0)
+    gcs = stack.ground_station()
+    frames = [round(t * stack.sim.control_hz) for t in applied]
+    steps = round(duration / stack.sim.dt_control)
+    for k in range(steps):
+        for frame, failure_type in zip(frames, (Type.off, Type.ok), strict=True):
+            if k == frame - 1:  # handled before frame k's answer, which carries it
+                gcs.command(m.MAV_CMD_INJECT_FAILURE, Unit.motor, failure_type, 1)
+        stack.step()
+    stack.final_frame()
+    inproc_truth = np.asarray(stack.truth_rows)
+    assert stack.sim.requests_applied == 2
+    assert len(truth) == len(inproc_truth) == steps + 1
+    gap = np.abs(truth[:, 1:] - inproc_truth[:, 1:]).max()
+    assert gap <= 1e-9, f"largest difference in the truth rows: {gap:.2e}"
+    roll_rate = np.abs(truth[:, T["p_rad_s"]])
+    calm = roll_rate[round(1.0 * stack.sim.control_hz) : frames[0]].max()  # settled on the helix
+    assert roll_rate[frames[0] : frames[1] + 1].max() > 10 * calm  # the rotor stopped: it rolled
