@@ -40,7 +40,15 @@ from dataclasses import dataclass
 
 from quadcommon import wire
 from quadcommon.bus_records import ESTIMATOR_FIELDS
-from quadcommon.config import SitlConfig, VehicleConfig, config_path, load_scenario, load_sitl, load_vehicle
+from quadcommon.config import (
+    SIM_BATTERY_PARAMETERS,
+    SitlConfig,
+    VehicleConfig,
+    config_path,
+    load_scenario,
+    load_sitl,
+    load_vehicle,
+)
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
@@ -417,6 +425,7 @@ class AutopilotCore:
         self.commander.home = None
         self.battery.reset()
         self.failure_injection.simulator_restarted()
+        self._forward_simulator_parameters()  # a restarted simulator starts from its vehicle file
         self.last_time_usec = -1
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
@@ -438,8 +447,10 @@ class AutopilotCore:
                 VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
             )
         self._battery_step(t, frame.parts)
-        if self.frames == 0 and self.setup.autostart is not None:
-            commander.start_scenario(t, self.setup.autostart)
+        if self.frames == 0:
+            self._forward_simulator_parameters()
+            if self.setup.autostart is not None:
+                commander.start_scenario(t, self.setup.autostart)
         self.frames += 1
         guidance = commander.step(t, self.dt)
         output = None
@@ -777,11 +788,29 @@ class AutopilotCore:
                 self.statustext(m.MAV_SEVERITY_CRITICAL, f"retune failed: {exc}")
         if name.startswith(("EKF2_", "EST_")) and self.estimator is not None:
             self.estimator.ekf.set_params(estimator_params(self.params))
+        if name in SIM_BATTERY_PARAMETERS:  # PX4's battery simulator's: the simulator's own
+            self._forward_simulator_parameter(name, value)
         if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_", "BAT")):
             for problem in consistency_problems(self.params):
                 self.statustext(
                     m.MAV_SEVERITY_WARNING, f"parameters inconsistent (arming refused): {problem}"
                 )
+
+    def _forward_simulator_parameter(self, name: str, value: float) -> None:
+        """A ``SIM_*`` parameter to the simulator, as a PARAM_SET in the next answer, its value a
+        plain float whatever its type (the channel is ours: :mod:`quadcommon.wire`); the simulator
+        validates it again and counts a refusal."""
+        target = (self.system_id, wire.SIMULATOR_COMPONENT_ID)
+        self.simulator_requests.send(
+            m.MAVLink_param_set_message(*target, name.encode(), value, m.MAV_PARAM_TYPE_REAL32)
+        )
+
+    def _forward_simulator_parameters(self) -> None:
+        """At the first frame of a simulator: the ``SIM_*`` parameters that differ from the vehicle
+        file's (a parameters file or a PARAM_SET before it started), which the simulator starts from."""
+        for name in SIM_BATTERY_PARAMETERS:
+            if self.params[name] != self.params.specs[name].default:
+                self._forward_simulator_parameter(name, self.params[name])
 
     # -- wall-clock housekeeping ----------------------------------------------------------------
     def _housekeeping(self, now: float) -> None:

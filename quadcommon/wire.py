@@ -58,20 +58,23 @@ clear = normalised rotor speeds Omega_i/Omega_max for rotors 1-4. The simulator 
 whose bit 1 disagrees with its own vehicle config.
 
 Requests to the simulator: the autopilot is the one that hears the ground stations, and some of
-what they ask is the simulator's to carry out (``MAV_CMD_INJECT_FAILURE``: a sensor, a rotor or
-the battery fails, :mod:`quadcommon.failures`). The autopilot puts such a request into the answer
+what they ask is the simulator's to carry out (``MAV_CMD_INJECT_FAILURE``: a sensor, a rotor or the
+battery fails, :mod:`quadcommon.failures`). The autopilot puts such a request into the answer
 datagram, after the ``HIL_ACTUATOR_CONTROLS``, as a MAVLink 2 frame from itself (system 1 + N,
 component :data:`AUTOPILOT_COMPONENT_ID`, never signed) addressed to the simulator
 (``target_system`` 1 + N, ``target_component`` :data:`SIMULATOR_COMPONENT_ID`); at most
-:data:`MAX_REQUESTS_PER_ANSWER` per answer (more wait for the next one). Requests now:
+:data:`MAX_REQUESTS_PER_ANSWER` per answer (more wait for the next one). The requests:
 ``COMMAND_LONG`` ``MAV_CMD_INJECT_FAILURE`` (param1 unit, param2 type, param3 instance, as the
-ground station sent them). The simulator takes requests only from the answer it accepts for the
-current frame, once: an answer's ``time_usec`` applies its requests only if it is later than the
-last one that did, so the copy of an answer that a resent frame brings back (the autopilot
-answers a resent frame with the same bytes) never applies twice. They apply from the next frame
-on (the frame after the answer that carried them), in both runners alike. Anything else after the
-controls (a frame that fails its checksum, comes from another sender, is addressed elsewhere, is
-not a request, has a non-finite parameter, or bytes that are not MAVLink 2) is refused and
+ground station sent them); ``PARAM_SET`` of a simulator parameter the autopilot declares (PX4's
+``SIM_BAT_ENABLE``, ``SIM_BAT_DRAIN``, ``SIM_BAT_MIN_PCT``; ``param_value`` the plain value as a
+float, whatever the parameter's type), sent when it changes and, at a simulator's first frame,
+those that differ from the vehicle file's. The simulator takes requests only from the answer it
+accepts for the current frame, once: an answer's ``time_usec`` applies its requests only if it is
+later than the last one that did, so the copy of an answer that a resent frame brings back (the
+autopilot answers a resent frame with the same bytes) never applies twice. They apply from the next
+frame on (the frame after the answer that carried them), in both runners alike. Anything else after
+the controls (a frame that fails its checksum, comes from another sender, is addressed elsewhere,
+is not a request, has a non-finite parameter, or bytes that are not MAVLink 2) is refused and
 counted (``quadsitl/<N>/info``: ``requests``), never applied.
 
 Values on the wire: integer fields saturate at their type's range instead of failing to pack

@@ -59,6 +59,7 @@ from .mavlink.hil import (
     InjectFailure,
     Request,
     RequestDecoder,
+    SetSimParameter,
 )
 from .safety import MOTORS_OFF, emergency_descent, touched_down
 from .sensors import SensorConfig, SensorSuite, load_sensors
@@ -290,6 +291,9 @@ class SimulatorCore:
         and counted with its reason (``info()['requests']``)."""
         if isinstance(request, InjectFailure):
             problem = self.inject_failure(request.unit, request.failure_type, request.instance)
+        elif isinstance(request, SetSimParameter):
+            accepted = self.set_battery_parameter(request.name, request.value)
+            problem = None if accepted else f"PARAM_SET {request.name} = {request.value:g} refused"
         else:  # pragma: no cover - every Request type has its branch
             problem = f"request {request!r} not handled"
         if problem is None:
@@ -318,10 +322,7 @@ class SimulatorCore:
                 rotor = ROTOR_POSITIONS.index(failures.PX4_MOTOR_POSITIONS[motor - 1]) + 1
                 self.plant.set_rotor_effectiveness(rotor, effectiveness)
         elif where is failures.Where.BATTERY:
-            battery = self.battery
-            if battery is None:
-                return f"failure {name}: this simulator has no battery model"
-            if not battery.inject_failure(failure_type):
+            if not self.battery.inject_failure(failure_type):
                 return f"failure {name} {type_name}: refused by the battery model"
         else:
             return f"failure {name}: the autopilot's own (its links), not the simulator's"

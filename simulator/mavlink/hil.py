@@ -48,6 +48,7 @@ from typing import NamedTuple
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
+from quadcommon.config import SIM_BATTERY_PARAMETERS
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
 
@@ -292,7 +293,16 @@ class InjectFailure(NamedTuple):
     instance: int  # 0: all
 
 
-Request = InjectFailure  # the requests to the simulator (quadcommon.wire); a new one: a type here
+class SetSimParameter(NamedTuple):
+    """A ``PARAM_SET`` of one of the simulator's own parameters (PX4's ``SIM_BAT_*``:
+    :data:`quadcommon.config.SIM_BATTERY_PARAMETERS`), forwarded by the autopilot that declares
+    them."""
+
+    name: str
+    value: float
+
+
+Request = InjectFailure | SetSimParameter  # the requests to the simulator (quadcommon.wire)
 
 
 class RequestDecoder:
@@ -308,8 +318,13 @@ class RequestDecoder:
         where = self._command.slices
         self._c = tuple(where[name] for name in ("target_system", "target_component", "command", "param1",
                                                  "param2", "param3"))  # fmt: skip
+        self._param_set = FastDecoder(mavlink.MAVLink_param_set_message)
+        where = self._param_set.slices
+        self._p = tuple(where[name] for name in ("target_system", "target_component", "param_id",
+                                                 "param_value"))  # fmt: skip
         # message id -> how its frame becomes a request (a new request: one entry and a method)
-        self._decoders = {mavlink.MAVLINK_MSG_ID_COMMAND_LONG: self._command_long}
+        self._decoders = {mavlink.MAVLINK_MSG_ID_COMMAND_LONG: self._command_long,
+                          mavlink.MAVLINK_MSG_ID_PARAM_SET: self._parameter}  # fmt: skip
 
     def decode(self, others: tuple[tuple[int, bytes], ...]) -> list[Request]:
         requests: list[Request] = []
@@ -347,6 +362,18 @@ class RequestDecoder:
         if not all(math.isfinite(x) and 0.0 <= x <= 255.0 and x == int(x) for x in params):
             return "MAV_CMD_INJECT_FAILURE with a parameter that is not an integer in [0, 255]"
         return InjectFailure(int(unit), int(failure_type), int(instance))
+
+    def _parameter(self, frame: bytes) -> Request | str:
+        v = self._param_set.unpack(frame)
+        system, component, raw_id, value = (v[i] for i in self._p)
+        if (system, component) != self.target:
+            return f"a PARAM_SET to system {system} component {component}, not the simulator"
+        name = bytes(raw_id).split(b"\0", 1)[0].decode("ascii", "replace")
+        if name not in SIM_BATTERY_PARAMETERS:
+            return f"PARAM_SET {name[:16]!r}: not a simulator parameter"
+        if not math.isfinite(value):
+            return f"PARAM_SET {name}: value not finite"
+        return SetSimParameter(name, float(value))
 
     @property
     def refused_total(self) -> int:

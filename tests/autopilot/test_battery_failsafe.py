@@ -232,3 +232,29 @@ def test_arming_is_refused_on_a_flat_pack():
              sim_timeout=1.0, what="the refusal's reason")  # fmt: skip
     assert not stack.autopilot.commander.armed
     gcs.close()
+
+
+def test_sim_bat_parameters_set_from_a_ground_station_reach_the_simulator():
+    """PX4 SITL's way to rehearse a low battery: PARAM_SET SIM_BAT_DRAIN / SIM_BAT_MIN_PCT on the
+    vehicle; the simulator's battery drains by them from the next lockstep answer."""
+    stack = make_stack()
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    gcs.conn.mav.param_set_send(stack.autopilot.system_id, 1, b"SIM_BAT_DRAIN", 30.0,
+                                m.MAV_PARAM_TYPE_REAL32)  # fmt: skip
+    gcs.conn.mav.param_set_send(stack.autopilot.system_id, 1, b"SIM_BAT_MIN_PCT", 0.0,
+                                m.MAV_PARAM_TYPE_REAL32)  # fmt: skip
+    stack.run_for(0.1)
+    battery = stack.sim.info()["battery"]
+    assert (battery["SIM_BAT_DRAIN"], battery["SIM_BAT_MIN_PCT"]) == (30.0, 0.0)
+    assert stack.autopilot.params["SIM_BAT_DRAIN"] == 30.0
+
+
+def test_sim_bat_parameters_from_a_parameters_file_reach_a_new_simulator(tmp_path):
+    """A SIM_BAT_* the autopilot starts with (a parameters file) differs from the vehicle file the
+    simulator starts from: it is sent at the simulator's first frame."""
+    params = tmp_path / "params.toml"
+    params.write_text("SIM_BAT_DRAIN = 45.0\n")
+    stack = make_stack(params_file=str(params))
+    stack.run_for(0.05)
+    assert stack.sim.info()["battery"]["SIM_BAT_DRAIN"] == 45.0

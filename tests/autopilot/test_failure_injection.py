@@ -233,34 +233,24 @@ def test_a_motor_off_on_the_rotors_vehicle_in_the_plant_from_the_next_frame():
     assert stack.sim.plant.rotor_effectiveness == [1.0] * 4 and stack.sim.failures == {}
 
 
-class BatteryStandIn:
-    """Records what the simulator hands its battery model (the model itself is the simulator's
-    battery, connected where it exists: SimulatorCore.battery)."""
-
-    def __init__(self) -> None:
-        self.failures: list[int] = []
-
-    def inject_failure(self, failure_type: int) -> bool:
-        self.failures.append(failure_type)
-        return True
-
-
-def test_a_battery_failure_is_handed_to_the_simulators_battery_model():
+def test_a_battery_failure_reaches_the_simulators_battery_monitor():
+    """battery off: the simulator's monitor reads the pack empty (as PX4's battery simulator), the
+    autopilot's estimate falls with it; ok: the monitor reports the pack again."""
     stack = make_stack()
     stack.autopilot.params.set("SYS_FAILURE_EN", 1.0)
     gcs = Gcs(stack)
     gcs.wait_heartbeat()
+    stack.run_for(3.0)  # the estimate starts 2 s after the pack connected
+    full = stack.autopilot.battery.status.remaining
+    assert full > 0.9
     assert command(gcs, Unit.battery, Type.off) == m.MAV_RESULT_ACCEPTED
-    stack.step()
-    refused = stack.sim.info()["requests"]["refused"]
-    assert refused == {"failure battery: this simulator has no battery model": 1}
-    stack.sim.battery = battery = BatteryStandIn()
-    assert command(gcs, Unit.battery, Type.off) == m.MAV_RESULT_ACCEPTED
-    stack.step()
-    assert battery.failures == [Type.off] and stack.sim.failures == {"battery": "off"}
+    stack.run_for(10.0)
+    assert stack.sim.failures == {"battery": "off"}
+    assert stack.sim.info()["battery"]["failure"].startswith("off")
+    assert stack.autopilot.battery.status.remaining < 0.15 < full
     assert command(gcs, Unit.battery, Type.ok) == m.MAV_RESULT_ACCEPTED
     stack.step()
-    assert battery.failures == [Type.off, Type.ok]
+    assert stack.sim.info()["battery"]["failure"] == "ok" and stack.sim.failures == {}
 
 
 @pytest.mark.timeout(180)

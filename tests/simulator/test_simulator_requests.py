@@ -35,6 +35,12 @@ def inject(unit: float, failure_type: float, instance: float = 0.0, *, mav: m.MA
     return msg.pack(mav or packer())
 
 
+def param_set(name: bytes, value: float, *,
+              target: tuple[int, int] = (SYSTEM, wire.SIMULATOR_COMPONENT_ID)) -> bytes:  # fmt: skip
+    msg = m.MAVLink_param_set_message(*target, name, value, m.MAV_PARAM_TYPE_REAL32)
+    return msg.pack(packer())
+
+
 def answered(core: SimulatorCore, *requests: bytes):
     """Frame ``k``: sent, answered with the controls and ``requests``; the answer the core took."""
     core.begin_frame()
@@ -107,6 +113,10 @@ HOSTILE = {
     "the autopilot's own unit": inject(Unit.rc_signal, Type.off),
     "a motor on the wrench vehicle": inject(Unit.motor, Type.off, 1.0),
     "bytes that are not MAVLink": b"\x01\x02garbage",
+    "a parameter that is not the simulator's": param_set(b"MPC_XY_VEL_MAX", 3.0),
+    "a simulator parameter out of range": param_set(b"SIM_BAT_MIN_PCT", 150.0),
+    "a NaN simulator parameter": param_set(b"SIM_BAT_DRAIN", math.nan),
+    "a parameter to the autopilot": param_set(b"SIM_BAT_DRAIN", 60.0, target=(SYSTEM, 1)),
     "a truncated frame": inject(Unit.gps, Type.off)[:15],
 }
 
@@ -126,3 +136,11 @@ def test_at_most_a_few_requests_an_answer(core):
     requests = core.info()["requests"]
     assert requests["applied"] == wire.MAX_REQUESTS_PER_ANSWER
     assert sum(requests["refused"].values()) == 6 - wire.MAX_REQUESTS_PER_ANSWER
+
+
+def test_a_sim_parameter_reaches_the_battery_model(core):
+    """PX4's SIM_BAT_* forwarded by the autopilot as PARAM_SET: applied to the battery model."""
+    answered(core, param_set(b"SIM_BAT_DRAIN", 120.0), param_set(b"SIM_BAT_MIN_PCT", 10.0))
+    info = core.info()
+    assert (info["battery"]["SIM_BAT_DRAIN"], info["battery"]["SIM_BAT_MIN_PCT"]) == (120.0, 10.0)
+    assert info["requests"]["applied"] == 2 and not info["requests"]["refused"]
