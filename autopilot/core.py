@@ -229,7 +229,8 @@ class AutopilotCore:
             if setup.default_remotes
             else (None, None)
         )
-        self.links = [GcsLink(GCS_LINK, remotes[0], self._out), GcsLink(API_LINK, remotes[1], self._out)]
+        self.links = [GcsLink(GCS_LINK, remotes[0], self._out, self.dt),
+                      GcsLink(API_LINK, remotes[1], self._out, self.dt)]  # fmt: skip
         self.faults = FaultLog(log, lambda text: self.statustext(m.MAV_SEVERITY_ERROR, text))
         self.refusals = RefusalNotices(self.statustext, lambda: self.wall_now)
         self.dispatcher = MessageDispatcher(self.faults)
@@ -500,6 +501,7 @@ class AutopilotCore:
             self.commander.estimator_problem = None
             self.commander.height_uncertainty_m = 0.0  # the truth
         self._status.estimator = None
+        self._status.on_ekf = want
         self.log(f"flying on {'the EKF estimate' if want else 'the simulator truth'} (EKF2_EN {int(want)})")
 
     def _estimate(self, t: float, frame) -> StateEstimate | None:
@@ -526,8 +528,6 @@ class AutopilotCore:
         self.commander.estimator_problem = loop.problem()
         self.commander.height_uncertainty_m = loop.height_uncertainty_m()
         self._status.estimator = loop.last_status
-        self._status.imu = loop.last_imu
-        self._status.mag_gauss, self._status.baro_height_m = loop.last_mag_gauss, loop.last_baro_height_m
         self._estimator_done = (t, est, loop)  # its row is written after the answer is out
         return est
 
@@ -604,6 +604,8 @@ class AutopilotCore:
         s, c = self._status, self.commander
         s.time_usec = frame.time_usec
         s.state = frame.state
+        s.parts = frame.parts
+        s.on_ekf = self.estimator is not None
         s.armed = c.armed
         s.custom_mode = c.mode.custom_mode
         s.landed_state = c.landed_state.value
