@@ -77,6 +77,7 @@ from .mavlink.params import ParamService
 from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
+from .mavlink.vision_in import ExternalVision
 from .mission.service import MissionService
 from .params.definitions import (
     consistency_problems,
@@ -266,6 +267,9 @@ class AutopilotCore:
         d[m.MAVLINK_MSG_ID_SET_MODE] = self._on_set_mode_message
         d[m.MAVLINK_MSG_ID_HEARTBEAT] = self._on_gcs_heartbeat
         d[m.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
+        self.external_vision = ExternalVision()  # a client's vision (mocap bridge, VIO) for the EKF
+        d[m.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE] = self._on_vision
+        d[m.MAVLINK_MSG_ID_ODOMETRY] = self._on_vision
 
     # -- entry points ---------------------------------------------------------------------------
     def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:
@@ -339,6 +343,7 @@ class AutopilotCore:
             },
             "peers": {link.name: [f"{host}:{port}" for host, port in link.peers] for link in self.links},
             "signing": self.signing.info(),
+            "vision": self.external_vision.info(),
             "flight_log": {"logging": self.flight_log.logging, "logs_started": self.flight_log.logs_started},
         }
 
@@ -745,6 +750,18 @@ class AutopilotCore:
         if msg.tc1 == 0:  # a request: answer with our (simulation) clock in ns
             reply = m.MAVLink_timesync_message(int(self.sim_time * 1e9), msg.ts1)
             link.send_to(self.encoder.pack(reply), address)
+
+    def _on_vision(self, msg, link: GcsLink, address: Address) -> None:
+        """A client's VISION_POSITION_ESTIMATE or ODOMETRY: checked and timed at the edge
+        (:mod:`.mavlink.vision_in`), then fused by the EKF with the next frame's aiding; a refusal
+        is counted and said (STATUSTEXT, rate-limited per reason)."""
+        sender = (link.index, address, msg.get_srcSystem(), msg.get_srcComponent())
+        vision, on_ekf = self.external_vision, self.estimator is not None
+        pose = vision.receive(msg, sender, self.sim_time, self.wall_now, on_ekf, self.params.values)
+        if pose is not None:
+            self.estimator.external_vision(pose)
+        for text in vision.take_announcements():
+            self.statustext(m.MAV_SEVERITY_WARNING, text)
 
     def _on_param_change(self, name: str, value: float) -> None:
         """Gains take effect between two control steps (this runs between frames), no jump in
