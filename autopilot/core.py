@@ -415,6 +415,7 @@ class AutopilotCore:
         self.last_time_usec = -1
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
+        self.external_vision.restart()  # so were the vision senders' stamps
         self.missions.restart_clock()
 
     def _control_step(self, frame) -> bytes:

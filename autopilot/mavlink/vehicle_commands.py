@@ -168,9 +168,12 @@ class VehicleCommands:
 
     def get_message_interval(self, r: CommandRequest) -> Result:
         """MESSAGE_INTERVAL after the ACK: the interval granted on this link (µs), -1 off, 0 a
-        message the vehicle does not stream."""
+        message the vehicle does not stream or cannot build as configured (ESTIMATOR_STATUS on the
+        truth)."""
         msg_id = int(r.params[0])
-        self.after_ack = m.MAVLink_message_interval_message(msg_id, r.link.streams.interval_us(msg_id))
+        refused = telemetry.stream_refusal(msg_id, self.core.status) is not None
+        interval = 0 if refused else r.link.streams.interval_us(msg_id)
+        self.after_ack = m.MAVLink_message_interval_message(msg_id, interval)
         return m.MAV_RESULT_ACCEPTED, ""
 
     def send_requested(self, r: CommandRequest, msg_id: int) -> Result:

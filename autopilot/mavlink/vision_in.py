@@ -49,7 +49,9 @@ timesync after consecutive outliers: a client whose clock drifted). Otherwise th
 clock of its own (a script's boot time or UNIX time): its samples are valid at their arrival, as
 PX4 takes them before its timesync has converged. A stamp of 0 means "at arrival". On either
 clock a stamp not later than the sender's previous one is refused (a duplicate, a reordered or
-replayed message). The filter then takes the sample as valid EKF2_EV_DELAY before that time.
+replayed message; these count among the refusals in a row too: a client that restarted its clock).
+A restarted simulator (its time starts again) forgets every sender's clock. The filter then takes
+the sample as valid EKF2_EV_DELAY before that time.
 """
 
 from __future__ import annotations
@@ -133,6 +135,7 @@ class SenderClocks:
             on_vehicle = abs(stamp_usec * 1e-6 - arrival_s) <= SYNC_WINDOW_S
             clock = _Clock(on_vehicle, -1, 0, now)
         elif stamp_usec <= clock.last_stamp_usec:
+            self._keep(sender, clock._replace(refused_in_a_row=clock.refused_in_a_row + 1, heard_s=now))
             raise Refused(OUT_OF_ORDER)
         if not clock.on_vehicle_clock:
             self._keep(sender, clock._replace(last_stamp_usec=stamp_usec, heard_s=now))
@@ -144,6 +147,10 @@ class SenderClocks:
             raise Refused(problem)
         self._keep(sender, _Clock(True, stamp_usec, 0, now))
         return min(t, arrival_s)
+
+    def restart(self) -> None:
+        """Forget every sender's clock (the simulation clock started again)."""
+        self.clocks.clear()
 
     def _keep(self, sender: Sender, clock: _Clock) -> None:
         clocks = self.clocks
@@ -244,6 +251,12 @@ class ExternalVision:
         self._last_arrival = arrival_s
         self.accepted += 1
         return pose._replace(time_s=t)
+
+    def restart(self) -> None:
+        """The simulation clock started again (a restarted simulator): the senders' clocks are
+        decided afresh; the counts stay."""
+        self.clocks.restart()
+        self._last_arrival = -math.inf
 
     def _announce(self, text: str, now: float) -> None:
         """Each text the first time, then at most every :data:`ANNOUNCE_EVERY_S` while it recurs
