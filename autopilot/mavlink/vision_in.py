@@ -31,9 +31,9 @@ position: about home when it also fuses GNSS).
 
 Checks at the edge, each refusal counted by its reason: numbers that are not finite; absurd ones
 (a position farther than :data:`MAX_DISTANCE_M` from the origin, an angle beyond 2 pi, a
-quaternion whose norm is far from 1, a negative variance); an unsupported frame or estimator
-type; a flood (more than one sample per control frame: the filter fuses one a frame, the first);
-and the times below.
+quaternion whose norm is far from 1, a variance that is negative or not finite); an unsupported
+frame or estimator type; a flood (more than one sample per control frame: the filter fuses one a
+frame, the first); and the times below.
 
 **Time.** A message's ``usec`` / ``time_usec`` is its sender's clock. PX4 maps it to its own
 with timesync (it sends TIMESYNC requests and estimates each link's offset) and, until that has
@@ -90,7 +90,7 @@ NOT_FINITE = "a value is not finite"
 TOO_FAR = f"a position farther than {MAX_DISTANCE_M:g} m"
 BAD_ANGLE = "an angle beyond 2 pi"
 BAD_QUATERNION = "q is not a rotation (norm far from 1)"
-BAD_VARIANCE = "a negative or infinite variance"
+BAD_VARIANCE = "a variance that is negative or not finite"
 BAD_FRAME = "ODOMETRY frame_id not LOCAL_NED or LOCAL_FRD"
 MOCAP_ODOMETRY = (
     "ODOMETRY of estimator_type MOCAP: not for the EKF (as on PX4: send VISION_POSITION_ESTIMATE, "
@@ -168,7 +168,7 @@ def _std(variance: float) -> float:
 
 def _pose(position_ned, yaw_ned: float, covariance, read_covariance: bool) -> VisionPose:
     """The pose in the paper's frames, with the covariance's diagonal as 1-sigmas (time 0)."""
-    if not math.isfinite(position_ned[0] + position_ned[1] + position_ned[2] + yaw_ned):
+    if not all(math.isfinite(c) for c in (*position_ned, yaw_ned)):
         raise Refused(NOT_FINITE)
     if math.hypot(*position_ned) > MAX_DISTANCE_M:
         raise Refused(TOO_FAR)

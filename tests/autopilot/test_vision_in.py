@@ -75,6 +75,8 @@ def test_vision_position_estimate_and_odometry_read_as_px4_reads_them():
         (vpe(xyz=(0.0, math.inf, 0.0)), v.NOT_FINITE),
         (vpe(rpy=(0.0, NAN, 0.0)), v.NOT_FINITE),
         (vpe(xyz=(3.4e38, 0.0, 0.0)), v.TOO_FAR),
+        (vpe(xyz=(3.4e38, 3.4e38, 0.0)), v.TOO_FAR),  # finite, however large
+        (vpe(cov=covariance(0.01, NAN, 0.0, 0.0)), v.BAD_VARIANCE),
         (vpe(xyz=(0.0, 0.0, -10_001.0)), v.TOO_FAR),
         (vpe(rpy=(0.0, 0.0, 7.0)), v.BAD_ANGLE),
         (vpe(cov=covariance(-0.01, 0.0, 0.0, 0.0)), v.BAD_VARIANCE),
