@@ -87,6 +87,7 @@ from .mavlink.params import ParamService
 from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
+from .mavlink.vision_in import ExternalVision
 from .mission.service import MissionService
 from .params.definitions import (
     consistency_problems,
@@ -239,7 +240,8 @@ class AutopilotCore:
             if setup.default_remotes
             else (None, None)
         )
-        self.links = [GcsLink(GCS_LINK, remotes[0], self._out), GcsLink(API_LINK, remotes[1], self._out)]
+        self.links = [GcsLink(GCS_LINK, remotes[0], self._out, self.dt),
+                      GcsLink(API_LINK, remotes[1], self._out, self.dt)]  # fmt: skip
         self.faults = FaultLog(log, lambda text: self.statustext(m.MAV_SEVERITY_ERROR, text))
         self.refusals = RefusalNotices(self.statustext, lambda: self.wall_now)
         self.dispatcher = MessageDispatcher(self.faults)
@@ -280,6 +282,9 @@ class AutopilotCore:
         d[m.MAVLINK_MSG_ID_SET_MODE] = self._on_set_mode_message
         d[m.MAVLINK_MSG_ID_HEARTBEAT] = self._on_gcs_heartbeat
         d[m.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
+        self.external_vision = ExternalVision()  # a client's vision (mocap bridge, VIO) for the EKF
+        d[m.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE] = self._on_vision
+        d[m.MAVLINK_MSG_ID_ODOMETRY] = self._on_vision
 
     # -- entry points ---------------------------------------------------------------------------
     def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:
@@ -355,6 +360,7 @@ class AutopilotCore:
             },
             "peers": {link.name: [f"{host}:{port}" for host, port in link.peers] for link in self.links},
             "signing": self.signing.info(),
+            "vision": self.external_vision.info(),
             "flight_log": {"logging": self.flight_log.logging, "logs_started": self.flight_log.logs_started},
             "failures": self.failure_injection.info(),
         }
@@ -429,6 +435,7 @@ class AutopilotCore:
         self.last_time_usec = -1
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
+        self.external_vision.restart()  # so were the vision senders' stamps
         self.missions.restart_clock()
 
     def _control_step(self, frame) -> bytes:
@@ -525,6 +532,7 @@ class AutopilotCore:
             self.commander.estimator_problem = None
             self.commander.height_uncertainty_m = 0.0  # the truth
         self._status.estimator = None
+        self._status.on_ekf = want
         self.log(f"flying on {'the EKF estimate' if want else 'the simulator truth'} (EKF2_EN {int(want)})")
 
     def _estimate(self, t: float, frame) -> StateEstimate | None:
@@ -551,8 +559,6 @@ class AutopilotCore:
         self.commander.estimator_problem = loop.problem()
         self.commander.height_uncertainty_m = loop.height_uncertainty_m()
         self._status.estimator = loop.last_status
-        self._status.imu = loop.last_imu
-        self._status.mag_gauss, self._status.baro_height_m = loop.last_mag_gauss, loop.last_baro_height_m
         self._estimator_done = (t, est, loop)  # its row is written after the answer is out
         return est
 
@@ -629,6 +635,8 @@ class AutopilotCore:
         s, c = self._status, self.commander
         s.time_usec = frame.time_usec
         s.state = frame.state
+        s.parts = frame.parts
+        s.on_ekf = self.estimator is not None
         s.armed = c.armed
         s.custom_mode = c.mode.custom_mode
         s.landed_state = c.landed_state.value
@@ -776,6 +784,18 @@ class AutopilotCore:
         if msg.tc1 == 0:  # a request: answer with our (simulation) clock in ns
             reply = m.MAVLink_timesync_message(int(self.sim_time * 1e9), msg.ts1)
             link.send_to(self.encoder.pack(reply), address)
+
+    def _on_vision(self, msg, link: GcsLink, address: Address) -> None:
+        """A client's VISION_POSITION_ESTIMATE or ODOMETRY: checked and timed at the edge
+        (:mod:`.mavlink.vision_in`), then fused by the EKF with the next frame's aiding; a refusal
+        is counted and said (STATUSTEXT, rate-limited per reason)."""
+        sender = (link.index, address, msg.get_srcSystem(), msg.get_srcComponent())
+        vision, on_ekf = self.external_vision, self.estimator is not None
+        pose = vision.receive(msg, sender, self.sim_time, self.wall_now, on_ekf, self.params.values)
+        if pose is not None:
+            self.estimator.external_vision(pose)
+        for text in vision.take_announcements():
+            self.statustext(m.MAV_SEVERITY_WARNING, text)
 
     def _on_param_change(self, name: str, value: float) -> None:
         """Gains take effect between two control steps (this runs between frames), no jump in

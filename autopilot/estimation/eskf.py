@@ -94,6 +94,7 @@ from .parameters import (
     EV_CTRL_HPOS,
     EV_CTRL_VPOS,
     EV_CTRL_YAW,
+    GPS_CTRL_HPOS,
     GPS_CTRL_VEL,
     MAG_TYPE_NONE,
     EstimatorParams,
@@ -290,12 +291,18 @@ class ErrorStateEkf:
         if elapsed < need:
             self._align_reason = f"aligning: IMU at rest for {elapsed:.1f} s of {need:.1f} s"
             return
-        position = self._pending_vision is not None or self._pending_gps is not None
+        p = self.params
+        vision_position = self._pending_vision is not None and p.ev_ctrl & (EV_CTRL_HPOS | EV_CTRL_VPOS)
+        position = vision_position or (self._pending_gps is not None and p.gps_ctrl & GPS_CTRL_HPOS)
         if not position:
-            self._align_reason = (
-                f"aligning: waiting for a position source (GPS 3D fix with eph <= "
-                f"{self.params.gps_req_eph_m:g} m and >= {self.params.gps_req_nsats} satellites, or vision)"
-            )
+            sources = []
+            if p.gps_ctrl & GPS_CTRL_HPOS:
+                eph, sats = p.gps_req_eph_m, p.gps_req_nsats
+                sources.append(f"a GPS 3D fix with eph <= {eph:g} m and >= {sats} satellites")
+            if p.ev_ctrl & (EV_CTRL_HPOS | EV_CTRL_VPOS):
+                sources.append("vision")
+            wanted = " or ".join(sources) or "none enabled (EKF2_GPS_CTRL, EKF2_EV_CTRL)"
+            self._align_reason = f"aligning: waiting for a position source ({wanted})"
             return
         heading = (self._pending_vision is not None and self.params.ev_ctrl & EV_CTRL_YAW) or (
             self._align_mn > 0 and self.params.mag_type != MAG_TYPE_NONE

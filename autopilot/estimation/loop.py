@@ -40,7 +40,7 @@ from quadcommon.rigid_body import quaternion_from_euler
 from ..control.cascade import StateEstimate
 from ..mavlink.hil import SensorSamples
 from .eskf import ErrorStateEkf
-from .measurements import BaroSample, ImuSample, MagSample
+from .measurements import BaroSample, ImuSample, MagSample, VisionPose
 from .parameters import EstimatorParams
 from .status import EstimatorStatus
 
@@ -55,10 +55,8 @@ class EstimatorLoop:
         self._last_t: float | None = None
         self._frames = 0
         self.last_status: EstimatorStatus | None = None
-        self.last_imu: ImuSample | None = None
-        self.last_mag_gauss: tuple[float, float, float] | None = None  # the last magnetometer sample read
-        self.last_baro_height_m: float | None = None  # the last pressure altitude read
         self._pending: SensorSamples | None = None  # the aiding of the last predict(), not yet fused
+        self._external: VisionPose | None = None  # a client's vision pose, fused with the next frame's aiding
         self._converged_since: float | None = None  # filter time of the first "converged" in a row
 
     def step(self, t: float, samples: SensorSamples) -> StateEstimate | None:
@@ -77,7 +75,6 @@ class EstimatorLoop:
         dt = self.dt if self._last_t is None else t - self._last_t
         self._last_t = t
         imu = ImuSample(t, dt, samples.angular_rate_rad_s, samples.specific_force_m_s2)
-        self.last_imu = imu
         self.ekf.predict(imu)
         self._pending = samples
         if self.last_status is None:  # the first sample: a verdict from the start (aligning)
@@ -91,18 +88,25 @@ class EstimatorLoop:
             return
         ekf, t = self.ekf, self._last_t
         if samples.mag_gauss is not None:
-            self.last_mag_gauss = samples.mag_gauss
             ekf.fuse_mag(MagSample(t, samples.mag_gauss))
         if samples.baro_height_m is not None:
-            self.last_baro_height_m = samples.baro_height_m
             ekf.fuse_baro(BaroSample(t, samples.baro_height_m))
         if samples.gps is not None:
             ekf.fuse_gps(samples.gps._replace(time_s=t))
         if samples.vision is not None:
             ekf.fuse_vision(samples.vision._replace(time_s=t))
+        if self._external is not None:
+            ekf.fuse_vision(self._external)
+            self._external = None
         self._frames += 1
         if self.last_status is None or self._frames % STATUS_EVERY == 0:
             self.last_status = ekf.status()
+
+    def external_vision(self, pose: VisionPose) -> None:
+        """A client's vision pose (:mod:`autopilot.mavlink.vision_in`: checked, valid at its
+        ``time_s``), fused after the next frame's own aiding, through the same vision fusion
+        (EKF2_EV_*); one a frame (the edge refuses more), a newer one replaces it."""
+        self._external = pose
 
     def estimate(self) -> StateEstimate | None:
         """The filter's estimate now, or None while it is not initialised."""
@@ -116,7 +120,6 @@ class EstimatorLoop:
         """Initialise from ``pose`` at this frame instead of :meth:`step` (an in-air start: no
         alignment possible); see the module."""
         imu = ImuSample(t, self.dt, samples.angular_rate_rad_s, samples.specific_force_m_s2)
-        self.last_imu = imu
         self._pending = None
         self.ekf.reset_to(imu, pose.position_m, pose.velocity_m_s, quaternion_from_euler(*pose.euler_rad),
                           baro_height_m=samples.baro_height_m)  # fmt: skip

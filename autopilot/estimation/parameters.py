@@ -232,8 +232,8 @@ ESTIMATOR_PARAMS: tuple[ParamSpec, ...] = (
         0,
         15,
         kind=INT32,
-        description="vision aiding bits: 0 horizontal pos, 1 vertical pos, 3 yaw (PX4's default is 0; "
-        "here vision is fused when the autopilot feeds it)",
+        description="vision aiding bits: 0 horizontal pos, 1 vertical pos, 3 yaw (bit 2, velocity, is not "
+        "fused here; PX4's default is 0; here vision is fused when it comes)",
     ),
     ParamSpec("EKF2_EV_DELAY", 0.0, 0.0, 300.0, unit="ms", description="vision delay relative to the IMU"),
     ParamSpec(
@@ -249,6 +249,14 @@ ESTIMATOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("EKF2_EVP_NOISE", 0.1, 0.0001, 10.0, unit="m", description="vision position noise"),
     ParamSpec("EKF2_EVA_NOISE", 0.1, 0.0005, 1.0, unit="rad", description="vision angle (yaw) noise"),
     ParamSpec("EKF2_EVP_GATE", 5.0, 1.0, 100.0, unit="SD", description="gate of the vision position test"),
+    ParamSpec(
+        "EKF2_EV_QMIN",
+        0,
+        0,
+        100,
+        kind=INT32,
+        description="minimum ODOMETRY quality fused (a client's vision; -1, failed, is always refused)",
+    ),
     # -- health and start-up ----------------------------------------------------------------
     ParamSpec(
         "EKF2_NOAID_TOUT",

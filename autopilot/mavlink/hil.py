@@ -191,6 +191,52 @@ def imu_fields(parts: dict) -> list | None:
     return None if raw is None else _fields(_SENSOR, raw, _IMU_FIELDS)
 
 
+_HIGHRES_FIELDS = _where(_SENSOR, "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag",
+                         "abs_pressure", "diff_pressure", "pressure_alt", "temperature")  # fmt: skip
+
+
+def sensor_fields(parts: dict) -> list | None:
+    """The frame's HIL_SENSOR readings as sent, in HIGHRES_IMU's field order and units (FRD body
+    axes: specific force m/s², rates rad/s, field gauss; pressures hPa, pressure altitude m AMSL,
+    temperature deg C), or None when the frame has none or it is corrupt. Decoded when asked (a
+    requested HIGHRES_IMU), not every frame."""
+    raw = parts.get(_ID_SENSOR)
+    if raw is None:
+        return None
+    try:
+        return _fields(_SENSOR, raw, _HIGHRES_FIELDS)
+    except DecodeError:
+        return None
+
+
+_STATE = FastDecoder(mavlink.MAVLink_hil_state_quaternion_message)
+_STATE_FLOATS = tuple(
+    name for name, kind in zip(_STATE.message_class.fieldnames, _STATE.message_class.fieldtypes, strict=True)
+    if kind == "float"
+)  # fmt: skip
+
+
+def ground_truth(parts: dict):
+    """The simulator's HIL_STATE_QUATERNION of this frame (its ground truth: attitude, rates,
+    lat/lon/alt, NED velocity, specific force) as a message to send on (pymavlink), or None when
+    the frame has none, or one that is corrupt or not finite. Decoded when asked."""
+    raw = parts.get(_ID_STATE)
+    if raw is None:
+        return None
+    try:
+        values = _STATE.unpack(raw)
+    except DecodeError:
+        return None
+    slices = _STATE.slices
+    fields = {name: values[slices[name]] for name in _STATE.message_class.fieldnames}
+    fields["attitude_quaternion"] = list(fields["attitude_quaternion"])
+    for name in _STATE_FLOATS:
+        value = fields[name]
+        if not all(math.isfinite(v) for v in (value if isinstance(value, list) else (value,))):
+            return None
+    return _STATE.message_class(**fields)
+
+
 class GpsFields(NamedTuple):
     """HIL_GPS as sent: scaled integers (degE7, mm, cm/s, cm), ``cog`` in cdeg (65535: unknown)."""
 

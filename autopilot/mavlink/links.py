@@ -44,7 +44,10 @@ class Outgoing(NamedTuple):
 
 
 class GcsLink:
-    def __init__(self, index: int, default_remote: Address | None, outbox: list[Outgoing]) -> None:
+    def __init__(
+        self, index: int, default_remote: Address | None, outbox: list[Outgoing], frame_period_s: float = 0.0
+    ) -> None:
+        """``frame_period_s``: the control frames' period, the shortest stream interval."""
         self.index = index
         self.name = LINK_NAMES[index]
         self.default_remote = default_remote
@@ -53,7 +56,7 @@ class GcsLink:
         if default_remote is not None:
             self.peers[default_remote] = math.inf
         self.parser = new_parser()
-        self.streams = StreamTable()
+        self.streams = StreamTable(frame_period_s)
         self.last_heartbeat_s: float | None = None  # simulation time of the last GCS heartbeat
         self.oversize = 0  # datagrams cut at MAX_DATAGRAM_BYTES
         self.evicted = 0  # peers dropped to make room for a new one

@@ -1,18 +1,22 @@
 """Telemetry to ground stations: what each message says, and how often (simulation time).
 
 Messages are built from :class:`VehicleStatus` (paper frames inside, NED/FRD and MAVLink units
-only here). Each GCS link has its own :class:`StreamTable`: PX4-like default rates, changed by
-``MAV_CMD_SET_MESSAGE_INTERVAL``; intervals count simulation time (lockstep), so at ``--speed 4``
-a 1 Hz HEARTBEAT arrives 4 times per wall second, as in PX4 SITL.
+only here). :data:`STREAMS` is the one table of the messages the vehicle streams and sends on
+request: each one's builder, its default rate and what it is built from, which decides whether a
+request for it is granted (:func:`stream_refusal`). Each GCS link has its own :class:`StreamTable`:
+PX4-like default rates, changed by ``MAV_CMD_SET_MESSAGE_INTERVAL``; intervals count simulation
+time (lockstep), so at ``--speed 4`` a 1 Hz HEARTBEAT arrives 4 times per wall second, as in PX4
+SITL, and no stream runs faster than the control frames (one message per frame at most).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from quadcommon import frames
-from quadcommon.atmosphere import isa_pressure_hpa, isa_temperature_c
 from quadcommon.rigid_body import quaternion_from_euler
 from quadcommon.trajectories import Reference
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
@@ -25,9 +29,9 @@ from ..battery.estimator import (
     BatteryStatus,
 )
 from ..control.cascade import StateEstimate
-from ..estimation.measurements import ImuSample
 from ..estimation.status import EstimatorStatus
 from .codec import mavlink
+from .hil import ground_truth, sensor_fields
 
 m = mavlink
 Vector3 = tuple[float, float, float]
@@ -48,29 +52,6 @@ SENSORS_PRESENT = (
     | m.MAV_SYS_STATUS_AHRS
     | m.MAV_SYS_STATUS_PREARM_CHECK
 )
-
-# Default rates, Hz (0 = off until requested). PX4's "normal" stream set, roughly.
-DEFAULT_RATES_HZ = {
-    m.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    m.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
-    m.MAVLINK_MSG_ID_ATTITUDE: 20.0,
-    m.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 10.0,
-    m.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
-    m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
-    m.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
-    m.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
-    m.MAVLINK_MSG_ID_ATTITUDE_TARGET: 10.0,
-    m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
-    m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
-    m.MAVLINK_MSG_ID_VFR_HUD: 4.0,
-    m.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,  # PX4's rate (sent once a battery has reported)
-    m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.0,
-    m.MAVLINK_MSG_ID_ESTIMATOR_STATUS: 1.0,  # sent only when flying on the EKF
-    m.MAVLINK_MSG_ID_ODOMETRY: 0.0,  # on request (SET_MESSAGE_INTERVAL / REQUEST_MESSAGE)
-    m.MAVLINK_MSG_ID_HIGHRES_IMU: 0.0,  # on request, and only on the EKF
-}
-
 
 @dataclass
 class VehicleStatus:
@@ -93,10 +74,11 @@ class VehicleStatus:
     geofence_enabled: bool = False
     geofence_breached: bool = False
     flight_sw_version: int = 0x01000000
+    on_ekf: bool = False  # flying on the EKF (EKF2_EN 1), else on the simulator's truth
     estimator: EstimatorStatus | None = None  # flying on the EKF: its last status (else None)
-    imu: ImuSample | None = None  # the EKF's last IMU sample (HIGHRES_IMU)
-    mag_gauss: Vector3 | None = None  # the EKF's last magnetometer sample, body FLU (HIGHRES_IMU)
-    baro_height_m: float | None = None  # the EKF's last pressure altitude, m AMSL (HIGHRES_IMU)
+    # The latest lockstep frame's messages by id, undecoded (autopilot.mavlink.hil.Frame.parts):
+    # HIGHRES_IMU and the ground truth are decoded from them when one is sent.
+    parts: dict[int, bytes] | None = None
     battery: BatteryStatus | None = None  # the battery's estimate (None: no battery has reported)
     battery_unhealthy: bool = False  # its reports stopped
     extra: dict = field(default_factory=dict)
@@ -379,66 +361,120 @@ def odometry(s: VehicleStatus):
     )  # fmt: skip
 
 
-_HIGHRES_ACC_GYRO = 0b111111  # HIGHRES_IMU_UPDATED_FLAGS: x/y/z acc, x/y/z gyro
-_HIGHRES_MAG = 0b111 << 6  # x/y/z mag
-_HIGHRES_BARO = (1 << 9) | (1 << 11) | (1 << 12)  # abs_pressure, pressure_alt, temperature
+_HIGHRES_BITS = (  # HIGHRES_IMU_UPDATED_FLAGS of each group of fields, as HIL_SENSOR's fields_updated
+    (0, 6, 0b111111),  # x/y/z acc, x/y/z gyro
+    (6, 9, 0b111 << 6),  # x/y/z mag
+    (9, 10, 1 << 9),  # abs_pressure
+    (11, 12, 1 << 11),  # pressure_alt
+    (12, 13, 1 << 12),  # temperature
+)
 
 
 def highres_imu(s: VehicleStatus):
-    """The EKF's last IMU, magnetometer and barometer samples (FRD), on request, as PX4 reports
-    its sensors; None on truth (no sensor is read then). The pressure and the temperature are the
-    ISA's at the pressure altitude read (the simulator's barometer is an ISA one). A field without
-    a sample yet is 0 with its ``fields_updated`` bit clear; there is no airspeed sensor."""
-    imu = s.imu
-    if imu is None:
+    """The sensors as PX4 reports them (MAVSDK's Telemetry.imu), whatever the vehicle flies on:
+    the latest lockstep frame's HIL_SENSOR (the IMU sample of that frame, the magnetometer's and
+    the barometer's latest samples, which HIL_SENSOR carries in every frame), FRD body axes. A group
+    of fields that is not finite goes out as 0 with its ``fields_updated`` bits clear; there is no
+    airspeed sensor (``diff_pressure`` 0, its bit clear). None without a HIL_SENSOR in the frame."""
+    values = sensor_fields(s.parts) if s.parts is not None else None
+    if values is None:
         return None
-    ax, ay, az = frames.vector_to_ned(imu.specific_force_m_s2)
-    gx, gy, gz = frames.vector_to_ned(imu.angular_rate_rad_s)
-    updated = _HIGHRES_ACC_GYRO
-    mx = my = mz = pressure = altitude = temperature = 0.0
-    if s.mag_gauss is not None:
-        mx, my, mz = frames.vector_to_ned(s.mag_gauss)
-        updated |= _HIGHRES_MAG
-    if s.baro_height_m is not None:
-        altitude = s.baro_height_m
-        pressure, temperature = isa_pressure_hpa(altitude), isa_temperature_c(altitude)
-        updated |= _HIGHRES_BARO
-    return m.MAVLink_highres_imu_message(  # specific force FRD: -g on z at rest, as HIL_SENSOR
-        s.time_usec, ax, ay, az, gx, gy, gz, mx, my, mz, pressure, 0.0, altitude, temperature, updated, 0
-    )
+    updated = 0
+    for first, end, bits in _HIGHRES_BITS:
+        if all(math.isfinite(v) for v in values[first:end]):
+            updated |= bits
+        else:
+            values[first:end] = [0.0] * (end - first)
+    values[10] = 0.0  # diff_pressure: no airspeed sensor
+    return m.MAVLink_highres_imu_message(s.time_usec, *values, updated, 0)
 
 
-BUILDERS = {
-    m.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
-    m.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
-    m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
-    m.MAVLINK_MSG_ID_ATTITUDE: attitude,
-    m.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: attitude_quaternion,
-    m.MAVLINK_MSG_ID_LOCAL_POSITION_NED: local_position_ned,
-    m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
-    m.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
-    m.MAVLINK_MSG_ID_HOME_POSITION: home_position,
-    m.MAVLINK_MSG_ID_ATTITUDE_TARGET: attitude_target,
-    m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: position_target_local_ned,
-    m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: servo_output_raw,
-    m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: actuator_output_status,
-    m.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
-    m.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
-    m.MAVLINK_MSG_ID_ESTIMATOR_STATUS: estimator_status,
-    m.MAVLINK_MSG_ID_ODOMETRY: odometry,
-    m.MAVLINK_MSG_ID_HIGHRES_IMU: highres_imu,
+def hil_state_quaternion(s: VehicleStatus):
+    """The ground truth on request, as PX4 SITL serves it (its HIL_STATE_QUATERNION stream, from
+    the simulator's groundtruth): the simulator's own HIL_STATE_QUATERNION of the latest lockstep
+    frame (lat/lon 1e-7 deg and alt mm AMSL of the vehicle, attitude, body rates, NED velocity,
+    specific force), whatever the vehicle flies on. MAVSDK's Telemetry.ground_truth reads its
+    lat, lon and alt."""
+    return ground_truth(s.parts) if s.parts is not None else None
+
+
+# What a stream is built from; while it is not there the stream sends nothing. A request for a
+# stream whose source this vehicle cannot have is refused (stream_refusal).
+ALWAYS, STATE, REFERENCE, BATTERY, EKF, SENSORS, TRUTH = (
+    "always", "state", "reference", "battery", "ekf", "sensors", "truth"
+)  # fmt: skip
+SENT_WHILE = {  # (the docs' table)
+    ALWAYS: "always",
+    STATE: "the vehicle has a state (its first frame; on the EKF: aligned)",
+    REFERENCE: "it flies to a target (armed, in a flying mode)",
+    BATTERY: "a battery has reported",
+    EKF: "it flies on the EKF (`EKF2_EN` 1); refused on the truth",
+    SENSORS: "the frames carry `HIL_SENSOR` (whatever the vehicle flies on); refused otherwise",
+    TRUTH: "the frames carry `HIL_STATE_QUATERNION` (whatever the vehicle flies on); refused otherwise",
 }
-NEEDS_STATE = set(BUILDERS) - {
-    m.MAVLINK_MSG_ID_HEARTBEAT,
-    m.MAVLINK_MSG_ID_SYS_STATUS,
-    m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
-    m.MAVLINK_MSG_ID_HOME_POSITION,
-    m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,
-    m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS,
-    m.MAVLINK_MSG_ID_ESTIMATOR_STATUS,
-    m.MAVLINK_MSG_ID_HIGHRES_IMU,
-    m.MAVLINK_MSG_ID_BATTERY_STATUS,
+_NEEDS_PART = {SENSORS: mavlink.MAVLINK_MSG_ID_HIL_SENSOR, TRUTH: mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION}
+
+
+class Stream(NamedTuple):
+    """One message the vehicle streams and sends on request."""
+
+    build: Callable[[VehicleStatus], object]  # the message now, or None while it cannot be built
+    default_hz: float  # on every GCS link from the start (0: off until requested)
+    needs: str  # what it is built from (ALWAYS, STATE, ...: SENT_WHILE says when it is sent)
+
+
+STREAMS: dict[int, Stream] = {  # PX4's "normal" stream set, roughly, and what it sends on request
+    m.MAVLINK_MSG_ID_HEARTBEAT: Stream(heartbeat, 1.0, ALWAYS),
+    m.MAVLINK_MSG_ID_SYS_STATUS: Stream(sys_status, 1.0, ALWAYS),
+    m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Stream(extended_sys_state, 1.0, ALWAYS),
+    m.MAVLINK_MSG_ID_ATTITUDE: Stream(attitude, 20.0, STATE),
+    m.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: Stream(attitude_quaternion, 10.0, STATE),
+    m.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(local_position_ned, 30.0, STATE),
+    m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Stream(global_position_int, 10.0, STATE),
+    m.MAVLINK_MSG_ID_GPS_RAW_INT: Stream(gps_raw_int, 5.0, STATE),
+    m.MAVLINK_MSG_ID_HOME_POSITION: Stream(home_position, 0.5, ALWAYS),
+    m.MAVLINK_MSG_ID_ATTITUDE_TARGET: Stream(attitude_target, 10.0, STATE),
+    m.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: Stream(position_target_local_ned, 10.0, REFERENCE),
+    m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: Stream(servo_output_raw, 10.0, ALWAYS),
+    m.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: Stream(actuator_output_status, 0.0, ALWAYS),
+    m.MAVLINK_MSG_ID_VFR_HUD: Stream(vfr_hud, 4.0, STATE),
+    m.MAVLINK_MSG_ID_BATTERY_STATUS: Stream(battery_status, 0.5, BATTERY),  # PX4's rate
+    m.MAVLINK_MSG_ID_ESTIMATOR_STATUS: Stream(estimator_status, 1.0, EKF),
+    m.MAVLINK_MSG_ID_ODOMETRY: Stream(odometry, 0.0, STATE),
+    m.MAVLINK_MSG_ID_HIGHRES_IMU: Stream(highres_imu, 0.0, SENSORS),
+    m.MAVLINK_MSG_ID_HIL_STATE_QUATERNION: Stream(hil_state_quaternion, 0.0, TRUTH),
 }
+BUILDERS = {msg_id: stream.build for msg_id, stream in STREAMS.items()}  # (a test replaces one)
+DEFAULT_RATES_HZ = {msg_id: stream.default_hz for msg_id, stream in STREAMS.items()}
+
+
+def stream_refusal(msg_id: int, status: VehicleStatus) -> str | None:
+    """Why a request for ``msg_id`` (SET_MESSAGE_INTERVAL, REQUEST_MESSAGE) is refused, or None:
+    a message the vehicle does not send, ESTIMATOR_STATUS while it flies on the truth, a message
+    built from a part the simulator's frames do not carry. A granted stream is sent at its rate
+    while what it is built from is there (:attr:`Stream.needs`: a state, a reference, a battery
+    report)."""
+    stream = STREAMS.get(msg_id)
+    if stream is None:
+        entry = m.mavlink_map.get(msg_id)
+        name = entry.msgname if entry is not None else f"message {msg_id}"
+        return f"{name}: not sent by this vehicle"
+    name = m.mavlink_map[msg_id].msgname
+    if stream.needs == EKF and not status.on_ekf:
+        return f"{name}: no estimator, the vehicle flies on the simulator's truth (EKF2_EN 0)"
+    part = _NEEDS_PART.get(stream.needs)
+    if part is not None and status.parts is not None and part not in status.parts:
+        return f"{name}: the simulator's frames carry no {m.mavlink_map[part].msgname}"
+    return None
+
+
+def streams_table() -> str:
+    """:data:`STREAMS` as a Markdown table (the one in docs/compatibility.md)."""
+    rows = ["| message | id | default rate | sent while |", "|---|---:|---|---|"]
+    for msg_id, stream in sorted(STREAMS.items()):
+        rate = f"{stream.default_hz:g} Hz" if stream.default_hz > 0.0 else "on request"
+        rows.append(f"| `{m.mavlink_map[msg_id].msgname}` | {msg_id} | {rate} | {SENT_WHILE[stream.needs]} |")
+    return "\n".join(rows)
 
 
 STATUSTEXT_CHUNK = 50  # bytes of text per STATUSTEXT
@@ -459,15 +495,18 @@ def statustext_messages(severity: int, text: str, ident: int) -> list:
 def build(msg_id: int, status: VehicleStatus):
     """The message ``msg_id`` describing ``status`` now, or None if it cannot be built yet."""
     builder = BUILDERS.get(msg_id)
-    if builder is None or (msg_id in NEEDS_STATE and status.state is None):
+    if builder is None or (STREAMS[msg_id].needs == STATE and status.state is None):
         return None
     return builder(status)
 
 
 class StreamTable:
-    """Per-link stream intervals (simulation time) and when each message is next due."""
+    """Per-link stream intervals (simulation time) and when each message is next due.
+    ``frame_period_s``: the control frames' period, the shortest interval a stream can have (one
+    message per frame); a shorter one asked for is granted at it."""
 
-    def __init__(self) -> None:
+    def __init__(self, frame_period_s: float = 0.0) -> None:
+        self.frame_period_s = frame_period_s
         self.interval_s: dict[int, float] = {}
         self.next_due: dict[int, float] = {}
         self._earliest = 0.0  # min(next_due): most frames nothing is due and due() returns at once
@@ -479,21 +518,30 @@ class StreamTable:
             self.interval_s.pop(msg_id, None)
             self.next_due.pop(msg_id, None)
         else:
-            self.interval_s[msg_id] = 1.0 / hz
+            self.interval_s[msg_id] = max(1.0 / hz, self.frame_period_s)
             self.next_due[msg_id] = now
             self._earliest = min(self._earliest, now)
 
     def set_interval_us(self, msg_id: int, interval_us: float, now: float) -> bool:
-        """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, >0 interval (µs)."""
-        if msg_id not in BUILDERS:
+        """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, >0 interval (µs); False for a
+        message that is not one of :data:`STREAMS`."""
+        if msg_id not in STREAMS:
             return False
         if interval_us == 0:
-            self.set_rate(msg_id, DEFAULT_RATES_HZ.get(msg_id, 0.0), now)
+            self.set_rate(msg_id, DEFAULT_RATES_HZ[msg_id], now)
         elif interval_us < 0:
             self.set_rate(msg_id, 0.0, now)
         else:
             self.set_rate(msg_id, 1e6 / interval_us, now)
         return True
+
+    def interval_us(self, msg_id: int) -> int:
+        """MESSAGE_INTERVAL's ``interval_us`` for ``msg_id``: the interval granted (µs), -1 for a
+        stream that is off, 0 for a message that is not one of :data:`STREAMS`."""
+        if msg_id not in STREAMS:
+            return 0
+        interval = self.interval_s.get(msg_id)
+        return -1 if interval is None else round(interval * 1e6)
 
     def restart(self) -> None:
         """Every stream due now: the simulation clock started again (a restarted simulator)."""

@@ -95,6 +95,7 @@ COMMAND_RULES: dict[int, tuple[Param, ...]] = {
         Param(1, "message id", 0.0, MAX_MESSAGE_ID, integer=True),
         Param(2, "interval (us; -1 off, 0 default)", -1.0, MAX_INTERVAL_US),
     ),
+    m.MAV_CMD_GET_MESSAGE_INTERVAL: (Param(1, "message id", 0.0, MAX_MESSAGE_ID, integer=True),),
     m.MAV_CMD_REQUEST_MESSAGE: (Param(1, "message id", 0.0, MAX_MESSAGE_ID, integer=True),),
     m.MAV_CMD_MISSION_START: (Param(1, "first item", **_SEQ), Param(2, "last item", **_SEQ)),
     m.MAV_CMD_DO_SET_MISSION_CURRENT: (Param(1, "item", -1.0, 65535.0, integer=True, nan_ok=True),),

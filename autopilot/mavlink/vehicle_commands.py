@@ -61,6 +61,7 @@ class VehicleCommands:
         commands.register(m.MAV_CMD_DO_SET_MODE, self.set_mode)
         commands.register(m.MAV_CMD_DO_REPOSITION, self.reposition)
         commands.register(m.MAV_CMD_SET_MESSAGE_INTERVAL, self.message_interval)
+        commands.register(m.MAV_CMD_GET_MESSAGE_INTERVAL, self.get_message_interval)
         commands.register(m.MAV_CMD_REQUEST_MESSAGE, lambda r: self.send_requested(r, int(r.params[0])))
         commands.register(
             m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
@@ -162,19 +163,44 @@ class VehicleCommands:
         return self.core.commander.set_mode(self.core.sim_time, mode)
 
     def message_interval(self, r: CommandRequest) -> Result:
+        """SET_MESSAGE_INTERVAL for one of the link's streams (telemetry.STREAMS): granted at the
+        interval asked for, or at the control frames' period if that is shorter (one message a
+        frame; GET_MESSAGE_INTERVAL says what was granted); DENIED with the reason for a message
+        the vehicle does not send or cannot build here (telemetry.stream_refusal)."""
         msg_id = int(r.params[0])
-        if r.link.streams.set_interval_us(msg_id, r.params[1], self.core.sim_time):
+        refusal = telemetry.stream_refusal(msg_id, self.core.status) if r.params[1] >= 0 else None
+        if refusal is None and r.link.streams.set_interval_us(msg_id, r.params[1], self.core.sim_time):
             return m.MAV_RESULT_ACCEPTED, ""
-        return m.MAV_RESULT_DENIED, f"no stream for message {msg_id}"
+        return m.MAV_RESULT_DENIED, refusal or telemetry.stream_refusal(msg_id, self.core.status) or ""
+
+    def get_message_interval(self, r: CommandRequest) -> Result:
+        """MESSAGE_INTERVAL after the ACK: the interval granted on this link (µs), -1 off, 0 a
+        message the vehicle does not stream or cannot build as configured (ESTIMATOR_STATUS on the
+        truth)."""
+        msg_id = int(r.params[0])
+        refused = telemetry.stream_refusal(msg_id, self.core.status) is not None
+        interval = 0 if refused else r.link.streams.interval_us(msg_id)
+        self.after_ack = m.MAVLink_message_interval_message(msg_id, interval)
+        return m.MAV_RESULT_ACCEPTED, ""
 
     def send_requested(self, r: CommandRequest, msg_id: int) -> Result:
+        """REQUEST_MESSAGE (and the older requests for one message): the message after the ACK;
+        UNSUPPORTED for one the vehicle does not send, DENIED with the reason for one it cannot
+        build here (telemetry.stream_refusal) and, as PX4, for one it has nothing for yet (no state
+        yet, no battery report yet...)."""
         core = self.core
         if msg_id == m.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             msg = self.autopilot_version()
         else:
-            msg = telemetry.build(msg_id, core.status)
+            status = core.status
+            if msg_id not in telemetry.STREAMS:
+                return m.MAV_RESULT_UNSUPPORTED, telemetry.stream_refusal(msg_id, status) or ""
+            refusal = telemetry.stream_refusal(msg_id, status)
+            if refusal is not None:
+                return m.MAV_RESULT_DENIED, refusal
+            msg = telemetry.build(msg_id, status)
         if msg is None:
-            return m.MAV_RESULT_UNSUPPORTED, f"message {msg_id} cannot be sent"
+            return m.MAV_RESULT_DENIED, f"{m.mavlink_map[msg_id].msgname}: nothing to report yet"
         self.after_ack = msg
         return m.MAV_RESULT_ACCEPTED, ""
 

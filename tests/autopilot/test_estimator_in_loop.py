@@ -181,10 +181,10 @@ def test_non_finite_sensor_samples_are_refused_at_the_edge_and_the_flight_goes_o
 
 
 @pytest.mark.parametrize("sensors", ["gps", "mocap"])
-def test_highres_imu_on_request_reports_the_sensors_the_filter_read(sensors):
+def test_highres_imu_on_request_reports_the_sensors_on_the_ekf(sensors):
     """HIGHRES_IMU (MAVSDK's Telemetry.imu) as PX4 fills it: acceleration and rates, the
-    magnetometer and the barometer the filter read, finite, with their fields_updated bits;
-    pressure and temperature the ISA's at that pressure altitude."""
+    magnetometer and the barometer of the frames' HIL_SENSOR (the samples the filter reads),
+    finite, with their fields_updated bits; the simulator's barometer is an ISA one."""
     stack = ekf_stack(sensors)
     gcs = Gcs(stack)
     gcs.wait(lambda g: "SYS_STATUS" in g.last, what="SYS_STATUS")

@@ -69,6 +69,8 @@ from mavsdk.asyncio.plugins.manual_control import ManualControlAsync
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.mission_raw import MissionItem as MissionItemRaw
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+from mavsdk.asyncio.plugins.mocap import AngleBody, Covariance, MocapAsync, PositionBody
+from mavsdk.asyncio.plugins.mocap import VisionPositionEstimate as MocapPose
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw, VelocityNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
@@ -286,12 +288,48 @@ async def flow_action(system, args) -> None:
         emit("home", home=_position(await tel.home()))
         await watch.sim_sleep(1.0)
         emit("at_rest", **watch.snapshot())
+        await streams_on_request(system, tel, watch)
         await take_off(action, watch, 2.5)  # NaN altitude: the vehicle's MIS_TAKEOFF_ALT (2.5 m)
         emit("position", position=_position(await tel.position()))
         await land_and_disarm(action, watch)
         emit("history", **watch.history)
     finally:
         await watch.stop()
+
+
+async def streams_on_request(system, tel: TelemetryAsync, watch: Watch) -> None:
+    """What a PX4 user asks for beside the default streams: the ground truth and the IMU at a
+    rate (set_rate_ground_truth 10 Hz, set_rate_imu 50 Hz; 2 s of each, stamped with the
+    vehicle's clock at arrival), and a Mocap pose (this vehicle flies on the simulator's truth,
+    EKF2_EN 0: it refuses the pose and says why)."""
+    await tel.set_rate_ground_truth(10.0)
+    await tel.set_rate_imu(50.0)
+    got: dict[str, list] = {"ground_truth": [], "imu": []}
+
+    async def pump(name: str) -> None:
+        async for value in getattr(tel, f"subscribe_{name}")():
+            got[name].append((watch.sim_time(), value))
+
+    tasks = [asyncio.create_task(pump(name)) for name in got]
+    start = watch.sim_time()
+    await watch.sim_sleep(2.0)
+    for task in tasks:
+        task.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
+    window = (start + 0.5, start + 1.5)  # one second of simulation, away from the subscriptions' start
+    counts = {name: sum(window[0] <= t < window[1] for t, _ in values) for name, values in got.items()}
+    truth, imu = got["ground_truth"][-1][1], got["imu"][-1][1]
+    pose = MocapPose(0, PositionBody(0.0, 0.0, 0.0), AngleBody(0.0, 0.0, 0.0), Covariance([math.nan]))
+    await MocapAsync(system).set_vision_position_estimate(pose)
+    await watch.until("the Mocap pose answered", lambda w: any("vision refused" in t for t in w.texts), 5.0)
+    a, g, mag = imu.acceleration_frd, imu.angular_velocity_frd, imu.magnetic_field_frd
+    emit("streams", counts=counts,
+         ground_truth=(truth.latitude_deg, truth.longitude_deg, truth.absolute_altitude_m),
+         imu_acceleration=(a.forward_m_s2, a.right_m_s2, a.down_m_s2),
+         imu_rates=(g.forward_rad_s, g.right_rad_s, g.down_rad_s),
+         imu_field=(mag.forward_gauss, mag.right_gauss, mag.down_gauss),
+         imu_temperature=imu.temperature_degc,
+         vision=[t for t in watch.texts if "vision" in t])  # fmt: skip
 
 
 async def flow_offboard(system, args) -> None:

@@ -61,7 +61,8 @@ def values(result, stream: str) -> list:
 
 
 def test_discovery_health_telemetry_and_action(compat_sitl_config):
-    """udpin://0.0.0.0:14540+N as in PX4's docs; arm -> takeoff -> land -> disarm."""
+    """udpin://0.0.0.0:14540+N as in PX4's docs; the ground truth, the IMU and a Mocap pose on
+    request; arm -> takeoff -> land -> disarm."""
     result, (truth,) = fly("action", 0, compat_sitl_config)
 
     found = result.event("discovered")
@@ -80,6 +81,18 @@ def test_discovery_health_telemetry_and_action(compat_sitl_config):
     home = result.event("home")["home"]
     assert math.dist((home["latitude_deg"], home["longitude_deg"]), HOME) < 1e-6
     assert abs(home["absolute_altitude_m"] - 488.0) < 0.01
+
+    streams = result.event("streams")  # set_rate_ground_truth / set_rate_imu accepted (else they raise)
+    assert abs(streams["counts"]["ground_truth"] - 10) <= 1 and abs(streams["counts"]["imu"] - 50) <= 2
+    lat, lon, alt = streams["ground_truth"]  # the simulator's truth: at rest on home
+    assert math.dist((lat, lon), HOME) < 1e-7 and abs(alt - 488.0) < 0.002
+    assert streams["imu_acceleration"] == pytest.approx([0.0, 0.0, -9.81], abs=1e-4)  # exact sensors
+    assert streams["imu_rates"] == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)
+    assert streams["imu_field"] == pytest.approx([0.21, 0.016, 0.43], abs=1e-4)  # the earth's, NED
+    assert streams["imu_temperature"] == pytest.approx(11.8, abs=0.1)  # ISA at 488 m
+    assert streams["vision"] == [  # the Mocap pose came, and this vehicle flies on the truth
+        "vision refused: no estimator: the vehicle flies on the simulator's truth (EKF2_EN 0)"
+    ]
 
     up = result.event("took_off")
     assert up["armed"] is True and up["in_air"] is True and up["landed_state"] == "IN_AIR"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from autopilot.mavlink import validation
+from autopilot.mavlink import telemetry, validation
 from autopilot.mission import items, plans
 from quadcommon import environment
 
@@ -130,6 +130,12 @@ def test_parameter_slot_tables_are_the_modules() -> None:
     assert validation.overrides_table() in security
     item_commands = items.SUPPORTED_COMMANDS | plans.FENCE_COMMANDS | plans.RALLY_COMMANDS
     assert validation.slots_table(item_commands) in missions
+
+
+def test_the_streams_table_is_the_modules() -> None:
+    """docs/compatibility.md shows autopilot.mavlink.telemetry.STREAMS as it is (print
+    ``telemetry.streams_table()`` to update the page)."""
+    assert telemetry.streams_table() in (DOCS / "compatibility.md").read_text()
 
 
 # Development history in user-facing text: issue numbers, review findings, dates of measurements,

@@ -42,7 +42,7 @@ def test_the_autopilot_core_takes_100000_hostile_inputs_and_still_lands():
 @pytest.mark.parametrize("sensors", ["gps"])
 def test_the_autopilot_core_on_its_ekf_takes_20000_hostile_inputs(sensors):
     """On the estimate, fed by the sensor models (seed 15 asks for HIGHRES_IMU, among the rest: the
-    sensors the filter read come back finite)."""
+    sensors come back finite), vision messages among the inputs."""
     report = fuzz_autopilot(20_000, seed=15, sensors=sensors)
     assert report.results["COMMAND_ACK MAV_RESULT_ACCEPTED"] > 100
 

@@ -233,6 +233,15 @@ def test_alignment_says_what_it_waits_for():
     vision = ErrorStateEkf(estimator_params({"EKF2_MAG_TYPE": 5}))
     static_run(vision, q, 1.5, gps=False, vision=True)
     assert vision.initialised and vision.estimate().euler_rad[2] == pytest.approx(0.3, abs=1e-9)
+    # A source whose aiding is off is no position source: vision with EKF2_EV_CTRL 0, GNSS with
+    # EKF2_GPS_CTRL 0 (the reason says none is enabled).
+    off = ErrorStateEkf(estimator_params({"EKF2_EV_CTRL": 0, "EKF2_GPS_CTRL": 0}))
+    static_run(off, q, 1.5, vision=True)
+    assert not off.initialised
+    assert off.status().reason.endswith("position source (none enabled (EKF2_GPS_CTRL, EKF2_EV_CTRL))")
+    vision_off = ErrorStateEkf(estimator_params({"EKF2_EV_CTRL": 0}))
+    static_run(vision_off, q, 1.5, gps=False, vision=True)
+    assert not vision_off.initialised and "(a GPS 3D fix with eph <= 3 m" in vision_off.status().reason
 
 
 def test_tilt_error_of_the_alignment_is_correlated_with_the_accelerometer_bias():
