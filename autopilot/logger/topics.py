@@ -219,17 +219,18 @@ def vehicle_attitude_groundtruth(s: Snapshot) -> tuple:
     return (s.t_us, s.t_us, *_q_ned(s.truth.euler_rad), 1.0, 0.0, 0.0, 0.0, 0)
 
 
-ANGULAR_VELOCITY = "uint64_t timestamp_sample; float[3] xyz; float[3] xyz_derivative"
+ANGULAR_VELOCITY = "uint64_t timestamp_sample; float[3] xyz"
 
 
 def vehicle_angular_velocity(s: Snapshot) -> tuple | None:
+    """The body rates the vehicle flies on (FRD)."""
     if s.estimate is None:
         return None
-    return (s.t_us, s.t_us, *_rates_frd(s.estimate), NAN, NAN, NAN)
+    return (s.t_us, s.t_us, *_rates_frd(s.estimate))
 
 
 def vehicle_angular_velocity_groundtruth(s: Snapshot) -> tuple:
-    return (s.t_us, s.t_us, *_rates_frd(s.truth), NAN, NAN, NAN)
+    return (s.t_us, s.t_us, *_rates_frd(s.truth))
 
 
 ATTITUDE_SETPOINT = (
