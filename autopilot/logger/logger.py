@@ -195,7 +195,12 @@ class FlightLogger:
             if not self.logging:
                 return False
         s = self.snapshot
-        s.t_us, s.truth, s.row, s.parts, s.estimate, s.output = t_us, truth, row, parts, estimate, output
+        s.t_us = t_us
+        s.truth = truth
+        s.row = row
+        s.parts = parts
+        s.estimate = estimate
+        s.output = output
         buf = self._buffer
         for topic, build in self._every_step:
             values = build(s)

@@ -102,9 +102,10 @@ def imu_of(parts: dict) -> tuple | None:
         return None
 
 
-@dataclass
+@dataclass(slots=True)
 class Snapshot:
-    """One frame as the log reads it (refreshed in place by the logger when a sample is due)."""
+    """One frame as the log reads it (refreshed in place: what every control step's topics read by
+    the logger at each frame, the rest by the core when periodic topics are due)."""
 
     t_us: int = 0  # the frame's time_usec: simulation time since boot
     truth: object = None  # StateEstimate: the simulator's state in the HIL frame (paper frames)
