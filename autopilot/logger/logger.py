@@ -177,9 +177,7 @@ class FlightLogger:
                 self.stop()
         return self.logging
 
-    def frame(
-        self, t_us: int, armed: bool, truth, row: tuple, parts: dict | None, estimate=None, output=None
-    ) -> bool:
+    def frame(self, t_us: int, armed: bool, truth, row: tuple, parts: dict | None, estimate, output) -> bool:
         """One control step: :meth:`update`, then, while a log is open, the topics of every step
         (interval 0: ``paper_tracking``, the IMU, the body rates, the torque and thrust setpoints)
         from the frame's ``truth``, controller ``row``, undecoded messages ``parts``, the

@@ -359,9 +359,9 @@ def vehicle_torque_setpoint(s: Snapshot) -> tuple | None:
     out = s.output
     if out is None:
         return None
-    tx, ty, tz = out.torque_body_n_m
+    tx, ty, tz = frames.vector_to_ned(out.torque_body_n_m)
     mx, my, mz = s.torque_max_n_m
-    return (s.t_us, s.t_us, tx / mx, -ty / my, -tz / mz)
+    return (s.t_us, s.t_us, tx / mx, ty / my, tz / mz)
 
 
 def vehicle_thrust_setpoint(s: Snapshot) -> tuple | None:
@@ -415,7 +415,7 @@ def rate_integrals(
 
     def read() -> tuple[float, float, float]:
         values = law_states()[1]
-        return (values[i], -values[j], -values[k])
+        return frames.vector_to_ned((values[i], values[j], values[k]))
 
     return read
 
