@@ -218,7 +218,9 @@ class AutopilotCore:
             log_info(setup.log.version, setup.controller.name, setup.vehicle.name, setup.estimator,
                      setup.instance),
             self.cascade.law_states,
-            Snapshot(thrust_max_n=setup.vehicle.actuation.thrust_max_n, home_geodetic=sitl.home,
+            Snapshot(thrust_max_n=setup.vehicle.actuation.thrust_max_n,
+                     torque_max_n_m=setup.vehicle.actuation.torque_max_n_m,
+                     rotors=setup.vehicle.actuation.mode == "rotors", home_geodetic=sitl.home,
                      system_id=self.system_id, commander=self.commander),
             utc_clock=setup.log.utc_clock,
             enabled=setup.log.enabled,
@@ -604,22 +606,19 @@ class AutopilotCore:
         disturbance when the frame reports it (kept while no log is open: a log starts with it)."""
         log = self.flight_log
         parts = frame.parts
-        due = log.frame(
-            frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1], parts
-        )
+        due = log.frame(frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1],
+                        parts, frame.state, output)  # fmt: skip
         if parts is not None and DISTURBANCE_ID in parts:  # a change, or a reminder (quadcommon.wire)
             report = disturbance_of(parts)
             if report is not None:
                 log.disturbance(*report)
         if due:  # the periodic topics (one frame in ten, at most)
             s = log.snapshot
-            s.estimate = frame.state
             s.reference = guidance.reference
-            s.output = output
             s.controls = self._controls
             s.estimator = self.estimator.last_status if self.estimator is not None else None
             s.battery = self.battery.status
-            log.sample_due(frame.parts)
+            log.sample_due()
 
     @property
     def status(self) -> telemetry.VehicleStatus:

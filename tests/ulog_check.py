@@ -11,46 +11,121 @@
   every subscription names a defined format (PlotJuggler dereferences it); parameters only
   ``int32_t`` or ``float`` (it throws on any other type); info keys ``type name``; every data
   message's id subscribed and its size the format's;
-* Flight Review (``app/plot_app``): the topics and fields its plots and tables read
-  (:data:`FLIGHT_REVIEW`; a plot missing one field is dropped whole), ``estimator_status`` too
-  when the vehicle flew on its EKF.
+* Flight Review (``app/plot_app``): :data:`FLIGHT_REVIEW`, every topic and field its standard
+  plots and tables read (a plot missing one field is dropped whole) and the least sampling rate
+  its spectra take, ``estimator_status`` too when the vehicle flew on its EKF.
 """
 
 from __future__ import annotations
 
 import struct
 from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
 
 from autopilot.logger.ulog import TYPE_CODES
 
 MAGIC = b"ULog\x01\x12\x35"
 DEFINITION_TYPES = {ord(c) for c in "BFIMPQ"}
-FLIGHT_REVIEW = {
-    "vehicle_local_position": ("x", "y", "z", "vx", "vy", "vz", "xy_valid", "z_valid", "v_xy_valid",
-                               "v_z_valid"),
-    "vehicle_local_position_setpoint": ("x", "y", "z", "vx", "vy", "vz"),
-    "vehicle_attitude": ("q[0]", "q[1]", "q[2]", "q[3]"),
-    "vehicle_attitude_setpoint": ("q_d[0]", "q_d[1]", "q_d[2]", "q_d[3]", "yaw_sp_move_rate"),
-    "vehicle_angular_velocity": ("xyz[0]", "xyz[1]", "xyz[2]"),
-    "vehicle_rates_setpoint": ("roll", "pitch", "yaw"),
-    "actuator_outputs": ("noutputs", "output[0]", "output[15]"),
-    "vehicle_status": ("nav_state", "arming_state", "is_vtol", "vehicle_type", "failsafe",
-                       "failsafe_and_user_took_over"),
-    "sensor_combined": ("gyro_rad[0]", "accelerometer_m_s2[2]"),
-    "vehicle_gps_position": ("latitude_deg", "longitude_deg", "altitude_msl_m", "fix_type", "time_utc_usec",
-                             "eph", "epv", "hdop", "vdop", "s_variance_m_s", "satellites_used", "vel_m_s",
-                             "noise_per_ms", "jamming_indicator"),
-    "vehicle_global_position": ("lat", "lon", "alt"),
-    "battery_status": ("voltage_v", "voltage_filtered_v", "current_a", "current_filtered_a", "discharged_mah",
-                       "remaining"),
-    "vehicle_local_position_groundtruth": ("x", "y", "z"),
-    "vehicle_attitude_groundtruth": ("q[0]", "q[3]"),
-    "vehicle_angular_velocity_groundtruth": ("xyz[0]",),
-}  # fmt: skip
-EKF_ONLY = {  # health_flags, timeout_flags: its "Estimator Flags" plot
-    "estimator_status": ("pos_test_ratio", "vel_test_ratio", "hgt_test_ratio", "solution_status_flags",
-                         "health_flags", "timeout_flags"),
-}  # fmt: skip
+
+
+class Need(NamedTuple):
+    """What Flight Review reads of one topic (``app/plot_app/configured_plots.py``, ``helper.py``,
+    ``plotting.py``, ``plotted_tables.py``): pyulog's columns, the least sampling rate it takes
+    (Hz, 0: any), the plots the topic serves, and whether every flight has it (False: only some
+    flights, as in PX4's logs; checked where present)."""
+
+    topic: str
+    fields: tuple[str, ...]
+    min_rate_hz: int
+    plots: str
+    every_flight: bool = True
+
+
+# DataPlotFFT and DataPlotSpec draw a spectrum only at >= 100 Hz: int(1 / the median interval of
+# timestamp_sample, else timestamp).
+SPECTRUM_HZ = 100
+XYZ = ("xyz[0]", "xyz[1]", "xyz[2]")
+Q = ("q[0]", "q[1]", "q[2]", "q[3]")
+FLIGHT_REVIEW: tuple[Need, ...] = (
+    Need("vehicle_local_position",
+         ("x", "y", "z", "vx", "vy", "vz", "xy_valid", "z_valid", "v_xy_valid", "v_z_valid",
+          "ref_timestamp", "ref_lat", "ref_lon"), 0,
+         "Position (2D) and its map origin, Local Position X/Y/Z, Velocity, the info table"),
+    Need("vehicle_local_position_setpoint", ("x", "y", "z", "vx", "vy", "vz"), 0,
+         "Position, Local Position X/Y/Z, Velocity: setpoints"),
+    Need("vehicle_local_position_groundtruth", ("x", "y"), 0, "Position: groundtruth"),
+    Need("position_setpoint_triplet", ("current.lat", "current.lon", "current.alt"), 0,
+         "Altitude Estimate and Position: the setpoint circles (PX4: the navigator's modes)",
+         every_flight=False),
+    Need("vehicle_gps_position",
+         ("latitude_deg", "longitude_deg", "altitude_msl_m", "fix_type", "time_utc_usec", "eph",
+          "epv", "hdop", "vdop", "s_variance_m_s", "satellites_used", "noise_per_ms",
+          "jamming_indicator"), 0,
+         "the map, Position (GPS), Altitude Estimate (GPS), GPS Uncertainty, GPS Noise & Jamming, "
+         "the info table's start time"),
+    Need("vehicle_global_position", ("alt",), 0, "Altitude Estimate (fused)"),
+    Need("vehicle_attitude", Q, 0, "Roll/Pitch/Yaw Angle (pyulog's Euler angles of q), the info table"),
+    Need("vehicle_attitude_setpoint", ("q_d[0]", "q_d[1]", "q_d[2]", "q_d[3]", "yaw_sp_move_rate"), 0,
+         "Roll/Pitch/Yaw Angle: setpoints, yaw feed-forward"),
+    Need("vehicle_attitude_groundtruth", Q, 0, "Roll/Pitch/Yaw Angle: groundtruth"),
+    Need("vehicle_angular_velocity", XYZ, SPECTRUM_HZ,
+         "Roll/Pitch/Yaw Angular Rate, Angular Velocity FFT, Angular velocity Power Spectral Density"),
+    Need("vehicle_rates_setpoint", ("roll", "pitch", "yaw"), 0, "Angular Rate: setpoints"),
+    Need("rate_ctrl_status", ("rollspeed_integ", "pitchspeed_integ", "yawspeed_integ"), 0,
+         "Angular Rate: the rate integrals"),
+    Need("vehicle_angular_velocity_groundtruth", XYZ, 0, "Angular Rate: groundtruth"),
+    Need("vehicle_torque_setpoint", XYZ, SPECTRUM_HZ, "Actuator Controls, Actuator Controls FFT"),
+    Need("vehicle_thrust_setpoint", XYZ, 0, "Actuator Controls: thrust"),
+    Need("actuator_motors", tuple(f"control[{i}]" for i in range(12)), 0,
+         "Motor Outputs; its presence makes the torque and thrust setpoints the actuator controls "
+         "(PX4's control allocation)"),
+    Need("sensor_combined",
+         ("gyro_rad[0]", "gyro_rad[1]", "gyro_rad[2]", "accelerometer_m_s2[0]", "accelerometer_m_s2[1]",
+          "accelerometer_m_s2[2]"), SPECTRUM_HZ,
+         "Raw Acceleration, Raw Angular Speed (Gyroscope), Acceleration Power Spectral Density, "
+         "Sampling Regularity of Sensor Data"),
+    Need("battery_status", ("voltage_v", "voltage_filtered_v", "current_a", "current_filtered_a",
+                            "discharged_mah", "remaining"), 0,
+         "Power, the info table"),
+    Need("vehicle_status",
+         ("nav_state", "arming_state", "is_vtol", "vehicle_type", "failsafe",
+          "failsafe_and_user_took_over"), 0,
+         "the flight modes behind every plot, Failsafe Flags"),
+    # failsafe_flags (Failsafe Flags) is added with the failsafe flags
+)  # fmt: skip
+EKF_ONLY = (
+    Need("estimator_status",
+         ("pos_test_ratio", "vel_test_ratio", "hgt_test_ratio", "solution_status_flags", "health_flags",
+          "timeout_flags"), 0, "Estimator Flags"),
+)  # fmt: skip
+
+
+def sampling_rate_hz(dataset) -> int:
+    """The sampling rate as Flight Review's spectra compute it (``DataPlotSpec.add_graph``)."""
+    data = dataset.data
+    t = data["timestamp_sample"] if "timestamp_sample" in data else data["timestamp"]
+    if len(t) < 2:
+        return 0
+    return int(1.0 / (np.median(np.diff(t.astype(np.int64))) * 1.0e-6))
+
+
+def check_flight_review(ulog, ekf: bool = False) -> None:
+    """Every :data:`FLIGHT_REVIEW` need (and :data:`EKF_ONLY` with ``ekf``) met by the pyulog
+    ``ulog``: the topic there (unless only some flights have it), its fields, its rate."""
+    datasets = {d.name: d for d in ulog.data_list}
+    for need in (*FLIGHT_REVIEW, *(EKF_ONLY if ekf else ())):
+        dataset = datasets.get(need.topic)
+        if dataset is None:
+            assert not need.every_flight, f"no {need.topic} samples (Flight Review: {need.plots})"
+            continue
+        missing = [f for f in need.fields if f not in dataset.data]
+        assert not missing, f"{need.topic} lacks {missing} (Flight Review: {need.plots})"
+        rate = sampling_rate_hz(dataset)
+        assert rate >= need.min_rate_hz, f"{need.topic} at {rate} Hz, below {need.min_rate_hz} ({need.plots})"
+    for key in ("sys_name", "ver_hw", "ver_sw"):
+        assert key in ulog.msg_info_dict, f"no info {key}"
 
 
 def _format_fields(text: str) -> tuple[str, list[tuple[str, int, str]]]:
@@ -71,18 +146,29 @@ def _format_fields(text: str) -> tuple[str, list[tuple[str, int, str]]]:
 
 def check_plotjuggler(data: bytes) -> dict[str, int]:
     """The requirements of PlotJuggler's parser (see the module docstring); the number of data
-    samples per topic. A message cut by the end of the file ends the check (as the parser stops)."""
+    samples per topic. A message cut by the end of the file ends the check (as the parser stops).
+    A field of a nested message type names a format (PlotJuggler reads it inline, recursively)."""
     assert data[:7] == MAGIC, "not a ULog file (magic)"
     assert len(data) >= 16 + 3 + 40, "no flag bits message"
     size, kind = struct.unpack_from("<HB", data, 16)
     assert (kind, size) == (ord("B"), 40), f"first message {chr(kind)!r} of {size} bytes, expected 'B' of 40"
     incompat = data[16 + 3 + 8 : 16 + 3 + 16]
     assert incompat[0] & ~1 == 0 and not any(incompat[1:]), "unknown incompatible flags"
-    formats: dict[str, int] = {}
+    formats: dict[str, list[tuple[str, int, str]]] = {}
+    sizes: dict[str, int] = {}
     subscriptions: dict[int, str] = {}
     counts: dict[str, int] = {}
     in_data = False
     offset = 16
+
+    def size_of(name: str) -> int:
+        if name not in sizes:
+            sizes[name] = sum(
+                (struct.calcsize("<" + TYPE_CODES[k]) if k in TYPE_CODES else size_of(k)) * n
+                for k, n, _ in formats[name]
+            )
+        return sizes[name]
+
     while offset + 3 <= len(data):
         size, kind = struct.unpack_from("<HB", data, offset)
         body = data[offset + 3 : offset + 3 + size]
@@ -98,8 +184,7 @@ def check_plotjuggler(data: bytes) -> dict[str, int]:
             assert fields[0] == ("uint64_t", 1, "timestamp"), (
                 f"format {name}: timestamp is not its first field"
             )
-            assert all(k in TYPE_CODES for k, _, _ in fields), f"format {name}: a nested or unknown type"
-            formats[name] = sum(struct.calcsize("<" + TYPE_CODES[k]) * n for k, n, _ in fields)
+            formats[name] = fields
         elif kind in (ord("I"), ord("P")):
             key = body[1 : 1 + body[0]].decode("ascii")
             type_name, _, key_name = key.partition(" ")
@@ -109,12 +194,14 @@ def check_plotjuggler(data: bytes) -> dict[str, int]:
         elif kind == ord("A"):
             msg_id, name = struct.unpack_from("<H", body, 1)[0], body[3:].decode("ascii")
             assert name in formats, f"subscription {msg_id} to {name}: no such format"
+            unknown = [k for k, _, _ in formats[name] if k not in TYPE_CODES and k not in formats]
+            assert not unknown, f"format {name}: types {unknown} neither basic nor defined"
             subscriptions[msg_id] = name
         elif kind == ord("D"):
             msg_id = struct.unpack_from("<H", body)[0]
             assert msg_id in subscriptions, f"data of message id {msg_id}, never subscribed"
             name = subscriptions[msg_id]
-            assert size - 2 == formats[name], f"{name}: sample of {size - 2} bytes, format {formats[name]}"
+            assert size - 2 == size_of(name), f"{name}: sample of {size - 2} bytes, format {size_of(name)}"
             counts[name] = counts.get(name, 0) + 1
     return counts
 
@@ -131,11 +218,5 @@ def check_ulog(path: str | Path, ekf: bool = False, cut: bool = False, flight_re
     datasets = {d.name: d for d in ulog.data_list}
     assert {name: len(d.data["timestamp"]) for name, d in datasets.items()} == counts
     if flight_review:
-        required = {**FLIGHT_REVIEW, **(EKF_ONLY if ekf else {})}
-        for topic, fields in required.items():
-            assert topic in datasets, f"{path}: no {topic} samples (Flight Review plots it)"
-            missing = [f for f in fields if f not in datasets[topic].data]
-            assert not missing, f"{path}: {topic} lacks {missing}"
-        for key in ("sys_name", "ver_hw", "ver_sw"):
-            assert key in ulog.msg_info_dict, f"{path}: no info {key}"
+        check_flight_review(ulog, ekf)
     return ulog

@@ -154,6 +154,8 @@ _MODE_EVENTS = {
     FlightMode.AUTO_MISSION: Event.MISSION,
 }
 _TRAJECTORY_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.TRAJECTORY, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
+# The phases whose plan leads to a point (Commander.destination; a scenario's trajectory does not)
+_NAVIGATED_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
 _LIFTING_PHASES = (Phase.TAKEOFF, Phase.OFFBOARD, Phase.TRAJECTORY, Phase.MISSION)
 # Each manual mode's control step (autopilot/guidance/manual.py); MANUAL flies as STABILIZED (PX4).
 _MANUAL_STEPS = {
@@ -250,6 +252,22 @@ class Commander:
             acro_tilt=rad(p["ACRO_TILT_LIM"]),
             override_speed=p["COM_RC_STICK_OV"] / 100.0,
         )
+
+    @property
+    def destination(self) -> Reference | None:
+        """Where the plan being flown ends (paper frame), what PX4's navigator publishes as its
+        current position setpoint: the takeoff point, the hold point, the landing point (a descent
+        planned through the ground ends on it), the return point, the mission leg's target; None
+        where no plan leads anywhere (on the ground, offboard, the manual modes, a scenario's
+        trajectory). Samples the plan: for the flight log, a few times a second."""
+        if self.phase == Phase.MISSION:
+            return self.mission.destination if self.mission is not None else None
+        plan = self._trajectory
+        if self.phase not in _NAVIGATED_PHASES or plan is None or not math.isfinite(plan.duration_s):
+            return None
+        end = plan.sample(plan.duration_s)
+        x, y, z = end.position_m
+        return end._replace(position_m=(x, y, GROUND_Z_M)) if z < GROUND_Z_M else end
 
     def in_air(self) -> bool:
         """Whether the vehicle is off the ground (flat, z = 0 in the local frame): its height at

@@ -7,7 +7,9 @@ registered with ``@register(TRANSLATIONAL)`` or ``@register(ROTATIONAL)`` that g
 
 * ``NAME``: the value of ``law = "..."`` in a controller file (``config/controllers/NAME.toml``);
 * ``STATE``: the names of the law's state entries (integrals, filter states), ``()`` if none;
-  the state is a float array the step reads and advances, zero at reset, logged under these names;
+  the state is a float array the step reads and advances, zero at reset, logged under these names
+  (a rotational law's body-rate integrals in PX4's normalised torque, named ``rate_int_x``,
+  ``rate_int_y``, ``rate_int_z``, also as PX4's ``rate_ctrl_status``: docs/logs.md);
 * ``load_gains(section) -> gains``: read and validate its keys of the controller file's
   ``[translational]`` / ``[rotational]`` section (a :class:`quadcommon.schema.Section`: errors name
   file, key, value and range); the gains record is frozen and carries ``law`` (= NAME);

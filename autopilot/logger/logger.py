@@ -137,7 +137,7 @@ class FlightLogger:
         self._ever_armed = False
         self._disarmed_since_boot = False
         self._last_t_us = -1
-        self._tracking: ulog.Topic | None = None
+        self._every_step: list[tuple[ulog.Topic, Callable[[Snapshot], tuple | None]]] = []
         self._groups: list[_Group] = []
         self._gps: ulog.Topic | None = None
         self._status: ulog.Topic | None = None
@@ -177,12 +177,14 @@ class FlightLogger:
                 self.stop()
         return self.logging
 
-    def frame(self, t_us: int, armed: bool, truth, row: tuple, parts: dict | None) -> bool:
-        """One control step: :meth:`update`, then, while a log is open, the samples of every step:
-        ``paper_tracking`` (the frame's ``truth`` and controller ``row``), the GPS fix when the frame
-        carries one (``parts``: its undecoded messages), ``vehicle_status`` when the mode or arming
-        changed. True when periodic topics are due: the caller then fills the rest of the snapshot
-        and calls :meth:`sample_due` (most frames need neither)."""
+    def frame(self, t_us: int, armed: bool, truth, row: tuple, parts: dict | None, estimate, output) -> bool:
+        """One control step: :meth:`update`, then, while a log is open, the topics of every step
+        (interval 0: ``paper_tracking``, the IMU, the body rates, the torque and thrust setpoints)
+        from the frame's ``truth``, controller ``row``, undecoded messages ``parts``, the
+        ``estimate`` flown on and the cascade's ``output`` (None: motors off); the GPS fix when the
+        frame carries one, ``vehicle_status`` when the mode or arming changed. True when periodic
+        topics are due: the caller then fills the rest of the snapshot and calls
+        :meth:`sample_due` (most frames need neither)."""
         if t_us <= self._last_t_us or armed != self._was_armed or self._decide:
             if not self.update(t_us, armed):
                 return False
@@ -191,11 +193,18 @@ class FlightLogger:
             if not self.logging:
                 return False
         s = self.snapshot
-        s.t_us, s.truth, s.row = t_us, truth, row
+        s.t_us = t_us
+        s.truth = truth
+        s.row = row
+        s.parts = parts
+        s.estimate = estimate
+        s.output = output
         buf = self._buffer
-        tracking = self._tracking
-        buf += tracking.prefix
-        buf += tracking.pack(*topics.paper_tracking_values(t_us, truth, row))
+        for topic, build in self._every_step:
+            values = build(s)
+            if values is not None:
+                buf += topic.prefix
+                buf += topic.pack(*values)
         if parts is not None and topics.GPS_ID in parts:
             s.gps = topics.gps_of(parts)
             values = topics.vehicle_gps_position(s)
@@ -205,13 +214,11 @@ class FlightLogger:
             self._on_status_change(row[topics.ROW_CUSTOM_MODE], row[topics.ROW_ARMED], t_us)
         return t_us >= self._next_due_us
 
-    def sample_due(self, parts: dict | None) -> None:
-        """The periodic topics due at this frame (``parts``: its undecoded messages, for the raw
-        sensor topic)."""
+    def sample_due(self) -> None:
+        """The periodic topics due at this frame."""
         s = self.snapshot
         t_us = s.t_us
         buf = self._buffer
-        s.parts = parts
         next_due = t_us + 3_600_000_000
         for group in self._groups:
             if t_us >= group.next_us:
@@ -310,10 +317,15 @@ class FlightLogger:
         utc = self.utc_clock() if self.utc_clock is not None else None
         names, _ = self.law_states()
         law_fields = "".join(f"float {topics.law_state_field(n)};" for n in names)
+        extras = {topics.CASCADE: self._law_state_values,
+                  topics.RATE_CTRL: topics.rate_integrals(names, self.law_states)}  # fmt: skip
         buf = bytearray(ulog.file_header(t_us))
         buf += ulog.flag_bits()
         formats = [spec.format(law_fields if spec.name == topics.CASCADE else "") for spec in TOPICS]
+        nested: list[ulog.Format] = []
         for fmt in formats:
+            nested.extend(n for n in fmt.nested if n not in nested)
+        for fmt in (*nested, *formats):
             buf += ulog.format_message(fmt)
         for key, value in self.info.items():
             buf += ulog.info(key, value, "uint32_t" if key in _UINT32_INFO else None)
@@ -322,21 +334,21 @@ class FlightLogger:
         for name, value in self.params.values.items():
             buf += ulog.parameter(name, value, self.params.specs[name].kind == INT32)
         groups: dict[int, _Group] = {}
+        self._every_step = []
         for msg_id, (spec, fmt) in enumerate(zip(TOPICS, formats, strict=True)):
             buf += ulog.add_logged(msg_id, spec.name)
             topic = ulog.Topic(fmt, msg_id)
-            if spec.name == topics.TRACKING:
-                self._tracking = topic
-            elif spec.name == "vehicle_gps_position":
+            if spec.name == "vehicle_gps_position":
                 self._gps = topic
             elif spec.name == topics.DISTURBANCE:
                 self._disturbance = topic
+            elif spec.interval_ms == 0:
+                self._every_step.append((topic, spec.build))
             else:
                 if spec.name == "vehicle_status":
                     self._status = topic
                 group = groups.setdefault(spec.interval_ms, _Group(spec.interval_ms * 1000, t_us))
-                extra = self._law_state_values if spec.name == topics.CASCADE else None
-                group.topics.append(_Periodic(topic, spec.build, extra))
+                group.topics.append(_Periodic(topic, spec.build, extras.get(spec.name)))
         self._groups = sorted(groups.values(), key=lambda g: g.interval_us)
         self._flush_buffer()
         self._out.append(LogOpen(t_us, utc))

@@ -20,11 +20,14 @@ x north / y west / z up, body front-left-up, ZYX Euler angles), SI units:
 
 Rates are PX4's default logging profile (``logged_topics.cpp``: an interval in ms, at most one
 sample per interval; its SITL ground-truth topics included, at 20 ms rather than PX4's 10 ms for
-attitude and rates, and ``sensor_combined`` at 20 ms rather than every sample: each sample costs
-the lockstep's process a few µs), sampled on the simulation clock of the frames. Every builder
-reads the frame's :class:`Snapshot` and returns the sample's values, timestamp first, or None
-when the vehicle has no such data now (no estimate yet, no GPS fix in this frame, not flying on
-the EKF).
+attitude and rates), sampled on the simulation clock of the frames, except four topics logged at
+every control step, as PX4's high-rate profile logs them: ``sensor_combined`` (PX4 logs every
+sample; here the IMU comes with each frame), ``vehicle_angular_velocity`` (PX4 SITL: every 10 ms,
+100 Hz, the very edge of the 100 Hz Flight Review's spectra need, and folding the content of the
+rate loop above 50 Hz into them) and ``vehicle_torque_setpoint`` / ``vehicle_thrust_setpoint``
+(PX4: 20 ms, too slow for the Actuator Controls FFT). Every builder reads the frame's
+:class:`Snapshot` and returns the sample's values, timestamp first, or None when the vehicle has
+no such data now (no estimate yet, no GPS fix in this frame, not flying on the EKF, motors off).
 
 Pure: no file, no clock; :mod:`.logger` decides when a log runs and packs these samples.
 """
@@ -34,7 +37,7 @@ from __future__ import annotations
 import functools
 import math
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -43,6 +46,7 @@ from quadcommon.bus_records import CONTROLLER_FIELDS
 from quadcommon.rigid_body import body_rates_from_euler_rates, quaternion_from_euler
 
 from ..commander.modes import FlightMode, LandedState
+from ..commander.transitions import Phase
 from ..mavlink.codec import mavlink
 from ..mavlink.hil import GpsFields, gps_fields, imu_fields
 from .ulog import Format, fields
@@ -90,17 +94,18 @@ def gps_of(parts: dict) -> GpsFields | None:
         return None
 
 
-def imu_of(parts: dict) -> list | None:
-    """The frame's HIL_SENSOR gyro and accelerometer as sent (FRD), or None (none, or corrupt)."""
+def imu_of(parts: dict) -> tuple | None:
+    """The frame's HIL_SENSOR accelerometer and gyro as sent (FRD), or None (none, or corrupt)."""
     try:
         return imu_fields(parts)
     except (ValueError, struct.error):
         return None
 
 
-@dataclass
+@dataclass(slots=True)
 class Snapshot:
-    """One frame as the log reads it (refreshed in place by the logger when a sample is due)."""
+    """One frame as the log reads it (refreshed in place: what every control step's topics read by
+    the logger at each frame, the rest by the core when periodic topics are due)."""
 
     t_us: int = 0  # the frame's time_usec: simulation time since boot
     truth: object = None  # StateEstimate: the simulator's state in the HIL frame (paper frames)
@@ -114,7 +119,9 @@ class Snapshot:
     battery: object = None  # autopilot.battery.estimator.BatteryStatus | None (no battery reported)
     parts: dict | None = None  # the frame's undecoded messages (sensor_combined reads HIL_SENSOR's)
     gps: object = None  # hil.GpsFields of this frame's HIL_GPS, or None
-    thrust_max_n: float = 1.0
+    thrust_max_n: float = 1.0  # the actuators' U1_max: 1 of PX4's normalised thrust
+    torque_max_n_m: tuple = (1.0, 1.0, 1.0)  # the actuators' tau_max per body axis: 1 of PX4's torque
+    rotors: bool = False  # actuation "rotors": the controls are rotor speeds over Omega_max
     home_geodetic: tuple = (0.0, 0.0, 0.0)  # the local frame's origin (lat, lon, alt)
     system_id: int = 1
     utc_offset_us: int = 0  # UTC minus simulation time (µs) when the log started with a clock, else 0
@@ -123,16 +130,18 @@ class Snapshot:
 
 
 class TopicSpec(NamedTuple):
-    """One logged topic: PX4's message notation of its fields after the timestamp, and at most one
-    sample per ``interval_ms`` of simulation time (0: every control step)."""
+    """One logged topic: PX4's message notation of its fields after the timestamp (a field's type
+    may be one of the ``nested`` formats), and at most one sample per ``interval_ms`` of
+    simulation time (0: every control step)."""
 
     name: str
     fields: str
     interval_ms: int
     build: Callable[[Snapshot], tuple | None]
+    nested: tuple[Format, ...] = ()
 
     def format(self, extra: str = "") -> Format:
-        return Format(self.name, fields(f"uint64_t timestamp; {self.fields}; {extra}"))
+        return Format(self.name, fields(f"uint64_t timestamp; {self.fields}; {extra}", self.nested))
 
 
 def _q_ned(euler) -> tuple[float, float, float, float]:
@@ -212,17 +221,18 @@ def vehicle_attitude_groundtruth(s: Snapshot) -> tuple:
     return (s.t_us, s.t_us, *_q_ned(s.truth.euler_rad), 1.0, 0.0, 0.0, 0.0, 0)
 
 
-ANGULAR_VELOCITY = "uint64_t timestamp_sample; float[3] xyz; float[3] xyz_derivative"
+ANGULAR_VELOCITY = "uint64_t timestamp_sample; float[3] xyz"
 
 
 def vehicle_angular_velocity(s: Snapshot) -> tuple | None:
+    """The body rates the vehicle flies on (FRD)."""
     if s.estimate is None:
         return None
-    return (s.t_us, s.t_us, *_rates_frd(s.estimate), NAN, NAN, NAN)
+    return (s.t_us, s.t_us, *_rates_frd(s.estimate))
 
 
 def vehicle_angular_velocity_groundtruth(s: Snapshot) -> tuple:
-    return (s.t_us, s.t_us, *_rates_frd(s.truth), NAN, NAN, NAN)
+    return (s.t_us, s.t_us, *_rates_frd(s.truth))
 
 
 ATTITUDE_SETPOINT = (
@@ -332,10 +342,110 @@ SENSOR_COMBINED = (
 def sensor_combined(s: Snapshot) -> tuple | None:
     """HIL_SENSOR's IMU as the simulator sent it (FRD already), non-finite samples left out."""
     imu = imu_of(s.parts) if s.parts is not None else None
-    if imu is None or not math.isfinite(sum(imu)):
+    if imu is None:
         return None
-    gx, gy, gz, ax, ay, az = imu
+    ax, ay, az, gx, gy, gz = imu
+    if not math.isfinite(ax + ay + az + gx + gy + gz):
+        return None
     return (s.t_us, gx, gy, gz, 0, 0, ax, ay, az, 0, 0, 0, 0, 0)
+
+
+TORQUE_SETPOINT = THRUST_SETPOINT = "uint64_t timestamp_sample; float[3] xyz"
+
+
+def vehicle_torque_setpoint(s: Snapshot) -> tuple | None:
+    """PX4's normalised torque (FRD, each axis over the actuators' tau_max: 1 is the most the
+    vehicle can give, docs/controllers.md), of the body torque applied after the actuators'
+    saturation; while the motors fly."""
+    out = s.output
+    if out is None:
+        return None
+    tx, ty, tz = frames.vector_to_ned(out.torque_body_n_m)
+    mx, my, mz = s.torque_max_n_m
+    return (s.t_us, s.t_us, tx / mx, ty / my, tz / mz)
+
+
+def vehicle_thrust_setpoint(s: Snapshot) -> tuple | None:
+    """PX4's normalised thrust (FRD: -z is up; the applied U1 over the actuators' U1_max); while
+    the motors fly."""
+    out = s.output
+    if out is None:
+        return None
+    return (s.t_us, s.t_us, 0.0, 0.0, -out.thrust_n / s.thrust_max_n)
+
+
+MOTORS = "uint64_t timestamp_sample; uint16_t reversible_flags; float[12] control"
+ACTUATOR_MOTORS = 12  # actuator_motors.control[12]
+_NO_MOTOR = (NAN,) * ACTUATOR_MOTORS  # PX4: NaN stops a motor (disarmed, or no motor there)
+
+
+def actuator_motors(s: Snapshot) -> tuple:
+    """Each rotor's commanded thrust over its largest, ``(Omega_i / Omega_max)^2`` (PX4's motor
+    control: thrust, 0..1), in the simulator's rotor order (1 front, 2 right, 3 rear, 4 left); NaN
+    for the outputs without a rotor, while disarmed, and under ``actuation = "wrench"`` (no
+    rotors: the wrench itself is vehicle_torque_setpoint / vehicle_thrust_setpoint)."""
+    if not s.rotors or s.row[ROW_ARMED] <= 0.5:
+        return (s.t_us, s.t_us, 0, *_NO_MOTOR)
+    c0, c1, c2, c3 = s.controls
+    return (s.t_us, s.t_us, 0, c0 * c0, c1 * c1, c2 * c2, c3 * c3, *_NO_MOTOR[4:])
+
+
+RATE_CTRL = "rate_ctrl_status"
+RATE_CTRL_FIELDS = "float rollspeed_integ; float pitchspeed_integ; float yawspeed_integ"
+# The rotational law's state entries that are PX4's rate integrals (normalised torque, body
+# front-left-up): px4_attitude's. Laws without them log zeros, as PX4 does with no rate
+# integrator (MC_*RATE_I = 0); their integral action is in cascade_status's law states.
+RATE_INTEGRAL_STATES = ("rotational.rate_int_x", "rotational.rate_int_y", "rotational.rate_int_z")
+_NO_RATE_INTEGRAL = (0.0, 0.0, 0.0)
+
+
+def rate_ctrl_status(s: Snapshot) -> tuple:
+    """Without the integrals (the logger appends them: :func:`rate_integrals`)."""
+    return (s.t_us,)
+
+
+def rate_integrals(
+    names: Sequence[str], law_states: Callable[[], tuple[tuple[str, ...], tuple[float, ...]]]
+) -> Callable[[], tuple[float, float, float]]:
+    """The reader of ``rate_ctrl_status``'s integrals (FRD) for the laws whose states are
+    ``names`` (:meth:`~autopilot.control.cascade.Cascade.law_states`): the entries
+    :data:`RATE_INTEGRAL_STATES`, or zeros when the law has none."""
+    if not all(name in names for name in RATE_INTEGRAL_STATES):
+        return lambda: _NO_RATE_INTEGRAL
+    i, j, k = (names.index(name) for name in RATE_INTEGRAL_STATES)
+
+    def read() -> tuple[float, float, float]:
+        values = law_states()[1]
+        return frames.vector_to_ned((values[i], values[j], values[k]))
+
+    return read
+
+
+POSITION_SETPOINT = Format(
+    "position_setpoint",
+    fields("uint64_t timestamp; bool valid; uint8_t type; float vx; float vy; float vz; double lat; "
+           "double lon; float alt; float yaw"),
+)  # fmt: skip
+TRIPLET = "position_setpoint previous; position_setpoint current; position_setpoint next"
+# PositionSetpoint.type of the phases with a destination (Commander.destination)
+SETPOINT_TYPE = {Phase.TAKEOFF: 3, Phase.HOLD: 2, Phase.LAND: 4, Phase.RTL_LAND: 4}  # else 0: position
+_NO_SETPOINT = (0, False, 0, NAN, NAN, NAN, NAN, NAN, NAN, NAN)
+
+
+def position_setpoint_triplet(s: Snapshot) -> tuple | None:
+    """``current``: where the flown plan leads (:attr:`Commander.destination
+    <autopilot.commander.commander.Commander.destination>`: takeoff, hold, landing or return
+    point, the mission leg's target) as latitude, longitude, altitude AMSL and yaw; ``previous``
+    and ``next`` not valid. None (no sample, as PX4's navigator publishes none) where no plan
+    leads anywhere: offboard, manual, a scenario's trajectory, on the ground."""
+    commander = s.commander
+    target = commander.destination
+    if target is None:
+        return None
+    lat, lon, alt = frames.ned_to_geodetic(*frames.vector_to_ned(target.position_m), s.home_geodetic)
+    kind = SETPOINT_TYPE.get(commander.phase, 0)
+    current = (s.t_us, True, kind, NAN, NAN, NAN, lat, lon, alt, frames.yaw_to_ned(target.yaw_rad))
+    return (s.t_us, *_NO_SETPOINT, *current, *_NO_SETPOINT)
 
 
 GPS_POSITION = (
@@ -418,15 +528,11 @@ TRACKING_FIELDS = (
 )
 
 
-def paper_tracking_values(t_us: int, truth, row: tuple) -> tuple:
-    """One ``paper_tracking`` sample: the frame's truth and its controller row (every control step:
-    the logger calls this directly, without the snapshot)."""
-    return (t_us, *truth.position_m, *row[ROW_POS_REF], *truth.euler_rad, *row[ROW_EULER_REF],
-            row[ROW_U1], *row[ROW_TAU], int(row[ROW_CUSTOM_MODE]), row[ROW_ARMED] > 0.5)  # fmt: skip
-
-
 def paper_tracking(s: Snapshot) -> tuple:
-    return paper_tracking_values(s.t_us, s.truth, s.row)
+    """The frame's truth and its controller row."""
+    truth, row = s.truth, s.row
+    return (s.t_us, *truth.position_m, *row[ROW_POS_REF], *truth.euler_rad, *row[ROW_EULER_REF],
+            row[ROW_U1], *row[ROW_TAU], int(row[ROW_CUSTOM_MODE]), row[ROW_ARMED] > 0.5)  # fmt: skip
 
 
 CASCADE = "cascade_status"
@@ -462,26 +568,31 @@ def sim_disturbance(s: Snapshot) -> None:
     return None
 
 
-# The topics sampled from frames, in message-id order. vehicle_gps_position is sampled from every
-# frame that carries HIL_GPS, vehicle_status also whenever the mode or arming changes; paper_tracking
-# every control step; sim_disturbance as it is given (FlightLogger.disturbance).
+# The topics sampled from frames, in message-id order. Interval 0: every control step, but
+# vehicle_gps_position is sampled from every frame that carries HIL_GPS; vehicle_status also
+# whenever the mode or arming changes; sim_disturbance as it is given (FlightLogger.disturbance).
 TOPICS: tuple[TopicSpec, ...] = tuple(
-    TopicSpec(build.__name__, layout, interval_ms, build)
-    for build, layout, interval_ms in (
+    TopicSpec(build.__name__, layout, interval_ms, build, tuple(nested))
+    for build, layout, interval_ms, *nested in (
         (paper_tracking, TRACKING_FIELDS, 0),
         (cascade_status, CASCADE_FIELDS, 50),
         (vehicle_status, VEHICLE_STATUS, 500),
         (vehicle_land_detected, LAND_DETECTED, 100),
         (vehicle_attitude, ATTITUDE, 50),
         (vehicle_attitude_setpoint, ATTITUDE_SETPOINT, 50),
-        (vehicle_angular_velocity, ANGULAR_VELOCITY, 20),
+        (vehicle_angular_velocity, ANGULAR_VELOCITY, 0),
         (vehicle_rates_setpoint, RATES_SETPOINT, 20),
+        (vehicle_torque_setpoint, TORQUE_SETPOINT, 0),
+        (vehicle_thrust_setpoint, THRUST_SETPOINT, 0),
+        (rate_ctrl_status, RATE_CTRL_FIELDS, 200),
         (vehicle_local_position, LOCAL_POSITION, 100),
         (vehicle_local_position_setpoint, LOCAL_POSITION_SETPOINT, 100),
+        (position_setpoint_triplet, TRIPLET, 200, POSITION_SETPOINT),
         (vehicle_global_position, GLOBAL_POSITION, 200),
         (vehicle_gps_position, GPS_POSITION, 0),
-        (sensor_combined, SENSOR_COMBINED, 20),
+        (sensor_combined, SENSOR_COMBINED, 0),
         (actuator_outputs, OUTPUTS, 100),
+        (actuator_motors, MOTORS, 100),
         (battery_status, BATTERY, 200),
         (estimator_status, ESTIMATOR_STATUS, 200),
         (vehicle_angular_velocity_groundtruth, ANGULAR_VELOCITY, 20),

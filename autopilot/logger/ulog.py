@@ -23,6 +23,11 @@ and 40 bytes long (PlotJuggler refuses anything else), no incompatible flag set,
 first field ``uint64_t timestamp`` (PlotJuggler and pyulog find the time there), a format for
 every subscription before its first ``A`` (PlotJuggler dereferences it), and parameters typed
 ``int32_t`` or ``float`` only (PlotJuggler throws on any other type).
+
+A field may be of a nested message type, as PX4's ``position_setpoint_triplet`` holds three
+``position_setpoint``: its type is the nested format's name (``position_setpoint current``), the
+nested format is defined by its own ``F`` message, and a sample holds the nested fields inline
+(readers flatten them: pyulog's ``current.alt``).
 """
 
 from __future__ import annotations
@@ -52,11 +57,13 @@ _MESSAGE_HEADER = struct.Struct("<HB")
 
 
 class Field(NamedTuple):
-    """One field of a format: ``float[4] q`` is ``Field("float", "q", 4)``; count 0: a scalar."""
+    """One field of a format: ``float[4] q`` is ``Field("float", "q", 4)``; count 0: a scalar;
+    ``nested``: the format of a nested message type (``type`` is then its name)."""
 
     type: str
     name: str
     count: int = 0
+    nested: Format | None = None
 
     @property
     def text(self) -> str:
@@ -68,8 +75,10 @@ class Field(NamedTuple):
         return self.count or 1
 
 
-def fields(text: str) -> tuple[Field, ...]:
-    """Fields from PX4's message notation: ``"uint64_t timestamp; float[4] q; bool valid"``."""
+def fields(text: str, nested: Sequence[Format] = ()) -> tuple[Field, ...]:
+    """Fields from PX4's message notation: ``"uint64_t timestamp; float[4] q; bool valid"``; a
+    field's type may be the name of one of the ``nested`` formats."""
+    known = {fmt.name: fmt for fmt in nested}
     out = []
     for part in text.split(";"):
         part = part.strip()
@@ -80,9 +89,9 @@ def fields(text: str) -> tuple[Field, ...]:
         if "[" in kind:
             kind, size = kind[:-1].split("[")
             count = int(size)
-        if kind not in TYPE_CODES:
+        if kind not in TYPE_CODES and kind not in known:
             raise ValueError(f"ULog field {part!r}: unknown type {kind!r}")
-        out.append(Field(kind, name, count))
+        out.append(Field(kind, name, count, known.get(kind)))
     return tuple(out)
 
 
@@ -98,11 +107,37 @@ class Format(NamedTuple):
 
     @property
     def struct(self) -> struct.Struct:
-        return struct.Struct("<" + "".join(f"{f.count or ''}{TYPE_CODES[f.type]}" for f in self.fields))
+        return struct.Struct("<" + self.codes)
+
+    @property
+    def codes(self) -> str:
+        """The ``struct`` codes of a sample, nested messages inline."""
+        return "".join(
+            f.nested.codes * f.values if f.nested is not None else f"{f.count or ''}{TYPE_CODES[f.type]}"
+            for f in self.fields
+        )
+
+    @property
+    def nested(self) -> tuple[Format, ...]:
+        """The formats of its nested message types (theirs first), each once."""
+        out: list[Format] = []
+        for f in self.fields:
+            if f.nested is not None:
+                out.extend(n for n in (*f.nested.nested, f.nested) if n not in out)
+        return tuple(out)
 
     def field_names(self) -> list[str]:
-        """The names pyulog gives the columns: ``q[0]`` .. ``q[3]`` for arrays."""
-        return [f"{f.name}[{i}]" if f.count else f.name for f in self.fields for i in range(f.values)]
+        """The names pyulog gives the columns: ``q[0]`` .. ``q[3]`` for arrays, ``current.alt`` for
+        a nested message's field."""
+        names = []
+        for f in self.fields:
+            for i in range(f.values):
+                name = f"{f.name}[{i}]" if f.count else f.name
+                if f.nested is None:
+                    names.append(name)
+                else:
+                    names.extend(f"{name}.{inner}" for inner in f.nested.field_names())
+        return names
 
     def check(self) -> None:
         """ValueError unless the format is one every reader takes (see the module docstring)."""

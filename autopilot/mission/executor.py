@@ -445,6 +445,23 @@ class MissionExecutor:
     def awaiting_landing(self) -> bool:
         return self._awaiting_landing
 
+    @property
+    def destination(self) -> Reference | None:
+        """Where the current leg leads (paper frame): its acceptance target, else where its
+        trajectory ends (a hover: its point); None between legs."""
+        leg = self._leg
+        if leg is None:
+            return None
+        plan = leg.trajectory
+        if isinstance(plan, Hover):
+            end = plan.sample(0.0)
+        else:
+            end = _final(plan) if math.isfinite(plan.duration_s) else None
+        if leg.target is None:
+            return end
+        yaw = end.yaw_rad if end is not None else self._held.yaw_rad
+        return Reference(leg.target, ZERO3, ZERO3, yaw)
+
     # -- the per-step reference --------------------------------------------------------------------
     def step(self, t: float, position: Vector3) -> MissionStep:
         """The reference at ``t`` given the vehicle's ``position`` (paper frame, m)."""

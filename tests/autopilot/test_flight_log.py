@@ -25,7 +25,7 @@ from autopilot.logger.storage import LogDirectory
 from autopilot.params.definitions import default_parameters
 from simulator.core import SimulatorCore
 from tests.stack import Gcs, make_stack
-from tests.ulog_check import check_plotjuggler, check_ulog
+from tests.ulog_check import FLIGHT_REVIEW, check_plotjuggler, check_ulog, sampling_rate_hz
 
 ARM, DISARM = 1.0, 0.0
 
@@ -71,8 +71,15 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     assert log.start_timestamp == data[topics.TRACKING]["timestamp"][0]
     # every control step (500 Hz), the other topics at PX4's rates
     assert np.allclose(np.diff(t), 0.002)
+    for name in ("sensor_combined", "vehicle_angular_velocity"):  # every frame's IMU and body rates
+        assert np.array_equal(data[name]["timestamp"], data[topics.TRACKING]["timestamp"]), name
+    flying = data["vehicle_torque_setpoint"]["timestamp"]  # every step while the motors fly
+    assert np.array_equal(data["vehicle_thrust_setpoint"]["timestamp"], flying)
+    assert np.all(np.diff(flying.astype(np.int64)) == 2000)
+    assert (flying[-1] - flying[0]) * 1e-6 > 0.6 * span_of(t)  # (not on the ground after landing)
     span = t[-1] - t[0]
-    setpoints = ("vehicle_attitude_setpoint", "vehicle_rates_setpoint", "vehicle_local_position_setpoint")
+    setpoints = ("vehicle_attitude_setpoint", "vehicle_rates_setpoint", "vehicle_local_position_setpoint",
+                 "position_setpoint_triplet")  # fmt: skip
     for spec in topics.TOPICS:  # (the setpoints only while the motors fly; status also on changes)
         if spec.interval_ms and spec.name not in (*topics.EVENT_TOPICS, *setpoints, "vehicle_status"):
             if spec.name == "estimator_status":
@@ -123,6 +130,11 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     assert law_fields and all(field in cascade for field in law_fields)
     (integral_z,) = [f for f in law_fields if f.startswith("translational_") and f.endswith("_z")]
     assert np.any(cascade[integral_z] != 0.0)  # the altitude integral worked against gravity
+    # no body-rate integral in this cascade (nlhinf integrates the attitude error): zeros, as PX4's
+    # rate controller without one; no rotors under wrench actuation: no motor commands
+    rate = data["rate_ctrl_status"]
+    assert all(np.all(rate[f"{axis}speed_integ"] == 0.0) for axis in ("roll", "pitch", "yaw"))
+    assert all(np.all(np.isnan(data["actuator_motors"][f"control[{i}]"])) for i in range(12))
     assert stack.autopilot.faults.counts == {}
     # PX4 users' first commands on a log: pyulog's ulog_info and ulog2csv
     bin_dir = Path(sys.executable).parent
@@ -134,6 +146,84 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     assert csv.returncode == 0, csv.stderr
     (table,) = (tmp_path / "csv").glob("*vehicle_attitude_0.csv")
     assert table.read_text().splitlines()[0].startswith("timestamp,timestamp_sample,q[0]")
+
+
+def span_of(t: np.ndarray) -> float:
+    return float(t[-1] - t[0])
+
+
+def at_common_times(a: dict, b: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The indices of the samples of topics ``a`` and ``b`` taken at the same timestamps."""
+    _, ia, ib = np.intersect1d(a["timestamp"], b["timestamp"], return_indices=True)
+    assert len(ia) > 5
+    return ia, ib
+
+
+def test_flight_review_finds_every_topic_field_and_rate_its_plots_read(tmp_path):
+    """PX4's cascade (a body-rate integral per axis) on four rotors, up and down: every need of
+    Flight Review's plots met (tests/ulog_check.FLIGHT_REVIEW: the spectra at the control rate),
+    and the new topics hold the vehicle's own numbers in PX4's conventions."""
+    stack = make_stack(controller="px4_pid", vehicle="paper_quad_rotors", log_dir=str(tmp_path))
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    arm(gcs)
+    assert gcs.command(m.MAV_CMD_NAV_TAKEOFF).result == m.MAV_RESULT_ACCEPTED
+    commander = stack.autopilot.commander
+    gcs.wait(lambda g: commander.mode is FlightMode.AUTO_LOITER and commander.in_air(), 15.0, "takeoff")
+    stack.run_for(1.0)  # holding
+    assert gcs.command(m.MAV_CMD_NAV_LAND).result == m.MAV_RESULT_ACCEPTED
+    gcs.wait(lambda g: not commander.armed, 20.0, "landed and disarmed")
+    (path,) = stack.close()
+    log = check_ulog(path)  # every need of FLIGHT_REVIEW with its rate, besides pyulog's and PlotJuggler's
+    data = {d.name: d.data for d in log.data_list}
+    assert {need.topic for need in FLIGHT_REVIEW} <= set(data)  # the takeoff, hold and landing points too
+    for name in ("sensor_combined", "vehicle_angular_velocity", "vehicle_torque_setpoint"):
+        assert sampling_rate_hz(log.get_dataset(name)) == 500, name  # the control rate: spectra to 250 Hz
+    vehicle = stack.autopilot.setup.vehicle
+    tau_max, u1_max = vehicle.actuation.torque_max_n_m, vehicle.actuation.thrust_max_n
+    cascade, tracking = data[topics.CASCADE], data[topics.TRACKING]
+    # torque and thrust: PX4's normalised setpoints, FRD (y, z and the thrust's z turn)
+    torque = data["vehicle_torque_setpoint"]
+    i, j = at_common_times(torque, cascade)
+    for axis, sign in enumerate((1.0, -1.0, -1.0)):
+        expected = sign * cascade[f"torque_body_n_m[{axis}]"][j] / tau_max[axis]
+        assert np.allclose(torque[f"xyz[{axis}]"][i], expected, rtol=1e-6, atol=1e-7)
+    assert np.all(np.abs([torque[f"xyz[{axis}]"] for axis in range(3)]) <= 1.0)
+    thrust = data["vehicle_thrust_setpoint"]
+    i, j = at_common_times(thrust, tracking)
+    assert np.allclose(thrust["xyz[2]"][i], -tracking["thrust_n"][j] / u1_max, rtol=1e-6)
+    assert np.all(thrust["xyz[0]"] == 0.0) and np.all(thrust["xyz[2]"] < 0.0)  # up is -z
+    hover = vehicle.nominal.mass_kg * vehicle.nominal.gravity_m_s2 / u1_max
+    assert np.median(thrust["xyz[2]"]) == pytest.approx(-hover, rel=0.05)
+    # the rate integrals of px4_attitude, FRD, as cascade_status has them (body FLU)
+    rate = data["rate_ctrl_status"]
+    i, j = at_common_times(rate, cascade)
+    for axis, sign in (("roll", 1.0), ("pitch", -1.0), ("yaw", -1.0)):
+        state = {"roll": "x", "pitch": "y", "yaw": "z"}[axis]
+        expected = sign * cascade[f"rotational_rate_int_{state}"][j]
+        assert np.array_equal(rate[f"{axis}speed_integ"][i], expected.astype(np.float32))
+    assert np.any(rate["rollspeed_integ"] != 0.0) and np.any(rate["yawspeed_integ"] != 0.0)
+    # the motors: each rotor's thrust over its largest, (Omega / Omega_max)^2, while armed
+    motors = data["actuator_motors"]
+    i, j = at_common_times(motors, cascade)
+    for k in range(4):
+        expected = cascade[f"actuator_controls[{k}]"][j].astype(np.float64) ** 2
+        assert np.allclose(motors[f"control[{k}]"][i], expected, rtol=1e-6)
+    assert all(np.all(np.isnan(motors[f"control[{k}]"])) for k in range(4, 12))
+    assert 0.2 < np.median(motors["control[0]"]) < 0.4  # hover: thrust m g / 4 per rotor
+    # where the plan leads: takeoff (PX4's type 3) at MIS_TAKEOFF_ALT, hold (2), land (4) on the ground
+    triplet = data["position_setpoint_triplet"]
+    home_lat, home_lon, home_alt = stack.autopilot.setup.sitl.home
+    kind = triplet["current.type"]
+    kinds = [int(k) for n, k in enumerate(kind) if n == 0 or k != kind[n - 1]]
+    assert kinds == [3, 2, 4] and np.all(triplet["current.valid"] == 1) and np.all(triplet["next.valid"] == 0)
+    alt = triplet["current.alt"]
+    takeoff_alt = stack.autopilot.params["MIS_TAKEOFF_ALT"]
+    assert np.allclose(alt[kind == 3], home_alt + takeoff_alt, atol=0.01)
+    assert np.allclose(alt[kind == 4], home_alt, atol=0.01)
+    assert np.allclose(triplet["current.lat"], home_lat, atol=1e-6)
+    assert np.allclose(triplet["current.lon"], home_lon, atol=1e-6)
+    assert stack.autopilot.faults.counts == {}
 
 
 SEQUENCE = (("idle", 1.0), ("arm", 1.0), ("disarm", 1.0), ("arm", 1.0), ("disarm", 0.5))
@@ -190,20 +280,24 @@ def test_sdlog_mode_3_is_refused_and_a_simulator_restart_ends_the_log(tmp_path):
 
 
 def test_the_ulog_encoding_is_what_pyulog_reads():
-    """Formats, info of each type, parameters, subscriptions, samples, strings, sync, dropout."""
-    fmt = ulog.Format(
-        "demo", ulog.fields("uint64_t timestamp; float[3] v; double d; int8_t i; bool b; uint32_t u")
-    )
+    """Formats (one with a nested type), info of each type, parameters, subscriptions, samples,
+    strings, sync, dropout."""
+    inner = ulog.Format("inner", ulog.fields("uint64_t timestamp; bool valid; double lat"))
+    layout = "uint64_t timestamp; float[3] v; double d; int8_t i; bool b; uint32_t u; inner[2] pair"
+    fmt = ulog.Format("demo", ulog.fields(layout, [inner]))
+    assert fmt.nested == (inner,)
+    assert fmt.field_names()[-3:] == ["pair[1].timestamp", "pair[1].valid", "pair[1].lat"]
     topic = ulog.Topic(fmt, 0)
-    data = (ulog.file_header(1000) + ulog.flag_bits() + ulog.format_message(fmt)
+    pair = (7, True, 47.5, 8, False, -1.25)
+    data = (ulog.file_header(1000) + ulog.flag_bits() + ulog.format_message(inner) + ulog.format_message(fmt)
             + ulog.info("sys_name", "quadsitl") + ulog.info("ver_sw_release", 0x010203FF, "uint32_t")
             + ulog.info("answer", 42) + ulog.info("ratio", 0.25)
             + ulog.parameter("A_FLOAT", 0.3, integer=False) + ulog.parameter("AN_INT", -7, integer=True)
             + ulog.add_logged(0, "demo")
-            + topic.sample((1000, 1.0, -2.0, 3.5, 1e300, -5, True, 2**32 - 1))
+            + topic.sample((1000, 1.0, -2.0, 3.5, 1e300, -5, True, 2**32 - 1, *pair))
             + ulog.logged_string(4, 1500, "a warning") + ulog.sync() + ulog.dropout(20)
             + ulog.parameter("AN_INT", 8, integer=True)
-            + topic.sample((2000, math.nan, 0.0, 0.0, -1.0, 127, False, 0)))  # fmt: skip
+            + topic.sample((2000, math.nan, 0.0, 0.0, -1.0, 127, False, 0, *pair)))  # fmt: skip
     counts = check_plotjuggler(data)
     assert counts == {"demo": 2}
     log = ULog(io.BytesIO(data))
@@ -222,6 +316,9 @@ def test_the_ulog_encoding_is_what_pyulog_reads():
         list(d["timestamp"]) == [1000, 2000] and d["v[1]"][0] == np.float32(-2.0) and math.isnan(d["v[0]"][1])
     )
     assert list(d["d"]) == [1e300, -1.0] and list(d["i"]) == [-5, 127] and list(d["u"]) == [2**32 - 1, 0]
+    assert sorted(c for c in d if c.startswith("pair")) == sorted(fmt.field_names()[-6:])  # nested, flattened
+    assert list(d["pair[0].lat"]) == [47.5, 47.5] and list(d["pair[1].valid"]) == [0, 0]
+    assert list(d["pair[1].timestamp"]) == [8, 8]
     (msg,) = log.logged_messages
     assert (msg.log_level_str(), msg.timestamp, msg.message) == ("WARNING", 1500, "a warning")
     assert [dropout.duration for dropout in log.dropouts] == [20]

@@ -91,6 +91,29 @@ def test_mission_mode_on_the_ground_starts_at_arming_and_ends_landed_and_disarme
     assert t < 90.0
 
 
+def test_the_destination_is_each_items_point_then_the_landing_point_on_the_ground(commander):
+    """Commander.destination (the flight log's position_setpoint_triplet, PX4's navigator
+    setpoint): nothing while disarmed, then where each leg of the mission leads, in order."""
+    commander.set_mission(0.0, square())
+    assert commander.destination is None
+    commander.arm(0.0)
+    commander.set_mode(0.0, FlightMode.AUTO_MISSION)
+    seen: list[tuple] = []
+
+    def note(c: Commander) -> bool:
+        if c.destination is not None:
+            point = tuple(round(v, 3) + 0.0 for v in c.destination.position_m)
+            if not seen or seen[-1] != point:
+                seen.append(point)
+        return not c.armed
+
+    fly(commander, 0.0, 90.0, until=note)
+    # takeoff, the three waypoints, above the landing point, the landing point on the ground
+    assert seen == [(0.0, 0.0, 2.0), (2.0, 0.0, 2.0), (2.0, 2.0, 2.0), (0.0, 2.0, 2.0), (0.0, 0.0, 2.0),
+                    (0.0, 0.0, 0.0)]  # fmt: skip
+    assert commander.destination is None  # landed, disarmed
+
+
 def test_hold_pauses_and_auto_mission_resumes_the_current_item(commander):
     commander.set_mission(0.0, square())
     commander.arm(0.0)
