@@ -39,6 +39,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from quadcommon import wire
+from quadcommon.build_info import BuildInfo
 from quadcommon.bus_records import ESTIMATOR_FIELDS
 from quadcommon.config import (
     SIM_BATTERY_PARAMETERS,
@@ -130,6 +131,7 @@ class AutopilotSetup:
     estimator: str = "truth"  # "truth": fly on the simulator's state; "ekf": on the EKF (EKF2_EN)
     estimator_profile: str = "default"  # config/estimator/NAME.toml: the EKF2_* values to start from
     log: LogOptions = LogOptions()  # the flight log (ULog): where, and the wall clock for its UTC times
+    build: BuildInfo = BuildInfo()  # version and git commit (AUTOPILOT_VERSION); the shell reads them
 
     @classmethod
     def load(

@@ -24,6 +24,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from quadcommon.build_info import flight_sw_version
+
 from ..params.store import INT32, ParameterStore
 from . import topics, ulog
 from .topics import TOPICS, Snapshot
@@ -57,7 +59,7 @@ def log_info(version: str, controller: str, vehicle: str, estimator: str, instan
         "sys_name": "quadsitl",
         "ver_hw": "SITL",
         "ver_sw": f"quadsitl {version}".strip(),
-        "ver_sw_release": _release_number(version),
+        "ver_sw_release": flight_sw_version(version),  # PX4's 0xMMmmppTT
         "ver_data_format": 2,
         "sys_os_name": "Linux",
         "sys_toolchain": "CPython",
@@ -66,13 +68,6 @@ def log_info(version: str, controller: str, vehicle: str, estimator: str, instan
         "quadsitl_estimator": estimator,
         "quadsitl_instance": instance,
     }
-
-
-def _release_number(version: str) -> int:
-    """PX4's ``ver_sw_release`` encoding: 0xMMmmpp followed by the type byte (255: a release)."""
-    parts = [int(p) if p.isdigit() else 0 for p in version.split(".")[:3]] + [0, 0, 0]
-    major, minor, patch = (min(max(v, 0), 255) for v in parts[:3])
-    return (major << 24) | (minor << 16) | (patch << 8) | 0xFF
 
 
 class LogOpen(NamedTuple):
