@@ -11,9 +11,11 @@ error (``MAV_FTP_ERR``) in ``data[0]`` and, for ``FailErrno``, the errno in ``da
   ``F<name>\\t<size>\\0`` for a file, ``D<name>\\0`` for a directory (sorted by name; symbolic
   links and other kinds are not listed); past the last entry, NAK ``EOF``; an empty directory,
   an ACK with no data. A directory that cannot be listed: ``FileNotFound``.
-* ``OpenFileRO(path)``: session 0 and the file's size (u32) at that moment, which the session
+* ``OpenFileRO(path)``: the session and the file's size (u32) at that moment, which the session
   serves up to (a log still being written reads as far as it was when opened); a second open
-  while the station's session is open: ``NoSessionsAvailable``. ``ReadFile(session, offset,
+  while the station's session is open: ``NoSessionsAvailable``. The session's id is the one the
+  open request names: 0 from PX4's clients (MAVSDK, QGC), to which PX4 answers 0 whatever they
+  send; a client that picks its own, as ArduPilot lets it (MAVProxy), keeps it. ``ReadFile(session, offset,
   size)``: up to ``size`` bytes (0 asks for :data:`DATA_MAX`), ``EOF`` at or past the end.
   ``BurstReadFile(session, offset)``: no ACK; the data streams as ACKs numbered ``seq + 1``,
   ``seq + 2``... (``req_opcode`` BurstReadFile, ``offset`` each chunk's) until the end of the
@@ -234,6 +236,7 @@ class _Session:
     handle: object
     size: int  # bytes served (the file's size when opened, at most u32)
     writable: bool
+    number: int  # the id the open request named (PX4's clients: 0)
 
 
 @dataclass
@@ -385,12 +388,12 @@ class FtpServer:
         handle, size = self.files.open(path, mode)
         self.created += int(writing)
         size = min(size, 0xFFFFFFFF)
-        station.session = _Session(handle, size, mode is not OpenMode.READ)
+        station.session = _Session(handle, size, writing, r.session)
         self._busy = True
-        return Reply(U32.pack(size), 0, r.offset)
+        return Reply(U32.pack(size), r.session, r.offset)
 
     def _session(self, station: _Station, r: Request) -> _Session:
-        if r.session != 0 or station.session is None:
+        if station.session is None or r.session != station.session.number:
             raise FtpError(ERR_INVALID_SESSION)
         return station.session
 
@@ -399,7 +402,7 @@ class FtpServer:
         if r.offset >= session.size:
             raise FtpError(ERR_EOF)
         count = min(r.size or DATA_MAX, DATA_MAX, session.size - r.offset)
-        return Reply(self.files.read(session.handle, r.offset, count), 0, r.offset)
+        return Reply(self.files.read(session.handle, r.offset, count), session.number, r.offset)
 
     def _burst(self, station: _Station, r: Request, target) -> None:
         self._session(station, r)
@@ -416,12 +419,12 @@ class FtpServer:
         self._check_budget(data=len(r.data))
         written = self.files.write(session.handle, r.offset, r.data)
         self.written_bytes += written
-        return Reply(U32.pack(written), 0, r.offset)
+        return Reply(U32.pack(written), session.number, r.offset)
 
     def _terminate(self, station: _Station, r: Request, target) -> Reply:
         self._session(station, r)
         self._close(station)
-        return Reply(offset=r.offset)
+        return Reply(session=r.session, offset=r.offset)
 
     def _reset(self, station: _Station, r: Request, target) -> Reply:
         self._close(station)
@@ -512,24 +515,24 @@ class FtpServer:
 
     def _send_chunk(self, link: GcsLink, station: _Station) -> None:
         burst, session = station.burst, station.session
-        offset = burst.offset
+        offset, number = burst.offset, session.number
         try:
             chunk = self.files.read(session.handle, offset, min(DATA_MAX, session.size - offset)) if (
                 offset < session.size) else b""  # fmt: skip
         except OSError as failure:
             code, errno_value = _os_error(failure)
             self.refused[_ERROR_NAMES[code]] += 1
-            payload = _payload(burst.seq, 0, NAK, BURST_READ, offset, _nak_data(code, errno_value))
+            payload = _payload(burst.seq, number, NAK, BURST_READ, offset, _nak_data(code, errno_value))
             station.burst = None
         else:
             if not chunk:  # the end (or a file shorter than when it was opened)
                 self.refused[_ERROR_NAMES[ERR_EOF]] += 1
-                payload = _payload(burst.seq, 0, NAK, BURST_READ, offset, _nak_data(ERR_EOF))
+                payload = _payload(burst.seq, number, NAK, BURST_READ, offset, _nak_data(ERR_EOF))
                 station.burst = None
             else:
                 burst.sent += len(chunk)
                 complete = burst.sent >= BURST_BYTES
-                payload = _payload(burst.seq, 0, ACK, BURST_READ, offset, chunk, burst_complete=complete)
+                payload = _payload(burst.seq, number, ACK, BURST_READ, offset, chunk, burst_complete=complete)
                 burst.offset += len(chunk)
                 burst.seq = (burst.seq + 1) & 0xFFFF
                 if complete:

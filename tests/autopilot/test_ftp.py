@@ -327,7 +327,7 @@ def test_hostile_fields_are_refused_at_their_edges(vehicle):
     assert client.request(WRITE, b"x").error == E_SESSION
     assert client.open(path.decode()) == size
     assert client.request(OPEN_RO, path).error == E_NO_SESSIONS  # one session per station, as PX4
-    assert client.request(READ, session=1).error == E_SESSION
+    assert client.request(READ, session=1).error == E_SESSION  # not the session opened
     assert client.request(READ, offset=size - 1).data == logs[0].read_bytes()[-1:]  # the last byte
     for offset in (size, size + 1, 0xFFFFFFFF):
         assert client.request(READ, offset=offset).error == E_EOF
@@ -358,6 +358,23 @@ def test_hostile_fields_are_refused_at_their_edges(vehicle):
     os.truncate(tmp / "log" / "big.bin", ftp.CRC_MAX_BYTES + 1)
     assert client.request(CRC, b"/log/big.bin\0").error == E_FAIL
     assert not stack.autopilot.faults.counts
+
+
+def test_a_session_keeps_the_id_its_open_named(vehicle):
+    """PX4's clients open with session 0 (and PX4 answers 0); a client choosing its own id, as
+    ArduPilot lets MAVProxy, keeps it: its reads, bursts and terminate name it."""
+    stack, tmp, logs = vehicle
+    client = FtpClient(stack)
+    path = f"/log/{logs[0].parent.name}/{logs[0].name}".encode() + b"\0"
+    opened = client.request(OPEN_RO, path, session=7)
+    assert (opened.opcode, opened.session) == (ACK, 7)
+    assert client.request(READ, session=0).error == E_SESSION
+    read = client.request(READ, session=7, size=10)
+    assert (read.session, read.data) == (7, logs[0].read_bytes()[:10])
+    client.send(HEADER.pack(client.seq, 7, BURST, 0, 0, 0, 0, 0))
+    client.seq += 1
+    assert client.wait_for(client.seq).session == 7
+    assert client.request(TERMINATE, session=7).session == 7
 
 
 def test_a_resent_request_gets_the_same_answer_without_being_done_twice(vehicle):
