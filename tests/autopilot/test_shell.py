@@ -196,6 +196,7 @@ def test_version_in_autopilot_version_and_in_the_console():
     assert list(version.flight_custom_version) == [0xEF, 0xCD, 0xAB, 0x89, 0x67, 0x45, 0x23, 0x01]
     assert "".join(f"{b:02x}" for b in reversed(version.flight_custom_version)) == commit[:16]  # as QGC
     assert list(version.middleware_custom_version) == list(version.flight_custom_version)
+    assert version.capabilities & m.MAV_PROTOCOL_CAPABILITY_FTP  # as PX4: FTP is served
     console = ShellClient(stack)
     console.type("\n")
     assert "quadsitl 1.2.3:" in console.read(until=PROMPT)
