@@ -79,6 +79,7 @@ class MavlinkShell:
         self.allowance = [SendAllowance(MESSAGES_PER_S, MESSAGES_AT_ONCE, clock) for _ in links]
         self.lines_run = 0
         self.lines_refused = 0  # busy: the backlog was full
+        self._waiting = False  # output may be waiting: pump() has work
 
     def register(self, dispatcher) -> None:
         dispatcher[m.MAVLINK_MSG_ID_SERIAL_CONTROL] = self.on_message
@@ -141,6 +142,7 @@ class MavlinkShell:
         self._emit(terminal, self.console.run(line).encode("ascii", "replace"))
 
     def _emit(self, terminal: _Terminal, data: bytes) -> None:
+        self._waiting = True
         room = OUTPUT_MAX - len(terminal.output)
         if len(data) <= room:
             terminal.output += data
@@ -152,6 +154,9 @@ class MavlinkShell:
     def pump(self, budget: int) -> None:
         """Send waiting output, at most ``budget`` messages per link (consoles taking turns) and
         no more than :data:`MESSAGES_PER_S` of the clock allows."""
+        if not self._waiting:  # (every frame asks)
+            return
+        self._waiting = False
         for link, terminals, allowance in zip(self.links, self.terminals, self.allowance, strict=True):
             waiting = [t for t in terminals.values() if t.output]
             if not waiting:
@@ -164,6 +169,7 @@ class MavlinkShell:
                         left -= 1
                 waiting = [t for t in waiting if t.output]
             allowance.give_back(left)
+            self._waiting = self._waiting or bool(waiting)
 
     def _send(self, link: GcsLink, terminal: _Terminal) -> None:
         chunk = bytes(terminal.output[:DATA_LEN])
