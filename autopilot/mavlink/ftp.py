@@ -30,9 +30,10 @@ error (``MAV_FTP_ERR``) in ``data[0]`` and, for ``FailErrno``, the errno in ``da
   ``CreateFile`` (truncates) / ``OpenFileWO`` then ``WriteFile(session, offset, data)`` (the count
   written, u32), ``RemoveFile``, ``CreateDirectory``, ``RemoveDirectory`` (empty only),
   ``Rename(old\\0new)``, ``TruncateFile(path, offset = length)``.
-* A request resent unchanged (its answer was lost) gets the same answer again without being
-  carried out twice (PX4 matches on the sequence number alone; here the whole request must match,
-  so a client restarting its numbering is not answered from another's cache). ``None`` (opcode 0)
+* A request resent unchanged (its answer was lost) within :data:`RESEND_WINDOW_S` gets the same
+  answer again without being carried out twice (PX4 matches on the sequence number alone; here the
+  whole request must match, and be recent, so a client restarting its numbering is not answered
+  from an earlier run's cache). ``None`` (opcode 0)
   is acknowledged; an unknown opcode is NAK ``UnknownCommand``; ``size`` above 239 is NAK
   ``InvalidDataSize``.
 
@@ -87,6 +88,7 @@ BURST_BYTES = 35_000  # data per burst before burst_complete (PX4's, found "empi
 MESSAGES_PER_S = 1000
 MESSAGES_AT_ONCE = 20  # a link may send this many at once after a pause
 SESSION_IDLE_S = 10.0  # a session without a request for this long is closed (PX4's)
+RESEND_WINDOW_S = 10.0  # a request repeated within this is a resend (its answer was lost)
 MAX_STATIONS_PER_LINK = 4
 MAX_FILE_BYTES = 64 * 1024 * 1024  # no write or truncation makes a file longer
 WRITE_BUDGET_BYTES = 256 * 1024 * 1024  # bytes a run writes through FTP, at most
@@ -253,8 +255,9 @@ class _Station:
     heard: float  # the caller's clock at its last request
     session: _Session | None = None
     burst: _Burst | None = None
-    last_request: bytes = b""  # the request answered last (its whole payload) and the answer
+    last_request: bytes = b""  # the request answered last (its whole payload), the answer, when
     last_answer: tuple[bytes, tuple[int, int]] | None = None
+    answered_at: float = 0.0
 
 
 class FtpServer:
@@ -313,7 +316,8 @@ class FtpServer:
         raw = bytes(msg.payload).ljust(PAYLOAD_LEN, b"\0")
         target = (msg.get_srcSystem(), msg.get_srcComponent())
         station = self._station(link, address)
-        if station.last_answer is not None and raw == station.last_request:
+        resent = station.last_answer is not None and raw == station.last_request
+        if resent and station.heard - station.answered_at < RESEND_WINDOW_S:
             answer, _ = station.last_answer  # the answer was lost: the same again, not done twice
             self._send(link, address, answer, target)
             return
@@ -338,7 +342,7 @@ class FtpServer:
                 station.last_request, station.last_answer = b"", None
                 return
             answer = _payload(seq + 1, reply.session, ACK, opcode, reply.offset, reply.data)
-        station.last_request, station.last_answer = raw, (answer, target)
+        station.last_request, station.last_answer, station.answered_at = raw, (answer, target), station.heard
         self._send(link, address, answer, target)
 
     def _station(self, link: GcsLink, address: Address) -> _Station:

@@ -393,6 +393,12 @@ def test_a_resent_request_gets_the_same_answer_without_being_done_twice(vehicle)
     assert other.opcode == ACK and (tmp / "log" / "third").is_dir()
     # Sequence numbers wrap as u16.
     assert client.request(LIST, b"/\0", seq=0xFFFF).seq == 0
+    # The same request long after its answer is a new one (a client run again, numbering from 0).
+    listed = client.request(LIST, b"/log\0", seq=0)
+    (tmp / "log" / "later").mkdir()
+    stack.run_for(ftp.RESEND_WINDOW_S + 0.5)
+    client.send(client.last_payload)
+    assert b"Dlater" in client.wait_for(listed.seq).data and b"Dlater" not in listed.data
 
 
 def test_stations_sessions_and_idle_sessions(vehicle):
