@@ -9,6 +9,7 @@ import sys
 import time
 
 from quadcommon import bus
+from quadcommon.build_info import this_build
 from quadcommon.schema import ConfigError
 from quadcommon.udp import PortInUse
 
@@ -65,8 +66,9 @@ def main(argv: list[str] | None = None) -> int:
                                     args.autostart, args.state_source, args.params, args.estimator,
                                     args.estimator_profile)  # fmt: skip
         signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
-        log = LogOptions(None if args.no_log else args.log_dir, utc_clock=time.time, version=_version())
-        setup = dataclasses.replace(setup, signing=signing, log=log)
+        build = this_build()  # AUTOPILOT_VERSION and the flight log's version
+        log = LogOptions(None if args.no_log else args.log_dir, utc_clock=time.time, version=build.version)
+        setup = dataclasses.replace(setup, signing=signing, log=log, build=build)
         if args.impair:
             impair = setup.sitl.impair.with_specs(args.impair)
             setup = dataclasses.replace(setup, sitl=dataclasses.replace(setup.sitl, impair=impair))
@@ -86,15 +88,6 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         app.close()
         print("autopilot: stopped", flush=True)
-
-
-def _version() -> str:
-    from importlib import metadata
-
-    try:
-        return metadata.version("quadsitl")
-    except metadata.PackageNotFoundError:
-        return ""
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ from .core import AutopilotCore, AutopilotSetup
 from .logger.storage import LogDirectory, LogWriter
 from .mavlink.codec import mavlink
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing
+from .vehicle_files import VehicleFiles
 
 HOUSEKEEPING_S = 0.05
 LINK_NAMES = {HIL_LINK: "hil", GCS_LINK: "gcs", API_LINK: "api"}  # as --impair names them
@@ -54,7 +55,8 @@ class Autopilot:
         self.log_directory = LogDirectory(directory) if directory is not None else None
         self.log_writer = LogWriter(self.log_directory) if self.log_directory is not None else None
         self._log_error_reported = False
-        self.core = AutopilotCore(setup, self.log, log_store=self.log_directory)
+        files = VehicleFiles.for_vehicle(self.log_directory, setup.params_file)  # MAVLink FTP's root
+        self.core = AutopilotCore(setup, self.log, log_store=self.log_directory, files=files)
         sitl = setup.sitl
         self.ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base,
                                 sitl.api_port_base, sitl.zenoh_port_base)  # fmt: skip

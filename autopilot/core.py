@@ -34,11 +34,13 @@ those modules.)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from quadcommon import wire
+from quadcommon.build_info import BuildInfo
 from quadcommon.bus_records import ESTIMATOR_FIELDS
 from quadcommon.config import (
     SIM_BATTERY_PARAMETERS,
@@ -61,13 +63,16 @@ from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
 from .estimation.streams import StreamWatch
+from .logger import topics
 from .logger.logger import FlightLogger, LogOptions, log_info
 from .logger.topics import Snapshot
 from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
-from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
+from .mavlink.commands import CommandDispatcher, CommandRequest, command_ack, request_from_message
+from .mavlink.console import Console, ConsoleContext
 from .mavlink.dispatch import FaultLog, MessageDispatcher
 from .mavlink.failure_injection import FailureInjection
+from .mavlink.ftp import FileSystem, FtpServer, NoFiles
 from .mavlink.hil import (
     BATTERY_ID,
     DISTURBANCE_ID,
@@ -84,6 +89,7 @@ from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.manual import decode_sticks
 from .mavlink.offboard import decode_setpoint
 from .mavlink.params import ParamService
+from .mavlink.shell import MavlinkShell
 from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
 from .mavlink.vehicle_commands import VehicleCommands
@@ -111,6 +117,11 @@ IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it 
 # tick (wall) while no frames flow.
 LOG_MESSAGES_PER_FRAME = 4
 LOG_MESSAGES_PER_TICK = 100
+# MAVLink FTP burst chunks (239 bytes each) per link, likewise: 1000 a second of simulation time.
+FTP_MESSAGES_PER_FRAME = 2
+FTP_MESSAGES_PER_TICK = 50
+SHELL_MESSAGES_PER_FRAME = 1  # the console's output (SERIAL_CONTROL, 70 bytes each), likewise
+SHELL_MESSAGES_PER_TICK = 25
 NO_FRAMES_S = 0.1  # wall time without frames after which the housekeeping streams the download
 
 
@@ -130,6 +141,7 @@ class AutopilotSetup:
     estimator: str = "truth"  # "truth": fly on the simulator's state; "ekf": on the EKF (EKF2_EN)
     estimator_profile: str = "default"  # config/estimator/NAME.toml: the EKF2_* values to start from
     log: LogOptions = LogOptions()  # the flight log (ULog): where, and the wall clock for its UTC times
+    build: BuildInfo = BuildInfo()  # version and git commit (AUTOPILOT_VERSION); the shell reads them
 
     @classmethod
     def load(
@@ -162,9 +174,12 @@ class AutopilotCore:
         setup: AutopilotSetup,
         log: Callable[[str], None] = lambda text: None,
         log_store: LogStore | None = None,
+        files: FileSystem | None = None,
     ) -> None:
         """``log``: where the process's text goes; ``log_store``: the flight logs on disk, for the
-        MAVLink log download (the shell's :class:`~autopilot.logger.storage.LogDirectory`)."""
+        MAVLink log download (the shell's :class:`~autopilot.logger.storage.LogDirectory`);
+        ``files``: what MAVLink FTP serves (the shell's :class:`~autopilot.vehicle_files.VehicleFiles`;
+        None: an empty root)."""
         self.setup = setup
         self.log = log
         sitl = setup.sitl
@@ -276,6 +291,17 @@ class AutopilotCore:
         self.log_transfer = LogTransfer(log_store or NoLogs(), self.encoder, self.links, self.statustext,
                                         lambda: self.commander.armed, self.system_id, clock)  # fmt: skip
         self.log_transfer.register(self.dispatcher)  # LOG_REQUEST_LIST, _DATA, _END, LOG_ERASE
+        self.ftp = FtpServer(files or NoFiles(), self.encoder, self.links, self.system_id, clock)
+        self.ftp.register(self.dispatcher)  # FILE_TRANSFER_PROTOCOL
+        console = Console(ConsoleContext(
+            self.params, self.param_service.set_value, self._console_command, self._topic_now,
+            tuple(spec.name for spec in topics.TOPICS), self.info, self.commander, lambda: self.sim_time,
+            setup.build,
+        ))  # fmt: skip
+        greeting = f"\nquadsitl {setup.build.version or '(version unknown)'}: 'help' lists the commands\n"
+        self.shell = MavlinkShell(console, self.encoder, self.links, self.system_id, clock, greeting)
+        self.shell.register(self.dispatcher)  # SERIAL_CONTROL (device SHELL)
+        self._latest: tuple | None = None  # (frame, guidance, output, controller row): the listener's
         d = self.dispatcher
         d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
         d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
@@ -365,6 +391,7 @@ class AutopilotCore:
             "vision": self.external_vision.info(),
             "flight_log": {"logging": self.flight_log.logging, "logs_started": self.flight_log.logs_started},
             "failures": self.failure_injection.info(),
+            "ftp": self.ftp.info(),
         }
 
     def on_foreign_datagram(self, what: str) -> None:
@@ -595,11 +622,14 @@ class AutopilotCore:
             self._record_estimator(t_est, loop.estimate() if est is not None else None, loop)
         self._status_of = (frame, guidance, output)  # brought into the status when it is read
         self._record_controller(t, guidance, output)
+        self._latest = (frame, guidance, output, self.controller_rows[-1])
         self._log_frame(frame, guidance, output)
         self._send_telemetry(t)
         self.missions.update(t)  # MISSION_CURRENT, MISSION_ITEM_REACHED
         self.send_events()
         self.log_transfer.pump(LOG_MESSAGES_PER_FRAME)
+        self.ftp.pump(FTP_MESSAGES_PER_FRAME)
+        self.shell.pump(SHELL_MESSAGES_PER_FRAME)
 
     def _log_frame(self, frame, guidance, output) -> None:
         """The frame into the flight log (autopilot/logger/), when one is open; the simulator's
@@ -714,6 +744,16 @@ class AutopilotCore:
             return
         request = request_from_message(msg, link, address)
         self.vehicle_commands.after_ack = None
+        result, reason = self.run_command(request)
+        link.send_to(self.encoder.pack(command_ack(request, result)), address)
+        if self.vehicle_commands.after_ack is not None:  # a requested message, after its ACK (PX4)
+            link.send_to(self.encoder.pack(self.vehicle_commands.after_ack), address)
+            self.vehicle_commands.after_ack = None
+        self.send_events()
+
+    def run_command(self, request: CommandRequest) -> tuple[int, str]:
+        """A MAV_CMD through the vehicle's one command path: its parameters checked
+        (:mod:`.mavlink.validation`), then its handler; (MAV_RESULT, reason)."""
         known = request.command in self.commands.handlers  # an unknown one is UNSUPPORTED, not DENIED
         problem = check_command(request.command, request.params, request.frame is not None) if known else None
         if problem:
@@ -724,11 +764,32 @@ class AutopilotCore:
             result, reason = self.commands.dispatch(request)
         if reason and result != m.MAV_RESULT_ACCEPTED:
             self.log(f"command {request.command} -> result {result}: {reason}")
-        link.send_to(self.encoder.pack(command_ack(request, result)), address)
-        if self.vehicle_commands.after_ack is not None:  # a requested message, after its ACK (PX4)
-            link.send_to(self.encoder.pack(self.vehicle_commands.after_ack), address)
-            self.vehicle_commands.after_ack = None
+        return result, reason
+
+    def _console_command(self, command: int, params: tuple[float, ...]) -> tuple[int, str]:
+        """The console's command (``commander arm``, ``failure gps off``...), as a COMMAND_LONG
+        from the vehicle itself."""
+        request = CommandRequest(command, params, None, self.system_id, wire.AUTOPILOT_COMPONENT_ID,
+                                 None, None)  # fmt: skip
+        outcome = self.run_command(request)
         self.send_events()
+        return outcome
+
+    def _topic_now(self, name: str) -> tuple[list[str], tuple] | None:
+        """Flight-log topic ``name`` at the latest frame (the console's ``listener``), built by the
+        log's own builders from a copy of its snapshot refreshed with that frame."""
+        if self._latest is None:
+            return None
+        frame, guidance, output, row = self._latest
+        parts = frame.parts
+        gps = topics.gps_of(parts) if parts is not None and topics.GPS_ID in parts else None
+        snapshot = dataclasses.replace(
+            self.flight_log.snapshot, t_us=frame.time_usec, truth=self._frame_truth, estimate=frame.state,
+            row=row, parts=parts, output=output, reference=guidance.reference, controls=self._controls,
+            estimator=self.estimator.last_status if self.estimator is not None else None,
+            battery=self.battery.status, gps=gps or self.flight_log.snapshot.gps,
+        )  # fmt: skip
+        return self.flight_log.sample_now(name, snapshot)
 
     def _request_failure(self, unit: int, failure_type: int, instance: int) -> bool:
         """MAV_CMD_INJECT_FAILURE for the simulator, in the next answer; False when too many wait."""
@@ -838,8 +899,10 @@ class AutopilotCore:
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
         self.signing.poll(now)  # wall clock -> timestamps, refusals announced, state saved
-        if now - self.last_frame_wall > NO_FRAMES_S:  # else each frame streams the log download
+        if now - self.last_frame_wall > NO_FRAMES_S:  # else each frame streams the downloads
             self.log_transfer.pump(LOG_MESSAGES_PER_TICK)
+            self.ftp.pump(FTP_MESSAGES_PER_TICK)
+            self.shell.pump(SHELL_MESSAGES_PER_TICK)
         sim_loss_s = self.params["COM_SIM_LOSS_T"]
         if self.linked and now - self.last_frame_wall <= sim_loss_s:
             return

@@ -13,7 +13,8 @@ loss) is simulation time here: nothing waits on anything real.
 
 With a log directory in the autopilot's setup (``AutopilotSetup.log``), the autopilot writes its
 flight logs (ULog) there as the process does, without the writer thread, and serves them to the
-ground stations' log download; :meth:`Lockstep.close` ends the open log.
+ground stations' log download and MAVLink FTP (with the parameter file, as the process does:
+:mod:`autopilot.vehicle_files`); :meth:`Lockstep.close` ends the open log.
 The links can be impaired as the processes' are (``impair=``, ``RunOptions.impair``, the
 simulator's ``[impair]``; :meth:`Lockstep.impair` while running): ground-station datagrams arrive
 when their channel says, and over an impaired HIL link each frame is exchanged as the two processes
@@ -56,6 +57,7 @@ from autopilot.core import AutopilotCore, AutopilotSetup  # noqa: E402
 from autopilot.logger.logger import LogOptions  # noqa: E402
 from autopilot.logger.storage import LogDirectory, LogWriter  # noqa: E402
 from autopilot.mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing  # noqa: E402
+from autopilot.vehicle_files import VehicleFiles  # noqa: E402
 from gcs_scripts.analysis.record import FlightRecord  # noqa: E402
 from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS  # noqa: E402
 from quadcommon.config import (  # noqa: E402
@@ -175,7 +177,8 @@ class Lockstep:
         self.sim = SimulatorCore(simulator, log)
         self.log_directory = LogDirectory(autopilot.log.directory) if autopilot.log.enabled else None
         self.log_writer = LogWriter(self.log_directory, threaded=False) if self.log_directory else None
-        self.autopilot = AutopilotCore(autopilot, log, log_store=self.log_directory)
+        files = VehicleFiles.for_vehicle(self.log_directory, autopilot.params_file)  # MAVLink FTP's root
+        self.autopilot = AutopilotCore(autopilot, log, log_store=self.log_directory, files=files)
         # The links' impairment (default: the simulator's sitl.toml [impair]), in stack time: one
         # channel per link and direction, as the two processes have at their sockets.
         impair = simulator.sitl.impair if impair is None else impair

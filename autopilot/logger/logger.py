@@ -24,6 +24,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from quadcommon.build_info import flight_sw_version
+
 from ..params.store import INT32, ParameterStore
 from . import topics, ulog
 from .topics import TOPICS, Snapshot
@@ -57,7 +59,7 @@ def log_info(version: str, controller: str, vehicle: str, estimator: str, instan
         "sys_name": "quadsitl",
         "ver_hw": "SITL",
         "ver_sw": f"quadsitl {version}".strip(),
-        "ver_sw_release": _release_number(version),
+        "ver_sw_release": flight_sw_version(version),  # PX4's 0xMMmmppTT
         "ver_data_format": 2,
         "sys_os_name": "Linux",
         "sys_toolchain": "CPython",
@@ -66,13 +68,6 @@ def log_info(version: str, controller: str, vehicle: str, estimator: str, instan
         "quadsitl_estimator": estimator,
         "quadsitl_instance": instance,
     }
-
-
-def _release_number(version: str) -> int:
-    """PX4's ``ver_sw_release`` encoding: 0xMMmmpp followed by the type byte (255: a release)."""
-    parts = [int(p) if p.isdigit() else 0 for p in version.split(".")[:3]] + [0, 0, 0]
-    major, minor, patch = (min(max(v, 0), 255) for v in parts[:3])
-    return (major << 24) | (minor << 16) | (patch << 8) | 0xFF
 
 
 class LogOpen(NamedTuple):
@@ -316,9 +311,7 @@ class FlightLogger:
     def _start(self, t_us: int) -> None:
         utc = self.utc_clock() if self.utc_clock is not None else None
         names, _ = self.law_states()
-        law_fields = "".join(f"float {topics.law_state_field(n)};" for n in names)
-        extras = {topics.CASCADE: self._law_state_values,
-                  topics.RATE_CTRL: topics.rate_integrals(names, self.law_states)}  # fmt: skip
+        law_fields, extras = self._law_fields(names), self._extras(names)
         buf = bytearray(ulog.file_header(t_us))
         buf += ulog.flag_bits()
         formats = [spec.format(law_fields if spec.name == topics.CASCADE else "") for spec in TOPICS]
@@ -363,6 +356,30 @@ class FlightLogger:
         self._disturbance_logged_us = t_us
         if self._disturbance_held is not None:  # what applies as the log starts
             self._buffer += self._disturbance.sample((t_us, *self._disturbance_held))
+
+    def _law_fields(self, names: Sequence[str]) -> str:
+        """``cascade_status``'s fields after PX4's: one per state of the laws."""
+        return "".join(f"float {topics.law_state_field(n)};" for n in names)
+
+    def _extras(self, names: Sequence[str]) -> dict[str, Callable[[], Sequence[float]]]:
+        """What is appended to a topic's built values: the laws' states (``cascade_status``), the
+        rate integrals PX4 logs (``rate_ctrl_status``)."""
+        return {topics.CASCADE: self._law_state_values,
+                topics.RATE_CTRL: topics.rate_integrals(names, self.law_states)}  # fmt: skip
+
+    def sample_now(self, name: str, snapshot: Snapshot) -> tuple[list[str], tuple] | None:
+        """Topic ``name`` as a log would hold it for ``snapshot`` (the console's ``listener``): its
+        fields' names (pyulog's) and values; None for no such topic, or no data for it now."""
+        spec = next((s for s in TOPICS if s.name == name), None)
+        values = spec.build(snapshot) if spec is not None else None
+        if values is None:
+            return None
+        names, _ = self.law_states()
+        extra = self._extras(names).get(name)
+        if extra is not None:
+            values = (*values, *extra())
+        fields = spec.format(self._law_fields(names) if name == topics.CASCADE else "").field_names()
+        return fields, values
 
     def _law_state_values(self) -> tuple[float, ...]:
         return self.law_states()[1]

@@ -43,6 +43,33 @@ class Outgoing(NamedTuple):
     data: bytes
 
 
+class SendAllowance:
+    """How many messages a paced stream may send on one link now: refilled at ``per_s`` a second
+    of ``clock`` (the caller's: wall time in the process, simulation time in-process), never more
+    than ``at_once`` saved up."""
+
+    def __init__(self, per_s: float, at_once: int, clock) -> None:
+        self.per_s = per_s
+        self.at_once = at_once
+        self.clock = clock
+        self._left = float(at_once)
+        self._at = clock()
+
+    def take(self, wanted: int) -> int:
+        """Up to ``wanted`` messages, as many as the allowance has now (spent)."""
+        now = self.clock()
+        elapsed = min(max(now - self._at, 0.0), 1.0)
+        self._at = now
+        self._left = min(self._left + elapsed * self.per_s, float(self.at_once))
+        granted = max(min(wanted, int(self._left)), 0)
+        self._left -= granted
+        return granted
+
+    def give_back(self, unused: int) -> None:
+        """Messages taken but not sent (nothing was left to send)."""
+        self._left = min(self._left + unused, float(self.at_once))
+
+
 class GcsLink:
     def __init__(
         self, index: int, default_remote: Address | None, outbox: list[Outgoing], frame_period_s: float = 0.0

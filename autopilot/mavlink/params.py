@@ -21,9 +21,10 @@
 * ``MAV_CMD_PREFLIGHT_STORAGE`` (245), param1: 0 load the parameter file, 1 save it, 2 (and 4)
   reset every writable parameter to its default. With a file (``--params FILE``) every accepted
   change is also saved at once, as PX4 does.
-* MAVLink FTP (``FILE_TRANSFER_PROTOCOL``): there is no file system here, so every request is
-  answered with a NAK (FileNotFound for opens and listings, which is what makes MAVProxy fall
-  back to PARAM_REQUEST_LIST at once instead of after ~8 s of retries).
+
+(Parameters over MAVLink FTP: PX4 releases serve none; the FTP server (:mod:`.ftp`) answers
+ArduPilot's ``@PARAM/param.pck`` with FileNotFound, so MAVProxy falls back to
+PARAM_REQUEST_LIST at once.)
 """
 
 from __future__ import annotations
@@ -43,14 +44,6 @@ from .commands import CommandDispatcher, CommandRequest
 
 LIST_BURST = 16  # PARAM_VALUE messages per poll of a PARAM_REQUEST_LIST stream
 REFUSAL_REPEAT_S = 1.0  # the same refusal text is not repeated within this (MAVSDK retries 5 times)
-
-# MAVLink FTP (https://mavlink.io/en/services/ftp.html)
-FTP_HEADER = struct.Struct("<HBBBBBBI")  # seq, session, opcode, size, req_opcode, burst_complete, pad, offset
-FTP_ACK, FTP_NAK = 128, 129
-FTP_TERMINATE_SESSION, FTP_RESET_SESSIONS = 1, 2
-FTP_ERR_FAIL, FTP_ERR_INVALID_SESSION, FTP_ERR_UNKNOWN_COMMAND, FTP_ERR_FILE_NOT_FOUND = 1, 4, 7, 10
-_FTP_FILE_OPS = {3, 4, 6, 8, 9, 10, 11, 12, 13, 14}  # ops naming a path: the path does not exist
-_FTP_SESSION_OPS = {5, 7, 15}  # read/write/burst on a session: no session was ever opened
 
 _PARAM_VALUE = struct.Struct("<iHH16sB")  # PARAM_VALUE payload with the value field as raw int32
 
@@ -110,24 +103,8 @@ def pack_param_value(encoder: Encoder, name: str, value: float, kind: str, count
     return data
 
 
-def ftp_nak(request_payload: Sequence[int]) -> list[int]:
-    """The 251-byte FTP payload answering ``request_payload``: NAK (or ACK to session resets)."""
-    seq, session, opcode = struct.unpack_from("<HBB", bytes(request_payload[:4]))
-    if opcode in (FTP_TERMINATE_SESSION, FTP_RESET_SESSIONS):
-        header = FTP_HEADER.pack((seq + 1) & 0xFFFF, session, FTP_ACK, 0, opcode, 0, 0, 0)
-        return list(header.ljust(251, b"\0"))
-    if opcode in _FTP_FILE_OPS:
-        error = FTP_ERR_FILE_NOT_FOUND
-    elif opcode in _FTP_SESSION_OPS:
-        error = FTP_ERR_INVALID_SESSION
-    else:
-        error = FTP_ERR_UNKNOWN_COMMAND
-    header = FTP_HEADER.pack((seq + 1) & 0xFFFF, session, FTP_NAK, 1, opcode, 0, 0, 0)
-    return list((header + bytes([error])).ljust(251, b"\0"))
-
-
 class ParamService:
-    """Parameters on the GCS links: the protocol above, the file, the FTP refusal."""
+    """Parameters on the GCS links: the protocol above, and the file."""
 
     def __init__(
         self,
@@ -165,7 +142,6 @@ class ParamService:
         handlers[m.MAVLINK_MSG_ID_PARAM_REQUEST_LIST] = self.on_message
         handlers[m.MAVLINK_MSG_ID_PARAM_REQUEST_READ] = self.on_message
         handlers[m.MAVLINK_MSG_ID_PARAM_SET] = self.on_message
-        handlers[m.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL] = self.on_ftp
         commands.register(m.MAV_CMD_PREFLIGHT_STORAGE, self._cmd_storage)
 
     # -- encoding ------------------------------------------------------------------------------------
@@ -224,11 +200,31 @@ class ParamService:
             problem = self.store.set(name, value)
         if problem:
             self._refused(f"param set refused: {problem}")
-        data = self.value_frame(name)  # the value now: new if accepted, unchanged if refused
-        for each in self.links:
-            each.send(data)
+        data = self._announce(name)
         if address not in getattr(link, "peers", ()):
             link.send_to(data, address)
+
+    def set_value(self, name: str, value: float) -> str | None:
+        """Set a parameter as a PARAM_SET does, from inside the vehicle (its console): the store's
+        checks, the refusal said by STATUSTEXT, the value after it on every link. None when
+        accepted, else why not."""
+        if name not in self.store.specs:
+            problem = f"unknown parameter '{name}'"
+        else:
+            kind = self.store.specs[name].kind
+            problem = self.store.set(name, value if kind == INT32 else float32_shortest(value))
+        if problem:
+            self._refused(f"param set refused: {problem}")
+        if name in self.store.specs:
+            self._announce(name)
+        return problem
+
+    def _announce(self, name: str) -> bytes:
+        """PARAM_VALUE of ``name`` on every link (new if a set was accepted, unchanged if not)."""
+        data = self.value_frame(name)
+        for each in self.links:
+            each.send(data)
+        return data
 
     def _refused(self, text: str) -> None:
         if self.refusals is not None:
@@ -239,14 +235,6 @@ class ParamService:
         if text != last_text or now - last_at > REFUSAL_REPEAT_S:
             self.statustext(m.MAV_SEVERITY_WARNING, text)
         self._last_refusal = (text, now)
-
-    def on_ftp(self, msg, link, address) -> None:
-        if msg.target_system not in (0, self.system_id) or msg.target_component not in (0, self.component_id):
-            return
-        reply = m.MAVLink_file_transfer_protocol_message(
-            0, msg.get_srcSystem(), msg.get_srcComponent(), ftp_nak(msg.payload)
-        )
-        link.send_to(self.encoder.pack(reply), address)
 
     # -- list streams ------------------------------------------------------------------------------------
     def poll(self) -> None:

@@ -32,7 +32,6 @@ REPOSITION_FRAMES = {  # COMMAND_INT frame -> altitude relative to home?
     m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: True,
 }
 UNDERGROUND_MARGIN_M = 10.0  # a takeoff "AMSL" this far below home is read as a height above home
-VERSION_1_0_0 = 0x01000000 | 0xFF  # major.minor.patch, FIRMWARE_VERSION_TYPE_OFFICIAL
 CAPABILITIES = (
     m.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
     | m.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
@@ -41,6 +40,7 @@ CAPABILITIES = (
     | m.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     | m.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | m.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | m.MAV_PROTOCOL_CAPABILITY_FTP  # as PX4: MAVLink FTP is served (.ftp)
 )
 
 Result = tuple[int, str]
@@ -205,7 +205,12 @@ class VehicleCommands:
         return m.MAV_RESULT_ACCEPTED, ""
 
     def autopilot_version(self):
+        """AUTOPILOT_VERSION as PX4 fills it: the build's version and git commit
+        (:mod:`quadcommon.build_info`) as the flight software's and the middleware's, no OS or
+        board version, a unique id per vehicle."""
+        build = self.core.setup.build
         uid = 0x5153000000000000 | self.core.system_id
+        version, commit = build.flight_sw_version, build.custom_version
         return m.MAVLink_autopilot_version_message(
-            CAPABILITIES, VERSION_1_0_0, VERSION_1_0_0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid, [0] * 18
+            CAPABILITIES, version, version, 0, 0, commit, commit, [0] * 8, 0, 0, uid, [0] * 18
         )

@@ -52,7 +52,7 @@ COMMANDER_PARAMS = (
     ParamSpec("MPC_Z_VEL_MAX_UP", 1.5, 0.1, 8.0, unit="m/s", description="climb speed limit"),
     ParamSpec("MPC_Z_VEL_MAX_DN", 1.0, 0.1, 4.0, unit="m/s", description="descent speed limit"),
     ParamSpec("MPC_ACC_HOR", 2.0, 0.2, 15.0, unit="m/s^2", description="acceleration limit"),
-    ParamSpec("MPC_TKO_SPEED", 1.0, 0.1, 5.0, unit="m/s", description="takeoff climb speed"),
+    ParamSpec("MPC_TKO_SPEED", 1.5, 0.1, 5.0, unit="m/s", description="takeoff climb speed"),
     ParamSpec("MPC_LAND_SPEED", 0.7, 0.1, 3.0, unit="m/s", description="landing descent speed"),
     ParamSpec("MPC_YAWRAUTO_MAX", 1.0, 0.1, 6.0, unit="rad/s", description="yaw rate limit"),
     # The manual modes (MANUAL_CONTROL): autopilot/guidance/manual.py, docs/manual-control.md.

@@ -1,5 +1,5 @@
 """The parameter protocol (pure, against fake links): list/read/set, PX4's bytewise INT32
-encoding including the signalling-NaN bit patterns, refusals, storage command, FTP NAK."""
+encoding including the signalling-NaN bit patterns, refusals, storage command."""
 
 import struct
 
@@ -260,25 +260,3 @@ def test_preflight_storage_without_a_file_is_denied(service):
     service.register({}, commands)
     result, reason = commands.dispatch(request(m.MAV_CMD_PREFLIGHT_STORAGE, 1))
     assert result == m.MAV_RESULT_DENIED and "--params FILE" in reason
-
-
-@pytest.mark.parametrize("opcode, error", [(4, 10), (3, 10), (5, 4), (99, 7)])
-def test_ftp_requests_get_a_nak(service, opcode, error):
-    link = service.link
-    header = struct.pack("<HBBBBBBI", 41, 0, opcode, 0, 0, 0, 0, 0) + b"@PARAM/param.pck"
-    msg = m.MAVLink_file_transfer_protocol_message(0, SYS, 1, list(header.ljust(251, b"\0")))
-    service.on_ftp(parse_one(Encoder(255, 190).pack(msg)), link, GCS)
-    (reply,) = link.messages()
-    assert reply.get_type() == "FILE_TRANSFER_PROTOCOL" and reply.target_system == 255
-    seq, session, op, size, req_op = struct.unpack_from("<HBBBB", bytes(reply.payload))
-    assert (seq, op, size, req_op, reply.payload[12]) == (42, 129, 1, opcode, error)
-
-
-def test_ftp_session_reset_is_acknowledged(service):
-    link = service.link
-    header = struct.pack("<HBBBBBBI", 7, 0, 2, 0, 0, 0, 0, 0)
-    service.on_ftp(
-        m.MAVLink_file_transfer_protocol_message(0, SYS, 1, list(header.ljust(251, b"\0"))), link, GCS
-    )
-    (reply,) = link.messages()
-    assert struct.unpack_from("<HBBBB", bytes(reply.payload))[2] == 128

@@ -150,7 +150,7 @@ def test_bad_file_names_file_key_value_and_range(tmp_path, line, message):
     with pytest.raises(ConfigError) as info:
         load_params_file(path, store)
     assert str(path) in str(info.value) and message in str(info.value)
-    assert store["MPC_TKO_SPEED"] == 1.0  # all or nothing
+    assert store["MPC_TKO_SPEED"] == store.specs["MPC_TKO_SPEED"].default  # all or nothing
 
 
 def test_missing_file_is_an_error_for_read():

@@ -63,6 +63,7 @@ import traceback
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.ftp import FtpAsync, FtpError
 from mavsdk.asyncio.plugins.geofence import Circle, FenceType, GeofenceAsync, GeofenceData, Point, Polygon
 from mavsdk.asyncio.plugins.log_files import LogFilesAsync, LogFilesError
 from mavsdk.asyncio.plugins.manual_control import ManualControlAsync
@@ -73,6 +74,7 @@ from mavsdk.asyncio.plugins.mocap import AngleBody, Covariance, MocapAsync, Posi
 from mavsdk.asyncio.plugins.mocap import VisionPositionEstimate as MocapPose
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw, VelocityNedYaw
 from mavsdk.asyncio.plugins.param import ParamAsync
+from mavsdk.asyncio.plugins.shell import Device, ShellAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
 from quadcommon import frames
@@ -577,12 +579,80 @@ async def flow_logs(system, args) -> None:
         await watch.stop()
     entries = await listing("entries_after_flight")
     await download(entries[-1])
+    await ftp_files(system, args)
+    await shell_commands(system)
     await logs.erase_all_log_files()  # LOG_ERASE has no answer: listing again shows what it did
     try:
         left = await logs.get_entries()
         emit("after_erase", entries=len(left))
     except LogFilesError as exc:
         emit("after_erase", error=exc.result.name)
+
+
+async def ftp_files(system, args) -> None:
+    """MAVSDK's Ftp plugin as against PX4 SITL: list the root and the log directory (PX4 SITL's
+    layout, /log/DATE/TIME.ulg), download the newest log with bursts and with plain reads, compare
+    it by CRC, and try a path outside the root."""
+    ftp = FtpAsync(system)
+
+    def described(data) -> list:
+        return sorted([e.name, e.entry_type.name, e.size_bytes] for e in data.entries)
+
+    root = await ftp.list_directory("/")
+    emit("ftp_root", entries=described(root))
+    days = await ftp.list_directory("/log")
+    listing = {}
+    for day in (e.name for e in days.entries if e.entry_type.name == "DIRECTORY"):
+        listing[day] = described(await ftp.list_directory(f"/log/{day}"))
+    emit("ftp_logs", days=listing)
+    day = max(listing)
+    newest = f"/log/{day}/{max(name for name, kind, _ in listing[day] if kind == 'FILE')}"
+    for burst in (True, False):
+        folder = os.path.join(args.out, "ftp_burst" if burst else "ftp_plain")
+        os.makedirs(folder, exist_ok=True)
+        started = time.monotonic()
+        updates = [(result.name, data.bytes_transferred, data.total_bytes)
+                   async for result, data in ftp.download(newest, folder, burst)]  # fmt: skip
+        local = os.path.join(folder, os.path.basename(newest))
+        identical = await ftp.are_files_identical(local, newest)  # CalcFileCRC32
+        progress = max(((done, total) for _, done, total in updates), default=(0, 0))  # (the end: zeros)
+        wall_s = round(time.monotonic() - started, 3)
+        emit("ftp_download", remote=newest, local=local, burst=burst, result=updates[-1][0],
+             progress=list(progress), identical=identical, wall_s=wall_s)  # fmt: skip
+    try:
+        await ftp.list_directory("/..")
+        emit("ftp_outside", error=None)
+    except FtpError as exc:
+        emit("ftp_outside", error=exc.result.name)
+
+
+SHELL_COMMANDS = ("ver all", "param show MPC_TKO_SPEED", "commander status", "listener vehicle_status")
+
+
+async def shell_commands(system) -> None:
+    """MAVSDK's Shell plugin (QGC's MAVLink Console does the same): subscribe, then send each
+    command; what comes back up to the prompt after it."""
+    shell = ShellAsync(system)
+    received: list[str] = []
+
+    async def collect() -> None:
+        async for chunk in shell.subscribe_receive():
+            received.append(chunk if isinstance(chunk, str) else getattr(chunk, "data", str(chunk)))
+
+    task = asyncio.create_task(collect())
+    await asyncio.sleep(0.2)
+    outputs = {}
+    try:
+        for command in SHELL_COMMANDS:
+            received.clear()
+            await shell.send(command, Device.SHELL)
+            end = time.monotonic() + 5.0
+            while time.monotonic() < end and not "".join(received).rstrip().endswith("nsh>"):
+                await asyncio.sleep(0.05)
+            outputs[command] = "".join(received)
+    finally:
+        task.cancel()
+    emit("shell", outputs=outputs)
 
 
 # MAVSDK-Python's examples/manual_control.py stick inputs: [roll, pitch, throttle, yaw].

@@ -18,7 +18,8 @@ Two things a PX4 user meets here, both from the client side, both the same again
   MIS_TAKEOFF_ALT.
 
 After the landing, ``log list`` / ``log download N FILE`` (MAVProxy's log module, LOG_REQUEST_*):
-the flight's own log is listed beside the two the vehicle had, and one comes down byte-identical.
+the flight's own log is listed beside the two the vehicle had, and one comes down byte-identical;
+then the same over MAVLink FTP (MAVProxy's ftp module: ``ftp list``, ``ftp get``, ``ftp crc``).
 
 Waypoint files: line 0 of a QGC WPL 110 file is a real mission item here (PX4's semantics; MAVProxy
 uploads every line as seq 0..n-1). An ArduPilot file whose line 0 is the home position is flown
@@ -34,6 +35,7 @@ import warnings
 
 import pytest
 
+from autopilot.mavlink.ftp import crc32
 from quadcommon import frames
 from quadcommon.config import load_sitl
 
@@ -158,6 +160,21 @@ def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config, flight_logs):
             mp.send("log download 1 got1.ulg")
             mp.expect(r"Finished downloading got1.ulg", 30)
             assert (tmp_path / "got1.ulg").read_bytes() == on_vehicle[1].read_bytes()
+
+            # MAVLink FTP: the log directory in PX4 SITL's layout, a log by bursts, its CRC.
+            day, name = on_vehicle[0].parent.name, on_vehicle[0].name
+            mp.command("ftp list /log", rf"^ D {day}$", 10)
+            mp.send(f"ftp list /log/{day}")
+            for log in on_vehicle:
+                mp.expect(rf"^\s+{log.name}\t{log.stat().st_size}$", 10)
+            mp.command(f"ftp get /log/{day}/{name} got_ftp.ulg", r"^Wrote \d+ bytes to got_ftp.ulg", 30)
+            got, size = tmp_path / "got_ftp.ulg", on_vehicle[0].stat().st_size
+            flushed = time.monotonic() + 5.0  # MAVProxy prints "Wrote" before its file is closed
+            while got.stat().st_size < size and time.monotonic() < flushed:
+                time.sleep(0.05)
+            assert got.read_bytes() == on_vehicle[0].read_bytes()
+            crc = mp.command(f"ftp crc /log/{day}/{name}", rf"^crc: /log/{day}/{name} (0x[0-9a-f]+)", 10)
+            assert int(crc.group(1), 16) == crc32(on_vehicle[0].read_bytes())
         except AssertionError as exc:
             raise AssertionError(f"{exc}\n--- MAVProxy:\n{mp.tail()}\n{sitl_output(sitl)}") from None
         finally:

@@ -23,8 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from quadcommon.build_info import this_build
+
 from ..ulog_check import check_ulog
-from .vehicles import TruthTap, ports, run_flow, sitl_output, vehicle, vehicle_logs
+from .vehicles import LOG_NAMES, TruthTap, ports, run_flow, sitl_output, vehicle, vehicle_logs
 
 pytestmark = [pytest.mark.processes, pytest.mark.compat]  # (tests/conftest.py: the markers)
 
@@ -211,9 +213,11 @@ def test_params_get_set_and_a_gain_that_changes_the_flight(compat_sitl_config):
     assert rms["changed"] < 0.05, rms  # retuned in flight without a bump
 
 
-def test_log_files_lists_and_downloads_logs_byte_identical(compat_sitl_config, flight_logs, tmp_path):
+def test_log_files_ftp_and_shell(compat_sitl_config, flight_logs, tmp_path):
     """MAVSDK's log_files plugin (what QGC's Log Download does too): the logs on the vehicle, and
-    one it writes while the flow arms and disarms it, downloaded byte-identical; then erased."""
+    one it writes while the flow arms and disarms it, downloaded byte-identical; the same log over
+    MAVLink FTP (the Ftp plugin: PX4 SITL's /log layout, bursts and plain reads, CRC), the MAVLink
+    shell (the Shell plugin: ver, param, commander, listener); then the logs erased."""
     log_dir, out = tmp_path / "log", tmp_path / "downloads"
     out.mkdir()
     vehicle_logs(log_dir, flight_logs)
@@ -236,6 +240,30 @@ def test_log_files_lists_and_downloads_logs_byte_identical(compat_sitl_config, f
     assert not list(log_dir.glob("*/*.ulg"))  # erased on the vehicle
     ulog = check_ulog(Path(downloads[2]["path"]), flight_review=False)  # the flow's arming, logged
     assert ulog.get_dataset("paper_tracking").data["armed"].all()
+
+    # MAVLink FTP: the root is the log directory (no parameter file on this vehicle), as PX4 SITL's.
+    assert result.event("ftp_root")["entries"] == [["log", "DIRECTORY", 0]]
+    days = result.event("ftp_logs")["days"]
+    day = Path(LOG_NAMES[0]).parent.name  # the day the vehicle's two logs are filed under
+    assert days[day] == [[Path(n).name, "FILE", log.stat().st_size] for n, log in
+                         zip(LOG_NAMES, flight_logs, strict=True)]  # fmt: skip
+    assert len(days) == 2  # and the day of the flow's flight (UTC)
+    flown = Path(downloads[2]["path"]).read_bytes()  # the newest log, as the log protocol gave it
+    for burst in (True, False):
+        ftp = next(e for e in result.events if e["event"] == "ftp_download" and e["burst"] is burst)
+        assert ftp["result"] == "SUCCESS" and ftp["progress"] == [len(flown), len(flown)], ftp
+        assert ftp["identical"] is True, ftp  # CalcFileCRC32 agrees with MAVSDK's own CRC
+        assert Path(ftp["local"]).read_bytes() == flown
+    assert result.event("ftp_outside")["error"] == "FILE_PROTECTED"  # '/..' leaves the root
+
+    # The MAVLink shell: each command's output, then the prompt.
+    shell = result.event("shell")["outputs"]
+    assert all(out.rstrip().endswith("nsh>") for out in shell.values()), shell
+    assert f"quadsitl git-hash: {this_build().commit_text}" in shell["ver all"]
+    shown = shell["param show MPC_TKO_SPEED"]
+    assert "MPC_TKO_SPEED [" in shown and ": 1.5000" in shown
+    assert "armed: no" in shell["commander status"]
+    assert "arming_state: 1" in shell["listener vehicle_status"]
 
 
 def test_what_mavsdk_needs_item_by_item(compat_sitl_config):

@@ -174,7 +174,8 @@ def test_param_list_get_set_and_refusals(vehicle):
     assert "flight termination is not supported" in all_text
     assert "type 9 refused, it is INT32" in all_text
 
-    # MAVLink FTP gets a NAK (MAVProxy then falls back to PARAM_REQUEST_LIST at once)
+    # ArduPilot's parameter file over MAVLink FTP is FileNotFound, as on PX4 (MAVProxy then falls
+    # back to PARAM_REQUEST_LIST at once)
     header = struct.pack("<HBBBBBBI", 1, 0, 4, 16, 0, 0, 0, 0) + b"@PARAM/param.pck"
     gcs.conn.mav.file_transfer_protocol_send(0, gcs.system_id, 1, list(header.ljust(251, b"\0")))
     end = gcs.sim_time + 0.2
