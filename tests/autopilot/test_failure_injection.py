@@ -254,7 +254,7 @@ def test_a_motors_loss_of_effectiveness_given_in_param4_or_sim_mot_eff():
         assert stack.sim.plant.rotor_effectiveness[left] == 0.25
         stack.autopilot.params.set("SIM_MOT_EFF", 0.5)
     assert command(gcs, Unit.motor, Type.wrong, 2, 1.5) == m.MAV_RESULT_DENIED
-    assert "param4 (motor effectiveness for wrong (0 or NaN: SIM_MOT_EFF)) = 1.5 out of range [0, 1]" in texts(gcs)
+    assert "(0 or NaN: SIM_MOT_EFF)) = 1.5 out of range [0, 1]" in texts(gcs)  # the parameter's rule
     assert command(gcs, Unit.motor, Type.stuck, 2) == m.MAV_RESULT_ACCEPTED
     stack.step()
     assert stack.sim.plant.rotor_fault(left + 1).failure_type == Type.stuck
