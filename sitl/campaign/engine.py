@@ -67,7 +67,7 @@ ESTIMATION_COLUMNS = (
     "estimate_rms_error_m", "worst_test_ratio", "time_not_converged_s", "rejected_samples",
 )  # fmt: skip
 # A campaign that draws faults, after those (:func:`fault_columns`).
-FAULT_COLUMNS = ("survived", "max_excursion_m", "time_to_recover_s", "impact_speed_m_s")
+FAULT_COLUMNS = ("survived", "fault_onset_s", "max_excursion_m", "time_to_recover_s", "impact_speed_m_s")
 
 
 @dataclass(frozen=True)
@@ -336,8 +336,9 @@ def fault_columns(metrics: np.ndarray, row: dict, survival: SurvivalLimits, onse
                   dt_control: float) -> dict[str, float | bool]:  # fmt: skip
     """A fault study's columns of one flight (:data:`FAULT_COLUMNS`), from its metrics row and its
     named columns (``row``: :func:`metrics_dict`'s): ``survived`` (the run flew to its end and its
-    position error stayed within the envelope), ``max_excursion_m`` (the largest position error
-    from the first fault's onset ``onset_s`` on; NaN when the run ended before it),
+    position error stayed within the envelope), ``fault_onset_s`` (the first fault's, ``onset_s``),
+    ``max_excursion_m`` (the largest position error from the onset on; NaN when the run ended
+    before it),
     ``time_to_recover_s`` (from the onset until the error is back within the recovery bound for
     good: 0 if it never left it; NaN when it had not recovered by the run's end, or the run failed)
     and ``impact_speed_m_s`` (the downward speed at a ground contact after take-off; NaN: none)."""
@@ -354,6 +355,7 @@ def fault_columns(metrics: np.ndarray, row: dict, survival: SurvivalLimits, onse
         recover = max(last_out + dt_control - onset_s, 0.0)
     return {
         "survived": not failed and float(row["max_position_error_m"]) <= survival.envelope_m,
+        "fault_onset_s": onset_s,
         "max_excursion_m": float(metrics[lay.M_EXCURSION]),
         "time_to_recover_s": recover,
         "impact_speed_m_s": float(metrics[lay.M_IMPACT_SPEED]),

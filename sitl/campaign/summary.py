@@ -290,6 +290,8 @@ def fault_section(table: pa.Table, spec: CampaignSpec, controllers: Sequence[str
     reasons = np.array(table.column("failure").to_pylist(), dtype=object)
     excursion = np.array(table.column("max_excursion_m").to_pylist(), dtype=float)
     recover = np.array(table.column("time_to_recover_s").to_pylist(), dtype=float)
+    failed_at = np.array(table.column("failure_time_s").to_pylist(), dtype=float)
+    early = failed & (failed_at < np.array(table.column("fault_onset_s").to_pylist(), dtype=float))
     limits = spec.survival
     drawn = [
         f"{', '.join(f.types)} of motor {f.motor.describe()} (effectiveness {f.effectiveness.describe()}) "
@@ -304,11 +306,12 @@ def fault_section(table: pa.Table, spec: CampaignSpec, controllers: Sequence[str
         f"Drawn per run: {'; '.join(drawn)}. Survived: the run flew to its end (no failure) and its "
         f"position error stayed within {limits.envelope_m:g} m of the reference; excursion: the largest "
         f"position error from the fault's onset on; recovered: back within {limits.recovery_bound_m:g} m "
-        "for the rest of the run (the time from the onset). Ranked by survival, then by the median "
-        "excursion.",
+        "for the rest of the run (the time from the onset). Ranked by survival over every run (a run lost "
+        "before its fault's onset counts too: the column of the runs lost says how many), then by the "
+        "median excursion.",
         "",
         "| rank | controller | survived | excursion, median / p95 / worst (m) | recovered | time to recover, "
-        "median / p95 (s) | lost: failed (reasons) / outside the envelope |",
+        "median / p95 (s) | lost: failed (reasons; before the onset) / outside the envelope |",
         "|---:|---|---:|---:|---:|---:|---|",
     ]
     for rank, (c, share, _) in enumerate(fault_ranking(table, controllers), 1):
@@ -322,13 +325,28 @@ def fault_section(table: pa.Table, spec: CampaignSpec, controllers: Sequence[str
         for r in reasons[sel & failed]:
             counts[r] = counts.get(r, 0) + 1
         detail = ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()))
+        if detail:
+            detail += f"; {int((sel & early).sum())} before the onset"
         outside = int((sel & ~failed & ~survived).sum())
         lost = f"{int((sel & failed).sum())}" + (f" ({detail})" if detail else "") + f" / {outside}"
         lines.append(
             f"| {rank} | {title(c)} | {int(survived[sel].sum())}/{n} ({100.0 * share:.1f} %) | {_fmt(med)} / "
             f"{_fmt(p95)} / {_fmt(worst)} | {rec.size}/{n} | {_fmt(rmed)} / {_fmt(rp95)} | {lost} |"
         )
-    params = [p for p in parameter_names(table) if p.startswith(("actuator_fault", "fault"))]
+    groups = _drawn_groups(table, spec)
+    if groups:
+        lines += ["", "Survived, by the fault drawn:", "",
+                  "| fault drawn | runs | " + " | ".join(title(c) for c in controllers) + " |",
+                  "|---|---:|" + "---:|" * len(controllers)]  # fmt: skip
+        for label, which in groups:
+            cells = []
+            for c in controllers:
+                sel = (names == c) & which
+                cells.append(f"{int(survived[sel].sum())}/{int(sel.sum())}")
+            runs = int(((names == controllers[0]) & which).sum())
+            lines.append(f"| {label} | {runs} | " + " | ".join(cells) + " |")
+    params = [p for p in parameter_names(table) if p.startswith(("actuator_fault", "fault"))
+              and not p.endswith(("_kind_index", "_type_index")) and "_value_" not in p]  # fmt: skip
     if params:
         lines += ["", "Fault parameters in the runs lost (median, against all runs):", ""]
         for c in controllers:
@@ -342,6 +360,31 @@ def fault_section(table: pa.Table, spec: CampaignSpec, controllers: Sequence[str
                 cells.append(f"{p} {np.median(values[lost]):.4g} ({np.median(values[sel]):.4g})")
             lines.append(f"- {title(c)}: " + "; ".join(cells))
     return lines
+
+
+def _drawn_groups(table: pa.Table, spec: CampaignSpec) -> list[tuple[str, np.ndarray]]:
+    """The rows by what was drawn among several: each sensor fault's kind, each actuator fault's
+    type and motor (``(label, rows)``)."""
+    out = []
+
+    def column(name: str) -> np.ndarray | None:
+        return np.array(table.column(name).to_pylist(), dtype=float) if name in table.column_names else None
+
+    for i, f in enumerate(spec.actuator_faults):
+        for key, labels in ((f"actuator_fault{i}_type_index", f.types),
+                            (f"actuator_fault{i}_motor", None)):  # fmt: skip
+            values = column(key)
+            if values is None or np.all(values == values[0]):
+                continue
+            for v in sorted(set(values.tolist())):
+                label = labels[int(v)] if labels is not None else ("all motors" if v == 0 else f"motor {v:g}")
+                out.append((label, values == v))
+    if spec.estimation is not None:
+        for i, f in enumerate(spec.estimation.faults):
+            values = column(f"fault{i}_kind_index")
+            if values is not None:
+                out += [(kind, values == k) for k, kind in enumerate(f.kinds) if (values == k).any()]
+    return out
 
 
 def _run_list(runs: np.ndarray, limit: int = 12) -> str:
