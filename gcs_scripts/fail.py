@@ -90,6 +90,7 @@ def parse_words(unit: str, words: list[str], instance: int) -> Request:
 
 def build_parser(prog: str = "quadsitl fail") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=HelpFormatter,
+                                     usage="%(prog)s [options] UNIT [N] TYPE [EFFECTIVENESS]",
                                      epilog="units and their types here:\n" + help_text())  # fmt: skip
     parser.add_argument("unit", choices=[u.name for u in Unit], metavar="UNIT",
                         help="the failing unit, PX4's names: " + ", ".join(u.name for u in Unit))  # fmt: skip

@@ -500,7 +500,6 @@ class SimulatorCore:
 HEALTHY_ROTORS = (*(HEALTHY.effectiveness,) * 4, *(float(HEALTHY.failure_type),) * 4)
 
 
-
 def resend_after_s(sitl: SitlConfig) -> float:
     """How long (s) an unanswered frame waits before it is sent again: ``[lockstep] resend_s``
     plus the HIL link's impairment round trip (delay and jitter both ways), so a frame that is
