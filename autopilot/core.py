@@ -280,7 +280,7 @@ class AutopilotCore:
         self.simulator_requests = SimulatorRequests(self.encoder, self.system_id)  # in the next answer
         self.failure_injection = FailureInjection(
             self.params, self._request_failure, lambda: self.estimator is not None, self.refusals,
-            self.statustext, self.wrench,
+            self.statustext,
         )  # fmt: skip
         self.vehicle_commands = VehicleCommands(self)
         self.vehicle_commands.register(self.commands)
@@ -633,7 +633,8 @@ class AutopilotCore:
 
     def _log_frame(self, frame, guidance, output) -> None:
         """The frame into the flight log (autopilot/logger/), when one is open; the simulator's
-        disturbance when the frame reports it (kept while no log is open: a log starts with it)."""
+        disturbance and rotors' health when the frame reports them (kept while no log is open: a log
+        starts with them)."""
         log = self.flight_log
         parts = frame.parts
         due = log.frame(frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1],
@@ -641,7 +642,8 @@ class AutopilotCore:
         if parts is not None and DISTURBANCE_ID in parts:  # a change, or a reminder (quadcommon.wire)
             report = disturbance_of(parts)
             if report is not None:
-                log.disturbance(*report)
+                log.disturbance(report.time_usec, report.force_n, report.torque_n_m)
+                log.rotor_health(report.time_usec, report.rotor_effectiveness, report.rotor_failure)
         if due:  # the periodic topics (one frame in ten, at most)
             s = log.snapshot
             s.reference = guidance.reference
@@ -791,12 +793,13 @@ class AutopilotCore:
         )  # fmt: skip
         return self.flight_log.sample_now(name, snapshot)
 
-    def _request_failure(self, unit: int, failure_type: int, instance: int) -> bool:
-        """MAV_CMD_INJECT_FAILURE for the simulator, in the next answer; False when too many wait."""
+    def _request_failure(self, unit: int, failure_type: int, instance: int, effectiveness: float) -> bool:
+        """MAV_CMD_INJECT_FAILURE for the simulator, in the next answer (param4: a motor's
+        effectiveness); False when too many wait."""
         requests = self.simulator_requests
         if requests.full:
             return False
-        requests.command(m.MAV_CMD_INJECT_FAILURE, unit, failure_type, instance)
+        requests.command(m.MAV_CMD_INJECT_FAILURE, unit, failure_type, instance, effectiveness)
         return True
 
     def _on_set_mode_message(self, msg, link: GcsLink, address: Address) -> None:

@@ -21,7 +21,10 @@ with that process's error. With ``--estimator ekf --sensors NAME`` two
 more fresh processes fly the same campaign on the estimate (the sensor profile NAME and the
 autopilot's EKF, each run with its own noise): the first compiles the flight on the estimate (an
 entry of its own), the second's wall time is printed beside the truth campaign's warm one with
-their ratio, measured in the same run. The machine is
+their ratio, measured in the same run. A spec that draws faults (``--spec paper_box_faults``) is
+flown a third time, in a fresh process with the cache warm, without its faults (no
+``[[actuator_faults]]``: the same runs, healthy), and the two wall
+times are printed with their ratio: what the faults cost. The machine is
 shared: the CPU seconds (this process and its workers) and the load average before each
 measurement are printed too, so a wall time taken under someone else's load can be read. Last
 lines ``name: value unit``.
@@ -42,7 +45,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = {"cold": "cold numba cache", "warm": "warm numba cache", "ekf_cold": "on the EKF, cold numba cache",
-         "ekf": "on the EKF, warm numba cache"}
+         "ekf": "on the EKF, warm numba cache", "healthy": "without its faults, warm numba cache"}
 
 
 def _cpu_s() -> float:
@@ -62,11 +65,12 @@ def flown_spec(args: argparse.Namespace):
     from sitl.campaign.spec import estimation_spec, flown_by, load_campaign
 
     spec = flown_by(load_campaign(args.spec, runs=args.runs), args.controller)
-    return replace(
+    spec = replace(
         spec,
         wire_float32=args.wire == "on",
         estimation=estimation_spec(args.sensors) if args.estimator == "ekf" else None,
     )
+    return replace(spec, actuator_faults=()) if args.healthy else spec  # the same runs without their faults
 
 
 def child(args: argparse.Namespace) -> None:
@@ -112,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--sensors", default="gps", help="the EKF campaign's sensor profile (default gps)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--healthy", action="store_true", help=argparse.SUPPRESS)
     return parser
 
 
@@ -140,13 +145,17 @@ def main(argv: list[str] | None = None) -> None:
     # A flight on the estimate is a compiled entry of its own (the truth's holds no filter): its
     # first run compiles it, the second is the figure.
     labels = ("cold", "warm", "ekf_cold", "ekf") if args.estimator == "ekf" else ("cold", "warm")
+    if spec.draws_faults:  # the same runs without their faults, for what the faults cost
+        labels = (*labels[:1], "healthy", *labels[1:])
     with tempfile.TemporaryDirectory() as cache:
         # An empty cache for both the generated entry modules and numba's compiled code: the first
         # child compiles the law pair's flight from scratch (what a new law costs once).
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, QUADSITL_KERNEL_CACHE=cache)
         for label in labels:
             estimator = ["--estimator", "ekf" if label.startswith("ekf") else "truth"]
-            out = subprocess.run(cmd + estimator, env=env, capture_output=True, text=True, timeout=3600)
+            healthy = ["--healthy"] if label == "healthy" else []
+            out = subprocess.run(cmd + estimator + healthy, env=env, capture_output=True, text=True,
+                                 timeout=3600)  # fmt: skip
             if out.returncode != 0:
                 sys.stderr.write(out.stderr)
                 print(f"benchmarks/campaign.py: the {NAMES[label]} measurement failed "
@@ -173,6 +182,13 @@ def main(argv: list[str] | None = None) -> None:
     print(f"numba_cache_load_time: {warm['warm_up_s']:.2f} s")
     print(f"campaign_cpu_time_warm_cache: {warm['cpu_s']:.1f} s")
     print(f"campaign_vehicle_steps_per_s_warm: {physics_steps / warm['wall_s']:.3g} steps/s")
+    if "healthy" in results:
+        healthy = results["healthy"]
+        print(f"with its faults: {warm['failed']} failed; without: {healthy['failed']} failed")
+        print(f"campaign_wall_time_faults: {warm['wall_s']:.1f} s")
+        print(f"campaign_wall_time_without_faults: {healthy['wall_s']:.1f} s")
+        print(f"campaign_cpu_time_without_faults: {healthy['cpu_s']:.1f} s")
+        print(f"campaign_faults_to_healthy_ratio: {warm['wall_s'] / healthy['wall_s']:.2f} x")
     if "ekf" in results:
         ekf = results["ekf"]
         print(f"on the estimate: sensors {args.sensors}, the autopilot's EKF; {ekf['failed']} failed")

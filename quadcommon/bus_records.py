@@ -37,7 +37,12 @@ TRUTH_FIELDS = (
     "wind_x_m_s", "wind_y_m_s", "wind_z_m_s",
     "thrust_n",  # applied U1
     "tau_x_n_m", "tau_y_n_m", "tau_z_n_m",  # applied control torque, body
-    "rotor1_rad_s", "rotor2_rad_s", "rotor3_rad_s", "rotor4_rad_s",
+    "rotor1_rad_s", "rotor2_rad_s", "rotor3_rad_s", "rotor4_rad_s",  # 1 front, 2 right, 3 rear, 4 left
+    # the rotors' health (the same order): the fraction of thrust and reaction torque each gives
+    # (1 healthy, 0 off), and its failure as MAVLink's FAILURE_TYPE (0 none, 1 off, 2 stuck, 4
+    # wrong: a loss of effectiveness); on the ideal-wrench vehicle, its share of the wrench's
+    "rotor1_effectiveness", "rotor2_effectiveness", "rotor3_effectiveness", "rotor4_effectiveness",
+    "rotor1_failure", "rotor2_failure", "rotor3_failure", "rotor4_failure",
     "on_ground",
 )  # fmt: skip
 

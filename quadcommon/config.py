@@ -7,7 +7,7 @@ Files and what they hold:
   battery.
 * ``config/controllers/NAME.toml``: read by :mod:`autopilot.control.config` (the laws' own schemas).
 * ``config/scenarios/NAME.toml``: trajectory, initial state, parametric uncertainty, gust profile,
-  duration.
+  duration, motor failures at a time (``[[actuator_faults]]``, :mod:`.failures`).
 * ``config/sitl.toml``: rates, ports, home position, zenoh endpoints, lockstep timeouts.
 
 Gust profiles (``config/gusts/``) are read by :mod:`simulator.environment.gust_profile`.
@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from . import environment, wire
+from .failures import ActuatorFault, read_actuator_faults
 from .impairment import LINKS, ImpairConfig, parse_impairment
 from .schema import ConfigError, Section, load_toml
 
@@ -387,6 +388,9 @@ class ScenarioConfig:
     takeoff_altitude_m: float = field(default=2.5)
     sensors: str = field(default="ideal")  # sensor profile (config/sensors/NAME.toml)
     estimator: str = field(default="truth")  # what the autopilot flies on: "truth" or "ekf"
+    # Motor failures at a time ([[actuator_faults]]; quadcommon.failures.ActuatorFault): the
+    # simulator applies each from the first frame at or after its start_s.
+    actuator_faults: tuple[ActuatorFault, ...] = field(default=())
 
 
 def estimator_profile_for(sensors: str) -> str:
@@ -457,6 +461,8 @@ def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
     mass_scale = sec.number("mass_scale", 1.0, lo=0.5, hi=2.0)
     inertia_scale = sec.number("inertia_scale", 1.0, lo=0.5, hi=2.0)
     sec.finish()
+    faults = read_actuator_faults(root.data.get("actuator_faults", []), str(path), "", duration)
+    root._used.add("actuator_faults")  # noqa: SLF001  (Section's own bookkeeping of the keys read)
     root.finish()
     return ScenarioConfig(
         name,
@@ -472,6 +478,7 @@ def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
         takeoff_alt,
         sensors,
         estimator,
+        faults,
     )
 
 

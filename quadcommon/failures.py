@@ -15,8 +15,11 @@ Where a failure acts (:class:`Where`):
   ``VISION_POSITION_ESTIMATE``). The vehicle learns of the failure from its data only, as on PX4;
   these act on the EKF (``EKF2_EN`` 1, ``--estimator ekf``): on the simulator's state (the
   default) the vehicle does not fly on its sensors, and the autopilot refuses them;
-* ``plant``: the simulator's rigid body (a rotor's effectiveness; vehicles with
-  ``actuation = "rotors"``);
+* ``plant``: the simulator's rigid body: a rotor off, stuck at its speed, or at a loss of
+  effectiveness (``wrong``: it gives a fraction of its thrust and reaction torque, the fraction in
+  the command's param4 or :data:`MOTOR_EFFECTIVENESS_PARAMETER`); on the rotors vehicle the rotor
+  itself, on the paper's ideal-wrench vehicle the rotor's share of the wrench through the
+  allocation's equation (:mod:`quadcommon.rotor_geometry`);
 * ``battery``: the simulator's battery model;
 * ``autopilot``: the autopilot's own MAVLink links (as PX4's receiver): the existing data-link and
   RC-loss failsafes then act.
@@ -31,6 +34,9 @@ unit's failure. Each unit has one failure at a time: a new type replaces the act
 
 Motors are numbered as PX4 numbers a quadrotor in + configuration (airframe geometry "4+",
 :data:`PX4_MOTOR_POSITIONS`): 1 right, 2 left, 3 front, 4 rear; instance 0 is all of them.
+
+The same rotor faults at a time rather than on command: a scenario's ``[[actuator_faults]]``
+(:class:`ActuatorFault`, :func:`read_actuator_faults`) and a campaign's drawn ones.
 """
 
 from __future__ import annotations
@@ -92,6 +98,10 @@ EXTRA_LATENCY_S = 0.2  # delayed: added to the sensor's latency (GPS: GPS_EXTRA_
 GPS_EXTRA_LATENCY_S = 0.5
 # PX4's quadrotor + geometry ("4+"): motor n (1-based) sits at PX4_MOTOR_POSITIONS[n - 1].
 PX4_MOTOR_POSITIONS = ("right", "left", "front", "rear")
+# A motor's "wrong": the effectiveness it keeps (in [0, 1]), param4 of the command when in (0, 1],
+# else this autopilot parameter's value.
+MOTOR_EFFECTIVENESS_PARAMETER = "SIM_MOT_EFF"
+MOTOR_EFFECTIVENESS_DEFAULT = 0.5
 
 
 @dataclass(frozen=True)
@@ -190,9 +200,16 @@ FAILURES: dict[Unit, UnitModel] = {
             Type.intermittent: _INTERMITTENT,
         }, "vision / motion capture (a sensor profile with `[vision]`, e.g. mocap)"),
         UnitModel(Unit.motor, Where.PLANT, 4, {
-            Type.off: Effect("the rotor gives no thrust and no reaction torque (effectiveness 0)"),
-        }, "a rotor, numbered as PX4's quadrotor + (1 right, 2 left, 3 front, 4 rear); "
-           "vehicles with actuation \"rotors\""),
+            Type.off: Effect("the motor unpowered: the rotor gives no thrust and no reaction torque and "
+                             "spins down"),
+            Type.stuck: Effect("the rotor held at the speed it had (the wrench vehicle: its share of the "
+                               "wrench held)"),
+            Type.wrong: Effect(f"a loss of effectiveness: the rotor gives a fraction of its thrust and "
+                               f"reaction torque, param4 when in (0, 1], else "
+                               f"{MOTOR_EFFECTIVENESS_PARAMETER} ({MOTOR_EFFECTIVENESS_DEFAULT:g})",
+                               (MOTOR_EFFECTIVENESS_DEFAULT, 0.0, 0.0)),
+        }, "a rotor, numbered as PX4's quadrotor + (1 right, 2 left, 3 front, 4 rear); on the paper's "
+           "ideal-wrench vehicle, the rotor's share of the wrench (the allocation's equation)"),
         UnitModel(Unit.battery, Where.BATTERY, 1, {
             Type.off: Effect("the monitor reads the pack empty (the cells at their empty voltage), as PX4's "
                              "battery simulator takes off"),
@@ -291,6 +308,68 @@ def keep_active(active: dict[str, str], unit: int, failure_type: int, instance: 
             active.pop(key, None)
         else:
             active[key] = Type(failure_type).name
+
+
+def motor_effectiveness(failure_type: int, param4: float, parameter: float) -> float | None:
+    """The effectiveness a motor keeps: for ``wrong``, param4 when it is in (0, 1] (0 and NaN are
+    MAVLink's "unset"), else ``parameter`` (:data:`MOTOR_EFFECTIVENESS_PARAMETER`); None for a
+    param4 outside [0, 1]. Other types: 1 (``stuck``, ``ok``) or 0 (``off``)."""
+    if failure_type != Type.wrong:
+        return 0.0 if failure_type == Type.off else 1.0
+    if math.isnan(param4) or param4 == 0.0:
+        return parameter
+    return float(param4) if 0.0 < param4 <= 1.0 else None
+
+
+# -- rotor faults at a time (a scenario's [[actuator_faults]], a campaign's drawn ones) -----------
+ACTUATOR_FAULT_TYPES = ("off", "stuck", "wrong", "ok")  # the motor's types, and ok (the recovery)
+
+
+@dataclass(frozen=True)
+class ActuatorFault:
+    """A motor's failure from a time on: PX4's ``motor`` number (1 right, 2 left, 3 front, 4 rear;
+    0 all), the failure ``type`` (``off``, ``stuck``, ``wrong``, ``ok``), the ``effectiveness`` a
+    ``wrong`` motor keeps (in [0, 1]; 1 otherwise, 0 for ``off``), and ``start_s`` (s of simulation
+    time: from the first frame at or after it, as a commanded failure applies from a frame)."""
+
+    motor: int
+    type: str
+    effectiveness: float
+    start_s: float
+
+    @property
+    def failure_type(self) -> Type:
+        return Type[self.type]
+
+    def describe(self) -> str:
+        what = f"wrong ({self.effectiveness:.3g} effectiveness)" if self.type == "wrong" else self.type
+        motors = "all motors" if self.motor == ALL_INSTANCES else f"motor {self.motor}"
+        return f"{motors} {what} from {self.start_s:.3g} s"
+
+
+def read_actuator_faults(items, source: str, prefix: str, duration_s: float) -> tuple[ActuatorFault, ...]:
+    """A scenario's ``[[actuator_faults]]`` (a list of tables: ``motor``, ``type``, ``effectiveness``
+    for ``wrong``, ``start_s`` within the run), validated; errors name the file and the key."""
+    from .schema import ConfigError, Section
+
+    if not isinstance(items, list) or not all(isinstance(item, dict) for item in items):
+        raise ConfigError(f"{source}: key '{prefix}actuator_faults' = {items!r} is invalid; allowed: a "
+                          "list of tables ([[actuator_faults]] with motor, type, start_s)")  # fmt: skip
+    faults = []
+    for i, item in enumerate(items):
+        sec = Section(item, source, f"{prefix}actuator_faults[{i}].")
+        motor = sec.integer("motor", lo=0, hi=FAILURES[Unit.motor].instances)
+        kind = sec.choice("type", ACTUATOR_FAULT_TYPES)
+        start = sec.number("start_s", lo=0.0, hi=duration_s, unit="s")
+        if kind == "wrong":
+            effectiveness = sec.number("effectiveness", MOTOR_EFFECTIVENESS_DEFAULT, lo=0.0, hi=1.0)
+        elif sec.has("effectiveness"):
+            raise sec.error("effectiveness", sec.data["effectiveness"], "only with type = \"wrong\"")
+        else:
+            effectiveness = 0.0 if kind == "off" else 1.0
+        sec.finish()
+        faults.append(ActuatorFault(motor, kind, effectiveness, start))
+    return tuple(faults)
 
 
 def sensor_fault_kinds() -> tuple[str, ...]:

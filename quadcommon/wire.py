@@ -38,8 +38,12 @@ The frame also carries the disturbance the simulator applies, as a ``DEBUG_FLOAT
 the sample's time, the frame's or, when a changing value settles, the frame it settled at), at
 every change after a steady stretch, every 10 ms while it keeps changing, when it settles, and at
 least every :data:`DISTURBANCE_REPORT_EVERY_S` of simulated time (an autopilot that starts late
-learns it); a receiver holds the last report (``simulator.core.DisturbanceReport``). The flight
-log's ``sim_disturbance`` comes from it.
+learns it); a receiver holds the last report (``simulator.core.DisturbanceReport``). The same
+array carries the rotors' health, what the simulator applies beyond the controls as well:
+``data[6:10]`` each rotor's effectiveness (1 healthy, 0 off), ``data[10:14]`` its failure as
+``FAILURE_TYPE`` (0 none, 1 off, 2 stuck, 4 wrong), rotors 1-4 in the plant's order (1 front,
+2 right, 3 rear, 4 left); a change of health is an onset like a disturbance's. The flight log's
+``sim_disturbance`` and ``sim_rotors`` come from it.
 
 The frame carries the flight battery as a power module measures it, a ``BATTERY_STATUS`` from
 the simulator's component at :data:`BATTERY_REPORT_HZ` (simulator.battery): ``voltages[0]`` the
@@ -65,7 +69,8 @@ component :data:`AUTOPILOT_COMPONENT_ID`, never signed) addressed to the simulat
 (``target_system`` 1 + N, ``target_component`` :data:`SIMULATOR_COMPONENT_ID`); at most
 :data:`MAX_REQUESTS_PER_ANSWER` per answer (more wait for the next one). The requests:
 ``COMMAND_LONG`` ``MAV_CMD_INJECT_FAILURE`` (param1 unit, param2 type, param3 instance, as the
-ground station sent them); ``PARAM_SET`` of a simulator parameter the autopilot declares (PX4's
+ground station sent them; param4 the effectiveness a motor's ``wrong`` leaves it, in [0, 1], as
+the autopilot resolved it, 1 otherwise); ``PARAM_SET`` of a simulator parameter the autopilot declares (PX4's
 ``SIM_BAT_ENABLE``, ``SIM_BAT_DRAIN``, ``SIM_BAT_MIN_PCT``; ``param_value`` the plain value as a
 float, whatever the parameter's type), sent when it changes and, at a simulator's first frame,
 those that differ from the vehicle file's. The simulator takes requests only from the answer it
@@ -112,6 +117,7 @@ SIMULATOR_COMPONENT_ID = 51  # a component of the same system on the HIL link (n
 # The applied disturbance in the lockstep frame (see the module's docstring).
 DISTURBANCE_NAME = b"DISTURB"
 DISTURBANCE_REPORT_EVERY_S = 1.0
+DISTURB_SIZE = 14  # floats of data used: force (3), torque (3), rotor effectiveness (4), failure type (4)
 
 # The flight battery's monitor in the lockstep frame (see the module's docstring).
 BATTERY_REPORT_HZ = 20.0

@@ -26,6 +26,8 @@ lockstep loop; both paths run it, so their trajectories are identical.
 The autopilot's requests to the simulator ride in the answer (:mod:`quadcommon.wire`):
 :meth:`~SimulatorCore.end_frame` takes those of the answer it applies, once, and carries them out
 from the next frame on (:meth:`~SimulatorCore.inject_failure`: a sensor, a rotor, the battery).
+The scenario's motor failures at a time (``[[actuator_faults]]``) apply at the start of the first
+frame at or after their time, through the plant's fault table (the kernels the campaigns fly).
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ from quadcommon.config import (
 from quadcommon.wire import new_parser, restart_parser
 
 from .battery import BatteryModel
-from .dynamics.plant import ROTOR_POSITIONS, make_plant
+from .dynamics.plant import HEALTHY, RotorFault, make_plant, motors_of, rotor_of_motor, schedule
 from .environment.gust_profile import DisturbanceSchedule, GustProfile, load_gust_profile
 from .environment.gust_upload import handle_gust_request
 from .mavlink.hil import (
@@ -181,6 +183,13 @@ class SimulatorCore:
         self._requests_usec = -1  # the answer whose requests applied last (a copy never applies twice)
         self._late_answer: ActuatorAnswer | None = None  # its requests apply at the next end_frame
         self.failures: dict[str, str] = {}  # active injected failures: unit -> type (PX4's names)
+        # The scenario's motor failures at a time, one row per motor, by onset (the plant's table).
+        self._scheduled, self._fault_table = schedule(setup.scenario.actuator_faults)
+        if self._scheduled and setup.nominal_plant:
+            raise ValueError(f"scenario '{setup.scenario.name}': actuator_faults need the coupled plant "
+                             "(the nominal Section II model has no rotors)")  # fmt: skip
+        self._fault_row = 0
+        self.rotor_health = HEALTHY_ROTORS  # per rotor (plant order): effectiveness x 4, failure type x 4
         self._probe = new_parser()  # for is_autopilot: never touches the lockstep decoder
         self.k = 0  # the frame being flown
         self.time_usec = 0
@@ -210,14 +219,17 @@ class SimulatorCore:
             self.schedule, self._pending_schedule = self._pending_schedule, None
         k, t = self.k, self.k * self.dt_control
         self.time_usec = time_usec = round(k * self.usec_per_frame)
+        if self._fault_row < len(self._scheduled):
+            self._scheduled_faults_due(t)
         truth = self.plant.truth()
         p = truth.position_m
         if not math.isfinite(p[0] + p[1] + p[2]):
             raise PlantDiverged(f"the plant state is not finite at t={t:.3f} s")
         force, torque, wind = self.schedule.evaluate(t)
         sensed = self.sensors.step(t, truth)
-        self.truth_row = truth_row(t, truth, force, torque, wind)
-        report = self.disturbance_report.due(time_usec, (force, torque))
+        health = self.rotor_health
+        self.truth_row = truth_row(t, truth, force, torque, wind, health)
+        report = self.disturbance_report.due(time_usec, (force, torque, health))
         battery = self.battery.frame(t, self.dt_control if k > 0 else 0.0, truth, self._armed)
         try:
             datagram = self.encoder.encode(
@@ -290,7 +302,8 @@ class SimulatorCore:
         """Carry out one request from now on (the frame :attr:`t`); one that cannot be is refused
         and counted with its reason (``info()['requests']``)."""
         if isinstance(request, InjectFailure):
-            problem = self.inject_failure(request.unit, request.failure_type, request.instance)
+            problem = self.inject_failure(request.unit, request.failure_type, request.instance,
+                                          request.effectiveness)  # fmt: skip
         elif isinstance(request, SetSimParameter):
             accepted = self.set_battery_parameter(request.name, request.value)
             problem = None if accepted else f"PARAM_SET {request.name} = {request.value:g} refused"
@@ -301,10 +314,13 @@ class SimulatorCore:
         else:
             self.requests.refuse(problem)  # one count of the refusals on the channel
 
-    def inject_failure(self, unit: int, failure_type: int, instance: int) -> str | None:
+    def inject_failure(
+        self, unit: int, failure_type: int, instance: int, effectiveness: float = 1.0
+    ) -> str | None:
         """``MAV_CMD_INJECT_FAILURE`` (:mod:`quadcommon.failures`) from the current frame on: a
-        sensor of the sensor models, a rotor of the plant (PX4's motor numbers), the battery
-        model. None when applied, else why not."""
+        sensor of the sensor models, a rotor of the plant (PX4's motor numbers; ``effectiveness``
+        what a ``wrong`` one keeps, in [0, 1]), the battery model. None when applied, else why
+        not."""
         refusal = failures.refusal(unit, failure_type, instance)
         if refusal is not None:
             return refusal[1]
@@ -314,13 +330,15 @@ class SimulatorCore:
         if where is failures.Where.SENSORS:
             self.sensors.inject_failure(name, failure_type, self.t)
         elif where is failures.Where.PLANT:
-            if self.wrench:
-                return f"failure {name}: vehicle '{self.setup.vehicle.name}' has the wrench actuation"
-            motors = range(1, model.instances + 1) if instance == failures.ALL_INSTANCES else (instance,)
-            effectiveness = 1.0 if failure_type == failures.Type.ok else 0.0
-            for motor in motors:  # PX4's motor n sits at PX4_MOTOR_POSITIONS[n - 1] (quadrotor +)
-                rotor = ROTOR_POSITIONS.index(failures.PX4_MOTOR_POSITIONS[motor - 1]) + 1
-                self.plant.set_rotor_effectiveness(rotor, effectiveness)
+            if self.setup.nominal_plant:
+                return f"failure {name}: the nominal plant (the Section II model) has no rotors"
+            try:
+                fault = RotorFault.of(failure_type, effectiveness)
+            except ValueError as exc:
+                return f"failure {name} {type_name}: {exc}"
+            for motor in motors_of(instance):  # PX4's numbers: the rotor at the same position
+                self.plant.set_rotor_fault(rotor_of_motor(motor), fault)
+            self._rotor_health_changed()
         elif where is failures.Where.BATTERY:
             if not self.battery.inject_failure(failure_type):
                 return f"failure {name} {type_name}: refused by the battery model"
@@ -329,6 +347,22 @@ class SimulatorCore:
         failures.keep_active(self.failures, unit, failure_type, instance)
         self.log(f"t={self.t:.3f} s: {failures.announcement(unit, failure_type, instance)}")
         return None
+
+    def _scheduled_faults_due(self, t: float) -> None:
+        """The scenario's motor failures whose time has come, into the plant (at frame ``t``)."""
+        row = self.plant.faults_due(self._fault_table, self._fault_row, t)
+        for fault, motor in self._scheduled[self._fault_row : row]:
+            failures.keep_active(self.failures, failures.Unit.motor, fault.failure_type, motor)
+            text = failures.announcement(failures.Unit.motor, fault.failure_type, motor)
+            self.log(f"t={t:.3f} s: {text} (scenario, from {fault.start_s:g} s)")
+        self._fault_row = row
+        self._rotor_health_changed()
+
+    def _rotor_health_changed(self) -> None:
+        """:attr:`rotor_health` again, from the plant's rotors (plant order: 1 front, 2 right,
+        3 rear, 4 left): their effectiveness, then their FAILURE_TYPE (0 healthy)."""
+        faults = [self.plant.rotor_fault(rotor) for rotor in (1, 2, 3, 4)]
+        self.rotor_health = (*(f.effectiveness for f in faults), *(float(f.failure_type) for f in faults))
 
     def _controls(self, answer: ActuatorAnswer) -> Controls:
         """Zero unless armed, consistent with our actuation and finite."""
@@ -461,6 +495,9 @@ class SimulatorCore:
             "failures": dict(self.failures),
             "requests": {"applied": self.requests_applied, "refused": dict(self.requests.refused)},
         }
+
+
+HEALTHY_ROTORS = (*(HEALTHY.effectiveness,) * 4, *(float(HEALTHY.failure_type),) * 4)
 
 
 def resend_after_s(sitl: SitlConfig) -> float:

@@ -27,12 +27,18 @@ Vector3 = tuple[float, float, float]
 
 
 def truth_row(
-    time_s: float, truth: TruthState, force_n: Vector3, torque_n_m: Vector3, wind_m_s: Vector3
+    time_s: float,
+    truth: TruthState,
+    force_n: Vector3,
+    torque_n_m: Vector3,
+    wind_m_s: Vector3,
+    rotor_health: tuple[float, ...],
 ) -> tuple[float, ...]:
     """One row in :data:`~quadcommon.bus_records.TRUTH_FIELDS` order.
 
     ``force_n`` (world, at the CoM), ``torque_n_m`` (on the Euler coordinates) and ``wind_m_s``
-    (world) are the disturbance applied at ``time_s``.
+    (world) are the disturbance applied at ``time_s``; ``rotor_health`` the rotors' effectiveness
+    and failure types (:attr:`simulator.core.SimulatorCore.rotor_health`).
     """
     return (
         time_s,
@@ -48,6 +54,7 @@ def truth_row(
         truth.thrust_n,
         *truth.torque_body_n_m,
         *truth.rotor_speeds_rad_s,
+        *rotor_health,
         1.0 if truth.on_ground else 0.0,
     )
 

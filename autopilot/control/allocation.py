@@ -3,7 +3,8 @@
 Rotors in + configuration, 1 front, 2 right, 3 rear, 4 left (CONTROL.md), with
 ``U1 = b sum(Omega_i^2)``, ``tau_x = l b (Omega4^2 - Omega2^2)``,
 ``tau_y = l b (Omega3^2 - Omega1^2)``,
-``tau_z = d (-Omega1^2 + Omega2^2 - Omega3^2 + Omega4^2)``.
+``tau_z = d (-Omega1^2 + Omega2^2 - Omega3^2 + Omega4^2)``: the equation of
+:mod:`quadcommon.rotor_geometry`, both ways, which the simulator's plant reads too.
 
 Saturation preserves thrust first: the collective part is clipped to the feasible range, then
 the roll/pitch part is scaled down until every rotor is within its limits, then the yaw part.
@@ -23,6 +24,7 @@ from typing import NamedTuple
 from quadcommon.config import VehicleConfig
 from quadcommon.kernel import kernel
 from quadcommon.numerics import clip
+from quadcommon.rotor_geometry import squared_speed_parts, wrench_from_squares
 
 Vector3 = tuple[float, float, float]
 
@@ -77,10 +79,8 @@ def allocate_rotors(a, o, thrust, tx, ty, tz, out):
     achieved; normalised commands and speeds into ``out``."""
     b, d, arm = a[o + A_B], a[o + A_D], a[o + A_ARM]
     lo, hi = a[o + A_SQ_MIN], a[o + A_SQ_MAX]
-    raw = thrust / (4.0 * b)
+    raw, rp, yaw = squared_speed_parts(b, d, arm, thrust, tx, ty, tz)
     base = clip(raw, lo, hi)
-    rp = (-ty / (2.0 * arm * b), -tx / (2.0 * arm * b), ty / (2.0 * arm * b), tx / (2.0 * arm * b))
-    yaw = (-tz / (4.0 * d), tz / (4.0 * d), -tz / (4.0 * d), tz / (4.0 * d))
     k_rp = largest_scale((base, base, base, base), rp, lo, hi)
     partial = (base + k_rp * rp[0], base + k_rp * rp[1], base + k_rp * rp[2], base + k_rp * rp[3])
     k_yaw = largest_scale(partial, yaw, lo, hi)
@@ -92,8 +92,8 @@ def allocate_rotors(a, o, thrust, tx, ty, tz, out):
     out[4], out[5], out[6], out[7] = math.sqrt(s1), math.sqrt(s2), math.sqrt(s3), math.sqrt(s4)
     out[0], out[1], out[2], out[3] = out[4] / top, out[5] / top, out[6] / top, out[7] / top
     saturated = 1.0 if (raw != base or k_rp < 1.0 or k_yaw < 1.0) else 0.0
-    thrust_a = b * (s1 + s2 + s3 + s4)
-    return thrust_a, arm * b * (s4 - s2), arm * b * (s3 - s1), d * (-s1 + s2 - s3 + s4), saturated
+    thrust_a, tx_a, ty_a, tz_a = wrench_from_squares(b, d, arm, s1, s2, s3, s4)
+    return thrust_a, tx_a, ty_a, tz_a, saturated
 
 
 class RotorAllocation(NamedTuple):

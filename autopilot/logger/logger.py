@@ -14,7 +14,8 @@ says. A mode change takes effect at the next frame.
 
 A log holds the definitions (formats, info, every parameter's value at the start), then samples
 of :data:`~.topics.TOPICS` at their rates, every STATUSTEXT as a logged string with its
-severity, every parameter change, and the simulator's disturbance as the frames report it.
+severity, every parameter change, and the simulator's disturbance and rotors' health as the frames
+report them.
 """
 
 from __future__ import annotations
@@ -141,6 +142,8 @@ class FlightLogger:
         self._disturbance: ulog.Topic | None = None
         self._disturbance_held: tuple | None = None  # the simulator's last report (held between)
         self._disturbance_logged_us = 0
+        self._rotors: ulog.Topic | None = None
+        self._rotors_held: tuple | None = None  # the rotors' health last reported
         self._next_due_us = 0
         self._next_sync_us = 0
         self._start_us = 0
@@ -272,6 +275,16 @@ class FlightLogger:
         self._buffer += topic.sample((t_us, *values))
         self._disturbance_logged_us = t_us
 
+    def rotor_health(self, t_us: int, effectiveness: Sequence[float], failure: Sequence[int]) -> None:
+        """The rotors' health the simulator reports (``sim_rotors``): logged when it changes (and,
+        the last one kept while no log is open, when a log starts)."""
+        values = (*effectiveness, *failure)
+        if values == self._rotors_held:
+            return
+        self._rotors_held = values
+        if self.logging:
+            self._buffer += self._rotors.sample((max(t_us, self._start_us), *values))
+
     def stop(self) -> None:
         """End the open log (disarm, shutdown, a simulator restart); nothing if none is open."""
         if not self.logging:
@@ -335,6 +348,8 @@ class FlightLogger:
                 self._gps = topic
             elif spec.name == topics.DISTURBANCE:
                 self._disturbance = topic
+            elif spec.name == topics.ROTORS:
+                self._rotors = topic
             elif spec.interval_ms == 0:
                 self._every_step.append((topic, spec.build))
             else:
@@ -356,6 +371,8 @@ class FlightLogger:
         self._disturbance_logged_us = t_us
         if self._disturbance_held is not None:  # what applies as the log starts
             self._buffer += self._disturbance.sample((t_us, *self._disturbance_held))
+        if self._rotors_held is not None:
+            self._buffer += self._rotors.sample((t_us, *self._rotors_held))
 
     def _law_fields(self, names: Sequence[str]) -> str:
         """``cascade_status``'s fields after PX4's: one per state of the laws."""

@@ -15,8 +15,11 @@ x north / y west / z up, body front-left-up, ZYX Euler angles), SI units:
   commanded rotor speeds) and the laws' integral states
   (:meth:`~autopilot.control.cascade.Cascade.law_states`, one field per state);
 * ``sim_disturbance``: the disturbance the simulator applies (force at the CoM, world; torque on
-  the Euler coordinates), when the autopilot is given it (the simulator's truth on zenoh in the
-  SITL, the simulator core in-process); the HIL link does not carry it.
+  the Euler coordinates), as the lockstep frame reports it (``DISTURB``, :mod:`quadcommon.wire`);
+* ``sim_rotors``: the rotors' health the simulator applies, from the same report, logged when
+  the log starts and at every change: each rotor's effectiveness (1 healthy, 0 off) and its
+  failure as ``FAILURE_TYPE`` (0 none, 1 off, 2 stuck, 4 wrong: a loss of effectiveness), rotors
+  1-4 in the simulator's order (1 front, 2 right, 3 rear, 4 left, as ``actuator_motors``).
 
 Rates are PX4's default logging profile (``logged_topics.cpp``: an interval in ms, at most one
 sample per interval; its SITL ground-truth topics included, at 20 ms rather than PX4's 10 ms for
@@ -568,9 +571,19 @@ def sim_disturbance(s: Snapshot) -> None:
     return None
 
 
+ROTORS = "sim_rotors"
+ROTORS_FIELDS = "float[4] effectiveness; uint8_t[4] failure_type"
+
+
+def sim_rotors(s: Snapshot) -> None:
+    """Not sampled from frames: FlightLogger.rotor_health() logs what it is given."""
+    return None
+
+
 # The topics sampled from frames, in message-id order. Interval 0: every control step, but
 # vehicle_gps_position is sampled from every frame that carries HIL_GPS; vehicle_status also
-# whenever the mode or arming changes; sim_disturbance as it is given (FlightLogger.disturbance).
+# whenever the mode or arming changes; sim_disturbance and sim_rotors as they are given
+# (FlightLogger.disturbance, FlightLogger.rotor_health).
 TOPICS: tuple[TopicSpec, ...] = tuple(
     TopicSpec(build.__name__, layout, interval_ms, build, tuple(nested))
     for build, layout, interval_ms, *nested in (
@@ -600,7 +613,8 @@ TOPICS: tuple[TopicSpec, ...] = tuple(
         (vehicle_global_position_groundtruth, GLOBAL_POSITION, 100),
         (vehicle_local_position_groundtruth, LOCAL_POSITION, 20),
         (sim_disturbance, DISTURBANCE_FIELDS, 10),
+        (sim_rotors, ROTORS_FIELDS, 10),
     )
 )
 # Sampled by the logger's own rules rather than by their interval alone (see TOPICS above).
-EVENT_TOPICS = ("vehicle_gps_position", DISTURBANCE)
+EVENT_TOPICS = ("vehicle_gps_position", DISTURBANCE, ROTORS)

@@ -319,11 +319,21 @@ def battery_report(raw: bytes) -> BatteryReport:
     return BatteryReport(millivolts * 1e-3, centiamps * 1e-2 if centiamps != -1 else math.nan)
 
 
-def disturbance_of(parts: dict) -> tuple[int, Vector3, Vector3] | None:
-    """The disturbance the simulator reports in this frame (``DISTURB``, see
-    :mod:`quadcommon.wire`): its sample time (µs), force (N, world) and torque on the Euler
-    coordinates (N m) in the paper's frames; None when the frame carries none, or one that is
-    corrupt, named otherwise or not finite (never logged)."""
+class DisturbanceReport(NamedTuple):
+    """What the simulator reports it applies beyond the controls (``DISTURB``, :mod:`quadcommon.wire`)."""
+
+    time_usec: int  # the sample's time
+    force_n: Vector3  # at the centre of mass, world (paper frames)
+    torque_n_m: Vector3  # on the Euler coordinates
+    rotor_effectiveness: tuple[float, float, float, float]  # rotors 1-4, the plant's order
+    rotor_failure: tuple[int, int, int, int]  # their FAILURE_TYPE (0 none)
+
+
+def disturbance_of(parts: dict) -> DisturbanceReport | None:
+    """The disturbance and the rotors' health the simulator reports in this frame (``DISTURB``,
+    see :mod:`quadcommon.wire`), in the paper's frames; None when the frame carries none, or one
+    that is corrupt, named otherwise, not finite, or with a failure type that is not a byte
+    (never logged)."""
     raw = parts.get(_ID_DISTURBANCE)
     if raw is None:
         return None
@@ -333,10 +343,14 @@ def disturbance_of(parts: dict) -> tuple[int, Vector3, Vector3] | None:
         return None
     if values[_DISTURBANCE_NAME].rstrip(b"\0") != wire.DISTURBANCE_NAME:
         return None
-    data = values[_DISTURBANCE_DATA : _DISTURBANCE_DATA + 6]
+    data = values[_DISTURBANCE_DATA : _DISTURBANCE_DATA + wire.DISTURB_SIZE]
     if not math.isfinite(sum(data)):
         return None
-    return values[0], frames.vector_from_ned(data[0:3]), frames.euler_from_ned(data[3:6])
+    failure = data[10:14]
+    if not all(0.0 <= f <= 255.0 and f == int(f) for f in failure):
+        return None
+    return DisturbanceReport(values[0], frames.vector_from_ned(data[0:3]), frames.euler_from_ned(data[3:6]),
+                             tuple(data[6:10]), tuple(int(f) for f in failure))  # fmt: skip
 
 
 def _attitude(q_ned, rates_frd):

@@ -114,6 +114,7 @@ COMMAND_RULES: dict[int, tuple[Param, ...]] = {
         Param(1, "failure unit (FAILURE_UNIT)", **_BYTE),
         Param(2, "failure type (FAILURE_TYPE)", **_BYTE),
         Param(3, "instance (0: all)", **_BYTE, nan_ok=True),
+        Param(4, "motor effectiveness for wrong (0 or NaN: SIM_MOT_EFF)", 0.0, 1.0, nan_ok=True),
     ),
 }
 
@@ -172,6 +173,11 @@ SLOT_OVERRIDES: tuple[SlotOverride, ...] = (
     SlotOverride(
         m.MAV_CMD_SET_MESSAGE_INTERVAL, (3, 4, 5, 6), True,
         "newer common.xml: request parameters of the message (an index, ...), as in REQUEST_MESSAGE",
+    ),
+    SlotOverride(
+        m.MAV_CMD_INJECT_FAILURE, (4,), True,
+        "this vehicle's extension: the effectiveness a motor keeps under FAILURE_TYPE_WRONG (a loss of "
+        "effectiveness), in [0, 1]; 0 or NaN (unset) takes SIM_MOT_EFF",
     ),
     SlotOverride(
         m.MAV_CMD_WAYPOINT_USER_1, (3,), False,

@@ -74,8 +74,10 @@ class VehicleCommands:
 
     def inject_failure(self, r: CommandRequest) -> Result:
         """MAV_CMD_INJECT_FAILURE (PX4's): param1 FAILURE_UNIT, param2 FAILURE_TYPE, param3 the
-        instance (0 or NaN: all), validated as bytes; :mod:`.failure_injection` answers it."""
-        return self.core.failure_injection.command(int(r.params[0]), int(r.params[1]), r.params[2])
+        instance (0 or NaN: all), validated as bytes; param4 (this vehicle's) the effectiveness a
+        motor's ``wrong`` leaves it; :mod:`.failure_injection` answers it."""
+        return self.core.failure_injection.command(int(r.params[0]), int(r.params[1]), r.params[2],
+                                                   r.params[3])  # fmt: skip
 
     def arm_disarm(self, r: CommandRequest) -> Result:
         # MAVSDK sends param2 = NaN ("unset") with a plain arm; only 21196 means force.

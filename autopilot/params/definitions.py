@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from quadcommon.config import SIM_BATTERY_PARAMETERS, BatteryConfig, Rates, VehicleConfig
+from quadcommon.failures import MOTOR_EFFECTIVENESS_DEFAULT, MOTOR_EFFECTIVENESS_PARAMETER
 
 from ..control import registry
 from ..control.config import ControllerConfig
@@ -261,6 +262,11 @@ FAILURE_PARAMS = (
         "SYS_FAILURE_EN", 0, 0, 1, kind=INT32,
         description="enable failure injection (MAV_CMD_INJECT_FAILURE, quadsitl fail): 0 refused (PX4's "
         "default), 1 accepted. The failures can easily cause crashes: use with caution",
+    ),
+    ParamSpec(
+        MOTOR_EFFECTIVENESS_PARAMETER, MOTOR_EFFECTIVENESS_DEFAULT, 0.0, 1.0,
+        description="the effectiveness (fraction of thrust and reaction torque) a motor keeps under an "
+        "injected 'wrong' failure (a loss of effectiveness) whose command gives none in param4",
     ),
 )  # fmt: skip
 

@@ -10,6 +10,8 @@ log's own topics (:mod:`autopilot.logger.topics`), in the paper's frames:
 * ``Ax_n`` ... ``Ar_n_m``: the ``sim_disturbance`` topic (when the log has it) as of each row:
   its latest sample at or before the row's time (it is logged at every onset, so the events
   the analysis finds are where they were);
+* ``rotor1_effectiveness`` ... ``rotor4_failure``: the ``sim_rotors`` topic (when the log has it) as
+  of each row, the rotors' health as the truth rows carry it;
 * ``mav_landed_state``: MAV_LANDED_STATE from ``vehicle_land_detected`` as of each row (1 on the
   ground, 4 landing, 2 in the air; a takeoff reads as in the air).
 
@@ -28,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.logger.topics import DISTURBANCE, TRACKING
+from autopilot.logger.topics import DISTURBANCE, ROTORS, TRACKING
 
 # paper_tracking's fields -> the session columns (log_reader.REQUIRED and the status columns)
 TRACKING_COLUMNS = {
@@ -45,6 +47,10 @@ DISTURBANCE_COLUMNS = {
     "force_n[0]": "Ax_n", "force_n[1]": "Ay_n", "force_n[2]": "Az_n",
     "torque_n_m[0]": "Ap_n_m", "torque_n_m[1]": "Aq_n_m", "torque_n_m[2]": "Ar_n_m",
 }  # fmt: skip
+ROTOR_COLUMNS = {
+    **{f"effectiveness[{i}]": f"rotor{i + 1}_effectiveness" for i in range(4)},
+    **{f"failure_type[{i}]": f"rotor{i + 1}_failure" for i in range(4)},
+}
 LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_LANDING = 1, 2, 4
 
 
@@ -70,7 +76,8 @@ def read_ulog_columns(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str
     if not p.is_file():
         raise FileNotFoundError(f"no flight log at {p}")
     try:
-        ulog = ULog(str(p), [TRACKING, DISTURBANCE, "vehicle_land_detected"], disable_str_exceptions=True)
+        ulog = ULog(str(p), [TRACKING, DISTURBANCE, ROTORS, "vehicle_land_detected"],
+                    disable_str_exceptions=True)  # fmt: skip
     except (ULogException, ValueError, IndexError, KeyError) as exc:  # pyulog's own and its parser's
         raise ValueError(f"{p}: not a readable ULog ({exc})") from exc
     data = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
@@ -81,12 +88,13 @@ def read_ulog_columns(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str
     cols: dict[str, np.ndarray] = {"time_s": t_us * 1e-6}
     for field, column in TRACKING_COLUMNS.items():
         cols[column] = tracking[field].astype(float)
-    disturbance = data.get(DISTURBANCE)
-    if disturbance is not None and len(disturbance["timestamp"]):
-        order = np.argsort(disturbance["timestamp"], kind="stable")
-        times = disturbance["timestamp"][order].astype(np.int64)
-        for field, column in DISTURBANCE_COLUMNS.items():
-            cols[column] = _as_of(t_us, times, disturbance[field][order].astype(float))
+    for topic, fields in ((DISTURBANCE, DISTURBANCE_COLUMNS), (ROTORS, ROTOR_COLUMNS)):
+        held = data.get(topic)
+        if held is not None and len(held["timestamp"]):
+            order = np.argsort(held["timestamp"], kind="stable")
+            times = held["timestamp"][order].astype(np.int64)
+            for field, column in fields.items():
+                cols[column] = _as_of(t_us, times, held[field][order].astype(float))
     land = data.get("vehicle_land_detected")
     if land is not None and len(land["timestamp"]):
         state = np.where(land["landed"] > 0, LANDED_ON_GROUND,

@@ -43,6 +43,9 @@ COLUMNS: dict[str, tuple[str, int]] = {
     "tphi": ("tau_phi_n_m", 6), "ttheta": ("tau_theta_n_m", 6), "tpsi": ("tau_psi_n_m", 6),
     "fx": ("Ax_n", 5), "fy": ("Ay_n", 5), "fz": ("Az_n", 5),
     "mx": ("Ap_n_m", 5), "my": ("Aq_n_m", 5), "mz": ("Ar_n_m", 5),
+    # the rotors' health (the simulator's rotor order: 1 front, 2 right, 3 rear, 4 left)
+    **{f"e{n}": (f"rotor{n}_effectiveness", 4) for n in (1, 2, 3, 4)},
+    **{f"f{n}": (f"rotor{n}_failure", 0) for n in (1, 2, 3, 4)},
 }  # fmt: skip
 STATUS_COLUMNS = ("mav_custom_mode", "mav_armed", "mav_landed_state")
 FALLBACK_STATUS_COLUMNS = ("custom_mode", "armed")  # the controller's own record

@@ -16,6 +16,7 @@ where the paper's controller holds a millimetre.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -26,6 +27,7 @@ from quadcommon.bus_records import CONTROLLER_FIELDS, TRUTH_FIELDS
 _T = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 _C = {name: i for i, name in enumerate(CONTROLLER_FIELDS)}
 DISTURBANCE_COLUMNS = [_T[n] for n in ("Ax_n", "Ay_n", "Az_n", "Ap_n_m", "Aq_n_m", "Ar_n_m")]
+ROTOR_HEALTH_COLUMNS = [_T[f"rotor{n}_{what}"] for what in ("effectiveness", "failure") for n in (1, 2, 3, 4)]
 CONTROLLER_STALE_S = 0.25  # controller rows older than this (sim s): show the truth without references
 KEEP_ROWS = 256  # recent rows of each stream kept to find their latest common step (0.5 s at 500 Hz)
 
@@ -54,6 +56,8 @@ class Sample:
     disturbance_force_n: list[float | None]  # world, at the CoM
     disturbance_torque_n_m: list[float | None]  # on the Euler coordinates
     on_ground: bool
+    # rotors 1-4 (1 front, 2 right, 3 rear, 4 left): effectiveness, then FAILURE_TYPE (0 healthy)
+    rotor_health: list[float | None] = dataclasses.field(default_factory=lambda: [1.0] * 4 + [0.0] * 4)
 
     def to_json(self) -> dict:
         return {
@@ -68,6 +72,7 @@ class Sample:
             "df": self.disturbance_force_n,
             "dm": self.disturbance_torque_n_m,
             "ground": self.on_ground,
+            "rot": self.rotor_health,
         }
 
 
@@ -192,4 +197,5 @@ class VehicleSampler:
             disturbance_force_n=_clean(truth[[t["Ax_n"], t["Ay_n"], t["Az_n"]]], 5),
             disturbance_torque_n_m=_clean(truth[[t["Ap_n_m"], t["Aq_n_m"], t["Ar_n_m"]]], 5),
             on_ground=bool(truth[t["on_ground"]] > 0.5),
+            rotor_health=_clean(truth[ROTOR_HEALTH_COLUMNS], 4),
         )

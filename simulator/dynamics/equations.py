@@ -15,6 +15,15 @@ Numbers sit in flat float vectors (what numba takes): ``P`` the plant's paramete
 ``P_*``, :meth:`~.plant.Plant.parameters`), ``u`` the inputs held over one physics step (layout
 ``U_*``); a frame's steps take their inputs as consecutive ``U_SIZE`` blocks of one vector.
 ``work`` holds the state (row 0) and the RK4 scratch (rows 1-5).
+
+Actuator faults live in ``P`` too (a flight's own copy): per rotor its effectiveness (thrust and
+reaction torque scaled), and what its speed does (``P_FAULT_MODE``: follows the command, stuck at
+the speed it had, or off: the motor unpowered, the rotor spinning down with its time constant).
+:func:`set_rotor_fault` sets them, at a command (the simulator's failure injection) or at a time
+(:func:`rotor_faults_due` over a table of rows ``RF_*`` sorted by onset: a scenario's or a
+campaign run's faults). On the ideal-wrench vehicle a rotor fails through the allocation's
+equation (:mod:`quadcommon.rotor_geometry`): the commanded wrench is split into the rotors' shares,
+the faults act on the shares, and the shares make the applied wrench (:func:`faulted_wrench`).
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
     transpose_times,
 )
+from quadcommon.rotor_geometry import squared_speed_parts, wrench_from_squares
 
 # -- parameters P (read off a simulator.dynamics.plant.Plant) -------------------------------------
 P_MASS = 0
@@ -55,8 +65,20 @@ P_ROTOR_MODE = 37  # 1.0 when actuation = "rotors"
 P_GROUND = 38  # 1.0 when ground contact is on
 P_HAS_DRAG = 39  # 1.0 when any drag coefficient is non-zero
 P_GROUND_REACH = 40  # |r_G| + 1 mm: with G higher than this above z = 0, O is in the air
-P_EFFECTIVENESS = 41  # 4: each rotor's effectiveness in [0, 1] (1 healthy; 0 off: a motor failure)
-P_SIZE = 45
+P_EFFECTIVENESS = 41  # 4: each rotor's effectiveness in [0, 1] (1 healthy)
+P_FAULT_MODE = 45  # 4: what each rotor's speed does (ROTOR_FOLLOWS, ROTOR_STUCK, ROTOR_OFF)
+P_HELD_SHARE = 49  # 4: wrench vehicle: a stuck rotor's share of the wrench (Omega^2, rad^2/s^2)
+P_FAULTED = 53  # 1.0 while any rotor is not healthy (the healthy path skips the fault terms)
+P_SIZE = 54
+
+# -- actuator faults ----------------------------------------------------------------------------
+ROTOR_FOLLOWS = 0.0  # the rotor follows its command (healthy, or at a loss of effectiveness)
+ROTOR_STUCK = 1.0  # its speed is held where it was (wrench vehicle: its share of the wrench)
+ROTOR_OFF = 2.0  # the motor is unpowered: no thrust, no torque, the rotor spins down
+# A row of a fault table: from ONSET (s) rotor ROTOR (0-3, the plant's numbering) has MODE and
+# EFFECTIVENESS. Rows sorted by onset.
+RF_ONSET, RF_ROTOR, RF_MODE, RF_EFFECTIVENESS = 0, 1, 2, 3
+RF_SIZE = 4
 
 # -- inputs u held over a physics step (zero-order hold) ------------------------------------------
 U_THRUST = 0  # wrench: U1 (saturated by Plant.set_wrench)
@@ -87,13 +109,80 @@ def com_offset(P) -> tuple:
 def rotor_wrench(P, s) -> tuple:
     """``(thrust, torque about O)`` of the rotors at the speeds of ``s``, + configuration (1 front,
     2 right, 3 rear, 4 left; 1 and 3 counter-clockwise seen from above): thrust ``e b Omega^2``,
-    reaction torque ``e d Omega^2`` each, ``e`` the rotor's effectiveness (``P_EFFECTIVENESS``:
-    1 healthy, 0 a motor that is off)."""
-    b, arm, e = P[P_B], P[P_ARM], P_EFFECTIVENESS
+    reaction torque ``e d Omega^2`` each (:func:`~quadcommon.rotor_geometry.wrench_from_squares`),
+    ``e`` the rotor's effectiveness (``P_EFFECTIVENESS``: 1 healthy, 0 a motor that is off)."""
+    e = P_EFFECTIVENESS
     s1, s2 = P[e] * s[13] * s[13], P[e + 1] * s[14] * s[14]
     s3, s4 = P[e + 2] * s[15] * s[15], P[e + 3] * s[16] * s[16]
-    torque = (arm * b * (s4 - s2), arm * b * (s3 - s1), P[P_D] * (-s1 + s2 - s3 + s4))
-    return b * (s1 + s2 + s3 + s4), torque
+    thrust, tx, ty, tz = wrench_from_squares(P[P_B], P[P_D], P[P_ARM], s1, s2, s3, s4)
+    return thrust, (tx, ty, tz)
+
+
+@kernel
+def rotor_acceleration(P, i: int, command: float, speed: float, tau: float) -> float:
+    """``dOmega/dt`` of rotor ``i`` (0-3): first order towards its command, held when stuck,
+    towards 0 when off."""
+    mode = P[P_FAULT_MODE + i]
+    if mode == ROTOR_STUCK:
+        return 0.0
+    if mode == ROTOR_OFF:
+        return -speed / tau
+    return (command - speed) / tau
+
+
+@kernel
+def faulted_share(P, i: int, share: float) -> float:
+    """Rotor ``i``'s share of the wrench (Omega^2) with its fault: scaled by its effectiveness,
+    held when stuck, none when off."""
+    mode = P[P_FAULT_MODE + i]
+    if mode == ROTOR_STUCK:
+        return P[P_HELD_SHARE + i]
+    if mode == ROTOR_OFF:
+        return 0.0
+    return P[P_EFFECTIVENESS + i] * share
+
+
+@kernel
+def faulted_wrench(P, thrust: float, tx: float, ty: float, tz: float) -> tuple:
+    """The wrench vehicle's applied ``(U1, tau)`` with its rotors' faults: the command split into
+    the four rotors' shares by the allocation's equation, each share as its rotor's fault leaves
+    it (:func:`faulted_share`), summed back. The ideal actuator's rotors have no limits of their
+    own: a share may be of either sign (the wrench's limits act on the command, before)."""
+    b, d, arm = P[P_B], P[P_D], P[P_ARM]
+    base, rp, yaw = squared_speed_parts(b, d, arm, thrust, tx, ty, tz)
+    s1 = faulted_share(P, 0, base + rp[0] + yaw[0])
+    s2 = faulted_share(P, 1, base + rp[1] + yaw[1])
+    s3 = faulted_share(P, 2, base + rp[2] + yaw[2])
+    s4 = faulted_share(P, 3, base + rp[3] + yaw[3])
+    return wrench_from_squares(b, d, arm, s1, s2, s3, s4)
+
+
+@kernel
+def set_rotor_fault(P, rotor: int, mode: float, effectiveness: float, u) -> None:
+    """From now on rotor ``rotor`` (0-3) has ``mode`` (``ROTOR_*``) and ``effectiveness``; a new
+    fault replaces the rotor's last one (``ROTOR_FOLLOWS`` at 1 is healthy again). A rotor stuck
+    on the wrench vehicle holds its share of the wrench held in ``u`` (the command in force)."""
+    P[P_EFFECTIVENESS + rotor] = effectiveness
+    P[P_FAULT_MODE + rotor] = mode
+    if mode == ROTOR_STUCK and P[P_ROTOR_MODE] == 0.0:
+        base, rp, yaw = squared_speed_parts(P[P_B], P[P_D], P[P_ARM], u[U_THRUST], u[U_TAU], u[U_TAU + 1],
+                                            u[U_TAU + 2])  # fmt: skip
+        P[P_HELD_SHARE + rotor] = base + rp[rotor] + yaw[rotor]
+    faulted = 0.0
+    for i in range(4):
+        if P[P_EFFECTIVENESS + i] != 1.0 or P[P_FAULT_MODE + i] != ROTOR_FOLLOWS:
+            faulted = 1.0
+    P[P_FAULTED] = faulted
+
+
+@kernel
+def rotor_faults_due(P, faults, row: int, t: float, u) -> int:
+    """The rows of the fault table ``faults`` (``RF_*``, sorted by onset) from ``row`` on whose
+    onset is at or before ``t``, set (:func:`set_rotor_fault`); returns the next row to wait for."""
+    while row < faults.shape[0] and faults[row, RF_ONSET] <= t:
+        set_rotor_fault(P, int(faults[row, RF_ROTOR]), faults[row, RF_MODE], faults[row, RF_EFFECTIVENESS], u)
+        row += 1
+    return row
 
 
 @kernel
@@ -113,8 +202,14 @@ def derivative(s, out, P, u) -> None:
         # with Omega_r = -Omega1 + Omega2 - Omega3 + Omega4, and the reaction to rotor
         # acceleration J_r dOmega_r/dt about z.
         tau_r, Jr = P[P_TAU], P[P_JR]
-        dw1, dw2 = (u[U_ROTOR] - s[13]) / tau_r, (u[U_ROTOR + 1] - s[14]) / tau_r
-        dw3, dw4 = (u[U_ROTOR + 2] - s[15]) / tau_r, (u[U_ROTOR + 3] - s[16]) / tau_r
+        if P[P_FAULTED] == 0.0:
+            dw1, dw2 = (u[U_ROTOR] - s[13]) / tau_r, (u[U_ROTOR + 1] - s[14]) / tau_r
+            dw3, dw4 = (u[U_ROTOR + 2] - s[15]) / tau_r, (u[U_ROTOR + 3] - s[16]) / tau_r
+        else:
+            dw1 = rotor_acceleration(P, 0, u[U_ROTOR], s[13], tau_r)
+            dw2 = rotor_acceleration(P, 1, u[U_ROTOR + 1], s[14], tau_r)
+            dw3 = rotor_acceleration(P, 2, u[U_ROTOR + 2], s[15], tau_r)
+            dw4 = rotor_acceleration(P, 3, u[U_ROTOR + 3], s[16], tau_r)
         thrust, (tx, ty, tz) = rotor_wrench(P, s)
         omega_r = -s[13] + s[14] - s[15] + s[16]
         tx += Jr * omega_r * w[1]
@@ -123,6 +218,8 @@ def derivative(s, out, P, u) -> None:
     else:
         thrust = u[U_THRUST]
         tx, ty, tz = u[U_TAU], u[U_TAU + 1], u[U_TAU + 2]
+        if P[P_FAULTED] != 0.0:
+            thrust, tx, ty, tz = faulted_wrench(P, thrust, tx, ty, tz)
 
     # Moment of the thrust (applied at O) about G: (-r_G) x (0, 0, T).
     tx -= r_G[1] * thrust
@@ -263,6 +360,9 @@ def truth(work, P, u) -> tuple:
     else:
         speeds = (0.0, 0.0, 0.0, 0.0)
         thrust, torque = u[U_THRUST], (u[U_TAU], u[U_TAU + 1], u[U_TAU + 2])
+        if P[P_FAULTED] != 0.0:
+            thrust, tx, ty, tz = faulted_wrench(P, u[U_THRUST], u[U_TAU], u[U_TAU + 1], u[U_TAU + 2])
+            torque = (tx, ty, tz)
     return (p_O, v_O, a_O, (s[6], s[7], s[8], s[9]), euler, w, euler_rates, specific, speeds, thrust, torque,
             grounded)  # fmt: skip
 

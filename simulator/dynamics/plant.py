@@ -15,15 +15,19 @@ Coupled plant (``plant.model = "coupled"``, CONTROL.md "The more accurate plant"
   applied directly (the idealised actuator the paper's experiment needs);
 * ``actuation = "rotors"``: four rotors in + configuration (1 front, 2 right, 3 rear, 4 left;
   1 and 3 spin counter-clockwise seen from above, :data:`ROTOR_POSITIONS`), thrust
-  ``e b Omega^2``, reaction torque ``e d Omega^2`` with each rotor's effectiveness ``e`` (1; 0 for
-  a motor that is off, :meth:`Plant.set_rotor_effectiveness`), first-order speed dynamics towards
-  the command, speed limits, gyroscopic moment
+  ``e b Omega^2``, reaction torque ``e d Omega^2`` with each rotor's effectiveness ``e`` (1
+  healthy), first-order speed dynamics towards the command, speed limits, gyroscopic moment
   ``J_r Omega_r (q, -p, 0)`` with ``Omega_r = -Omega1 + Omega2 - Omega3 + Omega4`` and the
   reaction to rotor acceleration ``J_r dOmega_r/dt`` about z;
 * disturbances: a force in the world frame applied at G (the ``[Ax, Ay, Az]`` of eq. 1), torques
   on the Euler coordinates as in eq. (4), applied as the equivalent body couple
   ``W_eta^-T [Ap, Aq, Ar]``; wind enters through linear drag ``-k (v_O - wind)`` at G;
-* ground contact (optional): the plane z = 0 under O; a vehicle pressed against it rests level.
+* ground contact (optional): the plane z = 0 under O; a vehicle pressed against it rests level;
+* actuator faults (:meth:`Plant.set_rotor_fault`, :class:`RotorFault`): per rotor a loss of
+  effectiveness (thrust and reaction torque scaled by ``e`` in [0, 1]), a rotor stuck at its
+  speed, a rotor off (unpowered: no thrust, no torque, spinning down); on the wrench vehicle
+  through the allocation's equation (each rotor's share of the wrench, see
+  :func:`.equations.faulted_wrench`).
 
 Nominal plant (``plant.model = "nominal"``, :mod:`.nominal_plant`): eqs. (1)-(6) integrated in
 ``(xi, eta)``: the model the controllers are designed on, for checking them against their own
@@ -39,21 +43,116 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from quadcommon.config import VehicleConfig
+from quadcommon.failures import ALL_INSTANCES, PX4_MOTOR_POSITIONS, ActuatorFault, Type
 from quadcommon.kernel import compiled, compiling, freeze, vector
 from quadcommon.rigid_body import cross, matrix_times, quaternion_from_euler, rotation_from_quaternion, solve3
 
 from . import equations
-from .equations import P_SIZE, U_FORCE, U_ROTOR, U_SIZE, U_TAU, U_THRUST, U_TORQUE, U_WIND
+from .equations import (
+    P_EFFECTIVENESS,
+    P_FAULT_MODE,
+    P_SIZE,
+    RF_SIZE,
+    ROTOR_FOLLOWS,
+    ROTOR_OFF,
+    ROTOR_STUCK,
+    U_FORCE,
+    U_ROTOR,
+    U_SIZE,
+    U_TAU,
+    U_THRUST,
+    U_TORQUE,
+    U_WIND,
+)
 
 Vector3 = tuple[float, float, float]
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
-ROTOR_POSITIONS = ("front", "right", "rear", "left")  # rotors 1-4 of actuation "rotors"
+ROTOR_POSITIONS = ("front", "right", "rear", "left")  # rotors 1-4 of the plant (and of the allocation)
+
+
+def rotor_of_motor(motor: int) -> int:
+    """The plant's rotor (1-4, :data:`ROTOR_POSITIONS`) of PX4's motor ``motor`` (1-4, quadrotor +:
+    :data:`quadcommon.failures.PX4_MOTOR_POSITIONS`): the same position."""
+    return ROTOR_POSITIONS.index(PX4_MOTOR_POSITIONS[motor - 1]) + 1
+
+
+class RotorFault(NamedTuple):
+    """What a rotor's failure (:mod:`quadcommon.failures`, unit ``motor``) does in the plant's terms:
+    its speed's ``mode`` (``ROTOR_FOLLOWS``, ``ROTOR_STUCK``, ``ROTOR_OFF``) and ``effectiveness``."""
+
+    mode: float
+    effectiveness: float
+
+    @classmethod
+    def of(cls, failure_type: int, effectiveness: float = 1.0) -> RotorFault:
+        """The plant's fault for a FAILURE_TYPE: ``ok`` healthy, ``off`` unpowered (effectiveness
+        0), ``stuck`` held at its speed (effectiveness 1), ``wrong`` a loss of effectiveness
+        (``effectiveness`` left, in [0, 1]). ValueError for another type or effectiveness."""
+        if failure_type == Type.ok:
+            return cls(ROTOR_FOLLOWS, 1.0)
+        if failure_type == Type.off:
+            return cls(ROTOR_OFF, 0.0)
+        if failure_type == Type.stuck:
+            return cls(ROTOR_STUCK, 1.0)
+        if failure_type == Type.wrong:
+            if not 0.0 <= effectiveness <= 1.0:
+                raise ValueError(f"rotor effectiveness {effectiveness!r} outside [0, 1]")
+            return cls(ROTOR_FOLLOWS, float(effectiveness))
+        raise ValueError(f"failure type {failure_type} is not a rotor's (ok, off, stuck, wrong)")
+
+    @property
+    def failure_type(self) -> Type:
+        """The FAILURE_TYPE this fault is (``ok`` for a healthy rotor)."""
+        if self.mode == ROTOR_OFF:
+            return Type.off
+        if self.mode == ROTOR_STUCK:
+            return Type.stuck
+        return Type.ok if self.effectiveness == 1.0 else Type.wrong
+
+
+HEALTHY = RotorFault(ROTOR_FOLLOWS, 1.0)
+
+
+class ScheduledFault(NamedTuple):
+    """A rotor fault at a time: from ``onset_s`` (the first frame at or after it) rotor ``rotor``
+    (1-4, the plant's numbering) has ``fault``."""
+
+    onset_s: float
+    rotor: int
+    fault: RotorFault
+
+
+def fault_table(faults: Iterable[ScheduledFault]) -> np.ndarray:
+    """``ScheduledFault`` rows as the kernels' table (layout ``RF_*`` of :mod:`.equations`), sorted
+    by onset (faults at the same time keep their order)."""
+    rows = sorted(faults, key=lambda f: f.onset_s)
+    table = np.zeros((len(rows), RF_SIZE))
+    for i, f in enumerate(rows):
+        table[i] = (f.onset_s, f.rotor - 1, f.fault.mode, f.fault.effectiveness)
+    return table
+
+
+def schedule(faults: Iterable[ActuatorFault]) -> tuple[list[tuple[ActuatorFault, int]], np.ndarray]:
+    """Motor failures at a time (a scenario's ``[[actuator_faults]]``, a campaign run's) as the
+    plant applies them: one ``(fault, PX4 motor)`` per motor addressed (motor 0: all four), by
+    onset, and their table for :func:`.equations.rotor_faults_due` (one row each, the same order)."""
+    rows = sorted(((f, m) for f in faults for m in motors_of(f.motor)), key=lambda item: item[0].start_s)
+    table = fault_table(
+        ScheduledFault(f.start_s, rotor_of_motor(m), RotorFault.of(f.failure_type, f.effectiveness))
+        for f, m in rows
+    )
+    return rows, table
+
+
+def motors_of(instance: int) -> tuple[int, ...]:
+    """PX4's motors a failure's instance addresses: the one, or all four for 0."""
+    return (1, 2, 3, 4) if instance == ALL_INSTANCES else (instance,)
 
 
 class TruthState(NamedTuple):
@@ -109,7 +208,6 @@ class Plant:
         self.rotor_inertia = rot.inertia_kg_m2
         self.rotor_tau = rot.time_constant_s
         self.speed_min, self.speed_max = rot.speed_min_rad_s, rot.speed_max_rad_s
-        self.rotor_effectiveness = [1.0, 1.0, 1.0, 1.0]  # rotors 1-4: 1 healthy, 0 off
         # Inputs held over the step.
         self.thrust_cmd = 0.0
         self.torque_cmd: Vector3 = ZERO3
@@ -146,19 +244,34 @@ class Plant:
         P[equations.P_GROUND] = 1.0 if self.ground_contact else 0.0
         P[equations.P_HAS_DRAG] = 1.0 if any(k != 0.0 for k in self.drag) else 0.0
         P[equations.P_GROUND_REACH] = math.sqrt(sum(c * c for c in self.com_offset)) + 1e-3
-        P[equations.P_EFFECTIVENESS : equations.P_EFFECTIVENESS + 4] = self.rotor_effectiveness
+        P[equations.P_EFFECTIVENESS : equations.P_EFFECTIVENESS + 4] = [1.0, 1.0, 1.0, 1.0]  # healthy
         return [float(x) for x in P]
 
-    def set_rotor_effectiveness(self, rotor: int, effectiveness: float) -> None:
-        """Rotor ``rotor`` (1-4, :data:`ROTOR_POSITIONS`) gives ``effectiveness`` (in [0, 1]) of its
-        thrust and reaction torque from the next step on: 0 is a motor that is off."""
-        if not self.rotor_mode:
-            raise ValueError("the wrench actuation has no rotors")
-        if not 0.0 <= effectiveness <= 1.0:
-            raise ValueError(f"rotor effectiveness {effectiveness!r} outside [0, 1]")
+    # -- actuator faults --------------------------------------------------------------------------
+    def set_rotor_fault(self, rotor: int, fault: RotorFault) -> None:
+        """Rotor ``rotor`` (1-4, :data:`ROTOR_POSITIONS`) has ``fault`` from the next step on
+        (:func:`.equations.set_rotor_fault`; :data:`HEALTHY` ends it); on the wrench vehicle a
+        stuck rotor holds its share of the wrench commanded now."""
+        if not 1 <= rotor <= 4:
+            raise ValueError(f"rotor {rotor!r}: the rotors are 1-4")
         self._truth = None
-        self.rotor_effectiveness[rotor - 1] = float(effectiveness)
-        self._P[equations.P_EFFECTIVENESS + rotor - 1] = float(effectiveness)
+        equations.set_rotor_fault(self._P, rotor - 1, fault.mode, fault.effectiveness, self._held_inputs())
+
+    def faults_due(self, table, row: int, t: float) -> int:
+        """The rows of a fault table (:func:`fault_table`) from ``row`` on whose onset is at or
+        before ``t`` (s), set (:func:`.equations.rotor_faults_due`); the next row to wait for."""
+        self._truth = None
+        return equations.rotor_faults_due(self._P, table, row, t, self._held_inputs())
+
+    def rotor_fault(self, rotor: int) -> RotorFault:
+        """Rotor ``rotor``'s (1-4) fault now (:data:`HEALTHY` when it has none)."""
+        P = self._P
+        return RotorFault(float(P[P_FAULT_MODE + rotor - 1]), float(P[P_EFFECTIVENESS + rotor - 1]))
+
+    @property
+    def rotor_effectiveness(self) -> list[float]:
+        """Rotors 1-4: each one's effectiveness (1 healthy, 0 off)."""
+        return [float(e) for e in self._P[P_EFFECTIVENESS : P_EFFECTIVENESS + 4]]
 
     # -- state ------------------------------------------------------------------------------------
     def reset(
@@ -347,4 +460,5 @@ def _clip(x: float, lo: float, hi: float) -> float:
     return hi if hi < x else x
 
 
-__all__ = ["Plant", "TruthState", "make_plant"]
+__all__ = ["HEALTHY", "Plant", "RotorFault", "ScheduledFault", "TruthState", "fault_table", "make_plant",
+           "motors_of", "rotor_of_motor", "schedule"]

@@ -27,7 +27,8 @@ One datagram per control period (see :mod:`quadcommon.wire`), all messages with 
   (first element NaN), ``estimator_type = MAV_ESTIMATOR_TYPE_MOCAP``, ``quality = 100``.
 * ``DEBUG_FLOAT_ARRAY`` ``DISTURB`` (when the core reports the disturbance, see
   :mod:`quadcommon.wire`): force (N, world NED) and torque on the Euler coordinates (N m, NED's
-  Euler convention) in ``data[0:6]``.
+  Euler convention) in ``data[0:6]``, the rotors' health in ``data[6:14]`` (each rotor's
+  effectiveness, then its FAILURE_TYPE, rotors 1-4 in the plant's order).
 * ``BATTERY_STATUS`` (at the battery monitor's rate, :mod:`simulator.battery`): the pack's voltage
   in ``voltages[0]`` (mV, MAVLink's split above 65 534 mV), current in cA (-1: not measured),
   every other field "unknown" (see :mod:`quadcommon.wire`); a reading that is not a finite number
@@ -144,13 +145,13 @@ class HilFrameEncoder:
         wind_world_m_s: Vector3 = (0.0, 0.0, 0.0),
         gps: GpsReading | None = None,
         vision: VisionReading | None = None,
-        disturbance: tuple[int, tuple[Vector3, Vector3]] | None = None,
+        disturbance: tuple[int, tuple[Vector3, Vector3, tuple[float, ...]]] | None = None,
         battery: BatteryReading | None = None,
     ) -> bytes:
         """One datagram: HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``,
         + VISION_POSITION_ESTIMATE when ``vision``, + the ``DISTURB`` array when ``disturbance``:
-        its sample time (µs) and (force (world), torque (Euler coordinates)) in the paper's frames,
-        + BATTERY_STATUS when ``battery``)."""
+        its sample time (µs) and (force (world), torque (Euler coordinates), the rotors' health) in
+        the paper's frames, + BATTERY_STATUS when ``battery``)."""
         to_ned = frames.vector_to_ned
         q_ned = frames.quaternion_to_ned(truth.quaternion)
         rates_frd = to_ned(truth.body_rates_rad_s)
@@ -209,10 +210,11 @@ class HilFrameEncoder:
             self._fill_vision(time_usec, vision)
             datagram += self._frame(self._vision)
         if disturbance is not None:
-            stamp_usec, (force, torque) = disturbance
+            stamp_usec, (force, torque, health) = disturbance
             v = self._disturbance.values
             v[self._d_time] = stamp_usec
-            v[self._d_data.start : self._d_data.start + 6] = (*to_ned(force), *frames.euler_to_ned(torque))
+            start = self._d_data.start
+            v[start : start + wire.DISTURB_SIZE] = (*to_ned(force), *frames.euler_to_ned(torque), *health)
             datagram += self._frame(self._disturbance)
         if battery is not None:
             self._fill_battery(battery)
@@ -286,11 +288,13 @@ NOT_MAVLINK = -1  # ActuatorAnswer.others: bytes that are not a MAVLink 2 frame
 
 class InjectFailure(NamedTuple):
     """The request ``MAV_CMD_INJECT_FAILURE`` (:mod:`quadcommon.failures`), as the ground station
-    sent it to the autopilot."""
+    sent it to the autopilot; a motor's ``wrong`` with the effectiveness the autopilot resolved
+    (param4)."""
 
     unit: int  # FAILURE_UNIT
     failure_type: int  # FAILURE_TYPE
     instance: int  # 0: all
+    effectiveness: float = 1.0  # param4: what a motor at a loss of effectiveness keeps, in [0, 1]
 
 
 class SetSimParameter(NamedTuple):
@@ -317,7 +321,7 @@ class RequestDecoder:
         self._command = FastDecoder(mavlink.MAVLink_command_long_message)
         where = self._command.slices
         self._c = tuple(where[name] for name in ("target_system", "target_component", "command", "param1",
-                                                 "param2", "param3"))  # fmt: skip
+                                                 "param2", "param3", "param4"))  # fmt: skip
         self._param_set = FastDecoder(mavlink.MAVLink_param_set_message)
         where = self._param_set.slices
         self._p = tuple(where[name] for name in ("target_system", "target_component", "param_id",
@@ -353,7 +357,7 @@ class RequestDecoder:
 
     def _command_long(self, frame: bytes) -> Request | str:
         v = self._command.unpack(frame)
-        system, component, command, unit, failure_type, instance = (v[i] for i in self._c)
+        system, component, command, unit, failure_type, instance, effectiveness = (v[i] for i in self._c)
         if (system, component) != self.target:
             return f"a command to system {system} component {component}, not the simulator"
         if command != mavlink.MAV_CMD_INJECT_FAILURE:
@@ -361,7 +365,9 @@ class RequestDecoder:
         params = (unit, failure_type, instance)
         if not all(math.isfinite(x) and 0.0 <= x <= 255.0 and x == int(x) for x in params):
             return "MAV_CMD_INJECT_FAILURE with a parameter that is not an integer in [0, 255]"
-        return InjectFailure(int(unit), int(failure_type), int(instance))
+        if not 0.0 <= effectiveness <= 1.0:  # (NaN fails it too)
+            return "MAV_CMD_INJECT_FAILURE with an effectiveness (param4) outside [0, 1]"
+        return InjectFailure(int(unit), int(failure_type), int(instance), float(effectiveness))
 
     def _parameter(self, frame: bytes) -> Request | str:
         v = self._param_set.unpack(frame)

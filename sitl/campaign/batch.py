@@ -21,6 +21,7 @@ from autopilot.control.config import ControllerConfig
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import VehicleConfig, load_scenario, load_vehicle
 from quadcommon.schema import ConfigError
+from simulator.dynamics.plant import schedule
 from simulator.environment.gust_profile import GustProfile
 
 from . import engine as eng
@@ -53,8 +54,10 @@ def flights(spec: CampaignSpec, sample: RunSample) -> dict[str, eng.Flight]:
     )
     steps, ramps, gusts, dryden, window = eng.disturbance_tables(sample.gusts, dtp, spec.duration_s)
     estimated = spec.estimation is not None
-    S = eng.sim_array(rates, spec.duration_s, spec.wire_float32, spec.failure, window, estimated)
+    S = eng.sim_array(rates, spec.duration_s, spec.wire_float32, spec.failure, window, estimated,
+                      sample.fault_onset_s, spec.survival)  # fmt: skip
     T = _reference(sc.trajectory, rates, spec.duration_s, spec.wire_float32)
+    faults = schedule(sc.actuator_faults)[1] if sc.actuator_faults else eng.NO_FAULTS
     return {
         c.name: eng.Flight(
             state0,
@@ -67,6 +70,7 @@ def flights(spec: CampaignSpec, sample: RunSample) -> dict[str, eng.Flight]:
             gusts,
             dryden,
             estimation(spec, sample) if estimated else (),
+            faults,
         )  # fmt: skip
         for c in spec.controllers
     }
@@ -86,13 +90,17 @@ def _home_altitude() -> float:
 def run_chunk(spec: CampaignSpec, runs: Sequence[int]) -> list[dict[str, Any]]:
     """Fly ``runs`` with every controller of ``spec``: one row per (run, controller)."""
     rows: list[dict[str, Any]] = []
+    dt_control = 1.0 / spec.rates.control_hz
     for run in runs:
         sample = sample_run(spec, int(run))
         for name, flight in flights(spec, sample).items():
             metrics, _ = eng.fly(flight)
-            rows.append(
-                {"run": int(run), "controller": name, **sample.parameters, **eng.metrics_dict(metrics, name)}
-            )
+            row = {"run": int(run), "controller": name, **sample.parameters,
+                   **eng.metrics_dict(metrics, name)}  # fmt: skip
+            if spec.draws_faults:  # a fault study: what the run survived, and the faults drawn
+                row.update(eng.fault_columns(metrics, row, spec.survival, sample.fault_onset_s, dt_control))
+                row["fault"] = sample.fault
+            rows.append(row)
     return rows
 
 

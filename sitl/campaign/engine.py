@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import Rates, TrajectorySpec, VehicleConfig, load_sitl
 from quadcommon.kernel import compiled
 from quadcommon.trajectories import trajectory_from_spec
+from simulator.dynamics.equations import RF_SIZE
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
 from simulator.environment.gust_profile import GustProfile, element_rows
@@ -52,6 +53,8 @@ def failure_reason(code: int, controller: str) -> str:
         return registry.non_finite_output(controller)
     return FAILURE_NAMES[code]
 
+NO_FAULTS = np.zeros((0, RF_SIZE))  # a flight without rotor faults (writable: the type numba compiled)
+
 # Names of the metric columns, in the order of the kernel's metrics row (layout M_*).
 METRIC_COLUMNS = (
     "final_error_x_m", "final_error_y_m", "final_error_z_m",
@@ -63,6 +66,8 @@ METRIC_COLUMNS = (
 ESTIMATION_COLUMNS = (
     "estimate_rms_error_m", "worst_test_ratio", "time_not_converged_s", "rejected_samples",
 )  # fmt: skip
+# A campaign that draws faults, after those (:func:`fault_columns`).
+FAULT_COLUMNS = ("survived", "fault_onset_s", "max_excursion_m", "time_to_recover_s", "impact_speed_m_s")
 
 
 @dataclass(frozen=True)
@@ -72,6 +77,17 @@ class FailureLimits:
     max_position_error_m: float = 5.0
     max_tilt_rad: float = 1.3
     airborne_height_m: float = 0.05  # a ground contact after O rose above this is a crash
+
+
+@dataclass(frozen=True)
+class SurvivalLimits:
+    """What a run that draws faults must do to survive them: stay within ``envelope_m`` of the
+    reference for the whole run (and not fail: no divergence, no tilt past the limit, no ground
+    contact after take-off); it has recovered once its position error is back within
+    ``recovery_bound_m`` for the rest of the run."""
+
+    envelope_m: float = 1.0
+    recovery_bound_m: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -102,6 +118,8 @@ class Flight:
     gusts: np.ndarray
     dryden: np.ndarray
     estimation: tuple = ()  # the run's sensors and filter (estimator_memory()); () on the truth
+    # the run's rotor faults (simulator.dynamics.plant.fault_table; none: zero rows)
+    faults: np.ndarray = field(default_factory=lambda: NO_FAULTS)
 
     @property
     def samples(self) -> int:
@@ -184,8 +202,11 @@ def sim_array(
     limits: FailureLimits,
     dryden_window: tuple[float, ...],
     estimated: bool = False,
+    fault_onset_s: float = math.inf,
+    survival: SurvivalLimits = SurvivalLimits(),
 ) -> np.ndarray:
-    """Timing, the wire switch and the failure limits (layout ``S_*``), as ``run_scenario`` times."""
+    """Timing, the wire switch, the failure limits and the faults' onset and recovery bound (layout
+    ``S_*``), as ``run_scenario`` times."""
     dt_control = 1.0 / rates.control_hz
     substeps = rates.physics_steps_per_control
     S = np.zeros(lay.S_SIZE)
@@ -200,6 +221,8 @@ def sim_array(
     S[lay.S_AIRBORNE] = limits.airborne_height_m
     S[lay.S_ESTIMATED] = 1.0 if estimated else 0.0
     S[lay.S_HOME : lay.S_HOME + 3] = home()
+    S[lay.S_FAULT_ONSET] = fault_onset_s
+    S[lay.S_RECOVERY_BOUND] = survival.recovery_bound_m
     (
         S[lay.S_DRYDEN_ON],
         S[lay.S_DRYDEN_T0],
@@ -263,7 +286,7 @@ def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | 
     estimation = flight.estimation or no_estimation()
     metrics = entry(c.translational, c.rotational, bool(flight.estimation))(
         flight.state0, flight.plant, c.K, c.gt, c.gr, c.nxt, c.nxr, flight.reference, flight.sim,
-        flight.steps, flight.ramps, flight.gusts, flight.dryden, rows, estimation,
+        flight.steps, flight.ramps, flight.gusts, flight.dryden, flight.faults, rows, estimation,
     )  # fmt: skip
     if not record:
         return metrics, None
@@ -303,7 +326,37 @@ def metrics_dict(metrics: np.ndarray, controller: str) -> dict[str, float | bool
     out["failed"] = code != lay.FAIL_NONE
     out["failure"] = failure_reason(code, controller)
     out["failure_time_s"] = float(metrics[lay.M_T_FAIL])
-    if metrics.shape[0] >= lay.M_EST_SIZE and not math.isnan(metrics[lay.M_EST_RMS]):
+    if not math.isnan(metrics[lay.M_EST_RMS]):
         for i, name in enumerate(ESTIMATION_COLUMNS):
             out[name] = float(metrics[lay.M_EST_RMS + i])
     return out
+
+
+def fault_columns(metrics: np.ndarray, row: dict, survival: SurvivalLimits, onset_s: float,
+                  dt_control: float) -> dict[str, float | bool]:  # fmt: skip
+    """A fault study's columns of one flight (:data:`FAULT_COLUMNS`), from its metrics row and its
+    named columns (``row``: :func:`metrics_dict`'s): ``survived`` (the run flew to its end and its
+    position error stayed within the envelope), ``fault_onset_s`` (the first fault's, ``onset_s``),
+    ``max_excursion_m`` (the largest position error from the onset on; NaN when the run ended
+    before it),
+    ``time_to_recover_s`` (from the onset until the error is back within the recovery bound for
+    good: 0 if it never left it; NaN when it had not recovered by the run's end, or the run failed)
+    and ``impact_speed_m_s`` (the downward speed at a ground contact after take-off; NaN: none)."""
+    failed = bool(row["failed"])
+    last_out = float(metrics[lay.M_T_LAST_OUT])
+    end = float(metrics[lay.M_T_END])
+    if failed or not onset_s <= end:
+        recover = math.nan
+    elif math.isnan(last_out):
+        recover = 0.0
+    elif last_out >= end:  # still out at the last sample
+        recover = math.nan
+    else:
+        recover = max(last_out + dt_control - onset_s, 0.0)
+    return {
+        "survived": not failed and float(row["max_position_error_m"]) <= survival.envelope_m,
+        "fault_onset_s": onset_s,
+        "max_excursion_m": float(metrics[lay.M_EXCURSION]),
+        "time_to_recover_s": recover,
+        "impact_speed_m_s": float(metrics[lay.M_IMPACT_SPEED]),
+    }

@@ -4,6 +4,9 @@
   values span decades;
 * ``ecdf.png``: the empirical CDF of each index, one line per controller;
 * ``ise_vs_mass.png``: position ISE against the plant's mass scale, per controller;
+* ``faults.png`` (a campaign that draws faults): the share of runs each controller survived,
+  against the drawn effectiveness of the first actuator fault when it varies (else per controller),
+  and the distribution of the largest excursion after the fault's onset;
 * ``worst_<controller>_run<N>_*.png``: the worst run of each controller re-flown by the batch
   engine with its time series recorded, in the paper's figure style
   (:func:`gcs_scripts.analysis.figures.paper_figures`).
@@ -23,7 +26,7 @@ import pyarrow as pa  # noqa: E402
 
 from gcs_scripts.analysis.figures import paper_figures  # noqa: E402
 
-from .summary import INDEX_LABELS, derived_columns, title  # noqa: E402
+from .summary import INDEX_LABELS, derived_columns, fault_ranking, title  # noqa: E402
 
 FIGURE_INDICES = (
     "ise_position",
@@ -114,6 +117,55 @@ def mass_scatter_figure(table: pa.Table, controllers: Sequence[str], path: Path)
     return path
 
 
+FAULT_BINS = 5  # bins of the drawn effectiveness in faults.png
+
+
+def faults_figure(table: pa.Table, controllers: Sequence[str], path: Path) -> Path | None:
+    """What each controller survives: survival against the first actuator fault's drawn
+    effectiveness (binned; per controller when it does not vary), and the largest excursion after
+    the onset (every run that reached it), controllers in the order of :func:`.summary.fault_ranking`."""
+    if "survived" not in table.column_names:
+        return None
+    ranked = [c for c, _, _ in fault_ranking(table, controllers)]
+    names = np.array(table.column("controller").to_pylist())
+    survived = np.array(table.column("survived").to_pylist(), dtype=bool)
+    excursion = np.array(table.column("max_excursion_m").to_pylist(), dtype=float)
+    key = "actuator_fault0_effectiveness"
+    drawn = np.array(table.column(key).to_pylist(), dtype=float) if key in table.column_names else None
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.8))
+    if drawn is not None and np.nanmax(drawn) > np.nanmin(drawn):
+        edges = np.linspace(np.nanmin(drawn), np.nanmax(drawn), FAULT_BINS + 1)
+        centres = 0.5 * (edges[:-1] + edges[1:])
+        which = np.clip(np.digitize(drawn, edges) - 1, 0, FAULT_BINS - 1)
+        for c in ranked:
+            share = [survived[(names == c) & (which == b)].mean() if ((names == c) & (which == b)).any()
+                     else np.nan for b in range(FAULT_BINS)]  # fmt: skip
+            left.plot(centres, 100.0 * np.array(share), marker="o", label=title(c))
+        left.set_xlabel("effectiveness the faulty rotor keeps (drawn, binned)")
+        left.legend(fontsize=8)
+    else:
+        shares = [100.0 * survived[names == c].mean() for c in ranked]
+        left.bar(range(len(ranked)), shares)
+        left.set_xticks(range(len(ranked)), [title(c) for c in ranked], fontsize=8)
+    left.set_ylabel("runs survived (%)")
+    left.set_ylim(-2.0, 102.0)
+    left.set_title("Survival")
+    left.grid(True, alpha=0.3)
+    groups = [excursion[(names == c) & np.isfinite(excursion)] for c in ranked]
+    right.boxplot([g if g.size else [np.nan] for g in groups], whis=(5, 95), showfliers=True)
+    right.set_xticks(range(1, len(ranked) + 1), [title(c) for c in ranked], fontsize=8)
+    if _log_scale(groups):
+        right.set_yscale("log")
+    right.set_ylabel("largest position error after the onset (m)")
+    right.set_title("Excursion (box: quartiles; whiskers: 5-95 %)")
+    right.grid(True, axis="y", alpha=0.3)
+    fig.suptitle("Faults: controllers ranked by survival, then by median excursion (left to right)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def worst_run_figures(records, out_dir: Path, controller: str, run: int) -> list[Path]:
     """The paper's figures of one re-flown run (``records``: that run flown by each controller)."""
     return paper_figures(records, out_dir, f"worst_{controller}_run{run}")
@@ -125,7 +177,8 @@ def campaign_figures(table: pa.Table, controllers: Sequence[str], out_dir: Path)
         distributions_figure(table, controllers, out_dir / "distributions.png"),
         ecdf_figure(table, controllers, out_dir / "ecdf.png"),
     ]
-    scatter = mass_scatter_figure(table, controllers, out_dir / "ise_vs_mass.png")
-    if scatter is not None:
-        paths.append(scatter)
+    for extra in (mass_scatter_figure(table, controllers, out_dir / "ise_vs_mass.png"),
+                  faults_figure(table, controllers, out_dir / "faults.png")):  # fmt: skip
+        if extra is not None:
+            paths.append(extra)
     return paths

@@ -11,6 +11,9 @@ Nothing here is a second copy of an equation: :func:`simulate` calls
 
 * the plant's RK4 step, ground contact and read-out of O (:mod:`simulator.dynamics`), the same
   kernels :class:`~simulator.dynamics.plant.Plant` steps in the simulator;
+* the plant's actuator faults (:func:`simulator.dynamics.equations.rotor_faults_due`: a run's
+  drawn rotor faults, applied at the start of the first step at or after their onset, as the
+  simulator applies a scenario's);
 * the disturbance profile's steps, ramps and 1-cos gusts
   (:func:`simulator.environment.gust_profile.steps_and_ramps`, ``one_minus_cosine_wind``) and the
   Dryden wind drawn beforehand by the project's own generator;
@@ -21,7 +24,9 @@ Nothing here is a second copy of an equation: :func:`simulate` calls
   HIL_ACTUATOR_CONTROLS;
 
 and accumulates the paper's indices while flying (final errors, ISE trapezoidal, IADU as total
-variation, the definitions of :mod:`gcs_scripts.analysis.metrics`). ``error_model="numpy"``: a
+variation, the definitions of :mod:`gcs_scripts.analysis.metrics`), and what a fault study reads:
+the largest position error from the fault's onset on, the last time the error was above the
+recovery bound, and the vertical speed at a ground contact after take-off. ``error_model="numpy"``: a
 division by zero gives inf/NaN. A run whose plant state goes non-finite ends as the plant's failure
 (``FAIL_NONFINITE``); one whose cascade applies a non-finite U1 or torque to a finite state ends as
 the controller's (``FAIL_CONTROLLER``), by the check the autopilot makes
@@ -49,6 +54,7 @@ from quadcommon.rigid_body import (
 )
 from simulator.dynamics.equations import (  # the plant (what the simulator steps)
     P_GROUND,
+    P_GROUND_REACH,
     P_ROTOR_MODE,
     P_THRUST_MAX,
     P_TORQUE_MAX,
@@ -64,6 +70,7 @@ from simulator.dynamics.equations import (  # the plant (what the simulator step
     ground_contact,
     motion_of_O,
     rk4_step,
+    rotor_faults_due,
     truth,
 )
 from simulator.environment.gust_profile import one_minus_cosine_wind, steps_and_ramps
@@ -90,7 +97,9 @@ S_DRYDEN_UNTIL = 12
 S_DRYDEN_STEP = 13
 S_ESTIMATED = 14  # 1.0: the controllers fly on the EKF fed by the sensor models (the est arrays)
 S_HOME = 15  # 3: the geodetic home (lat deg, lon deg, alt m) the GNSS fixes cross the wire about
-S_SIZE = 18
+S_FAULT_ONSET = 18  # the first fault's onset (s; inf: none): the excursion and recovery count from it
+S_RECOVERY_BOUND = 19  # position error (m) within which the vehicle has recovered
+S_SIZE = 20
 
 # -- metrics (one row per run, see engine.METRIC_NAMES) -------------------------------------------
 M_FINAL = 0  # 3: final position error x, y, z
@@ -110,6 +119,11 @@ M_EST_MAX_RATIO = 21  # largest innovation test ratio of any fusion (gate at 1)
 M_EST_T_NOT_CONVERGED = 22  # time the filter's verdict was "not converged" (s)
 M_EST_REJECTED = 23  # samples rejected by the gates or the quality checks
 M_EST_SIZE = 24
+# -- faults (S_FAULT_ONSET) --
+M_EXCURSION = 24  # the largest position error at or after the onset (m; NaN: no onset reached)
+M_T_LAST_OUT = 25  # the last sample time at or after the onset with the error above the bound (NaN: none)
+M_IMPACT_SPEED = 26  # downward speed of the centre of mass at a ground contact after take-off (m/s; NaN)
+M_ALL_SIZE = 27
 
 FAIL_NONE, FAIL_NONFINITE, FAIL_POSITION, FAIL_TILT, FAIL_GROUND, FAIL_CONTROLLER = 0, 1, 2, 3, 4, 5
 
@@ -312,11 +326,14 @@ ON_TRUTH = (truth_estimate, truth_after_step, truth_rejected)
 # a Dask worker with several threads flies several runs at once; nothing here touches Python objects).
 @kernel
 def simulate(translational, rotational, estimate_step, after_step, rejected, state0, P, K, gt, gr, nxt, nxr,
-             ref, S, steps_tab, ramps_tab, gusts_tab, dryden, record, est):  # noqa: C901  # fmt: skip
+             ref, S, steps_tab, ramps_tab, gusts_tab, dryden, faults_tab, record, est):  # noqa: C901  # fmt: skip
     """Fly one run from ``state0`` with the laws ``translational`` and ``rotational`` (their gains
     ``gt``, ``gr``; ``nxt``, ``nxr`` entries of state); return the metrics row (layout ``M_*``,
-    ``M_EST_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``: :data:`ON_ESTIMATE`
+    ``M_ALL_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``: :data:`ON_ESTIMATE`
     for a flight on the estimate, :data:`ON_TRUTH` (no sensors, no filter) for one on the truth.
+    ``faults_tab``: the run's rotor faults (rows ``RF_*`` of :mod:`simulator.dynamics.equations`,
+    by onset; none: zero rows), set into the flight's own copy of ``P`` at the start of the first
+    step at or after their onset.
 
     As ``sitl.inprocess.run_scenario`` flies the whole stack: per control step k (t = k dt), read
     the state, take the reference (row k of ``ref``: p_d, p_d', p_d'', yaw, yaw', yaw'', sampled by
@@ -345,12 +362,17 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     max_pos_err, max_tilt, airborne_h = S[S_MAX_POS_ERR], S[S_MAX_TILT], S[S_AIRBORNE]
     do_record = record.shape[0] > 0
     rotor_plant = P[P_ROTOR_MODE] != 0.0
+    flight_P = P.copy()  # the flight's own: its faults set into it (P is shared by a run's flights)
 
     # The arrays the loop passes to kernels, borrowed (quadcommon.kernel.borrowed: no reference
     # counting per call); ``work`` owns the loop's own arrays and is read after the loop.
-    P, K, gt, gr, ref, S = borrowed(P), borrowed(K), borrowed(gt), borrowed(gr), borrowed(ref), borrowed(S)
+    P, K, gt, gr = borrowed(flight_P), borrowed(K), borrowed(gt), borrowed(gr)
+    ref, S = borrowed(ref), borrowed(S)
     steps_tab, ramps_tab, gusts_tab = borrowed(steps_tab), borrowed(ramps_tab), borrowed(gusts_tab)
-    dryden = borrowed(dryden)
+    dryden, faults_tab = borrowed(dryden), borrowed(faults_tab)
+    next_fault = 0
+    fault_onset, recovery_bound = S[S_FAULT_ONSET], S[S_RECOVERY_BOUND]
+    ground_reach = P[P_GROUND_REACH]
     n = state0.shape[0]
     o_u, o_x, o_f, o_c = U_SIZE, U_SIZE + nxt + nxr, U_SIZE + nxt + nxr + FILTER_STATE_SIZE, 6 * n
     work = np.zeros(o_c + OUT_SIZE + o_f)
@@ -378,8 +400,9 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     t_estimator = 0.0
     squared_error = 0.0
 
-    metrics = np.zeros(M_EST_SIZE)
+    metrics = np.zeros(M_ALL_SIZE)
     metrics[M_T_FAIL] = np.nan
+    metrics[M_EXCURSION] = metrics[M_T_LAST_OUT] = metrics[M_IMPACT_SPEED] = np.nan
     # tilt = acos(R22) (the body z axis against the vertical): tracked as the smallest R22.
     min_cos_tilt = 1.0
     cos_max_tilt = math.cos(max_tilt)
@@ -391,6 +414,8 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     t = 0.0
     for k in range(steps + 1):
         t = k * dt
+        if next_fault < faults_tab.shape[0]:  # the rotor faults whose onset has come (held inputs: u)
+            next_fault = rotor_faults_due(P, faults_tab, next_fault, t, u)
         R, pos, vel = motion_of_O(s, P)
         euler, cos_tilt = euler_from_rotation(R), R[2][2]
         p_w, q_w, r_w = s[10], s[11], s[12]
@@ -483,6 +508,11 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         err = math.sqrt(sq0 + sq1 + sq2)
         if err > metrics[M_MAX_POS_ERR]:
             metrics[M_MAX_POS_ERR] = err
+        if t >= fault_onset:  # from the fault on: how far it strays, and until when
+            if not err <= metrics[M_EXCURSION]:  # (NaN until the first sample)
+                metrics[M_EXCURSION] = err
+            if err > recovery_bound:
+                metrics[M_T_LAST_OUT] = t
         if cos_tilt < min_cos_tilt:
             min_cos_tilt = cos_tilt
         if pos[2] > airborne_h:
@@ -527,8 +557,12 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         for j in range(substeps):
             disturbance(t + j * dt_phys, u, steps_tab, ramps_tab, gusts_tab, dryden, S)
             rk4_step(s, k1, k2, k3, k4, tmp, P, u, dt_phys)
-            if P[P_GROUND] != 0.0 and ground_contact(s, P) and airborne:
-                touched = True
+            if P[P_GROUND] != 0.0 and s[2] < ground_reach:  # O may be at the ground only then
+                falling = -s[5]
+                if ground_contact(s, P) and airborne:
+                    if not touched:
+                        metrics[M_IMPACT_SPEED] = falling
+                    touched = True
     metrics[M_MAX_TILT] = math.acos(clip(min_cos_tilt, -1.0, 1.0))
     if estimated:
         samples = int(round(t / dt)) + 1
@@ -539,5 +573,6 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         metrics[M_EST_REJECTED] = np.nan
     metrics[M_FAIL] = fail
     # (reads of work, plant_work and est: their arrays stay alive until here)
-    metrics[M_T_END] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + est[0].shape[0] + est[6].shape[0])
+    metrics[M_T_END] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + est[0].shape[0] + est[6].shape[0]
+                                  + flight_P.shape[0])  # fmt: skip
     return metrics

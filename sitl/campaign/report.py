@@ -35,6 +35,8 @@ def write_report(spec: CampaignSpec, table: pa.Table, out_dir: str | Path, worst
         [
             "- `figures/distributions.png`: per-index box plots, `figures/ecdf.png`: empirical CDFs",
             "- `figures/ise_vs_mass.png`: position ISE against the mass scale",
+            *(["- `figures/faults.png`: survival and excursion under the faults drawn"]
+              if "survived" in table.column_names else []),  # fmt: skip
             *notes,
         ]
     )

@@ -10,11 +10,14 @@ versions except for announced fixes.)
 The sampled vehicle is built the way the scalar runner builds its plant (``apply_uncertainty``
 on a scenario whose mass and inertia scales are the drawn ones), so ``sitl.inprocess.run_scenario``
 flies exactly the same numbers; rotor constants (``actuation = "rotors"``) are then scaled on the
-plant only (the allocator keeps the nominal ones).
+plant only (the allocator keeps the nominal ones). The drawn motor failures are the sampled
+scenario's ``actuator_faults``, which the simulator core applies as it applies a scenario's, and
+the batch engine through the same fault table (:func:`simulator.dynamics.plant.schedule`).
 """
 
 from __future__ import annotations
 
+import math
 import zlib
 from dataclasses import dataclass, replace
 from typing import Any
@@ -22,10 +25,11 @@ from typing import Any
 import numpy as np
 
 from quadcommon.config import ScenarioConfig, VehicleConfig, apply_uncertainty
+from quadcommon.failures import ActuatorFault
 from simulator.environment.gust_profile import GustProfile, gust_profile_from_mapping, profile_to_mapping
-from simulator.sensors.config import SensorConfig, SensorFault
+from simulator.sensors.config import SensorConfig, SensorFault, default_fault_value
 
-from .spec import CampaignSpec, Distribution
+from .spec import CampaignSpec, Distribution, fixed
 
 Vector3 = tuple[float, float, float]
 AXES = ("x", "y", "z")
@@ -46,6 +50,13 @@ class RunSample:
     initial_velocity_m_s: Vector3
     gusts: GustProfile
     sensors: SensorConfig | None = None  # on the estimate: the run's sensors (seed, figures, faults)
+    faults: tuple[str, ...] = ()  # the faults drawn, described (actuators' and sensors')
+    fault_onset_s: float = math.inf  # the first drawn fault's onset (s)
+
+    @property
+    def fault(self) -> str:
+        """The faults drawn, in words (the results' ``fault`` column)."""
+        return "; ".join(self.faults)
 
 
 def stream(seed: int, run: int, name: str) -> np.random.Generator:
@@ -125,7 +136,35 @@ def sample_run(spec: CampaignSpec, run: int) -> RunSample:
         )
     gusts = _sample_profile(spec, run, draw)
     sensors = _sample_sensors(spec, run, draw)
-    return RunSample(run, draw.values, scenario, vehicle, plant_vehicle, velocity, gusts, sensors)
+    actuator_faults = _sample_actuator_faults(spec, run, draw)
+    scenario = replace(scenario, actuator_faults=actuator_faults)
+    described = [f.describe() for f in actuator_faults]
+    onsets = [f.start_s for f in actuator_faults]
+    if sensors is not None and spec.estimation is not None and spec.estimation.faults:
+        drawn = sensors.faults[len(sensors.faults) - len(spec.estimation.faults) :]
+        described += [f"{f.kind} from {f.start_s:.3g} s" for f in drawn]
+        onsets += [f.start_s for f in drawn]
+    return RunSample(run, draw.values, scenario, vehicle, plant_vehicle, velocity, gusts, sensors,
+                     tuple(described), min(onsets, default=math.inf))  # fmt: skip
+
+
+def _sample_actuator_faults(spec: CampaignSpec, run: int, draw: _Draw) -> tuple[ActuatorFault, ...]:
+    """The run's motor failures (``[[actuator_faults]]``), as a scenario states them."""
+    out = []
+    for i, f in enumerate(spec.actuator_faults):
+        prefix = f"actuator_fault{i}"
+        motor = int(round(draw(f"{prefix}_motor", f.motor)))
+        kind = f.types[0]
+        if len(f.types) > 1:
+            index = int(stream(spec.seed, run, f"{prefix}_type").integers(len(f.types)))
+            draw.values[f"{prefix}_type_index"] = float(index)
+            kind = f.types[index]
+        effectiveness = draw(f"{prefix}_effectiveness", f.effectiveness) if "wrong" in f.types else 1.0
+        if kind != "wrong":
+            effectiveness = 0.0 if kind == "off" else 1.0
+        start = draw(f"{prefix}_start_s", f.start_s)
+        out.append(ActuatorFault(motor, kind, effectiveness, start))
+    return tuple(out)
 
 
 def _sample_sensors(spec: CampaignSpec, run: int, draw: _Draw) -> SensorConfig | None:
@@ -162,13 +201,21 @@ def _sample_sensors(spec: CampaignSpec, run: int, draw: _Draw) -> SensorConfig |
     )
     faults = list(c.faults)
     for i, f in enumerate(est.faults):
-        prefix = f"fault{i}_{f.kind}"
+        kind = f.kind
+        if kind:
+            prefix = f"fault{i}_{kind}"
+        else:  # drawn among several: the entry's streams, and the index drawn
+            prefix = f"fault{i}"
+            index = int(stream(spec.seed, run, f"{prefix}_kind").integers(len(f.kinds)))
+            draw.values[f"{prefix}_kind_index"] = float(index)
+            kind = f.kinds[index]
         start = draw(f"{prefix}_start_s", f.start_s)
         duration = (
             draw(f"{prefix}_duration_s", f.duration_s) if f.duration_s is not None else spec.duration_s + 1.0
         )
-        value = draw.vector(tuple(f"{prefix}_value_{a}" for a in AXES), f.value)
-        faults.append(SensorFault(f.kind, start, duration, value))
+        values = f.value if f.value is not None else tuple(fixed(v) for v in default_fault_value(kind))
+        value = draw.vector(tuple(f"{prefix}_value_{a}" for a in AXES), values)
+        faults.append(SensorFault(kind, start, duration, value))
     return replace(c, seed=seed, accelerometer=accel, gyroscope=gyro, magnetometer=mag, barometer=baro,
                    gps=gps, vision=vision, faults=tuple(faults))  # fmt: skip
 

@@ -50,7 +50,18 @@ drawn one). ``[[sensor_faults]]`` add faults per run: ``kind`` (``gps_glitch``, 
 ``mag_disturbance``, ``vision_outage``, ``accel_bias_step``, ``gyro_bias_step``, or a sensor
 failure of :mod:`quadcommon.failures`: ``gps_off``, ``baro_stuck``, ...), ``start_s``,
 ``duration_s`` (default: to the end), ``value`` (three distributions: m, gauss, m/s^2 or rad/s;
-default 0, a failure's the table's figure).
+default 0, a failure's the table's figure). ``kind`` may be drawn too: ``{ choice = ["gps_off",
+"baro_stuck", ...] }`` (each equally likely; ``value`` then defaults to the drawn kind's figure).
+
+Faults of the actuators: ``[[actuator_faults]]``, a motor's failure from a time on, as a scenario's
+(:func:`quadcommon.failures.read_actuator_faults`) but drawn per run: ``motor`` (PX4's number, 1
+right, 2 left, 3 front, 4 rear; 0 all; a distribution, e.g. ``{ choice = [1, 2, 3, 4] }``), ``type``
+(``off``, ``stuck``, ``wrong``, or ``{ choice = [...] }`` of them), ``effectiveness`` (what a
+``wrong`` motor keeps, in [0, 1]), ``start_s``. A spec that draws faults (of the actuators or the
+sensors) has ``[survival]``: ``envelope_m`` (default 1 m: a run survived when it flew to its end
+within this of the reference) and ``recovery_bound_m`` (default 0.1 m: it has recovered once its
+error is back within this for good), and its results have the fault study's columns
+(:data:`.engine.FAULT_COLUMNS`) and the faults drawn (``fault``).
 
 (One module: one schema, validated in one place, with the messages naming file, key, value and
 range.)
@@ -78,6 +89,7 @@ from quadcommon.config import (
     load_sitl,
     load_vehicle,
 )
+from quadcommon.failures import ACTUATOR_FAULT_TYPES, FAILURES, MOTOR_EFFECTIVENESS_DEFAULT, Unit
 from quadcommon.schema import ConfigError, Section, load_toml
 from simulator.environment.discrete_gust import (
     AXES,
@@ -102,13 +114,13 @@ from simulator.environment.gust_profile import (
 )
 from simulator.sensors.config import FAULT_KINDS, SensorConfig, default_fault_value, load_sensors
 
-from .engine import FailureLimits
+from .engine import FailureLimits, SurvivalLimits
 
 CAMPAIGN_DIR = SHIPPED_CONFIG_DIR / "campaigns"  # the shipped campaigns
 MAX_RUNS = 1_000_000
 # Bumped whenever the kernels or the sampling change what a run produces (results on disk from
 # another version are then not mixed in on resume).
-ENGINE_VERSION = "campaign-engine-3"
+ENGINE_VERSION = "campaign-engine-4"
 MAX_TIME_S = 1e6
 
 
@@ -293,12 +305,27 @@ FAULT_VALUE_LIMIT = 1e4  # |value| per axis (m, gauss, m/s^2, rad/s or hPa), as 
 
 @dataclass(frozen=True)
 class FaultSpec:
-    """One randomised sensor fault of ``[[sensor_faults]]``."""
+    """One randomised sensor fault of ``[[sensor_faults]]``: its kind, or several to draw one of."""
 
-    kind: str
+    kinds: tuple[str, ...]
     start_s: Distribution
     duration_s: Distribution | None  # None: to the end of the run
-    value: tuple[Distribution, ...]
+    value: tuple[Distribution, ...] | None  # None: the drawn kind's figure
+
+    @property
+    def kind(self) -> str:
+        """The kind when there is one (a drawn kind: its streams are named after the entry alone)."""
+        return self.kinds[0] if len(self.kinds) == 1 else ""
+
+
+@dataclass(frozen=True)
+class ActuatorFaultSpec:
+    """One randomised motor failure of ``[[actuator_faults]]``."""
+
+    motor: Distribution  # PX4's motor number (0: all), drawn
+    types: tuple[str, ...]  # one, or several to draw one of
+    effectiveness: Distribution  # what a "wrong" motor keeps
+    start_s: Distribution
 
 
 @dataclass(frozen=True)
@@ -336,6 +363,13 @@ class CampaignSpec:
     text: str = field(repr=False, default="")  # the file as read (for the results' manifest)
     warnings: tuple[str, ...] = ()
     estimation: EstimationSpec | None = None  # None: the controllers fly on the truth
+    actuator_faults: tuple[ActuatorFaultSpec, ...] = ()
+    survival: SurvivalLimits = SurvivalLimits()
+
+    @property
+    def draws_faults(self) -> bool:
+        """True when runs draw faults (of the actuators, or the sensors'): a fault study."""
+        return bool(self.actuator_faults) or (self.estimation is not None and bool(self.estimation.faults))
 
     @property
     def estimator(self) -> str:
@@ -354,7 +388,7 @@ class CampaignSpec:
         decisive = (
             ENGINE_VERSION, self.scenario, self.vehicle, self.controllers, self.seed, self.duration_s,
             self.wire_float32, self.rates, self.failure, self.plant, self.initial, self.base_profile,
-            self.elements, self.dryden, self.estimation,
+            self.elements, self.dryden, self.estimation, self.actuator_faults, self.survival,
         )  # fmt: skip
         return hashlib.sha256(repr(decisive).encode()).hexdigest()[:16]
 
@@ -426,6 +460,18 @@ def load_campaign(name_or_path: str | Path, runs: int | None = None) -> Campaign
     plant = _read_plant(root.section("plant", optional=True), vehicle)
     initial = _read_initial(root.section("initial_state", optional=True), scenario, vehicle)
     estimation = _read_estimation(root, path, duration)
+    actuator_faults = _read_actuator_faults(root, duration)
+    sec = root.section("survival", optional=True)
+    survival = SurvivalLimits(
+        envelope_m=sec.number("envelope_m", SurvivalLimits.envelope_m, lo=0.001, hi=1e4, unit="m"),
+        recovery_bound_m=sec.number("recovery_bound_m", SurvivalLimits.recovery_bound_m, lo=0.0, lo_open=True,
+                                    hi=1e4, unit="m"),
+    )  # fmt: skip
+    sec.finish()
+    draws = bool(actuator_faults) or (estimation is not None and bool(estimation.faults))
+    if root.has("survival") and not draws:
+        raise root.error("survival", root.data["survival"], "only in a spec that draws faults "
+                         "([[actuator_faults]] or [[sensor_faults]])")  # fmt: skip
     warnings: list[str] = []
     if root.has("disturbances"):
         base_name, base, elements, dryden = _read_disturbances(root.section("disturbances"), scenario)
@@ -464,7 +510,50 @@ def load_campaign(name_or_path: str | Path, runs: int | None = None) -> Campaign
         text=text,
         warnings=tuple(warnings),
         estimation=estimation,
+        actuator_faults=actuator_faults,
+        survival=survival,
     )
+
+
+def _read_labels(sec: Section, key: str, options: tuple[str, ...]) -> tuple[str, ...]:
+    """A string among ``options``, or ``{ choice = [...] }`` of them (drawn per run)."""
+    raw = sec.data.get(key)
+    if isinstance(raw, dict):
+        sec._used.add(key)  # noqa: SLF001
+        values = raw.get("choice")
+        if set(raw) != {"choice"} or not isinstance(values, list) or not values:
+            raise sec.error(key, raw, f"one of {', '.join(options)}, or {{ choice = [...] }} of them")
+        for i, value in enumerate(values):
+            if value not in options:
+                raise sec.error(f"{key}.choice[{i}]", value, f"one of {', '.join(options)}")
+        if len(set(values)) != len(values):
+            raise sec.error(f"{key}.choice", values, "each at most once")
+        return tuple(values)
+    return (sec.choice(key, options),)
+
+
+def _read_actuator_faults(root: Section, duration_s: float) -> tuple[ActuatorFaultSpec, ...]:
+    """``[[actuator_faults]]``: a motor's failure drawn per run."""
+    raw = root.data.get("actuator_faults", [])
+    root._used.add("actuator_faults")  # noqa: SLF001
+    if not isinstance(raw, list) or not all(isinstance(item, dict) for item in raw):
+        raise root.error("actuator_faults", raw, "a list of tables ([[actuator_faults]])")
+    motors = FAILURES[Unit.motor].instances
+    out = []
+    for i, item in enumerate(raw):
+        sec = Section(item, root.source, f"actuator_faults[{i}].")
+        motor = read_distribution(sec, "motor", None, 0.0, float(motors))
+        if motor.kind not in ("fixed", "choice") or any(v != int(v) for v in motor.params):
+            raise sec.error("motor", motor.describe(), f"a motor number 1-{motors} (0: all), or "
+                            "{ choice = [...] } of them")  # fmt: skip
+        types = _read_labels(sec, "type", ACTUATOR_FAULT_TYPES[:3])
+        if sec.has("effectiveness") and "wrong" not in types:
+            raise sec.error("effectiveness", sec.data["effectiveness"], 'only with type "wrong"')
+        effectiveness = read_distribution(sec, "effectiveness", MOTOR_EFFECTIVENESS_DEFAULT, 0.0, 1.0)
+        start = read_distribution(sec, "start_s", None, 0.0, duration_s, "s")
+        sec.finish()
+        out.append(ActuatorFaultSpec(motor, types, effectiveness, start))
+    return tuple(out)
 
 
 def _read_estimation(root: Section, path: Path, duration_s: float) -> EstimationSpec | None:
@@ -497,15 +586,17 @@ def _read_estimation(root: Section, path: Path, duration_s: float) -> Estimation
     faults = []
     for i, item in enumerate(raw):
         fs = Section(item, root.source, f"sensor_faults[{i}].")
-        kind = fs.choice("kind", FAULT_KINDS)
+        kinds = _read_labels(fs, "kind", FAULT_KINDS)
         start = read_distribution(fs, "start_s", None, 0.0, duration_s, "s")
         length = None
         if fs.has("duration_s"):
             length = read_distribution(fs, "duration_s", None, 0.0, MAX_TIME_S, "s")
         limit = FAULT_VALUE_LIMIT
-        value = read_distributions(fs, "value", default_fault_value(kind), -limit, limit)
+        value = None
+        if fs.has("value") or len(kinds) == 1:
+            value = read_distributions(fs, "value", default_fault_value(kinds[0]), -limit, limit)
         fs.finish()
-        faults.append(FaultSpec(kind, start, length, value))
+        faults.append(FaultSpec(kinds, start, length, value))
     return replace(base, parameters=parameters, faults=tuple(faults))
 
 

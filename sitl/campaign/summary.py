@@ -7,6 +7,11 @@ comparable; failures are counted separately); which sampled parameters drive the
 its median, over completed runs) and the worst runs
 themselves with their parameters.
 
+A campaign that draws faults (:attr:`~.spec.CampaignSpec.draws_faults`) gets a section of its own
+first: the controllers ranked by the share of runs they survived, then by the median of their
+largest excursion after the fault's onset, with their time to recover, the reasons of the runs
+lost and the fault parameters those runs have in common (:func:`fault_ranking`).
+
 Indices (CONTROL.md, Tables I-III): final position error (norm, mm), ISE of position (x + y + z,
 m^2 s) and attitude (phi + theta + psi, rad^2 s), IADU of U1 and of the torques, the largest
 position error (mm) and tilt (deg) along the run, the time an actuator limit was active; on the
@@ -167,11 +172,13 @@ def summary_markdown(
             if spec.estimation is not None
             else []
         ),  # fmt: skip
+        *(["- faults drawn per run: see the next section"] if "survived" in table.column_names else []),
         f"- failure: position error > {spec.failure.max_position_error_m:g} m, tilt > "
         f"{spec.failure.max_tilt_rad:g} rad, non-finite state, a controller's non-finite output, or ground "
         "contact after take-off; a failed run stops there and is left out of the statistics below (counted "
         "in the failure rate)",
         "",
+        *([*fault_section(table, spec, controllers), ""] if "survived" in table.column_names else []),
         "## Headline",
         "",
         "| controller | median ISE pos | p95 ISE pos | median ISE att | p95 ISE att | median "
@@ -254,6 +261,130 @@ def summary_markdown(
     if extra:
         lines += ["", extra]
     return "\n".join(lines) + "\n"
+
+
+def fault_ranking(table: pa.Table, controllers: Sequence[str]) -> list[tuple[str, float, float]]:
+    """The controllers ranked by what they survive: ``(controller, survival share, median
+    excursion)``, the highest share first, ties by the smaller median largest excursion after the
+    fault's onset (over every run, the lost ones with the excursion they reached before they ended;
+    runs that ended before the onset are left out of the median)."""
+    names = np.array(table.column("controller").to_pylist())
+    survived = np.array(table.column("survived").to_pylist(), dtype=bool)
+    excursion = np.array(table.column("max_excursion_m").to_pylist(), dtype=float)
+    out = []
+    for c in controllers:
+        sel = names == c
+        if not sel.any():
+            continue
+        reached = excursion[sel][np.isfinite(excursion[sel])]
+        median = float(np.median(reached)) if reached.size else math.inf
+        out.append((c, float(survived[sel].mean()), median))
+    return sorted(out, key=lambda item: (-item[1], item[2]))
+
+
+def fault_section(table: pa.Table, spec: CampaignSpec, controllers: Sequence[str]) -> list[str]:
+    """The summary's section on the faults drawn: the ranking and what the lost runs share."""
+    names = np.array(table.column("controller").to_pylist())
+    survived = np.array(table.column("survived").to_pylist(), dtype=bool)
+    failed = np.array(table.column("failed").to_pylist(), dtype=bool)
+    reasons = np.array(table.column("failure").to_pylist(), dtype=object)
+    excursion = np.array(table.column("max_excursion_m").to_pylist(), dtype=float)
+    recover = np.array(table.column("time_to_recover_s").to_pylist(), dtype=float)
+    failed_at = np.array(table.column("failure_time_s").to_pylist(), dtype=float)
+    early = failed & (failed_at < np.array(table.column("fault_onset_s").to_pylist(), dtype=float))
+    limits = spec.survival
+    drawn = [
+        f"{', '.join(f.types)} of motor {f.motor.describe()} (effectiveness {f.effectiveness.describe()}) "
+        f"from {f.start_s.describe()} s"
+        for f in spec.actuator_faults
+    ]
+    if spec.estimation is not None:
+        drawn += [f"{' or '.join(f.kinds)} from {f.start_s.describe()} s" for f in spec.estimation.faults]
+    lines = [
+        "## Faults: what each controller survives",
+        "",
+        f"Drawn per run: {'; '.join(drawn)}. Survived: the run flew to its end (no failure) and its "
+        f"position error stayed within {limits.envelope_m:g} m of the reference; excursion: the largest "
+        f"position error from the fault's onset on; recovered: back within {limits.recovery_bound_m:g} m "
+        "for the rest of the run (the time from the onset). Ranked by survival over every run (a run lost "
+        "before its fault's onset counts too: the column of the runs lost says how many), then by the "
+        "median excursion.",
+        "",
+        "| rank | controller | survived | excursion, median / p95 / worst (m) | recovered | time to recover, "
+        "median / p95 (s) | lost: failed (reasons; before the onset) / outside the envelope |",
+        "|---:|---|---:|---:|---:|---:|---|",
+    ]
+    for rank, (c, share, _) in enumerate(fault_ranking(table, controllers), 1):
+        sel = names == c
+        n = int(sel.sum())
+        ex = excursion[sel][np.isfinite(excursion[sel])]
+        med, p95, worst = _stats(ex)
+        rec = recover[sel][np.isfinite(recover[sel])]
+        rmed, rp95, _ = _stats(rec)
+        counts: dict[str, int] = {}
+        for r in reasons[sel & failed]:
+            counts[r] = counts.get(r, 0) + 1
+        detail = ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()))
+        if detail:
+            detail += f"; {int((sel & early).sum())} before the onset"
+        outside = int((sel & ~failed & ~survived).sum())
+        lost = f"{int((sel & failed).sum())}" + (f" ({detail})" if detail else "") + f" / {outside}"
+        lines.append(
+            f"| {rank} | {title(c)} | {int(survived[sel].sum())}/{n} ({100.0 * share:.1f} %) | {_fmt(med)} / "
+            f"{_fmt(p95)} / {_fmt(worst)} | {rec.size}/{n} | {_fmt(rmed)} / {_fmt(rp95)} | {lost} |"
+        )
+    groups = _drawn_groups(table, spec)
+    if groups:
+        lines += ["", "Survived, by the fault drawn:", "",
+                  "| fault drawn | runs | " + " | ".join(title(c) for c in controllers) + " |",
+                  "|---|---:|" + "---:|" * len(controllers)]  # fmt: skip
+        for label, which in groups:
+            cells = []
+            for c in controllers:
+                sel = (names == c) & which
+                cells.append(f"{int(survived[sel].sum())}/{int(sel.sum())}")
+            runs = int(((names == controllers[0]) & which).sum())
+            lines.append(f"| {label} | {runs} | " + " | ".join(cells) + " |")
+    params = [p for p in parameter_names(table) if p.startswith(("actuator_fault", "fault"))
+              and not p.endswith(("_kind_index", "_type_index")) and "_value_" not in p]  # fmt: skip
+    if params:
+        lines += ["", "Fault parameters in the runs lost (median, against all runs):", ""]
+        for c in controllers:
+            sel = names == c
+            lost = sel & ~survived
+            if not lost.any() or lost.sum() == sel.sum():
+                continue
+            cells = []
+            for p in params:
+                values = np.array(table.column(p).to_pylist(), dtype=float)
+                cells.append(f"{p} {np.median(values[lost]):.4g} ({np.median(values[sel]):.4g})")
+            lines.append(f"- {title(c)}: " + "; ".join(cells))
+    return lines
+
+
+def _drawn_groups(table: pa.Table, spec: CampaignSpec) -> list[tuple[str, np.ndarray]]:
+    """The rows by what was drawn among several: each sensor fault's kind, each actuator fault's
+    type and motor (``(label, rows)``)."""
+    out = []
+
+    def column(name: str) -> np.ndarray | None:
+        return np.array(table.column(name).to_pylist(), dtype=float) if name in table.column_names else None
+
+    for i, f in enumerate(spec.actuator_faults):
+        for key, labels in ((f"actuator_fault{i}_type_index", f.types),
+                            (f"actuator_fault{i}_motor", None)):  # fmt: skip
+            values = column(key)
+            if values is None or np.all(values == values[0]):
+                continue
+            for v in sorted(set(values.tolist())):
+                label = labels[int(v)] if labels is not None else ("all motors" if v == 0 else f"motor {v:g}")
+                out.append((label, values == v))
+    if spec.estimation is not None:
+        for i, f in enumerate(spec.estimation.faults):
+            values = column(f"fault{i}_kind_index")
+            if values is not None:
+                out += [(kind, values == k) for k, kind in enumerate(f.kinds) if (values == k).any()]
+    return out
 
 
 def _run_list(runs: np.ndarray, limit: int = 12) -> str:

@@ -39,6 +39,8 @@ def debug_array(name: bytes, data: list[float], system_id: int = 1) -> bytes:
         (debug_array(b"OTHER", [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]), "another array"),
         (debug_array(b"DISTURB", [1.0] * 6)[:-1], "truncated"),
         (debug_array(b"DISTURB", [1.0] * 6)[:-2] + b"\0\0", "a bad checksum"),
+        (debug_array(b"DISTURB", [1.0] * 10 + [0.5, 0.0, 0.0, 0.0]), "a failure type that is not a byte"),
+        (debug_array(b"DISTURB", [1.0] * 10 + [-1.0, 0.0, 0.0, 0.0]), "a negative failure type"),
     ],
 )
 def test_a_report_that_is_not_a_sound_disturbance_is_ignored(frame, why):
@@ -46,9 +48,12 @@ def test_a_report_that_is_not_a_sound_disturbance_is_ignored(frame, why):
 
 
 def test_a_report_comes_in_the_papers_frames():
-    # NED force (1, 2, 3) is the paper's (1, -2, -3); MAVLink Euler torque (4, 5, 6) is (4, -5, -6)
-    frame = debug_array(b"DISTURB", [1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
-    assert disturbance_of({DISTURBANCE_ID: frame}) == (123, (1.0, -2.0, -3.0), (4.0, -5.0, -6.0))
+    # NED force (1, 2, 3) is the paper's (1, -2, -3); MAVLink Euler torque (4, 5, 6) is (4, -5, -6);
+    # the rotors' health as it is (rotor 2 at 70 %, a loss of effectiveness; rotor 4 off)
+    frame = debug_array(b"DISTURB", [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 1.0, 0.75, 1.0, 0.0, 0.0, 4.0, 0.0, 1.0])
+    assert disturbance_of({DISTURBANCE_ID: frame}) == (
+        123, (1.0, -2.0, -3.0), (4.0, -5.0, -6.0), (1.0, 0.75, 1.0, 0.0), (0, 4, 0, 1)
+    )
 
 
 def zero_order_hold(times: np.ndarray, samples_t: np.ndarray, samples: np.ndarray) -> np.ndarray:

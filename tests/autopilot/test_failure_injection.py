@@ -81,8 +81,8 @@ def texts(gcs: Gcs) -> str:
     return "".join(gcs.statustext)
 
 
-def command(gcs: Gcs, unit: int, failure_type: int, instance: float = 0.0) -> int:
-    return gcs.command(INJECT, unit, failure_type, instance).result
+def command(gcs: Gcs, unit: int, failure_type: int, instance: float = 0.0, param4: float = 0.0) -> int:
+    return gcs.command(INJECT, unit, failure_type, instance, param4).result
 
 
 def test_refused_while_sys_failure_en_is_0_with_the_reason():
@@ -127,7 +127,7 @@ def test_every_pair_the_table_does_not_model_is_unsupported():
     assert stack.sim.failures == {} and stack.sim.requests_applied == 0
 
 
-def test_sensor_failures_act_on_the_ekf_and_motors_need_rotors():
+def test_sensor_failures_act_on_the_ekf_and_a_motor_fails_on_the_wrench_vehicle_too():
     stack = make_stack()  # truth (EKF2_EN 0), the wrench vehicle
     stack.autopilot.params.set("SYS_FAILURE_EN", 1.0)
     gcs = Gcs(stack)
@@ -136,8 +136,10 @@ def test_sensor_failures_act_on_the_ekf_and_motors_need_rotors():
     assert "failure gps acts on the EKF: this vehicle flies on the simulator's state (EKF2_EN 0); start " \
            "it with --estimator ekf (EKF2_EN 1)" in texts(gcs)  # fmt: skip
     assert command(gcs, Unit.gps, Type.ok) == m.MAV_RESULT_ACCEPTED  # a recovery always passes
-    assert command(gcs, Unit.motor, Type.off, 1) == m.MAV_RESULT_UNSUPPORTED
-    assert "ideal wrench" in texts(gcs)
+    # the ideal wrench's rotor: its share of the wrench (the allocation's equation)
+    assert command(gcs, Unit.motor, Type.off, 1) == m.MAV_RESULT_ACCEPTED
+    stack.step()
+    assert stack.sim.plant.rotor_effectiveness[ROTOR_POSITIONS.index("right")] == 0.0
 
 
 SENSOR_PAIRS = [(m_.unit, t) for m_ in FAILURES.values() if m_.where is Where.SENSORS for t in m_.effects]
@@ -231,6 +233,32 @@ def test_a_motor_off_on_the_rotors_vehicle_in_the_plant_from_the_next_frame():
     assert command(gcs, Unit.motor, Type.ok, 0) == m.MAV_RESULT_ACCEPTED
     stack.step()
     assert stack.sim.plant.rotor_effectiveness == [1.0] * 4 and stack.sim.failures == {}
+
+
+def test_a_motors_loss_of_effectiveness_given_in_param4_or_sim_mot_eff():
+    """``wrong``: the effectiveness the motor keeps, param4 when in (0, 1], else SIM_MOT_EFF (unset
+    param4: 0 from pymavlink, NaN from MAVSDK); outside [0, 1] DENIED with the reason; stuck."""
+    stack = make_stack(vehicle="paper_quad_rotors")
+    stack.autopilot.params.set("SYS_FAILURE_EN", 1.0)
+    gcs = Gcs(stack)
+    gcs.wait_heartbeat()
+    left = ROTOR_POSITIONS.index("left")  # PX4's motor 2
+    assert command(gcs, Unit.motor, Type.wrong, 2, 0.7) == m.MAV_RESULT_ACCEPTED
+    stack.step()
+    assert stack.sim.plant.rotor_effectiveness[left] == pytest.approx(0.7)
+    assert stack.sim.failures == {"motor 2": "wrong"}
+    for unset in (0.0, math.nan):
+        stack.autopilot.params.set("SIM_MOT_EFF", 0.25)
+        assert command(gcs, Unit.motor, Type.wrong, 2, unset) == m.MAV_RESULT_ACCEPTED
+        stack.step()
+        assert stack.sim.plant.rotor_effectiveness[left] == 0.25
+        stack.autopilot.params.set("SIM_MOT_EFF", 0.5)
+    assert command(gcs, Unit.motor, Type.wrong, 2, 1.5) == m.MAV_RESULT_DENIED
+    assert "(0 or NaN: SIM_MOT_EFF)) = 1.5 out of range [0, 1]" in texts(gcs)  # the parameter's rule
+    assert command(gcs, Unit.motor, Type.stuck, 2) == m.MAV_RESULT_ACCEPTED
+    stack.step()
+    assert stack.sim.plant.rotor_fault(left + 1).failure_type == Type.stuck
+    assert stack.sim.rotor_health[4 + left] == Type.stuck and stack.sim.rotor_health[left] == 1.0
 
 
 def test_a_battery_failure_reaches_the_simulators_battery_monitor():

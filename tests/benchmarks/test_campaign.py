@@ -47,3 +47,12 @@ def test_its_help_says_which_controllers_it_takes(benchmark):
     text = " ".join(benchmark.build_parser().format_help().split())
     assert "--controller NAME" in text and "--config-dir DIR" in text
     assert "not in the spec's list" in text
+
+
+def test_a_spec_that_draws_faults_is_flown_again_without_them(benchmark):
+    """``--spec paper_box_faults``: the same runs with and without their faults, for the cost."""
+    parse = benchmark.build_parser().parse_args
+    faults = benchmark.flown_spec(parse(["--spec", "paper_box_faults", "--runs", "3"]))
+    healthy = benchmark.flown_spec(parse(["--spec", "paper_box_faults", "--runs", "3", "--healthy"]))
+    assert faults.draws_faults and not healthy.draws_faults
+    assert faults.vehicle == healthy.vehicle and faults.plant == healthy.plant and faults.seed == healthy.seed

@@ -25,7 +25,7 @@ def test_every_pair_is_modelled_or_refused_with_a_reason():
                 assert why is not None and why[0] is Refusal.UNSUPPORTED and unit.name in why[1]
     assert failures.refusal(200, 1, 0)[0] is Refusal.UNSUPPORTED  # no such unit
     assert failures.refusal(Unit.gps, 9, 0)[0] is Refusal.UNSUPPORTED  # no such type
-    assert "modelled: ok, off" in failures.refusal(Unit.motor, Type.stuck, 0)[1]
+    assert "modelled: ok, off, stuck, wrong" in failures.refusal(Unit.motor, Type.garbage, 0)[1]
 
 
 def test_instances_beyond_the_units_are_denied():

@@ -74,9 +74,10 @@ def mixed_flight():
         datagram = sim.begin_frame()
         parts = dict(split_frames(datagram))
         if DISTURBANCE_ID in parts:
-            stamp, force, torque = disturbance_of(parts)
-            assert stamp <= sim.time_usec
-            current = (*force, *torque)
+            report = disturbance_of(parts)
+            assert report.time_usec <= sim.time_usec
+            assert report.rotor_effectiveness == (1.0,) * 4 and report.rotor_failure == (0,) * 4  # healthy
+            current = (*report.force_n, *report.torque_n_m)
         row = sim.truth_row
         applied.append(tuple(row[i] for i in APPLIED))
         held.append(current)

@@ -140,7 +140,8 @@ def test_actuator_decoder_ignores_other_messages_and_garbage():
 
 def test_truth_row_follows_the_field_layout():
     truth = make_truth()
-    row = truth_row(1.5, truth, (1.0, 2.0, 3.0), (0.1, 0.2, 0.3), (4.0, 5.0, 6.0))
+    health = (1.0, 0.7, 1.0, 0.0, 0.0, 4.0, 0.0, 1.0)  # rotor 2 at 70 %, rotor 4 off
+    row = truth_row(1.5, truth, (1.0, 2.0, 3.0), (0.1, 0.2, 0.3), (4.0, 5.0, 6.0), health)
     assert len(row) == len(TRUTH_FIELDS)
     named = dict(zip(TRUTH_FIELDS, row, strict=True))
     assert named["time_s"] == 1.5
@@ -151,4 +152,6 @@ def test_truth_row_follows_the_field_layout():
     assert (named["Ap_n_m"], named["Aq_n_m"], named["Ar_n_m"]) == (0.1, 0.2, 0.3)
     assert (named["wind_x_m_s"], named["wind_y_m_s"], named["wind_z_m_s"]) == (4.0, 5.0, 6.0)
     assert named["thrust_n"] == truth.thrust_n == 8.0
+    assert [named[f"rotor{n}_effectiveness"] for n in (1, 2, 3, 4)] == [1.0, 0.7, 1.0, 0.0]
+    assert [named[f"rotor{n}_failure"] for n in (1, 2, 3, 4)] == [0.0, 4.0, 0.0, 1.0]
     assert named["on_ground"] == 0.0

@@ -30,8 +30,9 @@ def controls(core: SimulatorCore) -> bytes:
 
 def inject(unit: float, failure_type: float, instance: float = 0.0, *, mav: m.MAVLink | None = None,
            target: tuple[int, int] = (SYSTEM, wire.SIMULATOR_COMPONENT_ID),
-           command: int = m.MAV_CMD_INJECT_FAILURE) -> bytes:  # fmt: skip
-    msg = m.MAVLink_command_long_message(*target, command, 0, unit, failure_type, instance, 0, 0, 0, 0)
+           command: int = m.MAV_CMD_INJECT_FAILURE, effectiveness: float = 1.0) -> bytes:  # fmt: skip
+    msg = m.MAVLink_command_long_message(*target, command, 0, unit, failure_type, instance, effectiveness,
+                                         0, 0, 0)  # fmt: skip
     return msg.pack(mav or packer())
 
 
@@ -111,7 +112,8 @@ HOSTILE = {
     "an unmodelled type": inject(Unit.gyro, Type.delayed),
     "no such instance": inject(Unit.motor, Type.off, 7.0),
     "the autopilot's own unit": inject(Unit.rc_signal, Type.off),
-    "a motor on the wrench vehicle": inject(Unit.motor, Type.off, 1.0),
+    "a motor's effectiveness above 1": inject(Unit.motor, Type.wrong, 1.0, effectiveness=1.5),
+    "a NaN effectiveness": inject(Unit.motor, Type.wrong, 1.0, effectiveness=math.nan),
     "bytes that are not MAVLink": b"\x01\x02garbage",
     "a parameter that is not the simulator's": param_set(b"MPC_XY_VEL_MAX", 3.0),
     "a simulator parameter out of range": param_set(b"SIM_BAT_MIN_PCT", 150.0),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import re
 
 import pytest
@@ -193,3 +194,27 @@ def test_fail_help_lists_px4s_units_and_types_and_what_is_modelled(capsys):
     with pytest.raises(SystemExit) as info:
         cli.main(["fail", "propeller", "off"])
     assert info.value.code == 2 and "invalid choice: 'propeller'" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(30)
+def test_fail_takes_the_motor_before_the_type_and_its_effectiveness_after():
+    """``quadsitl fail motor 2 off`` (as ``-i 2``), ``motor 3 wrong 0.7``; a figure anywhere else,
+    an instance given twice or an effectiveness outside (0, 1] are refused with the reason."""
+    from gcs_scripts.fail import Request, parse_words
+    from quadcommon.failures import Type, Unit
+
+    assert parse_words("motor", ["2", "off"], 0)[:3] == (Unit.motor, Type.off, 2)
+    assert parse_words("motor", ["off"], 2)[:3] == (Unit.motor, Type.off, 2)
+    assert parse_words("motor", ["3", "wrong", "0.7"], 0) == Request(Unit.motor, Type.wrong, 3, 0.7)
+    assert math.isnan(parse_words("motor", ["3", "wrong"], 0).effectiveness)  # the vehicle's SIM_MOT_EFF
+    assert parse_words("gps", ["off"], 0)[:3] == (Unit.gps, Type.off, 0)
+    for words, instance, why in (
+        (["2", "off"], 3, "give one"),
+        (["wrong", "1.5"], 1, "in (0, 1]"),
+        (["wrong", "x"], 1, "a number in (0, 1]"),
+        (["off", "0.5"], 1, "only for 'motor N wrong"),
+        (["2"], 0, "type: nothing"),
+        (["2", "broken"], 0, "type: 'broken'"),
+    ):
+        with pytest.raises(ValueError, match=re.escape(why)):
+            parse_words("motor", words, instance)

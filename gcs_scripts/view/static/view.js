@@ -33,8 +33,13 @@ const ANTIALIAS = params.has('aa') ? params.get('aa') !== '0' : !SOFTWARE_GL;
 const UI_HZ = clamp(Number(params.get('ui_hz')) || 8, 1, 60);
 const MAX_POINTS = 20000;            // per track and column (live: ~11 min at 30 Hz)
 const MAX_TEXTS = 200;
+// e1..e4, f1..f4: the rotors' health (effectiveness, FAILURE_TYPE), rotors 1 front, 2 right, 3 rear, 4 left
+const ROTOR_COLS = ['e1', 'e2', 'e3', 'e4', 'f1', 'f2', 'f3', 'f4'];
 const COLS = ['t', 'x', 'y', 'z', 'xr', 'yr', 'zr', 'phi', 'theta', 'psi', 'phir', 'thetar', 'psir',
-  'u1', 'tphi', 'ttheta', 'tpsi', 'fx', 'fy', 'fz', 'mx', 'my', 'mz'];
+  'u1', 'tphi', 'ttheta', 'tpsi', 'fx', 'fy', 'fz', 'mx', 'my', 'mz', ...ROTOR_COLS];
+// A failed rotor's colour by its FAILURE_TYPE (1 off, 2 stuck, 4 wrong: a loss of effectiveness).
+const ROTOR_FAILURES = { 1: ['off', 0xd50000], 2: ['stuck', 0xff6d00], 4: ['', 0xffab00] };
+const ROTOR_NAMES = ['front', 'right', 'rear', 'left'];
 const DEG = 180 / Math.PI;
 const SEVERITY = ['EMERGENCY', 'ALERT', 'CRITICAL', 'ERROR', 'WARNING', 'NOTICE', 'INFO', 'DEBUG'];
 
@@ -77,6 +82,7 @@ function appendSample(tr, s) {
   put(['phi', 'theta', 'psi'], s.eta); put(['phir', 'thetar', 'psir'], s.etar);
   c.u1.push(s.u1); put(['tphi', 'ttheta', 'tpsi'], s.tau);
   put(['fx', 'fy', 'fz'], s.df); put(['mx', 'my', 'mz'], s.dm);
+  put(ROTOR_COLS, s.rot);
   tr.q = s.q;
   return true;
 }
@@ -173,12 +179,17 @@ function makeBody(color) {
   a2.rotation.z = Math.PI / 2;      // '+' configuration: arms on the body x and y axes
   group.add(a1, a2);
   const rotor = new THREE.CylinderGeometry(0.1, 0.1, 0.012, 20);
-  for (const [x, y] of [[0.28, 0], [0, 0.28], [-0.28, 0], [0, -0.28]]) {
-    const r = new THREE.Mesh(rotor, mat);
+  const rotors = [];
+  // The simulator's rotors 1-4 (front, right, rear, left; body y is left), each its own material
+  // so that a failed one shows (rotorHealth).
+  for (const [x, y] of [[0.28, 0], [0, -0.28], [-0.28, 0], [0, 0.28]]) {
+    const r = new THREE.Mesh(rotor, mat.clone());
     r.rotation.x = Math.PI / 2;     // cylinder axis y -> body z
     r.position.set(x, y, 0.025);
     group.add(r);
+    rotors.push(r);
   }
+  group.userData = { rotors, color: new THREE.Color(color), health: '' };
   const nose = new THREE.Mesh(new THREE.ConeGeometry(0.04, 0.12, 12), new THREE.MeshLambertMaterial({ color: 0xff1744 }));
   nose.rotation.z = -Math.PI / 2;   // cone axis y -> body +x (the front)
   nose.position.set(0.36, 0, 0);
@@ -254,11 +265,39 @@ function poseTracks(tAt) {
       // The paper's ZYX Euler angles: R = Rz(psi) Ry(theta) Rx(phi) is three.js's order 'ZYX'.
       o.body.rotation.set(num(c.phi[i]), num(c.theta[i]), num(c.psi[i]), 'ZYX');
     }
+    rotorHealth(o.body, c, i);
     const sp = o.stem.geometry.attributes.position;
     sp.setXYZ(0, c.x[i], c.y[i], 0); sp.setXYZ(1, c.x[i], c.y[i], c.z[i]);
     sp.needsUpdate = true;
     o.stem.computeLineDistances();
   }
+}
+
+// A failed rotor in its failure's colour (a loss of effectiveness shaded by what it keeps), the
+// healthy ones in the track's; only when the health changed.
+function rotorHealth(body, c, i) {
+  const key = ROTOR_COLS.map((k) => c[k][i]).join(',');
+  const u = body.userData;
+  if (key === u.health) return;
+  u.health = key;
+  u.rotors.forEach((r, n) => {
+    const failure = ROTOR_FAILURES[c[`f${n + 1}`][i]];
+    const e = num(c[`e${n + 1}`][i]);
+    if (!failure) r.material.color.copy(u.color);
+    else r.material.color.setHex(failure[1]).lerp(new THREE.Color(0x333333), failure[0] ? 0 : 0.7 * (1 - e));
+  });
+}
+
+// The rotors' health in words, for the vehicle's card: "healthy", or each failed rotor.
+function rotorText(c, i) {
+  const out = [];
+  for (let n = 0; n < 4; n++) {
+    const failure = ROTOR_FAILURES[c[`f${n + 1}`][i]];
+    if (!failure) continue;
+    const e = num(c[`e${n + 1}`][i]);
+    out.push(`${n + 1} ${ROTOR_NAMES[n]}: ${failure[0] || `${fmt(100 * e, 0)} %`}`);
+  }
+  return out.length ? out.join(', ') : 'healthy';
 }
 
 function resize3d() {
@@ -455,7 +494,8 @@ function buildCards() {
       <span class="k">landed</span><span class="landed">–</span>
       <span class="k">failsafe</span><span><span class="failsafe">none</span></span>
       <span class="k">t</span><span class="time">–</span>
-      <span class="k">|p − p_d|</span><span class="err">–</span></div>`;
+      <span class="k">|p − p_d|</span><span class="err">–</span>
+      <span class="k">rotors</span><span class="rotors">–</span></div>`;
     card.querySelector('.name').textContent = tr.label;
     card.title = tr.desc.source || `instance ${tr.desc.instance}, MAVLink system ${tr.desc.system_id}`;
     host.appendChild(card);
@@ -491,6 +531,9 @@ function updateCards() {
       setText(q('.time'), `${fmt(c.t[i], 2)} s`);
       const e = c.xr[i] === null ? NaN : Math.hypot(c.x[i] - c.xr[i], c.y[i] - c.yr[i], c.z[i] - c.zr[i]) * 1000;
       setText(q('.err'), Number.isFinite(e) ? `${fmt(e, e < 10 ? 3 : 1)} mm` : '–');
+      const rotors = rotorText(c, i);
+      setText(q('.rotors'), rotors);
+      q('.rotors').className = `rotors ${rotors === 'healthy' ? '' : 'badge warn'}`;
     }
   }
 }

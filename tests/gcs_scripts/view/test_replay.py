@@ -101,3 +101,31 @@ def test_not_a_log(tmp_path):
         load_track(bad)
     with pytest.raises(FileNotFoundError):
         load_track(tmp_path / "missing")
+
+
+def test_a_flight_logs_rotor_health_reaches_the_replay(tmp_path):
+    """A motor failure injected in flight (PX4's motor 1, the right rotor, at 60 %): the flight log's
+    sim_rotors (from the frames' report) gives the replay its rotor-health columns."""
+    from pymavlink.dialects.v20 import common as m
+
+    from autopilot.control.config import load_controller
+    from quadcommon.config import load_scenario, load_vehicle
+    from quadcommon.failures import Type, Unit
+    from sitl.inprocess import RunOptions, paper_stack
+
+    options = RunOptions(log_dir=str(tmp_path))
+    stack = paper_stack(load_scenario("helix"), load_controller("intbs_nlhinf"), options,
+                        vehicle=load_vehicle("paper_quad_rotors"))  # fmt: skip
+    stack.autopilot.params.set("SYS_FAILURE_EN", 1.0)
+    gcs = stack.ground_station()
+    stack.run_for(0.5)
+    gcs.command(m.MAV_CMD_INJECT_FAILURE, Unit.motor, Type.wrong, 1, 0.6)
+    stack.run_for(0.5)
+    (log,) = stack.close()
+    track = load_track(log, rate_hz=50.0)
+    t = np.array(track.columns["t"])
+    e2, f2 = np.array(track.columns["e2"], dtype=float), np.array(track.columns["f2"], dtype=float)
+    assert (e2[t < 0.49] == 1.0).all() and (f2[t < 0.49] == 0.0).all()
+    assert e2[-1] == pytest.approx(0.6, abs=1e-6) and f2[-1] == Type.wrong
+    for n in (1, 3, 4):
+        assert track.columns[f"e{n}"][-1] == 1.0 and track.columns[f"f{n}"][-1] == 0.0

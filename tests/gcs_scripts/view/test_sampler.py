@@ -95,3 +95,19 @@ def test_each_step_is_sampled_once_and_a_stalled_controller_does_not_freeze_the_
     s.add_truth(truth_rows(times[30:400]))  # the autopilot stopped: 0.74 s of truth alone
     alone = s.take()
     assert alone.time_s == pytest.approx(times[-1]) and alone.position_ref_m == [None, None, None]
+
+
+def test_a_sample_carries_the_rotors_health():
+    """The truth rows' rotor health (effectiveness, FAILURE_TYPE; rotors 1 front, 2 right, 3 rear,
+    4 left) reaches the page as ``rot``: the view colours a failed rotor and names it."""
+    times = control_times(0.0, 20)
+    rows = truth_rows(times)
+    rows[:, [COL[f"rotor{n}_effectiveness"] for n in (1, 2, 3, 4)]] = 1.0
+    rows[10:, COL["rotor2_effectiveness"]] = 0.6
+    rows[10:, COL["rotor2_failure"]] = 4.0  # wrong: a loss of effectiveness
+    rows[15:, COL["rotor4_effectiveness"]] = 0.0
+    rows[15:, COL["rotor4_failure"]] = 1.0  # off
+    s = VehicleSampler()
+    s.add_truth(rows)
+    sample = s.take()
+    assert sample.to_json()["rot"] == [1.0, 0.6, 1.0, 0.0, 0.0, 4.0, 0.0, 1.0]
