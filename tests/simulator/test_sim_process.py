@@ -102,6 +102,8 @@ def test_truth_stream_and_info_on_zenoh():
                 for reply in session.get(wire.zenoh_key(n, "info"), timeout=1.0):
                     if reply.ok is not None:
                         info = json.loads(reply.ok.payload.to_bytes())
+            battery = info.pop("battery")  # the pack's truth, full at the start (simulator.battery)
+            assert battery["state_of_charge"] == 1.0 and battery["failure"] == "ok", battery
             assert info == {
                 "instance": n, "vehicle": "paper_quad", "scenario": "hover", "actuation": "wrench",
                 "physics_hz": RATES.physics_hz, "control_hz": RATES.control_hz, "speed": "max",
