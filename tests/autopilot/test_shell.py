@@ -162,7 +162,8 @@ def test_failure_goes_through_mav_cmd_inject_failure(vehicle):
     assert gps.startswith("WARN  [failure] gps off: DENIED: failure gps acts on the EKF")
     assert console.run("failure motor off -i 9").startswith("WARN  [failure] motor off: DENIED: failure "
                                                             "motor: no instance 9")
-    assert console.run("failure motor off").startswith("WARN  [failure] motor off: UNSUPPORTED")  # no rotors
+    assert console.run("failure motor off") == "INFO  [failure] motor off: accepted\n"  # the wrench too
+    assert console.run("failure motor ok") == "INFO  [failure] motor ok: accepted\n"
     for bad in ("failure", "failure gps", "failure warp off", "failure gps melt", "failure gps off -i x"):
         assert console.run(bad).startswith("usage: failure UNIT TYPE"), bad
 
