@@ -51,7 +51,6 @@ from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
-from .estimation.streams import StreamWatch
 from .logger.logger import FlightLogger, LogOptions, log_info
 from .logger.topics import Snapshot
 from .mavlink import telemetry
@@ -206,7 +205,6 @@ class AutopilotCore:
         self.hil_parser = new_parser()
         self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
-        self.sensor_streams = StreamWatch()  # sensor streams of the frames that stop (on the EKF)
         self._switch_estimator()
 
         ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
@@ -343,7 +341,7 @@ class AutopilotCore:
     def _frame(self, data: bytes, now: float) -> bytes | None:
         try:
             frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry,
-                                 sensors=self.estimator is not None)  # fmt: skip
+                                 sensors=True)  # health reads them on the truth too  # fmt: skip
         except CorruptFrame:
             self.on_foreign_datagram("HIL frame with a bad checksum")
             return None  # the simulator resends a frame it gets no answer to
@@ -402,11 +400,19 @@ class AutopilotCore:
         self.sim_time = t
         self.last_time_usec = frame.time_usec
         commander = self.commander
+        # What the vehicle knows of its sensors (commander/health.py): every frame, on either
+        # estimator; a stream that stops or resumes is announced.
+        for text in commander.observe_sensors(t, frame.sensors):
+            self.statustext(m.MAV_SEVERITY_WARNING, text)
+        if frame.sensors is not None and frame.sensors.gps is not None:
+            self._status.gps = frame.sensors.gps  # GPS_RAW_INT reports the receiver's last sample
         if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:
             est = self._estimate(t, frame)
             frame = frame._replace(state=est)  # telemetry reports what the vehicle flies on
         else:
             est = frame.state
+        commander.on_ekf = self.estimator is not None
+        commander.estimator_status = self.estimator.last_status if self.estimator is not None else None
         if est is not None:
             commander.update_state(
                 VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
@@ -478,8 +484,6 @@ class AutopilotCore:
         if loop is None:  # EKF2_EN = 1 set in flight: the switch waits for the disarm
             return frame.state
         samples = frame.sensors
-        for text in self.sensor_streams.update(t, samples):  # a stream that stops is announced
-            self.statustext(m.MAV_SEVERITY_WARNING, text)
         if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
             self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
             return None
@@ -582,6 +586,10 @@ class AutopilotCore:
         values = self.params.values
         s.geofence_enabled = values["GF_MAX_HOR_DIST"] > 0.0 or values["GF_MAX_VER_DIST"] > 0.0
         s.geofence_breached = c.failsafes.fence_breached
+        s.flags = c.health_flags(self.sim_time)
+        s.armable = s.armable and not s.flags.unhealthy_sensors()  # PX4's pre-arm check bit
+        s.failsafe = c.in_failsafe
+        s.terminated = c.terminated
         if output is not None:
             s.euler_ref = output.euler_ref_rad
             s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n

@@ -552,7 +552,8 @@ class Commander:
             failsafes = self.failsafes
             mission = self.mission
             links = LinkState(
-                mission_missing=mission is None or mission.count == 0,
+                # (a scenario's trajectory is the mission flown in its AUTO.MISSION)
+                mission_missing=(mission is None or mission.count == 0) and self.phase != Phase.TRAJECTORY,
                 offboard_lost=not self.offboard_stream_active(t),
                 home_invalid=self.home is None,
                 manual_control_lost=self.sticks.fresh(t, self._manual_limits.loss_s) is None,
