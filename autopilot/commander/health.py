@@ -256,7 +256,11 @@ class _Stream:
 
     def put(self, value: tuple[float, ...], state: tuple) -> None:
         last = self.value
-        if last is not None and len(last) == len(value):
+        if last is not None and value == last:  # (the common case on a noise-free sensor at rest)
+            if self.equal == 0:
+                self.frozen_state = state
+            self.equal += len(value)
+        elif last is not None and len(last) == len(value):
             for a, b in zip(last, value, strict=True):
                 if a == b:
                     if self.equal == 0:
@@ -268,7 +272,9 @@ class _Stream:
 
 
 def _angle_moved(a: Vector3, b: Vector3) -> float:
-    return max(abs(math.remainder(a[i] - b[i], 2.0 * math.pi)) for i in range(3))
+    tau = 2.0 * math.pi
+    return max(abs(math.remainder(a[0] - b[0], tau)), abs(math.remainder(a[1] - b[1], tau)),
+               abs(math.remainder(a[2] - b[2], tau)))  # fmt: skip
 
 
 def _moved(sensor: str, then: tuple, now: tuple) -> bool:
