@@ -401,9 +401,8 @@ class AutopilotCore:
         self.last_time_usec = frame.time_usec
         commander = self.commander
         # What the vehicle knows of its sensors (commander/health.py): every frame, on either
-        # estimator; a stream that stops or resumes is announced.
-        for text in commander.observe_sensors(t, frame.sensors):
-            self.statustext(m.MAV_SEVERITY_WARNING, text)
+        # estimator; a stream that stops or resumes is announced (commander events).
+        commander.observe_sensors(t, frame.sensors)
         if frame.sensors is not None and frame.sensors.gps is not None:
             self._status.gps = frame.sensors.gps  # GPS_RAW_INT reports the receiver's last sample
         if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:

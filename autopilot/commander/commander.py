@@ -109,7 +109,10 @@ ZERO3: Vector3 = (0.0, 0.0, 0.0)
 ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
 # MAV_SEVERITY
 SEVERITY_EMERGENCY, SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 0, 2, 4, 5, 6
-HEALTH_PERIOD_S = 0.01  # the failsafe flags are evaluated at 100 Hz of simulation time (PX4's commander)
+# The failsafe flags are evaluated this often (simulation time) and after every transition: PX4's
+# commander runs its health and arming checks at 10 Hz and when its state changes; its failsafe
+# state machine (here the mode fallback) reads the flags at 100 Hz, here when they or the mode change.
+HEALTH_PERIOD_S = 0.1
 
 CONTINUE_WITHIN_M = 0.5  # a new plan continues the reference if the vehicle is this close to it
 GROUND_Z_M = 0.0  # the local frame's origin (the configured home) is on flat ground
@@ -211,13 +214,17 @@ class Commander:
         self.failsafes = FailsafeMonitor(params)
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
-        # What the vehicle knows of its health (health.py): fed by the shell, evaluated at 100 Hz.
+        # What the vehicle knows of its health (health.py): fed by the shell every frame, the flags
+        # evaluated every HEALTH_PERIOD_S and after a transition.
         self.health = HealthMonitor(params)
         self.estimator_status: EstimatorStatus | None = None  # the EKF's last status (None: none)
         self.on_ekf = False  # flying on the EKF (EKF2_EN 1), else on the simulator's state
         self.flags = FailsafeFlags()
         self._health_due = -math.inf
         self._fallback: str | None = None  # the mode fallback taken (failsafe.py), None: none
+        # The fallback depends on the flags, the phase and mode, the parameters: checked again when
+        # one of them has changed.
+        self._fallback_due = True
         self._intended: FlightMode | None = None  # the mode chosen before the fallback
         self.in_failsafe = False  # a failsafe action is in force (HEARTBEAT: MAV_STATE_CRITICAL)
         self.terminated = False  # the flight was terminated (until the next arming)
@@ -329,6 +336,8 @@ class Commander:
                 return outcome
         if isinstance(row.to, Phase):
             self.phase = row.to
+        self._fallback_due = True
+        self._health_due = -math.inf  # the flags again at the next look (PX4: on a state change)
         mode = row.mode
         if mode is ASKED:
             mode = args.get("mode", FlightMode.AUTO_LOITER)
@@ -367,6 +376,7 @@ class Commander:
             if self.mode == FlightMode.AUTO_MISSION and self.mission is not None:
                 self.mission.pause()  # any other mode pauses the mission at its current item
             self.mode = mode
+            self._fallback_due = True
             self._event(SEVERITY_INFO, f"mode {mode.px4_name}")
 
     def _event(self, severity: int, text: str) -> None:
@@ -377,6 +387,7 @@ class Commander:
         return Outcome(result, reason)
 
     def _on_param_change(self, name: str, value: float) -> None:
+        self._fallback_due = True
         self.offboard.limits = self.limits()
         self._manual_limits = self.manual_limits()
 
@@ -538,15 +549,20 @@ class Commander:
         self.position_valid = False
 
     # -- health: what the vehicle knows of its sensors and estimates (health.py) ----------------------
-    def observe_sensors(self, t: float, samples: SensorSamples | None) -> list[str]:
-        """A frame's sensor samples (None: the frame had none); returns the sensor streams that
-        stopped or resumed, for the shell to announce."""
-        st = self.state
-        state = (st.position_m, st.velocity_m_s, st.euler_rad) if st is not None else None
-        return self.health.observe(t, samples, state)
+    def observe_sensors(self, t: float, samples: SensorSamples | None) -> None:
+        """A frame's sensor samples (None: the frame had none); a sensor stream that stopped or
+        resumed is announced."""
+        self.health.observe(t, samples, self.state)
+        if self.health.announcements:
+            self._announce_streams()
+
+    def _announce_streams(self) -> None:
+        for text in self.health.take_announcements():
+            self._event(SEVERITY_WARNING, text)
 
     def health_flags(self, t: float) -> FailsafeFlags:
-        """The failsafe flags, evaluated again when :data:`HEALTH_PERIOD_S` has passed."""
+        """The failsafe flags, evaluated again when :data:`HEALTH_PERIOD_S` has passed (the same
+        record while they are unchanged)."""
         if t >= self._health_due or t < self._health_due - 1.0:  # (or the clock restarted)
             self._health_due = t + HEALTH_PERIOD_S
             failsafes = self.failsafes
@@ -561,7 +577,12 @@ class Commander:
                 geofence_breached=failsafes.fence_breached,
             )
             has_state = self.position_valid and self.state is not None
-            self.flags = self.health.evaluate(t, self.estimator_status, self.on_ekf, has_state, links)
+            flags = self.health.evaluate(t, self.estimator_status, self.on_ekf, has_state, links)
+            if self.health.announcements:
+                self._announce_streams()
+            if flags is not self.flags:
+                self.flags = flags
+                self._fallback_due = True
         return self.flags
 
     def _nav_state(self, mode: FlightMode) -> int:
@@ -574,6 +595,7 @@ class Commander:
         the first of RTL, Land, Descend, Terminate that can (POSCTL and ALTCTL first to ALTCTL,
         STABILIZED: failsafe.py mode_fallback); taken once and announced; when the mode can run
         again, the vehicle goes back to it (PX4: the fallback clears with its condition)."""
+        self._fallback_due = False
         # The offboard stream has its own rule (COM_OF_LOSS_T, below), as PX4's COM_OBL_RC_ACT.
         flags = self.flags._replace(offboard_control_signal_lost=False)
         intended = self._intended or self.mode
@@ -665,7 +687,7 @@ class Commander:
         state = self.state
         if self.phase == Phase.DISARMED or state is None:
             return GuidanceOutput(Motors.OFF, None)
-        if self.phase in FLYING:
+        if self._fallback_due and self.phase in FLYING:  # what it depends on changed
             self._check_mode_fallback(t)
         if self.phase in FLYING:
             self._check_failsafes(t, state)

@@ -23,16 +23,23 @@ reports). :class:`HealthMonitor` computes it:
   estimate is valid while frames flow;
 * sensor health (PX4's sensor checks and ``DataValidator``): a stream that stops (silent for
   ``max(1 s, 3 intervals)``, :class:`~autopilot.estimation.streams.StreamWatch`); a value that
-  repeats exactly (the DataValidator's count, accumulated over the axes, above 100) *while the
+  repeats exactly (the DataValidator's count, accumulated over the axes, above 100; compared
+  every :data:`STUCK_CHECK_S` rather than every sample, see :class:`_StuckCheck`) *while the
   vehicle moves* enough that it must have changed (so a noise-free sensor, the ``ideal`` profile,
   at rest is not called stuck: PX4 would); the estimator rejecting the sensor's samples for
   :data:`REJECTING_S`; a GPS without a 3D fix.
+
+The rates are PX4's commander's: :meth:`HealthMonitor.observe` takes every frame (500 Hz) but
+only notes there what came (the streams' times; a stuck comparison when one is due) and judges the
+streams' silences at 100 Hz (:data:`STREAM_CHECK_S`, PX4's commander loop); :meth:`HealthMonitor.evaluate`
+runs when the commander asks (at 10 Hz and when its state changes, as PX4's health and arming
+checks) and returns the same record while nothing in it changed.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 from ..estimation.status import (
     ESTIMATOR_POS_HORIZ_REL,
@@ -97,6 +104,9 @@ STALE_S = 1.0  # PX4: an estimate (attitude, rates, position) older than this is
 PROBATION_S = 1.0  # PX4's checkPosVelValidity: good this long before valid again
 VALID_HYSTERESIS = 2.5  # ... and while valid, the accuracy may reach this times the threshold
 EQUAL_COUNT_MAX = 100  # PX4's DataValidator VALUE_EQUAL_COUNT_DEFAULT (counted over the axes)
+STUCK_CHECK_S = 0.02  # a sensor's value is compared at most this often (every 10th IMU sample at 500 Hz)
+STREAM_CHECK_S = 0.01  # the streams' silences are judged this often (PX4's commander loop, 100 Hz)
+FRAME_TIME_EPS_S = 1e-6  # the frames' times are whole microseconds: "due" is to within one
 REJECTING_S = 1.0  # the estimator's gate rejecting a sensor this long: unhealthy
 HEADING_SIGMA_MAX_RAD = math.radians(15.0)  # a yaw 1-sigma above this: no heading
 # How far the vehicle must have moved since a sensor's value froze for the freeze to be a fault.
@@ -121,7 +131,13 @@ class SensorHealth(NamedTuple):
     problem: str = ""  # why not healthy ('' when healthy): "stopped", "stuck", "rejected", "no 3D fix"
 
 
+# The verdicts there are (shared records: an evaluation allocates none of them).
 _ABSENT = SensorHealth()
+_HEALTHY = SensorHealth(True, True, "")
+_STOPPED = SensorHealth(True, False, "stopped")
+_NO_FIX = SensorHealth(True, False, "no 3D fix")
+_STUCK = SensorHealth(True, False, "stuck")
+_REJECTED = SensorHealth(True, False, "rejected by the estimator")
 
 
 class FailsafeFlags(NamedTuple):
@@ -243,32 +259,65 @@ def missing_for(flags: FailsafeFlags, nav_state: int) -> str:
     return ""
 
 
-class _Stream:
-    """One sensor's stuck check (PX4's DataValidator equal-value count), with the vehicle's state
-    when the value froze."""
+class Pose(Protocol):
+    """The state the vehicle flies on, as far as the stuck checks read it (the commander's
+    VehicleState)."""
 
-    __slots__ = ("value", "equal", "frozen_state")
+    position_m: Vector3
+    velocity_m_s: Vector3
+    euler_rad: Vector3
+
+
+class _StuckCheck:
+    """One sensor's stuck check (PX4's DataValidator equal-value count), with the vehicle's state
+    when the value froze.
+
+    PX4 compares every sample with the one before. Here a sample is compared at most every
+    :data:`STUCK_CHECK_S` (every sample of a sensor slower than that, every 10th of the 500 Hz
+    IMU) with the last one compared, and an axis found equal counts once for every sample since
+    that one: a stuck sensor repeats its value exactly, so the samples in between were equal too,
+    and the count passes :data:`EQUAL_COUNT_MAX` after as many samples as PX4's, give or take one
+    comparison's span (4 comparisons, 80 ms, for the IMU at 500 Hz; 34 samples in PX4). A sensor
+    whose value came back to exactly the same number at each comparison and changed in between
+    would count as stuck here; measured noise never does that.
+    """
+
+    __slots__ = ("value", "equal", "frozen_state", "samples", "due_s")
 
     def __init__(self) -> None:
-        self.value: tuple[float, ...] | None = None
+        self.value: tuple[float, ...] | None = None  # the last value compared
         self.equal = 0
-        self.frozen_state: tuple | None = None
+        self.frozen_state: Pose | None = None
+        self.samples = 0  # samples since the last comparison
+        self.due_s = -math.inf
 
-    def put(self, value: tuple[float, ...], state: tuple) -> None:
-        last = self.value
-        if last is not None and value == last:  # (the common case on a noise-free sensor at rest)
-            if self.equal == 0:
+    def offer(self, t: float, value: tuple[float, ...], state: Pose | None) -> None:
+        """A sample at ``t``: compared (:meth:`compare`) when :data:`STUCK_CHECK_S` has passed
+        since the last comparison."""
+        self.samples += 1
+        if self.due_s - 1.0 < t < self.due_s:  # (not due; t far before: the clock restarted)
+            return
+        self.due_s = t + STUCK_CHECK_S - FRAME_TIME_EPS_S
+        span, self.samples = self.samples, 0
+        self.compare(value, span, state)
+
+    def compare(self, value: tuple[float, ...], span: int, state: Pose | None) -> None:
+        """``value`` against the last one compared, ``span`` samples ago."""
+        last, self.value = self.value, value
+        if last is None:
+            return
+        if value == last:  # (the common case on a noise-free sensor at rest)
+            if self.equal == 0 or self.frozen_state is None:
                 self.frozen_state = state
-            self.equal += len(value)
-        elif last is not None and len(last) == len(value):
+            self.equal += span * len(value)
+        elif len(last) == len(value):
             for a, b in zip(last, value, strict=True):
                 if a == b:
-                    if self.equal == 0:
+                    if self.equal == 0 or self.frozen_state is None:
                         self.frozen_state = state
-                    self.equal += 1
+                    self.equal += span
                 else:
                     self.equal = 0
-        self.value = value
 
 
 def _angle_moved(a: Vector3, b: Vector3) -> float:
@@ -277,11 +326,10 @@ def _angle_moved(a: Vector3, b: Vector3) -> float:
                abs(math.remainder(a[2] - b[2], tau)))  # fmt: skip
 
 
-def _moved(sensor: str, then: tuple, now: tuple) -> bool:
-    """Has the vehicle moved since ``then`` enough that ``sensor`` must read differently?
-    (states: position, velocity, Euler angles)."""
-    p0, v0, e0 = then
-    p1, v1, e1 = now
+def _moved(sensor: str, then: Pose, now: Pose) -> bool:
+    """Has the vehicle moved since ``then`` enough that ``sensor`` must read differently?"""
+    p0, v0, e0 = then.position_m, then.velocity_m_s, then.euler_rad
+    p1, v1, e1 = now.position_m, now.velocity_m_s, now.euler_rad
     dv = math.dist(v0, v1)
     angle = _angle_moved(e0, e1)
     if sensor == "baro":
@@ -328,73 +376,100 @@ class LinkState(NamedTuple):
 
 
 class HealthMonitor:
-    """Feed :meth:`observe` every frame's samples; :meth:`evaluate` gives the flags."""
+    """Feed :meth:`observe` every frame's samples; :meth:`evaluate` gives the flags. The streams
+    that stopped or resumed are announced (:attr:`announcements`, :meth:`take_announcements`)."""
 
     def __init__(self, params: ParameterStore) -> None:
         self.params = params
         self.streams = StreamWatch()
-        self._stuck = {name: _Stream() for name in SENSORS}
-        self._state: tuple | None = None  # (position, velocity, euler) the vehicle flies on
+        self._stuck = {name: _StuckCheck() for name in SENSORS}
+        # The IMU's two checks are due together (one HIL_SENSOR): counted and timed here, once.
+        self._imu_samples = 0
+        self._imu_check_due = -math.inf
+        self._streams_due = -math.inf
+        self._state: Pose | None = None  # the state the vehicle flies on
         self.last_imu_s: float | None = None  # the last IMU (gyro and accelerometer) sample
         self.last_gps_fix_type = 0
         self._position = _Validity()
         self._velocity = _Validity()
+        self._verdict: tuple | None = None  # what the last record was made of (evaluate)
+        self.announcements: list[str] = []  # the sensor streams that stopped or resumed, as texts
+        self._flags: FailsafeFlags | None = None
 
-    def observe(self, t: float, samples: SensorSamples | None, state: tuple | None) -> list[str]:
-        """This frame's samples and the state the vehicle flies on ((position, velocity, Euler
-        angles), or None); returns the sensor streams that stopped or resumed, as texts."""
+    def observe(self, t: float, samples: SensorSamples | None, state: Pose | None) -> None:
+        """This frame's samples and the state the vehicle flies on (None before the first)."""
         self._state = state
-        texts = self.streams.update(t, samples)
+        self.streams.note(t, samples)
+        if not self._streams_due - 1.0 < t < self._streams_due:  # (t far before: the clock restarted)
+            self._check_streams(t)
         if samples is None:
-            return texts
-        s = state or ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+            return
         stuck = self._stuck
         if "imu" not in samples.refused:
             self.last_imu_s = t
-            stuck["gyro"].put(samples.angular_rate_rad_s, s)
-            stuck["accel"].put(samples.specific_force_m_s2, s)
+            self._imu_samples += 1
+            if not self._imu_check_due - 1.0 < t < self._imu_check_due:
+                self._imu_check_due = t + STUCK_CHECK_S - FRAME_TIME_EPS_S
+                span, self._imu_samples = self._imu_samples, 0
+                stuck["gyro"].compare(samples.angular_rate_rad_s, span, state)
+                stuck["accel"].compare(samples.specific_force_m_s2, span, state)
         if samples.mag_gauss is not None:
-            stuck["mag"].put(samples.mag_gauss, s)
+            stuck["mag"].offer(t, samples.mag_gauss, state)
         if samples.baro_height_m is not None:
-            stuck["baro"].put((samples.baro_height_m,), s)
+            stuck["baro"].offer(t, (samples.baro_height_m,), state)
         gps = samples.gps
         if gps is not None:
             self.last_gps_fix_type = gps.fix_type
             if gps.fix_type >= 3:
-                stuck["gps"].put(gps.position_m, s)
+                stuck["gps"].offer(t, gps.position_m, state)
         if samples.vision is not None:
             v = samples.vision
-            stuck["vision"].put((*v.position_m, v.yaw_rad), s)
+            stuck["vision"].offer(t, (*v.position_m, v.yaw_rad), state)
+
+    def _check_streams(self, t: float) -> None:
+        """The streams' silences (:meth:`StreamWatch.check`), every :data:`STREAM_CHECK_S` and
+        before each evaluation."""
+        self._streams_due = t + STREAM_CHECK_S - FRAME_TIME_EPS_S
+        texts = self.streams.check(t)
+        if texts:
+            self.announcements += texts
+
+    def take_announcements(self) -> list[str]:
+        """The sensor streams that stopped or resumed since the last call, as texts."""
+        texts, self.announcements = self.announcements, []
         return texts
 
-    def _sensor(self, name: str, t: float, estimator: EstimatorStatus | None) -> SensorHealth:
+    def _sensor(self, name: str, estimator: EstimatorStatus | None) -> SensorHealth:
         stream = _STREAM_OF[name]
         if stream not in self.streams.last:
             return _ABSENT
         if stream in self.streams.stopped:
-            return SensorHealth(True, False, "stopped")
+            return _STOPPED
         if name == "gps" and self.last_gps_fix_type < 3:
-            return SensorHealth(True, False, "no 3D fix")
+            return _NO_FIX
         check = self._stuck[name]
         frozen, now = check.frozen_state, self._state
         frozen_long = check.equal > EQUAL_COUNT_MAX and frozen is not None and now is not None
         if frozen_long and _moved(name, frozen, now):
-            return SensorHealth(True, False, "stuck")
+            return _STUCK
         if estimator is not None and estimator.initialised:
             for kind in _SOURCES_OF.get(name, ()):
                 since = estimator.sources[kind].rejecting_since_s
                 if since >= 0.0 and estimator.time_s - since > REJECTING_S:
-                    return SensorHealth(True, False, "rejected by the estimator")
-        return SensorHealth(True, True, "")
+                    return _REJECTED
+        return _HEALTHY
 
     def evaluate(
         self, t: float, estimator: EstimatorStatus | None, on_ekf: bool, has_state: bool, links: LinkState
     ) -> FailsafeFlags:
         """The flags at ``t``: ``estimator`` is the EKF's last status (None before its first or on
         the truth), ``on_ekf`` whether the vehicle flies on the EKF, ``has_state`` whether it has
-        a state at all (frames flowing)."""
+        a state at all (frames flowing). The record of the last call when nothing in it changed
+        (its ``timestamp_s`` is then the time of that call)."""
         p = self.params
-        sensors = {name: self._sensor(name, t, estimator if on_ekf else None) for name in SENSORS}
+        self._check_streams(t)  # (the streams' state as of now: the record is consistent)
+        judged_by = estimator if on_ekf else None
+        sensors = tuple([self._sensor(name, judged_by) for name in SENSORS])
         if not on_ekf:  # the simulator's state: valid while frames flow
             bad = not has_state
             rates = attitude = local = velocity = altitude = heading = bad
@@ -418,7 +493,11 @@ class HealthMonitor:
             low = not local and low_eph > 0.0 and eph > low_eph
         # The local position with the relaxed (no) accuracy requirement: aiding alone.
         relaxed = local if not on_ekf else not (ready and estimator.flags & ESTIMATOR_POS_HORIZ_REL)
-        return FailsafeFlags(
+        verdict = (rates, attitude, altitude, local, relaxed, velocity, low, heading, links, sensors)
+        if verdict == self._verdict and self._flags is not None:
+            return self._flags
+        self._verdict = verdict
+        self._flags = FailsafeFlags(
             timestamp_s=t,
             angular_velocity_invalid=rates,
             attitude_invalid=attitude,
@@ -436,5 +515,6 @@ class HealthMonitor:
             geofence_breached=links.geofence_breached,
             position_accuracy_low=low,
             heading_invalid=heading,
-            **sensors,
+            **dict(zip(SENSORS, sensors, strict=True)),
         )
+        return self._flags
