@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from quadcommon import wire
 from quadcommon.bus_records import ESTIMATOR_FIELDS
 from quadcommon.config import SitlConfig, VehicleConfig, config_path, load_scenario, load_sitl, load_vehicle
+from quadcommon.mavlink_fast import DecodeError
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
@@ -57,7 +58,15 @@ from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
 from .mavlink.commands import CommandDispatcher, command_ack, request_from_message
 from .mavlink.dispatch import FaultLog, MessageDispatcher
-from .mavlink.hil import DISTURBANCE_ID, ActuatorEncoder, CorruptFrame, decode_frame, disturbance_of
+from .mavlink.hil import (
+    DISTURBANCE_ID,
+    ActuatorEncoder,
+    CorruptFrame,
+    SensorSamples,
+    decode_frame,
+    disturbance_of,
+    sensor_samples,
+)
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.manual import decode_sticks
@@ -341,7 +350,7 @@ class AutopilotCore:
     def _frame(self, data: bytes, now: float) -> bytes | None:
         try:
             frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry,
-                                 sensors=True)  # health reads them on the truth too  # fmt: skip
+                                 sensors=self.estimator is not None)  # fmt: skip
         except CorruptFrame:
             self.on_foreign_datagram("HIL frame with a bad checksum")
             return None  # the simulator resends a frame it gets no answer to
@@ -401,10 +410,14 @@ class AutopilotCore:
         self.last_time_usec = frame.time_usec
         commander = self.commander
         # What the vehicle knows of its sensors (commander/health.py): every frame, on either
-        # estimator; a stream that stops or resumes is announced (commander events).
-        commander.observe_sensors(t, frame.sensors)
-        if frame.sensors is not None and frame.sensors.gps is not None:
-            self._status.gps = frame.sensors.gps  # GPS_RAW_INT reports the receiver's last sample
+        # estimator. On the truth nothing else reads the samples: the frame says which streams
+        # delivered, and the samples are decoded only when a health check wants their values.
+        samples = frame.sensors
+        if samples is None and frame.streams and commander.wants_sensor_samples(t, frame.streams):
+            samples = self._sensor_samples(frame.parts)
+        commander.observe_sensors(t, samples, frame.streams)
+        if samples is not None and samples.gps is not None:
+            self._status.gps = samples.gps  # GPS_RAW_INT reports the receiver's last sample
         if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:
             est = self._estimate(t, frame)
             frame = frame._replace(state=est)  # telemetry reports what the vehicle flies on
@@ -438,6 +451,12 @@ class AutopilotCore:
         self._frame_done = (frame, guidance, output)
         self._last_answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
         return self._last_answer
+
+    def _sensor_samples(self, parts: dict) -> SensorSamples | None:
+        try:
+            return sensor_samples(parts, self.setup.sitl.home)
+        except DecodeError:  # (decode_frame checked the messages already: not expected)
+            return None
 
     def _cascade_step(self, est: StateEstimate, guidance):
         """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'

@@ -29,9 +29,10 @@ reports). :class:`HealthMonitor` computes it:
   at rest is not called stuck: PX4 would); the estimator rejecting the sensor's samples for
   :data:`REJECTING_S`; a GPS without a 3D fix.
 
-The rates are PX4's commander's: :meth:`HealthMonitor.observe` takes every frame (500 Hz) but
-only notes there what came (the streams' times; a stuck comparison when one is due) and judges the
-streams' silences at 100 Hz (:data:`STREAM_CHECK_S`, PX4's commander loop); :meth:`HealthMonitor.evaluate`
+The rates are PX4's commander's. :meth:`HealthMonitor.observe` takes every frame (500 Hz) but
+only notes there which streams delivered, compares a value when its stuck check is due (the
+samples are needed only then: :meth:`HealthMonitor.wants_samples`) and judges the streams'
+silences at 100 Hz (:data:`STREAM_CHECK_S`, PX4's commander loop); :meth:`HealthMonitor.evaluate`
 runs when the commander asks (at 10 Hz and when its state changes, as PX4's health and arming
 checks) and returns the same record while nothing in it changed.
 """
@@ -48,7 +49,7 @@ from ..estimation.status import (
     EstimatorStatus,
 )
 from ..estimation.streams import StreamWatch
-from ..mavlink.hil import SensorSamples
+from ..mavlink.hil import STREAM_BARO, STREAM_GPS, STREAM_IMU, STREAM_MAG, STREAM_VISION, SensorSamples
 from ..params.store import ParameterStore
 from .modes import FlightMode
 
@@ -268,6 +269,11 @@ class Pose(Protocol):
     euler_rad: Vector3
 
 
+def _due(t: float, due_s: float) -> bool:
+    """Whether ``due_s`` has come at ``t`` (or the clock went back: the simulator restarted)."""
+    return not due_s - 1.0 < t < due_s
+
+
 class _StuckCheck:
     """One sensor's stuck check (PX4's DataValidator equal-value count), with the vehicle's state
     when the value froze.
@@ -291,18 +297,18 @@ class _StuckCheck:
         self.samples = 0  # samples since the last comparison
         self.due_s = -math.inf
 
-    def offer(self, t: float, value: tuple[float, ...], state: Pose | None) -> None:
-        """A sample at ``t``: compared (:meth:`compare`) when :data:`STUCK_CHECK_S` has passed
-        since the last comparison."""
+    def offer(self, t: float, value: tuple[float, ...] | None, state: Pose | None) -> None:
+        """A sample at ``t``, compared when :data:`STUCK_CHECK_S` has passed since the last
+        comparison (``value`` None: the frame's samples were not decoded, the check not being
+        due: :meth:`HealthMonitor.wants_samples`)."""
         self.samples += 1
-        if self.due_s - 1.0 < t < self.due_s:  # (not due; t far before: the clock restarted)
-            return
-        self.due_s = t + STUCK_CHECK_S - FRAME_TIME_EPS_S
-        span, self.samples = self.samples, 0
-        self.compare(value, span, state)
+        if value is not None and _due(t, self.due_s):
+            span, self.samples = self.samples, 0
+            self.compare(t, value, span, state)
 
-    def compare(self, value: tuple[float, ...], span: int, state: Pose | None) -> None:
-        """``value`` against the last one compared, ``span`` samples ago."""
+    def compare(self, t: float, value: tuple[float, ...], span: int, state: Pose | None) -> None:
+        """``value`` at ``t`` against the last one compared, ``span`` samples ago."""
+        self.due_s = t + STUCK_CHECK_S - FRAME_TIME_EPS_S
         last, self.value = self.value, value
         if last is None:
             return
@@ -383,9 +389,7 @@ class HealthMonitor:
         self.params = params
         self.streams = StreamWatch()
         self._stuck = {name: _StuckCheck() for name in SENSORS}
-        # The IMU's two checks are due together (one HIL_SENSOR): counted and timed here, once.
-        self._imu_samples = 0
-        self._imu_check_due = -math.inf
+        self._imu_samples = 0  # (the gyro and the accelerometer sample together: counted once)
         self._streams_due = -math.inf
         self._state: Pose | None = None  # the state the vehicle flies on
         self.last_imu_s: float | None = None  # the last IMU (gyro and accelerometer) sample
@@ -396,27 +400,43 @@ class HealthMonitor:
         self.announcements: list[str] = []  # the sensor streams that stopped or resumed, as texts
         self._flags: FailsafeFlags | None = None
 
-    def observe(self, t: float, samples: SensorSamples | None, state: Pose | None) -> None:
-        """This frame's samples and the state the vehicle flies on (None before the first)."""
+    def wants_samples(self, t: float, streams: int) -> bool:
+        """Whether :meth:`observe` reads the values of a frame at ``t`` that delivered ``streams``
+        (``STREAM_*`` bits): a stuck check due, or a GPS or vision sample. Where nothing else reads
+        the sensors (on the simulator's state) the samples are decoded only then."""
+        stuck = self._stuck
+        return bool(
+            streams & (STREAM_GPS | STREAM_VISION)
+            or (streams & STREAM_IMU and _due(t, stuck["gyro"].due_s))
+            or (streams & STREAM_MAG and _due(t, stuck["mag"].due_s))
+            or (streams & STREAM_BARO and _due(t, stuck["baro"].due_s))
+        )
+
+    def observe(self, t: float, streams: int, samples: SensorSamples | None, state: Pose | None) -> None:
+        """A frame at ``t``: the sensor streams that delivered (``STREAM_*`` bits), their samples
+        (None: not decoded, when :meth:`wants_samples` said so, or none) and the state the vehicle
+        flies on (None before the first)."""
         self._state = state
-        self.streams.note(t, samples)
-        if not self._streams_due - 1.0 < t < self._streams_due:  # (t far before: the clock restarted)
+        self.streams.note(t, streams)
+        if _due(t, self._streams_due):
             self._check_streams(t)
-        if samples is None:
+        if not streams:
             return
         stuck = self._stuck
-        if "imu" not in samples.refused:
+        if streams & STREAM_IMU:
             self.last_imu_s = t
             self._imu_samples += 1
-            if not self._imu_check_due - 1.0 < t < self._imu_check_due:
-                self._imu_check_due = t + STUCK_CHECK_S - FRAME_TIME_EPS_S
+            if samples is not None and _due(t, stuck["gyro"].due_s):
                 span, self._imu_samples = self._imu_samples, 0
-                stuck["gyro"].compare(samples.angular_rate_rad_s, span, state)
-                stuck["accel"].compare(samples.specific_force_m_s2, span, state)
-        if samples.mag_gauss is not None:
-            stuck["mag"].offer(t, samples.mag_gauss, state)
-        if samples.baro_height_m is not None:
-            stuck["baro"].offer(t, (samples.baro_height_m,), state)
+                stuck["gyro"].compare(t, samples.angular_rate_rad_s, span, state)
+                stuck["accel"].compare(t, samples.specific_force_m_s2, span, state)
+        if streams & STREAM_MAG:
+            stuck["mag"].offer(t, samples.mag_gauss if samples is not None else None, state)
+        if streams & STREAM_BARO:
+            baro = samples.baro_height_m if samples is not None else None
+            stuck["baro"].offer(t, (baro,) if baro is not None else None, state)
+        if samples is None:
+            return
         gps = samples.gps
         if gps is not None:
             self.last_gps_fix_type = gps.fix_type

@@ -17,7 +17,7 @@ than the checks, the only ones whose interval can exceed ``STREAM_SILENT_S / 3``
 
 from __future__ import annotations
 
-from ..mavlink.hil import SensorSamples
+from ..mavlink.hil import STREAM_BARO, STREAM_GPS, STREAM_IMU, STREAM_MAG, STREAM_VISION
 
 STREAM_SILENT_S = 1.0
 STREAM_NAMES = {
@@ -36,20 +36,21 @@ class StreamWatch:
         self.stopped: set[str] = set()
         self._checked: dict[str, float] = {}  # stream -> its latest sample at the last check
 
-    def note(self, t: float, samples: SensorSamples | None) -> None:
-        """The streams that delivered in a frame at ``t`` (None: the frame had no samples)."""
-        if samples is None:
+    def note(self, t: float, streams: int) -> None:
+        """The streams that delivered in a frame at ``t`` (``STREAM_*`` bits: SensorSamples.streams,
+        frame_streams)."""
+        if not streams:
             return
-        last = self.last  # (a refused sample is no sample)
-        if "imu" not in samples.refused:
+        last = self.last
+        if streams & STREAM_IMU:
             last["imu"] = t
-        if samples.mag_gauss is not None:
+        if streams & STREAM_MAG:
             last["mag"] = t
-        if samples.baro_height_m is not None:
+        if streams & STREAM_BARO:
             last["baro"] = t
-        if samples.gps is not None:
+        if streams & STREAM_GPS:
             last["gps"] = t
-        if samples.vision is not None:
+        if streams & STREAM_VISION:
             last["vision"] = t
 
     def check(self, t: float) -> list[str]:
