@@ -402,6 +402,7 @@ class AutopilotCore:
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
         self.missions.restart_clock()
+        self.commander.health.restart_clock()
 
     def _control_step(self, frame) -> bytes:
         self._frame_truth = frame.state
@@ -413,7 +414,7 @@ class AutopilotCore:
         # estimator. On the truth nothing else reads the samples: the frame says which streams
         # delivered, and the samples are decoded only when a health check wants their values.
         samples = frame.sensors
-        if samples is None and frame.streams and commander.wants_sensor_samples(t, frame.streams):
+        if samples is None and frame.streams and commander.health.wants_samples(t, frame.streams):
             samples = self._sensor_samples(frame.parts)
         commander.observe_sensors(t, samples, frame.streams)
         if samples is not None and samples.gps is not None:

@@ -550,19 +550,14 @@ class Commander:
 
     # -- health: what the vehicle knows of its sensors and estimates (health.py) ----------------------
     def observe_sensors(self, t: float, samples: SensorSamples | None, streams: int | None = None) -> None:
-        """A frame's sensor samples (None: none, or not decoded: :meth:`wants_sensor_samples`) and
-        the streams that delivered (``STREAM_*`` bits of autopilot/mavlink/hil.py; None: those of
+        """A frame's sensor samples (None: none, or not decoded: ``health.wants_samples``) and the
+        streams that delivered (``STREAM_*`` bits of autopilot/mavlink/hil.py; None: those of
         ``samples``); a sensor stream that stopped or resumed is announced."""
         if streams is None:
             streams = samples.streams if samples is not None else 0
         self.health.observe(t, streams, samples, self.state)
         if self.health.announcements:
             self._announce_streams()
-
-    def wants_sensor_samples(self, t: float, streams: int) -> bool:
-        """Whether :meth:`observe_sensors` reads the values of a frame that delivered ``streams``
-        (a health check due): where nothing else needs them, the shell decodes them only then."""
-        return self.health.wants_samples(t, streams)
 
     def _announce_streams(self) -> None:
         for text in self.health.take_announcements():

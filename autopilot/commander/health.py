@@ -269,11 +269,6 @@ class Pose(Protocol):
     euler_rad: Vector3
 
 
-def _due(t: float, due_s: float) -> bool:
-    """Whether ``due_s`` has come at ``t`` (or the clock went back: the simulator restarted)."""
-    return not due_s - 1.0 < t < due_s
-
-
 class _StuckCheck:
     """One sensor's stuck check (PX4's DataValidator equal-value count), with the vehicle's state
     when the value froze.
@@ -297,12 +292,11 @@ class _StuckCheck:
         self.samples = 0  # samples since the last comparison
         self.due_s = -math.inf
 
-    def offer(self, t: float, value: tuple[float, ...] | None, state: Pose | None) -> None:
+    def offer(self, t: float, value: tuple[float, ...], state: Pose | None) -> None:
         """A sample at ``t``, compared when :data:`STUCK_CHECK_S` has passed since the last
-        comparison (``value`` None: the frame's samples were not decoded, the check not being
-        due: :meth:`HealthMonitor.wants_samples`)."""
+        comparison."""
         self.samples += 1
-        if value is not None and _due(t, self.due_s):
+        if t >= self.due_s:
             span, self.samples = self.samples, 0
             self.compare(t, value, span, state)
 
@@ -407,18 +401,19 @@ class HealthMonitor:
         stuck = self._stuck
         return bool(
             streams & (STREAM_GPS | STREAM_VISION)
-            or (streams & STREAM_IMU and _due(t, stuck["gyro"].due_s))
-            or (streams & STREAM_MAG and _due(t, stuck["mag"].due_s))
-            or (streams & STREAM_BARO and _due(t, stuck["baro"].due_s))
+            or (streams & STREAM_IMU and t >= stuck["gyro"].due_s)
+            or (streams & STREAM_MAG and t >= stuck["mag"].due_s)
+            or (streams & STREAM_BARO and t >= stuck["baro"].due_s)
         )
 
     def observe(self, t: float, streams: int, samples: SensorSamples | None, state: Pose | None) -> None:
         """A frame at ``t``: the sensor streams that delivered (``STREAM_*`` bits), their samples
-        (None: not decoded, when :meth:`wants_samples` said so, or none) and the state the vehicle
+        (None: none, or not decoded: :meth:`wants_samples` said no) and the state the vehicle
         flies on (None before the first)."""
         self._state = state
-        self.streams.note(t, streams)
-        if _due(t, self._streams_due):
+        if streams:
+            self.streams.note(t, streams)
+        if t >= self._streams_due:
             self._check_streams(t)
         if not streams:
             return
@@ -426,17 +421,20 @@ class HealthMonitor:
         if streams & STREAM_IMU:
             self.last_imu_s = t
             self._imu_samples += 1
-            if samples is not None and _due(t, stuck["gyro"].due_s):
-                span, self._imu_samples = self._imu_samples, 0
-                stuck["gyro"].compare(t, samples.angular_rate_rad_s, span, state)
-                stuck["accel"].compare(t, samples.specific_force_m_s2, span, state)
-        if streams & STREAM_MAG:
-            stuck["mag"].offer(t, samples.mag_gauss if samples is not None else None, state)
-        if streams & STREAM_BARO:
-            baro = samples.baro_height_m if samples is not None else None
-            stuck["baro"].offer(t, (baro,) if baro is not None else None, state)
-        if samples is None:
+        if samples is None:  # not decoded (no check due): the samples only counted
+            if streams & STREAM_MAG:
+                stuck["mag"].samples += 1
+            if streams & STREAM_BARO:
+                stuck["baro"].samples += 1
             return
+        if streams & STREAM_IMU and t >= stuck["gyro"].due_s:
+            span, self._imu_samples = self._imu_samples, 0
+            stuck["gyro"].compare(t, samples.angular_rate_rad_s, span, state)
+            stuck["accel"].compare(t, samples.specific_force_m_s2, span, state)
+        if samples.mag_gauss is not None:
+            stuck["mag"].offer(t, samples.mag_gauss, state)
+        if samples.baro_height_m is not None:
+            stuck["baro"].offer(t, (samples.baro_height_m,), state)
         gps = samples.gps
         if gps is not None:
             self.last_gps_fix_type = gps.fix_type
@@ -445,6 +443,12 @@ class HealthMonitor:
         if samples.vision is not None:
             v = samples.vision
             stuck["vision"].offer(t, (*v.position_m, v.yaw_rad), state)
+
+    def restart_clock(self) -> None:
+        """The simulation time went back (the simulator restarted): every check is due."""
+        self._streams_due = -math.inf
+        for check in self._stuck.values():
+            check.due_s = -math.inf
 
     def _check_streams(self, t: float) -> None:
         """The streams' silences (:meth:`StreamWatch.check`), every :data:`STREAM_CHECK_S` and

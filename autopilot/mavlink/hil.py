@@ -200,7 +200,7 @@ def frame_streams(parts: dict) -> int:
     streams = fresh & ~refused
     raw = parts.get(_ID_GPS)
     if raw is not None:
-        _GPS.payload(raw)  # (checked as sensor_samples checks it)
+        _GPS.payload(raw)  # (its checksum, as sensor_samples checks it)
         streams |= STREAM_GPS
     raw = parts.get(_ID_VISION)
     if raw is not None and _vision(raw)[1]:
