@@ -51,6 +51,7 @@ from quadcommon.config import (
     load_sitl,
     load_vehicle,
 )
+from quadcommon.mavlink_fast import DecodeError
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Trajectory, trajectory_from_spec
 
@@ -62,7 +63,6 @@ from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params, load_estimator_params
-from .estimation.streams import StreamWatch
 from .logger import topics
 from .logger.logger import FlightLogger, LogOptions, log_info
 from .logger.topics import Snapshot
@@ -79,10 +79,12 @@ from .mavlink.hil import (
     ActuatorEncoder,
     CorruptFrame,
     RefusedReport,
+    SensorSamples,
     SimulatorRequests,
     battery_report,
     decode_frame,
     disturbance_of,
+    sensor_samples,
 )
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
@@ -248,7 +250,6 @@ class AutopilotCore:
         self.hil_parser = new_parser()
         self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
-        self.sensor_streams = StreamWatch()  # sensor streams of the frames that stop (on the EKF)
         self._switch_estimator()
 
         ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
@@ -466,6 +467,7 @@ class AutopilotCore:
             link.streams.restart()
         self.external_vision.restart()  # so were the vision senders' stamps
         self.missions.restart_clock()
+        self.commander.health.restart_clock()
 
     def _control_step(self, frame) -> bytes:
         self._frame_truth = frame.state
@@ -473,11 +475,22 @@ class AutopilotCore:
         self.sim_time = t
         self.last_time_usec = frame.time_usec
         commander = self.commander
+        # What the vehicle knows of its sensors (commander/health.py): every frame, on either
+        # estimator. On the truth nothing else reads the samples: the frame says which streams
+        # delivered, and the samples are decoded only when a health check wants their values.
+        samples = frame.sensors
+        if samples is None and frame.streams and commander.health.wants_samples(t, frame.streams):
+            samples = self._sensor_samples(frame.parts)
+        commander.observe_sensors(t, samples, frame.streams)
+        if samples is not None and samples.gps is not None:
+            self._status.gps = samples.gps  # GPS_RAW_INT reports the receiver's last sample
         if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:
             est = self._estimate(t, frame)
             frame = frame._replace(state=est)  # telemetry reports what the vehicle flies on
         else:
             est = frame.state
+        commander.on_ekf = self.estimator is not None
+        commander.estimator_status = self.estimator.last_status if self.estimator is not None else None
         if est is not None:
             commander.update_state(
                 VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
@@ -523,6 +536,12 @@ class AutopilotCore:
             else:
                 self.battery.update(t, report.voltage_v, report.current_a, self.commander.armed)
         self.commander.update_battery(self.battery.status, self.battery.unhealthy(t))
+
+    def _sensor_samples(self, parts: dict) -> SensorSamples | None:
+        try:
+            return sensor_samples(parts, self.setup.sitl.home)
+        except DecodeError:  # (decode_frame checked the messages already: not expected)
+            return None
 
     def _cascade_step(self, est: StateEstimate, guidance):
         """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'
@@ -571,8 +590,6 @@ class AutopilotCore:
         if loop is None:  # EKF2_EN = 1 set in flight: the switch waits for the disarm
             return frame.state
         samples = frame.sensors
-        for text in self.sensor_streams.update(t, samples):  # a stream that stops is announced
-            self.statustext(m.MAV_SEVERITY_WARNING, text)
         if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
             self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
             return None
@@ -681,6 +698,9 @@ class AutopilotCore:
         s.geofence_breached = c.failsafes.fence_breached
         s.battery = self.battery.status
         s.battery_unhealthy = c.battery.unhealthy
+        s.flags = c.health_flags(self.sim_time)
+        s.failsafe = c.in_failsafe
+        s.terminated = c.terminated
         if output is not None:
             s.euler_ref = output.euler_ref_rad
             s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n

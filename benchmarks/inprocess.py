@@ -1,10 +1,13 @@
 """In-process simulation speed at 1 kHz physics, 500 Hz control, the whole flight stack.
 
-Two measurements, best of N runs each (the machine is shared; the best run is the least
-disturbed), in wall time and in this process's CPU time:
+Three measurements, best of N runs each (the machine is shared; the best run is the least
+disturbed), in wall time and in this process's CPU time, the CPU also per control frame:
 
 * the paper's experiment (``run_scenario``: the scenario's 40 s from its initial state, armed at
-  t = 0; simulator core, MAVLink frames, autopilot core with commander and cascade);
+  t = 0; simulator core, MAVLink frames, autopilot core with commander, health checks and cascade),
+  flown on the simulator's state (the scenario's estimator, the truth by default);
+* the same on the EKF (``--ekf-sensors``, ``gps`` by default: the autopilot decodes every
+  frame's sensors and flies on its own estimate);
 * the full-stack mission (``fly_mission_experiment``, the scenario flown as ``gcs_scripts/fly_paper.py``
   flies it through the SITL: its trajectory uploaded as a timed mission by the upload script's own
   client, takeoff, the curve under the gust profile, landing, until disarmed);
@@ -12,7 +15,7 @@ disturbed), in wall time and in this process's CPU time:
 and, for comparison in the same run, one RK4 step of the plant alone (compiled with numba when it
 is installed, as the simulator runs it; ``QUADSITL_PURE_PYTHON=1`` for the Python reference).
 
-Run: ``.venv/bin/python benchmarks/inprocess.py [--repeat N] [--scenario helix]``.
+Run: ``.venv/bin/python benchmarks/inprocess.py [--repeat N] [--scenario helix] [--ekf-sensors gps]``.
 Last lines: ``name: value unit``.
 """
 
@@ -24,9 +27,9 @@ import io
 import time
 
 from autopilot.control.config import load_controller
-from quadcommon.config import load_scenario, load_vehicle
+from quadcommon.config import load_scenario, load_sitl, load_vehicle
 from simulator.dynamics.plant import Plant
-from sitl.inprocess import fly_mission_experiment, run_scenario
+from sitl.inprocess import RunOptions, fly_mission_experiment, run_scenario
 
 
 def main() -> None:
@@ -34,6 +37,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--scenario", default="helix")
     parser.add_argument("--controller", default="intbs_nlhinf")
+    parser.add_argument("--ekf-sensors", default="gps", help="sensor profile of the run on the EKF")
     args = parser.parse_args()
 
     scenario, controller = load_scenario(args.scenario), load_controller(args.controller)
@@ -50,12 +54,17 @@ def main() -> None:
     def paper() -> float:
         return float(run_scenario(scenario, controller).time_s[-1])
 
+    def paper_ekf() -> float:
+        options = RunOptions(estimator="ekf", sensors=args.ekf_sensors)
+        return float(run_scenario(scenario, controller, options).time_s[-1])
+
     def mission() -> float:
         with contextlib.redirect_stdout(io.StringIO()):  # the mission client's progress lines
             _, _, stack = fly_mission_experiment(scenario, controller)
         return stack.t  # takeoff, the curve, landing: the whole flight
 
-    results = {"paper_run": best_of(paper), "mission": best_of(mission)}
+    results = {"paper_run": best_of(paper), "paper_run_ekf": best_of(paper_ekf), "mission": best_of(mission)}
+    control_hz = load_sitl().rates.control_hz
     for name, (simulated, wall, cpu) in results.items():
         print(f"{name}: {simulated:.1f} s simulated in {wall:.2f} s wall, {cpu:.2f} s CPU "
               f"(best of {args.repeat})")  # fmt: skip
@@ -77,6 +86,7 @@ def main() -> None:
     for name, (simulated, wall, cpu) in results.items():
         print(f"inprocess_{name}_real_time_factor: {simulated / wall:.1f} x")
         print(f"inprocess_{name}_real_time_factor_cpu: {simulated / cpu:.1f} x")
+        print(f"inprocess_{name}_cpu_per_frame: {cpu / (simulated * control_hz) * 1e6:.1f} us")
     print(f"inprocess_physics_steps_per_s: {physics_steps / best:.0f} steps/s")
     print(f"plant_rk4_step: {rk4_us:.1f} us")
 

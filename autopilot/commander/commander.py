@@ -35,10 +35,12 @@ from typing import NamedTuple
 from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
 
 from ..battery.estimator import BatteryStatus
+from ..estimation.status import EstimatorStatus
 from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..guidance.sticks import LOST, Sticks, StickStream
+from ..mavlink.hil import SensorSamples
 from ..mission.executor import (
     MissionAction,
     MissionExecutor,
@@ -48,18 +50,42 @@ from ..mission.executor import (
     fence_violation,
 )
 from ..mission.plans import Geofence, RallyPoint
-from ..params.definitions import RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD
+from ..params.definitions import POSCTL_NAVL_ALTITUDE, RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD
 from ..params.store import ParameterStore
 from .failsafe import (
+    ACTION_NAMES,
+    ALTCTL,
+    DESCEND,
     HOLD,
     LAND,
     RTL,
+    STABILIZED,
+    TERMINATE,
     WARN,
     BatteryWatch,
     FailsafeMonitor,
     fence_excess,
+    mode_fallback,
     prearm_problem,
     rc_loss_action,
+    resolve_action,
+)
+from .health import (
+    NAV_ALTCTL,
+    NAV_AUTO_LAND,
+    NAV_AUTO_LOITER,
+    NAV_AUTO_MISSION,
+    NAV_AUTO_RTL,
+    NAV_AUTO_TAKEOFF,
+    NAV_DESCEND,
+    NAV_OFFBOARD,
+    NAV_POSCTL,
+    NAV_STATE_OF_MODE,
+    FailsafeFlags,
+    HealthMonitor,
+    LinkState,
+    missing_for,
+    mode_can_run,
 )
 from .modes import FlightMode, LandedState
 from .rtl import return_altitude, return_destination
@@ -85,7 +111,11 @@ ZERO3: Vector3 = (0.0, 0.0, 0.0)
 # MAV_RESULT
 ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
 # MAV_SEVERITY
-SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 2, 4, 5, 6
+SEVERITY_EMERGENCY, SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 0, 2, 4, 5, 6
+# The failsafe flags are evaluated this often (simulation time) and after every transition: PX4's
+# commander runs its health and arming checks at 10 Hz and when its state changes; its failsafe
+# state machine (here the mode fallback) reads the flags at 100 Hz, here when they or the mode change.
+HEALTH_PERIOD_S = 0.1
 
 CONTINUE_WITHIN_M = 0.5  # a new plan continues the reference if the vehicle is this close to it
 GROUND_Z_M = 0.0  # the local frame's origin (the configured home) is on flat ground
@@ -138,8 +168,19 @@ class Outcome(NamedTuple):
 
 PREFLIGHT_FAIL = "Preflight Fail: "  # PX4's prefix of a pre-arm failure reported unasked
 _FIGURES = re.compile(r"\d+(?:\.\d+)?")  # the figures of a verdict (not part of which verdict it is)
-_FAILSAFE_EVENTS = {HOLD: Event.FAILSAFE_HOLD, RTL: Event.FAILSAFE_RTL, LAND: Event.FAILSAFE_LAND}
-_FAILSAFE_DOING = {HOLD: "holding", RTL: "returning to launch", LAND: "landing"}
+_FAILSAFE_EVENTS = {HOLD: Event.FAILSAFE_HOLD, RTL: Event.FAILSAFE_RTL, LAND: Event.FAILSAFE_LAND,
+                    DESCEND: Event.FAILSAFE_DESCEND, TERMINATE: Event.FAILSAFE_TERMINATE,
+                    ALTCTL: Event.FAILSAFE_MANUAL, STABILIZED: Event.FAILSAFE_MANUAL}  # fmt: skip
+_FAILSAFE_DOING = {HOLD: "holding", RTL: "returning to launch", LAND: "landing", DESCEND: "descending",
+                   TERMINATE: "flight terminated", ALTCTL: "in ALTCTL",
+                   STABILIZED: "in STABILIZED"}  # fmt: skip
+_FALLBACK_MODES = {ALTCTL: FlightMode.ALTCTL, STABILIZED: FlightMode.STABILIZED}
+# The navigation state a command asks for (its mode must be able to run: PX4 refuses the switch).
+_COMMAND_NAV = {
+    Event.TAKEOFF: NAV_AUTO_TAKEOFF, Event.SELECT_TAKEOFF: NAV_AUTO_TAKEOFF, Event.HOLD: NAV_AUTO_LOITER,
+    Event.REPOSITION: NAV_AUTO_LOITER, Event.LAND: NAV_AUTO_LAND, Event.RTL: NAV_AUTO_RTL,
+    Event.OFFBOARD: NAV_OFFBOARD, Event.MISSION: NAV_AUTO_MISSION, Event.MISSION_START: NAV_AUTO_MISSION,
+}  # fmt: skip
 _MODE_EVENTS = {
     FlightMode.MANUAL: Event.MANUAL,
     FlightMode.STABILIZED: Event.MANUAL,
@@ -153,6 +194,7 @@ _MODE_EVENTS = {
     FlightMode.AUTO_TAKEOFF: Event.SELECT_TAKEOFF,
     FlightMode.AUTO_MISSION: Event.MISSION,
 }
+_NAV_MODE_NAMES = {nav: mode.px4_name for mode, nav in NAV_STATE_OF_MODE.items()}
 _TRAJECTORY_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.TRAJECTORY, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
 # The phases whose plan leads to a point (Commander.destination; a scenario's trajectory does not)
 _NAVIGATED_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
@@ -189,6 +231,20 @@ class Commander:
         self.position_valid = False  # sensor frames flowing (False until the first, and when lost)
         self.estimator_problem: str | None = None  # why the estimate is not fit to arm on (None: it is)
         self.height_uncertainty_m = 0.0  # 1-sigma of the estimate's height (0: the truth); see in_air()
+        # What the vehicle knows of its health (health.py): fed by the shell every frame, the flags
+        # evaluated every HEALTH_PERIOD_S and after a transition.
+        self.health = HealthMonitor(params)
+        self.estimator_status: EstimatorStatus | None = None  # the EKF's last status (None: none)
+        self.on_ekf = False  # flying on the EKF (EKF2_EN 1), else on the simulator's state
+        self.flags = FailsafeFlags()
+        self._health_due = -math.inf
+        self._fallback: str | None = None  # the mode fallback taken (failsafe.py), None: none
+        # The fallback depends on the flags, the phase and mode, the parameters: checked again when
+        # one of them has changed.
+        self._fallback_due = True
+        self._intended: FlightMode | None = None  # the mode chosen before the fallback
+        self.in_failsafe = False  # a failsafe action is in force (HEARTBEAT: MAV_STATE_CRITICAL)
+        self.terminated = False  # the flight was terminated (until the next arming)
         self._trajectory: Trajectory | None = None  # what the trajectory phases fly
         self._trajectory_start = 0.0
         self._after_trajectory: FlightMode | None = None  # a scenario's hand-over mode (None: none)
@@ -210,7 +266,7 @@ class Commander:
     def landed_state(self) -> LandedState:
         if self.phase == Phase.TAKEOFF:
             return LandedState.TAKEOFF
-        if self.phase in DESCENDING:
+        if self.phase in DESCENDING or self.phase == Phase.DESCEND:
             # LANDING until touchdown is confirmed (phase LANDED), as PX4's land detector: scripts
             # wait for "not in air" and then disarm, which must not happen a few cm up.
             return LandedState.LANDING
@@ -323,12 +379,19 @@ class Commander:
         if row is None:
             reason = REFUSALS.get(event, f"{event.value} refused while {self.phase.value}")
             return Outcome(ACCEPTED) if not reason else self._refuse(DENIED, reason)
+        user = event in _COMMAND_NAV or event in (Event.MANUAL, Event.RC_OVERRIDE)
+        if user and self.armed:
+            problem = self._cannot_run(t, event, args.get("mode"))
+            if problem:
+                return self._refuse(DENIED, problem)
         if row.action is not None:
             outcome = getattr(self, f"_act_{row.action}")(t, **args)
             if outcome is not None and not outcome.accepted:
                 return outcome
         if isinstance(row.to, Phase):
             self.phase = row.to
+        self._fallback_due = True
+        self._health_due = -math.inf  # the flags again at the next look (PX4: on a state change)
         mode = row.mode
         if mode is ASKED:
             mode = args.get("mode", FlightMode.AUTO_LOITER)
@@ -336,13 +399,38 @@ class Commander:
             mode = self._after_trajectory
         if isinstance(mode, FlightMode):
             self._set_mode(mode)
+        if user:  # the pilot's or the ground station's choice ends a fallback (PX4)
+            self._fallback = self._intended = None
+            self.in_failsafe = False
         return Outcome(ACCEPTED)
+
+    def _cannot_run(self, t: float, event: Event, mode: FlightMode | None) -> str:
+        """Why the mode ``event`` asks for cannot run now ('' if it can): PX4 refuses the switch
+        ("Switching to ... is currently not possible"). POSCTL is let in when ALTCTL can run and
+        COM_POSCTL_NAVL is 0 (the fallback then flies ALTCTL until the position returns)."""
+        flags = self.health_flags(t)
+        if event in _COMMAND_NAV:
+            nav = _COMMAND_NAV[event]
+            if event == Event.OFFBOARD:  # the stream is OFFBOARD's own guard (enter_offboard)
+                flags = flags._replace(offboard_control_signal_lost=False)
+        else:
+            nav = NAV_STATE_OF_MODE[FlightMode.POSCTL if mode is None else mode]
+        if nav == NAV_AUTO_MISSION:  # the mission's own guards say what is missing there
+            flags = flags._replace(auto_mission_missing=False)
+        if mode_can_run(flags, nav):
+            return ""
+        if (nav == NAV_POSCTL and int(self.params["COM_POSCTL_NAVL"]) == POSCTL_NAVL_ALTITUDE
+                and mode_can_run(flags, NAV_ALTCTL)):  # fmt: skip
+            return ""
+        name = mode.px4_name if mode is not None else _NAV_MODE_NAMES.get(nav, event.value)
+        return f"Switching to {name} is currently not possible: {missing_for(flags, nav)}"
 
     def _set_mode(self, mode: FlightMode) -> None:
         if mode != self.mode:
             if self.mode == FlightMode.AUTO_MISSION and self.mission is not None:
                 self.mission.pause()  # any other mode pauses the mission at its current item
             self.mode = mode
+            self._fallback_due = True
             self._event(SEVERITY_INFO, f"mode {mode.px4_name}")
 
     def _event(self, severity: int, text: str) -> None:
@@ -353,6 +441,7 @@ class Commander:
         return Outcome(result, reason)
 
     def _on_param_change(self, name: str, value: float) -> None:
+        self._fallback_due = True
         self.offboard.limits = self.limits()
         self._manual_limits = self.manual_limits()
 
@@ -519,6 +608,94 @@ class Commander:
         """No sensor frames any more: the position is unknown until they resume (no arming)."""
         self.position_valid = False
 
+    # -- health: what the vehicle knows of its sensors and estimates (health.py) ----------------------
+    def observe_sensors(self, t: float, samples: SensorSamples | None, streams: int | None = None) -> None:
+        """A frame's sensor samples (None: none, or not decoded: ``health.wants_samples``) and the
+        streams that delivered (``STREAM_*`` bits of autopilot/mavlink/hil.py; None: those of
+        ``samples``); a sensor stream that stopped or resumed is announced."""
+        if streams is None:
+            streams = samples.streams if samples is not None else 0
+        self.health.observe(t, streams, samples, self.state)
+        if self.health.announcements:
+            self._announce_streams()
+
+    def _announce_streams(self) -> None:
+        for text in self.health.take_announcements():
+            self._event(SEVERITY_WARNING, text)
+
+    def health_flags(self, t: float) -> FailsafeFlags:
+        """The failsafe flags, evaluated again when :data:`HEALTH_PERIOD_S` has passed (the same
+        record while they are unchanged)."""
+        if t >= self._health_due or t < self._health_due - 1.0:  # (or the clock restarted)
+            self._health_due = t + HEALTH_PERIOD_S
+            failsafes = self.failsafes
+            mission = self.mission
+            links = LinkState(
+                # (a scenario's trajectory is the mission flown in its AUTO.MISSION)
+                mission_missing=(mission is None or mission.count == 0) and self.phase != Phase.TRAJECTORY,
+                offboard_lost=not self.offboard_stream_active(t),
+                home_invalid=self.home is None,
+                manual_control_lost=self.sticks.fresh(t, self._manual_limits.loss_s) is None,
+                gcs_connection_lost=failsafes.link_lost,
+                geofence_breached=failsafes.fence_breached,
+            )
+            has_state = self.position_valid and self.state is not None
+            flags = self.health.evaluate(t, self.estimator_status, self.on_ekf, has_state, links)
+            if self.health.announcements:
+                self._announce_streams()
+            if flags is not self.flags:
+                self.flags = flags
+                self._fallback_due = True
+        return self.flags
+
+    def _nav_state(self, mode: FlightMode) -> int:
+        if self.phase == Phase.DESCEND and self._fallback is None:
+            return NAV_DESCEND
+        return NAV_STATE_OF_MODE[mode]
+
+    def _check_mode_fallback(self, t: float) -> None:
+        """PX4's mode fallback: when the mode chosen cannot run (an estimate or a sensor is gone),
+        the first of RTL, Land, Descend, Terminate that can (POSCTL and ALTCTL first to ALTCTL,
+        STABILIZED: failsafe.py mode_fallback); taken once and announced; when the mode can run
+        again, the vehicle goes back to it (PX4: the fallback clears with its condition)."""
+        self._fallback_due = False
+        # The offboard stream has its own rule (COM_OF_LOSS_T, below), as PX4's COM_OBL_RC_ACT.
+        flags = self.flags._replace(offboard_control_signal_lost=False)
+        intended = self._intended or self.mode
+        nav = self._nav_state(intended)
+        action = mode_fallback(flags, nav, self.params)
+        if action is None:
+            if self._fallback is not None:
+                self._recover(t, intended)
+            return
+        if action == self._fallback:
+            return
+        if self._fallback is None:
+            self._intended = self.mode
+        self._fallback = action
+        reason = missing_for(flags, nav) or "the mode cannot run"
+        self._take_failsafe(t, action, f"{reason} for {_NAV_MODE_NAMES.get(nav, 'the mode')}")
+
+    def _take_failsafe(self, t: float, action: str, reason: str) -> None:
+        """Carry out a failsafe action (through the table) and announce it as PX4 does."""
+        event = _FAILSAFE_EVENTS[action]
+        row = lookup(self.phase, event)
+        if row is None or (not isinstance(row.to, Phase) and row.action is None):
+            self._event(SEVERITY_CRITICAL, f"Failsafe activated: {reason} (already {self.mode.px4_name})")
+            return
+        self._event(SEVERITY_CRITICAL, f"Failsafe activated: {reason}, triggering {ACTION_NAMES[action]}")
+        self._fire(t, event, mode=_FALLBACK_MODES.get(action))
+        self.in_failsafe = True
+
+    def _recover(self, t: float, intended: FlightMode) -> None:
+        self._fallback = self._intended = None
+        self.in_failsafe = False
+        if self.phase not in FLYING:
+            return
+        event = _MODE_EVENTS.get(intended)
+        if event is not None and self._fire(t, event, mode=intended).accepted:
+            self._event(SEVERITY_NOTICE, f"Failsafe deactivated: back to {intended.px4_name}")
+
     def _check_sticks(self, t: float) -> None:
         """The sticks' stream (PX4's rules): announce a loss and a return; a loss while flying a
         manual mode acts by NAV_RCL_ACT; sticks that move take over by COM_RC_OVERRIDE."""
@@ -531,7 +708,9 @@ class Commander:
                 if self.phase == Phase.MANUAL:
                     mode = self.mode.px4_name
                     action, number = rc_loss_action(self.params)
-                    self._fire(t, _FAILSAFE_EVENTS[action])
+                    action = resolve_action(self.health_flags(t), action)  # a mode that can run
+                    self._fire(t, _FAILSAFE_EVENTS[action], mode=_FALLBACK_MODES.get(action))
+                    self.in_failsafe = True
                     doing = f"{_FAILSAFE_DOING[action]} (NAV_RCL_ACT {number})"
                     self._event(SEVERITY_CRITICAL, f"manual control lost in {mode}: {doing}")
             else:
@@ -553,39 +732,48 @@ class Commander:
             if action == WARN:
                 self._event(SEVERITY_WARNING, text)
                 continue
-            if self._failsafe(t, action):
-                self._event(SEVERITY_CRITICAL, f"{text}: {_FAILSAFE_DOING[action]}")
+            taken = self._failsafe(t, action)
+            if taken is not None:
+                self._event(SEVERITY_CRITICAL, f"{text}: {_FAILSAFE_DOING[taken]}")
             else:  # the vehicle is already returning or landing: let it
                 self._event(SEVERITY_CRITICAL, f"{text} (already {self.mode.px4_name})")
         battery = self.battery.action()
         if battery is not None:
             severity, (action, text) = battery
-            if action == WARN or self._failsafe(t, action):
+            if action == WARN or self._failsafe(t, action) is not None:
                 self._event(severity, text)
             else:  # a landing (or a return, for a return) under way goes on
                 self._event(severity, f"{text}: already {self.mode.px4_name}")
 
-    def _failsafe(self, t: float, action: str) -> bool:
-        """Take a failsafe's HOLD, RTL or LAND through the table; False when the row keeps the
-        phase (a return or landing under way goes on)."""
+    def _failsafe(self, t: float, action: str) -> str | None:
+        """Take a failsafe's action through the table, as a mode that can run (PX4's chain:
+        :func:`~.failsafe.resolve_action`); the action taken, or None when the row keeps the phase
+        (a return or landing under way goes on)."""
+        action = resolve_action(self.flags, action)
         event = _FAILSAFE_EVENTS[action]
         row = lookup(self.phase, event)
         if row is not None and isinstance(row.to, Phase):
-            self._fire(t, event)
-            return True
-        return False
+            self._fire(t, event, mode=_FALLBACK_MODES.get(action))
+            self.in_failsafe = True
+            return action
+        return None
 
     # -- the per-step decision ------------------------------------------------------------------------
     def step(self, t: float, dt: float) -> GuidanceOutput:
         """Decide this control step (``dt`` = control period, s)."""
         self._check_sticks(t)
+        self.health_flags(t)
         state = self.state
         if self.phase == Phase.DISARMED:
             self._announce_readiness(t)
         if self.phase == Phase.DISARMED or state is None:
             return GuidanceOutput(Motors.OFF, None)
+        if self._fallback_due and self.phase in FLYING:  # what it depends on changed
+            self._check_mode_fallback(t)
         if self.phase in FLYING:
             self._check_failsafes(t, state)
+        if self.phase == Phase.DISARMED:  # terminated
+            return GuidanceOutput(Motors.OFF, None)
         # An internal event (offboard loss, a mission's LAND or RTL item) changes the phase; the
         # new phase then decides this same step. Two rounds always settle (no event leads back).
         for _ in range(3):
@@ -618,6 +806,16 @@ class Commander:
             return GuidanceOutput(Motors.IDLE, None)
         if phase == Phase.MANUAL:
             return self._manual_step(t, dt, state)
+        if phase == Phase.DESCEND:
+            if self._touched_down(t, state):
+                self._fire(t, Event.TOUCHDOWN)
+                return GuidanceOutput(Motors.IDLE, None)
+            previous = self.last_reference or _at_rest(state)
+            altitude_valid = not self.flags.local_altitude_invalid
+            setpoint = self.manual.descend(dt, previous, state, p["MPC_LAND_SPEED"], altitude_valid,
+                                           self._manual_limits)  # fmt: skip
+            self.last_reference = setpoint.reference
+            return GuidanceOutput(Motors.FLY, setpoint.reference, setpoint)
 
         if phase == Phase.OFFBOARD:
             if not self.offboard_stream_active(t) and self.offboard.setpoint is not None:
@@ -726,7 +924,8 @@ class Commander:
         if self.mode.is_manual and self.sticks.fresh(t, self._manual_limits.loss_s) is None:
             return f"no manual control input ({self.mode.px4_name} flies on MANUAL_CONTROL)"
         return prearm_problem(
-            self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence
+            self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence,
+            self.health_flags(t), NAV_STATE_OF_MODE[self.mode],
         ) or self.battery.prearm_problem()
 
     def _announce_readiness(self, t: float) -> None:
@@ -764,6 +963,8 @@ class Commander:
         self._readiness_key = None  # after this flight, the first failure is announced again
         self._armed_at = t
         self.home = state.position_m  # PX4 sets home where it arms
+        self._fallback = self._intended = None
+        self.in_failsafe = self.terminated = False
         self._landed_since = None
         self._trajectory = None
         self._event(SEVERITY_INFO, "armed")
@@ -777,6 +978,23 @@ class Commander:
         self._trajectory = None
         self._event(SEVERITY_INFO, why)
         return None
+
+    def _act_descend(self, t: float, **_) -> None:
+        """PX4's Descend (guidance/manual.py descend): from the reference flown so far."""
+        assert self.state is not None
+        self.last_reference = self.last_or_measured(self.state)
+        self._trajectory = None
+        self._landed_since = None
+        self._event(SEVERITY_INFO, "descending")
+
+    def _act_terminate(self, t: float, **_) -> None:
+        """Flight termination (PX4's last failsafe): motors off at once, disarmed."""
+        if self.mission is not None:
+            self.mission.pause()
+        self._trajectory = None
+        self._fallback = self._intended = None
+        self.terminated = True
+        self._event(SEVERITY_EMERGENCY, "flight terminated: motors off")
 
     def _act_start_scenario(self, t: float, trajectory: Trajectory, then: FlightMode | None, **_) -> None:
         self._armed_at = t

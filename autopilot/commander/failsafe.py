@@ -64,12 +64,26 @@ from ..params.definitions import (
     LOW_BAT_RTL,
     LOW_BAT_RTL_THEN_LAND,
     LOW_BAT_WARN,
+    POSCTL_NAVL_LAND,
     RCL_HOLD,
     RCL_LAND,
     RCL_RTL,
     consistency_problems,
 )
 from ..params.store import ParameterStore
+from .health import (
+    NAV_ALTCTL,
+    NAV_AUTO_LAND,
+    NAV_AUTO_LOITER,
+    NAV_AUTO_RTL,
+    NAV_DESCEND,
+    NAV_NAMES,
+    NAV_POSCTL,
+    NAV_STAB,
+    FailsafeFlags,
+    missing_for,
+    mode_can_run,
+)
 
 Vector3 = tuple[float, float, float]
 
@@ -287,15 +301,28 @@ def prearm_problem(
     home: Vector3 | None,
     position_valid: bool,
     geofence: Geofence | None = None,
+    flags: FailsafeFlags | None = None,
+    nav_state: int | None = None,
 ) -> str | None:
     """Why arming must be refused (beyond "not landed", which the commander checks), or None.
 
-    Checked: a position (sensor frames flowing), consistent parameters
+    Checked: a position (sensor frames flowing), every sensor healthy and the mode armed in able
+    to run (``flags``, PX4's health and mode checks; the mission, the offboard stream and home
+    have their own checks), consistent parameters
     (:func:`~autopilot.params.definitions.consistency_problems`), and the vehicle inside the
     geofence around the current home (PX4 checks the fence before arming too).
     """
     if position is None or not position_valid:
         return "no position (no sensor frames from the simulator)"
+    if flags is not None:
+        sick = flags.unhealthy_sensors()
+        if sick:
+            return "sensor failure: " + ", ".join(sick)
+        own_checks = flags._replace(auto_mission_missing=False, offboard_control_signal_lost=False,
+                                    home_position_invalid=False)  # fmt: skip
+        if nav_state is not None and not mode_can_run(own_checks, nav_state):
+            name = NAV_NAMES.get(nav_state, "this mode")
+            return f"{name} not possible: {missing_for(own_checks, nav_state)}"
     problems = consistency_problems(params)
     if problems:
         return "bad parameters: " + "; ".join(problems)
@@ -304,3 +331,48 @@ def prearm_problem(
         if excess > 0.0:
             return f"outside the geofence: {what}"
     return None
+
+
+# -- when the current mode cannot run: PX4's mode fallback and its chain ------------------------------
+ALTCTL, STABILIZED, DESCEND, TERMINATE = "altctl", "stabilized", "descend", "terminate"
+# PX4's fallback order (FailsafeBase::getSelectedAction): an action whose mode cannot run falls
+# through to the next.
+FALLBACK_CHAIN = (ALTCTL, STABILIZED, HOLD, RTL, LAND, DESCEND, TERMINATE)
+FALLBACK_NAV = {ALTCTL: NAV_ALTCTL, STABILIZED: NAV_STAB, HOLD: NAV_AUTO_LOITER, RTL: NAV_AUTO_RTL,
+                LAND: NAV_AUTO_LAND, DESCEND: NAV_DESCEND}  # fmt: skip
+# PX4's names of the actions (events' failsafe_action_t), as the announcements say them.
+ACTION_NAMES = {ALTCTL: "Altitude mode", STABILIZED: "Stabilized mode", HOLD: "Hold", RTL: "Return",
+                LAND: "Land", DESCEND: "Descend", TERMINATE: "Terminate"}  # fmt: skip
+
+
+def resolve_action(flags: FailsafeFlags, action: str) -> str:
+    """The first action of :data:`FALLBACK_CHAIN` from ``action`` on whose mode can run
+    (TERMINATE when none can); WARN is returned as it is."""
+    if action not in FALLBACK_CHAIN:
+        return action
+    for candidate in FALLBACK_CHAIN[FALLBACK_CHAIN.index(action) :]:
+        nav = FALLBACK_NAV.get(candidate)
+        if nav is None or mode_can_run(flags, nav):
+            return candidate
+    return TERMINATE
+
+
+def mode_fallback(flags: FailsafeFlags, nav_state: int, params: ParameterStore) -> str | None:
+    """PX4's ``Failsafe::checkModeFallback`` then the chain: what to do when the mode the pilot or
+    the ground station chose (``nav_state``) cannot run; None when it can. POSCTL by
+    ``COM_POSCTL_NAVL`` (0: ALTCTL, then STABILIZED; 1: land, then descend), ALTCTL to STABILIZED,
+    any other mode to RTL; then RTL -> Land -> Descend -> Terminate as far as needed. A manual
+    fallback without the sticks acts by ``NAV_RCL_ACT``."""
+    action = None
+    if nav_state == NAV_POSCTL and not mode_can_run(flags, NAV_POSCTL):
+        if int(params["COM_POSCTL_NAVL"]) == POSCTL_NAVL_LAND:
+            action, nav_state = LAND, NAV_AUTO_LAND
+        else:
+            action, nav_state = ALTCTL, NAV_ALTCTL
+    if nav_state == NAV_ALTCTL and not mode_can_run(flags, NAV_ALTCTL):
+        action, nav_state = STABILIZED, NAV_STAB
+    if flags.manual_control_signal_lost and action in (ALTCTL, STABILIZED):
+        action, _ = rc_loss_action(params)
+    elif not mode_can_run(flags, nav_state):
+        action = RTL
+    return None if action is None else resolve_action(flags, action)

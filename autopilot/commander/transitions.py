@@ -36,6 +36,7 @@ class Phase(Enum):
     LAND = "land"  # descending to touchdown (AUTO.LAND, or a mission's LAND item in AUTO.MISSION)
     RTL = "rtl"  # climbing to RTL_RETURN_ALT and returning above home
     RTL_LAND = "rtl_land"  # RTL's final descent (mode stays AUTO.RTL)
+    DESCEND = "descend"  # PX4's Descend: level, down at MPC_LAND_SPEED, no position (mode AUTO.LAND)
     LANDED = "landed"  # touched down, motors idle, waiting to disarm
     MANUAL = "manual"  # flying on the sticks (MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO)
 
@@ -69,6 +70,10 @@ class Event(Enum):
     FAILSAFE_HOLD = "failsafe hold"
     FAILSAFE_RTL = "failsafe rtl"
     FAILSAFE_LAND = "failsafe land"
+    # PX4's mode fallback (failsafe.py mode_fallback): the chosen mode cannot run any more
+    FAILSAFE_MANUAL = "failsafe manual"  # POSCTL -> ALTCTL -> STABILIZED without a position / altitude
+    FAILSAFE_DESCEND = "failsafe descend"  # not even Land can run: Descend
+    FAILSAFE_TERMINATE = "failsafe terminate"  # not even Descend can run: motors off
     STICK_TAKEOFF = "stick takeoff"  # on the ground in a manual mode: throttle above 62.5 %
     RC_OVERRIDE = "rc override"  # sticks moved in AUTO or OFFBOARD (COM_RC_OVERRIDE): to POSCTL
 
@@ -86,10 +91,11 @@ P = Phase
 E = Event
 M = FlightMode
 ON_GROUND = (P.IDLE, P.LANDED)
-FLYING = (P.TAKEOFF, P.HOLD, P.OFFBOARD, P.MISSION, P.TRAJECTORY, P.LAND, P.RTL, P.RTL_LAND, P.MANUAL)
+FLYING = (P.TAKEOFF, P.HOLD, P.OFFBOARD, P.MISSION, P.TRAJECTORY, P.LAND, P.RTL, P.RTL_LAND, P.MANUAL,
+          P.DESCEND)
 ARMED = ON_GROUND + FLYING
 DESCENDING = (P.LAND, P.RTL_LAND)
-BUSY = (P.LAND, P.RTL, P.RTL_LAND)  # returning or landing: a hold/RTL failsafe lets it go on
+BUSY = (P.LAND, P.RTL, P.RTL_LAND, P.DESCEND)  # returning or landing: a hold/RTL failsafe lets it go on
 NOT_BUSY = tuple(p for p in FLYING if p not in BUSY)
 AUTOMATIC = tuple(p for p in FLYING if p not in (P.OFFBOARD, P.MANUAL))  # AUTO modes, in the air
 
@@ -149,7 +155,7 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
     ((P.TAKEOFF,),            E.PLAN_DONE,         P.HOLD,        M.AUTO_LOITER,   None),
     ((P.RTL,),                E.PLAN_DONE,         P.RTL_LAND,    M.AUTO_RTL,      "plan_landing"),
     ((P.TRAJECTORY,),         E.PLAN_DONE,         P.HOLD,        AFTER,           "plan_hold"),
-    (DESCENDING,              E.TOUCHDOWN,         P.LANDED,      KEEP,            "touchdown"),
+    (DESCENDING + (P.DESCEND,), E.TOUCHDOWN,       P.LANDED,      KEEP,            "touchdown"),
     ((P.OFFBOARD,),           E.OFFBOARD_LOST,     P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
     ((P.MISSION,),            E.MISSION_LAND,      P.LAND,        KEEP,            "plan_landing"),
     ((P.MISSION,),            E.MISSION_RTL,       P.RTL,         M.AUTO_RTL,      "plan_return"),
@@ -160,6 +166,11 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
     (BUSY,                    E.FAILSAFE_RTL,      SAME,          KEEP,            None),
     (_but(FLYING, *DESCENDING), E.FAILSAFE_LAND,   P.LAND,        M.AUTO_LAND,     "plan_landing"),
     (DESCENDING,              E.FAILSAFE_LAND,     SAME,          KEEP,            None),
+    # -- the mode cannot run (an estimate or a sensor is gone): PX4's fallback chain --------------
+    ((P.MANUAL,),             E.FAILSAFE_MANUAL,   SAME,          ASKED,           "enter_manual"),
+    (_but(FLYING, P.DESCEND), E.FAILSAFE_DESCEND,  P.DESCEND,     M.AUTO_LAND,     "descend"),
+    ((P.DESCEND,),            E.FAILSAFE_DESCEND,  SAME,          KEEP,            None),
+    (FLYING,                  E.FAILSAFE_TERMINATE, P.DISARMED,   KEEP,            "terminate"),
 )
 # fmt: on
 

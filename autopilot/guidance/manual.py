@@ -54,6 +54,8 @@ from .sticks import Sticks, acro_rate, beyond_deadzone, stick_tilt, throttle_cur
 
 Vector3 = tuple[float, float, float]
 GROUND_Z_M = 0.0
+DESCEND_ACCEL_M_S2 = 0.3  # PX4 FlightTaskDescend without a vertical velocity: 0.3 m/s^2 down
+STANDARD_GRAVITY_M_S2 = 9.81
 ZERO3: Vector3 = (0.0, 0.0, 0.0)
 CENTRED = Sticks(0.0)
 
@@ -210,6 +212,29 @@ class ManualGuidance:
         reference = Reference(state.position_m, state.velocity_m_s, ZERO3, yaw, yaw_rate, 0.0)
         return ManualSetpoint(reference, roll_pitch=stick_tilt(s.forward, s.left, limits.tilt_max),
                               thrust=_thrust(s.up, limits))  # fmt: skip
+
+    def descend(
+        self,
+        dt: float,
+        previous: Reference,
+        state: MeasuredState,
+        land_speed: float,
+        altitude_valid: bool,
+        limits: ManualLimits,
+    ) -> ManualSetpoint:
+        """PX4's Descend (FlightTaskDescend), the last failsafe before termination: level attitude
+        and the heading kept, no horizontal position control; down at ``land_speed``
+        (MPC_LAND_SPEED) on the altitude estimate, or without one a thrust for DESCEND_ACCEL_M_S2
+        downwards (PX4's crash landing)."""
+        p, v = state.position_m, state.velocity_m_s
+        yaw = previous.yaw_rad
+        if altitude_valid:
+            z = previous.position_m[2] - land_speed * dt
+            reference = Reference((p[0], p[1], z), (v[0], v[1], -land_speed), ZERO3, yaw, 0.0, 0.0)
+            return ManualSetpoint(reference, roll_pitch=(0.0, 0.0))
+        reference = Reference(p, v, ZERO3, yaw, 0.0, 0.0)
+        thrust = limits.thrust_hover * (1.0 - DESCEND_ACCEL_M_S2 / STANDARD_GRAVITY_M_S2)
+        return ManualSetpoint(reference, roll_pitch=(0.0, 0.0), thrust=thrust)
 
     def acro(
         self,

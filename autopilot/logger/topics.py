@@ -14,6 +14,8 @@ x north / y west / z up, body front-left-up, ZYX Euler angles), SI units:
   eta_d', the acceleration command, the body torque, the normalised actuator controls, the
   commanded rotor speeds) and the laws' integral states
   (:meth:`~autopilot.control.cascade.Cascade.law_states`, one field per state);
+* ``failsafe_flags`` (PX4's topic, every 500 ms): the commander's failsafe flags, PX4's fields
+  (:data:`autopilot.commander.health.PX4_FIELDS`);
 * ``sim_disturbance``: the disturbance the simulator applies (force at the CoM, world; torque on
   the Euler coordinates), as the lockstep frame reports it (``DISTURB``, :mod:`quadcommon.wire`);
 * ``sim_rotors``: the rotors' health the simulator applies, from the same report, logged when
@@ -48,6 +50,7 @@ from quadcommon import frames
 from quadcommon.bus_records import CONTROLLER_FIELDS
 from quadcommon.rigid_body import body_rates_from_euler_rates, quaternion_from_euler
 
+from ..commander.health import PX4_FIELDS
 from ..commander.modes import FlightMode, LandedState
 from ..commander.transitions import Phase
 from ..mavlink.codec import mavlink
@@ -562,6 +565,25 @@ def law_state_field(name: str) -> str:
     return "".join(c if c.isalnum() or c == "_" else "_" for c in name)
 
 
+def _failsafe_type(name: str) -> str:
+    if name.startswith("mode_req_"):
+        return "uint32_t"
+    return "uint8_t" if name == "battery_warning" else "bool"
+
+
+# PX4's msg/FailsafeFlags.msg, its fields and types in its order (commander/health.py holds them).
+FAILSAFE_FLAGS = "; ".join(f"{_failsafe_type(name)} {name}" for name in PX4_FIELDS)
+
+
+def failsafe_flags(s: Snapshot) -> tuple | None:
+    """The commander's failsafe flags (PX4 publishes them at 2 Hz and on a change)."""
+    commander = s.commander
+    if commander is None:
+        return None
+    flags = commander.flags
+    return (s.t_us, *(getattr(flags, name) for name in PX4_FIELDS))
+
+
 DISTURBANCE = "sim_disturbance"
 DISTURBANCE_FIELDS = "float[3] force_n; float[3] torque_n_m"
 
@@ -614,6 +636,7 @@ TOPICS: tuple[TopicSpec, ...] = tuple(
         (vehicle_local_position_groundtruth, LOCAL_POSITION, 20),
         (sim_disturbance, DISTURBANCE_FIELDS, 10),
         (sim_rotors, ROTORS_FIELDS, 10),
+        (failsafe_flags, FAILSAFE_FLAGS, 500),
     )
 )
 # Sampled by the logger's own rules rather than by their interval alone (see TOPICS above).

@@ -33,6 +33,8 @@ _ID_VISION = mavlink.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
 _ID_DISTURBANCE = mavlink.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 _CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+# The sensor streams a frame can deliver, one bit each (SensorSamples.streams, frame_streams).
+STREAM_IMU, STREAM_MAG, STREAM_BARO, STREAM_GPS, STREAM_VISION = 1, 2, 4, 8, 16
 
 
 class SensorSamples(NamedTuple):
@@ -52,6 +54,21 @@ class SensorSamples(NamedTuple):
     # frame; else it holds an old sample (a failure stopped it) and the two vectors are not new.
     imu_fresh: bool = True
 
+    @property
+    def streams(self) -> int:
+        """The streams that delivered a sample (``STREAM_*`` bits; a refused sample is none)."""
+        refused = self.refused
+        bits = STREAM_IMU if self.imu_fresh and "imu" not in refused else 0
+        if self.mag_gauss is not None:
+            bits |= STREAM_MAG
+        if self.baro_height_m is not None:
+            bits |= STREAM_BARO
+        if self.gps is not None:
+            bits |= STREAM_GPS
+        if self.vision is not None:
+            bits |= STREAM_VISION
+        return bits
+
 
 class Frame(NamedTuple):
     time_usec: int
@@ -60,6 +77,9 @@ class Frame(NamedTuple):
     # The frame's messages by id, undecoded (a log decodes HIL_SENSOR / HIL_GPS from them at its
     # own rate: sensor_samples(), gps_fields()).
     parts: dict[int, bytes] | None = None
+    # The sensor streams that delivered in this frame (STREAM_* bits), decoded or not: the same as
+    # ``sensors.streams`` (frame_streams without the samples).
+    streams: int = 0
 
 
 _ODOMETRY = FastDecoder(mavlink.MAVLink_odometry_message)
@@ -96,19 +116,23 @@ def decode_frame(
 def _decode_frame(datagram: bytes, parser, home, use_odometry: bool, sensors: bool) -> Frame | None:
     parts = dict(split_frames(datagram))
     raw = parts.get(_ID_ODOMETRY)
-    samples = sensor_samples(parts, home) if sensors else None
+    if sensors:
+        samples = sensor_samples(parts, home)
+        streams = samples.streams if samples is not None else 0
+    else:
+        samples, streams = None, frame_streams(parts)
     if raw is not None and (use_odometry or _ID_STATE not in parts):
         payload = _ODOMETRY.payload(raw)
         t, x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r = _ODOMETRY_STATE.unpack_from(payload)
         state = state_from_odometry_fields(
             (qw, qx, qy, qz), (x, y, z), (vx, vy, vz), (p, q, r), payload[_ODOMETRY_CHILD_FRAME]
         )
-        return Frame(t, state, samples, parts)
+        return Frame(t, state, samples, parts, streams)
     raw = parts.get(_ID_STATE)
     if raw is None:
         return None
     msg = parser.decode(bytearray(raw))
-    return Frame(msg.time_usec, state_from_hil_state(msg, home), samples, parts)
+    return Frame(msg.time_usec, state_from_hil_state(msg, home), samples, parts, streams)
 
 
 _SENSOR = FastDecoder(mavlink.MAVLink_hil_sensor_message)
@@ -129,11 +153,66 @@ def _fields(decoder: FastDecoder, raw: bytes, where: tuple) -> list:
     return [values[i] for i in where]
 
 
-_SENSOR_FIELDS = _where(_SENSOR, "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag",
-                        "pressure_alt", "fields_updated")  # fmt: skip
+# What an estimator reads of HIL_SENSOR, in wire order: the accelerometer, gyro and magnetometer
+# (after time_usec), pressure_alt (after abs_pressure and diff_pressure), fields_updated (after
+# temperature); one unpack of the checked payload.
+_SENSOR_VALUES = struct.Struct("<8x9f8xf4xI")
+assert _SENSOR.unpacker.format == "<QfffffffffffffIB"
+assert [_SENSOR.slices[name] for name in ("xacc", "zmag", "pressure_alt", "fields_updated")] == [1, 9, 12, 14]
 _GPS_FIELDS = _where(_GPS, "fix_type", "lat", "lon", "alt", "eph", "epv", "vn", "ve", "vd",
                      "satellites_visible")  # fmt: skip
 _VISION_FIELDS = _where(_VISION, "x", "y", "z", "yaw", "covariance")
+_REFUSED_NAMES = ((STREAM_IMU, "imu"), (STREAM_MAG, "mag"), (STREAM_BARO, "baro"))  # SensorSamples.refused
+
+
+def _hil_sensor(raw: bytes) -> tuple[tuple, int, int]:
+    """HIL_SENSOR's values (``_SENSOR_VALUES``) and which of its streams are fresh and which
+    refused (``STREAM_*`` bits): each stream when fields_updated says so (the IMU: its six
+    accelerometer and gyro bits, which a failure clears); a stream with a non-finite value is
+    refused."""
+    values = _SENSOR_VALUES.unpack_from(_SENSOR.payload(raw))
+    ax, ay, az, gx, gy, gz, mx, my, mz, alt, updated = values
+    fresh, refused = 0, 0
+    if updated & _IMU_BITS == _IMU_BITS:
+        fresh |= STREAM_IMU
+    if not math.isfinite(ax + ay + az + gx + gy + gz):
+        refused |= STREAM_IMU
+    if updated & _MAG_BITS == _MAG_BITS:
+        fresh |= STREAM_MAG
+        if not math.isfinite(mx + my + mz):
+            refused |= STREAM_MAG
+    if updated & _BARO_ALT_BIT:
+        fresh |= STREAM_BARO
+        if not math.isfinite(alt):
+            refused |= STREAM_BARO
+    return values, fresh, refused
+
+
+def _vision(raw: bytes) -> tuple[list, bool]:
+    """VISION_POSITION_ESTIMATE's values (``_VISION_FIELDS``) and whether its pose is finite."""
+    values = _fields(_VISION, raw, _VISION_FIELDS)
+    n, e, d, yaw, _ = values
+    return values, math.isfinite(n + e + d + yaw)
+
+
+def frame_streams(parts: dict) -> int:
+    """The sensor streams that delivered in a frame (``STREAM_*`` bits): ``sensor_samples(parts,
+    home).streams`` without building the samples (where nothing flies on them, the health checks
+    read this every frame and the samples only when a check is due). DecodeError if a message is
+    corrupt."""
+    raw = parts.get(_ID_SENSOR)
+    if raw is None:
+        return 0
+    _, fresh, refused = _hil_sensor(raw)
+    streams = fresh & ~refused
+    raw = parts.get(_ID_GPS)
+    if raw is not None:
+        _GPS.payload(raw)  # (its checksum, as sensor_samples checks it)
+        streams |= STREAM_GPS
+    raw = parts.get(_ID_VISION)
+    if raw is not None and _vision(raw)[1]:
+        streams |= STREAM_VISION
+    return streams
 
 
 def sensor_samples(parts: dict, home) -> SensorSamples | None:
@@ -142,19 +221,13 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
     raw = parts.get(_ID_SENSOR)
     if raw is None:
         return None
-    ax, ay, az, gx, gy, gz, mx, my, mz, alt, updated = _fields(_SENSOR, raw, _SENSOR_FIELDS)
+    (ax, ay, az, gx, gy, gz, mx, my, mz, alt, _), fresh, refused_streams = _hil_sensor(raw)
+    imu_fresh = bool(fresh & STREAM_IMU)
     to_paper = frames.vector_from_ned
-    refused: list[str] = []
-    mag = to_paper((mx, my, mz)) if updated & _MAG_BITS == _MAG_BITS else None
-    baro = alt if updated & _BARO_ALT_BIT else None
-    if not math.isfinite(ax + ay + az + gx + gy + gz):
-        refused.append("imu")
-    if mag is not None and not math.isfinite(mx + my + mz):
-        mag = None
-        refused.append("mag")
-    if baro is not None and not math.isfinite(baro):
-        baro = None
-        refused.append("baro")
+    usable = fresh & ~refused_streams
+    mag = to_paper((mx, my, mz)) if usable & STREAM_MAG else None
+    baro = alt if usable & STREAM_BARO else None
+    refused = [name for bit, name in _REFUSED_NAMES if refused_streams & bit] if refused_streams else []
     gps = vision = None
     raw = parts.get(_ID_GPS)
     if raw is not None:
@@ -168,9 +241,9 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
         )  # fmt: skip
     raw = parts.get(_ID_VISION)
     if raw is not None:
-        n, e, d, yaw, cov = _fields(_VISION, raw, _VISION_FIELDS)
+        (n, e, d, yaw, cov), finite = _vision(raw)
         pos_var, yaw_var = cov[0], cov[20]
-        if math.isfinite(n + e + d + yaw):
+        if finite:
             vision = VisionPose(
                 0.0, to_paper((n, e, d)), frames.yaw_from_ned(yaw),
                 math.sqrt(pos_var) if pos_var > 0.0 else 0.0, math.sqrt(yaw_var) if yaw_var > 0.0 else 0.0,
@@ -178,7 +251,7 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
         else:
             refused.append("vision")
     return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision,
-                         tuple(refused), updated & _IMU_BITS == _IMU_BITS)  # fmt: skip
+                         tuple(refused), imu_fresh)  # fmt: skip
 
 
 # HIL_SENSOR's accelerometer then gyro, right after time_usec in wire order (the log reads these

@@ -28,7 +28,9 @@ from ..battery.estimator import (
     WARNING_LOW,
     BatteryStatus,
 )
+from ..commander.health import FailsafeFlags
 from ..control.cascade import StateEstimate
+from ..estimation.measurements import GpsFix
 from ..estimation.status import EstimatorStatus
 from .codec import mavlink
 from .hil import ground_truth, sensor_fields
@@ -52,6 +54,24 @@ SENSORS_PRESENT = (
     | m.MAV_SYS_STATUS_AHRS
     | m.MAV_SYS_STATUS_PREARM_CHECK
 )
+
+# The sensors' bits, by the health record's names (commander/health.py): present once a sensor has
+# delivered a sample, healthy while it is (PX4 sets them from its sensor and estimator checks).
+SENSOR_BITS = {
+    "gyro": m.MAV_SYS_STATUS_SENSOR_3D_GYRO, "accel": m.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+    "mag": m.MAV_SYS_STATUS_SENSOR_3D_MAG, "baro": m.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+    "gps": m.MAV_SYS_STATUS_SENSOR_GPS, "vision": m.MAV_SYS_STATUS_SENSOR_VISION_POSITION,
+}  # fmt: skip
+ALL_SENSOR_BITS = sum(SENSOR_BITS.values())
+# The control bits and what their health needs (a flag of the record that must be False).
+CONTROL_NEEDS = {
+    m.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL: "angular_velocity_invalid",
+    m.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION: "attitude_invalid",
+    m.MAV_SYS_STATUS_SENSOR_YAW_POSITION: "heading_invalid",
+    m.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL: "local_altitude_invalid",
+    m.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL: "local_position_invalid",
+    m.MAV_SYS_STATUS_AHRS: "attitude_invalid",
+}
 
 @dataclass
 class VehicleStatus:
@@ -81,6 +101,10 @@ class VehicleStatus:
     parts: dict[int, bytes] | None = None
     battery: BatteryStatus | None = None  # the battery's estimate (None: no battery has reported)
     battery_unhealthy: bool = False  # its reports stopped
+    flags: FailsafeFlags | None = None  # the commander's failsafe flags and sensor health (None: none yet)
+    failsafe: bool = False  # a failsafe action is in force (HEARTBEAT: MAV_STATE_CRITICAL)
+    terminated: bool = False  # the flight was terminated (HEARTBEAT: MAV_STATE_FLIGHT_TERMINATION)
+    gps: GpsFix | None = None  # the receiver's last sample (GPS_RAW_INT)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -92,6 +116,10 @@ class VehicleStatus:
 def heartbeat(s: VehicleStatus):
     base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (m.MAV_MODE_FLAG_SAFETY_ARMED if s.armed else 0)
     state = m.MAV_STATE_ACTIVE if s.armed else m.MAV_STATE_STANDBY
+    if s.armed and s.failsafe:  # PX4: vehicle_status.failsafe
+        state = m.MAV_STATE_CRITICAL
+    if s.terminated:  # PX4: NAVIGATION_STATE_TERMINATION
+        state = m.MAV_STATE_FLIGHT_TERMINATION
     return m.MAVLink_heartbeat_message(
         m.MAV_TYPE_QUADROTOR, m.MAV_AUTOPILOT_PX4, base, s.custom_mode, state, 3
     )
@@ -107,6 +135,15 @@ def sys_status(s: VehicleStatus):
         if est.dead_reckoning or est.gps_glitch:
             health &= ~m.MAV_SYS_STATUS_SENSOR_GPS
     present = enabled = SENSORS_PRESENT
+    flags = s.flags
+    if flags is not None:  # each sensor as the autopilot sees it; each control as its estimate allows
+        present = enabled = (SENSORS_PRESENT & ~ALL_SENSOR_BITS) | _sensor_bits(flags, present=True)
+        health = (health & ~ALL_SENSOR_BITS) | _sensor_bits(flags, present=False)
+        for bit, needs in CONTROL_NEEDS.items():
+            if getattr(flags, needs):
+                health &= ~bit
+        if est is not None and (est.dead_reckoning or est.gps_glitch):
+            health &= ~m.MAV_SYS_STATUS_SENSOR_GPS
     if s.geofence_enabled:
         present |= m.MAV_SYS_STATUS_GEOFENCE
         enabled |= m.MAV_SYS_STATUS_GEOFENCE
@@ -178,6 +215,16 @@ def battery_status(s: VehicleStatus):
     )  # fmt: skip
 
 
+def _sensor_bits(flags: FailsafeFlags, present: bool) -> int:
+    """The bits of the sensors present (``present``) or present and healthy."""
+    out = 0
+    for name, bit in SENSOR_BITS.items():
+        sensor = flags.sensor(name)
+        if sensor.present and (present or sensor.healthy):
+            out |= bit
+    return out
+
+
 def extended_sys_state(s: VehicleStatus):
     return m.MAVLink_extended_sys_state_message(m.MAV_VTOL_STATE_UNDEFINED, s.landed_state)
 
@@ -240,21 +287,29 @@ def global_position_int(s: VehicleStatus):
 
 
 def gps_raw_int(s: VehicleStatus):
-    _, vel, _ = _ned_state(s)
-    lat, lon, alt = _geodetic(s, s.state.position_m)
+    """The receiver's last sample, as PX4 reports its GPS: fix type, position, eph/epv, velocity and
+    satellites of the fix; no receiver (never a sample): GPS_FIX_TYPE_NO_GPS; a receiver gone
+    silent: its last position with GPS_FIX_TYPE_NO_FIX and no satellites."""
+    fix = s.gps
+    if fix is None:
+        return m.MAVLink_gps_raw_int_message(s.time_usec, m.GPS_FIX_TYPE_NO_GPS, 0, 0, 0, 65535, 65535,
+                                             65535, 65535, 255)  # fmt: skip
+    stopped = s.flags is not None and s.flags.gps.problem == "stopped"
+    vel = frames.vector_to_ned(fix.velocity_m_s)
+    lat, lon, alt = _geodetic(s, fix.position_m)
     speed = math.hypot(vel[0], vel[1])
     cog = sat_i32(math.degrees(math.atan2(vel[1], vel[0])) * 100) % 36000 if speed > 0.2 else 65535
     return m.MAVLink_gps_raw_int_message(
         s.time_usec,
-        m.GPS_FIX_TYPE_3D_FIX,
+        m.GPS_FIX_TYPE_NO_FIX if stopped else fix.fix_type,
         sat_i32(lat * 1e7),
         sat_i32(lon * 1e7),
         sat_i32(alt * 1000),
-        80,
-        120,
+        sat_u16(fix.eph_m * 100.0),
+        sat_u16(fix.epv_m * 100.0),
         sat_u16(speed * 100),
         cog,
-        12,
+        0 if stopped else fix.satellites_visible,
     )
 
 

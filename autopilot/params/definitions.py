@@ -245,6 +245,31 @@ def battery_params(vehicle: VehicleConfig | None = None) -> tuple[ParamSpec, ...
         sim("SIM_BAT_MIN_PCT", b.drain_min_pct, FLOAT, "simulated battery: PX4's linear drain stops here"),
     )  # fmt: skip
 
+# COM_POSCTL_NAVL (PX4): what POSCTL does when its position estimate goes: 0 fly on in ALTCTL (then
+# STABILIZED), 1 land (then descend).
+POSCTL_NAVL_ALTITUDE, POSCTL_NAVL_LAND = 0, 1
+# COM_POS_LOW_ACT (PX4's values, as GF_ACTION's): the low position accuracy failsafe.
+POS_LOW_NONE, POS_LOW_WARN, POS_LOW_HOLD, POS_LOW_RTL, POS_LOW_TERMINATE, POS_LOW_LAND = 0, 1, 2, 3, 4, 5
+
+# What the vehicle does when an estimate or a sensor goes bad (autopilot/commander/health.py, the
+# mode requirements and fallbacks of autopilot/commander/failsafe.py): PX4's names and defaults.
+NAVIGATION_FAILSAFE_PARAMS = (
+    ParamSpec("COM_POS_FS_EPH", 5.0, -1.0, 400.0, unit="m",
+              description="horizontal position 1-sigma above which the position is invalid (2.5x while "
+                          "valid: hysteresis; -1 no accuracy check)"),
+    ParamSpec("COM_VEL_FS_EVH", 1.0, 0.0, 100.0, unit="m/s",
+              description="horizontal velocity 1-sigma above which the velocity is invalid "
+                          "(2.5x while valid)"),
+    ParamSpec("COM_POS_LOW_EPH", -1.0, -1.0, 1000.0, unit="m",
+              description="position still valid but less accurate than this: COM_POS_LOW_ACT in AUTO.MISSION "
+                          "and AUTO.LOITER (-1 disabled)"),
+    ParamSpec("COM_POS_LOW_ACT", POS_LOW_RTL, 0, 5, kind=INT32,
+              description="low position accuracy action: 0 none, 1 warning, 2 hold, 3 return, 5 land "
+                          "(PX4 values)",
+              refused={float(POS_LOW_TERMINATE): "terminating on a low accuracy is not supported"}),
+    ParamSpec("COM_POSCTL_NAVL", POSCTL_NAVL_ALTITUDE, 0, 1, kind=INT32,
+              description="POSCTL without a position: 0 ALTCTL (then STABILIZED), 1 land (then descend)"),
+)  # fmt: skip
 
 # The flight log (autopilot/logger/): PX4's SDLOG_MODE values; 3 (by an RC switch) is not supported.
 LOGGER_PARAMS = (
@@ -333,8 +358,8 @@ def default_parameters(
     and the estimator's (EKF2_EN and the EKF2_* of :mod:`autopilot.estimation.parameters`);
     ``vehicle`` gives ``MPC_THR_HOVER`` its default (:func:`hover_thrust_param`) and the battery's
     (:func:`battery_params`)."""
-    specs = [*COMMANDER_PARAMS, hover_thrust_param(vehicle), *FAILSAFE_PARAMS, *battery_params(vehicle),
-             *LOGGER_PARAMS, *FAILURE_PARAMS]  # fmt: skip
+    specs = [*COMMANDER_PARAMS, hover_thrust_param(vehicle), *FAILSAFE_PARAMS, *NAVIGATION_FAILSAFE_PARAMS,
+             *battery_params(vehicle), *LOGGER_PARAMS, *FAILURE_PARAMS]  # fmt: skip
     if controller is not None:
         specs += controller_params(controller)
     if rates is not None:

@@ -3,8 +3,9 @@
 For each (phase, event) pair the table defines, a fresh commander is flown into the phase along a
 route of table rows (each step of the route is itself checked), the event is made to happen (a
 command is fired; an internal event is provoked: a plan is let run out, setpoints stop, the
-vehicle touches down, the geofence is breached or changed, the sticks move or raise the throttle)
-and the phase and mode afterwards must be the row's. The vehicle follows its reference exactly and
+vehicle touches down, the geofence is breached or changed, the sticks move or raise the throttle,
+the estimate loses its horizontal aiding or its attitude) and the phase and mode afterwards must
+be the row's. The vehicle follows its reference exactly and
 stops at the ground, as in the other commander tests.
 """
 
@@ -27,9 +28,18 @@ from autopilot.commander.transitions import (
     describe,
     lookup,
 )
+from autopilot.estimation.status import (
+    ESTIMATOR_ATTITUDE,
+    ESTIMATOR_POS_HORIZ_REL,
+    ESTIMATOR_POS_VERT_ABS,
+    ESTIMATOR_VELOCITY_HORIZ,
+    ESTIMATOR_VELOCITY_VERT,
+    EstimatorStatus,
+)
 from autopilot.guidance.offboard import OffboardSetpoint
 from autopilot.guidance.sticks import Sticks
 from autopilot.mavlink.codec import mavlink as m
+from autopilot.mavlink.hil import SensorSamples
 from autopilot.mission.executor import MissionExecutor
 from autopilot.mission.items import WireItem, parse_item
 from autopilot.mission.plans import Area, Geofence
@@ -57,7 +67,23 @@ ROUTES: dict[Phase, list[Event]] = {
     P.RTL_LAND: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.RTL, E.PLAN_DONE],
     P.LANDED: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.LAND, E.TOUCHDOWN],
     P.MANUAL: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.MANUAL],
+    P.DESCEND: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.FAILSAFE_DESCEND],
 }
+# The estimate a fallback is provoked with (flying on the EKF): its ESTIMATOR_STATUS flags, or None
+# for an estimator that has lost its alignment (no attitude).
+GOOD = (ESTIMATOR_ATTITUDE | ESTIMATOR_VELOCITY_HORIZ | ESTIMATOR_VELOCITY_VERT | ESTIMATOR_POS_HORIZ_REL
+        | ESTIMATOR_POS_VERT_ABS)  # fmt: skip
+NO_HORIZONTAL = ESTIMATOR_ATTITUDE | ESTIMATOR_VELOCITY_VERT | ESTIMATOR_POS_VERT_ABS
+FALLBACKS = {E.FAILSAFE_DESCEND: NO_HORIZONTAL, E.FAILSAFE_MANUAL: NO_HORIZONTAL, E.FAILSAFE_TERMINATE: None}
+
+
+IMU_ONLY = SensorSamples((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), None, None, None, None)
+
+
+def _status(t: float, flags: int | None) -> EstimatorStatus:
+    """An EKF status with ``flags`` (None: not initialised), accurate where it is aided."""
+    return EstimatorStatus(t, flags is not None, flags == GOOD, "", flags or 0, 0.0, 0.0, 0.0, 0.0, 0.1, 0.1,
+                           0.1, 0.01, 0.01, False, False, {}, 0, 0)  # fmt: skip
 FAILSAFE_ACTION = {E.FAILSAFE_HOLD: GF_HOLD, E.FAILSAFE_RTL: GF_RTL, E.FAILSAFE_LAND: GF_LAND}
 
 
@@ -87,6 +113,9 @@ class Flight:
         self.t = 0.0
         self.feed_setpoints = True
         self.sticks = Sticks(0.0)  # fed every step (a MANUAL_CONTROL stream), moved by happen()
+        self.feed_sticks = True
+        self.ekf_flags: int | None = GOOD  # the estimate, once flying on a (made-up) EKF status
+        self.on_ekf = False
         self._state((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         self.c.set_mission(0.0, _mission(mission_end))
 
@@ -96,7 +125,12 @@ class Flight:
     def step(self) -> None:
         if self.feed_setpoints:
             self.c.offboard_setpoint(OffboardSetpoint(self.t, position=(0.0, 0.0, 2.5)))
-        self.c.manual_sticks(replace(self.sticks, time_s=self.t))
+        if self.feed_sticks:
+            self.c.manual_sticks(replace(self.sticks, time_s=self.t))
+        if self.on_ekf:  # an IMU stream and the filter's status
+            self.c.on_ekf = True
+            self.c.estimator_status = _status(self.t, self.ekf_flags)
+            self.c.observe_sensors(self.t, IMU_ONLY)
         out = self.c.step(self.t, DT)
         if out.motors == Motors.FLY:
             ref = out.reference
@@ -126,6 +160,11 @@ class Flight:
             c.params.set("COM_RC_OVERRIDE", 3)
         elif event == E.TOUCHDOWN and c.phase == P.MANUAL:
             self.sticks = replace(self.sticks, up=-1.0)
+        elif event == E.FAILSAFE_MANUAL:  # POSCTL falls back to ALTCTL (MANUAL_ASKED)
+            assert c.set_mode(self.t, FlightMode.POSCTL).accepted
+        if event in FALLBACKS:
+            self.on_ekf = True
+            self.step()
 
     def happen(self, event: Event) -> None:
         """Make ``event`` happen in the current phase."""
@@ -150,6 +189,17 @@ class Flight:
             self.step_until(lambda: c.phase != phase)
         elif event in (E.MISSION_LAND, E.MISSION_RTL):
             self.step_until(lambda: c.phase != phase)
+        elif event in FALLBACKS:  # the estimate degrades: the mode (or the next) cannot run
+            if self.height < 0.5:  # just taken off: in the air
+                self.step_until(lambda: self.height > 0.5, seconds=10.0)
+            if phase == P.MANUAL and event == E.FAILSAFE_DESCEND:
+                self.feed_sticks = False  # ALTCTL flies without a position: the sticks' loss acts
+            self.ekf_flags = FALLBACKS[event]
+            mode = c.mode
+            if lookup(phase, event).action:
+                self.step_until(lambda: (c.phase, c.mode) != (phase, mode), seconds=2.0)
+            else:  # already descending: nothing to do
+                self.step()
         elif event in FAILSAFE_ACTION:
             if self.height < 0.5:  # just taken off: high enough to put a fence below it
                 self.step_until(lambda: self.height > 0.5, seconds=10.0)
@@ -176,7 +226,10 @@ def _fly_to(phase: Phase, mission_end: int) -> Flight:
         before = flight.c.phase
         row = lookup(before, event)
         assert row is not None, f"route to {phase.name}: no row {before.name} + {event.name}"
-        flight.happen(event)
+        if event in FALLBACKS:  # through the table alone: the estimate stays good on the route
+            assert flight.c._fire(flight.t, event).accepted
+        else:
+            flight.happen(event)
         expected = before if not isinstance(row.to, Phase) else row.to
         assert flight.c.phase == expected, f"route to {phase.name}: {event.name} from {before.name}"
     assert flight.c.phase == phase

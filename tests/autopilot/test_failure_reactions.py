@@ -1,0 +1,254 @@
+"""The vehicle's answer to a failure, as PX4's (the whole stack in-process, simulation time): the
+autopilot learns of a failure only from its data (a sensor that stops, repeats, or lies), judges
+its estimates and sensors (commander/health.py) and reacts by PX4's rules: a mission without GPS
+falls back RTL -> Land -> Descend and lands; a motion capture lost does the same; a barometer or
+magnetometer lost or stuck lets the mission go on; an IMU that stops ends in flight termination.
+Each reaction is announced, reported (SYS_STATUS bits, HEARTBEAT, GPS_RAW_INT, the failsafe flags)
+and undone when the data returns. PX4's own tests of the same: test/mavsdk_tests/
+test_multicopter_failsafe.cpp ("Land on GPS lost during mission", "Continue on mag/baro
+lost/stuck during mission")."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from pymavlink.dialects.v20 import common as m
+
+from autopilot.control.config import load_controller
+from autopilot.core import AutopilotSetup
+from gcs_scripts.upload_mission import MissionLink, items_from_list
+from simulator.core import SimulatorSetup
+from simulator.sensors import SensorFault
+from sitl.inprocess import Lockstep
+
+from ..stack import Gcs, connect
+
+pytestmark = pytest.mark.timeout(300)
+LAND_MODE = (4 << 16) | (6 << 24)  # AUTO.LAND: PX4 shows Descend as it
+SQUARE = {
+    "frame": "paper",
+    "items": [
+        {"type": "takeoff", "altitude_m": 6.0},
+        {"type": "waypoint", "position": [6.0, 0.0, 6.0]},
+        {"type": "waypoint", "position": [6.0, 6.0, 6.0]},
+        {"type": "waypoint", "position": [0.0, 6.0, 6.0]},
+        {"type": "rtl"},
+    ],
+}
+
+
+def stack_with(sensors: str, estimator: str = "ekf") -> Lockstep:
+    sim = SimulatorSetup.load(scenario="hover", sensors=sensors)
+    ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller("intbs_nlhinf"), default_remotes=False,
+                        estimator=estimator, estimator_profile=sensors)  # fmt: skip
+    return Lockstep(sim, ap)
+
+
+def break_sensors(stack: Lockstep, monkeypatch) -> dict:
+    """The simulator's frames with a sensor broken as the returned dict says (set its keys):
+    ``baro``/``mag`` "lost" (no fresh sample) or "stuck" (the value at that moment, repeated),
+    ``imu`` "nan" (non-finite samples)."""
+    suite = stack.sim.sensors
+    step = suite.step
+    broken: dict = {}
+    held: dict = {}
+
+    def broken_step(t, truth):
+        f = step(t, truth)
+        r = f.readings
+        baro, mag, imu = broken.get("baro"), broken.get("mag"), broken.get("imu")
+        if baro == "lost":
+            r = r._replace(baro_fresh=False)
+        elif baro == "stuck":
+            held.setdefault("baro", r.baro)
+            r = r._replace(baro=held["baro"])
+        if mag == "lost":
+            r = r._replace(mag_fresh=False)
+        elif mag == "stuck":
+            held.setdefault("mag", r.magnetic_field_gauss)
+            r = r._replace(magnetic_field_gauss=held["mag"])
+        if imu == "nan":
+            nan = math.nan
+            bad = f.imu._replace(specific_force_m_s2=(nan, nan, nan), angular_rate_rad_s=(nan, nan, nan))
+            f, r = f._replace(imu=bad), r._replace(imu=bad)
+        return f._replace(readings=r)
+
+    monkeypatch.setattr(suite, "step", broken_step)
+    return broken
+
+
+def ready(stack: Lockstep, gcs: Gcs) -> None:
+    commander = stack.autopilot.commander
+    gcs.wait(lambda g: commander.estimator_problem is None and not commander.in_air()
+             and "SYS_STATUS" in g.last, sim_timeout=30.0, what="converged, on the ground")  # fmt: skip
+    gcs.wait(lambda g: commander.flags.global_position_invalid is False, sim_timeout=3.0, what="position")
+
+
+def fly_mission(stack: Lockstep) -> Gcs:
+    link = connect(stack, MissionLink)
+    link.upload(items_from_list(SQUARE))
+    link.close()
+    gcs = Gcs(stack)
+    ready(stack, gcs)
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    assert gcs.command(m.MAV_CMD_MISSION_START, 0, 0).result == m.MAV_RESULT_ACCEPTED
+    gcs.wait(lambda g: "LOCAL_POSITION_NED" in g.last and g.position()[2] > 5.5, sim_timeout=20.0,
+             what="the mission's takeoff")  # fmt: skip
+    return gcs
+
+
+def fresh(gcs: Gcs, kind: str):
+    gcs.last.pop(kind, None)
+    gcs.wait(lambda g: kind in g.last, sim_timeout=2.0, what=kind)
+    return gcs.last[kind]
+
+
+def said(gcs: Gcs, text: str) -> None:
+    """``text`` arrives (all its chunks) within 0.5 s."""
+    gcs.wait(lambda g: text in texts(g), sim_timeout=0.5, what=repr(text))
+
+
+def texts(gcs: Gcs) -> str:
+    return "".join(gcs.statustext)  # (a long STATUSTEXT comes in 50-byte chunks)
+
+
+def test_gps_lost_in_a_mission_falls_back_to_descend_and_lands(monkeypatch):
+    stack = stack_with("gps")
+    gcs = fly_mission(stack)
+    commander = stack.autopilot.commander
+    t_lost = stack.t
+    stack.sim.sensors.add_fault(SensorFault("gps_outage", t_lost, 1000.0))
+    gcs.wait(lambda g: "Failsafe activated" in texts(g), sim_timeout=10.0, what="the failsafe")
+    # The EKF dead reckons for EKF2_NOAID_TOUT (5 s), then the position is invalid: no Mission, no
+    # Return, no Land (all need a position): Descend.
+    assert 4.5 < stack.t - t_lost < 7.0
+    said(gcs, "Failsafe activated: no global position for AUTO.MISSION, triggering Descend")
+    flags = commander.flags
+    assert flags.global_position_invalid and flags.local_position_invalid and not flags.local_altitude_invalid
+    assert flags.gps.present and flags.gps.problem == "no 3D fix"
+    heartbeat = fresh(gcs, "HEARTBEAT")
+    assert heartbeat.custom_mode == LAND_MODE
+    assert heartbeat.system_status == m.MAV_STATE_CRITICAL
+    sys_status = fresh(gcs, "SYS_STATUS")
+    assert sys_status.onboard_control_sensors_present & m.MAV_SYS_STATUS_SENSOR_GPS
+    assert not sys_status.onboard_control_sensors_health & m.MAV_SYS_STATUS_SENSOR_GPS
+    assert not sys_status.onboard_control_sensors_health & m.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    assert sys_status.onboard_control_sensors_health & m.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    assert fresh(gcs, "GPS_RAW_INT").fix_type < m.GPS_FIX_TYPE_3D_FIX
+    assert not fresh(gcs, "ESTIMATOR_STATUS").flags & m.ESTIMATOR_POS_HORIZ_ABS
+    # PX4's test: disarmed within 30 s; the descent is level, at MPC_LAND_SPEED.
+    gcs.wait(lambda g: not stack.autopilot.commander.armed, sim_timeout=30.0, what="landed and disarmed")
+    assert "landing detected" in texts(gcs)
+    assert texts(gcs).count("Failsafe activated") == 1  # taken once
+
+
+def test_gps_back_during_the_descent_resumes_the_mission(monkeypatch):
+    stack = stack_with("gps")
+    gcs = fly_mission(stack)
+    commander = stack.autopilot.commander
+    stack.sim.sensors.add_fault(SensorFault("gps_outage", stack.sim.t, 7.0))
+    gcs.wait(lambda g: "triggering Descend" in texts(g), sim_timeout=10.0, what="the descent")
+    gcs.wait(lambda g: "Failsafe deactivated: back to AUTO.MISSION" in texts(g), sim_timeout=15.0,
+             what="the mission again")  # fmt: skip
+    assert commander.armed and commander.in_air() and commander.mode.name == "AUTO_MISSION"
+    assert not commander.flags.global_position_invalid and commander.flags.gps.healthy
+    gcs.wait(lambda g: not commander.armed, sim_timeout=120.0, what="the mission flown to its end")
+    assert "mission: flying item" in texts(gcs)
+
+
+def test_vision_lost_under_motion_capture_descends_and_lands():
+    stack = stack_with("mocap")
+    gcs = Gcs(stack)
+    ready(stack, gcs)
+    commander = stack.autopilot.commander
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    nan = math.nan
+    assert gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 488.0 + 3.0).result == 0
+    gcs.wait(lambda g: commander.phase.name == "HOLD", sim_timeout=20.0, what="holding")
+    t_lost = stack.t
+    stack.sim.sensors.add_fault(SensorFault("vision_outage", t_lost, 1000.0))
+    gcs.wait(lambda g: "Failsafe activated" in texts(g), sim_timeout=10.0, what="the failsafe")
+    assert 4.5 < stack.t - t_lost < 7.0  # EKF2_NOAID_TOUT
+    said(gcs, "Failsafe activated: no global position for AUTO.LOITER, triggering Descend")
+    assert commander.flags.vision.problem == "stopped"
+    sys_status = fresh(gcs, "SYS_STATUS")
+    assert sys_status.onboard_control_sensors_present & m.MAV_SYS_STATUS_SENSOR_VISION_POSITION
+    assert not sys_status.onboard_control_sensors_health & m.MAV_SYS_STATUS_SENSOR_VISION_POSITION
+    assert not sys_status.onboard_control_sensors_present & m.MAV_SYS_STATUS_SENSOR_GPS  # none indoors
+    gcs.wait(lambda g: not commander.armed, sim_timeout=30.0, what="landed and disarmed")
+
+
+@pytest.mark.parametrize("sensor, how", [("baro", "lost"), ("baro", "stuck"), ("mag", "lost"),
+                                         ("mag", "stuck")])  # fmt: skip
+def test_a_mission_goes_on_without_its_barometer_or_magnetometer(sensor, how, monkeypatch):
+    stack = stack_with("gps")
+    broken = break_sensors(stack, monkeypatch)
+    gcs = fly_mission(stack)
+    commander = stack.autopilot.commander
+    broken[sensor] = how
+    seen = set()
+    bit = {"baro": m.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE, "mag": m.MAV_SYS_STATUS_SENSOR_3D_MAG}[sensor]
+
+    def watch(g) -> bool:
+        health = commander.flags.sensor(sensor)
+        if not health.healthy:
+            seen.add(health.problem)
+            status = g.last.get("SYS_STATUS")
+            if status is not None and not status.onboard_control_sensors_health & bit:
+                seen.add("reported")
+        return not commander.armed
+
+    gcs.wait(watch, sim_timeout=120.0, what="the mission flown to its end, landed")
+    expected = {"lost": "stopped", "stuck": "stuck"}[how]
+    assert expected in seen and "reported" in seen, seen
+    assert "Failsafe activated" not in texts(gcs)  # PX4: continue (height from GPS, heading kept)
+    assert "mission: flying item 4" in texts(gcs) or "returning" in texts(gcs)
+    x, y, _ = stack.sim.plant.truth().position_m
+    assert math.hypot(x, y) < 1.5  # back home
+
+
+def test_an_imu_that_stops_in_flight_terminates_the_flight(monkeypatch):
+    stack = stack_with("gps")
+    broken = break_sensors(stack, monkeypatch)
+    gcs = Gcs(stack)
+    ready(stack, gcs)
+    commander = stack.autopilot.commander
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    nan = math.nan
+    assert gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 488.0 + 3.0).result == 0
+    gcs.wait(lambda g: commander.phase.name == "HOLD", sim_timeout=20.0, what="holding")
+    t_lost = stack.t
+    broken["imu"] = "nan"
+    gcs.wait(lambda g: not commander.armed, sim_timeout=3.0, what="the termination")
+    assert 0.9 < stack.t - t_lost < 1.2  # PX4: the angular velocity is invalid after 1 s
+    said(gcs, "Failsafe activated: no angular velocity for AUTO.LOITER, triggering Terminate")
+    said(gcs, "flight terminated: motors off")
+    assert commander.flags.angular_velocity_invalid and commander.flags.gyro.problem == "stopped"
+    heartbeat = fresh(gcs, "HEARTBEAT")
+    assert heartbeat.system_status == m.MAV_STATE_FLIGHT_TERMINATION
+    assert not fresh(gcs, "SYS_STATUS").onboard_control_sensors_health & m.MAV_SYS_STATUS_SENSOR_3D_GYRO
+
+
+def test_on_the_truth_a_failed_sensor_refuses_arming_until_it_returns(monkeypatch):
+    """EKF2_EN 0: the vehicle flies on the simulator's state, so nothing it flies on fails; but the
+    sensors' health still follows their data, and PX4 refuses to arm with a failed sensor. An
+    ideal (noise-free) barometer repeating its value at rest is not a failure."""
+    stack = stack_with("ideal", estimator="truth")
+    broken = break_sensors(stack, monkeypatch)
+    gcs = Gcs(stack)
+    gcs.wait(lambda g: "SYS_STATUS" in g.last, what="SYS_STATUS")
+    stack.run_for(3.0)  # an exact barometer at rest repeats its value: healthy still
+    commander = stack.autopilot.commander
+    assert commander.flags.baro.healthy and commander.flags.mag.healthy
+    broken["baro"] = "lost"
+    gcs.wait(lambda g: not commander.flags.baro.healthy, sim_timeout=2.0, what="the barometer stopped")
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_DENIED
+    said(gcs, "arming refused: sensor failure: barometer (stopped)")
+    status = fresh(gcs, "SYS_STATUS")
+    assert not status.onboard_control_sensors_health & m.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    assert not status.onboard_control_sensors_health & m.MAV_SYS_STATUS_PREARM_CHECK
+    broken.clear()
+    gcs.wait(lambda g: commander.flags.baro.healthy, sim_timeout=2.0, what="the barometer back")
+    said(gcs, "sensor stream resumed: barometer")
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
