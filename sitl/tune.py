@@ -258,7 +258,8 @@ def controller_toml(result: TuneResult, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_arguments(argv: list[str]) -> argparse.Namespace:
+    """``quadsitl tune``'s arguments (``options`` among them: the TuneOptions they ask for)."""
     parser = argparse.ArgumentParser(
         prog="quadsitl tune",
         formatter_class=HelpFormatter,
@@ -280,12 +281,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--order", type=int, default=None, choices=(1, 2),
                         help="the ARX model's order (default: 1 under wrench actuation, 2 with rotors)")
     parser.add_argument("--out", default=None, help="write the controller file here")
-    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)  # fmt: skip
-    options = TuneOptions(args.rise_time, args.yaw_rise_time, args.amplitude, args.gyro_cutoff,
-                          args.nominal_plant, args.order)  # fmt: skip
+    args.options = TuneOptions(args.rise_time, args.yaw_rise_time, args.amplitude, args.gyro_cutoff,
+                               args.nominal_plant, args.order)  # fmt: skip
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parse_arguments(argv)
     try:
-        result = autotune(args.vehicle, args.controller, options, log=print)
+        result = autotune(args.vehicle, args.controller, args.options, log=print)
     except AutotuneFailed as exc:
         print(f"quadsitl tune: {exc} (PX4's convergence test: every variance below "
               f"{at.CONVERGED_VARIANCE:g}); nothing written", file=sys.stderr)  # fmt: skip

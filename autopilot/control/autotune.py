@@ -7,8 +7,8 @@ gains:
 
 1. **Excitation** (:class:`Excitation`): a rate setpoint added to the attitude controller's output
    (mc_att_control adds ``autotune_attitude_control_status.rate_sp``): a step between 0 and
-   MC_AT_SYSID_AMP (0.7 rad/s) whose sign alternates with half-periods shrinking from 1 s to
-   0.1 s, then 0.5 s ... (the first one short, 0.6 s, to keep the vehicle centred), washed out:
+   MC_AT_SYSID_AMP (0.7 rad/s), its half-periods 0.6 s (short, to keep the vehicle centred), then
+   1.0, 0.9, ... 0.2 s, then 0.6, 0.5, ... 0.2 s over and over, washed out:
    ``signal = step - lowpass(step)``, the low pass a first-order filter of time constant 0.2 s
    stepped with the signal every 0.1 s.
 2. **Identification** (:class:`AxisIdentification`): the input ``u`` is the rate controller's
@@ -74,7 +74,7 @@ class Excitation:
         self.reset()
 
     def reset(self) -> None:
-        # the first half-period is shorter (6 calls, then 10, 9, ... 2, then 6, 5, ...)
+        # half-periods of 6 calls, then 10, 9, ... 2, then 6, 5, ... 2 over and over
         self.steps, self.max_steps, self.on, self.low_pass = 5, 10, True, 0.0
 
     def advance(self) -> float:

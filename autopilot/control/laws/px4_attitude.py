@@ -30,6 +30,11 @@ MC_ROLLRATE_P = 0.15 is 0.15 * 1.5 = 0.225 N m per rad/s on the paper's vehicle.
 of the yaw torque (MC_YAW_TQ_CUTOFF) and its attitude reference model (MC_REF_*, off by default)
 are not modelled. Rates from the command filter are not used (``px4_pid`` passes the roll/pitch
 references through, as PX4 has no such filter); the reference's yaw rate is.
+
+The autotune's input: three entries of the gains array (``G_AUTOTUNE_RATE``, rad/s per body axis,
+zero as packed) are added to the rate setpoint after its limits, as mc_att_control adds the rate
+setpoint PX4's autotune publishes; ``quadsitl tune`` (:mod:`sitl.tune`) writes its excitation
+there while it identifies an axis.
 """
 
 from __future__ import annotations
