@@ -17,13 +17,13 @@ Where this differs from PX4's module, and why:
   model, right for rotors (their lag, then the inertia: ``--vehicle paper_quad_rotors`` identifies
   the 20 ms rotor pole). Under wrench actuation (the paper's vehicle) the torque is applied as
   commanded and the rate dynamics are first order, ``tau_max / (J s)``; a second-order fit leaves
-  one direction of its coefficients unexcited, its variance stays at the initial 1e4, and PX4's
+  one direction of its coefficients unexcited, its variance stays in the thousands, and PX4's
   convergence test fails the axis after 20 s (``--order 2`` shows it). The first-order model is
   the special case ``a2 = b1 = b2 = 0`` of PX4's, and PX4's gain design applies to it unchanged.
 * **The gyro is not filtered** here (the controllers get the estimate as it is), so the model is
   sampled at the control period (2 ms at 500 Hz): PX4's rule ``max(1 / (2 IMU_GYRO_CUTOFF),
   sample period)`` with no cutoff. ``--gyro-cutoff 40`` (PX4's default) gives a 10 ms model, into
-  which the unfiltered loop's fast torque aliases (its gain comes out about 8 % low).
+  which the unfiltered loop's fast torque aliases (its gain comes out 7-10 % low).
 * **Yaw's rise time is an option** (``--yaw-rise-time``); PX4 fixes it at 0.2 s.
 * A tuned gain outside its parameter's declared range is brought into it, and said so (PX4 saves
   what it computed).
@@ -113,7 +113,7 @@ def model_order(vehicle: VehicleConfig) -> int:
     model: the rotors' lag, then the inertia) with rotors, 1 under wrench actuation, where the
     torque is applied as commanded and the body rate integrates it (``tau_max / (J s)``). A second-
     order model of a first-order plant leaves one direction of its coefficients unexcited: its
-    variance stays at the initial 1e4 and PX4's convergence test never holds."""
+    variance stays in the thousands and PX4's convergence test never holds."""
     return 2 if vehicle.actuation.mode == "rotors" else 1
 
 
@@ -231,8 +231,8 @@ def controller_toml(result: TuneResult, command: str) -> str:
         f"# Vehicle {result.vehicle}; base {result.base.name} (the gains flown while identifying);",
         f"# MC_AT_RISE_TIME {o.rise_time_s:g} s (roll, pitch), {o.yaw_rise_time_s:g} s (yaw); "
         f"MC_AT_SYSID_AMP {o.amplitude_rad_s:g} rad/s;",
-        f"# IMU_GYRO_CUTOFF {cutoff}. Identified, {order}-order ARX from the normalised torque to",
-        f"# the body rate, dt {first.dt_s * 1e3:g} ms:",
+        f"# IMU_GYRO_CUTOFF {cutoff}. Identified: a {order}-order ARX model,",
+        f"# normalised torque -> body rate, dt {first.dt_s * 1e3:g} ms:",
     ]
     for r in result.axes:
         m = r.model

@@ -18,14 +18,13 @@ gains:
    (IMU_GYRO_CUTOFF; none where the gyro is not filtered) and a first-order high pass at 0.5 Hz
    (removes the offsets: the torque that holds the hover, a slow drift). A second-order ARX model
    with one sample of delay (:class:`ArxRls`),
-   ``y(k) = -a1 y(k-1) - a2 y(k-2) + b0 u(k-1) + b1 u(k-2) + b2 u(k-3)``, is fitted by recursive
-   least squares with a forgetting factor ``1 - dt / 60 s`` (or its first-order special case
-   ``y(k) = -a1 y(k-1) + b0 u(k-1)``, for a plant without actuator lag: :mod:`sitl.tune`), every
-   ``model_dt``:
-   ``max(1 / (2 IMU_GYRO_CUTOFF), sample period)`` within [2, 10] ms (the gyro's cutoff bounds
-   the loop's bandwidth). An axis is identified when every coefficient's variance (the diagonal
-   of the RLS covariance) is below 50 and at least 5 s have passed; 20 s without that is a
-   failure.
+   ``y(k) = -a1 y(k-1) - a2 y(k-2) + b0 u(k-1) + b1 u(k-2) + b2 u(k-3)`` (or its first-order
+   special case ``y(k) = -a1 y(k-1) + b0 u(k-1)``, for a plant without actuator lag:
+   :mod:`sitl.tune`), is fitted by recursive least squares with a forgetting factor
+   ``1 - dt / 60 s``, sampled every ``max(1 / (2 IMU_GYRO_CUTOFF), sample period)`` within
+   [2, 10] ms (the gyro's cutoff bounds the loop's bandwidth). An axis is identified when every
+   coefficient's variance (the diagonal of the RLS covariance) is below 50 and at least 5 s have
+   passed; 20 s without that is a failure.
 3. **Gains** (:func:`gmvc_pid`, :func:`attitude_gain`): a PID by generalised minimum variance
    control (Yamamoto, Fujii & Kaneda, "Design and implementation of a self-tuning PID
    controller", 1998) from the identified model, the closed loop asked to behave as a critically
@@ -142,7 +141,7 @@ class ArxRls:
     def update(self, u: float, y: float) -> None:
         self.u = self.u[1:] + [u]
         self.y = self.y[1:] + [y]
-        if self.samples <= 5:  # the regressors still hold zeros
+        if self.samples < 5:  # the regressors still hold zeros (PX4's isBufferFull)
             self.samples += 1
             return
         if self.order == 2:

@@ -57,8 +57,8 @@ def test_rls_recovers_a_second_order_arx_model_exactly():
 def test_a_second_order_fit_of_an_integrator_leaves_a_direction_unexcited():
     """Why the first-order model under wrench actuation: data from y(k) = y(k-1) + b u(k-1) fit one
     second-order model as well as another (any common factor), so the variance along that direction
-    stays near its initial 1e4 and PX4's convergence test (every variance below 50) never holds; the
-    first-order model converges to the plant."""
+    stays in the thousands (it starts at 1e4) and PX4's convergence test (every variance below 50)
+    never holds; the first-order model converges to the plant."""
     rng = np.random.default_rng(2)
     u = rng.normal(size=3000)
     y = np.cumsum(np.r_[0.0, 0.75 * u[:-1]])
