@@ -4,6 +4,7 @@ quadsitl up [--instance N] [--scenario NAME]       the SITL: simulator + autopil
 quadsitl paper [--out DIR] [--nominal-plant]      the paper's experiment, in-process
 quadsitl run SCENARIO [--controller NAME]          one in-process run
 quadsitl campaign SPEC [--runs N] [--out DIR]       Monte Carlo campaign (sitl/campaign/)
+quadsitl tune [--rise-time S] [--out FILE]          PX4's attitude autotune in-process (sitl/tune.py)
 quadsitl view [--instance N ...] [LOG ...]         live view / replays in the browser
 quadsitl fly setpoints|trajectory|paper ...        fly a running SITL (gcs_scripts/fly_*.py)
 quadsitl mission upload|download|clear ...         the mission protocol (gcs_scripts/upload_mission.py)
@@ -327,6 +328,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("rest", nargs=argparse.REMAINDER)
     p.set_defaults(func=lambda a: __import__("sitl.compile", fromlist=["main"]).main(a.rest))
 
+    p = sub.add_parser("tune", help="PX4's attitude autotune flown in-process: gains for a px4_pid cascade "
+                       "(quadsitl tune --help)", add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=lambda a: __import__("sitl.tune", fromlist=["main"]).main(a.rest))
+
     p = sub.add_parser("demo", help="the paper's helix through the SITL for the three cascades (make demo)")
     p.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
     p.add_argument("--instance", type=int, default=0, help="vehicle instance used for the runs")
@@ -447,6 +453,10 @@ def _dispatch(argv: list[str]) -> int:
         from sitl.compile import main as compile_main
 
         return compile_main(argv[1:])
+    if argv[:1] == ["tune"]:  # its own parser too (sitl/tune.py)
+        from sitl.tune import main as tune_main
+
+        return tune_main(argv[1:])
     if argv[:1] == ["record"]:
         return _delegate(RECORD_MODULE, argv[1:], "quadsitl record")
     if argv[:1] == ["impair"]:

@@ -2,9 +2,9 @@
 
 Cascades are selected by name (``config/controllers/NAME.toml``): ``intbs_nlhinf`` (the paper's),
 ``intbs`` (integral in the first step, both loops), ``bs_nlhinf`` (no integral), ``px4_pid`` (PX4's
-cascade of P and PID loops) and ``se3`` (geometric control on SE(3)); the laws themselves are looked
-up by name (:mod:`.registry`). Pure: one :meth:`Cascade.step` per control period, driven by whoever
-owns the clock.
+cascade of P and PID loops; ``px4_pid_tuned`` with gains from PX4's autotune) and ``se3`` (geometric
+control on SE(3)); the laws themselves are looked up by name (:mod:`.registry`). Pure: one
+:meth:`Cascade.step` per control period, driven by whoever owns the clock.
 
 One step (:func:`cascade_step`, a kernel composed with the cascade's two laws):
 

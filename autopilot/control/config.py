@@ -17,7 +17,9 @@ from quadcommon.schema import ConfigError, Section, load_toml
 from . import registry
 
 PAPER_CONTROLLERS = ("intbs_nlhinf", "intbs", "bs_nlhinf")  # the paper's three cascades
-BASELINES = ("px4_pid", "se3")  # PX4's cascade and geometric control on SE(3), for comparison
+# PX4's cascade (its default gains; autotuned on this vehicle: sitl/tune.py) and geometric control on
+# SE(3), for comparison
+BASELINES = ("px4_pid", "px4_pid_tuned", "se3")
 CONTROLLER_NAMES = PAPER_CONTROLLERS + BASELINES
 
 

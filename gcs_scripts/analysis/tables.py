@@ -13,6 +13,7 @@ CONTROLLER_TITLES = {
     "intbs": "IntBS",
     "bs_nlhinf": "BS-NLH∞",
     "px4_pid": "PX4 PID",
+    "px4_pid_tuned": "PX4 PID, autotuned",
     "se3": "SE(3)",
 }
 

@@ -56,7 +56,8 @@ def distributions_figure(table: pa.Table, controllers: Sequence[str], path: Path
     for ax, key in zip(axes.ravel(), FIGURE_INDICES, strict=True):
         groups = _groups(table, controllers, key)
         ax.boxplot([g if g.size else [np.nan] for g in groups], whis=(5, 95), showfliers=True)
-        ax.set_xticks(range(1, len(controllers) + 1), [title(c) for c in controllers], fontsize=8)
+        ax.set_xticks(range(1, len(controllers) + 1), [title(c) for c in controllers], fontsize=8,
+                      rotation=20, ha="right", rotation_mode="anchor")  # fmt: skip
         if _log_scale(groups):
             ax.set_yscale("log")
         ax.set_title(INDEX_LABELS[key], fontsize=9)

@@ -14,7 +14,7 @@ from sitl.inprocess import RunOptions, run_scenario
 from sitl.paper import run_job
 from tests.own_law import laws_forgotten_afterwards, nan_above, write_overlay
 
-# The module's runs (13 flights of 40 s, the EKF ones the slowest) take about 2 min on two cores, more
+# The module's runs (15 flights of 40 s, the EKF ones the slowest) take about 2 min on two cores, more
 # while numba compiles the law pairs for the first time.
 pytestmark = pytest.mark.timeout(420)
 
@@ -62,7 +62,10 @@ def test_on_the_ekf_with_mocap_the_paper_pattern_holds(ekf_runs):
 # where NLHinf gives ~15, so the 1 N m torque steps tilt it by up to ~1 rad for about a second before
 # its rate integrals take them over, and the vehicle is pushed up to 5 m off the path (measured
 # 5.0 m on the circle, 4.9 m on the helix, 4.8 m on the EKF), tilting to 0.85 rad (limit 45 deg).
-TRACKING_BOUNDS = {"px4_pid": (6.0, 0.9)}
+# Autotuned (px4_pid_tuned) it holds the torque steps within 0.22 rad; what is left is its position
+# loop's (PX4's default MPC gains take the 1 N steps over in ~5 s): 0.74 m on the circle, 0.57 m on
+# the helix.
+TRACKING_BOUNDS = {"px4_pid": (6.0, 0.9), "px4_pid_tuned": (0.9, 0.3)}
 
 
 @pytest.mark.parametrize("scenario", ["circle", "helix"])

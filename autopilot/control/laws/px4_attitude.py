@@ -30,6 +30,11 @@ MC_ROLLRATE_P = 0.15 is 0.15 * 1.5 = 0.225 N m per rad/s on the paper's vehicle.
 of the yaw torque (MC_YAW_TQ_CUTOFF) and its attitude reference model (MC_REF_*, off by default)
 are not modelled. Rates from the command filter are not used (``px4_pid`` passes the roll/pitch
 references through, as PX4 has no such filter); the reference's yaw rate is.
+
+The autotune's input: three entries of the gains array (``G_AUTOTUNE_RATE``, rad/s per body axis,
+zero as packed) are added to the rate setpoint after its limits, as mc_att_control adds the rate
+setpoint PX4's autotune publishes; ``quadsitl tune`` (:mod:`sitl.tune`) writes its excitation
+there while it identifies an axis.
 """
 
 from __future__ import annotations
@@ -53,11 +58,12 @@ from ..tunable import Tunable, TunableLaw
 
 # Gains array, per body axis (roll, pitch, yaw) from each offset: attitude P (yaw divided by the
 # yaw weight), rate limits (rad/s), rate P, I, D (times K), rate FF, integrator limits, the actuators'
-# torque limits (N m); then the yaw weight and the rate derivative's low-pass weight.
+# torque limits (N m); then the yaw weight, the rate derivative's low-pass weight and the autotune's
+# rate setpoint (rad/s per body axis: zero except while sitl.autotune excites an axis).
 G_ATT_P, G_RATE_MAX, G_RATE_P, G_RATE_I, G_RATE_D = 0, 3, 6, 9, 12
 G_RATE_FF, G_INT_LIM, G_TORQUE_MAX = 15, 18, 21
-G_YAW_WEIGHT, G_ALPHA = 24, 25
-G_SIZE = 26
+G_YAW_WEIGHT, G_ALPHA, G_AUTOTUNE_RATE = 24, 25, 26
+G_SIZE = 29
 # State: the rate integrals (normalised torque), then the rate derivative's filter.
 X_INT, X_DERIVATIVE = 0, 3
 I_FACTOR_RATE = math.radians(400.0)  # rate error at which the i-factor reaches zero (rad/s)
@@ -112,8 +118,11 @@ def rate_setpoint(g, euler, eta_d, yaw_rate):
     r0 = 2.0 * q_e[1] * g[G_ATT_P] + R[2][0] * yaw_rate
     r1 = 2.0 * q_e[2] * g[G_ATT_P + 1] + R[2][1] * yaw_rate
     r2 = 2.0 * q_e[3] * g[G_ATT_P + 2] + R[2][2] * yaw_rate
-    return (clip_symmetric(r0, g[G_RATE_MAX]), clip_symmetric(r1, g[G_RATE_MAX + 1]),
-            clip_symmetric(r2, g[G_RATE_MAX + 2]))  # fmt: skip
+    # clipped to the rate limits, then the autotune's excitation added (as mc_att_control adds
+    # autotune_attitude_control_status.rate_sp after AttitudeControl::update)
+    return (clip_symmetric(r0, g[G_RATE_MAX]) + g[G_AUTOTUNE_RATE],
+            clip_symmetric(r1, g[G_RATE_MAX + 1]) + g[G_AUTOTUNE_RATE + 1],
+            clip_symmetric(r2, g[G_RATE_MAX + 2]) + g[G_AUTOTUNE_RATE + 2])  # fmt: skip
 
 
 @kernel
@@ -229,4 +238,5 @@ class Px4Attitude(TunableLaw):
             k.mc_rollrate_ff, k.mc_pitchrate_ff, k.mc_yawrate_ff,
             k.mc_rr_int_lim, k.mc_pr_int_lim, k.mc_yr_int_lim,
             *context.torque_max_n_m, weight, low_pass_alpha(k.imu_dgyro_cutoff, context.dt_s),
+            0.0, 0.0, 0.0,  # the autotune's rate setpoint: none
         )  # fmt: skip

@@ -50,9 +50,9 @@ def test_every_example_spec_loads_and_samples(path):
     assert not spec.warnings  # the examples put wind on vehicles that feel it
 
 
-def test_the_paper_box_is_the_five_cascades_within_30_percent():
+def test_the_paper_box_is_the_six_cascades_within_30_percent():
     spec = load_campaign("paper_box")
-    assert spec.controller_names == ("intbs_nlhinf", "intbs", "bs_nlhinf", "px4_pid", "se3")
+    assert spec.controller_names == ("intbs_nlhinf", "intbs", "bs_nlhinf", "px4_pid", "px4_pid_tuned", "se3")
     assert spec.plant.mass_scale.support() == (0.7, 1.3)
     assert [d.support() for d in spec.plant.inertia_scale] == [(0.7, 1.3)] * 3
     assert spec.runs == 1000 and spec.wire_float32
