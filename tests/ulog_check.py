@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from autopilot.commander.health import PX4_FIELDS
 from autopilot.logger.ulog import TYPE_CODES
 
 MAGIC = b"ULog\x01\x12\x35"
@@ -92,8 +93,11 @@ FLIGHT_REVIEW: tuple[Need, ...] = (
     Need("vehicle_status",
          ("nav_state", "arming_state", "is_vtol", "vehicle_type", "failsafe",
           "failsafe_and_user_took_over"), 0,
-         "the flight modes behind every plot, Failsafe Flags"),
-    # failsafe_flags (Failsafe Flags) is added with the failsafe flags
+         "the flight modes behind every plot, Failsafe Flags (In Failsafe, User Took Over)"),
+    # Failsafe Flags draws every failsafe_flags field set at some time in the flight, the mode_req_*
+    # masks aside: PX4's fields, all of them logged.
+    Need("failsafe_flags", tuple(f for f in PX4_FIELDS if not f.startswith("mode_req_")), 0,
+         "Failsafe Flags (each flag that was set)"),
 )  # fmt: skip
 EKF_ONLY = (
     Need("estimator_status",

@@ -63,6 +63,7 @@ import traceback
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.failure import FailureAsync, FailureError, FailureType, FailureUnit
 from mavsdk.asyncio.plugins.ftp import FtpAsync, FtpError
 from mavsdk.asyncio.plugins.geofence import Circle, FenceType, GeofenceAsync, GeofenceData, Point, Polygon
 from mavsdk.asyncio.plugins.log_files import LogFilesAsync, LogFilesError
@@ -735,6 +736,46 @@ async def flow_examples(system, args) -> None:
         await watch.stop()
 
 
+async def flow_failure(system, args) -> None:
+    """The Failure plugin as a PX4 user drives it: GPS off refused while SYS_FAILURE_EN is 0, then
+    enabled, a one-waypoint mission, GPS off in it; the vehicle's answer until it is disarmed."""
+    tel, action, mission = TelemetryAsync(system), ActionAsync(system), MissionAsync(system)
+    failure, param = FailureAsync(system), ParamAsync(system)
+    watch = Watch(tel)
+    watch.start()
+    try:
+        await ready(watch)
+        try:
+            await failure.inject(FailureUnit.SENSOR_GPS, FailureType.OFF, 0)
+            raise FlowError("GPS off accepted with SYS_FAILURE_EN 0")
+        except FailureError as error:
+            emit("refused", result=error.result.name)
+        await param.set_param_int("SYS_FAILURE_EN", 1)
+        home = await tel.home()
+        lat, lon, _ = frames.ned_to_geodetic(30.0, 0.0, 0.0, (home.latitude_deg, home.longitude_deg, 0.0))
+        nan = float("nan")
+        item = MissionItem(
+            latitude_deg=lat, longitude_deg=lon, relative_altitude_m=3.0, speed_m_s=nan, is_fly_through=False,
+            gimbal_pitch_deg=nan, gimbal_yaw_deg=nan, camera_action=MissionItem.CameraAction.NONE,
+            loiter_time_s=nan, camera_photo_interval_s=nan, acceptance_radius_m=1.0, yaw_deg=nan,
+            camera_photo_distance_m=nan, vehicle_action=MissionItem.VehicleAction.NONE,
+        )  # fmt: skip
+        await mission.upload_mission(MissionPlan([item]))
+        await action.arm()
+        await mission.start_mission()
+        await watch.until("in the mission at 2 m", lambda w: w.mode() == "MISSION"
+                          and -w.latest["position_velocity_ned"].position.down_m > 2.0, 20.0)  # fmt: skip
+        # MAVSDK's plugin reads SYS_FAILURE_EN when it starts: a new one sees the value just set
+        await FailureAsync(system).inject(FailureUnit.SENSOR_GPS, FailureType.OFF, 0)
+        emit("injected", **watch.snapshot())
+        await watch.until("landed after the GPS loss", lambda w: w.latest["in_air"] is False, 40.0)
+        await watch.until("disarmed after the GPS loss", lambda w: w.latest["armed"] is False, 15.0)
+        emit("landed", texts=watch.texts, **watch.snapshot())
+        emit("history", **watch.history)
+    finally:
+        await watch.stop()
+
+
 FLOWS = {
     "action": flow_action,
     "offboard": flow_offboard,
@@ -742,6 +783,7 @@ FLOWS = {
     "params": flow_params,
     "logs": flow_logs,
     "examples": flow_examples,
+    "failure": flow_failure,
 }
 
 

@@ -35,10 +35,11 @@ FLOW_TIMEOUT_S = 50.0
 
 
 def fly(flow: str, instance: int, config, *args: str, url_host: str = "0.0.0.0", truth_leaves=("truth",),
-        impair: tuple[str, ...] = ()):  # fmt: skip
-    """Start vehicle ``instance``, tap its zenoh streams, run ``flow``; returns (result, taps)."""
+        impair: tuple[str, ...] = (), **vehicle_options):  # fmt: skip
+    """Start vehicle ``instance`` (``vehicle_options``: :func:`vehicle`'s), tap its zenoh streams, run
+    ``flow``; returns (result, taps)."""
     started = time.monotonic()
-    with vehicle(instance, config, impair=impair) as sitl:
+    with vehicle(instance, config, impair=impair, **vehicle_options) as sitl:
         taps = [TruthTap(instance, leaf) for leaf in truth_leaves]
         try:
             url = f"udpin://{url_host}:{ports(instance).api_remote}"
@@ -146,6 +147,22 @@ def test_offboard_position_and_position_velocity(compat_sitl_config):
     assert stopped["active"] is False and stopped["flight_mode"] == "HOLD"
     assert stopped["drift_m"] < 0.05  # Hold keeps the position where offboard stopped
     assert result.event("disarmed")["armed"] is False
+
+
+def test_the_failure_plugin_gps_off_in_a_mission_on_the_ekf(compat_sitl_config):
+    """MAVSDK's Failure plugin unchanged: refused while SYS_FAILURE_EN is 0 (MAVSDK reads the
+    parameter of a PX4 autopilot and answers DISABLED itself), accepted at 1; GPS off in a mission
+    on the EKF: PX4's answer (docs/failures.md), dead reckoning, then no global position: Mission,
+    RTL and Land cannot run, Descend (MAVSDK's LAND: PX4's AUTO.LAND custom mode), lands, disarms."""
+    result, (truth,) = fly("failure", 7, compat_sitl_config, estimator="ekf", sensors="gps")
+    assert result.event("refused")["result"] == "DISABLED"
+    landed = result.event("landed")
+    assert any("Failsafe activated: no global position for AUTO.MISSION, triggering Descend" in text
+               for text in landed["texts"]), landed["texts"]  # fmt: skip
+    flown = modes(result)
+    assert flown[flown.index("MISSION") :][:2] == ["MISSION", "LAND"], flown
+    assert truth[-1, 3] < 0.05  # on the ground, where it came down (no return)
+    assert math.hypot(truth[-1, 1], truth[-1, 2]) > 1.0
 
 
 def test_mission_upload_download_fly_and_return(compat_sitl_config):

@@ -34,7 +34,7 @@ def ports(instance: int) -> wire.Ports:
 @contextmanager
 def vehicle(
     instance: int, sitl_config: Path, speed: str = "2", log_dir: Path | None = None,
-    impair: tuple[str, ...] = (),
+    impair: tuple[str, ...] = (), estimator: str | None = None, sensors: str | None = None,
 ) -> Iterator[Launcher]:
     """One vehicle (simulator + autopilot) started by the ``quadsitl up`` launcher; always stopped.
 
@@ -43,7 +43,8 @@ def vehicle(
     """
     assert 0 <= instance <= 9, "compat tests use instances 0-9"
     spec = VehicleSpec(instance=instance, speed=speed, sitl_config=str(sitl_config),
-                       log_dir=str(log_dir) if log_dir is not None else None, impair=impair)  # fmt: skip
+                       log_dir=str(log_dir) if log_dir is not None else None, impair=impair,
+                       estimator=estimator, sensors=sensors)  # fmt: skip
     with Launcher() as sitl:
         sitl.start_vehicles([spec], 20.0)
         yield sitl
