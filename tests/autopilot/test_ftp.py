@@ -474,3 +474,26 @@ def test_requests_for_an_empty_log_directory(tmp_path):
     assert (answer.opcode, answer.size) == (ACK, 0)
     assert client.request(MKDIR, b"/log/first\0").opcode == ACK
     assert Path(tmp_path / "log" / "first").is_dir()
+
+
+def test_nul_bytes_and_over_long_names(vehicle):
+    """A path ends at its first NUL, as PX4 reads it (what follows is not a second path); a path
+    that fills the payload without a NUL is read to the payload's end (a longer one is refused by
+    its size, test_hostile_fields_are_refused_at_their_edges), answered, never raised."""
+    stack, tmp, logs = vehicle
+    client = FtpClient(stack)
+    log = f"/log/{logs[0].parent.name}/{logs[0].name}".encode()
+    size = logs[0].stat().st_size
+    assert client.open((log + b"\0/../../secret.txt").decode()) == size  # the log, not the tail
+    client.request(TERMINATE)
+    for path in (b"/..\0/log", b"/log/..\0"):
+        answer = client.request(OPEN_RO, path)
+        assert (answer.opcode, answer.error) == (NAK, E_PROTECTED), path
+    assert client.request(OPEN_RO, b"/log\0/..\0/..").opcode == NAK  # /log: a directory, not opened
+    assert client.request(OPEN_RO, b"\0/etc/passwd\0").opcode == NAK  # the empty path: the root
+    full = b"/log/" + b"a" * (DATA_MAX - 5)  # DATA_MAX bytes, no terminator
+    for opcode in (OPEN_RO, CREATE, MKDIR, LIST, REMOVE):
+        answer = client.request(opcode, full)
+        assert answer.opcode in (NAK, ACK), opcode
+        client.request(TERMINATE)
+    assert not stack.autopilot.faults.counts

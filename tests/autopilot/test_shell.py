@@ -289,3 +289,18 @@ def test_a_flood_is_bounded(vehicle):
     assert len(core.shell.terminals[GCS_LINK]) == shell.MAX_CONSOLES_PER_LINK
     assert not core.faults.counts
     assert console.run("ver hw").startswith("HW arch")  # the flooding station's console still works
+
+
+def test_host_commands_are_not_run(vehicle, tmp_path):
+    """NuttX's shell has no host behind it: ``!``, shell syntax and substitutions are words of a
+    command (unknown, or a console command's arguments); nothing reaches the host's shell."""
+    stack, console = vehicle
+    canary = tmp_path / "canary"
+    unknown = (f"!touch {canary}", f"sh -c 'touch {canary}'", f"$(touch {canary})", f"`touch {canary}`",
+               f"exec touch {canary}", f"system touch {canary}")  # fmt: skip
+    for line in unknown:
+        assert "command not found" in console.run(line), line
+    for line in (f"ver; touch {canary}", f"ver && touch {canary}", f"param show | touch {canary}"):
+        console.run(line)  # answered by the console command named first, its arguments as words
+    assert not canary.exists()
+    assert not stack.autopilot.faults.counts

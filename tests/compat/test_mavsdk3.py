@@ -35,10 +35,6 @@ CLIENT = REPO / ".venv-mavsdk3" / "bin" / "python"
 FLOWS = Path(__file__).with_name("mavsdk3_flows.py")
 QUADSITL = f"{shlex.quote(sys.executable)} -m sitl.cli"  # quadsitl, from this checkout
 WALL_LIMIT_S = 240
-# MAVSDK-Python 3.15.3's own examples/logfile_download.py, byte for byte (upstream/README.md).
-LOG_EXAMPLE = Path(__file__).with_name("upstream") / "logfile_download.py"
-LOG_EXAMPLE_BLOB = "d6020b662c88f974f1d6ed680cc8dfe71f4ec35c"  # its git blob id at tag 3.15.3
-LOG_EXAMPLE_LIMIT_S = 60
 
 INSIDE = """
 set -u
@@ -46,20 +42,6 @@ ip link set lo up
 {quadsitl} up --speed 2 --no-log > "{log}" 2>&1 &
 up=$!
 timeout {limit} "{client}" "{flows}" udpin://0.0.0.0:14540
-rc=$?
-kill -INT $up 2>/dev/null; wait $up
-exit $rc
-"""
-
-
-# The example as a user runs it: in the directory the downloads go to, the vehicle up beside it.
-INSIDE_LOG_EXAMPLE = """
-set -u
-ip link set lo up
-{quadsitl} up --speed 2 --log-dir "{log_dir}" > "{log}" 2>&1 &
-up=$!
-cd "{downloads}"
-timeout {limit} "{client}" "{example}"
 rc=$?
 kill -INT $up 2>/dev/null; wait $up
 exit $rc
@@ -128,39 +110,112 @@ def _git_blob_id(path: Path) -> str:
     return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
 
 
-@pytest.mark.timeout(LOG_EXAMPLE_LIMIT_S + 60)
-def test_mavsdk_python3s_own_log_download_example_runs_unchanged(tmp_path, flight_logs):
-    """``examples/logfile_download.py`` of MAVSDK-Python 3.15.3, unchanged: it lists the vehicle's
-    logs and downloads each to ./log-<date>.ulog; the files are the vehicle's, byte for byte."""
+# MAVSDK-Python 3.15.3's log, FTP, IMU and shell examples, byte for byte (upstream/README.md), their
+# git blob ids at the tag.
+CLIENT_EXAMPLES = {
+    "logfile_download.py": "d6020b662c88f974f1d6ed680cc8dfe71f4ec35c",
+    "ftp_list_dir.py": "23fac3852ec8d31af45fdda6e90a73cd5a7ec5dd",
+    "ftp_download_file.py": "2bb78da0789dcbad7a82c9663ba71da1f81edce5",
+    "highres_imu.py": "b23ead3d53a1e55f6130e7ad1e60cf4cdc609b8c",
+    "shell.py": "5d7e0a26f087f026904e0b22bdc1bb8510cf3df1",
+}
+CLIENT_EXAMPLES_LIMIT_S = 150
+# The FTP examples talk to a mavsdk_server already running on localhost:50051 (their
+# ``mavsdk_server_address``), so the script starts one for the vehicle; the log, IMU and shell
+# examples start their own on udpin://0.0.0.0:14540, as written. The download example's file is a PX4
+# flight-controller firmware image: the one change is that path, to a log on this vehicle (sed on
+# a temporary copy).
+INSIDE_CLIENT_EXAMPLES = """
+set -u
+ip link set lo up
+{quadsitl} up --speed 2 --log-dir "{log_dir}" > "{log}" 2>&1 &
+up=$!
+cd "{downloads}"
+"{server}" -p 50051 udpin://0.0.0.0:14540 > "{server_log}" 2>&1 &
+server=$!
+echo "=== ftp_list_dir"; timeout 40 "{client}" "{examples}/ftp_list_dir.py"; echo "=== rc $?"
+echo "=== ftp_download_file"; timeout 40 "{client}" "{download}"; echo "=== rc $?"
+kill $server; wait $server
+echo "=== logfile_download"; timeout 60 "{client}" "{examples}/logfile_download.py"; echo "=== rc $?"
+echo "=== highres_imu"; timeout 20 "{client}" "{examples}/highres_imu.py"; echo "=== rc $?"
+echo "=== shell"; (sleep 8; echo "ver all") | timeout 20 "{client}" "{examples}/shell.py"
+rc=$?; echo; echo "=== rc $rc"
+kill -INT $up 2>/dev/null; wait $up
+"""
+
+
+def _sections(stdout: str) -> dict[str, tuple[str, int]]:
+    """The script's output per example: (text, exit status)."""
+    out, name, lines = {}, None, []
+    for line in stdout.splitlines():
+        if line.startswith("=== rc "):
+            out[name] = ("\n".join(lines), int(line.split()[-1]))
+        elif line.startswith("=== "):
+            name, lines = line[4:], []
+        else:
+            lines.append(line)
+    return out
+
+
+@pytest.mark.timeout(CLIENT_EXAMPLES_LIMIT_S + 60)
+def test_mavsdk_python3s_own_log_ftp_imu_and_shell_examples_run(tmp_path, flight_logs):
+    """MAVSDK-Python 3.15.3's ``examples/logfile_download.py`` (it lists the vehicle's logs and
+    downloads each to ./log-<date>.ulog; the files are the vehicle's, byte for byte),
+    ``ftp_list_dir.py``, ``ftp_download_file.py`` (its firmware path replaced by a log's),
+    ``highres_imu.py`` and ``shell.py``, against one ``quadsitl up``."""
     why = _namespaces_available()
     if why:
         pytest.skip(f"MAVSDK-Python 3 needs a loopback-only network namespace for its mavsdk_server: {why}")
     assert CLIENT.exists(), "no .venv-mavsdk3: run `make .venv-mavsdk3` (make test does)"
-    assert _git_blob_id(LOG_EXAMPLE) == LOG_EXAMPLE_BLOB, "the example is not upstream's text"
-    from .vehicles import vehicle_logs
+    upstream = Path(__file__).with_name("upstream")
+    for name, blob in CLIENT_EXAMPLES.items():
+        assert _git_blob_id(upstream / name) == blob, f"{name} is not upstream's text"
+    from .vehicles import LOG_NAMES, vehicle_logs
 
     log_dir, downloads = tmp_path / "log", tmp_path / "downloads"
     downloads.mkdir()
     on_vehicle = vehicle_logs(log_dir, flight_logs)
-    up_log = tmp_path / "up.log"
-    script = INSIDE_LOG_EXAMPLE.format(quadsitl=QUADSITL, log_dir=log_dir, log=up_log,
-                                       downloads=downloads, limit=LOG_EXAMPLE_LIMIT_S, client=CLIENT,
-                                       example=LOG_EXAMPLE)  # fmt: skip
+    firmware = "/etc/extras/px4_io-v2_default.bin"
+    text = (upstream / "ftp_download_file.py").read_text()
+    assert text.count(firmware) == 1
+    download = tmp_path / "ftp_download_file.py"
+    download.write_text(text.replace(firmware, f"/log/{LOG_NAMES[1]}"))
+    server = CLIENT.parent.parent / "lib"
+    server_binary = next(server.glob("python3*/site-packages/mavsdk/bin/mavsdk_server"))
+    up_log, server_log = tmp_path / "up.log", tmp_path / "server.log"
+    script = INSIDE_CLIENT_EXAMPLES.format(
+        quadsitl=QUADSITL, log_dir=log_dir, log=up_log, downloads=downloads, server=server_binary,
+        server_log=server_log, client=CLIENT, examples=upstream, download=download,
+    )
     result = subprocess.run(["unshare", "-n", "bash", "-c", script], capture_output=True, text=True,
-                            timeout=LOG_EXAMPLE_LIMIT_S + 30, env=shipped_ports_environment())  # fmt: skip
+                            timeout=CLIENT_EXAMPLES_LIMIT_S + 30, cwd=REPO,
+                            env=shipped_ports_environment())  # fmt: skip
     detail = (
-        f"rc {result.returncode}\n{result.stdout[-3000:]}\n{result.stderr[-2000:]}\n--- quadsitl up:\n"
+        f"rc {result.returncode}\n{result.stdout[-4000:]}\n{result.stderr[-2000:]}\n--- quadsitl up:\n"
         + (up_log.read_text()[-3000:] if up_log.exists() else "")
     )
-    assert result.returncode == 0, detail
-    assert (
-        "Log 0 from 2024-05-01T10:00:00Z" in result.stdout
-        and "Log 1 from 2024-05-01T10:05:30Z" in result.stdout
-    )
+    sections = _sections(result.stdout)
+    listed, status = sections["ftp_list_dir"]
+    assert status == 0 and "ListDirectoryData: [dirs: ['log'], files: []]" in listed, detail
+    got, status = sections["ftp_download_file"]
+    size = on_vehicle[1].stat().st_size
+    assert status == 0 and f"Got {size} of {size} bytes" in got, detail
+    assert (downloads / Path(LOG_NAMES[1]).name).read_bytes() == on_vehicle[1].read_bytes()
+    logs, status = sections["logfile_download"]
+    assert status == 0, detail
+    assert "Log 0 from 2024-05-01T10:00:00Z" in logs and "Log 1 from 2024-05-01T10:05:30Z" in logs
     expected = {
         "log-2024-05-01T10-00-00Z.ulog": on_vehicle[0],
         "log-2024-05-01T10-05-30Z.ulog": on_vehicle[1],
     }
-    assert sorted(p.name for p in downloads.iterdir()) == sorted(expected), detail
     for name, original in expected.items():
         assert (downloads / name).read_bytes() == original.read_bytes(), name
+    imu, status = sections["highres_imu"]
+    assert status == 124, detail  # it prints until stopped
+    assert imu.count("HIGHRES_IMU (105)") > 20, detail
+    assert "Z Acceleration (m/s^2): -9." in imu, detail  # at rest: specific force up, FRD z down
+    # examples/shell.py returns from run() once it printed the prompt, so asyncio.run ends there:
+    # upstream's example stops before it reads stdin, against PX4 as here (the shell's own
+    # commands run in test_mavsdk.py::test_log_files_ftp_and_shell).
+    shell, status = sections["shell"]
+    assert status == 0 and shell.endswith("-- Connected to drone!\nnsh> "), detail
