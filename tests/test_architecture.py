@@ -1,0 +1,84 @@
+"""The house's import rules (docs/architecture.md), read from the code's own import statements.
+
+Every ``import`` counts, wherever it stands (module level, inside a function, behind
+``TYPE_CHECKING``): the simulator and the autopilot never import each other, the ground stations
+import neither, and ``quadcommon`` imports none of the packages that use it; ``sitl`` composes.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.timeout(60)
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("autopilot", "simulator", "quadcommon", "gcs_scripts", "sitl")
+
+# package -> the project packages it must never import
+FORBIDDEN: dict[str, frozenset[str]] = {
+    "autopilot": frozenset({"simulator", "gcs_scripts", "sitl"}),
+    "simulator": frozenset({"autopilot", "gcs_scripts", "sitl"}),
+    "gcs_scripts": frozenset({"autopilot", "simulator", "sitl"}),
+    "quadcommon": frozenset({"autopilot", "simulator", "gcs_scripts", "sitl"}),
+    "sitl": frozenset(),
+}
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(path: Path) -> list[tuple[int, str]]:
+    """Every module ``path`` imports, as (line, absolute dotted name); relative imports resolved."""
+    package = _module_name(path).split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = package[: len(package) - node.level + 1] if node.level else []
+            module = ".".join([*base, *(node.module.split(".") if node.module else [])])
+            found.append((node.lineno, module))
+            if node.module is None or node.level:  # `from . import x`: x may be a module
+                found += [(node.lineno, f"{module}.{alias.name}") for alias in node.names]
+    return found
+
+
+def package_files(package: str) -> list[Path]:
+    return sorted(p for p in (ROOT / package).rglob("*.py") if "vendor" not in p.parts)
+
+
+def forbidden_imports(package: str) -> list[str]:
+    """``file:line -> module`` for every import from ``package`` into a package it must not import."""
+    bad = []
+    for path in package_files(package):
+        for line, module in imported_modules(path):
+            if module.split(".")[0] in FORBIDDEN[package]:
+                bad.append(f"{path.relative_to(ROOT)}:{line} -> {module}")
+    return bad
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_packages_import_only_what_they_may(package):
+    assert forbidden_imports(package) == []
+
+
+def test_the_rule_sees_a_ground_station_importing_the_autopilot(tmp_path, monkeypatch):
+    """The check can fail: a gcs_scripts file importing the autopilot or the simulator is caught."""
+    fake = tmp_path / "gcs_scripts" / "analysis"
+    fake.mkdir(parents=True)
+    (fake / "bad.py").write_text(
+        "from autopilot.logger import topics\nimport simulator.core\nfrom ..link import mode_name\n"
+    )
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    assert forbidden_imports("gcs_scripts") == [
+        "gcs_scripts/analysis/bad.py:1 -> autopilot.logger",
+        "gcs_scripts/analysis/bad.py:2 -> simulator.core",
+    ]
