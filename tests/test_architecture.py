@@ -82,3 +82,83 @@ def test_the_rule_sees_a_ground_station_importing_the_autopilot(tmp_path, monkey
         "gcs_scripts/analysis/bad.py:1 -> autopilot.logger",
         "gcs_scripts/analysis/bad.py:2 -> simulator.core",
     ]
+
+
+# Inside the autopilot: its rooms from the ground up (docs/architecture.md, "Inside the autopilot").
+# A module may import its own floor and the floors below, never one above; the longest prefix names
+# a module's floor.
+AUTOPILOT_FLOORS: tuple[tuple[str, ...], ...] = (
+    # the records the rooms pass each other, the parameter store, the MAVLink vocabulary
+    ("records", "params.store", "params.storage", "mavlink.codec", "mavlink.validation", "mavlink.commands"),
+    ("control", "guidance", "battery", "estimation"),  # the laws, guidance, the estimators
+    ("params",),  # the parameter table: gathers the laws' and the estimator's parameters
+    ("mission",),  # missions: items, plans, the executor
+    ("commander",),  # the commander: modes, transitions, failsafes, health
+    ("mavlink", "mission.service"),  # the protocol handlers and services around the commander
+    ("logger", "vehicle_files"),  # the flight log, the vehicle's files
+    ("core",),  # AutopilotCore: wires the rooms
+    ("app", "__main__"),  # the process shell
+)
+# Imports that still run back up, each with why it stands (a new one fails the suite).
+KNOWN_UPWARD = {
+    # VehicleCommands(core) is handed the whole core; the annotation imports it behind TYPE_CHECKING.
+    ("autopilot/mavlink/vehicle_commands.py", "autopilot.core"),
+}
+
+
+def autopilot_floor(module: str) -> tuple[int, str] | None:
+    """(floor, the prefix that placed it) of an ``autopilot.`` module; None outside the autopilot."""
+    parts = module.split(".")
+    if parts[0] != "autopilot" or len(parts) < 2:
+        return None
+    rest, best = ".".join(parts[1:]), None
+    for floor, prefixes in enumerate(AUTOPILOT_FLOORS):
+        for prefix in prefixes:
+            if (rest == prefix or rest.startswith(prefix + ".")) and (
+                best is None or len(prefix) > len(best[1])
+            ):
+                best = (floor, prefix)
+    return best
+
+
+def _known_upward(name: str, module: str) -> bool:
+    return any(
+        name == file and (module == target or module.startswith(target + "."))
+        for file, target in KNOWN_UPWARD
+    )
+
+
+def upward_imports() -> list[str]:
+    """``file:line -> module`` for every autopilot import of a module on a higher floor."""
+    bad = []
+    for path in package_files("autopilot"):
+        name = str(path.relative_to(ROOT))
+        here = autopilot_floor(_module_name(path))
+        if here is None:
+            continue
+        for line, module in imported_modules(path):
+            there = autopilot_floor(module)
+            if there and there[0] > here[0] and not _known_upward(name, module):
+                bad.append(f"{name}:{line} -> {module}")
+    return bad
+
+
+def test_every_autopilot_module_has_a_floor():
+    unplaced = [
+        str(p.relative_to(ROOT))
+        for p in package_files("autopilot")
+        if autopilot_floor(_module_name(p)) is None
+    ]
+    assert unplaced == ["autopilot/__init__.py"]
+
+
+def test_no_import_runs_back_up_inside_the_autopilot():
+    assert upward_imports() == []
+
+
+def test_the_floors_see_an_import_running_back_up():
+    assert autopilot_floor("autopilot.control.cascade")[0] < autopilot_floor("autopilot.commander.modes")[0]
+    assert (
+        autopilot_floor("autopilot.mission.service")[0] > autopilot_floor("autopilot.commander.commander")[0]
+    )
+    assert autopilot_floor("autopilot.mavlink.codec")[0] == 0
