@@ -58,7 +58,7 @@ from quadcommon.trajectories import Trajectory, trajectory_from_spec
 from .battery.estimator import BatteryEstimator
 from .commander.commander import Commander, Motors, VehicleState
 from .commander.modes import FlightMode
-from .control.cascade import AttitudeReference, Cascade, StateEstimate
+from .control.cascade import AttitudeReference, Cascade
 from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
@@ -79,7 +79,6 @@ from .mavlink.hil import (
     ActuatorEncoder,
     CorruptFrame,
     RefusedReport,
-    SensorSamples,
     SimulatorRequests,
     battery_report,
     decode_frame,
@@ -104,6 +103,7 @@ from .params.definitions import (
     default_parameters,
 )
 from .params.storage import load_params_file
+from .records import SensorSamples, StateEstimate
 
 m = mavlink
 WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)

@@ -49,6 +49,7 @@ class BuildInfo(NamedTuple):
 
     @property
     def flight_sw_version(self) -> int:
+        """``flight_sw_version``: the package version in PX4's encoding (:func:`flight_sw_version`)."""
         return flight_sw_version(self.version)
 
     @property
@@ -61,6 +62,7 @@ class BuildInfo(NamedTuple):
 
     @property
     def commit_text(self) -> str:
+        """The git commit as text, ``unknown`` without one."""
         return self.commit or "unknown"
 
 

@@ -58,6 +58,7 @@ def session_config(
 
 
 def hub_endpoint(port: int) -> str:
+    """The zenoh endpoint of the hub on ``port`` (TCP, loopback)."""
     return f"tcp/{LOOPBACK}:{port}"
 
 

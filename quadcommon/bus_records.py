@@ -84,6 +84,8 @@ class RowCodec:
         self._row = struct.Struct(f"<{self.width}d")
 
     def encode(self, rows: Iterable[Sequence[float]]) -> bytes:
+        """``rows`` (each ``width`` floats) as one payload: the header (magic, count, width), then
+        the rows as float64."""
         packed = [self._row.pack(*row) for row in rows]
         return _HEADER.pack(self.magic, len(packed), self.width) + b"".join(packed)
 

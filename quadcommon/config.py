@@ -167,6 +167,7 @@ class NominalModel:
 
     @property
     def hover_thrust_n(self) -> float:
+        """The thrust that holds the nominal vehicle in hover, ``m g`` (N)."""
         return self.mass_kg * self.gravity_m_s2
 
 
@@ -243,6 +244,8 @@ class VehicleConfig:
 
 
 def load_vehicle(name_or_path: str | Path = "paper_quad") -> VehicleConfig:
+    """The vehicle file ``config/vehicle/<name>.toml`` (or a path), validated: a ConfigError names
+    the file, key, value and range."""
     path = config_path("vehicle", name_or_path)
     root = load_toml(path)
     name = root.string("name", Path(path).stem)
@@ -415,6 +418,8 @@ def estimator_profile_for(sensors: str) -> str:
 
 
 def load_scenario(name_or_path: str | Path = "circle") -> ScenarioConfig:
+    """The scenario file ``config/scenarios/<name>.toml`` (or a path), validated: a ConfigError names
+    the file, key, value and range."""
     path = config_path("scenarios", name_or_path)
     root = load_toml(path)
     name = root.string("name", Path(path).stem)
@@ -506,6 +511,7 @@ class Rates:
 
     @property
     def physics_steps_per_control(self) -> int:
+        """Physics steps per control step (``physics_hz / control_hz``, rounded)."""
         return round(self.physics_hz / self.control_hz)
 
 
@@ -530,6 +536,7 @@ class SitlConfig:
 
 
 def load_rates(sec: Section) -> Rates:
+    """The ``[rates]`` section: physics, control and GPS rates (Hz), validated against their ranges."""
     rates = Rates(
         physics_hz=sec.number("physics_hz", 1000.0, lo=100.0, hi=20000.0, unit="Hz"),
         control_hz=sec.number("control_hz", 500.0, lo=50.0, hi=2000.0, unit="Hz"),
@@ -555,6 +562,7 @@ def _spin_from_environment(text: str) -> float:
 
 
 def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
+    """The SITL file (``sitl.toml``, or a path): its rates and the rest of its sections, validated."""
     path = config_path("", name_or_path) if name_or_path else find_config("", "sitl")
     root = load_toml(path)
     sec = root.section("rates", optional=True)

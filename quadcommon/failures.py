@@ -248,6 +248,7 @@ def unit_name(unit: int) -> str:
 
 
 def type_name(failure_type: int) -> str:
+    """The name of a MAVLink ``FAILURE_TYPE`` value, ``unknown`` when it is none of them."""
     try:
         return Type(failure_type).name
     except ValueError:
@@ -339,9 +340,11 @@ class ActuatorFault:
 
     @property
     def failure_type(self) -> Type:
+        """The fault's ``FAILURE_TYPE`` (:class:`Type`)."""
         return Type[self.type]
 
     def describe(self) -> str:
+        """The fault in words, e.g. ``motor 2 off from 3 s``."""
         what = f"wrong ({self.effectiveness:.3g} effectiveness)" if self.type == "wrong" else self.type
         motors = "all motors" if self.motor == ALL_INSTANCES else f"motor {self.motor}"
         return f"{motors} {what} from {self.start_s:.3g} s"

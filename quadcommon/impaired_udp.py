@@ -56,6 +56,7 @@ class ImpairedSender:
                 pass
 
     def next_due(self) -> float | None:
+        """When the next held datagram is due (the clock's seconds), None when none is held."""
         return None if self.channel is None else self.channel.next_due()
 
 
@@ -80,6 +81,7 @@ class ImpairedReceiver:
         return self.channel.due(now)
 
     def next_due(self) -> float | None:
+        """When the next held datagram is due (the clock's seconds), None when none is held."""
         return None if self.channel is None else self.channel.next_due()
 
 
@@ -101,11 +103,13 @@ class ImpairedLinks:
         self.endpoints: dict[tuple[str, str], ImpairedSender | ImpairedReceiver] = {}
 
     def sender(self, sock: Any, link: str, direction: str, clock: Callable[[], float] = time.monotonic):
+        """An impaired sender on ``sock`` for ``link`` in ``direction``, kept to answer status requests."""
         endpoint = ImpairedSender(sock, self.config.channel(link, direction), clock)
         self.endpoints[(link, direction)] = endpoint
         return endpoint
 
     def receiver(self, link: str, direction: str) -> ImpairedReceiver:
+        """An impaired receiver for ``link`` in ``direction``, kept to answer status requests."""
         endpoint = ImpairedReceiver(self.config.channel(link, direction))
         self.endpoints[(link, direction)] = endpoint
         return endpoint

@@ -58,6 +58,7 @@ class Impairment:
 
     @property
     def active(self) -> bool:
+        """Whether any impairment is set (a field not zero)."""
         return any(getattr(self, f.name) != 0.0 for f in fields(self))
 
     @property
@@ -144,9 +145,11 @@ class ImpairConfig:
 
     @property
     def active(self) -> bool:
+        """Whether any of the links (HIL, GCS, API) is impaired."""
         return self.hil.active or self.gcs.active or self.api.active
 
     def of(self, link: str) -> Impairment:
+        """The impairment of ``link`` (``hil``, ``gcs`` or ``api``)."""
         return getattr(self, link)
 
     def with_specs(self, specs: list[str] | tuple[str, ...], where: str = "--impair") -> ImpairConfig:
@@ -244,6 +247,7 @@ class ImpairedChannel:
         return self._queue[0][0] if self._queue else None
 
     def pending(self) -> int:
+        """How many datagrams the channel holds."""
         return len(self._queue)
 
     def info(self) -> dict[str, Any]:

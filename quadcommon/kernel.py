@@ -68,6 +68,7 @@ def kernel(fn: F) -> F:
 
 
 def is_kernel(fn: object) -> bool:
+    """Whether ``fn`` was written as a kernel (:func:`kernel`)."""
     return bool(getattr(fn, "__quadsitl_kernel__", False))
 
 

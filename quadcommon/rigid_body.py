@@ -310,6 +310,7 @@ def quaternion_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
 
 @kernel
 def quaternion_conjugate(q: Quaternion) -> Quaternion:
+    """``q*`` of ``q = (w, x, y, z)``: the inverse rotation of a unit quaternion."""
     return (q[0], -q[1], -q[2], -q[3])
 
 
@@ -327,5 +328,6 @@ def quaternion_exp(rx: float, ry: float, rz: float) -> Quaternion:
 
 @kernel
 def quaternion_normalised(q: Quaternion) -> Quaternion:
+    """``q / |q|``: ``q`` put back on the unit sphere."""
     n = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     return (q[0] * n, q[1] * n, q[2] * n, q[3] * n)

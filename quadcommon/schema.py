@@ -62,14 +62,17 @@ class Section:
 
     # -- helpers -------------------------------------------------------------------------------
     def key_name(self, key: str) -> str:
+        """The key's full name in the file (the section's prefix and the key)."""
         return f"{self.prefix}{key}"
 
     def error(self, key: str, value: Any, allowed: str) -> ConfigError:
+        """A ConfigError naming the file, the key, the value and what is allowed."""
         return ConfigError(
             f"{self.source}: key '{self.key_name(key)}' = {value!r} is invalid; allowed: {allowed}"
         )
 
     def has(self, key: str) -> bool:
+        """Whether the section sets ``key``."""
         return key in self.data
 
     def _get(self, key: str, default: Any) -> Any:
@@ -121,6 +124,7 @@ class Section:
     def integer(
         self, key: str, default: Any = _MISSING, *, lo: int | None = None, hi: int | None = None
     ) -> int:
+        """An integer key, in ``[lo, hi]`` when given; ``default`` when absent (required without one)."""
         value = self._get(key, default)
         allowed = _describe_range(lo, hi, False, False)
         if isinstance(value, bool) or not isinstance(value, int):
@@ -151,18 +155,21 @@ class Section:
         )
 
     def boolean(self, key: str, default: Any = _MISSING) -> bool:
+        """A boolean key; ``default`` when absent (required without one)."""
         value = self._get(key, default)
         if not isinstance(value, bool):
             raise self.error(key, value, "true or false")
         return value
 
     def string(self, key: str, default: Any = _MISSING) -> str:
+        """A string key; ``default`` when absent (required without one)."""
         value = self._get(key, default)
         if not isinstance(value, str):
             raise self.error(key, value, "a string")
         return value
 
     def choice(self, key: str, options: Iterable[str], default: Any = _MISSING) -> str:
+        """A string key that must be one of ``options``; ``default`` when absent (required without one)."""
         options = tuple(options)
         value = self._get(key, default)
         if value not in options:

@@ -37,7 +37,9 @@ class Reference(NamedTuple):
 class Trajectory(Protocol):
     duration_s: float
 
-    def sample(self, t: float) -> Reference: ...
+    def sample(self, t: float) -> Reference:
+        """The reference at ``t`` (s from the trajectory's start): position, velocity, acceleration, yaw."""
+        ...
 
 
 class HarmonicTrajectory:
@@ -62,6 +64,7 @@ class HarmonicTrajectory:
         self.duration_s = duration_s
 
     def sample(self, t: float) -> Reference:
+        """The reference at ``t`` (s from the start), the harmonic path and its first two derivatives."""
         w = self.w
         pos, vel, acc = [], [], []
         for i in range(3):
@@ -121,6 +124,7 @@ class Hover:
         self.duration_s = duration_s
 
     def sample(self, t: float) -> Reference:
+        """The reference at any ``t``: the hover point, at rest."""
         return self.reference
 
 
@@ -168,6 +172,8 @@ class QuinticSegment:
         self.yaw_coeffs = quintic_coefficients(yaw0, 0.0, 0.0, yaw0 + dyaw, 0.0, 0.0, T)
 
     def sample(self, t: float) -> Reference:
+        """The reference at ``t`` (clamped to the segment): the quintic's position, velocity,
+        acceleration and yaw."""
         t = min(max(t, 0.0), self.duration_s)
         pos, vel, acc = [], [], []
         for c in self.coeffs:
@@ -194,6 +200,7 @@ def quintic_coefficients(p0, v0, a0, p1, v1, a1, T):
 
 
 def eval_quintic(c, t):
+    """``(p, p', p'')`` at ``t`` of the quintic with coefficients ``c0..c5`` (Horner's rule)."""
     c0, c1, c2, c3, c4, c5 = c
     p = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))))
     v = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)))
@@ -216,6 +223,7 @@ class PiecewiseTrajectory:
         self.duration_s = t
 
     def sample(self, t: float) -> Reference:
+        """The reference at ``t``: the piece that holds ``t``, sampled at the time since its start."""
         i = max(bisect_right(self.starts, t) - 1, 0)
         piece = self.pieces[i]
         local = t - self.starts[i]

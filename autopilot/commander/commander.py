@@ -40,7 +40,6 @@ from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..guidance.sticks import LOST, Sticks, StickStream
-from ..mavlink.hil import SensorSamples
 from ..mission.executor import (
     MissionAction,
     MissionExecutor,
@@ -52,6 +51,7 @@ from ..mission.executor import (
 from ..mission.plans import Geofence, RallyPoint
 from ..params.definitions import POSCTL_NAVL_ALTITUDE, RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD
 from ..params.store import ParameterStore
+from ..records import SensorSamples
 from .failsafe import (
     ACTION_NAMES,
     ALTCTL,

@@ -49,8 +49,8 @@ from ..estimation.status import (
     EstimatorStatus,
 )
 from ..estimation.streams import StreamWatch
-from ..mavlink.hil import STREAM_BARO, STREAM_GPS, STREAM_IMU, STREAM_MAG, STREAM_VISION, SensorSamples
 from ..params.store import ParameterStore
+from ..records import STREAM_BARO, STREAM_GPS, STREAM_IMU, STREAM_MAG, STREAM_VISION, SensorSamples
 from .modes import FlightMode
 
 Vector3 = tuple[float, float, float]

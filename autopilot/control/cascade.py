@@ -33,6 +33,7 @@ from quadcommon.rigid_body import body_rates_from_euler_rates, euler_torque_from
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
 
+from ..records import StateEstimate
 from . import command_filter as cf
 from . import registry
 from .allocation import A_SIZE, OUT_SIZE, actuator_numbers, allocate_rotors, saturate_wrench
@@ -128,15 +129,6 @@ def buffered_step(translational, rotational, buf, at, position, velocity, euler,
                      euler_rates, ref_position, ref_velocity, ref_acceleration, yaw, yaw_rate,
                      yaw_acceleration, integrate, int(v[V_FLAGS]), roll_pitch, attitude, v[V_THRUST], out)
     return o + (out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7])
-
-
-class StateEstimate(NamedTuple):
-    """What the controllers see (paper frames): position/velocity of O, Euler angles and rates."""
-
-    position_m: Vector3
-    velocity_m_s: Vector3
-    euler_rad: Vector3
-    euler_rates_rad_s: Vector3
 
 
 class AttitudeReference(NamedTuple):

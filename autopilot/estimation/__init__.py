@@ -4,9 +4,9 @@ An error-state EKF (:class:`ErrorStateEkf`, Solà 2017) over the IMU, GNSS, baro
 magnetometer and motion capture / vision, with PX4 EKF2 parameter names (:mod:`.parameters`).
 """
 
+from ..records import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from .eskf import ErrorStateEkf
 from .kernels import STATE_NAMES
-from .measurements import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from .parameters import (
     DEFAULT_PARAMS,
     ESTIMATOR_PARAMS,

@@ -77,6 +77,7 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
 
+from ..records import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from . import filter as fk
 from . import kernels
 from .filter import (  # noqa: F401 - part of this module's interface
@@ -88,7 +89,6 @@ from .filter import (  # noqa: F401 - part of this module's interface
     yaw_of,
 )
 from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N
-from .measurements import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from .parameters import (
     DEFAULT_PARAMS,
     EV_CTRL_HPOS,

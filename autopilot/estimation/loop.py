@@ -3,7 +3,7 @@ fly on out (pure: the frame's time comes in with it).
 
 :class:`EstimatorLoop` feeds an :class:`~.eskf.ErrorStateEkf` in PX4's order (predict on the
 IMU sample, then the measurements that arrived with it: magnetometer, barometer, GNSS, vision)
-and turns its :class:`~.status.Estimate` into the :class:`~autopilot.control.cascade.StateEstimate`
+and turns its :class:`~.status.Estimate` into the :class:`~autopilot.records.StateEstimate`
 the commander and the cascade read. Until the filter has aligned (on the ground, at rest: about
 a second) there is no estimate and the autopilot has no position (arming refused with the
 filter's reason). A vehicle that starts in the air (the paper's experiments start at 1 m with the
@@ -37,10 +37,8 @@ from __future__ import annotations
 
 from quadcommon.rigid_body import quaternion_from_euler
 
-from ..control.cascade import StateEstimate
-from ..mavlink.hil import SensorSamples
+from ..records import BaroSample, ImuSample, MagSample, SensorSamples, StateEstimate, VisionPose
 from .eskf import ErrorStateEkf
-from .measurements import BaroSample, ImuSample, MagSample, VisionPose
 from .parameters import EstimatorParams
 from .status import EstimatorStatus
 

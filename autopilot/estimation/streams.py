@@ -17,7 +17,7 @@ than the checks, the only ones whose interval can exceed ``STREAM_SILENT_S / 3``
 
 from __future__ import annotations
 
-from ..mavlink.hil import STREAM_BARO, STREAM_GPS, STREAM_IMU, STREAM_MAG, STREAM_VISION
+from ..records import STREAM_BARO, STREAM_GPS, STREAM_IMU, STREAM_MAG, STREAM_VISION
 
 STREAM_SILENT_S = 1.0
 STREAM_NAMES = {

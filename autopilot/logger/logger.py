@@ -25,6 +25,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from quadcommon import ulog_topics
 from quadcommon.build_info import flight_sw_version
 
 from ..params.store import INT32, ParameterStore
@@ -327,7 +328,7 @@ class FlightLogger:
         law_fields, extras = self._law_fields(names), self._extras(names)
         buf = bytearray(ulog.file_header(t_us))
         buf += ulog.flag_bits()
-        formats = [spec.format(law_fields if spec.name == topics.CASCADE else "") for spec in TOPICS]
+        formats = [spec.format(law_fields if spec.name == ulog_topics.CASCADE else "") for spec in TOPICS]
         nested: list[ulog.Format] = []
         for fmt in formats:
             nested.extend(n for n in fmt.nested if n not in nested)
@@ -346,9 +347,9 @@ class FlightLogger:
             topic = ulog.Topic(fmt, msg_id)
             if spec.name == "vehicle_gps_position":
                 self._gps = topic
-            elif spec.name == topics.DISTURBANCE:
+            elif spec.name == ulog_topics.DISTURBANCE:
                 self._disturbance = topic
-            elif spec.name == topics.ROTORS:
+            elif spec.name == ulog_topics.ROTORS:
                 self._rotors = topic
             elif spec.interval_ms == 0:
                 self._every_step.append((topic, spec.build))
@@ -381,7 +382,7 @@ class FlightLogger:
     def _extras(self, names: Sequence[str]) -> dict[str, Callable[[], Sequence[float]]]:
         """What is appended to a topic's built values: the laws' states (``cascade_status``), the
         rate integrals PX4 logs (``rate_ctrl_status``)."""
-        return {topics.CASCADE: self._law_state_values,
+        return {ulog_topics.CASCADE: self._law_state_values,
                 topics.RATE_CTRL: topics.rate_integrals(names, self.law_states)}  # fmt: skip
 
     def sample_now(self, name: str, snapshot: Snapshot) -> tuple[list[str], tuple] | None:
@@ -395,7 +396,7 @@ class FlightLogger:
         extra = self._extras(names).get(name)
         if extra is not None:
             values = (*values, *extra())
-        fields = spec.format(self._law_fields(names) if name == topics.CASCADE else "").field_names()
+        fields = spec.format(self._law_fields(names) if name == ulog_topics.CASCADE else "").field_names()
         return fields, values
 
     def _law_state_values(self) -> tuple[float, ...]:

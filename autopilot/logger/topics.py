@@ -5,6 +5,9 @@ of each message's fields: every one that Flight Review and PlotJuggler users plo
 tools read a quadsitl log as a PX4 SITL log. Our own topics are in the paper's frames (world
 x north / y west / z up, body front-left-up, ZYX Euler angles), SI units:
 
+Our own topics' names and layouts are :mod:`quadcommon.ulog_topics` (the ground stations read
+them too); their samples are built here:
+
 * ``paper_tracking`` (every control step): what the paper's indices are computed from, the same
   quantities as the recorder's Parquet columns (``quadsitl analyze`` reads either): the truth the
   HIL frame carries (position, Euler angles), the reference, eta_d, the applied U1 and tau_eta,
@@ -49,6 +52,14 @@ from typing import NamedTuple
 from quadcommon import frames
 from quadcommon.bus_records import CONTROLLER_FIELDS
 from quadcommon.rigid_body import body_rates_from_euler_rates, quaternion_from_euler
+from quadcommon.ulog_topics import (
+    CASCADE_FIELDS,
+    DISTURBANCE,
+    DISTURBANCE_FIELDS,
+    ROTORS,
+    ROTORS_FIELDS,
+    TRACKING_FIELDS,
+)
 
 from ..commander.health import PX4_FIELDS
 from ..commander.modes import FlightMode, LandedState
@@ -527,26 +538,11 @@ def estimator_status(s: Snapshot) -> tuple | None:
 
 
 # -- our own topics (paper frames) ---------------------------------------------------------------------
-TRACKING = "paper_tracking"
-TRACKING_FIELDS = (
-    "float[3] position_m; float[3] position_ref_m; float[3] euler_rad; float[3] euler_ref_rad; "
-    "float thrust_n; float[3] torque_euler_n_m; uint32_t custom_mode; bool armed"
-)
-
-
 def paper_tracking(s: Snapshot) -> tuple:
     """The frame's truth and its controller row."""
     truth, row = s.truth, s.row
     return (s.t_us, *truth.position_m, *row[ROW_POS_REF], *truth.euler_rad, *row[ROW_EULER_REF],
             row[ROW_U1], *row[ROW_TAU], int(row[ROW_CUSTOM_MODE]), row[ROW_ARMED] > 0.5)  # fmt: skip
-
-
-CASCADE = "cascade_status"
-CASCADE_FIELDS = (
-    "float[3] velocity_ref_m_s; float[3] acceleration_ref_m_s2; float[2] roll_pitch_raw_rad; "
-    "float[3] euler_rate_ref_rad_s; float[3] acceleration_cmd_m_s2; float[3] torque_body_n_m; "
-    "float[4] actuator_controls; float[4] rotor_speeds_rad_s"
-)
 
 
 def cascade_status(s: Snapshot) -> tuple | None:
@@ -584,17 +580,9 @@ def failsafe_flags(s: Snapshot) -> tuple | None:
     return (s.t_us, *(getattr(flags, name) for name in PX4_FIELDS))
 
 
-DISTURBANCE = "sim_disturbance"
-DISTURBANCE_FIELDS = "float[3] force_n; float[3] torque_n_m"
-
-
 def sim_disturbance(s: Snapshot) -> None:
     """Not sampled from frames: FlightLogger.disturbance() logs what it is given."""
     return None
-
-
-ROTORS = "sim_rotors"
-ROTORS_FIELDS = "float[4] effectiveness; uint8_t[4] failure_type"
 
 
 def sim_rotors(s: Snapshot) -> None:

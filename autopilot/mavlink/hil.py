@@ -20,8 +20,17 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
 
-from ..control.cascade import StateEstimate
-from ..estimation.measurements import GpsFix, VisionPose
+from ..records import (
+    STREAM_BARO,
+    STREAM_GPS,
+    STREAM_IMU,
+    STREAM_MAG,
+    STREAM_VISION,
+    GpsFix,
+    SensorSamples,
+    StateEstimate,
+    VisionPose,
+)
 from .codec import Encoder, mavlink
 
 Vector3 = tuple[float, float, float]
@@ -33,41 +42,6 @@ _ID_VISION = mavlink.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
 _ID_DISTURBANCE = mavlink.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 _CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-# The sensor streams a frame can deliver, one bit each (SensorSamples.streams, frame_streams).
-STREAM_IMU, STREAM_MAG, STREAM_BARO, STREAM_GPS, STREAM_VISION = 1, 2, 4, 8, 16
-
-
-class SensorSamples(NamedTuple):
-    """What an estimator reads of one lockstep frame, in the paper's frames and SI units; None
-    where the frame holds no new sample (the simulator's rates and latencies decide)."""
-
-    angular_rate_rad_s: Vector3  # body front-left-up
-    specific_force_m_s2: Vector3  # body front-left-up, +g upward at rest
-    mag_gauss: Vector3 | None  # body front-left-up; None unless fields_updated has the mag bits
-    baro_height_m: float | None  # pressure altitude (m AMSL); None unless fields_updated says fresh
-    gps: GpsFix | None  # HIL_GPS, relative to home
-    vision: VisionPose | None  # VISION_POSITION_ESTIMATE
-    # What the edge refused of this frame (a non-finite value: never fed to the filter), by name:
-    # "imu" (then the two IMU vectors are not to be used), "mag", "baro", "vision".
-    refused: tuple[str, ...] = ()
-    # HIL_SENSOR's accelerometer and gyro bits (fields_updated 0-5) all set: the IMU sampled this
-    # frame; else it holds an old sample (a failure stopped it) and the two vectors are not new.
-    imu_fresh: bool = True
-
-    @property
-    def streams(self) -> int:
-        """The streams that delivered a sample (``STREAM_*`` bits; a refused sample is none)."""
-        refused = self.refused
-        bits = STREAM_IMU if self.imu_fresh and "imu" not in refused else 0
-        if self.mag_gauss is not None:
-            bits |= STREAM_MAG
-        if self.baro_height_m is not None:
-            bits |= STREAM_BARO
-        if self.gps is not None:
-            bits |= STREAM_GPS
-        if self.vision is not None:
-            bits |= STREAM_VISION
-        return bits
 
 
 class Frame(NamedTuple):

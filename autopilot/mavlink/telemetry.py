@@ -29,9 +29,8 @@ from ..battery.estimator import (
     BatteryStatus,
 )
 from ..commander.health import FailsafeFlags
-from ..control.cascade import StateEstimate
-from ..estimation.measurements import GpsFix
 from ..estimation.status import EstimatorStatus
+from ..records import GpsFix, StateEstimate
 from .codec import mavlink
 from .hil import ground_truth, sensor_fields
 

@@ -4,7 +4,7 @@ caller gives the times).
 A motion-capture bridge or a VIO on a companion computer sends the vehicle's pose on a
 ground-station link, as to PX4. :class:`ExternalVision` reads each message as PX4's MAVLink
 receiver does, checks it at the edge, times it, and hands the filter a
-:class:`~autopilot.estimation.measurements.VisionPose`, which the EKF fuses through the same vision
+:class:`~autopilot.records.VisionPose`, which the EKF fuses through the same vision
 fusion as the simulator's own vision stream (EKF2_EV_CTRL, EKF2_EV_DELAY, EKF2_EVP_NOISE,
 EKF2_EVA_NOISE, EKF2_EV_NOISE_MD, EKF2_EVP_GATE). What is refused is counted by reason and
 announced (:meth:`ExternalVision.announcement`); nothing is dropped unsaid.
@@ -63,8 +63,8 @@ from typing import NamedTuple
 from quadcommon import frames
 from quadcommon.rigid_body import euler_from_quaternion
 
-from ..estimation.measurements import VisionPose
 from ..estimation.parameters import EV_CTRL_VEL
+from ..records import VisionPose
 from .codec import mavlink as m
 
 MAX_DISTANCE_M = 10_000.0  # a vision position farther than this from its origin is absurd

@@ -2,7 +2,7 @@
 
 ``quadsitl analyze`` and ``quadsitl view`` read a ``.ulg`` as they read the recorder's Parquet:
 this module gives the same column names (:mod:`gcs_scripts.analysis.log_reader`), from the
-log's own topics (:mod:`autopilot.logger.topics`), in the paper's frames:
+log's own topics (:mod:`quadcommon.ulog_topics`), in the paper's frames:
 
 * ``time_s`` and, one row per control step, ``x_m`` ... (the truth the HIL frame carried),
   ``x_ref_m`` ..., ``phi_rad`` ..., ``phi_ref_rad`` ..., ``U1_n``, ``tau_phi_n_m`` ...,
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.logger.topics import DISTURBANCE, ROTORS, TRACKING
+from quadcommon.ulog_topics import DISTURBANCE, ROTORS, TRACKING
 
 # paper_tracking's fields -> the session columns (log_reader.REQUIRED and the status columns)
 TRACKING_COLUMNS = {

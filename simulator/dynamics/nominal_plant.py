@@ -7,10 +7,9 @@ and read-outs as that plant under ``actuation = "wrench"``. Pure: no clocks, no 
 
 from __future__ import annotations
 
-import math
-
 from quadcommon.config import VehicleConfig
 from quadcommon.rigid_body import (
+    body_rates_from_euler_rates,
     coriolis_times,
     euler_rates_from_body_rates,
     euler_torque_from_body_torque,
@@ -79,14 +78,12 @@ class NominalPlant:
         eta = (phi, theta, psi)
         eta_dot = (s[9], s[10], s[11])
         U1 = self.thrust_cmd
-        sf, cf = math.sin(phi), math.cos(phi)
-        st, ct = math.sin(theta), math.cos(theta)
-        sp, cp = math.sin(psi), math.cos(psi)
         fx, fy, fz = self.force_dist
-        # eq. (2)
-        ax = ((cp * st * cf + sp * sf) * U1 + fx) / m
-        ay = ((sp * st * cf - cp * sf) * U1 + fy) / m
-        az = -g + (ct * cf * U1 + fz) / m
+        # eq. (2): m xi'' = R e3 U1 + F_d - m g e3 (R e3: the last column of R)
+        R = rotation_matrix(phi, theta, psi)
+        ax = (R[0][2] * U1 + fx) / m
+        ay = (R[1][2] * U1 + fy) / m
+        az = -g + (R[2][2] * U1 + fz) / m
         # eq. (4): M eta_ddot + C eta_dot = tau_eta_a + tau_eta_d
         tau_ctrl = euler_torque_from_body_torque(phi, theta, self.torque_cmd)
         rhs_c = coriolis_times(self.inertia_diag, eta, eta_dot, eta_dot)
@@ -127,12 +124,7 @@ class NominalPlant:
         euler = (s[6], s[7], s[8])
         eta_dot = (s[9], s[10], s[11])
         R = rotation_matrix(*euler)
-        phi, theta = euler[0], euler[1]
-        w = (
-            eta_dot[0] - math.sin(theta) * eta_dot[2],
-            math.cos(phi) * eta_dot[1] + math.sin(phi) * math.cos(theta) * eta_dot[2],
-            -math.sin(phi) * eta_dot[1] + math.cos(phi) * math.cos(theta) * eta_dot[2],
-        )
+        w = body_rates_from_euler_rates(euler[0], euler[1], eta_dot)  # eq. (3)
         on_ground = self.on_ground()
         acc = ZERO3 if on_ground else (ds[3], ds[4], ds[5])
         specific = transpose_times(R, (acc[0], acc[1], acc[2] + self.gravity))

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from autopilot.control.cascade import AttitudeReference, Cascade, StateEstimate
+from autopilot.control.cascade import AttitudeReference, Cascade
 from autopilot.control.config import load_controller
+from autopilot.records import StateEstimate
 from quadcommon.config import load_vehicle
 from quadcommon.trajectories import Reference
 

@@ -16,7 +16,8 @@ from quadcommon.kernel import compiling
 
 FLIGHT = '''
 import json, math, sys
-from autopilot.control.cascade import Cascade, StateEstimate
+from autopilot.control.cascade import Cascade
+from autopilot.records import StateEstimate
 from autopilot.control.config import load_controller
 from quadcommon.config import load_vehicle
 from quadcommon.kernel import compiling

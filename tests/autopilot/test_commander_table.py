@@ -39,11 +39,11 @@ from autopilot.estimation.status import (
 from autopilot.guidance.offboard import OffboardSetpoint
 from autopilot.guidance.sticks import Sticks
 from autopilot.mavlink.codec import mavlink as m
-from autopilot.mavlink.hil import SensorSamples
 from autopilot.mission.executor import MissionExecutor
 from autopilot.mission.items import WireItem, parse_item
 from autopilot.mission.plans import Area, Geofence
 from autopilot.params.definitions import GF_HOLD, GF_LAND, GF_RTL, default_parameters
+from autopilot.records import SensorSamples
 from quadcommon import frames
 from quadcommon.trajectories import Hover
 

@@ -12,10 +12,10 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.control.config import load_controller
 from autopilot.core import AutopilotSetup
 from autopilot.logger.logger import LogOptions
-from autopilot.logger.topics import DISTURBANCE
 from autopilot.mavlink.hil import DISTURBANCE_ID, disturbance_of
 from quadcommon import wire
 from quadcommon.config import load_scenario
+from quadcommon.ulog_topics import DISTURBANCE
 from simulator.core import SimulatorSetup
 from simulator.environment.gust_profile import load_gust_profile
 from sitl.inprocess import Lockstep, RunOptions, flight_record, paper_stack

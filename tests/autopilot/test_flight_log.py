@@ -23,6 +23,7 @@ from autopilot.logger import topics, ulog
 from autopilot.logger.logger import FlightLogger, LogClose, LogOpen
 from autopilot.logger.storage import LogDirectory
 from autopilot.params.definitions import default_parameters
+from quadcommon import ulog_topics
 from simulator.core import SimulatorCore
 from tests.stack import Gcs, make_stack
 from tests.ulog_check import FLIGHT_REVIEW, check_plotjuggler, check_ulog, sampling_rate_hz
@@ -62,17 +63,17 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     assert paths == [tmp_path / "sess001" / "log001.ulg"]  # PX4's numbering without a clock
     log = check_ulog(paths[0])
     data = {d.name: d.data for d in log.data_list}
-    t = data[topics.TRACKING]["timestamp"] * 1e-6
+    t = data[ulog_topics.TRACKING]["timestamp"] * 1e-6
     assert (
         times["armed"] - 0.05 < t[0] <= times["armed"]
         and times["disarmed"] - 0.05 < t[-1] <= times["disarmed"]
     )
-    assert np.all(data[topics.TRACKING]["armed"] == 1) and np.all(np.diff(t) > 0)
-    assert log.start_timestamp == data[topics.TRACKING]["timestamp"][0]
+    assert np.all(data[ulog_topics.TRACKING]["armed"] == 1) and np.all(np.diff(t) > 0)
+    assert log.start_timestamp == data[ulog_topics.TRACKING]["timestamp"][0]
     # every control step (500 Hz), the other topics at PX4's rates
     assert np.allclose(np.diff(t), 0.002)
     for name in ("sensor_combined", "vehicle_angular_velocity"):  # every frame's IMU and body rates
-        assert np.array_equal(data[name]["timestamp"], data[topics.TRACKING]["timestamp"]), name
+        assert np.array_equal(data[name]["timestamp"], data[ulog_topics.TRACKING]["timestamp"]), name
     flying = data["vehicle_torque_setpoint"]["timestamp"]  # every step while the motors fly
     assert np.array_equal(data["vehicle_thrust_setpoint"]["timestamp"], flying)
     assert np.all(np.diff(flying.astype(np.int64)) == 2000)
@@ -91,7 +92,8 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
     # PX4's frames: NED, and the vehicle went to MIS_TAKEOFF_ALT and back
     truth_z = data["vehicle_local_position_groundtruth"]["z"]
     assert truth_z.min() == pytest.approx(-2.5, abs=0.05) and truth_z[-1] == pytest.approx(0.0, abs=0.02)
-    assert data[topics.TRACKING]["position_m[2]"].max() == pytest.approx(-truth_z.min(), abs=0.02)  # z up
+    tracking_z = data[ulog_topics.TRACKING]["position_m[2]"]
+    assert tracking_z.max() == pytest.approx(-truth_z.min(), abs=0.02)  # z up
     # sensor_combined: HIL_SENSOR as sent, FRD (at rest on the ground, the specific force points up: -z)
     accel_z = data["sensor_combined"]["accelerometer_m_s2[2]"]
     assert accel_z[0] == pytest.approx(-9.81, abs=0.3) and np.median(accel_z) == pytest.approx(-9.81, abs=0.5)
@@ -124,7 +126,7 @@ def test_a_flight_is_logged_from_arming_to_disarming_with_px4s_topics(tmp_path):
         and log.msg_info_dict["quadsitl_controller"] == "intbs_nlhinf"
     )
     # the cascade's own record, in the paper's frames, with the laws' integral states
-    cascade = data[topics.CASCADE]
+    cascade = data[ulog_topics.CASCADE]
     names, _ = stack.autopilot.cascade.law_states()
     law_fields = [topics.law_state_field(name) for name in names]
     assert law_fields and all(field in cascade for field in law_fields)
@@ -181,7 +183,7 @@ def test_flight_review_finds_every_topic_field_and_rate_its_plots_read(tmp_path)
         assert sampling_rate_hz(log.get_dataset(name)) == 500, name  # the control rate: spectra to 250 Hz
     vehicle = stack.autopilot.setup.vehicle
     tau_max, u1_max = vehicle.actuation.torque_max_n_m, vehicle.actuation.thrust_max_n
-    cascade, tracking = data[topics.CASCADE], data[topics.TRACKING]
+    cascade, tracking = data[ulog_topics.CASCADE], data[ulog_topics.TRACKING]
     # torque and thrust: PX4's normalised setpoints, FRD (y, z and the thrust's z turn)
     torque = data["vehicle_torque_setpoint"]
     i, j = at_common_times(torque, cascade)
@@ -255,7 +257,7 @@ def test_sdlog_mode_decides_when_a_log_runs(tmp_path, mode):
     paths = stack.close()
     assert len(paths) == len(EXPECTED[mode])
     for path, (start, end) in zip(paths, EXPECTED[mode], strict=True):
-        t = check_ulog(path, flight_review=False).get_dataset(topics.TRACKING).data["timestamp"] * 1e-6
+        t = check_ulog(path, flight_review=False).get_dataset(ulog_topics.TRACKING).data["timestamp"] * 1e-6
         assert events[start] - 0.06 < t[0] <= events[start] + 0.002, (start, t[0], events)
         assert events[end] - 0.06 < t[-1] <= events[end], (end, t[-1], events)
 
@@ -274,9 +276,9 @@ def test_sdlog_mode_3_is_refused_and_a_simulator_restart_ends_the_log(tmp_path):
     stack.run_for(1.0)
     first, second = stack.close()
     for path in (first, second):  # each log's time runs forward
-        t = check_ulog(path, flight_review=False).get_dataset(topics.TRACKING).data["timestamp"]
+        t = check_ulog(path, flight_review=False).get_dataset(ulog_topics.TRACKING).data["timestamp"]
         assert np.all(np.diff(t.astype(np.int64)) > 0)
-    assert ULog(str(second)).get_dataset(topics.TRACKING).data["timestamp"][0] == 0
+    assert ULog(str(second)).get_dataset(ulog_topics.TRACKING).data["timestamp"][0] == 0
 
 
 def test_the_ulog_encoding_is_what_pyulog_reads():
@@ -349,7 +351,7 @@ def test_a_killed_logger_leaves_what_it_wrote_readable(tmp_path):
         part = tmp_path / f"cut{cut}.ulg"
         part.write_bytes(whole[:cut])
         log = check_ulog(part, cut=True, flight_review=False)
-        t = log.get_dataset(topics.TRACKING).data["timestamp"]
+        t = log.get_dataset(ulog_topics.TRACKING).data["timestamp"]
         assert len(t) > 100 and np.all(np.diff(t.astype(np.int64)) == 2000)
 
 

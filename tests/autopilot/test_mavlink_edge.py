@@ -4,11 +4,11 @@ import math
 
 import pytest
 
-from autopilot.control.cascade import StateEstimate
 from autopilot.mavlink import telemetry
 from autopilot.mavlink.codec import Encoder, mavlink, new_parser
 from autopilot.mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
 from autopilot.mavlink.offboard import decode_setpoint
+from autopilot.records import StateEstimate
 from quadcommon import frames
 from quadcommon.rigid_body import quaternion_from_euler
 

@@ -11,10 +11,11 @@ import pytest
 from pymavlink.dialects.v20 import common as m
 
 from autopilot.control import registry
-from autopilot.control.cascade import Cascade, StateEstimate, law_context
+from autopilot.control.cascade import Cascade, law_context
 from autopilot.control.config import load_controller
 from autopilot.control.registry import ControllerFailure, LawError
 from autopilot.params.definitions import controller_config_from_params, default_parameters
+from autopilot.records import StateEstimate
 from quadcommon.config import config_path, load_sitl, load_vehicle
 from quadcommon.kernel import compiling, kernel
 from quadcommon.schema import ConfigError

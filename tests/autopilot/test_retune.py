@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from autopilot.control import command_filter as cf
-from autopilot.control.cascade import K_FILTER, Cascade, StateEstimate
+from autopilot.control.cascade import K_FILTER, Cascade
 from autopilot.control.config import load_controller
 from autopilot.control.laws.nlhinf import nlhinf_gains
+from autopilot.records import StateEstimate
 from quadcommon.config import load_vehicle
 from quadcommon.rigid_body import euler_torque_from_body_torque
 from quadcommon.trajectories import Reference

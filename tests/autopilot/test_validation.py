@@ -9,7 +9,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as m
 
-from autopilot.control.cascade import Cascade, StateEstimate
+from autopilot.control.cascade import Cascade
 from autopilot.control.config import PAPER_CONTROLLERS, load_controller
 from autopilot.control.translational import acceleration_limits
 from autopilot.guidance.offboard import OffboardGuidance, OffboardSetpoint
@@ -17,6 +17,7 @@ from autopilot.guidance.planner import Limits, transition
 from autopilot.mavlink import telemetry
 from autopilot.mavlink.links import MAX_DATAGRAM_BYTES, MAX_PEERS, PEER_EXPIRY_S, GcsLink
 from autopilot.mavlink.validation import COMMAND_RULES, RefusalNotices, check_command, reference_problem
+from autopilot.records import StateEstimate
 from quadcommon import wire
 from quadcommon.config import load_vehicle
 from quadcommon.trajectories import Reference

@@ -112,8 +112,9 @@ def test_se3_keeps_the_offset_of_its_mass_error(undisturbed):
 # -- compiled by numba, and the same source as Python ----------------------------------------------------
 SCRIPT = """
 import json, math
-from autopilot.control.cascade import Cascade, StateEstimate
+from autopilot.control.cascade import Cascade
 from autopilot.control.config import load_controller
+from autopilot.records import StateEstimate
 from quadcommon.config import load_vehicle
 from quadcommon.kernel import compiling
 from quadcommon.trajectories import Reference

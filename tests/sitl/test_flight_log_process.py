@@ -14,9 +14,9 @@ import pytest
 import zenoh
 from pymavlink import mavutil
 
-from autopilot.logger.topics import TRACKING
 from quadcommon import bus, wire
 from quadcommon.bus_records import CONTROLLER_CODEC
+from quadcommon.ulog_topics import TRACKING
 from sitl.launcher import Launcher, VehicleSpec
 from tests.ulog_check import check_ulog
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autopilot.control.cascade import Cascade, StateEstimate
+from autopilot.control.cascade import Cascade
 from autopilot.control.config import load_controller
 from autopilot.estimation import (
     BaroSample,
@@ -28,6 +28,7 @@ from autopilot.estimation import (
     MagSample,
     VisionPose,
 )
+from autopilot.records import StateEstimate
 from quadcommon.config import apply_uncertainty, load_scenario, load_sitl, load_vehicle
 from quadcommon.rigid_body import quaternion_multiply, rotation_from_quaternion
 from quadcommon.trajectories import trajectory_from_spec

@@ -15,8 +15,8 @@ from autopilot.estimation.eskf import (
     filter_entries,
     filter_kernels,
 )
-from autopilot.estimation.measurements import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from autopilot.estimation.parameters import DEFAULT_PARAMS, estimator_params
+from autopilot.records import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from quadcommon.kernel import compiling
 from quadcommon.rigid_body import quaternion_from_euler, rotation_from_quaternion
 

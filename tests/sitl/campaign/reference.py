@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from autopilot.control.cascade import Cascade, StateEstimate
+from autopilot.control.cascade import Cascade
 from autopilot.control.config import ControllerConfig
 from autopilot.mavlink.codec import Encoder, new_parser
 from autopilot.mavlink.hil import ActuatorEncoder, decode_frame
+from autopilot.records import StateEstimate
 from quadcommon import wire as wire_contract
 from quadcommon.config import load_sitl
 from quadcommon.trajectories import trajectory_from_spec
