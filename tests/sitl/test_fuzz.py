@@ -1,4 +1,4 @@
-"""The project's own fuzzing (sitl.fuzz), seeded: 10^5 hostile inputs against the autopilot core
+"""The project's own fuzzing (sitl.fuzz), seeded: 3 x 10^4 hostile inputs against the autopilot core
 while it flies (then a clean landing), 2 x 10^4 against the simulator core's HIL side; and proof
 that the fuzzer does catch what it is meant to (a planted fault, a NaN sent, a parameter changed
 behind its rules)."""
@@ -26,9 +26,11 @@ from sitl.fuzz import (
 pytestmark = pytest.mark.timeout(240)
 
 
-def test_the_autopilot_core_takes_100000_hostile_inputs_and_still_lands():
-    report = fuzz_autopilot(100_000, seed=1)
-    assert report.total == 100_000
+def test_the_autopilot_core_takes_30000_hostile_inputs_and_still_lands():
+    """Every input kind and hostile class (commands, corrupted, truncated, MAVLink 1, dialect, HIL
+    frames, random bytes, handled messages) at the counts asserted below; seed 1."""
+    report = fuzz_autopilot(30_000, seed=1)
+    assert report.total == 30_000
     assert set(report.inputs) == set(AUTOPILOT_KINDS)
     # The inputs reach the handlers: commands are accepted and refused, missions answered.
     results = report.results
