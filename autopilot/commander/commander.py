@@ -202,6 +202,9 @@ _MODE_EVENTS = {
     FlightMode.AUTO_FOLLOW_TARGET: Event.FOLLOW,
 }
 _NAV_MODE_NAMES = {nav: mode.px4_name for mode, nav in NAV_STATE_OF_MODE.items()}
+# Modes PX4 does not arm in (mode_req_prevent_arming) that this vehicle refuses to arm in too: Orbit
+# and follow-me (PX4 also lists RTL, Land and Descend, which arm here and stay on the ground).
+_NOT_ARMED_IN = (NAV_ORBIT, NAV_AUTO_FOLLOW_TARGET)
 _TRAJECTORY_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.TRAJECTORY, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
 # The phases whose plan leads to a point (Commander.destination; a scenario's trajectory does not)
 _NAVIGATED_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
@@ -978,6 +981,8 @@ class Commander:
             return "OFFBOARD without a setpoint stream"
         if self.mode.is_manual and self.sticks.fresh(t, self._manual_limits.loss_s) is None:
             return f"no manual control input ({self.mode.px4_name} flies on MANUAL_CONTROL)"
+        if NAV_STATE_OF_MODE[self.mode] in _NOT_ARMED_IN:
+            return f"mode {self.mode.px4_name} prevents arming (select a mode that takes off)"
         return prearm_problem(
             self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence,
             self.health_flags(t), NAV_STATE_OF_MODE[self.mode],
