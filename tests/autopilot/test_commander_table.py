@@ -68,6 +68,8 @@ ROUTES: dict[Phase, list[Event]] = {
     P.LANDED: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.LAND, E.TOUCHDOWN],
     P.MANUAL: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.MANUAL],
     P.DESCEND: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.FAILSAFE_DESCEND],
+    P.ORBIT: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.ORBIT],
+    P.FOLLOW: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.FOLLOW],
 }
 # The estimate a fallback is provoked with (flying on the EKF): its ESTIMATOR_STATUS flags, or None
 # for an estimator that has lost its alignment (no attitude).
