@@ -3,7 +3,8 @@ SITL: the flows of ``mavsdk3_flows.py`` (what MAVSDK-Python's examples do: telem
 the geofence example (a polygon and the "no circle" circle), a geofence upload, a QGC .plan with
 rally points, takeoff, a mission with gimbal and camera items, goto, offboard position and
 velocity, mission_raw, manual control, land, the manual control example and the loss of its
-sticks), in sequence against one vehicle.
+sticks), in sequence against one vehicle; and upstream's own examples unchanged (``upstream/``):
+the log download, follow-me and orbit.
 
 MAVSDK-Python 3 starts a ``mavsdk_server`` that listens for gRPC on every interface (a fixed port), so
 the test runs it and the vehicle (``quadsitl up``, default instance 0 on the shipped default ports
