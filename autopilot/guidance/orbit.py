@@ -44,6 +44,9 @@ ACCELERATION_MAX_M_S2 = 2.0  # PX4: _acceleration_max (centripetal)
 DEFAULT_SPEED_M_S = 1.0  # PX4: the speed on entering the mode
 ON_CIRCLE_M = 1.0  # PX4: _horizontal_acceptance_radius
 ON_CIRCLE_ALT_M = 0.8  # PX4: NAV_MC_ALT_RAD's default
+# A new radius within ON_CIRCLE_M of the circle flown is reached at this radial speed (PX4 closes the
+# gap with its velocity feedback; a step of the reference would jolt the cascade).
+RADIUS_RATE_M_S = 1.0
 
 # MAVLink ORBIT_YAW_BEHAVIOUR
 YAW_FRONT_TO_CENTRE, YAW_HOLD_INITIAL, YAW_UNCONTROLLED, YAW_FRONT_TANGENT, YAW_RC, YAW_UNCHANGED = range(6)
@@ -105,6 +108,7 @@ class Orbit:
         self._approach_start = 0.0
         self._angle = 0.0  # the reference's angle around the centre (paper frame, from +x)
         self._speed = 0.0  # the reference's signed tangential speed now (ramps to velocity_m_s)
+        self._radius = RADIUS_MIN_M  # the reference's radius now (moves to radius_m)
 
     @property
     def status(self) -> OrbitStatus:
@@ -195,12 +199,17 @@ class Orbit:
     def _start_circling(self, at: Reference) -> None:
         cx, cy, _ = self.centre
         self._angle = math.atan2(at.position_m[1] - cy, at.position_m[0] - cx)
+        self._radius = math.hypot(at.position_m[1] - cy, at.position_m[0] - cx)
         # the tangential speed the reference has (clockwise positive: -d(angle)/dt r)
         tangent = (-math.sin(self._angle), math.cos(self._angle))
         self._speed = -(at.velocity_m_s[0] * tangent[0] + at.velocity_m_s[1] * tangent[1])
 
     def _circle(self, dt: float, previous: Reference, limits: OrbitLimits, yaw_stick: float) -> Reference:
-        r = self.radius_m
+        reach = RADIUS_RATE_M_S * dt
+        grow = min(max(self.radius_m - self._radius, -reach), reach)
+        self._radius += grow
+        r = self._radius
+        radial = grow / dt if dt > 0.0 else 0.0
         step = limits.travel.acceleration * dt
         change = min(max(self.velocity_m_s - self._speed, -step), step)
         self._speed += change
@@ -211,7 +220,7 @@ class Orbit:
         c, s = math.cos(self._angle), math.sin(self._angle)
         cx, cy, cz = self.centre
         position = (cx + r * c, cy + r * s, cz)
-        velocity = (-r * omega * s, r * omega * c, 0.0)
+        velocity = (-r * omega * s + radial * c, r * omega * c + radial * s, 0.0)
         acceleration = (-r * omega * omega * c - r * alpha * s, -r * omega * omega * s + r * alpha * c, 0.0)
         yaw, yaw_rate, yaw_acc = self._yaw_target(previous, omega, alpha, yaw_stick, dt)
         yaw_max = limits.travel.yaw_rate
