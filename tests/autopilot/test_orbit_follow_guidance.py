@@ -61,3 +61,25 @@ def test_the_target_estimate_runs_on_between_reports_and_is_lost_after_the_stale
     assert now.position_m == pytest.approx((5.0, 0.0, 0.0))
     assert target.estimate(2.0 + TARGET_STALE_S - 1e-6) is not None
     assert target.estimate(2.0 + TARGET_STALE_S + 1e-3) is None
+
+
+def test_the_yaw_stick_behaviour_turns_at_the_stick_rate_while_circling():
+    """ORBIT_YAW_BEHAVIOUR 4 (PX4: the altitude task's yaw, from the stick); the vehicle here follows
+    its reference exactly."""
+    from quadcommon.frames import wrap_pi
+    from quadcommon.trajectories import Reference
+
+    orbit = Orbit()
+    orbit.enter((0.0, 0.0, 5.0), 0.0, LIMITS)
+    orbit.apply(OrbitRequest(3.0, 1.0, 4), 0.0, LIMITS)
+    ref = Reference((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
+    t, dt = 0.0, 0.002
+    while orbit.approaching or t < 0.1:  # fly the approach, perfectly tracked
+        ref = orbit.reference(t, dt, ref.position_m, ref, LIMITS, 0.0)
+        t += dt
+    yaw0 = ref.yaw_rad
+    for _ in range(250):  # 0.5 s at 0.4 rad/s
+        ref = orbit.reference(t, dt, ref.position_m, ref, LIMITS, 0.4)
+        t += dt
+    assert wrap_pi(ref.yaw_rad - yaw0) == pytest.approx(0.2, abs=1e-6) and ref.yaw_rate_rad_s == 0.4
+    assert math.hypot(*ref.position_m[:2]) == pytest.approx(3.0, abs=1e-6)
