@@ -39,7 +39,15 @@ from ..estimation.status import EstimatorStatus
 from ..guidance.follow import FollowSettings, FollowTarget, TargetReport
 from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
-from ..guidance.orbit import SPEED_MAX_M_S, YAW_NAMES, Orbit, OrbitLimits, OrbitRequest, OrbitStatus
+from ..guidance.orbit import (
+    SPEED_MAX_M_S,
+    YAW_NAMES,
+    Orbit,
+    OrbitLimits,
+    OrbitRequest,
+    OrbitStatus,
+    radius_refusal,
+)
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..guidance.sticks import LOST, Sticks, StickStream
 from ..mavlink.hil import SensorSamples
@@ -1243,12 +1251,9 @@ class Commander:
         assert state is not None
         limits = self._orbit_limits
         orbit = self.orbit
-        if request is not None and request.radius_m is not None:
-            radius = abs(request.radius_m)
-            if not 1.0 <= radius <= limits.radius_max_m:
-                most = limits.radius_max_m
-                return self._refuse(DENIED, f"Orbit radius limit exceeded: {radius:g} m, at most {most:g} m "
-                                            "(MC_ORBIT_RAD_MAX), at least 1 m")  # fmt: skip
+        refusal = radius_refusal(request, limits) if request is not None else None
+        if refusal is not None:
+            return self._refuse(DENIED, refusal)
         yaw = state.euler_rad[2]
         if self.phase != Phase.ORBIT:
             self.last_reference = self.last_or_measured(state)
@@ -1269,8 +1274,10 @@ class Commander:
         assert state is not None
         self.last_reference = self.last_or_measured(state)
         self.follow.enter(state.euler_rad[2])
-        self._follow_lost_said = False
-        self._event(SEVERITY_INFO, "follow-me: following the target (FOLLOW_TARGET)")
+        none_yet = self.follow.target.estimate(t) is None
+        self._follow_lost_said = none_yet  # (said now; the next change of the target's state is said)
+        self._event(SEVERITY_INFO, "follow-me: following the target (FOLLOW_TARGET)"
+                                   + (": none yet, holding position" if none_yet else ""))  # fmt: skip
 
     def _fly(self, t: float, trajectory: Trajectory) -> None:
         self._trajectory = trajectory

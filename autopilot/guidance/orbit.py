@@ -95,6 +95,14 @@ def sanitize(radius_m: float, velocity_m_s: float, limits: OrbitLimits) -> tuple
     return radius, velocity
 
 
+def radius_refusal(request: OrbitRequest, limits: OrbitLimits) -> str | None:
+    """Why PX4 refuses the request's radius (outside [RADIUS_MIN_M, MC_ORBIT_RAD_MAX]), or None."""
+    if request.radius_m is None or RADIUS_MIN_M <= abs(request.radius_m) <= limits.radius_max_m:
+        return None
+    return (f"Orbit radius limit exceeded: {abs(request.radius_m):g} m outside [{RADIUS_MIN_M:g}, "
+            f"{limits.radius_max_m:g}] m (MC_ORBIT_RAD_MAX)")  # fmt: skip
+
+
 class Orbit:
     """The Orbit mode's state and its reference, one control step at a time."""
 
@@ -130,7 +138,7 @@ class Orbit:
     def apply(self, request: OrbitRequest, yaw_rad: float, limits: OrbitLimits) -> str | None:
         """A DO_ORBIT's parameters (PX4's ``applyCommandParameters``); the reason a radius is
         refused, or None. The rest of the command applies either way, as in PX4."""
-        refused = None
+        refused = radius_refusal(request, limits)
         clockwise = self.velocity_m_s > 0.0
         radius = self.radius_m
         speed = abs(self.velocity_m_s)
@@ -139,11 +147,8 @@ class Orbit:
             radius = abs(request.radius_m)
         if request.speed_m_s is not None:
             speed = request.speed_m_s
-        if RADIUS_MIN_M <= radius <= limits.radius_max_m:
+        if refused is None:
             self.radius_m, self.velocity_m_s = sanitize(radius, speed if clockwise else -speed, limits)
-        else:
-            refused = (f"Orbit radius limit exceeded: {radius:g} m outside [{RADIUS_MIN_M:g}, "
-                       f"{limits.radius_max_m:g}] m (MC_ORBIT_RAD_MAX)")  # fmt: skip
         if request.yaw_behaviour is not None and request.yaw_behaviour != YAW_UNCHANGED:
             self.yaw_behaviour = request.yaw_behaviour
         self.initial_heading = yaw_rad
