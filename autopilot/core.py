@@ -72,6 +72,7 @@ from .mavlink.commands import CommandDispatcher, CommandRequest, command_ack, re
 from .mavlink.console import Console, ConsoleContext
 from .mavlink.dispatch import FaultLog, MessageDispatcher
 from .mavlink.failure_injection import FailureInjection
+from .mavlink.follow_target import decode_follow_target
 from .mavlink.ftp import FileSystem, FtpServer, NoFiles
 from .mavlink.hil import (
     BATTERY_ID,
@@ -308,6 +309,7 @@ class AutopilotCore:
         d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
         d[m.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED] = self._on_setpoint
         d[m.MAVLINK_MSG_ID_MANUAL_CONTROL] = self._on_manual_control
+        d[m.MAVLINK_MSG_ID_FOLLOW_TARGET] = self._on_follow_target
         d[m.MAVLINK_MSG_ID_SET_MODE] = self._on_set_mode_message
         d[m.MAVLINK_MSG_ID_HEARTBEAT] = self._on_gcs_heartbeat
         d[m.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
@@ -701,6 +703,7 @@ class AutopilotCore:
         s.flags = c.health_flags(self.sim_time)
         s.failsafe = c.in_failsafe
         s.terminated = c.terminated
+        s.orbit = c.orbit_status
         if output is not None:
             s.euler_ref = output.euler_ref_rad
             s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n
@@ -855,6 +858,18 @@ class AutopilotCore:
             self.refusals(f"sticks refused: {reason}")
             return
         self.commander.manual_sticks(sticks)
+
+    def _on_follow_target(self, msg, link: GcsLink, address: Address) -> None:
+        """The follow-me target (:mod:`.mavlink.follow_target`): checked at the edge, then the
+        commander's target estimate; a refusal is counted and said (rate-limited STATUSTEXT)."""
+        c = self.commander
+        home = c.home or (0.0, 0.0, 0.0)
+        origin = self.setup.sitl.home
+        report, reason = decode_follow_target(msg, self.sim_time, origin, home, self.params.values)
+        if report is None:
+            self.refusals(f"FOLLOW_TARGET refused: {reason}")
+            return
+        c.follow_target_report(report)
 
     def _on_gcs_heartbeat(self, msg, link: GcsLink, address: Address) -> None:
         if msg.type != m.MAV_TYPE_GCS:

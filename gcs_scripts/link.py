@@ -58,6 +58,8 @@ PX4_MODES: dict[str, tuple[int, int]] = {
     "AUTO.MISSION": (4, 4),
     "AUTO.RTL": (4, 5),
     "AUTO.LAND": (4, 6),
+    "AUTO.FOLLOW_TARGET": (4, 8),
+    "ORBIT": (3, 1),  # POSCTL's sub mode 1
     "ACRO": (5, 0),
     "OFFBOARD": (6, 0),
     "STABILIZED": (7, 0),

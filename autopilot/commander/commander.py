@@ -36,8 +36,18 @@ from quadcommon.trajectories import PiecewiseTrajectory, Reference, Trajectory
 
 from ..battery.estimator import BatteryStatus
 from ..estimation.status import EstimatorStatus
+from ..guidance.follow import FollowSettings, FollowTarget, TargetReport
 from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
 from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
+from ..guidance.orbit import (
+    SPEED_MAX_M_S,
+    YAW_NAMES,
+    Orbit,
+    OrbitLimits,
+    OrbitRequest,
+    OrbitStatus,
+    radius_refusal,
+)
 from ..guidance.planner import Limits, LineMove, stop_from
 from ..guidance.sticks import LOST, Sticks, StickStream
 from ..mission.executor import (
@@ -72,6 +82,7 @@ from .failsafe import (
 )
 from .health import (
     NAV_ALTCTL,
+    NAV_AUTO_FOLLOW_TARGET,
     NAV_AUTO_LAND,
     NAV_AUTO_LOITER,
     NAV_AUTO_MISSION,
@@ -79,6 +90,7 @@ from .health import (
     NAV_AUTO_TAKEOFF,
     NAV_DESCEND,
     NAV_OFFBOARD,
+    NAV_ORBIT,
     NAV_POSCTL,
     NAV_STATE_OF_MODE,
     FailsafeFlags,
@@ -180,6 +192,7 @@ _COMMAND_NAV = {
     Event.TAKEOFF: NAV_AUTO_TAKEOFF, Event.SELECT_TAKEOFF: NAV_AUTO_TAKEOFF, Event.HOLD: NAV_AUTO_LOITER,
     Event.REPOSITION: NAV_AUTO_LOITER, Event.LAND: NAV_AUTO_LAND, Event.RTL: NAV_AUTO_RTL,
     Event.OFFBOARD: NAV_OFFBOARD, Event.MISSION: NAV_AUTO_MISSION, Event.MISSION_START: NAV_AUTO_MISSION,
+    Event.ORBIT: NAV_ORBIT, Event.FOLLOW: NAV_AUTO_FOLLOW_TARGET,
 }  # fmt: skip
 _MODE_EVENTS = {
     FlightMode.MANUAL: Event.MANUAL,
@@ -193,8 +206,13 @@ _MODE_EVENTS = {
     FlightMode.AUTO_RTL: Event.RTL,
     FlightMode.AUTO_TAKEOFF: Event.SELECT_TAKEOFF,
     FlightMode.AUTO_MISSION: Event.MISSION,
+    FlightMode.ORBIT: Event.ORBIT,
+    FlightMode.AUTO_FOLLOW_TARGET: Event.FOLLOW,
 }
 _NAV_MODE_NAMES = {nav: mode.px4_name for mode, nav in NAV_STATE_OF_MODE.items()}
+# Modes PX4 does not arm in (mode_req_prevent_arming) that this vehicle refuses to arm in too: Orbit
+# and follow-me (PX4 also lists RTL, Land and Descend, which arm here and stay on the ground).
+_NOT_ARMED_IN = (NAV_ORBIT, NAV_AUTO_FOLLOW_TARGET)
 _TRAJECTORY_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.TRAJECTORY, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
 # The phases whose plan leads to a point (Commander.destination; a scenario's trajectory does not)
 _NAVIGATED_PHASES = (Phase.TAKEOFF, Phase.HOLD, Phase.LAND, Phase.RTL, Phase.RTL_LAND)
@@ -223,6 +241,10 @@ class Commander:
         self.sticks = StickStream()  # MANUAL_CONTROL: freshness, loss, override requests
         self.manual = ManualGuidance()  # the manual modes' state
         self._manual_limits = self.manual_limits()  # rebuilt when a parameter changes, not per step
+        self.orbit = Orbit()  # the Orbit mode's state (guidance/orbit.py)
+        self.follow = FollowTarget()  # follow-me: the target's estimate and the mode's state
+        self._orbit_limits = self.orbit_limits()
+        self._follow_settings = self.follow_settings()
         self.last_reference: Reference | None = None
         self.mission: MissionExecutor | None = None  # the stored mission (set by the mission service)
         self.rally_points: list[RallyPoint] = []  # the uploaded rally plan (RTL's destinations)
@@ -252,6 +274,7 @@ class Commander:
         self._landed_since: float | None = None
         self._touchdown_at = 0.0
         self._setpoint_times: list[float] = []
+        self._follow_lost_said = True  # follow-me: the loss of the target was announced (or none yet)
         self._next_readiness_check = 0.0
         self._readiness_key: str | None = None  # the verdict last announced (None: ready, or none yet)
         self._readiness_said: dict[str | None, float] = {}  # verdict -> when it was last announced
@@ -308,6 +331,22 @@ class Commander:
             acro_tilt=rad(p["ACRO_TILT_LIM"]),
             override_speed=p["COM_RC_STICK_OV"] / 100.0,
         )
+
+    def orbit_limits(self) -> OrbitLimits:
+        p = self.params
+        limits = self.limits()
+        return OrbitLimits(p["MC_ORBIT_RAD_MAX"], min(SPEED_MAX_M_S, limits.speed_horizontal), limits,
+                           int(p["MC_ORBIT_YAW_MOD"]))  # fmt: skip
+
+    def follow_settings(self) -> FollowSettings:
+        p = self.params
+        return FollowSettings(p["FLW_TGT_HT"], p["FLW_TGT_DST"], p["FLW_TGT_FA"], int(p["FLW_TGT_ALT_M"]),
+                              p["FLW_TGT_MAX_VEL"], p["FLW_TGT_RS"], self.limits())  # fmt: skip
+
+    @property
+    def orbit_status(self) -> OrbitStatus | None:
+        """The orbit flown (ORBIT_EXECUTION_STATUS), or None when not in Orbit."""
+        return self.orbit.status if self.phase == Phase.ORBIT else None
 
     @property
     def destination(self) -> Reference | None:
@@ -444,6 +483,8 @@ class Commander:
         self._fallback_due = True
         self.offboard.limits = self.limits()
         self._manual_limits = self.manual_limits()
+        self._orbit_limits = self.orbit_limits()
+        self._follow_settings = self.follow_settings()
 
     # -- commands ----------------------------------------------------------------------------------
     def update_state(self, state: VehicleState) -> None:
@@ -520,6 +561,17 @@ class Commander:
                 DENIED, f"reposition refused: in {self.mode.px4_name}, not hold (param2 bit 0 switches)"
             )
         return self._fire(t, Event.REPOSITION, target=target, speed_m_s=speed_m_s, yaw_rad=yaw_rad)
+
+    def orbit_command(self, t: float, request: OrbitRequest) -> Outcome:
+        """MAV_CMD_DO_ORBIT (paper frame): enter Orbit (or change the orbit flown) with the request's
+        radius, speed, yaw behaviour and centre (None: keep; entering, the defaults of
+        :mod:`autopilot.guidance.orbit`)."""
+        return self._fire(t, Event.ORBIT, request=request)
+
+    def follow_target_report(self, report: TargetReport) -> None:
+        """A FOLLOW_TARGET (checked at the edge): the target's estimate takes it in any mode, as
+        PX4's target estimator runs whatever the mode."""
+        self.follow.target.report(report, self._follow_settings.responsiveness)
 
     def target_problem(self, target: Vector3) -> str | None:
         """Why a point the vehicle is asked to fly to (paper frame, m) breaks the geofence, or None."""
@@ -828,6 +880,20 @@ class Commander:
             reference = self.offboard.reference(t, dt, previous)
             if self.offboard.setpoint is None:
                 reference = previous
+        elif phase == Phase.ORBIT:
+            previous = self.last_reference or _at_rest(state)
+            sticks = self.sticks.fresh(t, self._manual_limits.loss_s)
+            yaw_stick = sticks.yaw * self._manual_limits.yaw_rate if sticks is not None else 0.0
+            reference = self.orbit.reference(t, dt, state.position_m, previous, self._orbit_limits, yaw_stick)
+        elif phase == Phase.FOLLOW:
+            previous = self.last_reference or _at_rest(state)
+            home = self.home or (0.0, 0.0, GROUND_Z_M)
+            reference = self.follow.reference(t, dt, state.position_m, previous, home, self._follow_settings)
+            if self.follow.lost != self._follow_lost_said:
+                self._follow_lost_said = self.follow.lost
+                self._event(SEVERITY_WARNING if self.follow.lost else SEVERITY_INFO,
+                            "follow-me: no target (no FOLLOW_TARGET for 3 s): holding position"
+                            if self.follow.lost else "follow-me: target found, following")  # fmt: skip
         elif phase == Phase.MISSION:
             assert self.mission is not None
             out = self.mission.step(t, state.position_m)
@@ -923,6 +989,8 @@ class Commander:
             return "OFFBOARD without a setpoint stream"
         if self.mode.is_manual and self.sticks.fresh(t, self._manual_limits.loss_s) is None:
             return f"no manual control input ({self.mode.px4_name} flies on MANUAL_CONTROL)"
+        if NAV_STATE_OF_MODE[self.mode] in _NOT_ARMED_IN:
+            return f"mode {self.mode.px4_name} prevents arming (select a mode that takes off)"
         return prearm_problem(
             self.params, state.position_m, self.home, self.position_valid, self.failsafes.geofence,
             self.health_flags(t), NAV_STATE_OF_MODE[self.mode],
@@ -1175,6 +1243,41 @@ class Commander:
         self._landed_since = None
         self._event(SEVERITY_INFO, f"mission: flying item {mission.current_seq} of {mission.count}")
         return None
+
+    def _act_start_orbit(self, t: float, request: OrbitRequest | None = None, **_) -> Outcome | None:
+        """Enter Orbit (centre here, PX4's defaults) unless flying it, then apply the DO_ORBIT's
+        parameters; a radius PX4 refuses is refused here before anything changes."""
+        state = self.state
+        assert state is not None
+        limits = self._orbit_limits
+        orbit = self.orbit
+        refusal = radius_refusal(request, limits) if request is not None else None
+        if refusal is not None:
+            return self._refuse(DENIED, refusal)
+        yaw = state.euler_rad[2]
+        if self.phase != Phase.ORBIT:
+            self.last_reference = self.last_or_measured(state)
+            orbit.enter(state.position_m, yaw, limits)
+        if request is not None:
+            orbit.apply(request, yaw, limits)
+        asked = None if request is None or request.speed_m_s is None else abs(request.speed_m_s)
+        speed = abs(orbit.velocity_m_s)
+        clipped = f" (asked {asked:g} m/s: limited)" if asked is not None and asked > speed + 1e-6 else ""
+        way = "clockwise" if orbit.velocity_m_s > 0.0 else "counter-clockwise"
+        yaw_name = YAW_NAMES.get(orbit.yaw_behaviour, YAW_NAMES[0])
+        self._event(SEVERITY_INFO, f"orbit: radius {orbit.radius_m:.1f} m {way} at {speed:.1f} m/s{clipped}, "
+                                   f"yaw {yaw_name}")  # fmt: skip
+        return None
+
+    def _act_start_follow(self, t: float, **_) -> None:
+        state = self.state
+        assert state is not None
+        self.last_reference = self.last_or_measured(state)
+        self.follow.enter(state.euler_rad[2])
+        none_yet = self.follow.target.estimate(t) is None
+        self._follow_lost_said = none_yet  # (said now; the next change of the target's state is said)
+        self._event(SEVERITY_INFO, "follow-me: following the target (FOLLOW_TARGET)"
+                                   + (": none yet, holding position" if none_yet else ""))  # fmt: skip
 
     def _fly(self, t: float, trajectory: Trajectory) -> None:
         self._trajectory = trajectory

@@ -22,6 +22,9 @@ MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN
 _MANUAL_MAINS = (MAIN_MANUAL, MAIN_STABILIZED, MAIN_ALTCTL, MAIN_POSCTL, MAIN_ACRO)
 # PX4 AUTO sub modes
 SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
+SUB_FOLLOW_TARGET = 8
+# PX4 POSCTL sub modes: Orbit is POSCTL's sub mode 1 (PX4_CUSTOM_SUB_MODE_POSCTL_ORBIT)
+SUB_POSCTL_ORBIT = 1
 
 
 class FlightMode(Enum):
@@ -38,13 +41,16 @@ class FlightMode(Enum):
     AUTO_RTL = (MAIN_AUTO, SUB_RTL)
     AUTO_LAND = (MAIN_AUTO, SUB_LAND)
     OFFBOARD = (MAIN_OFFBOARD, 0)
+    ORBIT = (MAIN_POSCTL, SUB_POSCTL_ORBIT)  # MAV_CMD_DO_ORBIT (autopilot/guidance/orbit.py)
+    AUTO_FOLLOW_TARGET = (MAIN_AUTO, SUB_FOLLOW_TARGET)  # follow-me (autopilot/guidance/follow.py)
 
     def __init__(self, main: int, sub: int) -> None:
         # A plain attribute, computed once: telemetry and the controller rows read it every frame
         # (an Enum property costs ~0.2 us a read).
         self.custom_mode: int = (main << 16) | (sub << 24)
-        # Flown from the sticks (MANUAL_CONTROL): MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO.
-        self.is_manual: bool = main in _MANUAL_MAINS
+        # Flown from the sticks (MANUAL_CONTROL): MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO (not
+        # POSCTL's sub mode Orbit, which flies by itself).
+        self.is_manual: bool = main in _MANUAL_MAINS and sub == 0
 
     @property
     def px4_name(self) -> str:

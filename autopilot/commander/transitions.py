@@ -39,6 +39,8 @@ class Phase(Enum):
     DESCEND = "descend"  # PX4's Descend: level, down at MPC_LAND_SPEED, no position (mode AUTO.LAND)
     LANDED = "landed"  # touched down, motors idle, waiting to disarm
     MANUAL = "manual"  # flying on the sticks (MANUAL, STABILIZED, ALTCTL, POSCTL, ACRO)
+    ORBIT = "orbit"  # circling a centre (Orbit: MAV_CMD_DO_ORBIT)
+    FOLLOW = "follow"  # following the target a ground station reports (AUTO.FOLLOW_TARGET)
 
 
 class Event(Enum):
@@ -59,6 +61,8 @@ class Event(Enum):
     MISSION_INVALID = "mission invalid"  # a new geofence excludes the mission flown (PX4: loiter)
     SCENARIO = "scenario"  # armed and flying a scenario's trajectory from t = 0
     REPOSITION = "reposition"  # MAV_CMD_DO_REPOSITION: fly to a point, then hold there
+    ORBIT = "orbit"  # MAV_CMD_DO_ORBIT, or DO_SET_MODE Orbit
+    FOLLOW = "follow"  # DO_SET_MODE AUTO.FOLLOW_TARGET
     # raised by the commander itself
     PLAN_DONE = "plan done"  # the phase's trajectory reached its end
     TOUCHDOWN = "touchdown"
@@ -92,12 +96,13 @@ E = Event
 M = FlightMode
 ON_GROUND = (P.IDLE, P.LANDED)
 FLYING = (P.TAKEOFF, P.HOLD, P.OFFBOARD, P.MISSION, P.TRAJECTORY, P.LAND, P.RTL, P.RTL_LAND, P.MANUAL,
-          P.DESCEND)
+          P.DESCEND, P.ORBIT, P.FOLLOW)
 ARMED = ON_GROUND + FLYING
 DESCENDING = (P.LAND, P.RTL_LAND)
 BUSY = (P.LAND, P.RTL, P.RTL_LAND, P.DESCEND)  # returning or landing: a hold/RTL failsafe lets it go on
 NOT_BUSY = tuple(p for p in FLYING if p not in BUSY)
-AUTOMATIC = tuple(p for p in FLYING if p not in (P.OFFBOARD, P.MANUAL))  # AUTO modes, in the air
+# AUTO modes, in the air (Orbit is POSCTL's: its sticks change the orbit, they do not take over)
+AUTOMATIC = tuple(p for p in FLYING if p not in (P.OFFBOARD, P.MANUAL, P.ORBIT))
 
 
 def _but(phases: tuple[Phase, ...], *excluded: Phase) -> tuple[Phase, ...]:
@@ -151,6 +156,11 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
     ((P.MISSION,),            E.SET_CURRENT,       SAME,          KEEP,            "start_mission"),
     ((P.MISSION,),            E.MISSION_REPLACED,  P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
     ((P.MISSION,),            E.MISSION_INVALID,   P.HOLD,        M.AUTO_LOITER,   "plan_hold"),
+    # -- Orbit and follow-me: flying only (both prevent arming in PX4); disarmed, only selected -----
+    (FLYING,                  E.ORBIT,             P.ORBIT,       M.ORBIT,         "start_orbit"),
+    (FLYING,                  E.FOLLOW,            P.FOLLOW,      M.AUTO_FOLLOW_TARGET, "start_follow"),
+    ((P.DISARMED,),           E.FOLLOW,            SAME,          M.AUTO_FOLLOW_TARGET, None),
+    ((P.DISARMED,),           E.ORBIT,             SAME,          M.ORBIT,         None),
     # -- plans that end, touchdown, timeouts -----------------------------------------------------
     ((P.TAKEOFF,),            E.PLAN_DONE,         P.HOLD,        M.AUTO_LOITER,   None),
     ((P.RTL,),                E.PLAN_DONE,         P.RTL_LAND,    M.AUTO_RTL,      "plan_landing"),
@@ -178,6 +188,8 @@ TABLE: tuple[tuple[tuple[Phase, ...], Event, Phase | _Marker, FlightMode | _Mark
 REFUSALS: dict[Event, str] = {
     E.TAKEOFF: "takeoff refused: arm first",
     E.REPOSITION: "reposition refused: disarmed (arm first)",
+    E.ORBIT: "orbit refused: not flying (take off first)",
+    E.FOLLOW: "follow-me refused: not flying (take off first)",
     E.SET_CURRENT: "",  # not flying the mission: the current item is just stored
     E.MISSION_REPLACED: "",  # not flying the mission: the new one is just stored
     E.MISSION_INVALID: "",  # not flying the mission: AUTO.MISSION refuses it until it is valid

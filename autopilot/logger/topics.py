@@ -93,6 +93,8 @@ NAV_STATE = {
     FlightMode.OFFBOARD: 14,
     FlightMode.AUTO_TAKEOFF: 17,
     FlightMode.AUTO_LAND: 18,
+    FlightMode.AUTO_FOLLOW_TARGET: 19,
+    FlightMode.ORBIT: 21,
 }
 ARMING_STATE_DISARMED, ARMING_STATE_ARMED = 1, 2  # vehicle_status.arming_state
 VEHICLE_TYPE_ROTARY_WING = 1

@@ -30,6 +30,7 @@ from ..battery.estimator import (
 )
 from ..commander.health import FailsafeFlags
 from ..estimation.status import EstimatorStatus
+from ..guidance.orbit import OrbitStatus
 from ..records import GpsFix, StateEstimate
 from .codec import mavlink
 from .hil import ground_truth, sensor_fields
@@ -104,6 +105,7 @@ class VehicleStatus:
     failsafe: bool = False  # a failsafe action is in force (HEARTBEAT: MAV_STATE_CRITICAL)
     terminated: bool = False  # the flight was terminated (HEARTBEAT: MAV_STATE_FLIGHT_TERMINATION)
     gps: GpsFix | None = None  # the receiver's last sample (GPS_RAW_INT)
+    orbit: OrbitStatus | None = None  # the orbit flown (None: not in Orbit)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -443,6 +445,17 @@ def highres_imu(s: VehicleStatus):
     return m.MAVLink_highres_imu_message(s.time_usec, *values, updated, 0)
 
 
+def orbit_execution_status(s: VehicleStatus):
+    """The orbit flown, as PX4 reports it: signed radius (> 0 clockwise), MAV_FRAME_GLOBAL, the
+    centre's latitude/longitude (1e-7 deg) and altitude (m AMSL); None while not in Orbit."""
+    o = s.orbit
+    if o is None:
+        return None
+    lat, lon, alt = _geodetic(s, o.centre_m)
+    return m.MAVLink_orbit_execution_status_message(s.time_usec, o.radius_m, m.MAV_FRAME_GLOBAL,
+                                                    sat_i32(lat * 1e7), sat_i32(lon * 1e7), alt)  # fmt: skip
+
+
 def hil_state_quaternion(s: VehicleStatus):
     """The ground truth on request, as PX4 SITL serves it (its HIL_STATE_QUATERNION stream, from
     the simulator's groundtruth): the simulator's own HIL_STATE_QUATERNION of the latest lockstep
@@ -457,6 +470,7 @@ def hil_state_quaternion(s: VehicleStatus):
 ALWAYS, STATE, REFERENCE, BATTERY, EKF, SENSORS, TRUTH = (
     "always", "state", "reference", "battery", "ekf", "sensors", "truth"
 )  # fmt: skip
+ORBITING = "orbiting"
 SENT_WHILE = {  # (the docs' table)
     ALWAYS: "always",
     STATE: "the vehicle has a state (its first frame; on the EKF: aligned)",
@@ -465,6 +479,7 @@ SENT_WHILE = {  # (the docs' table)
     EKF: "it flies on the EKF (`EKF2_EN` 1); refused on the truth",
     SENSORS: "the frames carry `HIL_SENSOR` (whatever the vehicle flies on); refused otherwise",
     TRUTH: "the frames carry `HIL_STATE_QUATERNION` (whatever the vehicle flies on); refused otherwise",
+    ORBITING: "it flies the Orbit mode",
 }
 _NEEDS_PART = {SENSORS: mavlink.MAVLINK_MSG_ID_HIL_SENSOR, TRUTH: mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION}
 
@@ -497,6 +512,7 @@ STREAMS: dict[int, Stream] = {  # PX4's "normal" stream set, roughly, and what i
     m.MAVLINK_MSG_ID_ODOMETRY: Stream(odometry, 0.0, STATE),
     m.MAVLINK_MSG_ID_HIGHRES_IMU: Stream(highres_imu, 0.0, SENSORS),
     m.MAVLINK_MSG_ID_HIL_STATE_QUATERNION: Stream(hil_state_quaternion, 0.0, TRUTH),
+    m.MAVLINK_MSG_ID_ORBIT_EXECUTION_STATUS: Stream(orbit_execution_status, 2.0, ORBITING),  # PX4's rate
 }
 BUILDERS = {msg_id: stream.build for msg_id, stream in STREAMS.items()}  # (a test replaces one)
 DEFAULT_RATES_HZ = {msg_id: stream.default_hz for msg_id, stream in STREAMS.items()}

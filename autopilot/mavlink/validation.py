@@ -106,6 +106,12 @@ COMMAND_RULES: dict[int, tuple[Param, ...]] = {
         Param(7, "altitude (m; NaN keep)", -1000.0, 10000.0, nan_ok=True),
     ),
     m.MAV_CMD_PREFLIGHT_STORAGE: (Param(1, "parameter storage action", values=(0.0, 1.0, 2.0, 4.0)),),
+    m.MAV_CMD_DO_ORBIT: (  # the radius's limits are the commander's (MC_ORBIT_RAD_MAX); param4 is not read
+        Param(1, "radius (m; > 0 clockwise; NaN keep)", nan_ok=True),
+        Param(2, "tangential speed (m/s; NaN keep)", -100.0, 100.0, nan_ok=True),
+        Param(3, "yaw behaviour (ORBIT_YAW_BEHAVIOUR)", values=(0.0, 1.0, 2.0, 3.0, 4.0, 5.0), nan_ok=True),
+        Param(7, "centre altitude (m AMSL; NaN keep)", -1000.0, 10000.0, nan_ok=True),
+    ),
     m.MAV_CMD_NAV_LAND: (),
     m.MAV_CMD_NAV_RETURN_TO_LAUNCH: (),
     m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: (),

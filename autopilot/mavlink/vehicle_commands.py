@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from quadcommon import frames
 
 from ..commander.modes import FlightMode
+from ..guidance.orbit import OrbitRequest
 from . import telemetry
 from .codec import mavlink as m
 from .commands import CommandDispatcher, CommandRequest
@@ -60,6 +61,7 @@ class VehicleCommands:
         commands.register(m.MAV_CMD_NAV_RETURN_TO_LAUNCH, lambda r: c.return_to_launch(sim_time()))
         commands.register(m.MAV_CMD_DO_SET_MODE, self.set_mode)
         commands.register(m.MAV_CMD_DO_REPOSITION, self.reposition)
+        commands.register(m.MAV_CMD_DO_ORBIT, self.orbit)
         commands.register(m.MAV_CMD_SET_MESSAGE_INTERVAL, self.message_interval)
         commands.register(m.MAV_CMD_GET_MESSAGE_INTERVAL, self.get_message_interval)
         commands.register(m.MAV_CMD_REQUEST_MESSAGE, lambda r: self.send_requested(r, int(r.params[0])))
@@ -150,6 +152,52 @@ class VehicleCommands:
         yaw = None if math.isnan(p[3]) else frames.wrap_pi(frames.yaw_from_ned(math.radians(p[3])))
         change_mode = not math.isnan(p[1]) and bool(int(p[1]) & m.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE)
         return commander.reposition(core.sim_time, target, speed, yaw, change_mode)
+
+    def orbit(self, r: CommandRequest) -> Result:
+        """MAV_CMD_DO_ORBIT (PX4's reading): param1 radius (sign: > 0 clockwise), param2 tangential
+        speed, param3 ORBIT_YAW_BEHAVIOUR, param5/6 the centre's latitude/longitude, param7 its
+        altitude AMSL (NaN, or INT32_MAX in COMMAND_INT's x/y: keep, entering the mode: where the
+        vehicle is). COMMAND_LONG, or COMMAND_INT in a global frame (param7 AMSL whatever the frame,
+        as PX4 reads it); a centre out of range, too far (NAV_REF_MAX_DIST) or outside the geofence
+        is DENIED with the reason; the radius's and the speed's limits are the commander's."""
+        core = self.core
+        commander = core.commander
+        p = r.params
+        if r.frame is None:
+            lat, lon = p[4], p[5]
+        elif r.frame in REPOSITION_FRAMES:
+            lat = math.nan if p[4] == INT32_MAX else p[4] * 1e-7
+            lon = math.nan if p[5] == INT32_MAX else p[5] * 1e-7
+        else:
+            return self._refuse(f"orbit refused: frame {r.frame} (global frames only)")
+        if math.isnan(lat) != math.isnan(lon):
+            return self._refuse("orbit refused: the centre's latitude and longitude must both be given")
+        if not (math.isnan(lat) or -90.0 <= lat <= 90.0) or not (math.isnan(lon) or -180.0 <= lon <= 180.0):
+            return self._refuse(f"orbit refused: centre latitude {lat:g}, longitude {lon:g} invalid")
+        if commander.state is None or commander.home is None:
+            return self._refuse("orbit refused: no position")
+        origin = core.setup.sitl.home
+        centre_xy = centre_z = None
+        if not math.isnan(lat):
+            x, y, _ = frames.vector_from_ned(frames.geodetic_to_ned(lat, lon, origin[2], origin))
+            centre_xy = (x, y)
+        if not math.isnan(p[6]):
+            centre_z = p[6] - origin[2]
+        if centre_xy is not None or centre_z is not None:
+            here = commander.state.position_m
+            centre = (*(centre_xy or here[:2]), here[2] if centre_z is None else centre_z)
+            problem = reference_problem(centre, commander.home, core.params.values)
+            problem = problem or commander.target_problem(centre)
+            if problem:
+                return self._refuse(f"orbit refused: centre {problem}")
+        request = OrbitRequest(
+            None if math.isnan(p[0]) else p[0],
+            None if math.isnan(p[1]) else p[1],
+            None if math.isnan(p[2]) else int(p[2]),
+            centre_xy,
+            centre_z,
+        )
+        return commander.orbit_command(core.sim_time, request)
 
     def _refuse(self, reason: str) -> Result:
         """DENIED, with the reason as a STATUSTEXT too (rate-limited per reason)."""

@@ -92,6 +92,30 @@ COMMANDER_PARAMS = (
                           "point (home if none), 3 as 0, 5 closest rally point (land here if none)",
               refused={float(v): why for v, why in RTL_TYPES_REFUSED.items()}),
     ParamSpec("NAV_ACC_RAD", 0.2, 0.01, 20.0, unit="m", description="waypoint acceptance radius"),
+    # Orbit (MAV_CMD_DO_ORBIT, autopilot/guidance/orbit.py) and follow-me (AUTO.FOLLOW_TARGET,
+    # autopilot/guidance/follow.py): PX4's names, defaults and ranges (FLW_TGT_HT, FLW_TGT_DST: PX4 sets
+    # no maximum; here 1000 m).
+    ParamSpec("MC_ORBIT_RAD_MAX", 1000.0, 1.0, 10000.0, unit="m",
+              description="Orbit: largest radius accepted (a larger one is refused)"),
+    ParamSpec("MC_ORBIT_YAW_MOD", 0, 0, 4, kind=INT32,
+              description="Orbit's yaw behaviour until a DO_ORBIT sets one: 0 front to the centre, 1 hold "
+                          "the initial heading, 2 uncontrolled, 3 front tangent to the circle, 4 yaw stick"),
+    ParamSpec("FLW_TGT_HT", 8.0, 8.0, 1000.0, unit="m", description="follow-me: height above the target "
+                                                                   "(FLW_TGT_ALT_M 2) or home (0, 1)"),
+    ParamSpec("FLW_TGT_DST", 8.0, 1.0, 1000.0, unit="m", description="follow-me: horizontal distance to the "
+                                                                    "target"),
+    ParamSpec("FLW_TGT_FA", 180.0, -180.0, 180.0, unit="deg",
+              description="follow-me: angle from the target's course, clockwise (0 in front, 90 right, "
+                          "180 behind)"),
+    ParamSpec("FLW_TGT_ALT_M", 0, 0, 2, kind=INT32,
+              description="follow-me altitude: 0 FLW_TGT_HT above home, 1 above the terrain (flat: as 0), "
+                          "2 FLW_TGT_HT above the target"),
+    ParamSpec("FLW_TGT_MAX_VEL", 5.0, 0.0, 20.0, unit="m/s",
+              description="follow-me: tangential speed at which the vehicle circles the target to a new "
+                          "follow angle"),
+    ParamSpec("FLW_TGT_RS", 0.1, 0.0, 1.0,
+              description="follow-me: the target estimator's responsiveness (lower: follows the reports "
+                          "faster, filters less noise)"),
     ParamSpec(
         "NAV_REF_MAX_DIST",
         1000.0,

@@ -68,6 +68,8 @@ ROUTES: dict[Phase, list[Event]] = {
     P.LANDED: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.LAND, E.TOUCHDOWN],
     P.MANUAL: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.MANUAL],
     P.DESCEND: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.FAILSAFE_DESCEND],
+    P.ORBIT: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.ORBIT],
+    P.FOLLOW: [E.ARM, E.TAKEOFF, E.PLAN_DONE, E.FOLLOW],
 }
 # The estimate a fallback is provoked with (flying on the EKF): its ESTIMATOR_STATUS flags, or None
 # for an estimator that has lost its alignment (no attitude).
@@ -280,3 +282,20 @@ def test_the_table_is_printable() -> None:
     lines = describe().splitlines()
     assert len(lines) == len(TABLE) + 2  # header, rule, one line per row
     assert "| DISARMED | ARM | IDLE | (keep) | arm |" in lines
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("event, name", [(E.ORBIT, "ORBIT"), (E.FOLLOW, "AUTO.FOLLOW_TARGET")])
+def test_orbit_and_follow_need_the_local_position(event: Event, name: str) -> None:
+    """Without a horizontal position (PX4's mode requirements) the switch is refused with the reason;
+    the vehicle stays in the fallback it took (Descend)."""
+    flight = _fly_to(P.HOLD, m.MAV_CMD_NAV_LAND)
+    flight.on_ekf = True
+    flight.step()
+    flight.step_until(lambda: flight.height > 0.5, seconds=10.0)
+    flight.ekf_flags = NO_HORIZONTAL
+    flight.step_until(lambda: flight.c.phase == P.DESCEND, seconds=2.0)
+    outcome = flight.c._fire(flight.t, event)
+    assert not outcome.accepted
+    assert outcome.reason.startswith(f"Switching to {name} is currently not possible: no ")
+    assert flight.c.phase == P.DESCEND

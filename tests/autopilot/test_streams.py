@@ -65,8 +65,11 @@ def test_every_message_a_client_can_request_is_served_at_its_rate_or_refused():
             refused[msg_id] = result
     assert granted == set(telemetry.STREAMS) - {m.MAVLINK_MSG_ID_ESTIMATOR_STATUS}
     got = count_for(gcs, 2.0)
-    rates = {m.mavlink_map[i].msgname: len(got.get(i, [])) for i in granted}
+    # (sent only while orbiting: granted, and nothing comes while the vehicle holds)
+    orbiting = {i for i in granted if telemetry.STREAMS[i].needs == telemetry.ORBITING}
+    rates = {m.mavlink_map[i].msgname: len(got.get(i, [])) for i in granted - orbiting}
     assert all(abs(n - 20) <= 1 for n in rates.values()), rates
+    assert orbiting and not any(i in got for i in orbiting)
     assert m.MAVLINK_MSG_ID_ESTIMATOR_STATUS not in got  # refused: nothing comes
 
     answered = {}
@@ -79,7 +82,8 @@ def test_every_message_a_client_can_request_is_served_at_its_rate_or_refused():
             assert result in REFUSED, (msg_id, result)
             assert after is None or after.get_msgId() != msg_id, msg_id
     served = {i for i, result in answered.items() if result == m.MAV_RESULT_ACCEPTED}
-    assert served == granted | {m.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
+    assert served == (granted - orbiting) | {m.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
+    assert all(answered[i] == m.MAV_RESULT_DENIED for i in orbiting)  # nothing to report while holding
     assert answered[m.MAVLINK_MSG_ID_ESTIMATOR_STATUS] == m.MAV_RESULT_DENIED
     assert answered[99_999] == m.MAV_RESULT_UNSUPPORTED
     assert not stack.autopilot.faults.counts

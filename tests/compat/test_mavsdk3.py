@@ -3,7 +3,8 @@ SITL: the flows of ``mavsdk3_flows.py`` (what MAVSDK-Python's examples do: telem
 the geofence example (a polygon and the "no circle" circle), a geofence upload, a QGC .plan with
 rally points, takeoff, a mission with gimbal and camera items, goto, offboard position and
 velocity, mission_raw, manual control, land, the manual control example and the loss of its
-sticks), in sequence against one vehicle.
+sticks), in sequence against one vehicle; and upstream's own examples unchanged (``upstream/``):
+the log download, follow-me and orbit.
 
 MAVSDK-Python 3 starts a ``mavsdk_server`` that listens for gRPC on every interface (a fixed port), so
 the test runs it and the vehicle (``quadsitl up``, default instance 0 on the shipped default ports
@@ -35,6 +36,12 @@ CLIENT = REPO / ".venv-mavsdk3" / "bin" / "python"
 FLOWS = Path(__file__).with_name("mavsdk3_flows.py")
 QUADSITL = f"{shlex.quote(sys.executable)} -m sitl.cli"  # quadsitl, from this checkout
 WALL_LIMIT_S = 240
+# MAVSDK-Python 3.15.3's examples/follow_me_example.py and examples/do_orbit.py, byte for byte.
+FOLLOW_EXAMPLE = Path(__file__).with_name("upstream") / "follow_me_example.py"
+FOLLOW_EXAMPLE_BLOB = "3ec694085cbda5410b6a731748211412511b384b"  # its git blob id at tag 3.15.3
+ORBIT_EXAMPLE = Path(__file__).with_name("upstream") / "do_orbit.py"
+ORBIT_EXAMPLE_BLOB = "d824308bd682c21deb9d1bba4595e48fb3777670"
+ORBIT_FOLLOW_LIMIT_S = 150  # the examples sleep 27 s and 70 s of wall time
 
 INSIDE = """
 set -u
@@ -45,6 +52,25 @@ timeout {limit} "{client}" "{flows}" udpin://0.0.0.0:14540
 rc=$?
 kill -INT $up 2>/dev/null; wait $up
 exit $rc
+"""
+
+
+# Both examples on one vehicle at the wall clock's pace (they sleep in wall seconds, as against PX4
+# SITL): follow-me first (it ends landing), then, once the vehicle has landed and disarmed, the orbit
+# (it ends with a return to launch, left to fly when the script leaves).
+INSIDE_ORBIT_FOLLOW = """
+set -u
+ip link set lo up
+{quadsitl} up --speed 1 --no-log > "{log}" 2>&1 &
+up=$!
+timeout {limit} "{client}" "{follow}"
+follow=$?
+for i in $(seq 120); do grep -q "landed: disarmed" "{log}" && break; sleep 0.25; done
+timeout {limit} "{client}" "{orbit}"
+orbit=$?
+kill -INT $up 2>/dev/null; wait $up
+echo "exit codes: follow $follow orbit $orbit"
+exit $((follow || orbit))
 """
 
 
@@ -219,3 +245,34 @@ def test_mavsdk_python3s_own_log_ftp_imu_and_shell_examples_run(tmp_path, flight
     # commands run in test_mavsdk.py::test_log_files_ftp_and_shell).
     shell, status = sections["shell"]
     assert status == 0 and shell.endswith("-- Connected to drone!\nnsh> "), detail
+
+
+@pytest.mark.timeout(ORBIT_FOLLOW_LIMIT_S + 60)
+def test_mavsdk_python3s_own_follow_me_and_orbit_examples_run_unchanged(tmp_path):
+    """``examples/follow_me_example.py`` and ``examples/do_orbit.py`` of MAVSDK-Python 3.15.3,
+    unchanged, against one vehicle: every call they make succeeds (the FLW_TGT_* configuration,
+    AUTO.FOLLOW_TARGET, the target reports, DO_ORBIT, the return), and the vehicle says it flew them.
+    What the orbit and follow-me fly is checked in simulation time (tests/sitl/test_orbit_follow.py)."""
+    why = _namespaces_available()
+    if why:
+        pytest.skip(f"MAVSDK-Python 3 needs a loopback-only network namespace for its mavsdk_server: {why}")
+    assert CLIENT.exists(), "no .venv-mavsdk3: run `make .venv-mavsdk3` (make test does)"
+    assert _git_blob_id(FOLLOW_EXAMPLE) == FOLLOW_EXAMPLE_BLOB, "the example is not upstream's text"
+    assert _git_blob_id(ORBIT_EXAMPLE) == ORBIT_EXAMPLE_BLOB, "the example is not upstream's text"
+    up_log = tmp_path / "up.log"
+    each = ORBIT_FOLLOW_LIMIT_S // 2 + 20
+    script = INSIDE_ORBIT_FOLLOW.format(quadsitl=QUADSITL, log=up_log, limit=each, client=CLIENT,
+                                        follow=FOLLOW_EXAMPLE, orbit=ORBIT_EXAMPLE)  # fmt: skip
+    result = subprocess.run(["unshare", "-n", "bash", "-c", script], capture_output=True, text=True,
+                            timeout=ORBIT_FOLLOW_LIMIT_S + 30, cwd=REPO,
+                            env=shipped_ports_environment())  # fmt: skip
+    full_log = up_log.read_text() if up_log.exists() else ""
+    detail = (f"rc {result.returncode}\n{result.stdout[-3000:]}\n{result.stderr[-2000:]}\n--- quadsitl up:\n"
+              f"{full_log[-4000:]}")  # fmt: skip
+    assert result.returncode == 0, detail
+    assert "-- Stopping Follow Me Mode" in result.stdout and "--- Landing" in result.stdout, detail
+    for said in ("mode AUTO.FOLLOW_TARGET", "follow-me: target found, following", "landed: disarmed",
+                 "mode ORBIT", "orbit: radius 10.0 m clockwise at 2.0 m/s, yaw front to the centre",
+                 "mode AUTO.RTL"):  # fmt: skip
+        assert said in full_log, (said, detail)
+    assert "refused" not in full_log, detail
