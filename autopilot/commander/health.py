@@ -340,7 +340,11 @@ def _moved(sensor: str, then: Pose, now: Pose) -> bool:
         return abs(p1[2] - p0[2]) > MOVED_HEIGHT_M
     if sensor == "mag":
         return angle > MOVED_ANGLE_RAD
-    if sensor in ("gyro", "accel"):
+    if sensor == "accel":  # the specific force turns with the tilt, not with the heading
+        tilt = max(abs(math.remainder(e0[0] - e1[0], 2.0 * math.pi)),
+                   abs(math.remainder(e0[1] - e1[1], 2.0 * math.pi)))  # fmt: skip
+        return tilt > MOVED_ANGLE_RAD or dv > MOVED_SPEED_M_S
+    if sensor == "gyro":
         return angle > MOVED_ANGLE_RAD or dv > MOVED_SPEED_M_S
     if sensor == "gps":
         return math.hypot(p1[0] - p0[0], p1[1] - p0[1]) > MOVED_HORIZONTAL_M or dv > MOVED_SPEED_M_S
