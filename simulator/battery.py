@@ -51,8 +51,10 @@ its armed time; at a report the charge steps with the interval's mean power. Det
 not the pack:
 
 * ``OK``: the monitor reports the pack again;
-* ``OFF``: the pack reads empty, its cells at the empty voltage (as PX4's battery simulator
-  takes ``off``): the autopilot's low-battery failsafes follow;
+* ``OFF``: the pack reads empty, its cells at the empty voltage and no current measured (as PX4's
+  battery simulator takes ``off``: it has no current sensor, so no load correction lifts the
+  reading back up): the autopilot's estimate falls within seconds and its low-battery failsafes
+  follow;
 * ``STUCK``: the monitor repeats the reading it had when the failure came;
 * ``GARBAGE``: the monitor's readings are not numbers (a broken converter): they cross the wire
   as MAVLink's "unknown", which the autopilot refuses, so it hears no battery;
@@ -234,7 +236,7 @@ class BatteryModel:
         if failure == FAILURE_OK:
             return BatteryReading(truth.terminal_v, current)
         if failure == FAILURE_OFF:
-            return BatteryReading(self.cells * self.config.empty_cell_v, current)
+            return BatteryReading(self.cells * self.config.empty_cell_v, math.nan)
         if failure == FAILURE_STUCK:
             assert self._stuck is not None
             return self._stuck

@@ -178,7 +178,7 @@ def test_injected_failures_change_the_report_not_the_pack():
     ok = fly(bm, 1.0, truth(HOVER_N))[-1][1]
     assert bm.inject_failure(m.FAILURE_TYPE_OFF)
     off = fly(bm, 1.0, truth(HOVER_N), t0=1.0)[-1][1]
-    assert off.voltage_v == pytest.approx(3 * 3.6) and off.current_a == pytest.approx(ok.current_a, rel=0.02)
+    assert off.voltage_v == pytest.approx(3 * 3.6) and math.isnan(off.current_a) and ok.current_a > 1.0
     assert bm.truth.terminal_v > 11.0  # the pack itself is fine
     assert bm.inject_failure(m.FAILURE_TYPE_OK)
     assert bm.inject_failure(m.FAILURE_TYPE_STUCK)
