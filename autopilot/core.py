@@ -89,7 +89,7 @@ from .mavlink.hil import (
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.manual import decode_sticks
-from .mavlink.offboard import decode_setpoint
+from .mavlink.offboard import decode_attitude_target, decode_setpoint
 from .mavlink.params import ParamService
 from .mavlink.shell import MavlinkShell
 from .mavlink.signing import Signing, SigningOptions
@@ -308,6 +308,7 @@ class AutopilotCore:
         d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
         d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
         d[m.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED] = self._on_setpoint
+        d[m.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET] = self._on_attitude_target
         d[m.MAVLINK_MSG_ID_MANUAL_CONTROL] = self._on_manual_control
         d[m.MAVLINK_MSG_ID_FOLLOW_TARGET] = self._on_follow_target
         d[m.MAVLINK_MSG_ID_SET_MODE] = self._on_set_mode_message
@@ -846,6 +847,16 @@ class AutopilotCore:
             setpoint = None if reason else setpoint
         if setpoint is None:
             self.refusals(f"setpoint refused: {reason}")
+            return
+        self.commander.offboard_setpoint(setpoint)
+
+    def _on_attitude_target(self, msg, link: GcsLink, address: Address) -> None:
+        """SET_ATTITUDE_TARGET: offboard attitude or body rates with a collective thrust."""
+        if not self._for_us(msg) or msg.target_component not in (0, wire.AUTOPILOT_COMPONENT_ID):
+            return
+        setpoint, reason = decode_attitude_target(msg, self.sim_time)
+        if setpoint is None:
+            self.refusals(f"attitude target refused: {reason}")
             return
         self.commander.offboard_setpoint(setpoint)
 

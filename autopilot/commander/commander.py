@@ -38,7 +38,7 @@ from ..battery.estimator import BatteryStatus
 from ..estimation.status import EstimatorStatus
 from ..guidance.follow import FollowSettings, FollowTarget, TargetReport
 from ..guidance.manual import ManualGuidance, ManualLimits, ManualSetpoint
-from ..guidance.offboard import OffboardGuidance, OffboardSetpoint
+from ..guidance.offboard import AttitudeSetpoint, OffboardGuidance, OffboardSetpoint
 from ..guidance.orbit import (
     SPEED_MAX_M_S,
     YAW_NAMES,
@@ -637,7 +637,9 @@ class Commander:
         limits = self._manual_limits
         self.sticks.receive(sticks, limits.loss_s, limits.override_speed)
 
-    def offboard_setpoint(self, setpoint: OffboardSetpoint) -> None:
+    def offboard_setpoint(self, setpoint: OffboardSetpoint | AttitudeSetpoint) -> None:
+        """A setpoint of the offboard stream (position/velocity/acceleration, or attitude/body rates
+        with a thrust): flown in OFFBOARD, and what keeps the stream alive (COM_OF_LOSS_T)."""
         self.offboard.update(setpoint)
         times = self._setpoint_times
         times.append(setpoint.time_s)
@@ -876,6 +878,13 @@ class Commander:
                     self._fire(t, Event.OFFBOARD_LOST)
                     self._event(SEVERITY_WARNING, "offboard setpoints lost: switching to hold")
                     return None
+            if self.offboard.flies_attitude:  # attitude or body rates: past the position law
+                setpoint = self.offboard.attitude_step(dt, state, self._manual_limits)
+                self.last_reference = setpoint.reference
+                lifts = (setpoint.thrust or 0.0) >= self._manual_limits.thrust_hover
+                if self._near_ground(state) and not lifts:  # idle on the ground (no integrator wind-up)
+                    return GuidanceOutput(Motors.IDLE, setpoint.reference)
+                return GuidanceOutput(Motors.FLY, setpoint.reference, setpoint)
             previous = self.last_reference or _at_rest(state)
             reference = self.offboard.reference(t, dt, previous)
             if self.offboard.setpoint is None:

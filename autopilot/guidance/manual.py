@@ -107,6 +107,25 @@ class ManualSetpoint(NamedTuple):
         return self.roll_pitch is not None or self.attitude is not None or self.thrust is not None
 
 
+def integrate_body_rates(
+    eta: Vector3, omega: Vector3, dt: float, tilt_limit: float
+) -> tuple[Vector3, Vector3]:
+    """One step of an attitude reference flown by body rates (ACRO's sticks, an offboard client's
+    ``SET_ATTITUDE_TARGET`` rates): the ZYX Euler angles ``eta`` (rad) moved by the body rates
+    ``omega`` (rad/s, FLU) over ``dt``, and the Euler rates that move them (the feed-forward).
+    Roll and pitch stay within ``tilt_limit`` (rad): the rate on that axis stops at the limit, so
+    the reference never reaches the Euler singularity at 90 degrees of pitch (no flips)."""
+    phi, theta, psi = eta
+    rates = list(euler_rates_from_body_rates(phi, theta, omega))
+    angles = [phi + rates[0] * dt, theta + rates[1] * dt]
+    for i in range(2):
+        if abs(angles[i]) > tilt_limit:
+            angles[i] = math.copysign(tilt_limit, angles[i])
+            rates[i] = 0.0
+    psi = math.remainder(psi + rates[2] * dt, 2.0 * math.pi)
+    return (angles[0], angles[1], psi), (rates[0], rates[1], rates[2])
+
+
 def _thrust(up: float, limits: ManualLimits) -> float:
     lim = limits
     return throttle_curve(up, lim.thrust_hover, lim.thrust_min, lim.thrust_max, lim.thrust_rescale)
@@ -253,17 +272,9 @@ class ManualGuidance:
             acro_rate(s.forward, pitch_max, limits.acro_expo, limits.acro_super_expo),
             acro_rate(s.yaw, yaw_max, limits.acro_expo_yaw, limits.acro_super_expo_yaw),
         )
-        phi, theta, psi = self._acro_attitude if self._acro_attitude is not None else state.euler_rad
-        rates = list(euler_rates_from_body_rates(phi, theta, omega))
-        angles = [phi + rates[0] * dt, theta + rates[1] * dt]
-        limit = limits.acro_tilt
-        for i in range(2):
-            if abs(angles[i]) > limit:  # no flips: the rate stops at the limit
-                angles[i] = math.copysign(limit, angles[i])
-                rates[i] = 0.0
-        psi = math.remainder(psi + rates[2] * dt, 2.0 * math.pi)
-        eta = (angles[0], angles[1], psi)
+        start = self._acro_attitude if self._acro_attitude is not None else state.euler_rad
+        eta, rates = integrate_body_rates(start, omega, dt, limits.acro_tilt)
         self._acro_attitude = eta
+        psi = eta[2]
         reference = Reference(state.position_m, state.velocity_m_s, ZERO3, psi, rates[2], 0.0)
-        return ManualSetpoint(reference, attitude=(eta, (rates[0], rates[1], rates[2]), ZERO3),
-                              thrust=_thrust(s.up, limits))  # fmt: skip
+        return ManualSetpoint(reference, attitude=(eta, rates, ZERO3), thrust=_thrust(s.up, limits))

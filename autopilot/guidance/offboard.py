@@ -16,6 +16,13 @@ MAVLink edge (:mod:`autopilot.mavlink.offboard`):
   a planned transition an absolute yaw is reached the shorter way round at the planner's yaw rate
   limit, never in one step.
 
+Attitude and body-rate targets (``SET_ATTITUDE_TARGET``, PX4's offboard attitude and rate
+control) bypass the position law as ACRO does: :meth:`OffboardGuidance.attitude_step` gives the
+cascade the whole attitude reference and the collective thrust (a :class:`~.manual.ManualSetpoint`),
+the attitude as sent, or the one the body rates integrate (:func:`~.manual.integrate_body_rates`,
+ACRO's own step); the translational law keeps running on the measured state, so its integrals
+neither wind up nor jump when position setpoints come back.
+
 Bounded whatever arrives (PX4 does the same in its position controller): feedforward velocities
 are limited to ``MPC_XY_VEL_MAX`` / ``MPC_Z_VEL_MAX_UP`` / ``MPC_Z_VEL_MAX_DN`` and accelerations to
 ``MPC_ACC_HOR``; a trajectory sample more than :data:`JUMP_M` from the reference flown so far is
@@ -32,6 +39,7 @@ from dataclasses import dataclass
 
 from quadcommon.trajectories import Reference, Trajectory
 
+from .manual import ManualLimits, ManualSetpoint, MeasuredState, integrate_body_rates
 from .planner import Limits, transition
 
 Vector3 = tuple[float, float, float]
@@ -52,28 +60,85 @@ class OffboardSetpoint:
     yaw_rate: float | None = None
 
 
+@dataclass(frozen=True)
+class AttitudeSetpoint:
+    """One decoded attitude or body-rate target (``SET_ATTITUDE_TARGET``), paper frames.
+
+    Exactly one of ``attitude`` (ZYX Euler angles, rad) and ``body_rates`` (rad/s, body FLU) is
+    given (bounded when flown: :meth:`OffboardGuidance.attitude_step`); ``thrust`` is the
+    collective thrust as a fraction of the maximum (0..1), None when the target leaves it out (the
+    last one given is kept)."""
+
+    time_s: float  # simulation time of arrival
+    attitude: Vector3 | None = None
+    body_rates: Vector3 | None = None
+    thrust: float | None = None
+
+
 class OffboardGuidance:
+    """OFFBOARD's state between control steps: the last setpoint, a planned transition, the
+    attitude that body rates integrate, the collective thrust last given."""
+
     def __init__(self, limits: Limits) -> None:
         self.limits = limits
-        self.setpoint: OffboardSetpoint | None = None
+        self.setpoint: OffboardSetpoint | AttitudeSetpoint | None = None
+        self._rate_attitude: Vector3 | None = None
+        self.thrust: float | None = None  # the last collective thrust given (fraction of the maximum)
         self._target: tuple[Vector3, float] | None = None
         self._plan: Trajectory | None = None
         self._plan_start = 0.0
         self._joining = False  # joining a trajectory stream that started too far away
 
-    def update(self, setpoint: OffboardSetpoint) -> None:
+    def update(self, setpoint: OffboardSetpoint | AttitudeSetpoint) -> None:
+        """The latest setpoint received (it replaces the one before, of either kind)."""
+        if isinstance(setpoint, AttitudeSetpoint):
+            if setpoint.body_rates is None or not isinstance(self.setpoint, AttitudeSetpoint):
+                self._rate_attitude = None  # rates integrate from the attitude flown when they start
+            if setpoint.thrust is not None:
+                self.thrust = setpoint.thrust
         self.setpoint = setpoint
+
+    @property
+    def flies_attitude(self) -> bool:
+        """Whether the setpoint flown is an attitude or body-rate target."""
+        return isinstance(self.setpoint, AttitudeSetpoint)
 
     def reset(self) -> None:
         """Forget the plan (entering offboard again starts from the current reference)."""
         self._target = None
         self._plan = None
         self._joining = False
+        self._rate_attitude = None
+
+    def attitude_step(self, dt: float, state: MeasuredState, limits: ManualLimits) -> ManualSetpoint:
+        """One control step on an attitude or body-rate target: the attitude reference and the
+        collective thrust (the last given; ``MPC_THR_HOVER`` until one is). Bounded as ACRO is:
+        roll and pitch within ``ACRO_TILT_LIM`` (no flips: the Euler angles the attitude law tracks
+        are singular at 90 degrees of pitch), body rates within ``MC_ACRO_R/P/Y_MAX``, integrated
+        as ACRO integrates its sticks. The translational law gets the measured state as its
+        reference (no position error to fight)."""
+        sp = self.setpoint
+        assert isinstance(sp, AttitudeSetpoint)
+        thrust = self.thrust if self.thrust is not None else limits.thrust_hover
+        tilt = limits.acro_tilt
+        if sp.attitude is not None:
+            phi, theta, psi = sp.attitude
+            eta = (min(max(phi, -tilt), tilt), min(max(theta, -tilt), tilt), psi)
+            rates = ZERO3
+        else:
+            assert sp.body_rates is not None
+            omega = tuple(min(max(w, -w_max), w_max) for w, w_max in zip(sp.body_rates, limits.acro_rates,
+                                                                          strict=True))  # fmt: skip
+            start = self._rate_attitude if self._rate_attitude is not None else state.euler_rad
+            eta, rates = integrate_body_rates(start, omega, dt, tilt)  # type: ignore[arg-type]
+            self._rate_attitude = eta
+        reference = Reference(state.position_m, state.velocity_m_s, ZERO3, eta[2], rates[2], 0.0)
+        return ManualSetpoint(reference, attitude=(eta, rates, ZERO3), thrust=thrust)
 
     def reference(self, t: float, dt: float, previous: Reference) -> Reference:
         """The reference at time ``t``, continuing from ``previous`` (the last step's)."""
         sp = self.setpoint
-        if sp is None:
+        if sp is None or isinstance(sp, AttitudeSetpoint):
             return Reference(previous.position_m, ZERO3, ZERO3, previous.yaw_rad, 0.0, 0.0)
         yaw, yaw_rate = previous.yaw_rad, 0.0
         if sp.yaw is not None:  # (a planned transition turns to it; other references slew to it)

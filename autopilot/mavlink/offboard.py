@@ -1,4 +1,9 @@
-"""SET_POSITION_TARGET_LOCAL_NED -> OffboardSetpoint in the paper's frames (PX4 semantics).
+"""Offboard setpoints from the wire in the paper's frames (PX4 semantics).
+
+SET_POSITION_TARGET_LOCAL_NED -> :class:`OffboardSetpoint` (:func:`decode_setpoint`);
+SET_ATTITUDE_TARGET -> :class:`AttitudeSetpoint` (:func:`decode_attitude_target`).
+
+SET_POSITION_TARGET_LOCAL_NED:
 
 type_mask bits (POSITION_TARGET_TYPEMASK): 1/2/4 ignore x/y/z position, 8/16/32 velocity,
 64/128/256 acceleration, 1024 yaw, 2048 yaw rate (512 force: refused). A group is used when any
@@ -15,8 +20,9 @@ from __future__ import annotations
 import math
 
 from quadcommon import frames
+from quadcommon.rigid_body import euler_from_quaternion
 
-from ..guidance.offboard import OffboardSetpoint
+from ..guidance.offboard import AttitudeSetpoint, OffboardSetpoint
 from .codec import mavlink
 
 _POS, _VEL, _ACC = (1, 2, 4), (8, 16, 32), (64, 128, 256)
@@ -94,3 +100,43 @@ def sample_time(time_boot_ms: int, t: float) -> float:
     """
     stamped = time_boot_ms * 1e-3
     return stamped if t - 0.5 <= stamped <= t + 0.05 else t
+
+
+# SET_ATTITUDE_TARGET type_mask (ATTITUDE_TARGET_TYPEMASK), as PX4's receiver reads it.
+_ROLL_RATE_IGNORE, _PITCH_RATE_IGNORE, _YAW_RATE_IGNORE_ATT = 1, 2, 4
+_THRUST_IGNORE, _ATTITUDE_IGNORE = 64, 128
+QUATERNION_NORM_TOLERANCE = 0.1  # |q| within 1 +- this is normalised; beyond, refused
+
+
+def decode_attitude_target(msg, t: float) -> tuple[AttitudeSetpoint | None, str]:
+    """``SET_ATTITUDE_TARGET`` -> (setpoint, "") or (None, reason), as PX4's receiver reads it:
+    the attitude ``q`` (NED/FRD, w x y z) unless ``type_mask`` bit 128 ignores it; otherwise the body
+    rates when roll and pitch rates are both used (the yaw rate reads 0 when bit 4 ignores it);
+    the collective thrust (0..1, clamped) unless bit 64 ignores it. Refused: a non-finite value in
+    a used field, a quaternion whose norm is not within :data:`QUATERNION_NORM_TOLERANCE` of 1 (a
+    near-unit one is normalised), a mask that leaves neither the attitude nor the body rates.
+    (PX4 builds its setpoint from whatever arrives; refusing keeps a zero quaternion out of the
+    attitude law.)"""
+    mask = msg.type_mask
+    thrust = None
+    if not mask & _THRUST_IGNORE:
+        value = float(msg.thrust)
+        if not math.isfinite(value):
+            return None, "non-finite thrust"
+        thrust = min(max(value, 0.0), 1.0)
+    if not mask & _ATTITUDE_IGNORE:
+        q = tuple(float(v) for v in msg.q)
+        if not all(math.isfinite(v) for v in q):
+            return None, "non-finite attitude quaternion"
+        norm = math.sqrt(sum(v * v for v in q))
+        if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+            return None, f"attitude quaternion is not a unit quaternion (|q| = {norm:.3g})"
+        w, x, y, z = frames.quaternion_from_ned(tuple(v / norm for v in q))  # type: ignore[arg-type]
+        return AttitudeSetpoint(t, attitude=euler_from_quaternion(w, x, y, z), thrust=thrust), ""
+    if mask & _ROLL_RATE_IGNORE or mask & _PITCH_RATE_IGNORE:
+        return None, "type_mask ignores the attitude and the roll or pitch rate"
+    yaw_rate = 0.0 if mask & _YAW_RATE_IGNORE_ATT else float(msg.body_yaw_rate)
+    rates_frd = (float(msg.body_roll_rate), float(msg.body_pitch_rate), yaw_rate)
+    if not all(math.isfinite(v) for v in rates_frd):
+        return None, "non-finite body rate"
+    return AttitudeSetpoint(t, body_rates=frames.vector_from_ned(rates_frd), thrust=thrust), ""

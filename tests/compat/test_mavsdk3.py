@@ -41,7 +41,9 @@ FOLLOW_EXAMPLE = Path(__file__).with_name("upstream") / "follow_me_example.py"
 FOLLOW_EXAMPLE_BLOB = "3ec694085cbda5410b6a731748211412511b384b"  # its git blob id at tag 3.15.3
 ORBIT_EXAMPLE = Path(__file__).with_name("upstream") / "do_orbit.py"
 ORBIT_EXAMPLE_BLOB = "d824308bd682c21deb9d1bba4595e48fb3777670"
-ORBIT_FOLLOW_LIMIT_S = 150  # the examples sleep 27 s and 70 s of wall time
+ATTITUDE_EXAMPLE = Path(__file__).with_name("upstream") / "offboard_attitude.py"
+ATTITUDE_EXAMPLE_BLOB = "b1ca62589ed4ef4035533cfbbe30a2dfef12ec4f"
+ORBIT_FOLLOW_LIMIT_S = 170  # the examples sleep 27 s, 70 s and 8 s of wall time
 
 INSIDE = """
 set -u
@@ -55,9 +57,10 @@ exit $rc
 """
 
 
-# Both examples on one vehicle at the wall clock's pace (they sleep in wall seconds, as against PX4
-# SITL): follow-me first (it ends landing), then, once the vehicle has landed and disarmed, the orbit
-# (it ends with a return to launch, left to fly when the script leaves).
+# The three examples on one vehicle at the wall clock's pace (they sleep in wall seconds, as against
+# PX4 SITL): follow-me first (it ends landing), then, once the vehicle has landed and disarmed, the
+# orbit (it ends with a return to launch, left to fly when the script leaves), then offboard attitude
+# (taken over in the air: its arm is answered "already armed", its sequence then flown whole).
 INSIDE_ORBIT_FOLLOW = """
 set -u
 ip link set lo up
@@ -68,9 +71,11 @@ follow=$?
 for i in $(seq 120); do grep -q "landed: disarmed" "{log}" && break; sleep 0.25; done
 timeout {limit} "{client}" "{orbit}"
 orbit=$?
+timeout {limit} "{client}" "{attitude}"
+attitude=$?
 kill -INT $up 2>/dev/null; wait $up
-echo "exit codes: follow $follow orbit $orbit"
-exit $((follow || orbit))
+echo "exit codes: follow $follow orbit $orbit attitude $attitude"
+exit $((follow || orbit || attitude))
 """
 
 
@@ -248,21 +253,25 @@ def test_mavsdk_python3s_own_log_ftp_imu_and_shell_examples_run(tmp_path, flight
 
 
 @pytest.mark.timeout(ORBIT_FOLLOW_LIMIT_S + 60)
-def test_mavsdk_python3s_own_follow_me_and_orbit_examples_run_unchanged(tmp_path):
-    """``examples/follow_me_example.py`` and ``examples/do_orbit.py`` of MAVSDK-Python 3.15.3,
-    unchanged, against one vehicle: every call they make succeeds (the FLW_TGT_* configuration,
-    AUTO.FOLLOW_TARGET, the target reports, DO_ORBIT, the return), and the vehicle says it flew them.
-    What the orbit and follow-me fly is checked in simulation time (tests/sitl/test_orbit_follow.py)."""
+def test_mavsdk_python3s_own_follow_me_orbit_and_offboard_attitude_examples_run_unchanged(tmp_path):
+    """``examples/follow_me_example.py``, ``examples/do_orbit.py`` and
+    ``examples/offboard_attitude.py`` of MAVSDK-Python 3.15.3, unchanged, against one vehicle: every
+    call they make succeeds (the FLW_TGT_* configuration, AUTO.FOLLOW_TARGET, the target reports,
+    DO_ORBIT, the return, OFFBOARD on SET_ATTITUDE_TARGET and its stop), and the vehicle says it flew
+    them. What they fly is checked in simulation time (tests/sitl/test_orbit_follow.py,
+    tests/autopilot/test_offboard_attitude.py)."""
     why = _namespaces_available()
     if why:
         pytest.skip(f"MAVSDK-Python 3 needs a loopback-only network namespace for its mavsdk_server: {why}")
     assert CLIENT.exists(), "no .venv-mavsdk3: run `make .venv-mavsdk3` (make test does)"
     assert _git_blob_id(FOLLOW_EXAMPLE) == FOLLOW_EXAMPLE_BLOB, "the example is not upstream's text"
     assert _git_blob_id(ORBIT_EXAMPLE) == ORBIT_EXAMPLE_BLOB, "the example is not upstream's text"
+    assert _git_blob_id(ATTITUDE_EXAMPLE) == ATTITUDE_EXAMPLE_BLOB, "the example is not upstream's text"
     up_log = tmp_path / "up.log"
-    each = ORBIT_FOLLOW_LIMIT_S // 2 + 20
+    each = ORBIT_FOLLOW_LIMIT_S // 2 + 10
     script = INSIDE_ORBIT_FOLLOW.format(quadsitl=QUADSITL, log=up_log, limit=each, client=CLIENT,
-                                        follow=FOLLOW_EXAMPLE, orbit=ORBIT_EXAMPLE)  # fmt: skip
+                                        follow=FOLLOW_EXAMPLE, orbit=ORBIT_EXAMPLE,
+                                        attitude=ATTITUDE_EXAMPLE)  # fmt: skip
     result = subprocess.run(["unshare", "-n", "bash", "-c", script], capture_output=True, text=True,
                             timeout=ORBIT_FOLLOW_LIMIT_S + 30, cwd=REPO,
                             env=shipped_ports_environment())  # fmt: skip
@@ -271,8 +280,10 @@ def test_mavsdk_python3s_own_follow_me_and_orbit_examples_run_unchanged(tmp_path
               f"{full_log[-4000:]}")  # fmt: skip
     assert result.returncode == 0, detail
     assert "-- Stopping Follow Me Mode" in result.stdout and "--- Landing" in result.stdout, detail
+    assert "-- Hover at 60% thrust" in result.stdout and "failed with error code" not in result.stdout, detail
     for said in ("mode AUTO.FOLLOW_TARGET", "follow-me: target found, following", "landed: disarmed",
                  "mode ORBIT", "orbit: radius 10.0 m clockwise at 2.0 m/s, yaw front to the centre",
-                 "mode AUTO.RTL"):  # fmt: skip
+                 "mode AUTO.RTL", "mode OFFBOARD"):  # fmt: skip
         assert said in full_log, (said, detail)
+    assert "mode AUTO.LAND" in full_log[full_log.rindex("mode OFFBOARD"):], detail  # its stop, then land
     assert "refused" not in full_log, detail
