@@ -484,7 +484,6 @@ class AutopilotCore:
         samples = frame.sensors
         if samples is None and frame.streams and commander.health.wants_samples(t, frame.streams):
             samples = self._sensor_samples(frame.parts)
-        commander.observe_sensors(t, samples, frame.streams)
         if samples is not None and samples.gps is not None:
             self._status.gps = samples.gps  # GPS_RAW_INT reports the receiver's last sample
         if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:
@@ -498,6 +497,8 @@ class AutopilotCore:
             commander.update_state(
                 VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
             )
+        # After the state: a sensor's value that starts repeating is paired with this frame's pose.
+        commander.observe_sensors(t, samples, frame.streams)
         self._battery_step(t, frame.parts)
         if self.frames == 0:
             self._forward_simulator_parameters()

@@ -344,8 +344,8 @@ def _moved(sensor: str, then: Pose, now: Pose) -> bool:
         tilt = max(abs(math.remainder(e0[0] - e1[0], 2.0 * math.pi)),
                    abs(math.remainder(e0[1] - e1[1], 2.0 * math.pi)))  # fmt: skip
         return tilt > MOVED_ANGLE_RAD or dv > MOVED_SPEED_M_S
-    if sensor == "gyro":
-        return angle > MOVED_ANGLE_RAD or dv > MOVED_SPEED_M_S
+    if sensor == "gyro":  # (a translation leaves the body rates at zero)
+        return angle > MOVED_ANGLE_RAD
     if sensor == "gps":
         return math.hypot(p1[0] - p0[0], p1[1] - p0[1]) > MOVED_HORIZONTAL_M or dv > MOVED_SPEED_M_S
     return math.dist(p0, p1) > MOVED_HEIGHT_M or angle > MOVED_ANGLE_RAD  # vision
