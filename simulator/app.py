@@ -80,6 +80,7 @@ class Simulator:
         self._outage_wall = 0.0
 
     def log(self, text: str) -> None:
+        """Print ``text`` as the simulator's own line of the launcher's log."""
         print(f"simulator: {text}", flush=True)
 
     def open(self) -> None:
@@ -281,6 +282,8 @@ class Simulator:
         return 0
 
     def summary(self) -> str:
+        """The run in one line for the log at exit: the time reached, frames sent, the work and the
+        wait per frame, the pacer's re-anchors and the frames resent."""
         n = max(self.frames_sent - 1, 1)  # the final frame is not answered
         text = (
             f"stopped at t={self.core.t:.3f} s ({self.frames_sent} frames; per frame "

@@ -152,6 +152,10 @@ class DisturbanceReport:
 
 
 class SimulatorCore:
+    """The plant process's core, without sockets or clocks: the coupled plant, the disturbances,
+    the sensors and the battery, stepped one lockstep frame at a time (:meth:`begin_frame` gives
+    the frame's datagram, :meth:`answer_to_frame` takes the autopilot's answer); time comes in
+    as the frame counter, the shell (:mod:`simulator.app`) paces it."""
     def __init__(self, setup: SimulatorSetup, log: Callable[[str], None] = lambda text: None) -> None:
         self.setup = setup
         self.log = log

@@ -17,11 +17,14 @@ DECADES = 8
 
 
 class LatencyHistogram:
+    """Latencies counted in logarithmic bins (``BINS_PER_DECADE`` per decade from ``LOWEST_S``):
+    constant memory whatever the run's length, quantiles to within a bin."""
     def __init__(self) -> None:
         self.counts = array("q", bytes(8 * (BINS_PER_DECADE * DECADES + 1)))
         self.total = 0
 
     def add(self, seconds: float) -> None:
+        """Count one latency (s); below ``LOWEST_S`` in the first bin, beyond the last decade in the last."""
         index = 0 if seconds <= LOWEST_S else int(BINS_PER_DECADE * math.log10(seconds / LOWEST_S))
         self.counts[min(index, len(self.counts) - 1)] += 1
         self.total += 1

@@ -18,6 +18,9 @@ SLEEP_SLICE_S = 0.05  # sleeps in slices so that a stop request is seen
 
 
 class Pacer:
+    """Paces the lockstep frames on the wall clock at ``speed`` times real time (None: as fast as the
+    CPU allows), re-anchoring after an overrun or an outage rather than catching up, and reporting
+    the rate achieved now and then through ``log``."""
     def __init__(self, speed: float | None, log: Callable[[str], None], running: Callable[[], bool]) -> None:
         self.speed = speed
         self.log = log

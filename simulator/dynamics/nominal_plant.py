@@ -60,6 +60,7 @@ class NominalPlant:
             self.step()
 
     def set_rotor_commands(self, speeds_rad_s: tuple[float, float, float, float]) -> None:
+        """Refused: the nominal plant is actuated by its wrench only (ValueError)."""
         raise ValueError("the nominal plant has no rotors")
 
     def reset(
@@ -69,10 +70,14 @@ class NominalPlant:
         velocity_m_s: Vector3 = ZERO3,
         body_rates_rad_s: Vector3 = ZERO3,
     ) -> None:
+        """Put the body at ``position_m`` (m), ``euler_rad`` (ZYX), with ``velocity_m_s`` (world) and
+        ``body_rates_rad_s`` (FLU; stored as the Euler rates of eq. (3))."""
         eta_dot = euler_rates_from_body_rates(euler_rad[0], euler_rad[1], body_rates_rad_s)
         self.state = [*position_m, *velocity_m_s, *euler_rad, *eta_dot]
 
     def derivative(self, s: list[float]) -> list[float]:
+        """The state's derivative: eq. (2) for the translation, eq. (4) (the Euler-Lagrange form with
+        its inertia and Coriolis matrices) for the rotation, under the held wrench and disturbances."""
         m, g = self.mass, self.gravity
         phi, theta, psi = s[6], s[7], s[8]
         eta = (phi, theta, psi)
@@ -93,6 +98,7 @@ class NominalPlant:
         return [s[3], s[4], s[5], ax, ay, az, *eta_dot, *eta_ddot]
 
     def step(self) -> None:
+        """One RK4 step of ``dt``; on the ground (contact enabled) the body rests level at z = 0."""
         f = self.derivative
         s = self.state
         h = self.dt
@@ -112,13 +118,17 @@ class NominalPlant:
             s[9:12] = [0.0, 0.0, 0.0]
 
     def kinematics(self) -> tuple[Vector3, Vector3, Vector3, Vector3]:
+        """``(position, velocity, euler, euler_rates)``: the paper's state of O (world, ZYX)."""
         s = self.state
         return ((s[0], s[1], s[2]), (s[3], s[4], s[5]), (s[6], s[7], s[8]), (s[9], s[10], s[11]))
 
     def on_ground(self) -> bool:
+        """Resting on the ground: contact enabled, at z = 0 and not moving vertically."""
         return self.ground_contact and self.state[2] <= 1e-9 and abs(self.state[5]) < 1e-9
 
     def truth(self) -> TruthState:
+        """The state as the simulator reports it (:class:`TruthState`): pose, velocities, body rates
+        (eq. (3)), acceleration and the specific force an ideal IMU would read."""
         s = self.state
         ds = self.derivative(s)
         euler = (s[6], s[7], s[8])

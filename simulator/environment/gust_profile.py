@@ -74,6 +74,7 @@ class GustProfile:
 
     @property
     def is_empty(self) -> bool:
+        """True when the profile holds no disturbance at all (no steps, ramps, gusts or turbulence)."""
         return not (self.steps or self.ramps or self.one_minus_cosine or self.dryden)
 
     def event_times(self) -> list[float]:

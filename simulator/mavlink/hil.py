@@ -331,6 +331,9 @@ class RequestDecoder:
                           mavlink.MAVLINK_MSG_ID_PARAM_SET: self._parameter}  # fmt: skip
 
     def decode(self, others: tuple[tuple[int, bytes], ...]) -> list[Request]:
+        """The requests carried by an answer's other frames (``COMMAND_LONG``, ``PARAM_SET``), at most
+        ``wire.MAX_REQUESTS_PER_ANSWER``; anything else, or a request that does not decode, is refused
+        and counted (:meth:`refuse`), never raised."""
         requests: list[Request] = []
         for i, (msg_id, frame) in enumerate(others):
             if i >= wire.MAX_REQUESTS_PER_ANSWER:
@@ -383,6 +386,7 @@ class RequestDecoder:
 
     @property
     def refused_total(self) -> int:
+        """How many requests were refused, all reasons together."""
         return sum(self.refused.values())
 
     def refuse(self, reason: str) -> None:

@@ -157,22 +157,27 @@ class SensorSuite:
 
     @property
     def gyro_bias(self) -> Vector3:
+        """The gyro's bias so far (rad/s, body): switch-on bias plus random walk."""
         return self._vector(frame.S_GYRO_BIAS)
 
     @property
     def mag_bias(self) -> Vector3:
+        """The magnetometer's hard-iron bias (gauss, body)."""
         return self._vector(frame.S_MAG_BIAS)
 
     @property
     def baro_drift_hpa(self) -> float:
+        """The barometer's drifted offset so far (hPa)."""
         return float(self._S[frame.S_BARO_DRIFT])
 
     @property
     def gps_position_error(self) -> Vector3:
+        """The GNSS position error now (m, world): the Gauss-Markov processes' state."""
         return self._vector(frame.S_GPS_POS_ERR)
 
     @property
     def gps_velocity_error(self) -> Vector3:
+        """The GNSS velocity error now (m/s, world)."""
         return self._vector(frame.S_GPS_VEL_ERR)
 
     # -- faults -----------------------------------------------------------------------------------
