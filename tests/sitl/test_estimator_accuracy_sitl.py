@@ -2,17 +2,14 @@
 --estimator ekf --sensors PROFILE``, the 2 m square (``quadsitl fly setpoints``), the recorder's
 session, the estimator's ``pos_*_accuracy_m`` against the truth beside it.
 
-One flight on ``gps`` and one on ``ideal`` (``default`` is an alias of ``ideal``): the wire path
-(HIL sensors in, ESTIMATOR_STATUS and the recorder out) is the same for every profile, and
-``mocap``'s accuracies are checked with the same criteria in simulation time
-(tests/autopilot/estimation/test_accuracy.py). On ``gps``: at least 90 % of the airborne samples
-inside 3 sigma, and the median reported 1-sigma
-at most 3x the RMS error of its axes (horizontal, vertical). On ``ideal`` the sensors are exact
-and the GPS reports a 1 m accuracy (a receiver never claims less than its resolution): the
-estimate is the truth to a millimetre, so only the first half applies (never optimistic). The
-statistics over seeds (NEES) are in tests/autopilot/estimation/test_accuracy.py, in simulation time.
+One flight on ``gps``: the wire path (HIL sensors in, ESTIMATOR_STATUS and the recorder out) is
+the same for every profile, and ``mocap``'s and ``ideal``'s accuracies are checked with the same
+criteria in simulation time (tests/autopilot/estimation/test_accuracy.py). At least 90 % of the
+airborne samples inside 3 sigma, and the median reported 1-sigma at most 3x the RMS error of its
+axes (horizontal, vertical). The statistics over seeds (NEES) are in
+tests/autopilot/estimation/test_accuracy.py, in simulation time.
 
-Instances 55 and 57. Waits are bounded on the wall clock; every check is on recorded, simulation-time
+Instance 55. Waits are bounded on the wall clock; every check is on recorded, simulation-time
 rows.
 """
 
@@ -33,7 +30,7 @@ from tests.ports import instance_ports
 
 pytestmark = [pytest.mark.processes, pytest.mark.timeout(150)]
 
-PROFILES = {"gps": 55, "ideal": 57}
+PROFILES = {"gps": 55}
 _E = {n: i for i, n in enumerate(ESTIMATOR_FIELDS)}
 
 
@@ -83,5 +80,4 @@ def test_reported_accuracies_against_the_truth_through_the_sitl(tmp_path: Path, 
           f"{np.median(sigma_v) * 1e3:.2f} mm ({inside_v:.1%} inside 3 sigma)")  # fmt: skip
     assert np.all(est[air, _E["converged"]] == 1.0)
     assert inside_h >= 0.9 and inside_v >= 0.9
-    if profile != "ideal":
-        assert np.median(sigma_h) <= 3.0 * rms_h and np.median(sigma_v) <= 3.0 * rms_v
+    assert np.median(sigma_h) <= 3.0 * rms_h and np.median(sigma_v) <= 3.0 * rms_v

@@ -98,6 +98,18 @@ def test_reported_accuracies_are_neither_optimistic_nor_3x_pessimistic(profile):
         assert np.mean(eh[mine] <= 3.0 * sh[mine]) >= 0.9, seed
 
 
+def test_on_exact_sensors_the_estimate_is_the_truth_and_never_optimistic():
+    """``ideal`` (the default profile): exact sensors, and a GPS that reports a 1 m accuracy (a
+    receiver never claims less than its resolution): the estimate is the truth to a millimetre,
+    so only the first half of the criteria applies (never optimistic)."""
+    s = fly("ideal", seeds=1)
+    air = s.t >= PRE_S
+    eh, ev = s.err_h[air], s.err_v[air]
+    assert rms(eh) < 1e-3 and rms(ev) < 1e-3
+    assert np.mean(eh <= 3.0 * s.sigma_h[air]) >= 0.9 and np.mean(ev <= 3.0 * s.sigma_v[air]) >= 0.9
+    assert s.converged[s.t >= PRE_S + 1.0].all()  # (the stand's 2 s align it; converged within 1 s more)
+
+
 @pytest.mark.parametrize("profile", ["gps", "mocap"])
 def test_position_nees_over_seeds_is_in_its_chi_square_band(profile):
     """At each sample time the NEES of the 3 position states averaged over the seeds, times the
