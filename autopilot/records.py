@@ -57,13 +57,16 @@ class MagSample(NamedTuple):
 
 
 class VisionPose(NamedTuple):
-    """Motion capture / vision: position of O and yaw, with the source's reported accuracy."""
+    """Motion capture / vision: position of O and yaw, with the source's reported accuracy; and
+    the velocity, when the source gives one (a client's ODOMETRY)."""
 
     time_s: float
     position_m: Vector3  # world
     yaw_rad: float  # the paper's psi (ZYX Euler, z up, counter-clockwise from north)
     position_std_m: float = 0.0  # reported 1-sigma per axis (0: unknown)
     yaw_std_rad: float = 0.0
+    velocity_m_s: Vector3 | None = None  # world, of O; None: not given
+    velocity_std_m_s: float = 0.0  # reported 1-sigma per axis (0: unknown)
 
 
 class StateEstimate(NamedTuple):

@@ -482,13 +482,19 @@ class ErrorStateEkf:
                                float(sample.time_s), _floats(m))  # fmt: skip
 
     def fuse_vision(self, pose: VisionPose) -> None:
-        """Motion capture / vision position and yaw, valid EKF2_EV_DELAY before arrival."""
+        """Motion capture / vision position and yaw, and its velocity when it has one (EKF2_EV_CTRL
+        bit 2), valid EKF2_EV_DELAY before arrival."""
         if not self.initialised:
             self._pending_vision = pose
             return
-        self._entries.fuse_vision(self._F, self.P, self._ring, self._stats, self._windows, self._A,
-                                  float(pose.time_s), _floats(pose.position_m), float(pose.yaw_rad),
-                                  float(pose.position_std_m), float(pose.yaw_std_rad))  # fmt: skip
+        entries, t = self._entries, float(pose.time_s)
+        entries.fuse_vision(self._F, self.P, self._ring, self._stats, self._windows, self._A, t,
+                            _floats(pose.position_m), float(pose.yaw_rad), float(pose.position_std_m),
+                            float(pose.yaw_std_rad))  # fmt: skip
+        if pose.velocity_m_s is not None:
+            velocity, std = _floats(pose.velocity_m_s), float(pose.velocity_std_m_s)
+            entries.fuse_vision_velocity(self._F, self.P, self._ring, self._stats, self._windows, self._A, t,
+                                         velocity, std)  # fmt: skip
 
     # ------------------------------------------------------------------------------------------
     # Outputs
@@ -576,7 +582,7 @@ class ErrorStateEkf:
             reason == "",
             reason,
             flags,
-            max(src["gps_vel"].test_ratio, src["gps_vvel"].test_ratio),
+            max(src["gps_vel"].test_ratio, src["gps_vvel"].test_ratio, src["ev_vel"].test_ratio),
             pos_ratio,
             vert_ratio,
             mag_ratio,
@@ -610,6 +616,7 @@ class FilterEntries(NamedTuple):
     fuse_baro: Any
     fuse_mag: Any
     fuse_vision: Any
+    fuse_vision_velocity: Any
     reset_state: Any
     start: Any
     not_converged: Any
@@ -645,6 +652,7 @@ def filter_entries() -> FilterEntries:
         entries.fuse_baro(F, P, ring, stats, windows, A, 0.002, 0.0)
         entries.fuse_mag(F, P, ring, stats, windows, A, 0.002, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
         entries.fuse_vision(F, P, ring, stats, windows, A, 0.002, z3, 0.0, 0.01, 0.01)
+        entries.fuse_vision_velocity(F, P, ring, stats, windows, A, 0.002, z3, 0.01)
         entries.not_converged(F, P, A)
         for entry in entries:
             freeze(entry)

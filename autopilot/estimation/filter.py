@@ -47,7 +47,20 @@ from quadcommon.rigid_body import (
 )
 
 from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N, joseph_update, predict, prior_variances
-from .parameters import EstimatorParams
+from .parameters import (  # the EKF2_* bit fields and values, defined with the parameters
+    EV_CTRL_HPOS,
+    EV_CTRL_VEL,
+    EV_CTRL_VPOS,
+    EV_CTRL_YAW,
+    GPS_CTRL_HPOS,
+    GPS_CTRL_VEL,
+    GPS_CTRL_VPOS,
+    MAG_CHECK_INCLINATION,
+    MAG_CHECK_STRENGTH,
+    MAG_TYPE_HEADING,
+    MAG_TYPE_NONE,
+    EstimatorParams,
+)
 
 # -- the parameters (EstimatorParams' fields in this order, then the constants of the vehicle) ----
 PARAMETER_FIELDS = (
@@ -59,6 +72,7 @@ PARAMETER_FIELDS = (
     "mag_type", "mag_period_s", "mag_bias_init_gauss", "mag_delay_s", "mag_noise_gauss", "mag_gate",
     "heading_noise_rad", "heading_gate", "mag_check", "mag_strength_tol_gauss", "mag_inclination_tol_rad",
     "ev_ctrl", "ev_delay_s", "ev_noise_mode", "ev_pos_noise_m", "ev_yaw_noise_rad", "ev_pos_gate",
+    "ev_vel_noise_m_s", "ev_vel_gate",
     "no_aid_timeout_s", "align_time_s", "pos_reset_timeout_s",
     "converged_tilt_rad", "converged_yaw_rad", "converged_pos_m", "converged_vpos_m",
 )  # fmt: skip
@@ -70,6 +84,7 @@ PARAMETER_FIELDS = (
  A_MAG_TYPE, A_MAG_PERIOD, A_MAG_BIAS_INIT, A_MAG_DELAY, A_MAG_NOISE, A_MAG_GATE,
  A_HEADING_NOISE, A_HEADING_GATE, A_MAG_CHECK, A_MAG_STRENGTH_TOL, A_MAG_INCLINATION_TOL,
  A_EV_CTRL, A_EV_DELAY, A_EV_NOISE_MODE, A_EV_POS_NOISE, A_EV_YAW_NOISE, A_EV_POS_GATE,
+ A_EV_VEL_NOISE, A_EV_VEL_GATE,
  A_NO_AID_TIMEOUT, A_ALIGN_TIME, A_POS_RESET_TIMEOUT,
  A_CONV_TILT, A_CONV_YAW, A_CONV_POS, A_CONV_VPOS) = range(len(PARAMETER_FIELDS))  # fmt: skip
 A_GRAVITY = len(PARAMETER_FIELDS)
@@ -79,11 +94,6 @@ A_FIELD_INCLINATION = A_FIELD + 4  # positive: pointing down
 A_FIELD_HEADING = A_FIELD + 5  # -declination in the paper's frame (z up)
 A_SIZE = A_FIELD + 6
 
-# EKF2_* bit fields and values (see .parameters).
-GPS_CTRL_HPOS, GPS_CTRL_VPOS, GPS_CTRL_VEL = 1, 2, 4
-EV_CTRL_HPOS, EV_CTRL_VPOS, EV_CTRL_YAW = 1, 2, 8
-MAG_TYPE_HEADING, MAG_TYPE_NONE = 1, 5
-MAG_CHECK_STRENGTH, MAG_CHECK_INCLINATION = 1, 2
 GPS_FIX_3D = 3
 
 # -- the state F ---------------------------------------------------------------------------------
@@ -118,8 +128,8 @@ RING_SIZE = 21
 
 # -- per measurement kind (rows in SOURCE_NAMES' order) ---------------------------------------------
 SRC_GPS_POS, SRC_GPS_HGT, SRC_GPS_VEL, SRC_GPS_VVEL, SRC_BARO = 0, 1, 2, 3, 4
-SRC_MAG, SRC_HEADING, SRC_EV_POS, SRC_EV_HGT, SRC_EV_YAW = 5, 6, 7, 8, 9
-SOURCES = 10
+SRC_MAG, SRC_HEADING, SRC_EV_POS, SRC_EV_HGT, SRC_EV_YAW, SRC_EV_VEL = 5, 6, 7, 8, 9, 10
+SOURCES = 11
 STATS_FIELDS = (
     "fused", "rejected", "check_rejected", "too_old", "skipped", "test_ratio", "innovation",
     "normalized_innovation", "last_tested_s", "last_fused_s", "last_rejected_s", "rejecting_since_s",
@@ -293,6 +303,13 @@ def gps_usable(A: Any, fix_type: float, eph: float, epv: float, satellites: floa
 def ev_pos_variance(A: Any, position_std: float) -> float:
     """EKF2_EV_NOISE_MD 0: the reported 1-sigma with EKF2_EVP_NOISE as its floor; 1: the parameter."""
     s = A[A_EV_POS_NOISE] if A[A_EV_NOISE_MODE] != 0.0 else max(position_std, A[A_EV_POS_NOISE])
+    return s * s
+
+
+@kernel
+def ev_vel_variance(A: Any, velocity_std: float) -> float:
+    """EKF2_EV_NOISE_MD 0: the reported 1-sigma with EKF2_EVV_NOISE as its floor; 1: the parameter."""
+    s = A[A_EV_VEL_NOISE] if A[A_EV_NOISE_MODE] != 0.0 else max(velocity_std, A[A_EV_VEL_NOISE])
     return s * s
 
 
@@ -908,6 +925,31 @@ def fuse_vision(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float,
                 maybe_reset_position(F, P, stats, A, SRC_EV_POS, target, var)
         elif ok and src == SRC_EV_HGT:
             F[X_LAST_V_AID] = now
+    check_vertical_accel(F, stats, W)
+
+
+@kernel
+def fuse_vision_velocity(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, velocity: Vector3,
+                         velocity_std: float) -> None:  # fmt: skip
+    """External vision velocity (world, paper frame) arrived at ``t``, valid EKF2_EV_DELAY before:
+    the three axes gated together (EKF2_EVV_GATE), as PX4's EKF2 fuses ``ev_vel`` when
+    EKF2_EV_CTRL bit 2 is set. Accepted, it is horizontal aiding (no dead reckoning)."""
+    if not int(A[A_EV_CTRL]) & EV_CTRL_VEL:
+        return
+    found, _, vm, _, _ = state_at(F, ring, t - A[A_EV_DELAY])
+    if not found:
+        stats[SRC_EV_VEL, ST_TOO_OLD] += 1.0
+        return
+    var = ev_vel_variance(A, velocity_std)
+    H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
+    k = 0
+    for axis in range(3):
+        k = velocity_row(H, r, y, row_group, k, 0, axis, velocity[axis] - vm[axis], var)
+    accepted = np.zeros(1)
+    source, gate = np.full(1, float(SRC_EV_VEL)), np.full(1, A[A_EV_VEL_GATE])
+    fuse(F, P, stats, W, H, r, y, row_group, source, gate, accepted)
+    if accepted[0] != 0.0:
+        F[X_LAST_H_AID] = F[X_TIME]
     check_vertical_accel(F, stats, W)
 
 

@@ -232,8 +232,8 @@ ESTIMATOR_PARAMS: tuple[ParamSpec, ...] = (
         0,
         15,
         kind=INT32,
-        description="vision aiding bits: 0 horizontal pos, 1 vertical pos, 3 yaw (bit 2, velocity, is not "
-        "fused here; PX4's default is 0; here vision is fused when it comes)",
+        description="vision aiding bits: 0 horizontal pos, 1 vertical pos, 2 velocity, 3 yaw (PX4's default "
+        "is 0; here vision is fused when it comes)",
     ),
     ParamSpec("EKF2_EV_DELAY", 0.0, 0.0, 300.0, unit="ms", description="vision delay relative to the IMU"),
     ParamSpec(
@@ -249,6 +249,8 @@ ESTIMATOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("EKF2_EVP_NOISE", 0.1, 0.0001, 10.0, unit="m", description="vision position noise"),
     ParamSpec("EKF2_EVA_NOISE", 0.1, 0.0005, 1.0, unit="rad", description="vision angle (yaw) noise"),
     ParamSpec("EKF2_EVP_GATE", 5.0, 1.0, 100.0, unit="SD", description="gate of the vision position test"),
+    ParamSpec("EKF2_EVV_NOISE", 0.1, 0.01, 10.0, unit="m/s", description="vision velocity noise"),
+    ParamSpec("EKF2_EVV_GATE", 3.0, 1.0, 100.0, unit="SD", description="gate of the vision velocity test"),
     ParamSpec(
         "EKF2_EV_QMIN",
         0,
@@ -346,6 +348,8 @@ class EstimatorParams:
     ev_pos_noise_m: float
     ev_yaw_noise_rad: float
     ev_pos_gate: float
+    ev_vel_noise_m_s: float
+    ev_vel_gate: float
     # health and start-up
     no_aid_timeout_s: float
     align_time_s: float
@@ -406,6 +410,8 @@ def estimator_params(values: Mapping[str, float] | ParameterStore | None = None)
         ev_pos_noise_m=v["EKF2_EVP_NOISE"],
         ev_yaw_noise_rad=v["EKF2_EVA_NOISE"],
         ev_pos_gate=v["EKF2_EVP_GATE"],
+        ev_vel_noise_m_s=v["EKF2_EVV_NOISE"],
+        ev_vel_gate=v["EKF2_EVV_GATE"],
         no_aid_timeout_s=v["EKF2_NOAID_TOUT"] * 1e-6,
         align_time_s=v["EST_ALIGN_T"],
         pos_reset_timeout_s=v["EST_POS_RST_T"],

@@ -40,6 +40,7 @@ SOURCE_NAMES = (
     "ev_pos",
     "ev_hgt",
     "ev_yaw",
+    "ev_vel",
 )
 
 

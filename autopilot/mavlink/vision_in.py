@@ -23,8 +23,11 @@ How the messages are read (PX4's ``mavlink_receiver.cpp``):
   ``estimator_type`` UNKNOWN, NAIVE, VISION or VIO (PX4 publishes them as visual odometry, the
   topic EKF2 reads); MOCAP odometry is refused, as PX4's EKF2 never sees it (PX4 publishes it as
   mocap odometry, which EKF2 does not read: a mocap bridge sends VISION_POSITION_ESTIMATE, or
-  ODOMETRY of estimator type VISION); the twist is not fused (EKF2_EV_CTRL bit 2, velocity, is
-  not supported here; said once when it is set and a velocity arrives).
+  ODOMETRY of estimator type VISION); the velocity (``vx``, ``vy``, ``vz``) when it is finite, in
+  ``child_frame_id`` MAV_FRAME_BODY_FRD (rotated by ``q``), LOCAL_NED or LOCAL_FRD (as the
+  position), with the velocity covariance's diagonal (vx 0, vy 6, vz 11; a NaN first element
+  meaning unknown), fused when EKF2_EV_CTRL has bit 2 (EKF2_EVV_NOISE, EKF2_EVV_GATE); another
+  ``child_frame_id`` leaves the velocity out, said.
 
 Each position is read as the vision frame's, the filter's local frame (the frame of the EKF's
 position: about home when it also fuses GNSS).
@@ -61,13 +64,13 @@ from collections import Counter
 from typing import NamedTuple
 
 from quadcommon import frames
-from quadcommon.rigid_body import euler_from_quaternion
+from quadcommon.rigid_body import euler_from_quaternion, matrix_times, rotation_from_quaternion
 
-from ..estimation.parameters import EV_CTRL_VEL
 from ..records import VisionPose
 from .codec import mavlink as m
 
 MAX_DISTANCE_M = 10_000.0  # a vision position farther than this from its origin is absurd
+MAX_SPEED_M_S = 100.0  # a vision velocity faster than this is absurd
 MAX_ANGLE_RAD = 2.0 * math.pi  # |roll|, |pitch|, |yaw| of VISION_POSITION_ESTIMATE
 QUATERNION_NORM = (0.9, 1.1)  # ODOMETRY's q must be a rotation (normalised before use)
 SYNC_WINDOW_S = 1.0  # a first stamp this close to the vehicle's time: the sender is on its clock
@@ -78,6 +81,7 @@ MAX_SENDERS = 32  # senders whose clocks are remembered (the one heard from long
 ANNOUNCE_EVERY_S = 10.0  # a refusal reason is announced at most this often (caller's clock)
 
 ODOMETRY_FRAMES = {m.MAV_FRAME_LOCAL_NED: "LOCAL_NED", m.MAV_FRAME_LOCAL_FRD: "LOCAL_FRD"}
+ODOMETRY_VELOCITY_FRAMES = (m.MAV_FRAME_BODY_FRD, *ODOMETRY_FRAMES)  # child_frame_id of the velocity
 ODOMETRY_ESTIMATORS = (  # the types PX4 publishes as visual odometry (what EKF2 fuses)
     m.MAV_ESTIMATOR_TYPE_UNKNOWN, m.MAV_ESTIMATOR_TYPE_NAIVE, m.MAV_ESTIMATOR_TYPE_VISION,
     m.MAV_ESTIMATOR_TYPE_VIO,
@@ -102,7 +106,8 @@ FLOOD = "more than one sample per control frame"
 FUTURE = "timestamp in the future of the vehicle's clock"
 TOO_OLD = "timestamp too old"
 OUT_OF_ORDER = "timestamp not later than the sender's previous one"
-VELOCITY_NOT_FUSED = "ODOMETRY velocity not fused (EKF2_EV_CTRL bit 2 is not supported): position and yaw are"
+TOO_FAST = f"a velocity faster than {MAX_SPEED_M_S:g} m/s"
+VELOCITY_FRAME = "ODOMETRY child_frame_id not BODY_FRD, LOCAL_NED or LOCAL_FRD: its velocity is not fused"
 
 Sender = tuple  # (link index, address, system id, component id)
 
@@ -209,7 +214,19 @@ def read_odometry(msg, quality_min: float) -> tuple[int, VisionPose]:
     w, x, y, z = (c / norm for c in q)
     yaw_ned = euler_from_quaternion(w, x, y, z)[2]  # ZYX yaw of body FRD in the NED (or FRD) frame
     naive = msg.estimator_type == m.MAV_ESTIMATOR_TYPE_NAIVE
-    return msg.time_usec, _pose((msg.x, msg.y, msg.z), yaw_ned, msg.pose_covariance, not naive)
+    pose = _pose((msg.x, msg.y, msg.z), yaw_ned, msg.pose_covariance, not naive)
+    velocity = (msg.vx, msg.vy, msg.vz)
+    if not all(math.isfinite(v) for v in velocity) or msg.child_frame_id not in ODOMETRY_VELOCITY_FRAMES:
+        return msg.time_usec, pose  # no velocity (the caller says so for a frame it cannot read)
+    if math.hypot(*velocity) > MAX_SPEED_M_S:
+        raise Refused(TOO_FAST)
+    if msg.child_frame_id == m.MAV_FRAME_BODY_FRD:  # body FRD -> the pose's frame, by q
+        velocity = matrix_times(rotation_from_quaternion(w, x, y, z), velocity)
+    covariance = msg.velocity_covariance
+    std = 0.0
+    if not naive and len(covariance) == 21 and not math.isnan(covariance[0]):
+        std = max(_std(covariance[0]), _std(covariance[6]), _std(covariance[11]))
+    return msg.time_usec, pose._replace(velocity_m_s=frames.vector_from_ned(velocity), velocity_std_m_s=std)
 
 
 class ExternalVision:
@@ -237,8 +254,9 @@ class ExternalVision:
                 raise Refused(EV_OFF)
             if msg.get_msgId() == m.MAVLINK_MSG_ID_ODOMETRY:
                 stamp, pose = read_odometry(msg, values["EKF2_EV_QMIN"])
-                if ctrl & EV_CTRL_VEL and math.isfinite(msg.vx + msg.vy + msg.vz):
-                    self._announce(VELOCITY_NOT_FUSED, now)
+                velocity = math.isfinite(msg.vx) and math.isfinite(msg.vy) and math.isfinite(msg.vz)
+                if velocity and msg.child_frame_id not in ODOMETRY_VELOCITY_FRAMES:
+                    self._announce(VELOCITY_FRAME, now)
             else:
                 stamp, pose = read_vision_position_estimate(msg)
             if arrival_s == self._last_arrival:

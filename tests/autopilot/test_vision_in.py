@@ -110,10 +110,39 @@ def test_quality_below_ekf2_ev_qmin_the_estimator_and_ekf2_ev_ctrl():
     assert vision.receive(vpe(), sender, 2.0, 2.0, False, PARAMS) is None
     assert vision.receive(vpe(), sender, 3.0, 3.0, True, PARAMS | {"EKF2_EV_CTRL": 0.0}) is None
     assert vision.refused == {v.LOW_QUALITY: 1, v.NO_EKF: 1, v.EV_OFF: 1} and vision.accepted == 1
-    # EKF2_EV_CTRL bit 2 (velocity) with a velocity: the pose is fused, the velocity is not, and it says so
+    # A velocity travels with the pose (the filter fuses it when EKF2_EV_CTRL has bit 2)
     moving = odometry(velocity=(1.0, 0.0, 0.0))
-    assert vision.receive(moving, sender, 4.0, 4.0, True, PARAMS | {"EKF2_EV_CTRL": 15.0}) is not None
-    assert v.VELOCITY_NOT_FUSED in vision.take_announcements()
+    pose = vision.receive(moving, sender, 4.0, 4.0, True, PARAMS | {"EKF2_EV_CTRL": 15.0})
+    assert pose is not None and pose.velocity_m_s is not None
+
+
+def test_odometry_velocity_is_read_in_its_child_frame_as_px4_reads_it():
+    """``child_frame_id`` BODY_FRD: rotated by ``q`` into the pose's frame; LOCAL_NED / LOCAL_FRD:
+    as the position; then to the paper's frame. NaN: no velocity (the pose alone); absurd speeds
+    and bad variances refused; another child frame (BODY_OFFSET_NED here): no velocity, said."""
+    yaw = 0.5  # NED yaw: forward points 0.5 rad east of north
+    _, pose = v.read_odometry(odometry(yaw=yaw, velocity=(2.0, 0.0, 0.0)), 0)
+    assert pose.velocity_m_s == pytest.approx((2.0 * math.cos(yaw), -2.0 * math.sin(yaw), 0.0))
+    assert pose.velocity_std_m_s == 0.0  # unknown covariance: the EKF2_EVV_NOISE floor
+    local = odometry(yaw=yaw, velocity=(1.0, 2.0, -0.5))
+    local.child_frame_id = m.MAV_FRAME_LOCAL_NED
+    local.velocity_covariance = covariance(0.01, 0.04, 0.09, 0.0)
+    _, pose = v.read_odometry(local, 0)
+    assert pose.velocity_m_s == pytest.approx((1.0, -2.0, 0.5))
+    assert pose.velocity_std_m_s == pytest.approx(0.3)
+    assert v.read_odometry(odometry(velocity=(NAN, 0.0, 0.0)), 0)[1].velocity_m_s is None
+    with pytest.raises(v.Refused, match="faster than"):
+        v.read_odometry(odometry(velocity=(150.0, 0.0, 0.0)), 0)
+    bad = odometry(velocity=(1.0, 0.0, 0.0))
+    bad.velocity_covariance = covariance(-1.0, 0.04, 0.09, 0.0)
+    with pytest.raises(v.Refused, match="variance"):
+        v.read_odometry(bad, 0)
+    other = odometry(velocity=(1.0, 0.0, 0.0))
+    other.child_frame_id = m.MAV_FRAME_BODY_OFFSET_NED
+    vision = v.ExternalVision()
+    pose = vision.receive(other, ("in-process", 1), 1.0, 1.0, True, PARAMS)
+    assert pose is not None and pose.velocity_m_s is None
+    assert v.VELOCITY_FRAME in vision.take_announcements()
 
 
 def test_one_sample_a_control_frame_and_refusals_announced_at_most_every_10_s():

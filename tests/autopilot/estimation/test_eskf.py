@@ -333,3 +333,30 @@ def test_status_before_and_after_initialisation():
     assert status.initialised and status.flags & 1  # ESTIMATOR_ATTITUDE
     assert status.flags & 16 and status.flags & 32  # absolute horizontal (GPS) and vertical position
     assert 0.0 < status.pos_horiz_accuracy_m < 1.0 and status.sources["gps_pos"].fused >= 1
+
+
+@pytest.mark.parametrize("ctrl", [15, 11])
+def test_vision_velocity_is_fused_only_with_ekf2_ev_ctrl_bit_2_and_gated(ctrl):
+    """A client's vision velocity (ODOMETRY's twist) with the pose: fused as ``ev_vel`` when
+    EKF2_EV_CTRL has bit 2 (PX4's), within EKF2_EVV_GATE; with the bit cleared, never."""
+    q = quaternion_from_euler(0.0, 0.0, 0.3)
+    ekf = ErrorStateEkf(estimator_params({"EKF2_EV_DELAY": 0.0, "EKF2_EV_CTRL": ctrl}))
+    t = static_run(ekf, q, 3.0, gps=False, vision=True)
+    f = rest_force(q)
+    for k in range(1, 501):  # 1 s at rest, the pose and a zero velocity at 100 Hz
+        tt = t + k * 0.002
+        ekf.predict(ImuSample(tt, 0.002, (0.0, 0.0, 0.0), f))
+        if k % 5 == 0:
+            ekf.fuse_vision(VisionPose(tt, (0.0, 0.0, 0.0), yaw_of(q), 0.001, 0.001, (0.0, 0.0, 0.0), 0.02))
+    stats = ekf.sources["ev_vel"]
+    if not ctrl & 4:
+        assert stats.fused == 0 and stats.rejected == 0
+        return
+    assert stats.fused == 100 and stats.rejected == 0
+    before = ekf.estimate().velocity_m_s
+    # 2 m/s off: far outside 3 sigma of the velocity's uncertainty and the 0.1 m/s noise floor
+    ekf.fuse_vision(VisionPose(tt, (0.0, 0.0, 0.0), yaw_of(q), 0.001, 0.001, (2.0, 0.0, 0.0), 0.02))
+    assert stats.rejected == 1 and stats.test_ratio > 1.0
+    assert ekf.estimate().velocity_m_s == pytest.approx(before, abs=1e-3)
+    status = ekf.status()
+    assert status.vel_ratio == pytest.approx(stats.test_ratio)  # ESTIMATOR_STATUS's velocity ratio
