@@ -694,7 +694,10 @@ class Commander:
                 geofence_breached=failsafes.fence_breached,
             )
             has_state = self.position_valid and self.state is not None
-            flags = self.health.evaluate(t, self.estimator_status, self.on_ekf, has_state, links)
+            # Airborne by the phase, not by the estimate's height (which a failing sensor corrupts):
+            # after the touchdown is detected, a change of the estimate's speed is not the vehicle's.
+            flags = self.health.evaluate(t, self.estimator_status, self.on_ekf, has_state, links,
+                                         airborne=self.phase in FLYING)
             if self.health.announcements:
                 self._announce_streams()
             if flags is not self.flags:

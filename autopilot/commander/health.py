@@ -330,11 +330,16 @@ def _angle_moved(a: Vector3, b: Vector3) -> float:
                abs(math.remainder(a[2] - b[2], tau)))  # fmt: skip
 
 
-def _moved(sensor: str, then: Pose, now: Pose) -> bool:
-    """Has the vehicle moved since ``then`` enough that ``sensor`` must read differently?"""
+def _moved(sensor: str, then: Pose, now: Pose, airborne: bool) -> bool:
+    """Has the vehicle moved since ``then`` enough that ``sensor`` must read differently?
+
+    A change of speed counts only while ``airborne``: on the ground the vehicle cannot change its
+    speed without its sensors changing, and what changes there is the estimate, not the vehicle
+    (at a touchdown the plant stops in a frame, a noise-free IMU reads exactly g and 0 from then
+    on, and the EKF's velocity settles from the landing speed to 0 over a second or two)."""
     p0, v0, e0 = then.position_m, then.velocity_m_s, then.euler_rad
     p1, v1, e1 = now.position_m, now.velocity_m_s, now.euler_rad
-    dv = math.dist(v0, v1)
+    dv = math.dist(v0, v1) if airborne else 0.0
     angle = _angle_moved(e0, e1)
     if sensor == "baro":
         return abs(p1[2] - p0[2]) > MOVED_HEIGHT_M
@@ -471,7 +476,7 @@ class HealthMonitor:
         texts, self.announcements = self.announcements, []
         return texts
 
-    def _sensor(self, name: str, estimator: EstimatorStatus | None) -> SensorHealth:
+    def _sensor(self, name: str, estimator: EstimatorStatus | None, airborne: bool) -> SensorHealth:
         stream = _STREAM_OF[name]
         if stream not in self.streams.last:
             return _ABSENT
@@ -482,7 +487,7 @@ class HealthMonitor:
         check = self._stuck[name]
         frozen, now = check.frozen_state, self._state
         frozen_long = check.equal > EQUAL_COUNT_MAX and frozen is not None and now is not None
-        if frozen_long and _moved(name, frozen, now):
+        if frozen_long and _moved(name, frozen, now, airborne):
             return _STUCK
         if estimator is not None and estimator.initialised:
             for kind in _SOURCES_OF.get(name, ()):
@@ -492,16 +497,23 @@ class HealthMonitor:
         return _HEALTHY
 
     def evaluate(
-        self, t: float, estimator: EstimatorStatus | None, on_ekf: bool, has_state: bool, links: LinkState
+        self,
+        t: float,
+        estimator: EstimatorStatus | None,
+        on_ekf: bool,
+        has_state: bool,
+        links: LinkState,
+        airborne: bool,
     ) -> FailsafeFlags:
         """The flags at ``t``: ``estimator`` is the EKF's last status (None before its first or on
         the truth), ``on_ekf`` whether the vehicle flies on the EKF, ``has_state`` whether it has
-        a state at all (frames flowing). The record of the last call when nothing in it changed
+        a state at all (frames flowing), ``airborne`` whether it is off the ground (the stuck
+        checks count a change of speed only then). The record of the last call when nothing in it changed
         (its ``timestamp_s`` is then the time of that call)."""
         p = self.params
         self._check_streams(t)  # (the streams' state as of now: the record is consistent)
         judged_by = estimator if on_ekf else None
-        sensors = tuple([self._sensor(name, judged_by) for name in SENSORS])
+        sensors = tuple([self._sensor(name, judged_by, airborne) for name in SENSORS])
         if not on_ekf:  # the simulator's state: valid while frames flow
             bad = not has_state
             rates = attitude = local = velocity = altitude = heading = bad

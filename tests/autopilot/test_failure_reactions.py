@@ -252,3 +252,25 @@ def test_on_the_truth_a_failed_sensor_refuses_arming_until_it_returns(monkeypatc
     gcs.wait(lambda g: commander.flags.baro.healthy, sim_timeout=2.0, what="the barometer back")
     said(gcs, "sensor stream resumed: barometer")
     assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+
+
+def test_a_noise_free_imu_after_a_landing_on_the_ekf_is_not_stuck():
+    """At the touchdown the plant stops in a frame and a noise-free IMU reads exactly g and 0 from
+    then on, while the EKF's velocity settles from the landing speed to 0: that change is the
+    estimate's, not the vehicle's, and the IMU (and the GPS) at rest are healthy: arming again is
+    accepted. (A stuck accelerometer in flight is still caught: test_failures_flown.py.)"""
+    stack = stack_with("ideal")
+    gcs = Gcs(stack)
+    ready(stack, gcs)
+    commander = stack.autopilot.commander
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED
+    nan = math.nan
+    assert gcs.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 488.0 + 2.0).result == 0
+    gcs.wait(lambda g: commander.phase.name == "HOLD", sim_timeout=20.0, what="holding")
+    assert gcs.command(m.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, nan).result == 0
+    gcs.wait(lambda g: not commander.armed, sim_timeout=20.0, what="landed and disarmed")
+    stack.run_for(2.0)  # the filter's velocity settled; the IMU's values repeated all along
+    assert stack.autopilot.commander.health._stuck["accel"].equal > 100  # frozen: judged by the motion
+    flags = commander.flags
+    assert flags.accel.healthy and flags.gyro.healthy and flags.gps.healthy, flags
+    assert gcs.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == m.MAV_RESULT_ACCEPTED, texts(gcs)[-300:]
