@@ -7,8 +7,8 @@ Test modules that start processes say so themselves (``pytestmark = pytest.mark.
 with third-party clients ``compat`` as well): ``-m "not processes"`` runs the in-process tests alone.
 
 * Before any test, in the process that runs or dispatches them (xdist's controller), ``quadsitl
-  compile`` fills numba's cache: else the workers' first processes would compile the same kernels
-  at once (seconds each) while their tests wait.
+  compile --missing`` fills numba's cache: else the workers' first processes would compile the same
+  kernels at once (seconds each) while their tests wait. With the cache full it loads nothing.
 * Each process that runs tests claims a port block of its own (:mod:`tests.ports`) and points
   ``QUADSITL_CONFIG_DIR`` at a ``sitl.toml`` with those bases: every vehicle a test starts, and
   every port a test computes with ``load_sitl().ports(n)``, is on it. No test binds a fixed port.
@@ -61,8 +61,8 @@ def pytest_report_header(config: pytest.Config) -> str | None:
 def pytest_sessionstart(session: pytest.Session) -> None:
     if hasattr(session.config, "workerinput") or environment.pure_python():
         return
-    compiled = subprocess.run([sys.executable, "-m", "sitl.compile"], capture_output=True, text=True,
-                              timeout=1200)  # fmt: skip
+    compiled = subprocess.run([sys.executable, "-m", "sitl.compile", "--missing"], capture_output=True,
+                              text=True, timeout=1200)  # fmt: skip
     if compiled.returncode != 0:
         raise pytest.UsageError(f"quadsitl compile failed:\n{compiled.stdout}{compiled.stderr}")
 

@@ -14,6 +14,7 @@ import pytest
 from autopilot.control import registry
 from quadcommon import config
 from quadcommon.cli_help import has_default_to_show
+from quadcommon.kernel import compiling
 from sitl import cli
 from tests.own_law import laws_forgotten_afterwards, nan_above, write_overlay
 
@@ -107,6 +108,15 @@ def test_unknown_subcommand_is_a_usage_error(capsys):
         cli.main(["fly", "loops"])
     assert info.value.code == 2
     assert "invalid choice: 'loops'" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.skipif(not compiling(), reason="numba compiles nothing here (QUADSITL_PURE_PYTHON=1)")
+def test_compile_missing_with_the_cache_full_loads_nothing(capsys):
+    """After the suite's own ``quadsitl compile --missing`` (tests/conftest.py) every target is
+    cached: the check (file names only) finds nothing to do and loads no entry."""
+    assert cli.main(["compile", "--missing", "--no-campaign", "--controllers", "intbs_nlhinf", "se3"]) == 0
+    assert capsys.readouterr().out.strip() == "quadsitl compile: every target is in the cache"
 
 
 @pytest.mark.timeout(30)

@@ -89,13 +89,12 @@ def test_dask_cluster_gives_the_local_table_even_when_a_worker_dies(tmp_path):
     from dataclasses import replace
 
     spec = replace(spec, runs=32)
-    local = run_campaign(spec, tmp_path / "local", workers=2, progress=False)
+    # The reference in this process (a local pool gives the same table: test_runner.py).
+    local = run_campaign(spec, tmp_path / "local", workers=1, progress=False)
 
     with Cluster(tmp_path) as cluster:
-        clean = run_campaign(spec, tmp_path / "dask", scheduler=cluster.address, progress=False)
-        assert clean.executor == "ClientExecutor"
-        assert tables_equal(clean.table, local.table)
-
+        # One campaign on the cluster, a worker killed in its first chunk: the table is the local one
+        # all the same (the chunks the kill did not touch are the clean case).
         killed: list[str] = []
 
         def kill_a_busy_worker(done: int, total: int) -> None:
@@ -120,6 +119,7 @@ def test_dask_cluster_gives_the_local_table_even_when_a_worker_dies(tmp_path):
             progress=False,
             on_chunk=kill_a_busy_worker,
         )
+        assert survived.executor == "ClientExecutor"
         assert killed, "no worker was busy when the first chunk came back"
         assert cluster.workers[killed[0]].returncode == -signal.SIGKILL
         assert survived.table.num_rows == spec.runs * len(spec.controllers)
