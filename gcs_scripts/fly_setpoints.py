@@ -122,7 +122,8 @@ def build_parser(prog: str = "fly_setpoints.py") -> argparse.ArgumentParser:
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
     parser.add_argument(
-        "--url", default=None, help="MAVLink URL to listen on (default udpin:127.0.0.1:14540+N)"
+        "--url", default=None,
+        help="MAVLink URL (default udpin:127.0.0.1:14540+N; from N=10 udpout:127.0.0.1:14580+N)"
     )
     parser.add_argument(
         "--takeoff-alt", type=float, default=2.5, help="takeoff altitude above home, m (default 2.5)"

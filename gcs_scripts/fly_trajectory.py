@@ -58,7 +58,11 @@ def build_parser(prog: str = "fly_trajectory.py") -> argparse.ArgumentParser:
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
-    parser.add_argument("--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14540+N)")
+    parser.add_argument(
+        "--url",
+        default=None,
+        help="MAVLink URL (default udpin:127.0.0.1:14540+N; from N=10 udpout:127.0.0.1:14580+N)",
+    )
     parser.add_argument(
         "--scenario", default="circle", help="scenario name (config/scenarios) or path (default circle)"
     )

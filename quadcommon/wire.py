@@ -20,8 +20,8 @@ first ten instances; from instance 10 on PX4 sends it to 14549 (all of them: 145
 14550), and so do we. A script for one vehicle N >= 10 connects to that vehicle's own API link
 instead, ``udpout://127.0.0.1:14580+N`` in MAVSDK (``udpout:127.0.0.1:14580+N`` in pymavlink):
 the autopilot answers every address that talks to it, so the first HEARTBEAT it hears there makes
-the script a peer of that link alone (:func:`api_connect_url`). PX4's onboard payload and gimbal
-links (14280 + N, 13030 + N) have no counterpart here.
+the script a peer of that link alone (:func:`api_endpoint`, :func:`api_connect_url`). PX4's
+onboard payload and gimbal links (14280 + N, 13030 + N) have no counterpart here.
 
 :func:`port_roles` lists them by role: *own* ports are bound by our two processes (HIL, the two
 autopilot links, zenoh), *client* ports are where ground stations listen (14550, 14540 + N or
@@ -288,13 +288,21 @@ def ports(
     )
 
 
-def api_connect_url(p: Ports, instance: int) -> str:
-    """How a MAVSDK script reaches vehicle ``instance`` alone: ``udpin://0.0.0.0:14540+N`` for the
-    first ten (as PX4's docs), else ``udpout://127.0.0.1:14580+N`` (its API link's own port: the
-    autopilot answers the address that talks to it; 14549 would bring every vehicle from 10 on)."""
+def api_endpoint(p: Ports, instance: int) -> tuple[str, int]:
+    """Where a script for vehicle ``instance`` alone meets its API link: ("udpin", 14540 + N) for
+    the first ten (it listens there, as PX4's docs say), else ("udpout", 14580 + N), the link's own
+    port (the script talks first; the autopilot answers the address that talks to it). 14549 would
+    bring every vehicle from 10 on, and a pymavlink ``udpin`` answers whichever sent last."""
     if instance < API_OWN_REMOTES:
-        return f"udpin://0.0.0.0:{p.api_remote}"
-    return f"udpout://{LOOPBACK}:{p.api_local}"
+        return "udpin", p.api_remote
+    return "udpout", p.api_local
+
+
+def api_connect_url(p: Ports, instance: int) -> str:
+    """:func:`api_endpoint` as a MAVSDK connection URL: ``udpin://0.0.0.0:14540`` for instance 0,
+    ``udpout://127.0.0.1:14617`` for instance 37."""
+    kind, port = api_endpoint(p, instance)
+    return f"udpin://0.0.0.0:{port}" if kind == "udpin" else f"udpout://{LOOPBACK}:{port}"
 
 
 class PortRole(NamedTuple):
