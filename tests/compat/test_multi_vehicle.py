@@ -198,9 +198,9 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config, tmp_path):
             p = ports(n)
             assert f"vehicle {n} is up (MAVLink sysid {n + 1}," in text
             assert f"udpin://0.0.0.0:{p.api_remote}" in text and f"udp {p.gcs_remote}" in text
-        assert ports(FIRST).gcs_remote == ports(FIRST + 1).gcs_remote  # one GCS port for the fleet
             assert f"tcp/127.0.0.1:{p.zenoh}   keys quadsitl/{n}/truth" in text
             assert f"1 parameters loaded from {tmp_path / f'params-{n}.toml'}" in text  # COM_OF_LOSS_T
+        assert ports(FIRST).gcs_remote == ports(FIRST + 1).gcs_remote  # one GCS port for the fleet
 
         gcs = GroundStationPort(ports(FIRST).gcs_remote)
         clients = [Client(FIRST), Client(FIRST + 1)]
