@@ -19,7 +19,7 @@ sees the whole fleet, the vehicles told apart by system id. The API link goes to
 first ten instances; from instance 10 on PX4 sends it to 14549 (all of them: 14540 + 10 would be
 14550), and so do we. A script for one vehicle N >= 10 connects to that vehicle's own API link
 instead, ``udpout://127.0.0.1:14580+N`` in MAVSDK (``udpout:127.0.0.1:14580+N`` in pymavlink):
-the autopilot answers every address that talks to it, so the first HEARTBEAT it hears there makes
+the autopilot answers every address that talks to it, so the first message it hears there makes
 the script a peer of that link alone (:func:`api_endpoint`, :func:`api_connect_url`). PX4's
 onboard payload and gimbal links (14280 + N, 13030 + N) have no counterpart here.
 
