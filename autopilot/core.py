@@ -253,7 +253,7 @@ class AutopilotCore:
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
         self._switch_estimator()
 
-        ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
+        ports = sitl.ports(setup.instance)
         remotes = (
             ((wire.LOOPBACK, ports.gcs_remote), (wire.LOOPBACK, ports.api_remote))
             if setup.default_remotes
