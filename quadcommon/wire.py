@@ -28,8 +28,8 @@ autopilot links, zenoh), *client* ports are where ground stations listen (14550,
 14549); a ground station binding its client port is normal, and client ports are shared by design.
 Own ports are distinct across all 250 instances, and no own port is any instance's client port
 (:func:`port_collisions`, empty for the default bases; the ``[ports]`` bases of ``sitl.toml`` move
-every link of one kind together, and the launcher refuses bases whose ports meet,
-:func:`sitl.launcher.check_launch`).
+every link of one kind together; under bases that make ports meet, the launcher refuses the
+instances that would share them, :func:`sitl.launcher.check_launch`).
 
 HIL lockstep frame: the simulator sends ONE UDP datagram per control period holding
 ``HIL_SENSOR``, ``HIL_STATE_QUATERNION``, ``ODOMETRY`` and, at the GPS rate, ``HIL_GPS``, all
