@@ -58,8 +58,7 @@ class Autopilot:
         files = VehicleFiles.for_vehicle(self.log_directory, setup.params_file)  # MAVLink FTP's root
         self.core = AutopilotCore(setup, self.log, log_store=self.log_directory, files=files)
         sitl = setup.sitl
-        self.ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base,
-                                sitl.api_port_base, sitl.zenoh_port_base)  # fmt: skip
+        self.ports = sitl.ports(setup.instance)
         self.hil_address = (wire.LOOPBACK, self.ports.hil)
         self.use_zenoh = zenoh
         self.socks: dict[int, object] = {}

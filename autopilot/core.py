@@ -139,7 +139,7 @@ class AutopilotSetup:
     autostart: Trajectory | None = None  # armed at the first frame, flying this from t = 0
     use_odometry: bool = True  # the state from ODOMETRY (float32) or HIL_STATE_QUATERNION (1 cm)
     params_file: str | None = None  # params.toml: loaded at start if it exists, saved on change
-    default_remotes: bool = True  # the GCS/API links send to 14550+N / 14540+N before anyone talks
+    default_remotes: bool = True  # the GCS/API links send to 14550 / 14540+N (wire.ports) before anyone talks
     signing: SigningOptions = SigningOptions()  # MAVLink 2 signing on the GCS links: key, state, wall clock
     estimator: str = "truth"  # "truth": fly on the simulator's state; "ekf": on the EKF (EKF2_EN)
     estimator_profile: str = "default"  # config/estimator/NAME.toml: the EKF2_* values to start from
@@ -253,7 +253,7 @@ class AutopilotCore:
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
         self._switch_estimator()
 
-        ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base)
+        ports = sitl.ports(setup.instance)
         remotes = (
             ((wire.LOOPBACK, ports.gcs_remote), (wire.LOOPBACK, ports.api_remote))
             if setup.default_remotes

@@ -2,7 +2,8 @@
 
 Against ``quadsitl up --scenario helix`` (or ``circle``), this script, like any ground station:
 
-1. starts the recorder (``record.py`` on the GCS port 14550+N, until the vehicle disarms);
+1. starts the recorder (``record.py`` on the GCS port 14550, keeping system id 1+N, until the vehicle
+   disarms);
 2. clears the simulator's start-up disturbances (an empty gust profile, over zenoh), so that
    nothing pushes the vehicle while it takes off;
 3. uploads the scenario's trajectory as a mission: NAV_TAKEOFF to the height of p_d(0), then the

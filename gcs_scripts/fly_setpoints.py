@@ -36,6 +36,7 @@ if __package__ in (None, ""):
 
 from gcs_scripts import link as mavlink_link  # noqa: E402
 from gcs_scripts.link import Link, LinkError, PositionTarget, SetpointStream  # noqa: E402
+from quadcommon import wire  # noqa: E402
 from quadcommon.cli_help import HelpFormatter  # noqa: E402
 
 Vector3 = tuple[float, float, float]
@@ -122,7 +123,8 @@ def build_parser(prog: str = "fly_setpoints.py") -> argparse.ArgumentParser:
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
     parser.add_argument(
-        "--url", default=None, help="MAVLink URL to listen on (default udpin:127.0.0.1:14540+N)"
+        "--url", default=None,
+        help="MAVLink URL (default udpin:127.0.0.1:14540+N; from N=10 udpout:127.0.0.1:14580+N)"
     )
     parser.add_argument(
         "--takeoff-alt", type=float, default=2.5, help="takeoff altitude above home, m (default 2.5)"
@@ -175,8 +177,8 @@ def parse_args(
         parser.error(f"--tolerance must be > 0 m, got {args.tolerance}")
     if args.hold < 0.0 or not args.timeout > 0.0:
         parser.error("--hold must be >= 0 and --timeout > 0")
-    if not 0 <= args.instance <= 99:
-        parser.error(f"--instance must be in [0, 99], got {args.instance}")
+    if not wire.INSTANCE_MIN <= args.instance <= wire.INSTANCE_MAX:
+        parser.error(f"--instance must be in [{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}], got {args.instance}")
     for sp in setpoints:
         if sp.z < 0.2:
             parser.error(f"setpoint {sp} is below 0.2 m (z is UP in the paper's frame)")

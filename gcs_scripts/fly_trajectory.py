@@ -39,6 +39,7 @@ if __package__ in (None, ""):
 
 from gcs_scripts import link as mavlink_link  # noqa: E402
 from gcs_scripts.link import Link, LinkError, PositionTarget, SetpointStream  # noqa: E402
+from quadcommon import wire  # noqa: E402
 from quadcommon.cli_help import HelpFormatter  # noqa: E402
 from quadcommon.config import ScenarioConfig, config_path, load_scenario  # noqa: E402
 from quadcommon.schema import ConfigError  # noqa: E402
@@ -58,7 +59,11 @@ def build_parser(prog: str = "fly_trajectory.py") -> argparse.ArgumentParser:
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
-    parser.add_argument("--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14540+N)")
+    parser.add_argument(
+        "--url",
+        default=None,
+        help="MAVLink URL (default udpin:127.0.0.1:14540+N; from N=10 udpout:127.0.0.1:14580+N)",
+    )
     parser.add_argument(
         "--scenario", default="circle", help="scenario name (config/scenarios) or path (default circle)"
     )
@@ -103,8 +108,8 @@ def parse_args(
         parser.error(f"--rate must be in [50, 500] Hz, got {args.rate}")
     if not args.tolerance > 0.0 or args.settle < 0.0 or args.hold < 0.0 or not args.timeout > 0.0:
         parser.error("--tolerance and --timeout must be > 0, --settle and --hold >= 0")
-    if not 0 <= args.instance <= 99:
-        parser.error(f"--instance must be in [0, 99], got {args.instance}")
+    if not wire.INSTANCE_MIN <= args.instance <= wire.INSTANCE_MAX:
+        parser.error(f"--instance must be in [{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}], got {args.instance}")
     args.gust_profile = None
     if args.gusts is not None:
         try:

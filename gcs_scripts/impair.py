@@ -38,7 +38,7 @@ def change_impairment(
 
     own = session is None
     if own:
-        session = bus.open_peer(wire.ports(instance, zenoh_base=load_sitl().zenoh_port_base).zenoh, router)
+        session = bus.open_peer(load_sitl().ports(instance).zenoh, router)
     key = wire.zenoh_key(instance, "impair")
     answers: dict[str, dict[str, Any]] = {}
     deadline = time.monotonic() + timeout_s

@@ -1,8 +1,10 @@
 """A small ground-station client over pymavlink's ``mavutil``: what every flying script needs.
 
 Only MAVLink on this path (no project internals besides the pure frame helpers). The vehicle
-behaves like PX4 SITL: it sends to ``udpin:127.0.0.1:14540+N`` (API scripts, like MAVSDK) and to
-``14550+N`` (ground stations), answers whatever address talks to it, and stamps telemetry with
+behaves like PX4 SITL: it sends to ``udpin:127.0.0.1:14540+N`` (API scripts, like MAVSDK; 14549
+for every instance from 10 on, where a script for one of them talks to ``udpout:127.0.0.1:14580+N``
+instead) and to ``14550`` (ground stations, every instance), answers whatever address talks to it,
+and reads only its vehicle's system id (1 + N); it stamps telemetry with
 ``time_boot_ms`` = SIMULATION time. The simulation may run faster or slower than the wall clock,
 so everything here waits on simulation time (tracked from the telemetry), with a wall-clock
 safety timeout on top so that a stopped simulator can never hang a script.
@@ -122,16 +124,20 @@ class CommandFailed(LinkError):
 
 
 def api_url(instance: int) -> str:
-    """Where a flying script listens for vehicle ``instance``: the API port of ``sitl.toml``'s
-    ``[ports]`` + N (MAVSDK's default 14540 + N unless configured otherwise)."""
+    """Where a flying script meets vehicle ``instance`` alone (:func:`quadcommon.wire.api_endpoint`
+    under ``sitl.toml``'s ``[ports]``): ``udpin:127.0.0.1:14540+N`` for the first ten, else
+    ``udpout:127.0.0.1:14580+N`` (the script's 1 Hz HEARTBEAT makes it a peer of that link)."""
+    from quadcommon import wire
     from quadcommon.config import load_sitl
 
-    return f"udpin:127.0.0.1:{load_sitl().ports(instance).api_remote}"
+    kind, port = wire.api_endpoint(load_sitl().ports(instance), instance)
+    return f"{kind}:127.0.0.1:{port}"
 
 
 def gcs_url(instance: int) -> str:
-    """Where a ground station (or the recorder) listens for vehicle ``instance``: the GCS port of
-    ``sitl.toml``'s ``[ports]`` + N (QGroundControl's 14550 + N unless configured otherwise)."""
+    """Where a ground station (or the recorder) listens for vehicle ``instance``: the GCS client port
+    of ``sitl.toml``'s ``[ports]``, QGroundControl's 14550 for every instance (the vehicles told
+    apart by system id) unless configured otherwise."""
     from quadcommon.config import load_sitl
 
     return f"udpin:127.0.0.1:{load_sitl().ports(instance).gcs_remote}"

@@ -1,12 +1,14 @@
 """Record a SITL session: the MAVLink .tlog and a Parquet table joining zenoh truth with telemetry.
 
-Listens like a ground station (default ``udpin:127.0.0.1:14550+N``, QGroundControl's port) and
+Listens like a ground station (default ``udpin:127.0.0.1:14550``, QGroundControl's port, where
+every instance's GCS link sends; the recorder keeps vehicle N's system id 1 + N) and
 subscribes to the vehicle's zenoh bus (``quadsitl/N/truth`` from the simulator,
 ``quadsitl/N/controller`` from the autopilot and, when it flies on its EKF,
 ``quadsitl/N/estimator``; their ``info`` queryables give the metadata).
 Writes, for ``--out DIR/NAME`` (default ``runs/<timestamp>``):
 
-* ``NAME.tlog``: every MAVLink message received on the link, stamped with the wall clock
+* ``NAME.tlog``: every MAVLink message from the vehicle (system id 1 + N) received on the link
+  (other vehicles on the same port left out), stamped with the wall clock
   (readable by pymavlink's mavutil, ``mavlogdump.py``, MAVExplorer); flushed every second;
 * ``NAME.parts/part-000001.parquet``, ...: every second of wall time, the rows joined so far,
   each part a complete Parquet file; on a clean exit they are merged into ``NAME.parquet`` and
@@ -78,8 +80,8 @@ class Recorder:
     def __init__(self, options: RecorderOptions) -> None:
         self.options = options
         self.sitl = load_sitl(options.sitl_config)
-        self.ports = wire.ports(options.instance, zenoh_base=self.sitl.zenoh_port_base)
-        self.url = options.url or f"udpin:127.0.0.1:{self.sitl.gcs_port_base + options.instance}"
+        self.ports = self.sitl.ports(options.instance)
+        self.url = options.url or f"udpin:127.0.0.1:{self.ports.gcs_remote}"
         mavlink_link._check_loopback(self.url)
         out = Path(options.out)
         if out.suffix in (".parquet", ".tlog"):
@@ -214,6 +216,8 @@ class Recorder:
             if msg.get_type() == "BAD_DATA":
                 continue
             n += 1
+            if msg.get_srcSystem() != self.assembler.system_id:
+                continue  # another vehicle: every instance's GCS link sends to the one port 14550
             self.tlog.write(msg.get_msgbuf(), now_unix)
             self.assembler.add_mavlink(msg, wall)
             if msg.get_type() == "STATUSTEXT" and msg.get_srcSystem() == self.assembler.system_id:
@@ -297,7 +301,9 @@ def build_parser(prog: str = "record.py") -> argparse.ArgumentParser:
     parser.add_argument(
         "--out", type=Path, default=None, help="output DIR/NAME without suffix (default runs/<timestamp>)"
     )
-    parser.add_argument("--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14550+N)")
+    parser.add_argument(
+        "--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14550, kept: system id 1+N)"
+    )
     parser.add_argument(
         "--duration", type=float, default=None, help="stop after S seconds of simulation time"
     )
@@ -312,8 +318,8 @@ def build_parser(prog: str = "record.py") -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None, prog: str = "record.py") -> int:
     parser = build_parser(prog)
     args = parser.parse_args(argv)
-    if not 0 <= args.instance <= 99:
-        parser.error(f"--instance must be in [0, 99], got {args.instance}")
+    if not wire.INSTANCE_MIN <= args.instance <= wire.INSTANCE_MAX:
+        parser.error(f"--instance must be in [{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}], got {args.instance}")
     if args.duration is not None and not (args.duration > 0.0 and math.isfinite(args.duration)):
         parser.error(f"--duration must be > 0 s, got {args.duration}")
     options = RecorderOptions(

@@ -527,7 +527,11 @@ def build_parser(prog: str = "upload_mission.py") -> argparse.ArgumentParser:
     source.add_argument("--download", action="store_true", help="print the vehicle's mission")
     source.add_argument("--clear", action="store_true", help="clear the vehicle's mission")
     parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
-    parser.add_argument("--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14540+N)")
+    parser.add_argument(
+        "--url",
+        default=None,
+        help="MAVLink URL (default udpin:127.0.0.1:14540+N; from N=10 udpout:127.0.0.1:14580+N)",
+    )
     parser.add_argument("--scenario", default=None, help="scenario for --curve (default: the curve's name)")
     parser.add_argument(
         "--duration", type=float, default=None, help="curve duration, s (default: scenario's)"

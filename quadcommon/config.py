@@ -530,7 +530,7 @@ class SitlConfig:
     impair: ImpairConfig = ImpairConfig()  # loss, delay ... per link ([impair], --impair)
 
     def ports(self, instance: int) -> wire.Ports:
-        """Every port of vehicle ``instance`` under this file's ``[ports]`` bases (each base + N)."""
+        """Every port of vehicle ``instance`` under this file's ``[ports]`` bases (:func:`wire.ports`)."""
         return wire.ports(instance, self.hil_port_base, self.gcs_port_base, self.api_port_base,
                           self.zenoh_port_base)  # fmt: skip
 
@@ -569,10 +569,13 @@ def load_sitl(name_or_path: str | Path | None = None) -> SitlConfig:
     rates = load_rates(sec)
     sec.finish()
     sec = root.section("ports", optional=True)
-    hil = sec.integer("hil_base", 4560, lo=1024, hi=65000)
-    gcs = sec.integer("gcs_base", 14550, lo=1024, hi=65000)
-    api = sec.integer("api_base", 14540, lo=1024, hi=65000)
-    zenoh_port = sec.integer("zenoh_base", 7447, lo=1024, hi=65000)
+    top = 65535 - wire.INSTANCE_MAX  # the highest base whose instance 249 is still a port
+    gcs_link_above = wire.GCS_LOCAL_BASE - wire.GCS_REMOTE_BASE  # the autopilot's links move with their bases
+    api_link_above = wire.API_LOCAL_BASE - wire.API_REMOTE_BASE
+    hil = sec.integer("hil_base", wire.HIL_PORT_BASE, lo=1024, hi=top)
+    gcs = sec.integer("gcs_base", wire.GCS_REMOTE_BASE, lo=1024, hi=top - gcs_link_above)
+    api = sec.integer("api_base", wire.API_REMOTE_BASE, lo=1024, hi=top - api_link_above)
+    zenoh_port = sec.integer("zenoh_base", wire.ZENOH_PORT_BASE, lo=1024, hi=top)
     sec.finish()
     sec = root.section("home", optional=True)
     home = (

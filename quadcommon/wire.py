@@ -1,25 +1,35 @@
 """The contract on the wire between the processes: ports, ids, the HIL frame, zenoh keys.
 
 Both processes and the ground-station scripts read this module; neither process imports the
-other. Ports follow PX4 SITL's scheme, each offset by the instance number N:
+other. Ports follow PX4 SITL's scheme (PX4's ``px4-rc.mavlink``) for instance ``N`` in [0, 249]
+(MAVLink system id 1 + N, up to 250):
 
-=====================  ==============  ==========================================================
-link                   port            who binds / who sends
-=====================  ==============  ==========================================================
-HIL                    4560 + N        simulator binds 127.0.0.1; autopilot sends first
-GCS (QGC, MAVProxy)    14550 + N       ground station listens; autopilot sends from 18570 + N
-API (MAVSDK, scripts)  14540 + N       script listens; autopilot sends from 14580 + N
-zenoh                  7447 + N        simulator's session listens on tcp/127.0.0.1
-=====================  ==============  ==========================================================
+=====================  ==================  =======================================================
+link                   port                who binds / who sends
+=====================  ==================  =======================================================
+HIL                    4560 + N            simulator binds 127.0.0.1; autopilot sends first
+GCS (QGC, MAVProxy)    14550               ground station listens; autopilot N sends from 18570 + N
+API (MAVSDK, scripts)  14540 + N, N <= 9   script listens; autopilot N sends from 14580 + N
+                       14549, N >= 10
+zenoh                  7447 + N            simulator's session listens on tcp/127.0.0.1
+=====================  ==================  =======================================================
+
+Every vehicle streams its GCS link to the one port 14550: one QGroundControl or MAVProxy there
+sees the whole fleet, the vehicles told apart by system id. The API link goes to 14540 + N for the
+first ten instances; from instance 10 on PX4 sends it to 14549 (all of them: 14540 + 10 would be
+14550), and so do we. A script for one vehicle N >= 10 connects to that vehicle's own API link
+instead, ``udpout://127.0.0.1:14580+N`` in MAVSDK (``udpout:127.0.0.1:14580+N`` in pymavlink):
+the autopilot answers every address that talks to it, so the first message it hears there makes
+the script a peer of that link alone (:func:`api_endpoint`, :func:`api_connect_url`). PX4's
+onboard payload and gimbal links (14280 + N, 13030 + N) have no counterpart here.
 
 :func:`port_roles` lists them by role: *own* ports are bound by our two processes (HIL, the two
-autopilot links, zenoh), *client* ports are where ground stations listen (14550 + N, 14540 + N);
-a ground station binding its client port is normal. ``N`` is in [0, 99]. Because every port is a
-base + N, some of them meet across instances (:func:`overlapping_offsets`): with the default bases
-instance N's API client port 14540 + N is instance N - 10's GCS client port, instance N - 30's
-autopilot API link (14580 + N - 30) is instance N's GCS client port, and instance N - 40's is its
-API client port. Instances 10, 30 or 40 apart cannot run at the same time; the launcher refuses
-them (:func:`sitl.launcher.check_launch`).
+autopilot links, zenoh), *client* ports are where ground stations listen (14550, 14540 + N or
+14549); a ground station binding its client port is normal, and client ports are shared by design.
+Own ports are distinct across all 250 instances, and no own port is any instance's client port
+(:func:`port_collisions`, empty for the default bases; the ``[ports]`` bases of ``sitl.toml`` move
+every link of one kind together; under bases that make ports meet, the launcher refuses the
+instances that would share them, :func:`sitl.launcher.check_launch`).
 
 HIL lockstep frame: the simulator sends ONE UDP datagram per control period holding
 ``HIL_SENSOR``, ``HIL_STATE_QUATERNION``, ``ODOMETRY`` and, at the GPS rate, ``HIL_GPS``, all
@@ -93,6 +103,7 @@ from __future__ import annotations
 
 import select
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -108,7 +119,8 @@ GCS_LOCAL_BASE = 18570
 API_REMOTE_BASE = 14540
 API_LOCAL_BASE = 14580
 ZENOH_PORT_BASE = 7447
-INSTANCE_MIN, INSTANCE_MAX = 0, 99  # --instance N
+INSTANCE_MIN, INSTANCE_MAX = 0, 249  # --instance N: system ids 1..250
+API_OWN_REMOTES = 10  # instances 0-9 send the API link to 14540 + N; the rest to 14540 + 9 (PX4)
 
 # MAVLink ids.
 AUTOPILOT_COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
@@ -260,18 +272,37 @@ def ports(
     api_base: int = API_REMOTE_BASE,
     zenoh_base: int = ZENOH_PORT_BASE,
 ) -> Ports:
-    """Every port of vehicle ``instance`` (each base + N)."""
+    """Every port of vehicle ``instance`` (the table of the module's docstring): own ports base + N,
+    the GCS client port ``gcs_base`` for every instance, the API client port ``api_base`` + N for
+    N < :data:`API_OWN_REMOTES` and ``api_base`` + 9 beyond (PX4's 14549)."""
     if not INSTANCE_MIN <= instance <= INSTANCE_MAX:
         raise ValueError(f"--instance must be in [{INSTANCE_MIN}, {INSTANCE_MAX}], got {instance}")
     n = instance
     return Ports(
         hil=hil_base + n,
-        gcs_remote=gcs_base + n,
+        gcs_remote=gcs_base,
         gcs_local=GCS_LOCAL_BASE + (gcs_base - GCS_REMOTE_BASE) + n,
-        api_remote=api_base + n,
+        api_remote=api_base + min(n, API_OWN_REMOTES - 1),
         api_local=API_LOCAL_BASE + (api_base - API_REMOTE_BASE) + n,
         zenoh=zenoh_base + n,
     )
+
+
+def api_endpoint(p: Ports, instance: int) -> tuple[str, int]:
+    """Where a script for vehicle ``instance`` alone meets its API link: ("udpin", 14540 + N) for
+    the first ten (it listens there, as PX4's docs say), else ("udpout", 14580 + N), the link's own
+    port (the script talks first; the autopilot answers the address that talks to it). 14549 would
+    bring every vehicle from 10 on, and a pymavlink ``udpin`` answers whichever sent last."""
+    if instance < API_OWN_REMOTES:
+        return "udpin", p.api_remote
+    return "udpout", p.api_local
+
+
+def api_connect_url(p: Ports, instance: int) -> str:
+    """:func:`api_endpoint` as a MAVSDK connection URL: ``udpin://0.0.0.0:14540`` for instance 0,
+    ``udpout://127.0.0.1:14617`` for instance 37."""
+    kind, port = api_endpoint(p, instance)
+    return f"udpin://0.0.0.0:{port}" if kind == "udpin" else f"udpout://{LOOPBACK}:{port}"
 
 
 class PortRole(NamedTuple):
@@ -306,15 +337,34 @@ def port_roles(p: Ports, zenoh_listener: bool = True) -> tuple[PortRole, ...]:
     return tuple(r for r in roles if r.own) + tuple(r for r in roles if not r.own)
 
 
-def overlapping_offsets(p: Ports) -> tuple[int, ...]:
-    """The instance differences d > 0 for which instances N and N + d share a port (any role,
-    same protocol); ``p`` gives the bases (any instance: every port is base + N)."""
-    by_proto: dict[str, list[int]] = {}
-    for r in port_roles(p):
-        by_proto.setdefault(r.proto, []).append(r.port)
-    span = INSTANCE_MAX - INSTANCE_MIN
-    found = {abs(a - b) for ports_ in by_proto.values() for a in ports_ for b in ports_}
-    return tuple(sorted(d for d in found if 0 < d <= span))
+class PortCollision(NamedTuple):
+    """One port two instances use in ways that cannot go together: two own ports, or one
+    instance's own port that is another's client port (its stream would reach a process)."""
+
+    proto: str
+    port: int
+    first: tuple[int, PortRole]  # (instance, its role)
+    second: tuple[int, PortRole]
+
+
+def port_collisions(
+    roles_of: Callable[[int], tuple[PortRole, ...]], instances: Iterable[int]
+) -> list[PortCollision]:
+    """Every collision among ``instances`` (:class:`PortCollision`), ``roles_of(n)`` giving instance
+    n's :func:`port_roles`. Client ports shared with client ports are not collisions: a ground
+    station there hears every vehicle and tells them apart by system id."""
+    seen: dict[tuple[str, int], list[tuple[int, PortRole]]] = {}
+    for n in instances:
+        for role in roles_of(n):
+            seen.setdefault((role.proto, role.port), []).append((n, role))
+    found = []
+    for (proto, port), users in seen.items():
+        owners = [u for u in users if u[1].own]
+        if not owners or len(users) < 2:
+            continue
+        first = owners[0]
+        found.extend(PortCollision(proto, port, first, other) for other in users if other is not first)
+    return found
 
 
 def zenoh_key(instance: int, leaf: str) -> str:

@@ -61,8 +61,7 @@ class Simulator:
         self.duration_s = duration_s
         sitl = setup.sitl
         self.instance = setup.instance
-        self.ports = wire.ports(setup.instance, sitl.hil_port_base, sitl.gcs_port_base,
-                                sitl.api_port_base, sitl.zenoh_port_base)  # fmt: skip
+        self.ports = sitl.ports(setup.instance)
         self.timeout_s, self.spin_s = sitl.lockstep_timeout_s, sitl.lockstep_spin_s
         self.sock: Any = None
         self.impaired = ImpairedLinks(sitl.impair, "simulator")  # live changes: quadsitl/<N>/impair

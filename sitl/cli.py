@@ -248,10 +248,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--instance",
         type=int,
         default=0,
-        help="first vehicle instance N, 0-99 (every port +N, sysid 1+N); instances 10, 30 or 40 apart "
-        "share ports (N's API client port 14540+N is N-10's GCS client port ...) and are refused together",
+        help="first vehicle instance N, 0-249 (sysid 1+N; PX4's ports: HIL 4560+N, GCS link 18570+N sending "
+        "to 14550 for every vehicle, API link 14580+N sending to 14540+N, 14549 from N=10)",
     )
-    p.add_argument("--count", type=int, default=1, help="number of vehicles (instances N..N+K-1; at most 10)")
+    p.add_argument(
+        "--count", type=int, default=1, help="number of vehicles (instances N..N+K-1, up to instance 249)"
+    )
     p.add_argument("--controller", default="intbs_nlhinf",
                    help=f"cascade (config/controllers): {', '.join(CONTROLLER_NAMES)}, or your own")
     p.add_argument("--scenario", default="hover", help="initial state, uncertainty, gusts (config/scenarios)")

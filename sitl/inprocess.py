@@ -216,7 +216,7 @@ class Lockstep:
 
     def ground_station(self, link: int = API_LINK, listen: bool = True, **ids) -> GroundStation:
         """A station on ``link``; ``listen``: it is where the link sends by default (as MAVSDK on
-        14540 + N, QGC on 14550 + N), so it receives telemetry before it has sent anything."""
+        14540 + N, QGC on 14550), so it receives telemetry before it has sent anything."""
         gcs = GroundStation(self, link, **ids)
         self.stations[gcs.address] = gcs
         if listen:

@@ -14,8 +14,9 @@ used by ``quadsitl up``'s supervisor, :mod:`sitl.supervise`).
 
 Ports (:func:`check_launch`, before anything starts): every port of an instance by role
 (:func:`quadcommon.wire.port_roles`: *own* ports bound by our processes, *client* ports where
-ground stations listen). Refused, naming both instances, the port and the roles: an own port in
-use; two instances of one launch sharing any port (own or client); a client port that is another
+ground stations listen). Refused, naming the port, its link and the instances: an own port in
+use; two instances of one launch sharing a port where one of them binds it
+(:func:`quadcommon.wire.port_collisions`; never with the default bases); a client port that is another
 instance's own port while that port is in use (that instance is running: our stream would reach
 its autopilot); an own port that is the client port of another instance that is running (its
 stream would reach ours). A ground station listening on a client port is normal, never an error.
@@ -263,41 +264,50 @@ def _in_use_text(proto: str, port: int, what: str, instance: int) -> str:
 
 
 class _PortPlan:
-    """The ports by role of every instance in [0, 99] under one sitl.toml (its bases)."""
+    """The ports by role of every instance in [0, 249] under one sitl.toml (its bases), indexed by
+    port; which instances run is probed once per plan."""
 
     def __init__(self, spec: VehicleSpec) -> None:
         cfg = load_sitl(spec.sitl_config)
         self.bases = (cfg.hil_port_base, cfg.gcs_port_base, cfg.api_port_base, cfg.zenoh_port_base)
         self.zenoh_listener = not cfg.zenoh_router
-        self._roles: dict[int, tuple[wire.PortRole, ...]] = {}
+        everyone = range(wire.INSTANCE_MIN, wire.INSTANCE_MAX + 1)
+        self._roles = {n: wire.port_roles(self.ports(n), self.zenoh_listener) for n in everyone}
+        self._users: dict[tuple[str, int], list[tuple[int, wire.PortRole]]] = {}
+        for n in everyone:
+            for r in self._roles[n]:
+                self._users.setdefault((r.proto, r.port), []).append((n, r))
+        self._running: dict[int, wire.PortRole | None] = {}
 
     def ports(self, n: int) -> wire.Ports:
         return wire.ports(n, *self.bases)
 
     def roles(self, n: int) -> tuple[wire.PortRole, ...]:
-        if n not in self._roles:
-            self._roles[n] = wire.port_roles(self.ports(n), self.zenoh_listener)
         return self._roles[n]
 
     def sharing(self, role: wire.PortRole, n: int) -> list[tuple[int, wire.PortRole]]:
         """Every (other instance, its role) using the same protocol and port as ``role`` of ``n``."""
-        return [(m, r) for m in range(wire.INSTANCE_MIN, wire.INSTANCE_MAX + 1) if m != n
-                for r in self.roles(m) if (r.proto, r.port) == (role.proto, role.port)]  # fmt: skip
+        return [(m, r) for m, r in self._users[(role.proto, role.port)] if m != n]
 
     def unique_own(self, m: int) -> list[wire.PortRole]:
         """``m``'s own ports that no other instance uses in any role: one of them in use means
         instance ``m`` is running."""
-        return [r for r in self.roles(m) if r.own and not self.sharing(r, m)]
+        return [r for r in self.roles(m) if r.own and len(self._users[(r.proto, r.port)]) == 1]
+
+    def running(self, m: int) -> wire.PortRole | None:
+        """The first of ``m``'s :meth:`unique_own` ports in use (instance ``m`` runs), else None."""
+        if m not in self._running:
+            self._running[m] = next((r for r in self.unique_own(m) if port_in_use(r.proto, r.port)), None)
+        return self._running[m]
 
     def hint(self) -> str:
-        apart = wire.overlapping_offsets(self.ports(0))
-        if not apart:
-            return f"--instance is {wire.INSTANCE_MIN}-{wire.INSTANCE_MAX}"
-        names = ", ".join(str(d) for d in apart[:-1]) + (" or " if len(apart) > 1 else "") + str(apart[-1])
-        return (
-            f"--instance is {wire.INSTANCE_MIN}-{wire.INSTANCE_MAX}; instances {names} apart share "
-            f"ports and cannot run at the same time: at most {apart[0]} vehicles per launch"
-        )
+        clash = wire.port_collisions(self.roles, range(wire.INSTANCE_MIN, wire.INSTANCE_MAX + 1))
+        text = f"--instance is {wire.INSTANCE_MIN}-{wire.INSTANCE_MAX}"
+        if clash:
+            c = clash[0]
+            text += (f"; sitl.toml's [ports] bases make {len(clash)} ports meet across instances, e.g. "
+                     f"{_both(c.first[1], c.first[0], c.second[1], c.second[0])}")  # fmt: skip
+        return text
 
 
 def _both(port: wire.PortRole, n: int, other: wire.PortRole, m: int) -> str:
@@ -305,43 +315,43 @@ def _both(port: wire.PortRole, n: int, other: wire.PortRole, m: int) -> str:
 
 
 def launch_conflicts(specs: Sequence[VehicleSpec]) -> list[str]:
-    """Ports shared by two instances of one launch (pure: no socket), one sentence each naming
-    the port, both instances and their roles; empty when they can run together."""
+    """Ports two instances of one launch cannot share (pure: no socket; :func:`wire.port_collisions`:
+    an own port of both, or one's own port the other's client port), one sentence each naming the
+    port, both instances and their roles; empty when they can run together."""
     if not specs:
         return []
     plan = _PortPlan(specs[0])
     instances = [spec.instance for spec in specs]
     problems = [f"instance {n} is given twice" for n in sorted(set(instances)) if instances.count(n) > 1]
-    distinct = sorted(set(instances))
-    for i, low in enumerate(distinct):
-        for high in distinct[i + 1 :]:
-            for mine in plan.roles(high):
-                for theirs in plan.roles(low):
-                    if (mine.proto, mine.port) == (theirs.proto, theirs.port):
-                        problems.append(_both(mine, high, theirs, low))
+    for c in wire.port_collisions(plan.roles, sorted(set(instances))):
+        (n, mine), (m, theirs) = sorted([c.first, c.second], key=lambda u: -u[0])
+        problems.append(_both(mine, n, theirs, m))
     return problems
 
 
-def _running_sharers(plan: _PortPlan, n: int, together: set[int]):
+def _running_sharers(plan: _PortPlan, n: int, together: set[int], clients_too: bool = False):
     """(our role, other instance, its role, the port showing it runs) for every other instance
-    outside ``together`` that shares a port with ``n`` and is running now."""
+    outside ``together`` that shares a port with ``n`` and is running now; a client port shared
+    with another's client port only with ``clients_too`` (allowed: a ground station hears both)."""
     for mine in plan.roles(n):
         for m, theirs in plan.sharing(mine, n):
-            if m in together:
+            if m in together or (not clients_too and not mine.own and not theirs.own):
                 continue
-            running = next((r for r in plan.unique_own(m) if port_in_use(r.proto, r.port)), None)
+            running = plan.running(m)
             if running is not None:
                 yield mine, m, theirs, running
 
 
-def check_ports(spec: VehicleSpec, launch: Sequence[VehicleSpec] = ()) -> wire.Ports:
+def check_ports(
+    spec: VehicleSpec, launch: Sequence[VehicleSpec] = (), plan: _PortPlan | None = None
+) -> wire.Ports:
     """Every port of ``spec``'s instance against what is running now (sockets bound and let go):
     its own ports must be free, and no other instance it shares a port with may be running (one
     of that instance's ports no one else uses is in use). ``launch``: the instances started with
-    it (:func:`launch_conflicts` checks those). LaunchError naming the port, the roles and the
-    other instance. A client port in use with no such instance running is a ground station
+    it (:func:`launch_conflicts` checks those). LaunchError naming the port, the link, the instance
+    and the other instance. A client port in use with no such instance running is a ground station
     listening there: normal."""
-    plan = _PortPlan(spec)
+    plan = plan or _PortPlan(spec)
     n, together = spec.instance, {s.instance for s in launch} | {spec.instance}
     roles = plan.roles(n)
     for mine in roles:  # own ports in use
@@ -352,8 +362,6 @@ def check_ports(spec: VehicleSpec, launch: Sequence[VehicleSpec] = ()) -> wire.P
                 text += f"; it is also instance {m}'s {theirs.role} ({guess})"
             raise LaunchError(text)
     for mine, m, theirs, running in _running_sharers(plan, n, together):
-        if not mine.own and not theirs.own:
-            continue  # two client ports: a ground station there hears both (port_notes says so)
         if theirs.own:  # our client port: our stream to it would reach instance m's process
             effect = f"instance {n}'s traffic for its {mine.role} would reach instance {m}'s {theirs.role}"
         else:  # instance m's client port: its stream would reach our process
@@ -367,20 +375,33 @@ def check_ports(spec: VehicleSpec, launch: Sequence[VehicleSpec] = ()) -> wire.P
 
 
 def port_notes(specs: Sequence[VehicleSpec]) -> list[str]:
-    """Client ports shared with another instance that is running (not one of ``specs``): allowed
-    (a ground station tells the vehicles apart by system id, as with PX4's one GCS port for every
-    instance), but a ground station there hears both vehicles, and two cannot listen on it."""
+    """Client ports shared with other instances that are running (not of ``specs``): allowed (a
+    ground station tells the vehicles apart by system id, as with PX4's one GCS port 14550 for
+    every instance), but a ground station there hears them all; one note per port."""
     if not specs:
         return []
     plan, together = _PortPlan(specs[0]), {s.instance for s in specs}
-    return [
-        f"note: {_both(mine, spec.instance, theirs, m)} and instance {m} is running: a ground "
-        f"station on {mine.proto} {mine.port} hears both vehicles (sysid {wire.system_id(spec.instance)} "
-        f"and {wire.system_id(m)})"
-        for spec in specs
-        for mine, m, theirs, _ in _running_sharers(plan, spec.instance, together)
-        if not mine.own and not theirs.own
-    ]
+    heard: dict[tuple[str, int, str], set[int]] = {}
+    for spec in specs:
+        for mine, m, theirs, _ in _running_sharers(plan, spec.instance, together, clients_too=True):
+            if not mine.own and not theirs.own:
+                heard.setdefault((mine.proto, mine.port, mine.role), set()).add(m)
+    notes = []
+    for (proto, port, role), others in sorted(heard.items()):
+        ours = sorted(s.instance for s in specs
+                      if any(r.port == port and not r.own for r in plan.roles(s.instance)))  # fmt: skip
+        shown = ", ".join(str(m) for m in sorted(others)[:8]) + (" ..." if len(others) > 8 else "")
+        notes.append(
+            f"note: {proto} {port} is the {role} of instance(s) {_span(ours)} and of running instance(s) "
+            f"{shown}: a ground station there hears them all (system id 1 + N)"
+        )
+    return notes
+
+
+def _span(instances: list[int]) -> str:
+    if len(instances) > 2 and instances == list(range(instances[0], instances[-1] + 1)):
+        return f"{instances[0]}-{instances[-1]}"
+    return ", ".join(str(n) for n in instances)
 
 
 def check_launch(specs: Sequence[VehicleSpec], running: Sequence[VehicleSpec] = ()) -> dict[int, wire.Ports]:
@@ -397,7 +418,8 @@ def check_launch(specs: Sequence[VehicleSpec], running: Sequence[VehicleSpec] = 
             + f"\n({_PortPlan(specs[0]).hint()})"
         )
     everyone = [*running, *specs]
-    return {spec.instance: check_ports(spec, everyone) for spec in specs}
+    plan = _PortPlan(specs[0])
+    return {spec.instance: check_ports(spec, everyone, plan) for spec in specs}
 
 
 def spin_environment(vehicles: int, environ: dict[str, str] | None = None, cores: int | None = None):

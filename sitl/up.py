@@ -33,16 +33,19 @@ POLL_S = 0.1  # the foreground loop's period (wall): reaction time to a lost pro
 
 
 def endpoints_banner(spec: VehicleSpec, ports: wire.Ports) -> str:
+    """What a user points their tools at: the GCS client port (every vehicle's, told apart by
+    system id) and the API endpoint of this vehicle alone (:func:`quadcommon.wire.api_endpoint`)."""
     n = spec.instance
     speed = f"{spec.speed}{'x' if spec.speed != 'max' else ''}"
+    kind, api_port = wire.api_endpoint(ports, n)
     return "\n".join(
         [
             f"quadsitl: vehicle {n} is up (MAVLink sysid {wire.system_id(n)}, controller {spec.controller}, "
             f"scenario {spec.scenario}, speed {speed})",
             f"  QGroundControl / MAVProxy : udp {ports.gcs_remote}   "
             f"(mavproxy.py --master=udpin:127.0.0.1:{ports.gcs_remote})",
-            f"  MAVSDK / API scripts      : udpin://0.0.0.0:{ports.api_remote}   "
-            f"(pymavlink: udpin:127.0.0.1:{ports.api_remote})",
+            f"  MAVSDK / API scripts      : {wire.api_connect_url(ports, n)}   "
+            f"(pymavlink: {kind}:127.0.0.1:{api_port})",
             f"  zenoh (truth, internals)  : tcp/127.0.0.1:{ports.zenoh}   "
             f"keys quadsitl/{n}/truth, quadsitl/{n}/controller",
             f"  flight logs (ULog)        : {_log_line(spec)}",

@@ -2,7 +2,7 @@
 
 Every vehicle a test starts takes its ports from ``sitl.toml``'s ``[ports]`` bases + its instance
 (``quadcommon/wire.py``). Each pytest process (the run itself, or each pytest-xdist worker)
-claims one block of :data:`BLOCK_STARTS`, checks that every port of every instance 0-99 is free
+claims one block of :data:`BLOCK_STARTS`, checks that every port of every instance 0-249 is free
 on 127.0.0.1 (UDP, and TCP for zenoh), and writes a ``sitl.toml`` with those bases into a
 configuration directory of its own, put first in ``QUADSITL_CONFIG_DIR``
 (:func:`claim_block`). The launcher, the two processes, the ground-station scripts and the
@@ -11,9 +11,9 @@ configuration mechanism a user has, and two checkouts (or two workers) test at o
 
 The claim is an exclusive ``flock`` on a file per block in the temporary directory, held until the
 process exits (the kernel drops it even when the process is killed); the probe adds ports that
-something else (a running ``quadsitl up``) holds. A block keeps the default bases' relative
-layout (API 10 below GCS, as PX4's ``14540``/``14550``): instances 10, 30 or 40 apart share
-ports there exactly as with the defaults, and the launcher's port rules are tested unchanged.
+something else (a running ``quadsitl up``) holds. A block keeps the scheme's own layout (the API
+client ports just above the one GCS client port is a block's own choice; the scheme moves each
+link with its base), so its 250 instances meet nowhere, as with the defaults.
 """
 
 from __future__ import annotations
@@ -31,11 +31,12 @@ from quadcommon import environment, wire
 from quadcommon.config import SHIPPED_CONFIG_DIR
 
 # Below Linux's ephemeral range (32768-60999), so no client's random source port lands in a
-# block, and clear of the default bases' ports (4560+, 7447+, 14540-14679, 18570+). A block:
-# HIL base+0..99, zenoh base+100..199, API base+300..439 (remote, local), GCS base+310..409 and
-# base+4330..4429 (remote, local); blocks 450 apart, in two runs of nine whose GCS local ranges lie
-# above the run's other ports (tests/test_ports.py checks they never meet).
-BLOCK_STARTS = tuple(first + 450 * k for first in (10000, 20000) for k in range(9))
+# block, and clear of the default bases' ports (4560-4809, 7447-7696, 14540-14550, 14580-14829,
+# 18570-18819). A block at S: GCS client S, API client S+1..S+10 and local S+41..S+290, HIL
+# S+291..S+540, zenoh S+541..S+790, GCS local S+4020..S+4269 (18570 - 14550 above the client
+# port). The starts pack 17 blocks that never meet (tests/test_ports.py checks it).
+BLOCK_STARTS = (1100, 1900, 2700, 3680, 7950, 8750, 9550, 10810, 15080, 15880, 16680, 17480,
+                21750, 22550, 23350, 24150, 24950)  # fmt: skip
 LOCK_DIR = Path(tempfile.gettempdir()) / "quadsitl-test-ports"
 
 _held: list[IO[str]] = []  # the claimed block's lock file, open for the life of the process
@@ -44,11 +45,11 @@ _claimed: list[Path] = []  # the configuration directory holding its sitl.toml
 
 def bases(start: int) -> dict[str, int]:
     """The ``[ports]`` keys of the block at ``start``."""
-    return {"hil_base": start, "zenoh_base": start + 100, "api_base": start + 300, "gcs_base": start + 310}
+    return {"gcs_base": start, "api_base": start + 1, "hil_base": start + 291, "zenoh_base": start + 541}
 
 
 def block_ports(start: int) -> set[tuple[str, int]]:
-    """(protocol, port) of every port of instances 0-99 on the block at ``start``."""
+    """(protocol, port) of every port of instances 0-249 on the block at ``start``."""
     b = bases(start)
     found = set()
     for n in range(wire.INSTANCE_MIN, wire.INSTANCE_MAX + 1):
@@ -96,9 +97,7 @@ def claim_block() -> tuple[int, Path]:
         atexit.register(shutil.rmtree, directory, ignore_errors=True)
         (directory / "sitl.toml").write_text(sitl_toml(start))
         _claimed.append(directory)
-        os.environ[environment.CONFIG_DIR] = os.pathsep.join(
-            [str(directory), *environment.config_dir_list()]
-        )
+        os.environ[environment.CONFIG_DIR] = os.pathsep.join([str(directory), *environment.config_dir_list()])
         return start, directory
     raise RuntimeError("no free port block for the tests that start a SITL: " + "; ".join(refused))
 

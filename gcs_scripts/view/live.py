@@ -1,6 +1,6 @@
 """One live vehicle as the view sees it: zenoh (truth, controller, info) and MAVLink, polled.
 
-The view is a passive ground station. It never binds a ground-station port (14550+N is
+The view is a passive ground station. It never binds a ground-station port (14550 is
 QGroundControl's, 14540+N MAVSDK's): its MAVLink socket is an ephemeral port on 127.0.0.1, from
 which it sends a HEARTBEAT (``MAV_TYPE_GCS``, system id 254) once per wall second to the
 autopilot's GCS link (``18570+N``). The autopilot answers every address that talks to it, so it
@@ -48,9 +48,7 @@ class LiveVehicle:
     def __init__(self, instance: int, sitl: SitlConfig) -> None:
         self.instance = instance
         self.sitl = sitl
-        self.ports = wire.ports(
-            instance, sitl.hil_port_base, sitl.gcs_port_base, sitl.api_port_base, sitl.zenoh_port_base
-        )
+        self.ports = sitl.ports(instance)
         self.system_id = wire.system_id(instance)
         self.autopilot_address = (wire.LOOPBACK, self.ports.gcs_local)
         self.sampler = VehicleSampler()

@@ -400,8 +400,8 @@ def instances_from(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
             parser.error("--count goes with one --instance N (the first of the K vehicles)")
         instances = [instances[0] + k for k in range(args.count)]
     for n in instances:
-        if not 0 <= n <= 99:
-            parser.error(f"--instance must be in [0, 99], got {n}")
+        if not wire.INSTANCE_MIN <= n <= wire.INSTANCE_MAX:
+            parser.error(f"--instance must be in [{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}], got {n}")
     if len(set(instances)) != len(instances):
         parser.error(f"--instance: each vehicle once, got {instances}")
     return instances

@@ -1,8 +1,10 @@
 """Several vehicles at once: ``quadsitl up --instance N --count 2``, as PX4's multi-vehicle SITL.
 
-Vehicle N gets ports +N and sysid 1+N and its own zenoh key prefix ``quadsitl/<N>/``. Two vehicles
-fly different offboard setpoints at the same time, each driven by a pymavlink client on its own
-API port; neither obeys what is addressed to the other.
+Vehicle N gets its own ports (PX4's scheme, quadcommon/wire.py), sysid 1+N and its own zenoh key
+prefix ``quadsitl/<N>/``. Both stream their GCS link to the one ground-station port (PX4's 14550):
+one socket there hears both, told apart by system id. Two vehicles fly different offboard
+setpoints at the same time, each driven by a pymavlink client on its own API port; neither obeys
+what is addressed to the other.
 
 What PX4 does with a command for another system (and what this autopilot does): it ignores it
 without an ACK (PX4's ``MavlinkReceiver::handle_message_command_both``: "Ignore command ... to
@@ -99,6 +101,21 @@ class Client:
         self.conn.close()
 
 
+class GroundStationPort:
+    """A socket on the GCS client port, as QGroundControl on 14550: the system ids it hears."""
+
+    def __init__(self, port: int) -> None:
+        self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
+        self.heartbeats: set[int] = set()  # system ids of the HEARTBEATs received
+
+    def poll(self) -> None:
+        while (msg := self.conn.recv_match(type="HEARTBEAT", blocking=False)) is not None:
+            self.heartbeats.add(msg.get_srcSystem())
+
+    def close(self) -> None:
+        self.conn.close()
+
+
 def wait(clients, what: str, predicate, timeout_s: float, each=None) -> None:
     """Poll every client (calling ``each(client)`` every 50 ms) until ``predicate()``."""
     deadline = time.monotonic() + timeout_s
@@ -173,7 +190,7 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config, tmp_path):
     started = time.monotonic()
     proc, output = start_up(compat_sitl_config, tmp_path)
     clients: list[Client] = []
-    shared = None
+    shared = gcs = None
     try:
         # The banner names each vehicle's endpoints: ports +N, sysid 1+N, its own zenoh keys.
         text = output.output
@@ -183,11 +200,19 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config, tmp_path):
             assert f"udpin://0.0.0.0:{p.api_remote}" in text and f"udp {p.gcs_remote}" in text
             assert f"tcp/127.0.0.1:{p.zenoh}   keys quadsitl/{n}/truth" in text
             assert f"1 parameters loaded from {tmp_path / f'params-{n}.toml'}" in text  # COM_OF_LOSS_T
+        assert ports(FIRST).gcs_remote == ports(FIRST + 1).gcs_remote  # one GCS port for the fleet
 
+        gcs = GroundStationPort(ports(FIRST).gcs_remote)
         clients = [Client(FIRST), Client(FIRST + 1)]
         one, two = clients
         shared = SharedBus((FIRST, FIRST + 1))
-        wait(clients, "both heartbeats", lambda: all(c.heartbeat and c.position for c in clients), 15)
+
+        def both_heard() -> bool:
+            gcs.poll()
+            return len(gcs.heartbeats) >= 2 and all(c.heartbeat and c.position for c in clients)
+
+        wait(clients, "both heartbeats, on the API ports and the one GCS port", both_heard, 15)
+        assert gcs.heartbeats == {one.sysid, two.sysid}
         for c in clients:
             assert c.heartbeat.autopilot == m.MAV_AUTOPILOT_PX4 and c.foreign == set()
 
@@ -254,6 +279,8 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config, tmp_path):
             c.close()
         if shared is not None:
             shared.close()
+        if gcs is not None:
+            gcs.close()
         rc = stop(proc)
     assert rc == 0, output.tail(20)
     assert any(line.startswith("quadsitl: stopped") for line in output.lines)

@@ -2,8 +2,10 @@
 
 The test plays both SITL processes: it opens the simulator's zenoh hub (truth + controller
 batches, the two info queryables) and sends MAVLink 2 telemetry from the autopilot's GCS port
-(18570+N) to the recorder (14550+N). One recorder is killed with SIGKILL mid-run: the parts it
-wrote must be readable. Another stops by itself (--until-disarmed) and merges its parts. A third
+(18570+N) to the recorder (14550, every instance's GCS client port). One recorder is killed with
+SIGKILL mid-run: the parts it wrote must be readable. Another stops by itself (--until-disarmed) and
+merges its parts, while a second vehicle sends to the same port: only its own vehicle's system id
+is recorded. A third
 plays an autopilot flying on its EKF (estimator batches on ``quadsitl/N/estimator``): the merged
 file has the estimate beside the truth.
 """
@@ -188,24 +190,45 @@ def test_recorder_stops_after_disarm_and_merges(tmp_path: Path) -> None:
     instance = 71
     out = tmp_path / "clean"
     sitl = FakeSitl(instance)
+    other = Vehicle(5)  # another vehicle streaming to the same GCS client port (sysid 6)
+    other_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     proc = _start_recorder(instance, out, "--until-disarmed")
+
+    def other_sends(k: int) -> None:
+        frame = other.heartbeat(armed=k % 2 == 0) if k % 10 == 0 else other.local_position(k * 0.02, x=-1e3)
+        if k % 50 == 25:
+            frame = other.statustext("the other vehicle")
+        try:
+            other_sock.sendto(frame, sitl.gcs)
+        except OSError:
+            pass  # recorder not listening yet
+
     try:
         _wait_matching(sitl, proc)
         for _ in range(3):  # the recorder binds its UDP port at start: make sure it hears us
             sitl.send(sitl.vehicle.heartbeat(armed=False))
-        for _ in range(150):  # 3 s of simulation time, armed
+        for k in range(150):  # 3 s of simulation time, armed
             sitl.step(armed=True)
+            other_sends(k)
             time.sleep(0.002)
         sitl.send(sitl.vehicle.statustext("landed: disarmed"))
         deadline = time.monotonic() + 8.0
         while proc.alive and time.monotonic() < deadline:
             sitl.step(armed=False)
+            other_sends(0)  # the other one stays armed: it must not hold the recording open
             time.sleep(0.002)
         assert proc.wait(10.0) == 0, proc.output
         assert "stopped (disarmed)" in proc.output
     finally:
         _stop(proc)
         sitl.close()
+        other_sock.close()
+    log = mavutil.mavlink_connection(str(tmp_path / "clean.tlog"))
+    systems = set()
+    while (msg := log.recv_match(blocking=False)) is not None:
+        systems.add(msg.get_srcSystem())
+    log.close()
+    assert systems == {wire.system_id(instance)}  # the other vehicle's frames are not in the tlog
     assert (tmp_path / "clean.parquet").exists() and not (tmp_path / "clean.parts").exists()
     table, meta = sl.read_session_table(tmp_path / "clean.parquet")
     cols = {n: table.column(n).to_numpy() for n in table.column_names}

@@ -110,7 +110,7 @@ def test_fly_setpoints_file_text_and_json(tmp_path: Path) -> None:
         (["--setpoint", "1", "2", "-3"], "below 0.2 m"),
         (["--tolerance", "0"], "--tolerance"),
         (["--setpoints-file", "/nonexistent/sp.txt"], "cannot read"),
-        (["--instance", "100"], "--instance"),
+        (["--instance", "250"], "--instance"),
     ],
 )
 def test_fly_setpoints_bad_arguments_exit_2(argv, message, capsys) -> None:

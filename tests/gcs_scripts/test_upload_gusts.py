@@ -63,8 +63,8 @@ def test_exit_1_for_a_bad_file_or_bad_arguments(tmp_path: Path, capsys: pytest.C
     with pytest.raises(SystemExit) as info:
         ug.main([str(CONFIG_DIR / "gusts" / "mixed.toml"), "--now", "--start-at", "3"])
     assert info.value.code == 1
-    assert ug.main([str(CONFIG_DIR / "gusts" / "mixed.toml"), "--instance", "200"]) == 1
-    assert "--instance must be in [0, 99]" in capsys.readouterr().err
+    assert ug.main([str(CONFIG_DIR / "gusts" / "mixed.toml"), "--instance", "250"]) == 1
+    assert "--instance must be in [0, 249]" in capsys.readouterr().err
 
 
 def test_exit_2_naming_key_and_port_when_no_simulator_answers(capsys: pytest.CaptureFixture[str]) -> None:

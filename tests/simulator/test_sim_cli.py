@@ -42,7 +42,7 @@ def test_config_dir_is_where_configuration_is_read(tmp_path):
         (["--speed", "0"], "--speed must be a positive number or 'max'"),
         (["--speed", "fast"], "--speed must be a positive number or 'max'"),
         (["--duration", "-1"], "--duration must be > 0 s"),
-        (["--instance", "100"], "--instance must be in [0, 99]"),
+        (["--instance", "250"], "--instance must be in [0, 249]"),
     ],
 )
 def test_bad_arguments_exit_2_with_a_message(args, message):

@@ -1,5 +1,5 @@
 """`quadsitl up` as a user runs it: banner with the endpoints and the restart policy, clean stop, no
-orphans, port clashes (its own instance running; another instance sharing its ports).
+orphans, port clashes (its own instance running; a port of its in use; instances past 249).
 Process loss under it: test_up_process_loss.py."""
 
 import os
@@ -98,27 +98,24 @@ def test_up_leaves_no_orphan_when_the_launcher_is_killed():
     assert not any(alive(k) for k in kids), "orphaned simulator or autopilot"
 
 
-def test_up_refuses_an_instance_whose_ports_a_running_instance_uses():
-    """Instance 80's API client port (14620 with the default bases) is instance 40's autopilot API link. With
-    instance 40 running (its sockets bound here, as its processes would), instance 80 is refused
-    before anything starts, naming both instances, the port and the roles; so is a launch of 11."""
-    other = instance_ports(40)
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(3)]
+def test_up_refuses_a_port_in_use_naming_it_and_refuses_instances_past_249():
+    """Instance 80's autopilot GCS link port (18650 with the default bases) is taken: ``quadsitl up``
+    refuses before anything starts, naming the port, the link and the instance (no traceback); a
+    launch reaching past instance 249 is refused by its arguments."""
+    gcs_link = instance_ports(80).gcs_local
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        for sock, port in zip(socks, (other.hil, other.gcs_local, other.api_local), strict=True):
-            sock.bind((wire.LOOPBACK, port))
+        sock.bind((wire.LOOPBACK, gcs_link))
         up = Child("quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", "80"])
         assert up.wait(30.0) == 2
     finally:
-        for sock in socks:
-            sock.close()
-    api_80 = instance_ports(80).api_remote
-    assert f"UDP {api_80}: instance 80's API client port is instance 40's autopilot API link" in up.output
-    assert "instances 10, 30 or 40 apart share ports" in up.output
+        sock.close()
+    refusal = f"UDP port {gcs_link} (autopilot GCS link) is already in use: another SITL with --instance 80"
+    assert refusal in up.output
+    assert "Traceback" not in up.output
     assert "[simulator[80]]" not in up.output and "[autopilot[80]]" not in up.output  # nothing started
     many = Child(
-        "quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", "80", "--count", "11"]
+        "quadsitl up", [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", "240", "--count", "11"]
     )
     assert many.wait(30.0) == 2
-    api_90 = instance_ports(90).api_remote
-    assert f"UDP {api_90}: instance 90's API client port is instance 80's GCS client port" in many.output
+    assert "instances must be in [0, 249] (got 240..250)" in many.output

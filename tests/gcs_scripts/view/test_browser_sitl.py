@@ -123,7 +123,7 @@ def flight(tmp_path_factory):
         banner = up.wait_line("live view (browser)", 60.0)
         url = banner.split(":", 1)[1].strip()
         seen["url"] = url
-        # The recorder listens on the ground-station port 14550+N: free, since the view never binds it.
+        # The recorder listens on the ground-station port 14550: free, since the view never binds it.
         log = tmp / "square"
         recorder = Child(
             "record.py",

@@ -3,7 +3,7 @@
 A real SITL (instance 66: simulator + autopilot processes, real UDP and zenoh) at ``--speed 2``
 (ticks of the view wait on the wall clock: a faster vehicle takes more of the cores from the rest
 of the suite for the module's whole run, to fly the same checks); the view's :class:`LiveSource`
-ticked as the server ticks it. A socket on the ground-station port 14550+N stands for
+ticked as the server ticks it. A socket on the ground-station port 14550 stands for
 QGroundControl, bound before the view starts.
 """
 

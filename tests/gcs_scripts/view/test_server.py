@@ -73,7 +73,7 @@ def test_cli_refuses_bad_arguments(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main([str(tmp_path / "x.parquet"), "--instance", "3"])
     with pytest.raises(SystemExit):
-        main(["--instance", "100"])
+        main(["--instance", "250"])
     assert main(["--rate", "60", "--instance", "60", "--port", "0"]) == 2
     assert "--rate must be in (0, 30]" in capsys.readouterr().err
     assert main([str(tmp_path / "missing.parquet")]) == 2
