@@ -331,6 +331,10 @@ class RequestDecoder:
                           mavlink.MAVLINK_MSG_ID_PARAM_SET: self._parameter}  # fmt: skip
 
     def decode(self, others: tuple[tuple[int, bytes], ...]) -> list[Request]:
+        """The requests among an answer's other frames ``(message id, frame bytes)``, in order; at most
+        :data:`quadcommon.wire.MAX_REQUESTS_PER_ANSWER`, the rest and anything not a valid request from
+        this vehicle's autopilot (not MAVLink 2, unknown message, wrong sender, bad checksum, bad
+        values) refused and counted by reason."""
         requests: list[Request] = []
         for i, (msg_id, frame) in enumerate(others):
             if i >= wire.MAX_REQUESTS_PER_ANSWER:
@@ -383,6 +387,7 @@ class RequestDecoder:
 
     @property
     def refused_total(self) -> int:
+        """How many frames were refused so far, over all reasons."""
         return sum(self.refused.values())
 
     def refuse(self, reason: str) -> None:
