@@ -80,6 +80,7 @@ class Simulator:
         self._outage_wall = 0.0
 
     def log(self, text: str) -> None:
+        """Print ``text`` to stdout as a ``simulator:`` line, flushed (the launcher relays it)."""
         print(f"simulator: {text}", flush=True)
 
     def open(self) -> None:
@@ -281,6 +282,9 @@ class Simulator:
         return 0
 
     def summary(self) -> str:
+        """The one-line report printed at stop: simulated time, frames sent and resent, own work and
+        waiting per frame (us), re-anchors, the speed-up over the frame loop and the HIL round trip's
+        median and 99th percentile (us)."""
         n = max(self.frames_sent - 1, 1)  # the final frame is not answered
         text = (
             f"stopped at t={self.core.t:.3f} s ({self.frames_sent} frames; per frame "

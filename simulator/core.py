@@ -152,6 +152,11 @@ class DisturbanceReport:
 
 
 class SimulatorCore:
+    """The simulator's lockstep step machine (see the module docstring): :meth:`begin_frame` gives
+    the frame's datagram at ``t = k / control_hz``, :meth:`end_frame` applies the answer and steps the
+    plant. No sockets, no clocks: the process shell (simulator/app.py) and the in-process stack
+    (sitl/inprocess.py) drive it."""
+
     def __init__(self, setup: SimulatorSetup, log: Callable[[str], None] = lambda text: None) -> None:
         self.setup = setup
         self.log = log

@@ -17,11 +17,15 @@ DECADES = 8
 
 
 class LatencyHistogram:
+    """Counts of durations in log-spaced bins (:data:`BINS_PER_DECADE` per decade from
+    :data:`LOWEST_S` over :data:`DECADES` decades), read back as quantiles."""
+
     def __init__(self) -> None:
         self.counts = array("q", bytes(8 * (BINS_PER_DECADE * DECADES + 1)))
         self.total = 0
 
     def add(self, seconds: float) -> None:
+        """Count one duration (s); below 1 us goes to the first bin, beyond 100 s to the last."""
         index = 0 if seconds <= LOWEST_S else int(BINS_PER_DECADE * math.log10(seconds / LOWEST_S))
         self.counts[min(index, len(self.counts) - 1)] += 1
         self.total += 1

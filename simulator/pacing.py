@@ -18,6 +18,9 @@ SLEEP_SLICE_S = 0.05  # sleeps in slices so that a stop request is seen
 
 
 class Pacer:
+    """Paces frame times to the wall clock at ``speed`` x real time (``None``: as fast as possible);
+    ``running()`` false ends a wait early; ``log`` receives the slow-running reports."""
+
     def __init__(self, speed: float | None, log: Callable[[str], None], running: Callable[[], bool]) -> None:
         self.speed = speed
         self.log = log

@@ -89,6 +89,7 @@ class TruthStream:
             pass  # session closing under us at shutdown: nothing left to tell anyone
 
     def close(self) -> None:
+        """Put the rows still batched, then undeclare the publisher (a closed session is ignored)."""
         self.flush()
         try:
             self.publisher.undeclare()
@@ -137,6 +138,7 @@ class InfoServer(_PolledQueryable):
         self.describe = describe
 
     def answer(self, query: zenoh.Query) -> None:
+        """Reply to ``query`` with ``describe()`` as JSON."""
         query.reply(self.key, json.dumps(self.describe()).encode())
 
 
@@ -151,6 +153,8 @@ class RequestServer(_PolledQueryable):
         self.handle = handle
 
     def answer(self, query: zenoh.Query) -> None:
+        """Hand the query's payload to ``handle``; reply with its reply if accepted, else an error reply
+        carrying it."""
         payload = query.payload.to_bytes() if query.payload is not None else b""
         ok, reply = self.handle(payload)
         if ok:

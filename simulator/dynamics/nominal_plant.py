@@ -60,6 +60,7 @@ class NominalPlant:
             self.step()
 
     def set_rotor_commands(self, speeds_rad_s: tuple[float, float, float, float]) -> None:
+        """Refused (ValueError): the nominal plant is driven by thrust and torque, it has no rotors."""
         raise ValueError("the nominal plant has no rotors")
 
     def reset(
@@ -69,10 +70,16 @@ class NominalPlant:
         velocity_m_s: Vector3 = ZERO3,
         body_rates_rad_s: Vector3 = ZERO3,
     ) -> None:
+        """Place the vehicle at ``position_m`` (world, z up) with ZYX Euler angles ``euler_rad``, world
+        velocity ``velocity_m_s`` and body (FLU) rates ``body_rates_rad_s``, converted to Euler rates
+        (eq. (3))."""
         eta_dot = euler_rates_from_body_rates(euler_rad[0], euler_rad[1], body_rates_rad_s)
         self.state = [*position_m, *velocity_m_s, *euler_rad, *eta_dot]
 
     def derivative(self, s: list[float]) -> list[float]:
+        """The state derivative of ``s = (xi, xi_dot, eta, eta_dot)`` (world m, m/s; ZYX Euler rad,
+        rad/s) under the commanded thrust and torque and the disturbances: eq. (2) for the translation,
+        eq. (4) ``M(eta) eta_ddot + C(eta, eta_dot) eta_dot = tau`` for the rotation."""
         m, g = self.mass, self.gravity
         phi, theta, psi = s[6], s[7], s[8]
         eta = (phi, theta, psi)
@@ -93,6 +100,8 @@ class NominalPlant:
         return [s[3], s[4], s[5], ax, ay, az, *eta_dot, *eta_ddot]
 
     def step(self) -> None:
+        """Advance the state by one physics step ``dt`` with classical RK4; with ground contact, a
+        vehicle at or below z = 0 and not climbing is put on the ground, level and at rest."""
         f = self.derivative
         s = self.state
         h = self.dt
@@ -112,13 +121,19 @@ class NominalPlant:
             s[9:12] = [0.0, 0.0, 0.0]
 
     def kinematics(self) -> tuple[Vector3, Vector3, Vector3, Vector3]:
+        """Position (m), velocity (m/s) in the world frame (z up), ZYX Euler angles (rad) and their
+        rates (rad/s)."""
         s = self.state
         return ((s[0], s[1], s[2]), (s[3], s[4], s[5]), (s[6], s[7], s[8]), (s[9], s[10], s[11]))
 
     def on_ground(self) -> bool:
+        """Resting on the ground: contact enabled, at z = 0 and not moving vertically."""
         return self.ground_contact and self.state[2] <= 1e-9 and abs(self.state[5]) < 1e-9
 
     def truth(self) -> TruthState:
+        """The current ground truth as a :class:`TruthState`: world position, velocity, acceleration (zero
+        on the ground), attitude, body rates (eq. (3)), the specific force in the body (FLU, m/s^2), the
+        commanded thrust and body torque; the rotor speeds are zero (no rotors)."""
         s = self.state
         ds = self.derivative(s)
         euler = (s[6], s[7], s[8])

@@ -378,6 +378,7 @@ class Plant:
 
     # -- read-out ---------------------------------------------------------------------------------
     def on_ground(self) -> bool:
+        """Resting on the ground (the truth's ``on_ground``)."""
         return self.truth().on_ground
 
     def kinematics(self) -> tuple[Vector3, Vector3, Vector3, Vector3]:

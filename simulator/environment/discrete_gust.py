@@ -57,6 +57,7 @@ class OneMinusCosineGust:
 
     @property
     def end_s(self) -> float:
+        """When the gust is over (s of simulation time)."""
         return self.start_s + self.duration_s
 
     def unit(self) -> Vector3:
@@ -143,6 +144,8 @@ def describe_direction(direction: Vector3) -> str:
 
 
 def describe_gust(g: OneMinusCosineGust) -> str:
+    """A one-line human description of ``g`` (amplitude, direction, start and duration), for logs and
+    the CLI."""
     return (
         f"1-cos gust {g.amplitude_m_s:g} m/s along {describe_direction(g.direction)} "
         f"at {g.start_s:g} s for {g.duration_s:g} s"

@@ -74,6 +74,7 @@ class GustProfile:
 
     @property
     def is_empty(self) -> bool:
+        """No steps, ramps, 1-cos gusts or Dryden turbulence: the profile adds no wind."""
         return not (self.steps or self.ramps or self.one_minus_cosine or self.dryden)
 
     def event_times(self) -> list[float]:

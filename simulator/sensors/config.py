@@ -68,6 +68,7 @@ class ImuAxes:
 
     @property
     def is_exact(self) -> bool:
+        """No noise, no bias and no bias random walk: the axis reports the truth."""
         return (
             self.noise_density == 0.0
             and self.bias_random_walk == 0.0
@@ -113,14 +114,19 @@ class GpsModel:
 
     @property
     def reported_eph_m(self) -> float:
+        """The horizontal accuracy put in HIL_GPS ``eph`` (m): the configured one, else the horizontal
+        noise std (at least 1 cm)."""
         return self.eph_m if self.eph_m is not None else max(self.horizontal_noise_std_m, 0.01)
 
     @property
     def reported_epv_m(self) -> float:
+        """The vertical accuracy put in HIL_GPS ``epv`` (m): the configured one, else the vertical noise
+        std (at least 1 cm)."""
         return self.epv_m if self.epv_m is not None else max(self.vertical_noise_std_m, 0.01)
 
     @property
     def reported_speed_accuracy_m_s(self) -> float:
+        """The speed accuracy reported with a fix (m/s): the velocity noise std, at least 1 cm/s."""
         return max(self.velocity_noise_std_m_s, 0.01)
 
 
@@ -145,6 +151,7 @@ class SensorFault:
     value: Vector3 = _Z3
 
     def active(self, t_s: float) -> bool:
+        """Whether the fault acts at simulation time ``t_s``: ``start_s <= t_s < start_s + duration_s``."""
         return self.start_s <= t_s < self.start_s + self.duration_s
 
 
@@ -162,6 +169,7 @@ class SensorConfig:
 
     @property
     def earth_field_world_gauss(self) -> Vector3:
+        """The earth magnetic field in the world frame (x north, y west, z up; gauss)."""
         return self.magnetometer.earth_field_world_gauss
 
 

@@ -231,6 +231,7 @@ def initial_state(rng: Any, C: Any, accel_bias: Vector3, gyro_bias: Vector3, mag
 
 @kernel
 def at3(a: Any, i: int) -> Vector3:
+    """The three values ``a[i : i + 3]`` as a vector."""
     return (a[i], a[i + 1], a[i + 2])
 
 
@@ -249,6 +250,7 @@ def fault_sum(faults: Any, kind: int, t: float) -> Vector3:
 
 @kernel
 def fault_active(faults: Any, kind: int, t: float) -> bool:
+    """Whether a fault of ``kind`` is active at ``t`` (``[start, start + duration)``)."""
     for i in range(faults.shape[0]):
         f = faults[i]
         if int(f[F_KIND]) == kind and f[F_START] <= t < f[F_START] + f[F_DURATION]:
@@ -372,6 +374,7 @@ def sample_kept(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int) -
 
 @kernel
 def extra_latency(faults: Any, mode: int, row: int) -> float:
+    """The added delivery delay (s) of a delayed failure in fault row ``row``; 0 for other modes."""
     return faults[row][F_VALUE] if mode == DELAYED else 0.0
 
 
@@ -446,6 +449,8 @@ def imu_sample(rng: Any, S: Any, faults: Any, unit: int, t: float, value: Vector
 
 @kernel
 def magnetometer(rng: Any, S: Any, C: Any, faults: Any, q: Quaternion, t: float) -> Vector3:
+    """A magnetometer sample (body FLU, gauss) at attitude ``q``: the world field rotated into the
+    body, plus the hard-iron bias, any active disturbance fault and white noise."""
     bias = (S[S_MAG_BIAS], S[S_MAG_BIAS + 1], S[S_MAG_BIAS + 2])
     d = fault_sum(faults, MAG_DISTURBANCE, t)
     bias = (bias[0] + d[0], bias[1] + d[1], bias[2] + d[2])

@@ -157,22 +157,27 @@ class SensorSuite:
 
     @property
     def gyro_bias(self) -> Vector3:
+        """Switch-on bias + random walk so far (body FLU, rad/s; without injected steps)."""
         return self._vector(frame.S_GYRO_BIAS)
 
     @property
     def mag_bias(self) -> Vector3:
+        """The hard-iron bias: the configured one plus its switch-on draw (body FLU, gauss)."""
         return self._vector(frame.S_MAG_BIAS)
 
     @property
     def baro_drift_hpa(self) -> float:
+        """The barometer's pressure drift so far (hPa; a random walk)."""
         return float(self._S[frame.S_BARO_DRIFT])
 
     @property
     def gps_position_error(self) -> Vector3:
+        """The GPS position error now (world frame, m; Gauss-Markov per axis)."""
         return self._vector(frame.S_GPS_POS_ERR)
 
     @property
     def gps_velocity_error(self) -> Vector3:
+        """The GPS velocity error now (world frame, m/s; Gauss-Markov per axis)."""
         return self._vector(frame.S_GPS_VEL_ERR)
 
     # -- faults -----------------------------------------------------------------------------------
