@@ -33,6 +33,7 @@ POLL_S = 0.1  # the foreground loop's period (wall): reaction time to a lost pro
 
 
 def endpoints_banner(spec: VehicleSpec, ports: wire.Ports) -> str:
+    """The lines printed when vehicle N is up: its system id, controller, scenario and where to connect."""
     n = spec.instance
     speed = f"{spec.speed}{'x' if spec.speed != 'max' else ''}"
     return "\n".join(
