@@ -89,6 +89,7 @@ def parse_words(unit: str, words: list[str], instance: int) -> Request:
 
 
 def build_parser(prog: str = "quadsitl fail") -> argparse.ArgumentParser:
+    """The ``quadsitl fail`` command line, with PX4's ``failure`` units and types."""
     parser = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=HelpFormatter,
                                      usage="%(prog)s [options] UNIT [N] TYPE [EFFECTIVENESS]",
                                      epilog="units and their types here:\n" + help_text())  # fmt: skip
@@ -112,6 +113,9 @@ def build_parser(prog: str = "quadsitl fail") -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None, prog: str = "quadsitl fail") -> int:
+    """Inject the failure named on the command line (PX4's ``failure UNIT TYPE``) into a running
+    vehicle by MAV_CMD_INJECT_FAILURE; 0 when accepted, 1 when the link fails or the vehicle refuses
+    (a parser error for bad words)."""
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     try:

@@ -52,6 +52,7 @@ CURVE_MARGIN_S = 1.0
 
 
 def build_parser(prog: str = "fly_paper.py") -> argparse.ArgumentParser:
+    """The ``fly_paper.py`` command line (instance, scenario, gusts, curve start time and rate)."""
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
@@ -119,6 +120,9 @@ def _mission_start_time(session, instance: int, wall_timeout_s: float) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Fly the paper's scenario as a mission on vehicle ``args.instance``: clear the disturbances,
+    upload and verify the sampled curve, start a recorder, arm, start AUTO.MISSION, schedule the
+    gusts at the curve's start ``t0`` (simulation s), fly to the end; 0 on success, 1 on failure."""
     from gcs_scripts.fly_trajectory import load_gust_profile_mapping
     from quadcommon.config import load_scenario
     from quadcommon.trajectories import trajectory_from_spec
@@ -194,6 +198,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None, prog: str = "fly_paper.py") -> int:
+    """Parse the command line and :func:`run` it; 2 for a negative start time or rate."""
     args = build_parser(prog).parse_args(argv)
     if not (args.start_time >= 0 and args.rate > 0 and math.isfinite(args.start_time)):
         print("fly_paper: --start-time must be >= 0 and --rate > 0", file=sys.stderr)

@@ -62,9 +62,11 @@ class Setpoint:
 
     @property
     def position(self) -> Vector3:
+        """The target position (world frame, x north, y left, z up; m)."""
         return (self.x, self.y, self.z)
 
     def target(self) -> PositionTarget:
+        """The setpoint as a :class:`PositionTarget` (yaw in rad, or None to keep the heading)."""
         yaw = None if self.yaw_deg is None else math.radians(self.yaw_deg)
         return PositionTarget(self.position, yaw_rad=yaw)
 
@@ -118,6 +120,7 @@ def parse_setpoints_text(text: str, source: str = "setpoints") -> list[Setpoint]
 
 
 def build_parser(prog: str = "fly_setpoints.py") -> argparse.ArgumentParser:
+    """The ``fly_setpoints.py`` command line (instance, URL, takeoff altitude, setpoints, tolerances)."""
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
@@ -189,6 +192,7 @@ say = mavlink_link.report
 
 
 def distance(a: Vector3, b: Vector3) -> float:
+    """Euclidean distance between two positions (m)."""
     return math.dist(a, b)
 
 
@@ -201,10 +205,14 @@ class Flight:
         self.current: PositionTarget | None = None
 
     def error_to(self, position: Vector3) -> float:
+        """Distance from the vehicle's reported position to ``position`` (m); infinite before any position."""
         p = self.link.position_paper
         return math.inf if p is None else distance(p, position)
 
     def takeoff(self) -> None:
+        """Stream the position at a fast rate, wait until the vehicle can arm and reports a position and
+        a landed state, then arm, take off ``--takeoff-alt`` m above the start and wait until there and
+        out of AUTO.TAKEOFF; a vehicle already flying is taken as it is."""
         link, args = self.link, self.args
         link.set_message_interval(LOCAL_POSITION_NED_ID, STREAM_RATE_HZ)
         link.set_message_interval(EXTENDED_SYS_STATE_ID, 5.0)  # faster landing detection
@@ -236,6 +244,9 @@ class Flight:
         say(link, f"at altitude z={link.position_paper[2]:.3f} m ({link.mode})")
 
     def start_offboard(self) -> SetpointStream:
+        """Start streaming SET_POSITION_TARGET_LOCAL_NED at the current position (entering OFFBOARD
+        does not move the vehicle), then switch to OFFBOARD (PX4 refuses it without a stream); return the
+        stream."""
         link = self.link
         # First setpoint = where we are, so entering OFFBOARD does not move the vehicle.
         here = link.position_paper
@@ -248,6 +259,9 @@ class Flight:
         return stream
 
     def fly(self, index: int, sp: Setpoint) -> None:
+        """Fly to setpoint ``index`` and wait until within ``--tolerance`` m (``--timeout`` s of
+        simulation time); then hold ``--hold`` s, reporting the worst error. Raises LinkError on a
+        timeout or if the vehicle leaves OFFBOARD."""
         link, args = self.link, self.args
         self.current = sp.target()
         say(link, f"flying to setpoint {index} {sp}")
@@ -278,6 +292,8 @@ class Flight:
 
 
 def run(args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
+    """Connect (as MAVSDK would, ``udpin:127.0.0.1:14540+N``) and :func:`fly`; 3 when no vehicle
+    answers or the port cannot be bound."""
     try:
         link = mavlink_link.connect(args.url, args.instance, log=print)
     except mavlink_link.LinkTimeout as exc:
@@ -321,6 +337,7 @@ def fly(link: Link, args: argparse.Namespace, setpoints: list[Setpoint]) -> int:
 
 
 def main(argv: list[str] | None = None, prog: str = "fly_setpoints.py") -> int:
+    """Parse the command line and :func:`run` it; the exit status."""
     args, setpoints = parse_args(argv, prog)
     return run(args, setpoints)
 

@@ -55,6 +55,7 @@ T0_LEAD_GUSTS_S = 1.0  # ... or this far with a gust upload (done within it even
 
 
 def build_parser(prog: str = "fly_trajectory.py") -> argparse.ArgumentParser:
+    """The ``fly_trajectory.py`` command line (instance, URL, scenario, duration, gusts, rates)."""
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
@@ -94,6 +95,8 @@ def build_parser(prog: str = "fly_trajectory.py") -> argparse.ArgumentParser:
 def parse_args(
     argv: list[str] | None = None, prog: str = "fly_trajectory.py"
 ) -> tuple[argparse.Namespace, ScenarioConfig]:
+    """The parsed command line and its scenario; a parser error for an unknown scenario or a
+    non-positive duration."""
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     try:
@@ -160,6 +163,9 @@ class TrajectoryFlight:
         self.tracking = True
 
     def provide(self, t: float) -> PositionTarget | None:
+        """The setpoint at simulation time ``t`` (s): the fixed target before ``t0`` and after the
+        trajectory's end, else the trajectory's reference at ``t - t0`` (whose tracking error is
+        measured)."""
         if not self.tracking or t < self.t0:
             return self.fixed
         tau = t - self.t0
@@ -191,14 +197,20 @@ class TrajectoryFlight:
 
     @property
     def rms_error(self) -> float:
+        """RMS of the telemetry tracking errors measured so far (m); NaN before any."""
         return math.sqrt(self.errors_sq_sum / self.errors_n) if self.errors_n else math.nan
 
 
 def fmt(p: tuple[float, ...]) -> str:
+    """A position as ``(x, y, z)`` with millimetre precision, for messages."""
     return "(" + ", ".join(f"{v:.3f}" for v in p) + ")"
 
 
 def fly(link: Link, args: argparse.Namespace, flight: TrajectoryFlight) -> SetpointStream:
+    """Arm, enter OFFBOARD, go to ``p_d(0)`` and settle, upload the gusts, fly the trajectory from a
+    ``t0`` shortly ahead (printed as ``t0=...`` for the analysis) and hold its end; return the
+    setpoint stream (still running). Raises LinkError when the vehicle leaves OFFBOARD or a wait times
+    out."""
     link.set_message_interval(LOCAL_POSITION_NED_ID, args.rate)
     link.set_message_interval(EXTENDED_SYS_STATE_ID, 5.0)
     link.wait_ready_to_arm()  # (at once if armed): an EKF has no position until it aligns
@@ -281,6 +293,9 @@ def _last_text(link: Link) -> str:
 
 
 def run(args: argparse.Namespace, scenario: ScenarioConfig) -> int:
+    """Connect, :func:`fly`, then land and disarm; 0 on success, 1 on a failed flight (after an
+    emergency landing), 3 when no vehicle answers, the port cannot be bound or the gust bus cannot
+    be opened, 130 on Ctrl-C."""
     trajectory = trajectory_from_spec(scenario.trajectory)
     flight = TrajectoryFlight(None, trajectory, args.duration)  # type: ignore[arg-type]
     try:
@@ -333,6 +348,7 @@ def run(args: argparse.Namespace, scenario: ScenarioConfig) -> int:
 
 
 def main(argv: list[str] | None = None, prog: str = "fly_trajectory.py") -> int:
+    """Parse the command line and :func:`run` it; the exit status."""
     args, scenario = parse_args(argv, prog)
     return run(args, scenario)
 

@@ -68,6 +68,9 @@ def change_impairment(
 
 
 def main(argv: list[str] | None = None, prog: str = "quadsitl impair") -> int:
+    """``quadsitl impair``: send the ``LINK:SPEC`` impairments to both processes of the vehicle and
+    print their answers; 0 when both accept, 1 when one does not answer in ``--timeout`` wall
+    seconds, 2 for a bad spec or a refusal."""
     parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     parser.add_argument("specs", nargs="+", metavar="LINK:SPEC",

@@ -357,6 +357,7 @@ class Link:
 
     @property
     def velocity_ned(self) -> Vector3 | None:
+        """Latest LOCAL_POSITION_NED velocity (m/s, NED), or None."""
         lp = self.view.local_position
         return None if lp is None else (lp.vx, lp.vy, lp.vz)
 
@@ -368,6 +369,7 @@ class Link:
 
     @property
     def velocity_paper(self) -> Vector3 | None:
+        """Latest velocity in the paper's frame (x north, y left, z up; m/s), or None."""
         v = self.velocity_ned
         return None if v is None else frames.vector_from_ned(v)
 
@@ -379,6 +381,7 @@ class Link:
 
     @property
     def armed(self) -> bool:
+        """The last HEARTBEAT has MAV_MODE_FLAG_SAFETY_ARMED set."""
         hb = self.view.heartbeat
         return hb is not None and bool(hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
@@ -396,6 +399,7 @@ class Link:
 
     @property
     def landed_state_name(self) -> str:
+        """The EXTENDED_SYS_STATE landed state by name (e.g. ``ON_GROUND``, ``IN_AIR``)."""
         return LANDED_STATE_NAMES.get(self.landed_state, str(self.landed_state))
 
     @property
@@ -437,6 +441,7 @@ class Link:
 
     @property
     def home_altitude_amsl_m(self) -> float | None:
+        """The HOME_POSITION altitude above mean sea level (m), or None before one arrives."""
         hp = self.view.home_position
         return None if hp is None else hp.altitude * 1e-3
 
@@ -446,6 +451,7 @@ class Link:
 
     # -- waiting ---------------------------------------------------------------------------------
     def wall_timeout(self, sim_timeout_s: float) -> float:
+        """The wall-clock bound (s) for a wait of ``sim_timeout_s`` of simulation time."""
         return self.wall_factor * sim_timeout_s + self.wall_margin_s
 
     def wait_until(
@@ -625,6 +631,7 @@ class Link:
         self.command_long(mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us))
 
     def request_message(self, msg_id: int) -> None:
+        """Ask the vehicle for one message ``msg_id`` (MAV_CMD_REQUEST_MESSAGE; the ACK is not awaited)."""
         self.command_long(mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, (msg_id,))
 
     def set_mode(self, name: str) -> None:
@@ -641,6 +648,7 @@ class Link:
         self.wait_until(lambda link: link.mode == want, sim_timeout_s, what=f"mode {want}")
 
     def arm(self, force: bool = False) -> None:
+        """Send MAV_CMD_COMPONENT_ARM_DISARM to arm (``force``: PX4's magic 21196 skips the checks)."""
         self.command_long(mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 21196.0 if force else 0.0))
 
     def wait_ready_to_arm(self, sim_timeout_s: float = READY_TIMEOUT_S) -> None:
@@ -674,6 +682,7 @@ class Link:
             self.arm()
 
     def disarm(self, force: bool = False) -> None:
+        """Send MAV_CMD_COMPONENT_ARM_DISARM to disarm (``force``: 21196, even in flight)."""
         self.command_long(mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0.0, 21196.0 if force else 0.0))
 
     def takeoff(self, altitude_above_home_m: float | None = None) -> None:
@@ -713,6 +722,7 @@ class Link:
         return self.home_altitude_amsl_m  # type: ignore[return-value]
 
     def land(self) -> None:
+        """Send MAV_CMD_NAV_LAND: land here (NaN: the current position and heading)."""
         self.command_long(mavutil.mavlink.MAV_CMD_NAV_LAND, (0, 0, 0, math.nan, math.nan, math.nan, math.nan))
 
     def send_target(self, target: PositionTarget, time_boot_ms: int | None = None) -> None:
@@ -737,6 +747,7 @@ class Link:
         )
 
     def close(self) -> None:
+        """Close the MAVLink connection."""
         self.conn.close()
 
 
@@ -763,10 +774,12 @@ class SetpointStream:
             self.sent += 1
 
     def start(self) -> SetpointStream:
+        """Send a setpoint with every LOCAL_POSITION_NED received from now on; returns the stream."""
         self.link.on_local_position = self._on_sample
         return self
 
     def stop(self) -> None:
+        """Stop sending setpoints (if this stream is the one attached to the link)."""
         if self.link.on_local_position == self._on_sample:
             self.link.on_local_position = None
 

@@ -77,6 +77,10 @@ class RecorderOptions:
 
 
 class Recorder:
+    """One recording session (see the module docstring): the ground-station MAVLink connection, the
+    zenoh subscriptions, the .tlog writer and the Parquet parts; :meth:`open`, then the loop, until
+    the duration is reached or :meth:`request_stop`."""
+
     def __init__(self, options: RecorderOptions) -> None:
         self.options = options
         self.sitl = load_sitl(options.sitl_config)
@@ -107,6 +111,7 @@ class Recorder:
         self.was_armed = False
 
     def log(self, text: str) -> None:
+        """Print ``text`` as a ``record:`` line stamped with the latest simulation time (unless quiet)."""
         if not self.options.quiet:
             t = self.assembler.latest_time_s
             stamp = f"t={t:.2f} s " if t is not None else ""
@@ -114,6 +119,8 @@ class Recorder:
 
     # -- setup / teardown --------------------------------------------------------------------------
     def open(self) -> None:
+        """Open the MAVLink connection, the zenoh session and subscriptions and the .tlog; refuses
+        (FileExistsError) to overwrite an existing .tlog, .parquet or parts directory."""
         import zenoh
 
         for path in (self.tlog_path, self.parquet_path):
@@ -160,6 +167,8 @@ class Recorder:
         return merge_parts(self.parts_dir, self.parquet_path, self.metadata(final=True))
 
     def metadata(self, final: bool = False) -> dict[str, Any]:
+        """The recording's metadata stored with the Parquet table: the info of both processes, the
+        URL, row and message counts, the last simulation time and whether the recording is ``final``."""
         a = self.assembler
         extra = {
             "url": self.url,
@@ -184,6 +193,7 @@ class Recorder:
 
     # -- the loop ----------------------------------------------------------------------------------
     def request_stop(self, *_args: Any) -> None:
+        """Ask the loop to stop at its next turn (a signal handler)."""
         self._stop_requested = True
 
     def _drain_zenoh(self, sub: Any, codec: Any, add: Any, wall: float) -> int:
@@ -290,10 +300,12 @@ class Recorder:
 
 
 def default_out() -> Path:
+    """``runs/<YYYYmmdd-HHMMSS>`` (local time): the default output base name."""
     return Path("runs") / time.strftime("%Y%m%d-%H%M%S")
 
 
 def build_parser(prog: str = "record.py") -> argparse.ArgumentParser:
+    """The ``record.py`` command line (instance, output, URL, duration, router)."""
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
@@ -316,6 +328,8 @@ def build_parser(prog: str = "record.py") -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None, prog: str = "record.py") -> int:
+    """Record until ``--duration`` s of simulation time or Ctrl-C; the exit status. Refuses an instance
+    outside [0, 99] and a non-positive duration."""
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     if not wire.INSTANCE_MIN <= args.instance <= wire.INSTANCE_MAX:

@@ -146,6 +146,7 @@ class MavGroup:
 
     @property
     def time_column(self) -> str:
+        """The column holding the stamp of this group's message sample (``mav_<name>_time_s``)."""
         return f"mav_{self.name}_time_s"
 
 
@@ -263,6 +264,7 @@ def column_names(estimator: bool = False) -> list[str]:
 
 
 def column_descriptions() -> dict[str, str]:
+    """Every session column's description (units and source), by column name."""
     out = {"time_s": "simulation time, s (row key; truth and controller joined exactly on it)"}
     for name in TRUTH_COLUMNS:
         out[name] = "ground truth (simulator, zenoh), paper frames, SI"
@@ -282,6 +284,7 @@ SCHEMA_WITH_ESTIMATOR = pa.schema([pa.field(name, pa.float64()) for name in colu
 
 
 def schema_for(has_estimator: bool) -> pa.Schema:
+    """The session table's schema, with the estimator columns or without."""
     return SCHEMA_WITH_ESTIMATOR if has_estimator else SCHEMA
 
 
@@ -471,10 +474,12 @@ class SessionAssembler:
     # -- outputs ---------------------------------------------------------------------------------
     @property
     def latest_time_s(self) -> float | None:
+        """The latest simulation time seen (s), or None before any row."""
         return None if self.latest_key is None else self.latest_key * 1e-6
 
     @property
     def first_time_s(self) -> float | None:
+        """The first simulation time seen (s), or None before any row."""
         return None if self.first_key is None else self.first_key * 1e-6
 
     def watermark(self, wall: float) -> int | None:
@@ -545,6 +550,7 @@ class SessionAssembler:
 # Files: parts, merge, reading back
 # --------------------------------------------------------------------------------------------
 def with_metadata(table: pa.Table, metadata: dict[str, Any]) -> pa.Table:
+    """``table`` with ``metadata`` as JSON under :data:`METADATA_KEY` in its schema metadata."""
     return table.replace_schema_metadata({METADATA_KEY: json.dumps(metadata).encode()})
 
 
@@ -562,6 +568,8 @@ class PartWriter:
         self.paths: list[Path] = []
 
     def write(self, table: pa.Table, metadata: dict[str, Any]) -> Path:
+        """Write ``table`` (with ``metadata``) as the next numbered part, atomically (a temporary file
+        renamed); return its path."""
         self.index += 1
         path = self.parts_dir / f"part-{self.index:06d}.parquet"
         tmp = path.with_suffix(".parquet.tmp")
@@ -579,6 +587,7 @@ def _conform(table: pa.Table, schema: pa.Schema) -> pa.Table:
 
 
 def part_paths(parts_dir: Path) -> list[Path]:
+    """The part files in ``parts_dir``, in order."""
     return sorted(Path(parts_dir).glob(PART_GLOB))
 
 

@@ -42,6 +42,7 @@ class TlogWriter:
         self._file.flush()
 
     def close(self) -> None:
+        """Flush and close the file; a second call does nothing."""
         if not self._file.closed:
             self._file.flush()
             self._file.close()

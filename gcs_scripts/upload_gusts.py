@@ -190,6 +190,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser(prog: str = "upload_gusts.py") -> argparse.ArgumentParser:
+    """The ``upload_gusts.py`` command line (profile, instance, start time, timeout, router)."""
     parser = _Parser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
@@ -209,6 +210,8 @@ def build_parser(prog: str = "upload_gusts.py") -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None, prog: str = "upload_gusts.py") -> int:
+    """Upload a gust profile to vehicle N's simulator and print its answer; 0 when accepted, 1 for a
+    bad profile or argument or a refusal, 2 when the simulator does not answer."""
     args = build_parser(prog).parse_args(argv)
     try:
         wire.ports(args.instance)

@@ -116,6 +116,8 @@ class Item(NamedTuple):
     autocontinue: int = 1
 
     def message(self, target: tuple[int, int], seq: int):
+        """The item as MISSION_ITEM_INT number ``seq`` to ``target`` (system, component); item 0 is
+        marked current."""
         return m.MAVLink_mission_item_int_message(
             target[0], target[1], seq, self.frame, self.command, int(seq == 0), self.autocontinue,
             self.param1, self.param2, self.param3, self.param4, self.x, self.y, self.z,
@@ -134,6 +136,7 @@ def same_item(a: Item, b: Item) -> bool:
 
 
 def item_from_message(msg) -> Item:
+    """The :class:`Item` a downloaded MISSION_ITEM_INT carries."""
     return Item(msg.frame, msg.command, msg.param1, msg.param2, msg.param3, msg.param4,
                 msg.x, msg.y, msg.z, msg.autocontinue)  # fmt: skip
 
@@ -147,6 +150,8 @@ def _f32(value: float) -> float:
 
 def make_item(frame: int, command: int, p: Sequence[float] = (0.0, 0.0, 0.0, math.nan),
               x: int = 0, y: int = 0, z: float = 0.0, autocontinue: int = 1) -> Item:  # fmt: skip
+    """An :class:`Item` with its floats rounded to float32 as the wire carries them (so a download
+    compares equal); ``x``, ``y``: latitude, longitude in degE7 (or local units as ``frame`` says)."""
     p1, p2, p3, p4 = (_f32(v) for v in p)
     return Item(frame, command, p1, p2, p3, p4, int(x), int(y), _f32(z), autocontinue)
 
@@ -274,6 +279,8 @@ def items_from_list(spec: dict) -> list[Item]:
 
 
 def read_mission_file(path: str | Path, skip_first: bool = False) -> list[Item]:
+    """The items of a mission file: QGC WPL 110 (``.waypoints``/``.txt``), ``.toml`` or ``.json``;
+    ``skip_first`` drops a QGC file's home item. Raises MissionFileError naming the file and line."""
     path = Path(path)
     try:
         text = path.read_text()
@@ -351,6 +358,7 @@ class MissionLink(Link):
 
     @property
     def target(self) -> tuple[int, int]:
+        """The vehicle addressed: (system id, component id)."""
         return (self.target_system, self.target_component)
 
     def _wait(self, accept: Callable[[Any], bool], timeout_s: float):
@@ -443,6 +451,8 @@ class MissionLink(Link):
         return items
 
     def clear(self) -> None:
+        """Clear the vehicle's mission (MISSION_CLEAR_ALL, retried); raises MissionError when refused or
+        never acknowledged (MISSION_ACK)."""
         self.mission_inbox.clear()
         for _ in range(RETRIES):
             self.mav.mission_clear_all_send(*self.target, m.MAV_MISSION_TYPE_MISSION)
@@ -518,6 +528,7 @@ def fly(link: MissionLink, items: Sequence[Item], timeout_s: float) -> None:
 
 # -- command line -------------------------------------------------------------------------------------
 def build_parser(prog: str = "upload_mission.py") -> argparse.ArgumentParser:
+    """The ``upload_mission.py`` command line (a file, ``--curve``, ``--download`` or ``--clear``)."""
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
@@ -551,6 +562,7 @@ def build_parser(prog: str = "upload_mission.py") -> argparse.ArgumentParser:
 
 
 def build_items(args: argparse.Namespace) -> list[Item]:
+    """The items to upload: the sampled paper curve (``--curve``) or the mission file's."""
     if args.curve:
         from quadcommon.config import load_scenario
         from quadcommon.trajectories import trajectory_from_spec
@@ -565,6 +577,9 @@ def build_items(args: argparse.Namespace) -> list[Item]:
 
 
 def main(argv: list[str] | None = None, prog: str = "upload_mission.py") -> int:
+    """Upload (and verify, and optionally fly), download or clear the mission of vehicle N; 0 on
+    success, 1 when the vehicle refuses or the download differs, 2 for a bad file or URL, 3 when no
+    vehicle answers."""
     args = build_parser(prog).parse_args(argv)
     items: list[Item] = []
     if not (args.download or args.clear):

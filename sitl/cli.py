@@ -52,6 +52,7 @@ GROUP_HELP = {
 
 
 def version() -> str:
+    """The installed quadsitl version, or ``unknown (not installed)`` in a bare checkout."""
     try:
         return metadata.version("quadsitl")
     except metadata.PackageNotFoundError:  # a checkout run without installing it
@@ -232,6 +233,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``quadsitl`` command line: its global options and every subcommand."""
     parser = argparse.ArgumentParser(prog="quadsitl", description=__doc__, formatter_class=HelpFormatter)
     parser.add_argument("--version", action="version", version=f"quadsitl {version()}")
     parser.add_argument(
@@ -423,6 +425,8 @@ def _split_config_dir(argv: list[str]) -> tuple[str | None, list[str]]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``quadsitl`` entry point: apply ``--config-dir`` (also for the processes started), run the
+    subcommand; its exit status, 2 with the message for a configuration error."""
     argv = sys.argv[1:] if argv is None else argv
     directory, argv = _split_config_dir(list(argv))
     try:

@@ -119,6 +119,8 @@ def compile_all(names: Sequence[str], workers: int | None = None, log=print) -> 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """``quadsitl compile``: compile the numba kernels of the given controllers' cascades (and the
+    campaign engine's flights, unless ``--no-campaign``) into the cache, in parallel; 0."""
     from autopilot.control.config import CONTROLLER_NAMES
 
     parser = argparse.ArgumentParser(prog="quadsitl compile", description=__doc__,

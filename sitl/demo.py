@@ -89,6 +89,10 @@ def run_demo(
     speed: str = "max",
     log=print,
 ) -> Path:
+    """The demo: fly the paper's circle as OFFBOARD setpoints and ``scenario`` with each of
+    ``controllers`` through the SITL processes (vehicle ``instance``, at ``speed``), record them,
+    compare with in-process runs; write tables and figures into ``out_dir`` and return the path of
+    the comparison table."""
     out_dir = Path(out_dir)
     logs = out_dir / "logs"
     logs.mkdir(parents=True, exist_ok=True)
@@ -175,6 +179,7 @@ def run_demo(
 
 
 def main_demo(out: str, instance: int, speed: str) -> int:
+    """``quadsitl demo``: :func:`run_demo`; 2 when the processes cannot start, 1 when a flight fails."""
     try:
         run_demo(Path(out), instance=instance, speed=speed)
     except LaunchError as exc:

@@ -107,9 +107,11 @@ class FuzzReport:
 
     @property
     def total(self) -> int:
+        """How many inputs were fed, over all kinds."""
         return sum(self.inputs.values())
 
     def lines(self) -> list[str]:
+        """The report as text lines: inputs by kind, the answers and drops, refusals by reason."""
         rate = self.total / max(self.seconds, 1e-9)
         out = [f"seed {self.seed}: {self.total} inputs in {self.seconds:.1f} s CPU "
                f"({rate:.0f} inputs/s), {self.sim_seconds:.1f} s simulated"]  # fmt: skip
@@ -131,6 +133,8 @@ class Values:
         self.rng = rng
 
     def float_(self) -> float:
+        """A float field: an edge value (NaN, inf, limits), a moderate or a huge value, or any 32 bits
+        read as a float."""
         r = self.rng.random()
         if r < 0.35:
             return self.rng.choice(_FLOAT_EDGES)
@@ -141,6 +145,7 @@ class Values:
         return struct.unpack("<f", self.rng.getrandbits(32).to_bytes(4, "little"))[0]  # any bits
 
     def int_(self, kind: str) -> int:
+        """An integer field of MAVLink type ``kind``: an edge of its range, a small value or any in range."""
         lo, hi = _INT_RANGES[kind]
         r = self.rng.random()
         if r < 0.4:
@@ -150,12 +155,14 @@ class Values:
         return self.rng.randint(lo, hi)
 
     def text(self, length: int, words: list[str]) -> bytes:
+        """A char field of at most ``length`` bytes: one of ``words`` or random bytes without NUL."""
         if words and self.rng.random() < 0.5:
             return self.rng.choice(words).encode()[:length]
         n = self.rng.randint(0, length)
         return bytes(self.rng.randint(0, 255) for _ in range(n)).replace(b"\0", b"")
 
     def field(self, kind: str, length: int, words: list[str]):
+        """A value for a MAVLink field of type ``kind`` (an array of ``length`` values when non-zero)."""
         if kind == "char":
             return self.text(length or 1, words)
         one = self.float_ if kind in ("float", "double") else (lambda: self.int_(kind))
@@ -180,6 +187,7 @@ class AutopilotInputs:
         self.param_sets: list[tuple[str, float]] = []  # every PARAM_SET sent (name, value)
 
     def next(self) -> tuple[str, bytes]:
+        """The next input: its kind (one of :data:`AUTOPILOT_KINDS`, weighted) and the datagram."""
         kind = self.rng.choices(AUTOPILOT_KINDS, (8, 10, 8, 6, 16, 26, 22, 4))[0]
         rng = self.rng
         if kind == "random bytes":
@@ -205,6 +213,8 @@ class AutopilotInputs:
         return kind, self.command()
 
     def message(self, msg_id: int | None = None, mavlink1: bool = False) -> bytes:
+        """A MAVLink 2 (or 1) frame of message ``msg_id`` (random from the dialect when None) with
+        hostile field values, mostly addressed to this vehicle."""
         msg_id = self.rng.choice(self.dialect) if msg_id is None else msg_id
         cls = m.mavlink_map[msg_id]
         args = []
@@ -239,6 +249,8 @@ class AutopilotInputs:
                 msg.param_value = self.rng.uniform(lo, hi)
 
     def command(self) -> bytes:
+        """A COMMAND_LONG with a handled command: half the time plausible parameters (unused slots
+        unset), else hostile values."""
         rng, values = self.rng, self.values
         command = rng.choice(self.commands)
         if rng.random() < 0.5:  # plausible parameters: small integers, NaN where "unset", unused slots unset
@@ -661,6 +673,8 @@ def _actuator_input(kind: str, rng: random.Random, values: Values, time_usec: in
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m sitl.fuzz``: feed seeded hostile inputs to the autopilot core, then to the simulator
+    core, and print the reports; 1 on a failure (an exception or a broken invariant)."""
     parser = argparse.ArgumentParser(prog="python -m sitl.fuzz", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     parser.add_argument("--inputs", type=int, default=100_000, help="inputs against the autopilot core")

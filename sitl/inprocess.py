@@ -113,6 +113,7 @@ class GroundStation:
         self.stack.deliver(self.link, self.address, data)
 
     def receive(self, data: bytes) -> None:
+        """Parse a datagram from the autopilot; keep its messages, the last of each type, the STATUSTEXTs."""
         for msg in parse_datagram(self._parser, data):
             if self.keep:
                 self.messages.append(msg)
@@ -123,6 +124,7 @@ class GroundStation:
                 self.statustext.append(msg.text)
 
     def of_type(self, kind: str) -> list:
+        """The messages of type ``kind`` received so far (with ``keep``)."""
         return [m for m in self.messages if m.get_type() == kind]
 
     def heartbeat(self) -> None:
@@ -130,11 +132,14 @@ class GroundStation:
         self.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 
     def command(self, command: int, *params: float, target: int | None = None) -> None:
+        """Send COMMAND_LONG ``command`` with ``params`` (padded with zeros to 7) to the autopilot, or
+        to system ``target``."""
         p = list(params) + [0.0] * (7 - len(params))
         self.mav.command_long_send(self.stack.autopilot.system_id if target is None else target, 1,
                                    command, 0, *p)  # fmt: skip
 
     def acks(self, command: int) -> list:
+        """The COMMAND_ACKs received for ``command``."""
         return [a for a in self.of_type("COMMAND_ACK") if a.command == command]
 
 
@@ -155,12 +160,14 @@ class StackConnection:
         self.mav = self.station.mav
 
     def recv_msg(self):
+        """The next message for this station, stepping the stack once if none waits; None if still none."""
         inbox = self.station.inbox
         if not inbox:
             self.stack.step()
         return inbox.popleft() if inbox else None
 
     def close(self) -> None:
+        """Detach this station from the stack."""
         self.stack.stations.pop(self.station.address, None)
 
 
@@ -224,6 +231,8 @@ class Lockstep:
         return gcs
 
     def deliver(self, link: int, address: tuple[str, int], data: bytes) -> None:
+        """Hand ``data`` from ``address`` to the autopilot's ``link``: now, or through the link's
+        impairment channel when it has one (delayed, or lost)."""
         channel = self.channels[(link, "in")].channel
         if channel is None:
             self._inbox.append((link, address, data))
@@ -416,6 +425,7 @@ class Lockstep:
         return until is None
 
     def run_for(self, seconds: float, **kw) -> bool:
+        """Run ``seconds`` of simulation time (:meth:`run_until`; same options and result)."""
         return self.run_until(self.clock + seconds, **kw)
 
 

@@ -100,10 +100,12 @@ class Child:
 
     @property
     def output(self) -> str:
+        """Everything the child printed so far (the lines kept)."""
         with self._cond:
             return "\n".join(self.lines)
 
     def tail(self, n: int = 40) -> str:
+        """The child's last ``n`` output lines."""
         with self._cond:
             return "\n".join(list(self.lines)[-n:])
 
@@ -116,14 +118,17 @@ class Child:
 
     @property
     def pid(self) -> int:
+        """The child's process id."""
         return self.process.pid
 
     @property
     def alive(self) -> bool:
+        """The child has not exited."""
         return self.process.poll() is None
 
     @property
     def returncode(self) -> int | None:
+        """The exit status (negative: the signal that ended it), or None while running."""
         return self.process.poll()
 
     def wait_line(self, needle: str, timeout: float = 10.0) -> str:
@@ -152,6 +157,7 @@ class Child:
         return code
 
     def signal(self, sig: int) -> None:
+        """Send ``sig`` to the child, if it still runs."""
         if self.process.poll() is None:
             try:
                 self.process.send_signal(sig)
@@ -191,6 +197,7 @@ class VehicleSpec:
     extra_autopilot_args: tuple[str, ...] = ()
 
     def simulator_command(self) -> list[str]:
+        """The command line of this vehicle's simulator process."""
         cmd = [sys.executable, "-u", "-m", "simulator", *self._common(), "--scenario", self.scenario,
                "--speed", self.speed, *self.extra_simulator_args]  # fmt: skip
         if self.duration_s is not None:
@@ -200,6 +207,7 @@ class VehicleSpec:
         return cmd
 
     def autopilot_command(self) -> list[str]:
+        """The command line of this vehicle's autopilot process."""
         cmd = [sys.executable, "-u", "-m", "autopilot", *self._common(), "--controller", self.controller,
                *self.extra_autopilot_args]  # fmt: skip
         if self.autostart:
@@ -228,6 +236,7 @@ class VehicleSpec:
         return common + (["--sitl-config", self.sitl_config] if self.sitl_config else [])
 
     def ports(self) -> wire.Ports:
+        """The vehicle's UDP and zenoh ports (from the SITL configuration and its instance)."""
         return load_sitl(self.sitl_config).ports(self.instance)
 
 
@@ -449,6 +458,7 @@ class Launcher:
         self.stop()
 
     def spawn(self, name: str, cmd: Sequence[str], **kw) -> Child:
+        """Start ``cmd`` as child ``name`` and keep it to stop with the others."""
         child = Child(name, cmd, echo=self.echo, **kw)
         self.children.append(child)
         return child
@@ -499,9 +509,11 @@ class Launcher:
         return child
 
     def child(self, name: str) -> Child:
+        """The child called ``name`` (StopIteration if none)."""
         return next(c for c in self.children if c.name == name)
 
     def first_exited(self) -> Child | None:
+        """The first child that has exited, or None while all run."""
         return next((c for c in self.children if not c.alive), None)
 
     def stop(self, grace_s: float = 5.0) -> dict[str, int]:

@@ -111,6 +111,7 @@ class HostileTraffic:
             return bytes(rng.getrandbits(8) for _ in range(24))
 
     def next(self) -> tuple[str, bytes]:
+        """The next hostile datagram and its kind (one of :data:`HOSTILE_KINDS`; counted in ``sent``)."""
         rng = self.rng
         kind = rng.choice(HOSTILE_KINDS)
         self.sent[kind] += 1
@@ -253,6 +254,8 @@ def load(port: int, system_id: int, clients: int, seconds: float, interval_us: f
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m sitl.spray hostile|load``: spray a running autopilot with hostile datagrams, or load it
+    as demanding ground stations; print what was sent and answered."""
     parser = argparse.ArgumentParser(prog="python -m sitl.spray", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     sub = parser.add_subparsers(dest="mode", required=True)

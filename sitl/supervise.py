@@ -72,9 +72,12 @@ class RestartPolicy:
         return sum(1 for t in restarts if now - t < self.window_s)
 
     def allows(self, restarts: Sequence[float], now: float) -> bool:
+        """Whether another restart is allowed: enabled, and fewer than ``max_restarts`` in the window."""
         return self.enabled and self.recent(restarts, now) < self.max_restarts
 
     def delay_s(self, restarts: Sequence[float], now: float) -> float:
+        """The wait before the next restart (s): ``first_delay_s`` doubled for each recent restart, at most
+        ``max_delay_s``."""
         return min(self.first_delay_s * 2.0 ** self.recent(restarts, now), self.max_delay_s)
 
     def describe(self) -> str:
@@ -155,6 +158,7 @@ class VehicleSupervisor:
 
     @property
     def instance(self) -> int:
+        """The supervised vehicle's instance N."""
         return self.spec.instance
 
     @property
@@ -197,6 +201,8 @@ class VehicleSupervisor:
         self.say(f"vehicle {self.instance} relinked: {what}")
 
     def poll(self, now: float) -> None:
+        """Check both processes at monotonic time ``now`` (s): note exits and restarts that never linked,
+        and restart when due."""
         self._scan()
         for slot in (self.sim, self.ap):
             if slot.state in (UP, LINKING) and not slot.child.alive:
@@ -301,14 +307,17 @@ class Supervisor:
         ]  # fmt: skip
 
     def poll(self, now: float | None = None) -> None:
+        """Poll every vehicle at monotonic time ``now`` (s; default the clock's)."""
         now = time.monotonic() if now is None else now
         for vehicle in self.vehicles:
             vehicle.poll(now)
 
     @property
     def active(self) -> bool:
+        """Some vehicle still has a process running or to be restarted."""
         return any(v.active for v in self.vehicles)
 
     @property
     def whole(self) -> bool:
+        """Every vehicle has both processes up (or its run is over): nothing lost for good."""
         return all(v.whole for v in self.vehicles)

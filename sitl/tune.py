@@ -288,6 +288,9 @@ def parse_arguments(argv: list[str]) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``quadsitl tune``: fly PX4's attitude autotune in-process (see the module docstring); print (or
+    write to ``--out``) the controller TOML; 1 when the identification does not converge or PX4's checks
+    refuse the gains."""
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_arguments(argv)
     try:

@@ -39,6 +39,7 @@ def check_view_port(port: int) -> None:
 
 
 def view_command(instances: Sequence[int], port: int, sitl_config: str | None = None) -> list[str]:
+    """The command line of a ``quadsitl view`` process watching ``instances`` on ``port``."""
     cmd = [
         sys.executable,
         "-u",

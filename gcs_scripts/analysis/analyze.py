@@ -147,6 +147,7 @@ def analyze(
 
 
 def build_parser(prog: str = "quadsitl analyze") -> argparse.ArgumentParser:
+    """The ``quadsitl analyze`` command line (logs, output directory, time windows, figures)."""
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )

@@ -70,6 +70,10 @@ class EstimationStats(NamedTuple):
 
 
 def estimation_stats(record: FlightRecord) -> EstimationStats | None:
+    """How well the autopilot's EKF tracked the truth over ``record``: RMS position (m, per axis and
+    3-D) and Euler angle errors (rad), the share of position errors within the filter's reported
+    3-sigma, the largest of PX4's innovation test ratios and the samples each rejected (ratio > 1);
+    None when the record has no estimator columns (flown on truth)."""
     errors = estimation_errors(record)
     if errors is None:
         return None

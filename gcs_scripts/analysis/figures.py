@@ -28,6 +28,8 @@ def _label(rec: FlightRecord) -> str:
 
 
 def plot_path_3d(records: Sequence[FlightRecord], path: Path, title: str) -> Path:
+    """Plot the reference (dashed, from the first record) and each record's path in the world frame
+    (x, y, z in m, z up); save to ``path`` and return it."""
     fig = plt.figure(figsize=(6.5, 5.5))
     ax = fig.add_subplot(projection="3d")
     ref = records[0].position_ref_m

@@ -57,10 +57,12 @@ class FlightRecord:
 
     @property
     def position_error_m(self) -> np.ndarray:
+        """Position minus reference, (N, 3), world frame (m)."""
         return self.position_m - self.position_ref_m
 
     @property
     def euler_error_rad(self) -> np.ndarray:
+        """Euler angles minus reference, (N, 3), wrapped to [-pi, pi) (rad)."""
         err = self.euler_rad - self.euler_ref_rad
         return (err + np.pi) % (2.0 * np.pi) - np.pi
 
@@ -109,6 +111,8 @@ class FlightRecord:
         return cols
 
     def write_parquet(self, path) -> Path:
+        """Write the record's columns (:meth:`to_columns`) to a Parquet file at ``path``, with the label,
+        scenario, controller and event times as JSON metadata; return the path."""
         import json
 
         import pyarrow as pa

@@ -55,6 +55,7 @@ LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_LANDING = 1, 2, 4
 
 
 def is_ulog(path: str | Path) -> bool:
+    """Whether ``path`` names a PX4 flight log (suffix ``.ulg``, any case)."""
     return Path(path).suffix.lower() == ".ulg"
 
 

@@ -134,6 +134,7 @@ def build(quiet: bool = False) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Build the view's vendored JavaScript into static/vendor/ (``--check``: only verify, 1 if stale)."""
     parser = argparse.ArgumentParser(
         prog="python -m gcs_scripts.view.build",
         description=__doc__,

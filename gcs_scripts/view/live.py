@@ -71,6 +71,7 @@ class LiveVehicle:
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def open(self) -> None:
+        """Bind the ephemeral MAVLink socket; subscribe to the vehicle's zenoh truth and controller rows."""
         import zenoh
 
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -86,6 +87,7 @@ class LiveVehicle:
         )
 
     def close(self) -> None:
+        """Close the zenoh session and the socket; errors while closing are ignored."""
         for closer in (
             lambda: self.session.close() if self.session is not None else None,
             lambda: self.sock.close() if self.sock is not None else None,
@@ -170,6 +172,7 @@ class LiveVehicle:
 
     # -- what the page gets ------------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:
+        """The track's description for the page: instance, system id, label, controller, scenario."""
         sim = self.sim_info.answer or {}
         ap = self.autopilot_info.answer or {}
         controller = ap.get("controller", "")
@@ -186,6 +189,7 @@ class LiveVehicle:
         }
 
     def status(self) -> dict[str, Any]:
+        """Mode, armed, landed, active failsafe and whether heartbeats arrive, for the page."""
         tm = self.telemetry
         return {
             "mode": tm.mode,

@@ -67,10 +67,12 @@ class ReplayTrack:
 
     @property
     def duration_s(self) -> float:
+        """The track's length in simulation time (s); 0 when empty."""
         t = self.columns["t"]
         return float(t[-1] - t[0]) if t else 0.0
 
     def to_json(self) -> dict[str, Any]:
+        """The track as the page's JSON: description, columns, status, texts and events."""
         return {
             "label": self.label,
             "source": self.source,

@@ -60,6 +60,8 @@ class Sample:
     rotor_health: list[float | None] = dataclasses.field(default_factory=lambda: [1.0] * 4 + [0.0] * 4)
 
     def to_json(self) -> dict:
+        """The sample as the page's compact JSON (short keys; world frame, SI: positions m, angles rad,
+        thrust N, torques N m)."""
         return {
             "t": round(self.time_s, 6),
             "p": self.position_m,
@@ -84,6 +86,7 @@ class DisturbanceOnsets:
         self._changing = False
 
     def add(self, time_s: np.ndarray, disturbance: np.ndarray) -> list[float]:
+        """Take a batch of rows (times s, disturbance values); return the onsets found in it (s)."""
         d = np.nan_to_num(np.asarray(disturbance, dtype=float))
         if len(d) == 0:
             return []
@@ -121,10 +124,12 @@ class VehicleSampler:
         self.controller_rows = 0
 
     def add_truth(self, rows: np.ndarray) -> None:
+        """Queue a batch of truth rows (time first) for the next merge."""
         if len(rows):
             self._pending_truth.append(rows)
 
     def add_controller(self, rows: np.ndarray) -> None:
+        """Queue a batch of controller rows (time first) for the next merge."""
         if len(rows):
             self._pending_controller.append(rows)
 
@@ -145,11 +150,13 @@ class VehicleSampler:
 
     @property
     def latest_time_s(self) -> float | None:
+        """The latest truth time received (s), or None."""
         if self._pending_truth:
             return float(self._pending_truth[-1][-1, 0])
         return float(self._truth[-1, 0]) if len(self._truth) else None
 
     def take_events(self) -> list[float]:
+        """The disturbance onsets (s) found since the last call."""
         self._merge()
         out, self.new_events = self.new_events, []
         return out

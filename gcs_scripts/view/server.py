@@ -52,6 +52,7 @@ CONTENT_TYPES = {".js": "text/javascript", ".css": "text/css", ".html": "text/ht
 
 
 def track_color(index: int) -> str:
+    """The ``index``-th track's colour (CSS hex), cycling through :data:`COLORS`."""
     return COLORS[index % len(COLORS)]
 
 
@@ -78,6 +79,7 @@ class LiveSource:
         self._last_status: list[dict[str, Any] | None] = [None] * len(self.vehicles)
 
     def open(self) -> None:
+        """Open every vehicle; on a failure close those opened and re-raise."""
         try:
             for v in self.vehicles:
                 v.open()
@@ -86,16 +88,21 @@ class LiveSource:
             raise
 
     def close(self) -> None:
+        """Close every vehicle."""
         for v in self.vehicles:
             v.close()
 
     def tracks(self) -> list[dict[str, Any]]:
+        """Each vehicle's description with its track id and colour."""
         return [{"id": i, "color": track_color(i), **v.describe()} for i, v in enumerate(self.vehicles)]
 
     def hello(self) -> list[dict[str, Any]]:
+        """The first messages a page receives: the source kind and its tracks."""
         return [{"type": "hello", "kind": self.kind, "rate_hz": None, "tracks": self.tracks()}]
 
     def tick(self, wall: float) -> list[dict[str, Any]]:
+        """Poll every vehicle at wall time ``wall`` (s); the messages to broadcast: new samples, status,
+        events and texts, and the tracks again when a description changed."""
         out: list[dict[str, Any]] = []
         entries, events, texts = [], [], []
         changed = False
@@ -169,18 +176,23 @@ class ReplaySource:
         self._hello_text = [json.dumps(m, separators=(",", ":")) for m in self._hello]
 
     def open(self) -> None:
+        """Nothing to open: the logs were read when the source was made."""
         pass
 
     def close(self) -> None:
+        """Nothing to close."""
         pass
 
     def hello(self) -> list[dict[str, Any]]:
+        """The whole replay, as the messages a page receives first."""
         return self._hello
 
     def hello_texts(self) -> list[str]:
+        """The :meth:`hello` messages as JSON text, encoded once."""
         return self._hello_text
 
     def tick(self, wall: float) -> list[dict[str, Any]]:
+        """Nothing: a replay is sent whole in :meth:`hello`."""
         return []
 
 
@@ -231,6 +243,8 @@ class ViewServer:
         return entry
 
     def process_request(self, connection: Any, request: Any) -> Any:
+        """Serve the page's static files over HTTP (404 for anything else) and let ``/ws`` go on to the
+        WebSocket handshake."""
         from websockets.datastructures import Headers
         from websockets.http11 import Response
 
@@ -252,6 +266,7 @@ class ViewServer:
 
     # -- WebSocket ---------------------------------------------------------------------------------
     async def handler(self, ws: Any) -> None:
+        """One page's WebSocket: send the hello, then keep it among the broadcast clients until it closes."""
         import websockets
 
         try:
@@ -278,6 +293,7 @@ class ViewServer:
             self.clients.discard(ws)
 
     def broadcast(self, message: dict[str, Any]) -> None:
+        """Send ``message`` as JSON to every page, skipping a page whose send buffer is behind (counted)."""
         text = json.dumps(message, separators=(",", ":"))
         for ws in list(self.clients):
             transport = getattr(ws, "transport", None)
@@ -289,6 +305,8 @@ class ViewServer:
 
     # -- the loop ----------------------------------------------------------------------------------
     async def run(self, stop: asyncio.Event, ready: Callable[[str], None] | None = None) -> None:
+        """Open the source, serve on 127.0.0.1:``port`` and broadcast the source's ticks until ``stop``
+        is set; ``ready`` receives the page's URL once listening."""
         from websockets.asyncio.server import serve
 
         self.source.open()
@@ -334,6 +352,7 @@ class ViewServer:
 # Command line
 # --------------------------------------------------------------------------------------------
 def build_parser(prog: str = "quadsitl view") -> argparse.ArgumentParser:
+    """The ``quadsitl view`` command line (logs to replay, or instances to watch; port, rate, labels)."""
     parser = argparse.ArgumentParser(
         prog=prog,
         description="Live 3-D view and time plots of running vehicles in the browser, or replays of "
@@ -392,6 +411,8 @@ def build_parser(prog: str = "quadsitl view") -> argparse.ArgumentParser:
 
 
 def instances_from(args: argparse.Namespace, parser: argparse.ArgumentParser) -> list[int]:
+    """The vehicle instances to watch from ``--instance`` / ``--count`` (default vehicle 0); a parser
+    error outside [0, 99], for duplicates or a non-positive count."""
     instances = list(args.instance) if args.instance else [0]
     if args.count is not None:
         if args.count < 1:
@@ -408,6 +429,7 @@ def instances_from(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 
 def main(argv: list[str] | None = None, prog: str = "quadsitl view") -> int:
+    """``quadsitl view``: serve live vehicles or replays until Ctrl-C; the exit status."""
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     if args.logs and (args.instance or args.count):

@@ -134,9 +134,11 @@ class FailsafeTracker:
 
     @property
     def name(self) -> str | None:
+        """The active failsafe's name, or None."""
         return None if self.active is None else self.active.name
 
     def statustext(self, text: str) -> None:
+        """Start a failsafe whose STATUSTEXT this is, or end the active one this text recovers."""
         for rule in self.rules:
             if text.startswith(rule.starts_with):
                 self.active, self.text, self._mode_after = rule, text, None
@@ -146,6 +148,8 @@ class FailsafeTracker:
                 return
 
     def heartbeat(self, mode: str, armed: bool) -> None:
+        """End the active failsafe on a disarm, or on a mode change after the failsafe's own mode
+        (where its rule says so)."""
         rule = self.active
         if rule is None:
             return
@@ -204,11 +208,13 @@ class VehicleTelemetry:
                 self.failsafe.statustext(text)
 
     def take_texts(self) -> list[tuple[float, int, str]]:
+        """The STATUSTEXTs (time s, severity, text) received since the last call."""
         out, self.new_texts = self.new_texts, []
         return out
 
     @property
     def failsafe_name(self) -> str | None:
+        """The active failsafe's name, ``geofence`` on a breach, or None."""
         if self.failsafe.name is not None:
             return self.failsafe.name
         return "geofence" if self.geofence_breached else None

@@ -49,6 +49,10 @@ def add_campaign_parser(sub) -> None:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    """``quadsitl campaign run``: load the spec, fly every run on the batch engine (and
+    ``--full-stack`` runs through the whole stack for comparison), write the results, summary, report
+    and figures; 2 for a refused option (before flying anything), 1 when a full-stack run differs
+    from the batch engine, else 0."""
     try:
         import numba  # noqa: F401
     except ImportError:

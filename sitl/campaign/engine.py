@@ -123,6 +123,7 @@ class Flight:
 
     @property
     def samples(self) -> int:
+        """How many samples the flight recorded: the physics steps taken plus the initial one."""
         return int(self.sim[lay.S_STEPS]) + 1
 
 

@@ -52,6 +52,8 @@ def _log_scale(groups: list[np.ndarray]) -> bool:
 
 
 def distributions_figure(table: pa.Table, controllers: Sequence[str], path: Path) -> Path:
+    """Box plots (whiskers at the 5th and 95th percentiles) of the campaign's indices per controller,
+    log scale where the values span decades; saved to ``path``, which is returned."""
     fig, axes = plt.subplots(2, 3, figsize=(12, 7))
     for ax, key in zip(axes.ravel(), FIGURE_INDICES, strict=True):
         groups = _groups(table, controllers, key)
@@ -70,6 +72,8 @@ def distributions_figure(table: pa.Table, controllers: Sequence[str], path: Path
 
 
 def ecdf_figure(table: pa.Table, controllers: Sequence[str], path: Path) -> Path:
+    """The empirical cumulative distribution of each index per controller, log scale where the values
+    span decades; saved to ``path``, which is returned."""
     fig, axes = plt.subplots(2, 3, figsize=(12, 7))
     for ax, key in zip(axes.ravel(), FIGURE_INDICES, strict=True):
         groups = _groups(table, controllers, key)
@@ -91,6 +95,8 @@ def ecdf_figure(table: pa.Table, controllers: Sequence[str], path: Path) -> Path
 
 
 def mass_scatter_figure(table: pa.Table, controllers: Sequence[str], path: Path) -> Path | None:
+    """The position ISE (m^2 s) of each run that did not fail against its mass scale, per controller;
+    None when the campaign does not vary the mass."""
     if "mass_scale" not in table.column_names:
         return None
     names = np.array(table.column("controller").to_pylist())
@@ -173,6 +179,8 @@ def worst_run_figures(records, out_dir: Path, controller: str, run: int) -> list
 
 
 def campaign_figures(table: pa.Table, controllers: Sequence[str], out_dir: Path) -> list[Path]:
+    """Write the campaign's figures into ``out_dir`` (distributions and ECDFs always, ISE against
+    mass and the fault figure when they apply); their paths."""
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [
         distributions_figure(table, controllers, out_dir / "distributions.png"),

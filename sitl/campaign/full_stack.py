@@ -52,6 +52,8 @@ class Comparison:
 
     @property
     def agrees(self) -> bool:
+        """Batch engine and full stack agree: the same failure verdict and every compared index within
+        ``rel_tol`` (relative)."""
         return self.batch_failed == self.stack_failed and self.worst_relative <= self.rel_tol
 
     rel_tol: float = 1e-6

@@ -111,6 +111,8 @@ class ResultStore:
         return pa.Table.from_pylist(ordered, schema=table.schema)
 
     def write_results(self) -> Path:
+        """Write the results table to ``results.parquet`` in the campaign directory, atomically (a temporary
+        file renamed); return its path."""
         path = self.dir / RESULTS_FILE
         tmp = self.dir / f".{RESULTS_FILE}.tmp"
         pq.write_table(self.table(), tmp)

@@ -137,6 +137,8 @@ class Distribution:
 
     @property
     def varies(self) -> bool:
+        """Whether draws can differ: a uniform with distinct bounds, a choice among distinct values or a
+        normal with a positive standard deviation."""
         if self.kind == "fixed":
             return False
         if self.kind == "uniform":
@@ -167,6 +169,7 @@ class Distribution:
         return self.clip if self.clip is not None else (-math.inf, math.inf)
 
     def describe(self) -> str:
+        """The distribution in notation, e.g. ``U[0.8, 1.2]`` or ``N(1, 0.1^2) clipped to [0.5, 1.5]``."""
         if self.kind == "fixed":
             return f"{self.params[0]:g}"
         if self.kind == "uniform":
@@ -178,6 +181,7 @@ class Distribution:
 
 
 def fixed(value: float) -> Distribution:
+    """The distribution that always draws ``value``."""
     return Distribution("fixed", (float(value),))
 
 
@@ -373,10 +377,12 @@ class CampaignSpec:
 
     @property
     def estimator(self) -> str:
+        """``truth`` when the runs fly on the true state, ``ekf`` when they fly on the estimator."""
         return "truth" if self.estimation is None else "ekf"
 
     @property
     def controller_names(self) -> tuple[str, ...]:
+        """The names of the controllers compared, in the spec's order."""
         return tuple(c.name for c in self.controllers)
 
     def fingerprint(self) -> str:

@@ -39,6 +39,7 @@ PARAMETER_COLUMNS_END = "final_error_x_m"  # the first metric column: parameters
 
 
 def title(controller: str) -> str:
+    """The controller's display title (e.g. the paper's name for it), else its name."""
     return TITLES.get(controller, controller)
 
 

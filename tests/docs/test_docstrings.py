@@ -16,7 +16,7 @@ import pytest
 
 pytestmark = pytest.mark.timeout(120)
 
-DOCUMENTED = ("quadcommon", "simulator")
+DOCUMENTED = ("quadcommon", "simulator", "gcs_scripts", "sitl")
 
 
 def modules(package: str):
