@@ -189,3 +189,24 @@ def test_targets_are_flown_within_acros_bounds():
     assert step.attitude[:2] == integrate_body_rates(State.euler_rad, bounded, 0.002, tilt)
     again = guidance.attitude_step(0.002, State, limits)  # integrates on from its own attitude
     assert again.attitude[0] == integrate_body_rates(step.attitude[0], bounded, 0.002, tilt)[0]
+
+
+def test_hostile_targets_over_the_wire_are_refused_said_and_never_flown():
+    """pymavlink on the API link, in OFFBOARD on an attitude stream: a NaN quaternion, a zero one,
+    an infinite thrust and an empty mask are each refused with a STATUSTEXT naming the reason; the
+    vehicle keeps flying the last good target, level."""
+    stack, gcs = offboard_on_the_ground()
+    commander = stack.autopilot.commander
+    hover = stack.autopilot.params["MPC_THR_HOVER"]
+    stream(gcs, 2.0, lambda g: send_attitude(g, q_ned(0, 0, 0), 1.1 * hover))
+    hostile = [((NAN, 0.0, 0.0, 0.0), 0.5, ATTITUDE_ONLY, "non-finite attitude quaternion"),
+               ((0.0, 0.0, 0.0, 0.0), 0.5, ATTITUDE_ONLY, "not a unit quaternion"),
+               (q_ned(0, 0, 0), INF, ATTITUDE_ONLY, "non-finite thrust"),
+               (q_ned(0, 0, 0), 0.5, 255, "ignores the attitude and the roll or pitch rate")]  # fmt: skip
+    for q, thrust, mask, reason in hostile:
+        send_attitude(gcs, q, thrust, mask)
+        gcs.wait(lambda g, r=reason: any(r in text for text in g.statustext), sim_timeout=0.5, what=reason)
+        assert "attitude target refused" in gcs.statustext[-1]
+        assert commander.offboard.setpoint.thrust == pytest.approx(1.1 * hover)  # the last good one
+    assert commander.mode is FlightMode.OFFBOARD and commander.in_air()
+    assert max(abs(a) for a in commander.state.euler_rad[:2]) < math.radians(2.0)
