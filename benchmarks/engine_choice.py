@@ -1,18 +1,17 @@
-"""Which engine for campaigns? The coupled plant's RK4 step, four ways, on this machine.
+"""The campaign engine's loop order: the coupled plant's RK4 step, compiled, two ways, on this machine.
 
 Run: ``.venv/bin/python benchmarks/engine_choice.py [--batch 1000] [--steps 2000]``.
 
-The same plant (the coupled rigid body of ``simulator.dynamics.plant``, wrench actuation, CoM
-offset, products of inertia, a torque disturbance on the Euler coordinates) integrated by RK4 at
-1 kHz with the inputs held, measured as nanoseconds per vehicle-step (one RK4 step of one
+The plant's own compiled step (``simulator.dynamics.equations.rk4_step``: the coupled rigid body,
+wrench actuation, CoM offset, products of inertia, a torque disturbance on the Euler coordinates)
+at 1 kHz with the inputs held, measured as nanoseconds per vehicle-step (one RK4 step of one
 vehicle):
 
-* ``numpy_batch``: a batch axis over runs, every operation on arrays of ``--batch`` runs;
-* ``jax_batch``: the same array code under ``jax.jit`` with ``lax.fori_loop`` over the steps
-  (float64, CPU), the way crazyflow batches worlds (skipped if JAX is not installed);
-* ``numba_per_run``: the campaign kernel's ``rk4_step``, a compiled loop over the steps of one
-  run, then the next run;
-* ``numba_batch``: the same compiled step, the loop over runs inside the loop over steps.
+* ``numba_per_run``: a compiled loop over the steps of one run, then the next run (the engine's);
+* ``numba_batch``: the same step, the loop over runs inside the loop over steps.
+
+(Array engines over a batch axis, numpy or JAX, would need an array-shaped second copy of the
+plant's equations; none is kept here.)
 
 Then the full closed loop (``numba_closed_loop``: plant + cascade + wire + indices, the
 campaign's kernel) per run. Budget for the issue's target: 1,000 runs x 40 s x 1 kHz = 4e7
@@ -40,93 +39,6 @@ H = 1e-3
 THRUST = 7.3
 TORQUE = (0.001, -0.0005, 0.0002)
 DIST_TORQUE = (0.1, 0.1, 0.1)
-
-
-def _constants(plant: Plant):
-    J = np.array(plant.inertia, dtype=float)
-    K = np.array(plant.inertia_inv, dtype=float)
-    return plant.mass, plant.gravity, J, K, np.array(plant.com_offset, dtype=float)
-
-
-def derivative_xp(xp, s, m, g, J, K, rc):
-    """The coupled plant's derivative on a batch ``s`` of shape (13, B), any array module."""
-    vx, vy, vz, qw, qx, qy, qz, p, q, r = s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10], s[11], s[12]
-    xx, yy = qx * qx, qy * qy
-    xz, yz = qx * qz, qy * qz
-    wx, wy = qw * qx, qw * qy
-    R02, R12 = 2.0 * (xz + wy), 2.0 * (yz - wx)
-    R20, R21, R22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
-    thrust = THRUST
-    tx = TORQUE[0] - rc[1] * thrust
-    ty = TORQUE[1] + rc[0] * thrust
-    tz = TORQUE[2]
-    ap, aq, ar = DIST_TORQUE
-    st = -R20
-    ct = xp.sqrt(xp.maximum(1.0 - st * st, 1e-12))
-    sf, cf = R21 / ct, R22 / ct
-    rhs = (ar + st * ap) / ct
-    tx = tx + ap
-    ty = ty + cf * aq + sf * rhs
-    tz = tz - sf * aq + cf * rhs
-    hx = J[0, 0] * p + J[0, 1] * q + J[0, 2] * r
-    hy = J[1, 0] * p + J[1, 1] * q + J[1, 2] * r
-    hz = J[2, 0] * p + J[2, 1] * q + J[2, 2] * r
-    ex = tx - (q * hz - r * hy)
-    ey = ty - (r * hx - p * hz)
-    ez = tz - (p * hy - q * hx)
-    dp = K[0, 0] * ex + K[0, 1] * ey + K[0, 2] * ez
-    dq = K[1, 0] * ex + K[1, 1] * ey + K[1, 2] * ez
-    dr = K[2, 0] * ex + K[2, 1] * ey + K[2, 2] * ez
-    return xp.stack(
-        [
-            vx, vy, vz, R02 * thrust / m, R12 * thrust / m, R22 * thrust / m - g,
-            -0.5 * (qx * p + qy * q + qz * r), 0.5 * (qw * p + qy * r - qz * q),
-            0.5 * (qw * q + qz * p - qx * r), 0.5 * (qw * r + qx * q - qy * p),
-            dp, dq, dr,
-        ]
-    )  # fmt: skip
-
-
-def rk4_xp(xp, s, consts):
-    f = derivative_xp
-    k1 = f(xp, s, *consts)
-    k2 = f(xp, s + 0.5 * H * k1, *consts)
-    k3 = f(xp, s + 0.5 * H * k2, *consts)
-    k4 = f(xp, s + H * k3, *consts)
-    s = s + H / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
-    n = 1.0 / xp.sqrt(s[6] ** 2 + s[7] ** 2 + s[8] ** 2 + s[9] ** 2)
-    return xp.concatenate([s[:6], s[6:10] * n, s[10:]])
-
-
-def bench_numpy(state0, consts, batch, steps) -> float:
-    s = np.repeat(state0[:13, None], batch, axis=1)
-    start = time.perf_counter()
-    for _ in range(steps):
-        s = rk4_xp(np, s, consts)
-    return (time.perf_counter() - start) / (steps * batch) * 1e9
-
-
-def bench_jax(state0, consts, batch, steps) -> tuple[float, float] | None:
-    try:
-        import jax
-    except ImportError:
-        return None
-    jax.config.update("jax_enable_x64", True)
-    import jax.numpy as jnp
-
-    jconsts = tuple(jnp.asarray(c) if isinstance(c, np.ndarray) else c for c in consts)
-
-    @jax.jit
-    def run(s):
-        return jax.lax.fori_loop(0, steps, lambda i, x: rk4_xp(jnp, x, jconsts), s)
-
-    s = jnp.asarray(np.repeat(state0[:13, None], batch, axis=1))
-    start = time.perf_counter()
-    run(s).block_until_ready()
-    compile_s = time.perf_counter() - start
-    start = time.perf_counter()
-    run(s).block_until_ready()
-    return (time.perf_counter() - start) / (steps * batch) * 1e9, compile_s
 
 
 def _numba_loops():
@@ -172,7 +84,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--batch", type=int, default=1000, help="runs in the batch (numpy, JAX, numba batch)")
+    parser.add_argument("--batch", type=int, default=1000, help="a tenth: runs per loop order")
     parser.add_argument("--steps", type=int, default=2000, help="RK4 steps per run measured")
     args = parser.parse_args()
 
@@ -180,21 +92,9 @@ def main() -> None:
     plant = Plant(vehicle, H)
     plant.reset((0.0, 0.0, 1.0), (0.0, 0.0, 0.5))
     state0 = np.array(plant.state)
-    consts = _constants(plant)
     P = np.array(plant.parameters())
 
     results: dict[str, float] = {}
-    # numpy is slow: a tenth of the steps gives the per-step cost just as well.
-    results["numpy_batch"] = bench_numpy(state0, consts, args.batch, max(args.steps // 10, 20))
-    print(f"numpy batch ({args.batch} runs): {results['numpy_batch']:.0f} ns per vehicle-step", flush=True)
-    jax_result = bench_jax(state0, consts, args.batch, args.steps)
-    if jax_result is not None:
-        results["jax_batch"], jax_compile = jax_result
-        print(
-            f"JAX jit+fori_loop float64 ({args.batch} runs): {results['jax_batch']:.0f} ns per "
-            f"vehicle-step (compile {jax_compile:.1f} s)",
-            flush=True,
-        )
     per_run, batch, inputs = _numba_loops()
     u = inputs()
     per_run(state0, P, u, 10, 1)
@@ -219,7 +119,7 @@ def main() -> None:
 
     st, rp, gu, dw, win = eng.disturbance_tables(load_gust_profile(scenario.gusts), dtp, scenario.duration_s)
     flight = eng.Flight(
-        s0, Pc, eng.controller_array(load_controller("intbs_nlhinf"), vehicle, 1.0 / rates.control_hz),
+        s0, Pc, eng.pack_controller(load_controller("intbs_nlhinf"), vehicle, 1.0 / rates.control_hz),
         eng.reference_table(scenario.trajectory, rates, scenario.duration_s, True),
         eng.sim_array(rates, scenario.duration_s, True, eng.FailureLimits(), win), st, rp, gu, dw,
     )  # fmt: skip
