@@ -12,7 +12,7 @@ import pytest
 from pymavlink.dialects.v20 import common as m
 
 from autopilot.commander.modes import FlightMode
-from autopilot.guidance.manual import integrate_body_rates
+from autopilot.guidance.manual import ManualLimits, integrate_body_rates
 from autopilot.guidance.offboard import AttitudeSetpoint, OffboardGuidance
 from autopilot.guidance.planner import Limits
 from autopilot.mavlink.offboard import decode_attitude_target
@@ -170,8 +170,6 @@ def test_a_target_is_read_as_px4_reads_it():
 def test_targets_are_flown_within_acros_bounds():
     """An attitude beyond ACRO_TILT_LIM flies at the limit; rates beyond MC_ACRO_*_MAX at the
     maximum, integrated by ACRO's own step; thrust kept from the last target that gave one."""
-    from autopilot.guidance.manual import ManualLimits
-
     limits = ManualLimits(acro_rates=(1.0, 1.0, 0.5), acro_tilt=math.radians(60))
     guidance = OffboardGuidance(Limits(2.0, 1.5, 1.0, 2.0, 1.0))
 
