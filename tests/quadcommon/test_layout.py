@@ -1,0 +1,62 @@
+"""Record layouts: offsets generated from the declaration, refusals, the names a table carries, and
+numba reading the offsets as constants (a compiled kernel that indexes by them)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from quadcommon.kernel import compiled, kernel
+from quadcommon.layout import Field, column_names, describe, fields_of, layout
+
+pytestmark = pytest.mark.timeout(120)
+
+SETTINGS = layout(
+    "Settings",
+    (
+        Field("dt", unit="s", doc="control period"),
+        Field("home", 3, unit="deg, deg, m"),
+        Field("final", elements=("x", "y", "z")),
+    ),
+)
+EXTRA = layout("Extra", (Field("extra", unit="m"),), after=SETTINGS)
+
+
+@kernel
+def read_and_write(memory):
+    memory[EXTRA.extra] = memory[SETTINGS.home + 2] + memory[SETTINGS.dt]
+    return SETTINGS.size + EXTRA.size
+
+
+def test_offsets_follow_the_declaration():
+    assert (SETTINGS.dt, SETTINGS.home, SETTINGS.final, SETTINGS.size) == (0, 1, 4, 7)
+    assert (EXTRA.extra, EXTRA.size) == (7, 8)
+    assert [f.name for f in fields_of(SETTINGS)] == ["dt", "home", "final"]
+
+
+def test_column_names_and_description():
+    assert column_names(SETTINGS) == ("dt", "home_0", "home_1", "home_2", "final_x", "final_y", "final_z")
+    assert column_names(EXTRA) == ("extra",)
+    text = describe(SETTINGS)
+    assert "home [deg, deg, m]" in text and "control period" in text and "(7 floats)" in text
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ((Field("a"), Field("a")), "duplicate"),
+        ((Field("size"),), "length"),
+        ((Field("a", 0),), "size 0"),
+        ((Field("a", 2, elements=("x", "y", "z")),), "elements"),
+    ],
+)
+def test_bad_declarations_are_refused(fields, message):
+    with pytest.raises(ValueError, match=message):
+        layout("Bad", fields)
+
+
+def test_compiled_code_reads_the_generated_offsets():
+    memory = np.arange(8.0)
+    entry = compiled(read_and_write)
+    assert entry(memory) == 15
+    assert memory[7] == 3.0 + 0.0  # home's third element (3) plus dt (0)
