@@ -25,6 +25,7 @@ from autopilot.estimation.parameters import EstimatorParams
 from gcs_scripts.analysis.record import FlightRecord
 from quadcommon.config import Rates, TrajectorySpec, VehicleConfig, load_sitl
 from quadcommon.kernel import compiled
+from quadcommon.layout import column_names
 from quadcommon.trajectories import trajectory_from_spec
 from simulator.dynamics.equations import RF_SIZE
 from simulator.dynamics.plant import Plant
@@ -55,17 +56,10 @@ def failure_reason(code: int, controller: str) -> str:
 
 NO_FAULTS = np.zeros((0, RF_SIZE))  # a flight without rotor faults (writable: the type numba compiled)
 
-# Names of the metric columns, in the order of the kernel's metrics row (layout M_*).
-METRIC_COLUMNS = (
-    "final_error_x_m", "final_error_y_m", "final_error_z_m",
-    "ise_x", "ise_y", "ise_z", "ise_phi", "ise_theta", "ise_psi",
-    "iadu_U1", "iadu_tau_phi", "iadu_tau_theta", "iadu_tau_psi",
-    "max_position_error_m", "max_tilt_rad", "time_saturated_s", "time_tilt_limited_s",
-)  # fmt: skip
-# On the estimate, after those (layout M_EST_*).
-ESTIMATION_COLUMNS = (
-    "estimate_rms_error_m", "worst_test_ratio", "time_not_converged_s", "rejected_samples",
-)  # fmt: skip
+# Names of the metric columns: the kernel's metrics row as its layout names them (kernels.METRICS).
+METRIC_COLUMNS = column_names(lay.METRICS)
+# On the estimate, after those (kernels.ESTIMATION_METRICS).
+ESTIMATION_COLUMNS = column_names(lay.ESTIMATION_METRICS)
 # A campaign that draws faults, after those (:func:`fault_columns`).
 FAULT_COLUMNS = ("survived", "fault_onset_s", "max_excursion_m", "time_to_recover_s", "impact_speed_m_s")
 
@@ -124,7 +118,7 @@ class Flight:
     @property
     def samples(self) -> int:
         """How many samples the flight recorded: the physics steps taken plus the initial one."""
-        return int(self.sim[lay.S_STEPS]) + 1
+        return int(self.sim[lay.SETTINGS.steps]) + 1
 
 
 # -------------------------------------------------------------------------------------------------
@@ -176,7 +170,7 @@ def reference_table(spec: TrajectorySpec, rates: Rates, duration_s: float, wire_
 def disturbance_tables(
     profile: GustProfile, dt_physics: float, duration_s: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[float, ...]]:
-    """Steps, ramps, 1-cos gusts, Dryden wind samples, and the Dryden window (S_DRYDEN_*).
+    """Steps, ramps, 1-cos gusts, Dryden wind samples, and the Dryden window (SETTINGS.dryden_*).
 
     The flat tables of :func:`element_rows`, as ``DisturbanceSchedule`` reads them (start time 0); the
     Dryden wind is drawn by the project's :class:`DrydenWind` at the physics step, one sample
@@ -207,29 +201,29 @@ def sim_array(
     survival: SurvivalLimits = SurvivalLimits(),
 ) -> np.ndarray:
     """Timing, the wire switch, the failure limits and the faults' onset and recovery bound (layout
-    ``S_*``), as ``run_scenario`` times."""
+    ``SETTINGS``), as ``run_scenario`` times."""
     dt_control = 1.0 / rates.control_hz
     substeps = rates.physics_steps_per_control
-    S = np.zeros(lay.S_SIZE)
-    S[lay.S_DT_CONTROL] = dt_control
-    S[lay.S_DT_PHYSICS] = dt_control / substeps
-    S[lay.S_SUBSTEPS] = substeps
-    S[lay.S_STEPS] = int(round(duration_s / dt_control))
-    S[lay.S_WIRE] = 1.0 if wire_float32 else 0.0
-    S[lay.S_USEC_PER_FRAME] = 1e6 / rates.control_hz  # the simulator's time_usec per frame
-    S[lay.S_MAX_POS_ERR] = limits.max_position_error_m
-    S[lay.S_MAX_TILT] = limits.max_tilt_rad
-    S[lay.S_AIRBORNE] = limits.airborne_height_m
-    S[lay.S_ESTIMATED] = 1.0 if estimated else 0.0
-    S[lay.S_HOME : lay.S_HOME + 3] = home()
-    S[lay.S_FAULT_ONSET] = fault_onset_s
-    S[lay.S_RECOVERY_BOUND] = survival.recovery_bound_m
+    S = np.zeros(lay.SETTINGS.size)
+    S[lay.SETTINGS.dt_control] = dt_control
+    S[lay.SETTINGS.dt_physics] = dt_control / substeps
+    S[lay.SETTINGS.substeps] = substeps
+    S[lay.SETTINGS.steps] = int(round(duration_s / dt_control))
+    S[lay.SETTINGS.wire] = 1.0 if wire_float32 else 0.0
+    S[lay.SETTINGS.usec_per_frame] = 1e6 / rates.control_hz  # the simulator's time_usec per frame
+    S[lay.SETTINGS.max_position_error] = limits.max_position_error_m
+    S[lay.SETTINGS.max_tilt] = limits.max_tilt_rad
+    S[lay.SETTINGS.airborne_height] = limits.airborne_height_m
+    S[lay.SETTINGS.estimated] = 1.0 if estimated else 0.0
+    S[lay.SETTINGS.home : lay.SETTINGS.home + 3] = home()
+    S[lay.SETTINGS.fault_onset] = fault_onset_s
+    S[lay.SETTINGS.recovery_bound] = survival.recovery_bound_m
     (
-        S[lay.S_DRYDEN_ON],
-        S[lay.S_DRYDEN_T0],
-        S[lay.S_DRYDEN_FROM],
-        S[lay.S_DRYDEN_UNTIL],
-        S[lay.S_DRYDEN_STEP],
+        S[lay.SETTINGS.dryden_on],
+        S[lay.SETTINGS.dryden_t0],
+        S[lay.SETTINGS.dryden_from],
+        S[lay.SETTINGS.dryden_until],
+        S[lay.SETTINGS.dryden_step],
     ) = dryden_window
     return S
 
@@ -282,7 +276,7 @@ def entry(translational: str, rotational: str, estimated: bool = False):
 
 def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Fly one packed run: ``(metrics row, recorded rows or None)``."""
-    rows = np.zeros((flight.samples if record else 0, lay.R_SIZE))
+    rows = np.zeros((flight.samples if record else 0, lay.RECORD.size))
     c = flight.controller
     estimation = flight.estimation or no_estimation()
     metrics = entry(c.translational, c.rotational, bool(flight.estimation))(
@@ -291,27 +285,28 @@ def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | 
     )  # fmt: skip
     if not record:
         return metrics, None
-    flown = int(round(metrics[lay.M_T_END] / flight.sim[lay.S_DT_CONTROL])) + 1
+    flown = int(round(metrics[lay.RUN_END.end_time] / flight.sim[lay.SETTINGS.dt_control])) + 1
     return metrics, rows[:flown]
 
 
 def record_to_flight_record(
     rows: np.ndarray, label: str, scenario: str, controller: str, event_times: list[float]
 ) -> FlightRecord:
-    """Recorded rows (``RECORD_COLUMNS``) as the analysis package's :class:`FlightRecord`."""
+    """Recorded rows (layout :data:`~.kernels.RECORD`) as the analysis package's :class:`FlightRecord`."""
+    R = lay.RECORD
     return FlightRecord(
         label=label,
         scenario=scenario,
         controller=controller,
-        time_s=rows[:, 0].copy(),
-        position_m=rows[:, 1:4].copy(),
-        position_ref_m=rows[:, 4:7].copy(),
-        euler_rad=rows[:, 7:10].copy(),
-        euler_ref_rad=rows[:, 10:13].copy(),
-        thrust_n=rows[:, 13].copy(),
-        torque_euler_n_m=rows[:, 14:17].copy(),
-        disturbance_force_n=rows[:, 17:20].copy(),
-        disturbance_torque_n_m=rows[:, 20:23].copy(),
+        time_s=rows[:, R.t].copy(),
+        position_m=rows[:, R.position : R.position + 3].copy(),
+        position_ref_m=rows[:, R.position_ref : R.position_ref + 3].copy(),
+        euler_rad=rows[:, R.euler : R.euler + 3].copy(),
+        euler_ref_rad=rows[:, R.euler_ref : R.euler_ref + 3].copy(),
+        thrust_n=rows[:, R.thrust].copy(),
+        torque_euler_n_m=rows[:, R.torque_euler : R.torque_euler + 3].copy(),
+        disturbance_force_n=rows[:, R.disturbance_force : R.disturbance_force + 3].copy(),
+        disturbance_torque_n_m=rows[:, R.disturbance_torque : R.disturbance_torque + 3].copy(),
         event_times_s=list(event_times),
         source="campaign batch engine",
     )
@@ -320,16 +315,18 @@ def record_to_flight_record(
 def metrics_dict(metrics: np.ndarray, controller: str) -> dict[str, float | bool | str]:
     """``controller``'s metrics row as named columns (plus the final-error norm and the failure
     reason)."""
-    out: dict[str, float | bool | str] = {name: float(metrics[i]) for i, name in enumerate(METRIC_COLUMNS)}
+    out: dict[str, float | bool | str] = {
+        name: float(metrics[lay.METRICS.start + i]) for i, name in enumerate(METRIC_COLUMNS)
+    }
     fx, fy, fz = out["final_error_x_m"], out["final_error_y_m"], out["final_error_z_m"]
     out["final_error_m"] = math.sqrt(fx * fx + fy * fy + fz * fz)  # type: ignore[operator]
-    code = int(metrics[lay.M_FAIL])
+    code = int(metrics[lay.RUN_END.failure])
     out["failed"] = code != lay.FAIL_NONE
     out["failure"] = failure_reason(code, controller)
-    out["failure_time_s"] = float(metrics[lay.M_T_FAIL])
-    if not math.isnan(metrics[lay.M_EST_RMS]):
+    out["failure_time_s"] = float(metrics[lay.RUN_END.failure_time])
+    if not math.isnan(metrics[lay.ESTIMATION_METRICS.estimate_rms_error_m]):
         for i, name in enumerate(ESTIMATION_COLUMNS):
-            out[name] = float(metrics[lay.M_EST_RMS + i])
+            out[name] = float(metrics[lay.ESTIMATION_METRICS.start + i])
     return out
 
 
@@ -344,8 +341,8 @@ def fault_columns(metrics: np.ndarray, row: dict, survival: SurvivalLimits, onse
     good: 0 if it never left it; NaN when it had not recovered by the run's end, or the run failed)
     and ``impact_speed_m_s`` (the downward speed at a ground contact after take-off; NaN: none)."""
     failed = bool(row["failed"])
-    last_out = float(metrics[lay.M_T_LAST_OUT])
-    end = float(metrics[lay.M_T_END])
+    last_out = float(metrics[lay.FAULT_METRICS.last_out])
+    end = float(metrics[lay.RUN_END.end_time])
     if failed or not onset_s <= end:
         recover = math.nan
     elif math.isnan(last_out):
@@ -357,7 +354,7 @@ def fault_columns(metrics: np.ndarray, row: dict, survival: SurvivalLimits, onse
     return {
         "survived": not failed and float(row["max_position_error_m"]) <= survival.envelope_m,
         "fault_onset_s": onset_s,
-        "max_excursion_m": float(metrics[lay.M_EXCURSION]),
+        "max_excursion_m": float(metrics[lay.FAULT_METRICS.excursion]),
         "time_to_recover_s": recover,
-        "impact_speed_m_s": float(metrics[lay.M_IMPACT_SPEED]),
+        "impact_speed_m_s": float(metrics[lay.FAULT_METRICS.impact_speed]),
     }

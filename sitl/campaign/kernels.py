@@ -19,7 +19,7 @@ Nothing here is a second copy of an equation: :func:`simulate` calls
   Dryden wind drawn beforehand by the project's own generator;
 * the cascade (:func:`autopilot.control.cascade.cascade_step`) with the run's two laws: what the
   autopilot flies per frame;
-* the wire (switch ``S_WIRE``): ODOMETRY's float32 pose, velocity and rates and the autopilot's
+* the wire (switch ``SETTINGS.wire``): ODOMETRY's float32 pose, velocity and rates and the autopilot's
   conversions back (:mod:`quadcommon.rigid_body`), and the float32 controls of
   HIL_ACTUATOR_CONTROLS;
 
@@ -45,6 +45,7 @@ from autopilot.control.command_filter import S_SIZE as FILTER_STATE_SIZE
 from autopilot.estimation import filter as ekf
 from quadcommon.frames import geodetic_to_ned_about, ned_to_geodetic_about, wrap_pi
 from quadcommon.kernel import borrowed, kernel
+from quadcommon.layout import Field, column_names, layout
 from quadcommon.numerics import clip
 from quadcommon.rigid_body import (
     euler_from_quaternion,
@@ -77,62 +78,77 @@ from simulator.environment.gust_profile import one_minus_cosine_wind, steps_and_
 from simulator.sensors import frame as sensors
 
 # =================================================================================================
-# Where each number sits in the flat float64 arrays simulate() takes and returns.
+# The records simulate() takes and returns (flat float64 arrays; offsets generated from these).
 # =================================================================================================
+SETTINGS = layout("RunSettings", (
+    Field("dt_control", unit="s", doc="control period"),
+    Field("dt_physics", unit="s", doc="physics step"),
+    Field("substeps", doc="physics steps per control step"),
+    Field("steps", doc="control steps; samples k = 0..steps"),
+    Field("wire", doc="1.0: float32 state and controls as on the MAVLink wire"),
+    Field("usec_per_frame", unit="us", doc="informational: the reference table is sampled on this clock"),
+    Field("max_position_error", unit="m", doc="a run whose position error exceeds it fails"),
+    Field("max_tilt", unit="rad", doc="a run whose tilt exceeds it fails"),
+    Field("airborne_height", unit="m", doc="height of O above which the vehicle counts as airborne"),
+    Field("dryden_on", doc="1.0: Dryden turbulence is drawn"),
+    Field("dryden_t0", unit="s", doc="start_time + dryden.start_s"),
+    Field("dryden_from", unit="s", doc="profile time window of the turbulence"),
+    Field("dryden_until", unit="s"),
+    Field("dryden_step", unit="s", doc="time between two samples of the drawn wind"),
+    Field("estimated", doc="1.0: the controllers fly on the EKF fed by the sensor models (the est arrays)"),
+    Field("home", 3, unit="deg, deg, m", doc="the geodetic home the GNSS fixes cross the wire about"),
+    Field("fault_onset", unit="s", doc="first fault's onset (inf: none): excursion, recovery count from it"),
+    Field("recovery_bound", unit="m", doc="position error within which the vehicle has recovered"),
+))  # fmt: skip
 
-# -- simulation ----------------------------------------------------------------------------------
-S_DT_CONTROL = 0
-S_DT_PHYSICS = 1
-S_SUBSTEPS = 2
-S_STEPS = 3  # control steps; samples k = 0..steps
-S_WIRE = 4  # 1.0: float32 state and controls as on the MAVLink wire
-S_USEC_PER_FRAME = 5  # informational: the reference table is sampled on this clock
-S_MAX_POS_ERR = 6
-S_MAX_TILT = 7
-S_AIRBORNE = 8  # height of O above which the vehicle counts as airborne
-S_DRYDEN_ON = 9
-S_DRYDEN_T0 = 10  # start_time + dryden.start_s (s)
-S_DRYDEN_FROM = 11  # profile time window of the turbulence
-S_DRYDEN_UNTIL = 12
-S_DRYDEN_STEP = 13
-S_ESTIMATED = 14  # 1.0: the controllers fly on the EKF fed by the sensor models (the est arrays)
-S_HOME = 15  # 3: the geodetic home (lat deg, lon deg, alt m) the GNSS fixes cross the wire about
-S_FAULT_ONSET = 18  # the first fault's onset (s; inf: none): the excursion and recovery count from it
-S_RECOVERY_BOUND = 19  # position error (m) within which the vehicle has recovered
-S_SIZE = 20
-
-# -- metrics (one row per run, see engine.METRIC_NAMES) -------------------------------------------
-M_FINAL = 0  # 3: final position error x, y, z
-M_ISE = 3  # 6: x, y, z, phi, theta, psi
-M_IADU = 9  # 4: U1, tau_phi, tau_theta, tau_psi
-M_MAX_POS_ERR = 13
-M_MAX_TILT = 14
-M_T_SAT = 15  # time with an actuator limit active (s)
-M_T_TILT = 16  # time with the roll/pitch reference at the tilt limit (s)
-M_FAIL = 17  # failure code (FAIL_*)
-M_T_FAIL = 18  # time of the failure (s), NaN when none
-M_T_END = 19  # last sample's time (s)
-M_SIZE = 20
-# -- on the estimate (S_ESTIMATED) --
-M_EST_RMS = 20  # RMS of |estimated - true position| over the samples flown (m)
-M_EST_MAX_RATIO = 21  # largest innovation test ratio of any fusion (gate at 1)
-M_EST_T_NOT_CONVERGED = 22  # time the filter's verdict was "not converged" (s)
-M_EST_REJECTED = 23  # samples rejected by the gates or the quality checks
-M_EST_SIZE = 24
-# -- faults (S_FAULT_ONSET) --
-M_EXCURSION = 24  # the largest position error at or after the onset (m; NaN: no onset reached)
-M_T_LAST_OUT = 25  # the last sample time at or after the onset with the error above the bound (NaN: none)
-M_IMPACT_SPEED = 26  # downward speed of the centre of mass at a ground contact after take-off (m/s; NaN)
-M_ALL_SIZE = 27
+# The metrics row, one per run: the paper's indices (the results table's columns, named as here) ...
+METRICS = layout("RunMetrics", (
+    Field("final_error", elements=("x_m", "y_m", "z_m"), unit="m", doc="final position error"),
+    Field("ise", elements=("x", "y", "z", "phi", "theta", "psi"), doc="integral of the squared errors"),
+    Field("iadu", elements=("U1", "tau_phi", "tau_theta", "tau_psi"), doc="total variation of the controls"),
+    Field("max_position_error_m", unit="m"),
+    Field("max_tilt_rad", unit="rad"),
+    Field("time_saturated_s", unit="s", doc="time with an actuator limit active"),
+    Field("time_tilt_limited_s", unit="s", doc="time with the roll/pitch reference at the tilt limit"),
+))  # fmt: skip
+# ... how the run ended ...
+RUN_END = layout("RunEnd", (
+    Field("failure", doc="failure code (FAIL_*)"),
+    Field("failure_time", unit="s", doc="time of the failure, NaN when none"),
+    Field("end_time", unit="s", doc="last sample's time"),
+), after=METRICS)  # fmt: skip
+# ... on the estimate (SETTINGS.estimated; NaN otherwise) ...
+ESTIMATION_METRICS = layout("EstimationMetrics", (
+    Field("estimate_rms_error_m", unit="m", doc="RMS of |estimated - true position| over the samples flown"),
+    Field("worst_test_ratio", doc="largest innovation test ratio of any fusion (gate at 1)"),
+    Field("time_not_converged_s", unit="s", doc="time the filter's verdict was 'not converged'"),
+    Field("rejected_samples", doc="samples rejected by the gates or the quality checks"),
+), after=RUN_END)  # fmt: skip
+# ... and what a fault study reads (from SETTINGS.fault_onset on).
+FAULT_METRICS = layout("FaultMetrics", (
+    Field("excursion", unit="m", doc="the largest position error from the onset on (NaN: onset not reached)"),
+    Field("last_out", unit="s", doc="the last sample time from the onset on with the error above the bound"),
+    Field("impact_speed", unit="m/s", doc="downward speed of the centre of mass at a contact after take-off"),
+), after=ESTIMATION_METRICS)  # fmt: skip
+METRICS_SIZE = FAULT_METRICS.size
 
 FAIL_NONE, FAIL_NONFINITE, FAIL_POSITION, FAIL_TILT, FAIL_GROUND, FAIL_CONTROLLER = 0, 1, 2, 3, 4, 5
 
-# -- recorded time series (run_scenario's columns, one row per control step) ----------------------
-RECORD_COLUMNS = (
-    "t", "x", "y", "z", "xd", "yd", "zd", "phi", "theta", "psi", "phid", "thetad", "psid",
-    "U1", "tau_phi", "tau_theta", "tau_psi", "Ax", "Ay", "Az", "Ap", "Aq", "Ar", "x_est", "y_est", "z_est",
-)  # fmt: skip
-R_SIZE = len(RECORD_COLUMNS)
+# The recorded time series (run_scenario's columns, one row per control step).
+XYZ, EULER = ("x", "y", "z"), ("phi", "theta", "psi")
+RECORD = layout("RecordRow", (
+    Field("t", unit="s"),
+    Field("position", elements=XYZ, unit="m", doc="true position of O"),
+    Field("position_ref", elements=XYZ, unit="m"),
+    Field("euler", elements=EULER, unit="rad", doc="true attitude"),
+    Field("euler_ref", elements=EULER, unit="rad", doc="eta_d (filtered roll/pitch, yaw reference)"),
+    Field("thrust", unit="N", doc="applied U1"),
+    Field("torque_euler", elements=EULER, unit="N m", doc="applied tau_eta"),
+    Field("disturbance_force", elements=XYZ, unit="N", doc="world"),
+    Field("disturbance_torque", elements=EULER, unit="N m", doc="on the Euler coordinates"),
+    Field("position_estimate", elements=XYZ, unit="m", doc="what the controllers flew on"),
+))  # fmt: skip
+RECORD_COLUMNS = column_names(RECORD)
 
 
 @kernel
@@ -151,8 +167,8 @@ def disturbance(t, u, steps, ramps, gusts, dryden, S):
     wind at each step index of the turbulence (:class:`simulator.environment.dryden.DrydenWind`)."""
     f0, f1, f2, t0, t1, t2, _ = steps_and_ramps(t, steps, ramps)
     wx, wy, wz, _ = one_minus_cosine_wind(t, gusts)
-    if S[S_DRYDEN_ON] != 0.0 and S[S_DRYDEN_FROM] <= t < S[S_DRYDEN_UNTIL]:
-        n = int(math.floor((t - S[S_DRYDEN_T0]) / S[S_DRYDEN_STEP] + 0.5))
+    if S[SETTINGS.dryden_on] != 0.0 and S[SETTINGS.dryden_from] <= t < S[SETTINGS.dryden_until]:
+        n = int(math.floor((t - S[SETTINGS.dryden_t0]) / S[SETTINGS.dryden_step] + 0.5))
         n = min(max(n, 0), dryden.shape[0] - 1)  # the table is sized for the run: never clipped above
         wx += dryden[n, 0]
         wy += dryden[n, 1]
@@ -177,7 +193,7 @@ def _wire3(wire: bool, v: tuple) -> tuple:
 def gps_position_through_wire(S, position):
     """A fix's position as HIL_GPS carries it: geodetic about the home, latitude and longitude in
     1e-7 deg, altitude in mm (:mod:`simulator.mavlink.hil` and the autopilot's decoding)."""
-    lat0, lon0, alt0 = S[S_HOME], S[S_HOME + 1], S[S_HOME + 2]
+    lat0, lon0, alt0 = S[SETTINGS.home], S[SETTINGS.home + 1], S[SETTINGS.home + 2]
     lat0_r = math.radians(lat0)
     lat, lon, alt = ned_to_geodetic_about(position[0], -position[1], -position[2], lat0, lon0, alt0,
                                           math.radians(lon0), math.sin(lat0_r), math.cos(lat0_r))  # fmt: skip
@@ -196,13 +212,13 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
     IMU sample (none while an injected failure stops the IMU: the estimate as it is, the next
     prediction spans the gap, as the autopilot's). Returns ``(position, velocity, euler, euler
     rates, the autopilot's time of the last prediction)``."""
-    wire = S[S_WIRE] != 0.0
+    wire = S[SETTINGS.wire] != 0.0
     for i in range(s.shape[0]):
         plant_work[0, i] = s[i]
     tr = truth(plant_work, P, u)  # what the simulator's frame reads: the inputs held since the last step
     sensors.sensor_frame(rng, sensor, sensor_figures, faults, t, tr[7], tr[5], tr[3], tr[0], tr[1], tr[4][2],
                          delivered)  # fmt: skip
-    t_autopilot = round(k * S[S_USEC_PER_FRAME]) * 1e-6 if wire else t
+    t_autopilot = round(k * S[SETTINGS.usec_per_frame]) * 1e-6 if wire else t
     force = _wire3(
         wire, (delivered[sensors.O_FORCE], delivered[sensors.O_FORCE + 1], delivered[sensors.O_FORCE + 2])
     )
@@ -240,7 +256,7 @@ def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
     """The step's magnetometer, barometer, GNSS and vision samples into the filter, in the
     autopilot's order (:meth:`~autopilot.estimation.loop.EstimatorLoop.fuse`), as the wire
     delivers them."""
-    wire = S[S_WIRE] != 0.0
+    wire = S[SETTINGS.wire] != 0.0
     d = delivered
     if d[sensors.O_MAG] != 0.0:
         m = _wire3(wire, (d[sensors.O_MAG + 2], d[sensors.O_MAG + 3], d[sensors.O_MAG + 4]))
@@ -279,10 +295,10 @@ def estimator_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, w
     if k > 0 and imu_fresh(delivered):  # (no IMU sample: no prediction, no fusion, as the autopilot)
         fuse_aiding(t_estimator, S, delivered, F, Pf, ring, stats, windows, A)
     if ekf.not_converged(F, Pf, A) != ekf.CONVERGED:
-        metrics[M_EST_T_NOT_CONVERGED] += dt
+        metrics[ESTIMATION_METRICS.time_not_converged_s] += dt
     for j in range(stats.shape[0]):
-        if stats[j, ekf.ST_TEST_RATIO] > metrics[M_EST_MAX_RATIO]:
-            metrics[M_EST_MAX_RATIO] = stats[j, ekf.ST_TEST_RATIO]
+        if stats[j, ekf.ST_TEST_RATIO] > metrics[ESTIMATION_METRICS.worst_test_ratio]:
+            metrics[ESTIMATION_METRICS.worst_test_ratio] = stats[j, ekf.ST_TEST_RATIO]
 
 
 @kernel
@@ -328,9 +344,10 @@ ON_TRUTH = (truth_estimate, truth_after_step, truth_rejected)
 def simulate(translational, rotational, estimate_step, after_step, rejected, state0, P, K, gt, gr, nxt, nxr,
              ref, S, steps_tab, ramps_tab, gusts_tab, dryden, faults_tab, record, est):  # noqa: C901  # fmt: skip
     """Fly one run from ``state0`` with the laws ``translational`` and ``rotational`` (their gains
-    ``gt``, ``gr``; ``nxt``, ``nxr`` entries of state); return the metrics row (layout ``M_*``,
-    ``M_ALL_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``: :data:`ON_ESTIMATE`
-    for a flight on the estimate, :data:`ON_TRUTH` (no sensors, no filter) for one on the truth.
+    ``gt``, ``gr``; ``nxt``, ``nxr`` entries of state); return the metrics row (:data:`METRICS` and
+    the layouts after it, ``METRICS_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``:
+    :data:`ON_ESTIMATE` for a flight on the estimate, :data:`ON_TRUTH` (no sensors, no filter) for
+    one on the truth.
     ``faults_tab``: the run's rotor faults (rows ``RF_*`` of :mod:`simulator.dynamics.equations`,
     by onset; none: zero rows), set into the flight's own copy of ``P`` at the start of the first
     step at or after their onset.
@@ -341,7 +358,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     (``record`` when it has rows), then hold the controls over ``substeps`` RK4 steps, evaluating
     the disturbance at every one.
 
-    On the estimate (``S[S_ESTIMATED]``), ``est`` is the memory of the run's sensors and filter:
+    On the estimate (``S[SETTINGS.estimated]``), ``est`` is the memory of the run's sensors and filter:
     ``(rng, sensor state, sensor figures, faults, sensor delivery, F, P, ring, stats, windows,
     filter parameters)`` (:mod:`simulator.sensors.frame`, :mod:`autopilot.estimation.filter`);
     per step the sensors sample the truth the simulator's frame reads (the plant with the inputs
@@ -349,17 +366,18 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     controllers fly on the filter as the autopilot runs it (:class:`~autopilot.estimation.loop.
     EstimatorLoop`): at step 0 started from the frame's pose (the in-air start), then per step a
     prediction on the IMU sample, the controllers, and the fusions of the step's magnetometer,
-    barometer, GNSS and vision samples. Through the wire (``S_WIRE``) the samples are what
+    barometer, GNSS and vision samples. Through the wire (``SETTINGS.wire``) the samples are what
     HIL_SENSOR, HIL_GPS and VISION_POSITION_ESTIMATE carry: float32, velocities in cm/s, eph/epv
-    in cm, no speed accuracy, the GNSS position in 1e-7 deg and mm about the home ``S_HOME``.
+    in cm, no speed accuracy, the GNSS position in 1e-7 deg and mm about the home ``SETTINGS.home``.
     Otherwise ``est`` holds placeholder arrays and is not read.
     """
-    dt = S[S_DT_CONTROL]
-    dt_phys = S[S_DT_PHYSICS]
-    substeps = int(S[S_SUBSTEPS])
-    steps = int(S[S_STEPS])
-    wire = S[S_WIRE] != 0.0
-    max_pos_err, max_tilt, airborne_h = S[S_MAX_POS_ERR], S[S_MAX_TILT], S[S_AIRBORNE]
+    dt = S[SETTINGS.dt_control]
+    dt_phys = S[SETTINGS.dt_physics]
+    substeps = int(S[SETTINGS.substeps])
+    steps = int(S[SETTINGS.steps])
+    wire = S[SETTINGS.wire] != 0.0
+    max_pos_err, max_tilt = S[SETTINGS.max_position_error], S[SETTINGS.max_tilt]
+    airborne_h = S[SETTINGS.airborne_height]
     do_record = record.shape[0] > 0
     rotor_plant = P[P_ROTOR_MODE] != 0.0
     flight_P = P.copy()  # the flight's own: its faults set into it (P is shared by a run's flights)
@@ -371,7 +389,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     steps_tab, ramps_tab, gusts_tab = borrowed(steps_tab), borrowed(ramps_tab), borrowed(gusts_tab)
     dryden, faults_tab = borrowed(dryden), borrowed(faults_tab)
     next_fault = 0
-    fault_onset, recovery_bound = S[S_FAULT_ONSET], S[S_RECOVERY_BOUND]
+    fault_onset, recovery_bound = S[SETTINGS.fault_onset], S[SETTINGS.recovery_bound]
     ground_reach = P[P_GROUND_REACH]
     n = state0.shape[0]
     o_u, o_x, o_f, o_c = U_SIZE, U_SIZE + nxt + nxr, U_SIZE + nxt + nxr + FILTER_STATE_SIZE, 6 * n
@@ -389,7 +407,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     ptm0, ptm1, ptm2 = P[P_TORQUE_MAX], P[P_TORQUE_MAX + 1], P[P_TORQUE_MAX + 2]
     wmin, wmax = P[P_WMIN], P[P_WMAX]
 
-    estimated = S[S_ESTIMATED] != 0.0
+    estimated = S[SETTINGS.estimated] != 0.0
     rng, sensor, sensor_figures, faults, delivered = est[0], est[1], est[2], est[3], est[4]
     F, Pf, ring, stats, windows, A = est[5], est[6], est[7], est[8], est[9], est[10]
     rng, sensor, sensor_figures = borrowed(rng), borrowed(sensor), borrowed(sensor_figures)
@@ -400,9 +418,10 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     t_estimator = 0.0
     squared_error = 0.0
 
-    metrics = np.zeros(M_ALL_SIZE)
-    metrics[M_T_FAIL] = np.nan
-    metrics[M_EXCURSION] = metrics[M_T_LAST_OUT] = metrics[M_IMPACT_SPEED] = np.nan
+    metrics = np.zeros(METRICS_SIZE)
+    metrics[RUN_END.failure_time] = np.nan
+    for j in range(FAULT_METRICS.excursion, FAULT_METRICS.size):  # NaN until they happen
+        metrics[j] = np.nan
     # tilt = acos(R22) (the body z axis against the vertical): tracked as the smallest R22.
     min_cos_tilt = 1.0
     cos_max_tilt = math.cos(max_tilt)
@@ -474,15 +493,18 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         disturbance(t, u, steps_tab, ramps_tab, gusts_tab, dryden, S)
         if do_record:
             row = record[k]
-            row[0] = t
-            row[1], row[2], row[3] = pos[0], pos[1], pos[2]
-            row[4], row[5], row[6] = rp[0], rp[1], rp[2]
-            row[7], row[8], row[9] = euler[0], euler[1], euler[2]
-            row[10], row[11], row[12] = phi_d, theta_d, yaw
-            row[13], row[14], row[15], row[16] = thrust_a, tq0, tq1, tq2
-            for j in range(6):
-                row[17 + j] = u[U_FORCE + j]
-            row[23], row[24], row[25] = c_pos[0], c_pos[1], c_pos[2]
+            row[RECORD.t] = t
+            for j in range(3):
+                row[RECORD.position + j] = pos[j]
+                row[RECORD.position_ref + j] = rp[j]
+                row[RECORD.euler + j] = euler[j]
+                row[RECORD.position_estimate + j] = c_pos[j]
+                row[RECORD.disturbance_force + j] = u[U_FORCE + j]
+                row[RECORD.disturbance_torque + j] = u[U_TORQUE + j]
+            e_ref, torque = RECORD.euler_ref, RECORD.torque_euler
+            row[e_ref], row[e_ref + 1], row[e_ref + 2] = phi_d, theta_d, yaw
+            row[RECORD.thrust] = thrust_a
+            row[torque], row[torque + 1], row[torque + 2] = tq0, tq1, tq2
         ex, ey, ez = pos[0] - rp[0], pos[1] - rp[1], pos[2] - rp[2]
         ephi = wrap_pi(euler[0] - phi_d)
         etheta = wrap_pi(euler[1] - theta_d)
@@ -491,28 +513,29 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         sq3, sq4, sq5 = ephi * ephi, etheta * etheta, epsi * epsi
         if k > 0:
             half = 0.5 * dt
-            metrics[M_ISE] += half * (sq0 + prev_sq[0])
-            metrics[M_ISE + 1] += half * (sq1 + prev_sq[1])
-            metrics[M_ISE + 2] += half * (sq2 + prev_sq[2])
-            metrics[M_ISE + 3] += half * (sq3 + prev_sq[3])
-            metrics[M_ISE + 4] += half * (sq4 + prev_sq[4])
-            metrics[M_ISE + 5] += half * (sq5 + prev_sq[5])
-            metrics[M_IADU] += abs(thrust_a - prev_u[0])
-            metrics[M_IADU + 1] += abs(tq0 - prev_u[1])
-            metrics[M_IADU + 2] += abs(tq1 - prev_u[2])
-            metrics[M_IADU + 3] += abs(tq2 - prev_u[3])
+            metrics[METRICS.ise] += half * (sq0 + prev_sq[0])
+            metrics[METRICS.ise + 1] += half * (sq1 + prev_sq[1])
+            metrics[METRICS.ise + 2] += half * (sq2 + prev_sq[2])
+            metrics[METRICS.ise + 3] += half * (sq3 + prev_sq[3])
+            metrics[METRICS.ise + 4] += half * (sq4 + prev_sq[4])
+            metrics[METRICS.ise + 5] += half * (sq5 + prev_sq[5])
+            metrics[METRICS.iadu] += abs(thrust_a - prev_u[0])
+            metrics[METRICS.iadu + 1] += abs(tq0 - prev_u[1])
+            metrics[METRICS.iadu + 2] += abs(tq1 - prev_u[2])
+            metrics[METRICS.iadu + 3] += abs(tq2 - prev_u[3])
         prev_sq[0], prev_sq[1], prev_sq[2] = sq0, sq1, sq2
         prev_sq[3], prev_sq[4], prev_sq[5] = sq3, sq4, sq5
         prev_u[0], prev_u[1], prev_u[2], prev_u[3] = thrust_a, tq0, tq1, tq2
-        metrics[M_FINAL], metrics[M_FINAL + 1], metrics[M_FINAL + 2] = ex, ey, ez
+        final = METRICS.final_error
+        metrics[final], metrics[final + 1], metrics[final + 2] = ex, ey, ez
         err = math.sqrt(sq0 + sq1 + sq2)
-        if err > metrics[M_MAX_POS_ERR]:
-            metrics[M_MAX_POS_ERR] = err
+        if err > metrics[METRICS.max_position_error_m]:
+            metrics[METRICS.max_position_error_m] = err
         if t >= fault_onset:  # from the fault on: how far it strays, and until when
-            if not err <= metrics[M_EXCURSION]:  # (NaN until the first sample)
-                metrics[M_EXCURSION] = err
+            if not err <= metrics[FAULT_METRICS.excursion]:  # (NaN until the first sample)
+                metrics[FAULT_METRICS.excursion] = err
             if err > recovery_bound:
-                metrics[M_T_LAST_OUT] = t
+                metrics[FAULT_METRICS.last_out] = t
         if cos_tilt < min_cos_tilt:
             min_cos_tilt = cos_tilt
         if pos[2] > airborne_h:
@@ -529,14 +552,14 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         elif touched:
             fail = FAIL_GROUND
         if fail != FAIL_NONE:
-            metrics[M_T_FAIL] = t
+            metrics[RUN_END.failure_time] = t
             break
         if k == steps:
             break
         if sat:
-            metrics[M_T_SAT] += dt
+            metrics[METRICS.time_saturated_s] += dt
         if tilt_lim:
-            metrics[M_T_TILT] += dt
+            metrics[METRICS.time_tilt_limited_s] += dt
         if estimated:  # the step's aiding, fused after the controllers' answer (as the autopilot does)
             after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics)
 
@@ -561,18 +584,18 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
                 falling = -s[5]
                 if ground_contact(s, P) and airborne:
                     if not touched:
-                        metrics[M_IMPACT_SPEED] = falling
+                        metrics[FAULT_METRICS.impact_speed] = falling
                     touched = True
-    metrics[M_MAX_TILT] = math.acos(clip(min_cos_tilt, -1.0, 1.0))
+    metrics[METRICS.max_tilt_rad] = math.acos(clip(min_cos_tilt, -1.0, 1.0))
     if estimated:
         samples = int(round(t / dt)) + 1
-        metrics[M_EST_RMS] = math.sqrt(squared_error / samples)
-        metrics[M_EST_REJECTED] = rejected(stats)
+        metrics[ESTIMATION_METRICS.estimate_rms_error_m] = math.sqrt(squared_error / samples)
+        metrics[ESTIMATION_METRICS.rejected_samples] = rejected(stats)
     else:
-        metrics[M_EST_RMS] = metrics[M_EST_MAX_RATIO] = metrics[M_EST_T_NOT_CONVERGED] = np.nan
-        metrics[M_EST_REJECTED] = np.nan
-    metrics[M_FAIL] = fail
+        for j in range(RUN_END.size, ESTIMATION_METRICS.size):  # no estimate: NaN
+            metrics[j] = np.nan
+    metrics[RUN_END.failure] = fail
     # (reads of work, plant_work and est: their arrays stay alive until here)
-    metrics[M_T_END] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + est[0].shape[0] + est[6].shape[0]
-                                  + flight_P.shape[0])  # fmt: skip
+    metrics[RUN_END.end_time] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + est[0].shape[0]
+                                           + est[6].shape[0] + flight_P.shape[0])  # fmt: skip
     return metrics
