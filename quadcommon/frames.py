@@ -14,7 +14,6 @@ Scaled integers (mm, cdeg, 1e7 deg) are the concern of the MAVLink modules, not 
 
 from __future__ import annotations
 
-import functools
 import math
 
 from .kernel import kernel
@@ -26,31 +25,37 @@ Quaternion = tuple[float, float, float, float]
 EARTH_RADIUS_M = 6_378_137.0
 
 
+@kernel
 def vector_to_ned(v: Vector3) -> Vector3:
     """World (or body) vector from the paper's z-up frame to NED (or FRD)."""
     return (v[0], -v[1], -v[2])
 
 
+@kernel
 def vector_from_ned(v: Vector3) -> Vector3:
     """World (or body) vector from NED (or FRD) to the paper's z-up frame."""
     return (v[0], -v[1], -v[2])
 
 
+@kernel
 def euler_to_ned(eta: Vector3) -> Vector3:
     """ZYX Euler angles (roll, pitch, yaw) in the paper's frames to MAVLink's."""
     return (eta[0], -eta[1], -eta[2])
 
 
+@kernel
 def euler_from_ned(eta_ned: Vector3) -> Vector3:
     """MAVLink ZYX Euler angles (roll, pitch, yaw in NED/FRD) to the paper's."""
     return (eta_ned[0], -eta_ned[1], -eta_ned[2])
 
 
+@kernel
 def yaw_to_ned(psi: float) -> float:
     """Heading (yaw) from the paper's z-up frame to NED (same as the third Euler angle)."""
     return -psi
 
 
+@kernel
 def yaw_from_ned(yaw_ned: float) -> float:
     """Heading (yaw) from NED to the paper's z-up frame."""
     return -yaw_ned
@@ -64,11 +69,13 @@ def sticks_from_frd(
     return (forward, -right, throttle, -yaw_clockwise)
 
 
+@kernel
 def quaternion_to_ned(q: Quaternion) -> Quaternion:
     """Attitude quaternion (w, x, y, z) from the paper's frames to NED/FRD."""
     return (q[0], q[1], -q[2], -q[3])
 
 
+@kernel
 def quaternion_from_ned(q_ned: Quaternion) -> Quaternion:
     """Attitude quaternion (w, x, y, z) from NED/FRD to the paper's frames."""
     return (q_ned[0], q_ned[1], -q_ned[2], -q_ned[3])
@@ -80,14 +87,15 @@ def wrap_pi(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@functools.lru_cache(maxsize=64)
+@kernel
 def _home_terms(lat0_deg: float, lon0_deg: float) -> tuple[float, float, float]:
-    """``(lon0 rad, sin lat0, cos lat0)`` of a home: the same for every point of a flight (the
-    simulator converts its state at every frame)."""
+    """``(lon0 rad, sin lat0, cos lat0)`` of a home (three math calls: cheaper to compute at every
+    frame than to look up)."""
     lat0_r = math.radians(lat0_deg)
     return math.radians(lon0_deg), math.sin(lat0_r), math.cos(lat0_r)
 
 
+@kernel
 def ned_to_geodetic(
     north_m: float, east_m: float, down_m: float, home: tuple[float, float, float]
 ) -> tuple[float, float, float]:
@@ -96,8 +104,9 @@ def ned_to_geodetic(
     Azimuthal equidistant projection about home, as PX4's ``map_projection`` does; accurate to
     millimetres over the few kilometres a SITL flies.
     """
-    lat0, lon0, alt0 = home
-    return ned_to_geodetic_about(north_m, east_m, down_m, lat0, lon0, alt0, *_home_terms(lat0, lon0))
+    lat0, lon0, alt0 = home[0], home[1], home[2]
+    lon0_r, sin_lat0, cos_lat0 = _home_terms(lat0, lon0)
+    return ned_to_geodetic_about(north_m, east_m, down_m, lat0, lon0, alt0, lon0_r, sin_lat0, cos_lat0)
 
 
 @kernel
@@ -116,6 +125,7 @@ def ned_to_geodetic_about(north_m: float, east_m: float, down_m: float, lat0: fl
     return (math.degrees(lat), math.degrees(lon), alt0 - down_m)
 
 
+@kernel
 def geodetic_to_ned(
     lat_deg: float, lon_deg: float, alt_m: float, home: tuple[float, float, float]
 ) -> tuple[float, float, float]:

@@ -110,6 +110,7 @@ from typing import NamedTuple
 from pymavlink.dialects.v20 import common as mavlink
 
 from .mavlink_fast import split_frames
+from .wire_values import sat_i16, sat_i32, sat_u16  # noqa: F401 (the field types, defined with the fields)
 
 LOOPBACK = "127.0.0.1"
 
@@ -157,35 +158,6 @@ def spin_until_readable(sock, seconds: float) -> bool:
             return True
         if time.perf_counter() >= end:
             return False
-
-
-# (The in-range test first: a NaN fails it, and it is the one comparison of nearly every call;
-# the simulator's frame encoder calls these ~10 times a frame.)
-def sat_i16(x: float) -> int:
-    """An int16 field: saturated at +-32767, NaN as 0."""
-    if -32767.0 <= x <= 32767.0:
-        return round(x)
-    if x != x:
-        return 0
-    return -32767 if x < 0.0 else 32767
-
-
-def sat_u16(x: float, top: int = 65534) -> int:
-    """A uint16 field: saturated at [0, ``top``] (65535 is MAVLink's "unknown"), NaN as 65535."""
-    if 0.0 <= x <= top:
-        return round(x)
-    if x != x:
-        return 65535
-    return 0 if x < 0.0 else top
-
-
-def sat_i32(x: float) -> int:
-    """An int32 field: saturated at +-2147483647, NaN as 0."""
-    if -2147483647.0 <= x <= 2147483647.0:
-        return round(x)
-    if x != x:
-        return 0
-    return -2147483647 if x < 0.0 else 2147483647
 
 
 FLOAT32_MAX = 3.4028234663852886e38

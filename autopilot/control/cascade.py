@@ -23,12 +23,13 @@ is what the autopilot flies per frame, compiled by numba with the two laws inlin
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from quadcommon.config import VehicleConfig
 from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel, typing_error_cause
+from quadcommon.layout import Field, layout
 from quadcommon.rigid_body import body_rates_from_euler_rates, euler_torque_from_body_torque
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Reference
@@ -42,93 +43,136 @@ from .registry import ROTATIONAL, TRANSLATIONAL, ControllerFailure, LawContext, 
 
 Vector3 = tuple[float, float, float]
 
-# The cascade's own numbers: the control period, wrench (0.0) or rotors (1.0), the command filter's
-# coefficients (command_filter.F_*), the actuators' numbers (allocation.A_*).
-K_DT, K_ROTORS, K_FILTER = 0, 1, 2
-K_ACTUATORS = K_FILTER + cf.F_SIZE
-K_SIZE = K_ACTUATORS + A_SIZE
-# What a step may be given instead of computing it (flags, added up).
+# The cascade's own numbers (the first part of its buffer).
+CASCADE_NUMBERS = layout("CascadeNumbers", (
+    Field("dt", unit="s", doc="control period"),
+    Field("rotors", doc="1.0: the wrench allocated to the rotors; 0.0: the wrench saturated"),
+    Field("filter", cf.F_SIZE, doc="the command filter's coefficients (command_filter.F_*)"),
+    Field("actuators", A_SIZE, doc="the actuators' numbers (allocation.A_*)"),
+))  # fmt: skip
+# What a step may be given instead of computing it (Cascade.step's overrides).
 OVERRIDE_ROLL_PITCH, OVERRIDE_ATTITUDE, OVERRIDE_THRUST = 1, 2, 4
-# What a step returns, in order.
-OUTPUTS = (
-    "thrust", "tau_eta_x", "tau_eta_y", "tau_eta_z", "tau_x", "tau_y", "tau_z",
-    "phi_d", "theta_d", "psi_d", "phi_d_dot", "theta_d_dot", "psi_d_dot", "phi_r", "theta_r",
-    "a_x", "a_y", "a_z", "saturated", "tilt_limited",
-)  # fmt: skip
+GIVEN = layout("GivenOverrides", (
+    Field("flags", doc="OVERRIDE_* added up (0: nothing given)"),
+    Field("roll_pitch", 2, unit="rad", doc="phi_r, theta_r instead of the translational law's"),
+    Field("attitude", 9, unit="rad, rad/s, rad/s^2", doc="eta_d, eta_d', eta_d'' instead of the filter's"),
+    Field("thrust", unit="N", doc="U1 instead of the translational law's"),
+))  # fmt: skip
+
+
+class CascadeMemory(NamedTuple):
+    """The arrays a cascade step reads and advances: its own numbers (:data:`CASCADE_NUMBERS`), the
+    laws' gains and states, the command filter's state (command_filter.S_*), the overrides given
+    (:data:`GIVEN`)."""
+
+    numbers: Any
+    translational_gains: Any
+    translational_state: Any
+    rotational_gains: Any
+    rotational_state: Any
+    filter_state: Any
+    given: Any
+
+
+class StepResult(NamedTuple):
+    """What one cascade step returns (paper frames, SI units)."""
+
+    thrust: float  # applied U1 (N)
+    torque_euler: Vector3  # applied tau_eta = W_eta^T tau_body, eq. (4) (N m)
+    torque_body: Vector3  # applied body torque (N m)
+    euler_ref: Vector3  # eta_d: the filtered roll/pitch references and the yaw reference (rad)
+    euler_rate_ref: Vector3  # eta_d' (rad/s)
+    roll_pitch_raw: tuple[float, float]  # phi_r, theta_r before the command filter (rad)
+    acceleration_cmd: Vector3  # the translational law's commanded acceleration (m/s^2)
+    saturated: float  # 1.0 when an actuator limit or the thrust limit acted
+    tilt_limited: float  # 1.0 when the roll/pitch reference is at the tilt limit
+
+
+class BufferParts(NamedTuple):
+    """Where each part of a :class:`Cascade`'s one buffer starts (``end``: its length)."""
+
+    numbers: int
+    translational_gains: int
+    translational_state: int
+    rotational_gains: int
+    rotational_state: int
+    filter_state: int
+    given: int
+    out: int
+    end: int
 
 
 @kernel
-def cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, velocity, euler, euler_rates,
-                 ref_position, ref_velocity, ref_acceleration, yaw, yaw_rate, yaw_acceleration, integrate,
-                 override, roll_pitch, attitude, thrust_given, out):  # fmt: skip
+def cascade_step(translational, rotational, memory, state, reference, integrate, out):
     """One step of the cascade (module docstring) with the laws ``translational`` and ``rotational``
-    (their step kernels), their gains ``gt``, ``gr`` and states ``xt``, ``xr``; the command filter's
-    state ``filt``. Normalised commands and rotor speeds go into ``out`` (allocation.OUT_SIZE);
-    returns the numbers named by :data:`OUTPUTS`."""
-    dt = K[K_DT]
+    (their step kernels) on their ``memory`` (:class:`CascadeMemory`), flying ``state``
+    (:class:`~autopilot.records.StateEstimate`) towards ``reference``
+    (:class:`~quadcommon.trajectories.Reference`); the laws' states advance if ``integrate``.
+    Normalised commands and rotor speeds go into ``out`` (allocation.OUT_SIZE); returns a
+    :class:`StepResult`."""
+    K, given = memory.numbers, memory.given
+    gt, xt, gr, xr = (memory.translational_gains, memory.translational_state, memory.rotational_gains,
+                      memory.rotational_state)  # fmt: skip
+    dt = K[CASCADE_NUMBERS.dt]
+    euler, euler_rates = state.euler_rad, state.euler_rates_rad_s
+    yaw = reference.yaw_rad
     thrust, roll_r, pitch_r, a_x, a_y, a_z, thrust_limited, tilt_limited = translational(
-        gt, xt, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, yaw, dt, integrate
-    )
+        gt, xt, state.position_m, state.velocity_m_s, euler, reference.position_m, reference.velocity_m_s,
+        reference.acceleration_m_s2, yaw, dt, integrate,
+    )  # fmt: skip
+    override = int(given[GIVEN.flags])
     if override & OVERRIDE_ROLL_PITCH:
-        roll_r, pitch_r = roll_pitch[0], roll_pitch[1]
-    phi_d, theta_d, phi_d_dot, theta_d_dot, phi_d_ddot, theta_d_ddot = cf.advance(K, K_FILTER, filt, roll_r,
-                                                                                 pitch_r)  # fmt: skip
+        roll_r, pitch_r = given[GIVEN.roll_pitch], given[GIVEN.roll_pitch + 1]
+    phi_d, theta_d, phi_d_dot, theta_d_dot, phi_d_ddot, theta_d_ddot = cf.advance(
+        K, CASCADE_NUMBERS.filter, memory.filter_state, roll_r, pitch_r
+    )
     eta_d = (phi_d, theta_d, yaw)
-    eta_d_dot = (phi_d_dot, theta_d_dot, yaw_rate)
-    eta_d_ddot = (phi_d_ddot, theta_d_ddot, yaw_acceleration)
+    eta_d_dot = (phi_d_dot, theta_d_dot, reference.yaw_rate_rad_s)
+    eta_d_ddot = (phi_d_ddot, theta_d_ddot, reference.yaw_acceleration_rad_s2)
     if override & OVERRIDE_ATTITUDE:
-        eta_d = (attitude[0], attitude[1], attitude[2])
-        eta_d_dot = (attitude[3], attitude[4], attitude[5])
-        eta_d_ddot = (attitude[6], attitude[7], attitude[8])
+        a = GIVEN.attitude
+        eta_d = (given[a], given[a + 1], given[a + 2])
+        eta_d_dot = (given[a + 3], given[a + 4], given[a + 5])
+        eta_d_ddot = (given[a + 6], given[a + 7], given[a + 8])
     if override & OVERRIDE_THRUST:
-        thrust = thrust_given
+        thrust = given[GIVEN.thrust]
     body_rates = body_rates_from_euler_rates(euler[0], euler[1], euler_rates)
     tx, ty, tz = rotational(gr, xr, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
                             integrate)  # fmt: skip
-    if K[K_ROTORS] != 0.0:
-        thrust_a, ta0, ta1, ta2, saturated = allocate_rotors(K, K_ACTUATORS, thrust, tx, ty, tz, out)
+    actuators = CASCADE_NUMBERS.actuators
+    if K[CASCADE_NUMBERS.rotors] != 0.0:
+        thrust_a, ta0, ta1, ta2, saturated = allocate_rotors(K, actuators, thrust, tx, ty, tz, out)
     else:
-        thrust_a, ta0, ta1, ta2, saturated = saturate_wrench(K, K_ACTUATORS, thrust, tx, ty, tz, out)
+        thrust_a, ta0, ta1, ta2, saturated = saturate_wrench(K, actuators, thrust, tx, ty, tz, out)
     te0, te1, te2 = euler_torque_from_body_torque(euler[0], euler[1], (ta0, ta1, ta2))
-    return (thrust_a, te0, te1, te2, ta0, ta1, ta2, eta_d[0], eta_d[1], eta_d[2], eta_d_dot[0], eta_d_dot[1],
-            eta_d_dot[2], roll_r, pitch_r, a_x, a_y, a_z,
-            1.0 if (saturated != 0.0 or thrust_limited != 0.0) else 0.0, tilt_limited)  # fmt: skip
+    return StepResult(
+        thrust_a, (te0, te1, te2), (ta0, ta1, ta2), eta_d, eta_d_dot, (roll_r, pitch_r), (a_x, a_y, a_z),
+        1.0 if (saturated != 0.0 or thrust_limited != 0.0) else 0.0, tilt_limited,
+    )  # fmt: skip
 
 
 @kernel
 def output_finite(o):
-    """False when the wrench a cascade step applies is not finite (``o``: :func:`cascade_step`'s
-    outputs; U1 and the body torque): a NaN or inf anywhere in it shows in their sum (saturation
+    """False when the wrench a cascade step applies is not finite (``o``: a :class:`StepResult`;
+    U1 and the body torque): a NaN or inf anywhere in it shows in their sum (saturation
     lets NaN through). The one check of a law's output, wherever the cascade flies: the autopilot
     (:meth:`Cascade.step`) and the campaign engine (:func:`sitl.campaign.kernels.simulate`)."""
-    return math.isfinite(o[0] + o[4] + o[5] + o[6])
-
-
-# What a step is given instead of computing it (Cascade.step's overrides), as numbers: the flags
-# (OVERRIDE_*, added up), roll and pitch, the attitude reference (eta_d, eta_d', eta_d''), U1.
-V_FLAGS, V_ROLL_PITCH, V_ATTITUDE, V_THRUST = 0, 1, 3, 12
-V_SIZE = 13
+    return math.isfinite(o.thrust + o.torque_body[0] + o.torque_body[1] + o.torque_body[2])
 
 
 @kernel
-def buffered_step(translational, rotational, buf, at, position, velocity, euler, euler_rates, ref_position,
-                  ref_velocity, ref_acceleration, yaw, yaw_rate, yaw_acceleration, integrate):  # fmt: skip
-    """:func:`cascade_step` with its arrays as parts of one buffer, at the offsets ``at`` (K, gt, xt,
-    gr, xr, the filter's state, the overrides given (layout ``V_*``), out, end): a compiled call
-    converts each array argument on its own, so one buffer costs one conversion instead of eight.
-    Returns :data:`OUTPUTS` followed by ``out`` (the normalised commands and the rotor speeds)."""
+def buffered_step(translational, rotational, buf, at, state, reference, integrate):
+    """:func:`cascade_step` with its arrays as parts of one buffer, at the offsets ``at``
+    (:class:`BufferParts`): a compiled call converts each array argument on its own, so one buffer
+    costs one conversion instead of eight. Returns the :class:`StepResult`; the normalised commands
+    and the rotor speeds are in the buffer's ``out`` part."""
     buf = borrowed(buf)  # the caller's for the call: its parts are passed on without counting
-    v = buf[at[6] : at[7]]
-    attitude = (v[V_ATTITUDE], v[V_ATTITUDE + 1], v[V_ATTITUDE + 2], v[V_ATTITUDE + 3], v[V_ATTITUDE + 4],
-                v[V_ATTITUDE + 5], v[V_ATTITUDE + 6], v[V_ATTITUDE + 7], v[V_ATTITUDE + 8])  # fmt: skip
-    out = buf[at[7] : at[8]]
-    K, gt, xt = buf[at[0] : at[1]], buf[at[1] : at[2]], buf[at[2] : at[3]]
-    gr, xr, filt = buf[at[3] : at[4]], buf[at[4] : at[5]], buf[at[5] : at[6]]
-    roll_pitch = (v[V_ROLL_PITCH], v[V_ROLL_PITCH + 1])
-    o = cascade_step(translational, rotational, K, gt, xt, gr, xr, filt, position, velocity, euler,
-                     euler_rates, ref_position, ref_velocity, ref_acceleration, yaw, yaw_rate,
-                     yaw_acceleration, integrate, int(v[V_FLAGS]), roll_pitch, attitude, v[V_THRUST], out)
-    return o + (out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7])
+    memory = CascadeMemory(
+        buf[at.numbers : at.translational_gains], buf[at.translational_gains : at.translational_state],
+        buf[at.translational_state : at.rotational_gains], buf[at.rotational_gains : at.rotational_state],
+        buf[at.rotational_state : at.filter_state], buf[at.filter_state : at.given], buf[at.given : at.out],
+    )  # fmt: skip
+    return cascade_step(translational, rotational, memory, state, reference, integrate, buf[at.out : at.end])
 
 
 class AttitudeReference(NamedTuple):
@@ -140,6 +184,8 @@ class AttitudeReference(NamedTuple):
 
 
 class CascadeOutput(NamedTuple):
+    """One step's result as the autopilot reads it (:meth:`Cascade.step`)."""
+
     thrust_n: float  # applied U1
     torque_euler_n_m: Vector3  # applied tau_eta (tau_phi, tau_theta, tau_psi)
     torque_body_n_m: Vector3  # applied body torque
@@ -161,7 +207,7 @@ def law_context(controller: ControllerConfig, vehicle: VehicleConfig, dt: float)
 
 
 def cascade_numbers(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> tuple[float, ...]:
-    """The cascade's own numbers (layout ``K_*``)."""
+    """The cascade's own numbers (layout :data:`CASCADE_NUMBERS`)."""
     f = controller.command_filter
     rotors = 1.0 if vehicle.actuation.mode == "rotors" else 0.0
     filter_numbers = cf.discretise(f.natural_frequency_rad_s, f.damping, dt, f.enabled)
@@ -170,7 +216,7 @@ def cascade_numbers(controller: ControllerConfig, vehicle: VehicleConfig, dt: fl
 
 class Packed(NamedTuple):
     """A controller config as numbers: its two law classes, their context and gains arrays, and
-    the cascade's own numbers (layout ``K_*``)."""
+    the cascade's own numbers (layout :data:`CASCADE_NUMBERS`)."""
 
     translational: type
     rotational: type
@@ -204,10 +250,10 @@ class Cascade:
         self.context = packed.context
         # One buffer, and views of its parts (buffered_step): the cascade's numbers, the laws' gains and
         # states, the filter's state, the overrides given, the outputs.
-        sizes = (K_SIZE, len(packed.gt), len(self.translational.STATE), len(packed.gr),
-                 len(self.rotational.STATE), cf.S_SIZE, V_SIZE, OUT_SIZE)  # fmt: skip
-        self._at = tuple(int(v) for v in np.cumsum((0, *sizes)))
-        self.buffer = np.zeros(self._at[-1])
+        sizes = (CASCADE_NUMBERS.size, len(packed.gt), len(self.translational.STATE), len(packed.gr),
+                 len(self.rotational.STATE), cf.S_SIZE, GIVEN.size, OUT_SIZE)  # fmt: skip
+        self._at = BufferParts(*(int(v) for v in np.cumsum((0, *sizes))))
+        self.buffer = np.zeros(self._at.end)
         self.K, self.gt, self.xt, self.gr, self.xr, self.filt, self.given, self.out = (
             self.buffer[a:b] for a, b in zip(self._at[:-1], self._at[1:], strict=True)
         )
@@ -245,30 +291,28 @@ class Cascade:
             flags = 0
             if roll_pitch is not None:
                 flags += OVERRIDE_ROLL_PITCH
-                given[V_ROLL_PITCH : V_ROLL_PITCH + 2] = roll_pitch
+                given[GIVEN.roll_pitch : GIVEN.roll_pitch + 2] = roll_pitch
             if attitude is not None:
                 flags += OVERRIDE_ATTITUDE
-                given[V_ATTITUDE : V_ATTITUDE + 9] = [v for part in attitude for v in part]
+                given[GIVEN.attitude : GIVEN.attitude + 9] = [v for part in attitude for v in part]
             if thrust_n is not None:
                 flags += OVERRIDE_THRUST
-                given[V_THRUST] = thrust_n
-            given[V_FLAGS] = flags
+                given[GIVEN.thrust] = thrust_n
+            given[GIVEN.flags] = flags
         elif self._overridden:
-            given[V_FLAGS] = 0.0
+            given[GIVEN.flags] = 0.0
         self._overridden = overridden
         try:
-            o = self._step(self.buffer, self._at, state.position_m, state.velocity_m_s, state.euler_rad,
-                           state.euler_rates_rad_s, ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2,
-                           ref.yaw_rad, ref.yaw_rate_rad_s, ref.yaw_acceleration_rad_s2, integrate)
+            o = self._step(self.buffer, self._at, state, ref, integrate)
         except Exception as error:  # noqa: BLE001 - a law (maybe a user's) failed: the failsafe acts
             raise ControllerFailure(f"controller {self.name}: {type(error).__name__}: {error}") from error
         if not output_finite(o):
-            raise ControllerFailure(f"{non_finite_output(self.name)} (U1 {o[0]}, tau {o[4:7]})")
+            raise ControllerFailure(f"{non_finite_output(self.name)} (U1 {o.thrust}, tau {o.torque_body})")
         self._last = (state.euler_rad, state.euler_rates_rad_s)
+        out = self.out.tolist()  # the normalised commands, then the rotor speeds (allocation.OUT_SIZE)
         return CascadeOutput(
-            o[0], (o[1], o[2], o[3]), (o[4], o[5], o[6]), (o[20], o[21], o[22], o[23]),
-            (o[24], o[25], o[26], o[27]), (o[7], o[8], o[9]), (o[10], o[11], o[12]), (o[13], o[14]),
-            (o[15], o[16], o[17]),
+            o.thrust, o.torque_euler, o.torque_body, tuple(out[0:4]), tuple(out[4:8]), o.euler_ref,
+            o.euler_rate_ref, o.roll_pitch_raw, o.acceleration_cmd,
         )  # fmt: skip
 
     def law_states(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
@@ -323,7 +367,8 @@ def _entry(cascade: Cascade):
     if compiling() and not getattr(step, "_quadsitl_warm", False):
         z3, up = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
         try:
-            step(cascade.buffer.copy(), cascade._at, up, z3, z3, z3, up, z3, z3, 0.0, 0.0, 0.0, True)
+            hover, at_rest = StateEstimate(up, z3, z3, z3), Reference(up, z3, z3, 0.0, 0.0, 0.0)
+            step(cascade.buffer.copy(), cascade._at, hover, at_rest, True)
         except Exception as error:  # numba's typing errors: a law it cannot compile
             laws = f"{cascade.translational.NAME} + {cascade.rotational.NAME}"
             raise ConfigError(not_compiled(laws, error)) from error

@@ -15,10 +15,9 @@ from typing import NamedTuple
 from quadcommon import frames, wire
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.rigid_body import (
-    euler_from_quaternion,
-    euler_rates_from_body_rates,
     rotation_from_quaternion,
 )
+from quadcommon.wire_values import attitude_from_fields, gps_fix, odometry_state, vision_pose
 
 from ..records import (
     STREAM_BARO,
@@ -206,22 +205,13 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
     raw = parts.get(_ID_GPS)
     if raw is not None:
         fix, lat, lon, alt_mm, eph, epv, vn, ve, vd, sats = _fields(_GPS, raw, _GPS_FIELDS)
-        ned = frames.geodetic_to_ned(lat * 1e-7, lon * 1e-7, alt_mm * 1e-3, home)
-        unknown = 65535
-        gps = GpsFix(
-            0.0, to_paper(ned), to_paper((vn * 0.01, ve * 0.01, vd * 0.01)),
-            eph * 0.01 if eph != unknown else 99.0, epv * 0.01 if epv != unknown else 99.0,
-            0.0, fix, sats,
-        )  # fmt: skip
+        position, velocity, eph_m, epv_m = gps_fix(lat, lon, alt_mm, vn, ve, vd, eph, epv, home)
+        gps = GpsFix(0.0, position, velocity, eph_m, epv_m, 0.0, fix, sats)  # (no speed accuracy field)
     raw = parts.get(_ID_VISION)
     if raw is not None:
         (n, e, d, yaw, cov), finite = _vision(raw)
-        pos_var, yaw_var = cov[0], cov[20]
         if finite:
-            vision = VisionPose(
-                0.0, to_paper((n, e, d)), frames.yaw_from_ned(yaw),
-                math.sqrt(pos_var) if pos_var > 0.0 else 0.0, math.sqrt(yaw_var) if yaw_var > 0.0 else 0.0,
-            )  # fmt: skip
+            vision = VisionPose(0.0, *vision_pose((n, e, d), yaw, cov[0], cov[20]))
         else:
             refused.append("vision")
     return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision,
@@ -400,13 +390,6 @@ def disturbance_of(parts: dict) -> DisturbanceReport | None:
                              tuple(data[6:10]), tuple(int(f) for f in failure))  # fmt: skip
 
 
-def _attitude(q_ned, rates_frd):
-    q = frames.quaternion_from_ned(q_ned)
-    euler = euler_from_quaternion(*q)
-    omega = frames.vector_from_ned(rates_frd)
-    return q, euler, euler_rates_from_body_rates(euler[0], euler[1], omega)
-
-
 def state_from_odometry(msg) -> StateEstimate:
     """The state in an ODOMETRY message object (pymavlink)."""
     return state_from_odometry_fields(
@@ -421,20 +404,20 @@ def state_from_odometry(msg) -> StateEstimate:
 def state_from_odometry_fields(
     q_ned, position_ned, velocity_child, rates_frd, child_frame_id
 ) -> StateEstimate:
-    """ODOMETRY fields (NED pose, twist in ``child_frame_id``, FRD rates) -> paper frames."""
-    q, euler, euler_rates = _attitude(tuple(q_ned), rates_frd)
-    position = frames.vector_from_ned(position_ned)
+    """ODOMETRY fields (NED pose, twist in ``child_frame_id``, FRD rates) -> paper frames
+    (:func:`quadcommon.wire_values.odometry_state`; a body twist rotated by the attitude)."""
     if child_frame_id in (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED):
+        q, euler, euler_rates = attitude_from_fields(tuple(q_ned), rates_frd)
         v_body = frames.vector_from_ned(velocity_child)
         R = rotation_from_quaternion(*q)
         velocity = tuple(R[i][0] * v_body[0] + R[i][1] * v_body[1] + R[i][2] * v_body[2] for i in range(3))
-    else:
-        velocity = frames.vector_from_ned(velocity_child)
-    return StateEstimate(position, velocity, euler, euler_rates)  # type: ignore[arg-type]
+        return StateEstimate(frames.vector_from_ned(position_ned), velocity, euler, euler_rates)  # type: ignore[arg-type]
+    state = odometry_state(tuple(position_ned), tuple(velocity_child), tuple(q_ned), tuple(rates_frd))
+    return StateEstimate(*state)
 
 
 def state_from_hil_state(msg, home: tuple[float, float, float]) -> StateEstimate:
-    q, euler, euler_rates = _attitude(
+    q, euler, euler_rates = attitude_from_fields(
         tuple(msg.attitude_quaternion), (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
     )
     ned = frames.geodetic_to_ned(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, home)

@@ -52,6 +52,7 @@ from quadcommon import frames, wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
+from quadcommon.wire_values import float_field, gps_values, odometry_values, vector_field, vision_values
 
 from ..battery import BatteryReading
 from ..dynamics.plant import TruthState
@@ -172,9 +173,9 @@ class HilFrameEncoder:
         baro = readings.baro
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]], v[i[12]]) = (
-            time_usec, *to_ned(readings.imu.specific_force_m_s2), *to_ned(readings.imu.angular_rate_rad_s),
-            *to_ned(readings.magnetic_field_gauss), baro.pressure_hpa, baro.pressure_altitude_m,
-            baro.temperature_c,
+            time_usec, *vector_field(readings.imu.specific_force_m_s2),
+            *vector_field(readings.imu.angular_rate_rad_s), *vector_field(readings.magnetic_field_gauss),
+            baro.pressure_hpa, float_field(baro.pressure_altitude_m), baro.temperature_c,
         )  # fmt: skip
 
         lat, lon, alt = frames.ned_to_geodetic(pos_ned[0], pos_ned[1], pos_ned[2], self.home)
@@ -194,12 +195,18 @@ class HilFrameEncoder:
         )  # fmt: skip
 
         v, i = self._odometry.values, self._o
-        v[self._o_q] = q_ned
+        o_position, o_velocity, o_q, o_rates = odometry_values(
+            truth.position_m, truth.velocity_m_s, truth.quaternion, truth.body_rates_rad_s
+        )
+        p, w, r = o_position, o_velocity, o_rates
+        if not math.isfinite(p[0] + p[1] + p[2] + w[0] + w[1] + w[2] + r[0] + r[1] + r[2]):
+            raise OverflowError("the state is past the range of ODOMETRY's float32 fields")
+        v[self._o_q] = o_q
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]]) = (
             time_usec,
-            *pos_ned,
-            *vel_ned,
-            *rates_frd,
+            *o_position,
+            *o_velocity,
+            *o_rates,
         )
 
         datagram = self._frame(self._sensor) + self._frame(self._state) + self._frame(self._odometry)
@@ -240,30 +247,24 @@ class HilFrameEncoder:
         covariance's upper triangle (x, y, z, roll, pitch, yaw: entries 0, 6, 11, 15, 18, 20;
         roll and pitch are not measured: NaN, as MAVLink has it for unknown)."""
         v, i = self._vision.values, self._v
-        n, e, d = frames.vector_to_ned(reading.position_m)
-        v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]] = time_usec, n, e, d, frames.yaw_to_ned(reading.yaw_rad)
+        (n, e, d), yaw, position_variance, yaw_variance = vision_values(
+            reading.position_m, reading.yaw_rad, reading.position_std_m, reading.yaw_std_rad
+        )
+        v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]] = time_usec, n, e, d, yaw
         cov = [0.0] * 21
-        cov[0] = cov[6] = cov[11] = reading.position_std_m**2
+        cov[0] = cov[6] = cov[11] = position_variance
         cov[15] = cov[18] = math.nan
-        cov[20] = reading.yaw_std_rad**2
+        cov[20] = yaw_variance
         v[self._v_cov] = cov
 
     def _fill_gps(self, time_usec: int, reading: GpsReading) -> None:
-        p_ned = frames.vector_to_ned(reading.position_m)
-        v_ned = frames.vector_to_ned(reading.velocity_m_s)
-        lat, lon, alt = frames.ned_to_geodetic(p_ned[0], p_ned[1], p_ned[2], self.home)
-        # Course over ground, 0 = north, clockwise (NED), in [0, 36000) cdeg.
-        cog = round(math.degrees(math.atan2(v_ned[1], v_ned[0])) * 100.0) % 36000
+        """The fix as HIL_GPS (:func:`quadcommon.wire_values.gps_values`), with its fix type and
+        satellites."""
         v, i = self._gps.values, self._g
         v[self._g_fix] = reading.fix_type
-        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
-         v[i[10]], v[i[11]]) = (
-            time_usec, sat_i32(lat * 1e7), sat_i32(lon * 1e7), sat_i32(alt * 1000.0),
-            sat_u16(reading.eph_m * 100.0), sat_u16(reading.epv_m * 100.0),
-            sat_u16(100.0 * math.hypot(v_ned[0], v_ned[1])),
-            sat_i16(v_ned[0] * 100.0), sat_i16(v_ned[1] * 100.0), sat_i16(v_ned[2] * 100.0), cog,
-            reading.satellites_visible,
-        )  # fmt: skip
+        fields = gps_values(reading.position_m, reading.velocity_m_s, reading.eph_m, reading.epv_m, self.home)
+        (v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]], v[i[10]]) = fields
+        v[i[0]], v[i[11]] = time_usec, reading.satellites_visible
 
 
 def _slots(encoder: FastEncoder, *names: str) -> tuple[int, ...]:

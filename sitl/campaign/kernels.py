@@ -19,9 +19,10 @@ Nothing here is a second copy of an equation: :func:`simulate` calls
   Dryden wind drawn beforehand by the project's own generator;
 * the cascade (:func:`autopilot.control.cascade.cascade_step`) with the run's two laws: what the
   autopilot flies per frame;
-* the wire (switch ``SETTINGS.wire``): ODOMETRY's float32 pose, velocity and rates and the autopilot's
-  conversions back (:mod:`quadcommon.rigid_body`), and the float32 controls of
-  HIL_ACTUATOR_CONTROLS;
+* the wire (switch ``SETTINGS.wire``): what ODOMETRY, HIL_SENSOR, HIL_GPS,
+  VISION_POSITION_ESTIMATE and HIL_ACTUATOR_CONTROLS carry, by the simulator's encoders and the
+  autopilot's decoders themselves (:mod:`quadcommon.wire_values`: the float32 fields, the scaled
+  integers, the NED/FRD sign flips), applied in turn;
 
 and accumulates the paper's indices while flying (final errors, ISE trapezoidal, IADU as total
 variation, the definitions of :mod:`gcs_scripts.analysis.metrics`), and what a fault study reads:
@@ -40,10 +41,11 @@ import math
 import numpy as np
 
 from autopilot.control.allocation import OUT_SIZE
-from autopilot.control.cascade import cascade_step, output_finite
+from autopilot.control.cascade import GIVEN, CascadeMemory, cascade_step, output_finite
 from autopilot.control.command_filter import S_SIZE as FILTER_STATE_SIZE
 from autopilot.estimation import filter as ekf
-from quadcommon.frames import geodetic_to_ned_about, ned_to_geodetic_about, wrap_pi
+from autopilot.records import StateEstimate
+from quadcommon.frames import wrap_pi
 from quadcommon.kernel import borrowed, kernel
 from quadcommon.layout import Field, column_names, layout
 from quadcommon.numerics import clip
@@ -52,6 +54,18 @@ from quadcommon.rigid_body import (
     euler_from_rotation,
     euler_rates_from_body_rates,
     quaternion_from_euler,
+)
+from quadcommon.trajectories import Reference
+from quadcommon.wire_values import (
+    float_field,
+    gps_fix,
+    gps_values,
+    odometry_state,
+    odometry_values,
+    vector_field,
+    vector_from_field,
+    vision_pose,
+    vision_values,
 )
 from simulator.dynamics.equations import (  # the plant (what the simulator steps)
     P_GROUND,
@@ -151,12 +165,6 @@ RECORD = layout("RecordRow", (
 RECORD_COLUMNS = column_names(RECORD)
 
 
-@kernel
-def _f32(x: float) -> float:
-    """Round to float32 and back, as a MAVLink float field does."""
-    return np.float64(np.float32(x))
-
-
 # -------------------------------------------------------------------------------------------------
 # Disturbances
 # -------------------------------------------------------------------------------------------------
@@ -182,24 +190,17 @@ def disturbance(t, u, steps, ramps, gusts, dryden, S):
 # The sensors and the filter (on the estimate)
 # -------------------------------------------------------------------------------------------------
 @kernel
-def _wire3(wire: bool, v: tuple) -> tuple:
-    """A vector as a float32 MAVLink field carries it (the NED/FRD sign flips are exact)."""
+def _through_fields(wire: bool, v: tuple) -> tuple:
+    """A vector as three float fields of the wire carry it (HIL_SENSOR, VISION_POSITION_ESTIMATE)."""
     if wire:
-        return (_f32(v[0]), _f32(v[1]), _f32(v[2]))
+        return vector_from_field(vector_field(v))
     return (v[0], v[1], v[2])
 
 
 @kernel
-def gps_position_through_wire(S, position):
-    """A fix's position as HIL_GPS carries it: geodetic about the home, latitude and longitude in
-    1e-7 deg, altitude in mm (:mod:`simulator.mavlink.hil` and the autopilot's decoding)."""
-    lat0, lon0, alt0 = S[SETTINGS.home], S[SETTINGS.home + 1], S[SETTINGS.home + 2]
-    lat0_r = math.radians(lat0)
-    lat, lon, alt = ned_to_geodetic_about(position[0], -position[1], -position[2], lat0, lon0, alt0,
-                                          math.radians(lon0), math.sin(lat0_r), math.cos(lat0_r))  # fmt: skip
-    ned = geodetic_to_ned_about(round(lat * 1e7) * 1e-7, round(lon * 1e7) * 1e-7, round(alt * 1000.0) * 1e-3,
-                                lat0, lon0, alt0)  # fmt: skip
-    return (ned[0], -ned[1], -ned[2])
+def _home(S) -> tuple:
+    """The geodetic home the GNSS fixes cross the wire about."""
+    return (S[SETTINGS.home], S[SETTINGS.home + 1], S[SETTINGS.home + 2])
 
 
 @kernel
@@ -219,17 +220,17 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
     sensors.sensor_frame(rng, sensor, sensor_figures, faults, t, tr[7], tr[5], tr[3], tr[0], tr[1], tr[4][2],
                          delivered)  # fmt: skip
     t_autopilot = round(k * S[SETTINGS.usec_per_frame]) * 1e-6 if wire else t
-    force = _wire3(
+    force = _through_fields(
         wire, (delivered[sensors.O_FORCE], delivered[sensors.O_FORCE + 1], delivered[sensors.O_FORCE + 2])
     )
-    rate = _wire3(
+    rate = _through_fields(
         wire, (delivered[sensors.O_RATE], delivered[sensors.O_RATE + 1], delivered[sensors.O_RATE + 2])
     )
     if k == 0:
         offset = 0.0
         if delivered[sensors.O_BARO] != 0.0:
             height = delivered[sensors.O_BARO + 3]
-            offset = (_f32(height) if wire else height) - c_pos[2]
+            offset = (float_field(height) if wire else height) - c_pos[2]
         q = quaternion_from_euler(c_euler[0], c_euler[1], c_euler[2])
         ekf.reset_state(F, Pf, A, c_pos, c_vel, q, 0.1, 0.1, offset)
         ekf.start(F, ring, t_autopilot, dt, rate, force)
@@ -259,32 +260,31 @@ def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
     wire = S[SETTINGS.wire] != 0.0
     d = delivered
     if d[sensors.O_MAG] != 0.0:
-        m = _wire3(wire, (d[sensors.O_MAG + 2], d[sensors.O_MAG + 3], d[sensors.O_MAG + 4]))
+        m = _through_fields(wire, (d[sensors.O_MAG + 2], d[sensors.O_MAG + 3], d[sensors.O_MAG + 4]))
         ekf.fuse_mag(F, Pf, ring, stats, windows, A, t, m)
     if d[sensors.O_BARO] != 0.0:
         height = d[sensors.O_BARO + 3]
-        ekf.fuse_baro(F, Pf, ring, stats, windows, A, t, _f32(height) if wire else height)
+        ekf.fuse_baro(F, Pf, ring, stats, windows, A, t, float_field(height) if wire else height)
     g = sensors.O_GPS + 1  # time, position, velocity, eph, epv, satellites, speed accuracy, fix type
     if d[sensors.O_GPS] != 0.0:
         position = (d[g + 1], d[g + 2], d[g + 3])
         velocity = (d[g + 4], d[g + 5], d[g + 6])
         eph, epv, speed_accuracy = d[g + 7], d[g + 8], d[g + 10]
-        if wire:  # HIL_GPS: 1e-7 deg and mm, cm/s, cm, and no speed accuracy field
-            position = gps_position_through_wire(S, position)
-            velocity = (round(velocity[0] * 100.0) * 0.01, round(velocity[1] * 100.0) * 0.01,
-                        round(velocity[2] * 100.0) * 0.01)  # fmt: skip
-            eph, epv, speed_accuracy = round(eph * 100.0) * 0.01, round(epv * 100.0) * 0.01, 0.0
+        if wire:  # through HIL_GPS's fields (it has no speed accuracy)
+            home = _home(S)
+            f = gps_values(position, velocity, eph, epv, home)
+            position, velocity, eph, epv = gps_fix(f[0], f[1], f[2], f[6], f[7], f[8], f[3], f[4], home)
+            speed_accuracy = 0.0
         fix_type, satellites = d[g + 11], d[g + 9]
         ekf.fuse_gps(F, Pf, ring, stats, windows, A, t, position, velocity, eph, epv, speed_accuracy,
                      fix_type, satellites)  # fmt: skip
     v = sensors.O_VISION + 1  # time, position, yaw, position std, yaw std
     if d[sensors.O_VISION] != 0.0:
-        position = _wire3(wire, (d[v + 1], d[v + 2], d[v + 3]))
+        position = (d[v + 1], d[v + 2], d[v + 3])
         yaw, position_std, yaw_std = d[v + 4], d[v + 5], d[v + 6]
-        if wire:  # VISION_POSITION_ESTIMATE: float32 yaw and variances
-            yaw = _f32(yaw)
-            position_std = math.sqrt(_f32(position_std * position_std))
-            yaw_std = math.sqrt(_f32(yaw_std * yaw_std))
+        if wire:  # through VISION_POSITION_ESTIMATE's fields
+            p_ned, yaw_ned, p_var, yaw_var = vision_values(position, yaw, position_std, yaw_std)
+            position, yaw, position_std, yaw_std = vision_pose(p_ned, yaw_ned, p_var, yaw_var)
         ekf.fuse_vision(F, Pf, ring, stats, windows, A, t, position, yaw, position_std, yaw_std)
 
 
@@ -393,7 +393,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     ground_reach = P[P_GROUND_REACH]
     n = state0.shape[0]
     o_u, o_x, o_f, o_c = U_SIZE, U_SIZE + nxt + nxr, U_SIZE + nxt + nxr + FILTER_STATE_SIZE, 6 * n
-    work = np.zeros(o_c + OUT_SIZE + o_f)
+    work = np.zeros(o_c + OUT_SIZE + o_f + GIVEN.size)
     whole = borrowed(work)
     s, k1, k2 = whole[0:n], whole[n : 2 * n], whole[2 * n : 3 * n]
     k3, k4, tmp = whole[3 * n : 4 * n], whole[4 * n : 5 * n], whole[5 * n : 6 * n]
@@ -402,7 +402,8 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     xt, xr = whole[o_c + o_u : o_c + o_u + nxt], whole[o_c + o_u + nxt : o_c + o_x]
     filt = whole[o_c + o_x : o_c + o_f]
     controls = whole[o_c + o_f : o_c + o_f + OUT_SIZE]
-    no_tilt, no_attitude = (0.0, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    nothing_given = whole[o_c + o_f + OUT_SIZE :]  # (GIVEN: zeros, the cascade computes every part)
+    memory = CascadeMemory(K, gt, xt, gr, xr, filt, nothing_given)
     plant_thrust_max = P[P_THRUST_MAX]
     ptm0, ptm1, ptm2 = P[P_TORQUE_MAX], P[P_TORQUE_MAX + 1], P[P_TORQUE_MAX + 2]
     wmin, wmax = P[P_WMIN], P[P_WMAX]
@@ -438,13 +439,10 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         R, pos, vel = motion_of_O(s, P)
         euler, cos_tilt = euler_from_rotation(R), R[2][2]
         p_w, q_w, r_w = s[10], s[11], s[12]
-        if wire:
-            # ODOMETRY: float32 NED pose, NED velocity, FRD rates; the autopilot converts back.
-            c_euler = euler_from_quaternion(_f32(s[6]), _f32(s[7]), -_f32(-s[8]), -_f32(-s[9]))
-            c_pos = (_f32(pos[0]), -_f32(-pos[1]), -_f32(-pos[2]))
-            c_vel = (_f32(vel[0]), -_f32(-vel[1]), -_f32(-vel[2]))
-            c_omega = (_f32(p_w), -_f32(-q_w), -_f32(-r_w))
-            c_rates = euler_rates_from_body_rates(c_euler[0], c_euler[1], c_omega)
+        if wire:  # through ODOMETRY's fields, read as the autopilot reads them
+            c_pos, c_vel, c_euler, c_rates = odometry_state(
+                *odometry_values(pos, vel, (s[6], s[7], s[8], s[9]), (p_w, q_w, r_w))
+            )
         else:
             c_pos, c_vel, c_euler = pos, vel, euler
             c_rates = euler_rates_from_body_rates(euler[0], euler[1], (p_w, q_w, r_w))
@@ -457,37 +455,13 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         rp = (ref[k, 0], ref[k, 1], ref[k, 2])
         rv = (ref[k, 3], ref[k, 4], ref[k, 5])
         ra = (ref[k, 6], ref[k, 7], ref[k, 8])
-        yaw, yaw_rate, yaw_acc = ref[k, 9], ref[k, 10], ref[k, 11]
+        yaw = ref[k, 9]
 
         # -- the cascade (what the autopilot flies) --
-        o = cascade_step(
-            translational,
-            rotational,
-            K,
-            gt,
-            xt,
-            gr,
-            xr,
-            filt,
-            c_pos,
-            c_vel,
-            c_euler,
-            c_rates,
-            rp,
-            rv,
-            ra,
-            yaw,
-            yaw_rate,
-            yaw_acc,
-            True,
-            0,
-            no_tilt,
-            no_attitude,
-            0.0,
-            controls,
-        )
-        thrust_a, tq0, tq1, tq2, phi_d, theta_d = o[0], o[1], o[2], o[3], o[7], o[8]
-        sat, tilt_lim = o[18] != 0.0, o[19] != 0.0
+        o = cascade_step(translational, rotational, memory, StateEstimate(c_pos, c_vel, c_euler, c_rates),
+                         Reference(rp, rv, ra, yaw, ref[k, 10], ref[k, 11]), True, controls)  # fmt: skip
+        thrust_a, (tq0, tq1, tq2), (phi_d, theta_d, _) = o.thrust, o.torque_euler, o.euler_ref
+        sat, tilt_lim = o.saturated != 0.0, o.tilt_limited != 0.0
 
         # -- disturbance at the control instant (recorded) and this sample's indices --
         disturbance(t, u, steps_tab, ramps_tab, gusts_tab, dryden, S)
@@ -566,7 +540,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         # -- actuator controls into the plant (Plant.set_actuator_controls), float32 on the wire --
         c0, c1, c2, c3 = controls[0], controls[1], controls[2], controls[3]
         if wire:
-            c0, c1, c2, c3 = _f32(c0), _f32(c1), _f32(c2), _f32(c3)
+            c0, c1, c2, c3 = float_field(c0), float_field(c1), float_field(c2), float_field(c3)
         if rotor_plant:
             u[U_ROTOR] = clip(c0 * wmax, wmin, wmax)
             u[U_ROTOR + 1] = clip(c1 * wmax, wmin, wmax)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from autopilot.control import command_filter as cf
-from autopilot.control.cascade import K_FILTER, Cascade
+from autopilot.control.cascade import CASCADE_NUMBERS, Cascade
 from autopilot.control.config import load_controller
 from autopilot.control.laws.nlhinf import nlhinf_gains
 from autopilot.records import StateEstimate
@@ -163,7 +163,7 @@ def test_command_filter_keeps_its_state_across_a_retune():
     cascade.retune(slow)
     assert list(cascade.filt) == filt
     coefficients = cf.discretise(20.0, config.command_filter.damping, DT)
-    assert list(cascade.K[K_FILTER : K_FILTER + cf.F_SIZE]) == pytest.approx(coefficients, abs=0)
+    assert list(cascade.K[CASCADE_NUMBERS.filter : CASCADE_NUMBERS.filter + cf.F_SIZE]) == pytest.approx(coefficients, abs=0)
     expected = list(filt)
     raw = cascade.step(state, ref, integrate=False).roll_pitch_raw_rad
     cf.advance(coefficients, 0, expected, *raw)

@@ -1,0 +1,83 @@
+"""What the lockstep frame's messages carry: each encoder gives the message's own values (float32
+fields, scaled and saturated integers, NED/FRD), and the decoder reads them back into the paper's
+frames. Checked against pymavlink packing the same values (lossless) and against the fields' units."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from quadcommon import wire_values as w
+
+pytestmark = pytest.mark.timeout(60)
+
+HOME = (47.397742, 8.545594, 488.0)
+
+
+def test_float_fields_are_float32_and_pack_losslessly():
+    x = 0.1
+    f = w.float_field(x)
+    assert f != x and f == float(np.float32(x))
+    msg = mavlink.MAVLink_odometry_message(0, 1, 1, f, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0, [0] * 21,
+                                           [0] * 21, 0, 0, 0)  # fmt: skip
+    packed = msg.pack(mavlink.MAVLink(None, 1, 1))
+    assert mavlink.MAVLink(None).decode(bytearray(packed)).x == f
+
+
+def test_vectors_cross_in_ned_and_come_back_in_the_paper_frames():
+    v = (1.0, 2.0, 3.0)
+    field = w.vector_field(v)
+    assert field == (1.0, -2.0, -3.0)
+    assert w.vector_from_field(field) == v
+
+
+@pytest.mark.parametrize(
+    "sat, x, expected",
+    [(w.sat_i16, 40000.0, 32767), (w.sat_i16, -40000.0, -32767), (w.sat_i16, math.nan, 0),
+     (w.sat_i16, 2.5, 2), (w.sat_i32, 3e9, 2147483647), (w.sat_i32, math.nan, 0), (w.sat_u16, -3.0, 0),
+     (w.sat_u16, 7e4, 65534), (w.sat_u16, math.nan, 65535)],
+)  # fmt: skip
+def test_integer_fields_saturate_and_take_nan_as_mavlink_has_it(sat, x, expected):
+    assert sat(x) == expected
+
+
+def test_a_gps_fix_crosses_in_its_units_and_comes_back_within_their_resolution():
+    position, velocity = (120.0, -35.0, 12.0), (3.0, -4.0, 0.5)
+    lat, lon, alt, eph, epv, vel, vn, ve, vd, cog = w.gps_values(position, velocity, 0.8, 1.234, HOME)
+    assert (eph, epv, vel) == (80, 123, 500)  # cm, ground speed cm/s
+    assert (vn, ve, vd) == (300, 400, -50)  # NED cm/s: y left is east negative, z up is down negative
+    assert cog == round(math.degrees(math.atan2(400, 300)) * 100)
+    assert alt == round((HOME[2] + 12.0) * 1000)
+    back, v_back, eph_m, epv_m = w.gps_fix(lat, lon, alt, vn, ve, vd, eph, epv, HOME)
+    assert max(abs(a - b) for a, b in zip(back, position, strict=True)) < 0.01  # 1e-7 deg ~ 1 cm
+    assert v_back == pytest.approx(velocity, abs=0.005)
+    assert (eph_m, epv_m) == (0.8, 1.23)
+
+
+def test_an_unknown_gps_accuracy_reads_as_the_autopilots_unknown():
+    *_, eph, epv = w.gps_fix(0, 0, 0, 0, 0, 0, 65535, 65535, HOME)
+    assert eph == epv == w.GPS_ACCURACY_UNKNOWN_M
+
+
+def test_odometry_carries_the_truth_as_the_autopilot_flies_it():
+    yaw = 0.7
+    q = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    fields = w.odometry_values((1.0, 2.0, 3.0), (0.5, -0.5, 0.25), q, (0.0, 0.0, 0.2))
+    position_ned, velocity_ned, q_ned, rates_frd = fields
+    assert position_ned == (1.0, -2.0, -3.0) and q_ned[3] == pytest.approx(-math.sin(yaw / 2))
+    position, velocity, euler, euler_rates = w.odometry_state(*fields)
+    assert position == (1.0, 2.0, 3.0) and velocity == (0.5, -0.5, 0.25)
+    assert euler == pytest.approx((0.0, 0.0, yaw), abs=1e-7)
+    assert euler_rates == pytest.approx((0.0, 0.0, 0.2), abs=1e-7)
+
+
+def test_a_vision_pose_carries_variances_and_reads_back_standard_deviations():
+    (n, e, d), yaw, p_var, yaw_var = w.vision_values((1.0, 2.0, 3.0), 0.3, 0.01, 0.02)
+    assert (n, e, d) == (1.0, -2.0, -3.0) and yaw == w.float_field(-0.3)
+    position, yaw_back, p_std, yaw_std = w.vision_pose((n, e, d), yaw, p_var, yaw_var)
+    assert position == (1.0, 2.0, 3.0) and yaw_back == pytest.approx(0.3, abs=1e-7)
+    assert p_std == pytest.approx(0.01, rel=1e-6) and yaw_std == pytest.approx(0.02, rel=1e-6)
+    assert w.vision_pose((0.0, 0.0, 0.0), 0.0, -1.0, math.nan)[2:] == (0.0, 0.0)
