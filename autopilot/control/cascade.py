@@ -254,13 +254,51 @@ class Cascade:
                  len(self.rotational.STATE), cf.S_SIZE, GIVEN.size, OUT_SIZE)  # fmt: skip
         self._at = BufferParts(*(int(v) for v in np.cumsum((0, *sizes))))
         self.buffer = np.zeros(self._at.end)
-        self.K, self.gt, self.xt, self.gr, self.xr, self.filt, self.given, self.out = (
-            self.buffer[a:b] for a, b in zip(self._at[:-1], self._at[1:], strict=True)
-        )
         self.K[:], self.gt[:], self.gr[:] = packed.K, packed.gt, packed.gr
         self._last: tuple[Vector3, Vector3] | None = None  # (eta, eta') of the latest step: for retune
         self._overridden = False
         self._step = _entry(self)
+
+    # -- the buffer's parts (views taken when asked: a copy of the cascade keeps them its own) --
+    @property
+    def K(self) -> np.ndarray:
+        """The cascade's own numbers (:data:`CASCADE_NUMBERS`)."""
+        return self.buffer[self._at.numbers : self._at.translational_gains]
+
+    @property
+    def gt(self) -> np.ndarray:
+        """The translational law's gains."""
+        return self.buffer[self._at.translational_gains : self._at.translational_state]
+
+    @property
+    def xt(self) -> np.ndarray:
+        """The translational law's state."""
+        return self.buffer[self._at.translational_state : self._at.rotational_gains]
+
+    @property
+    def gr(self) -> np.ndarray:
+        """The rotational law's gains."""
+        return self.buffer[self._at.rotational_gains : self._at.rotational_state]
+
+    @property
+    def xr(self) -> np.ndarray:
+        """The rotational law's state."""
+        return self.buffer[self._at.rotational_state : self._at.filter_state]
+
+    @property
+    def filt(self) -> np.ndarray:
+        """The command filter's state (command_filter.S_*)."""
+        return self.buffer[self._at.filter_state : self._at.given]
+
+    @property
+    def given(self) -> np.ndarray:
+        """The overrides given to the next step (:data:`GIVEN`)."""
+        return self.buffer[self._at.given : self._at.out]
+
+    @property
+    def out(self) -> np.ndarray:
+        """The last step's normalised commands, then its rotor speeds (allocation.OUT_SIZE)."""
+        return self.buffer[self._at.out : self._at.end]
 
     # -- stepping ---------------------------------------------------------------------------------
     def step(

@@ -78,8 +78,9 @@ from quadcommon.rigid_body import (
 )
 
 from ..records import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
+from . import aiding, kernels
 from . import filter as fk
-from . import kernels
+from .aiding import Aiding
 from .filter import (  # noqa: F401 - part of this module's interface
     BAD_ACCEL_HOLD_S,
     MAX_IMU_DT_S,
@@ -481,6 +482,13 @@ class ErrorStateEkf:
         self._entries.fuse_mag(self._F, self.P, self._ring, self._stats, self._windows, self._A,
                                float(sample.time_s), _floats(m))  # fmt: skip
 
+    def fuse_frame(self, t: float, frame_aiding: Aiding) -> None:
+        """A frame's aiding at the time ``t`` of its IMU sample, in PX4's order
+        (:func:`.aiding.fuse_frame`, one compiled call); the filter must be initialised (before,
+        each sensor's own method holds its samples for the alignment)."""
+        self._entries.fuse_frame(self._F, self.P, self._ring, self._stats, self._windows, self._A, float(t),
+                                 frame_aiding)  # fmt: skip
+
     def fuse_vision(self, pose: VisionPose) -> None:
         """Motion capture / vision position and yaw, and its velocity when it has one (EKF2_EV_CTRL
         bit 2), valid EKF2_EV_DELAY before arrival."""
@@ -617,6 +625,7 @@ class FilterEntries(NamedTuple):
     fuse_mag: Any
     fuse_vision: Any
     fuse_vision_velocity: Any
+    fuse_frame: Any
     reset_state: Any
     start: Any
     not_converged: Any
@@ -625,9 +634,8 @@ class FilterEntries(NamedTuple):
 def filter_kernels() -> FilterEntries:
     """The kernels themselves (what Python runs where nothing compiles)."""
     arithmetic = ("predict", "prior_variances", "joseph_update")
-    return FilterEntries(
-        *(getattr(kernels if name in arithmetic else fk, name) for name in FilterEntries._fields)
-    )
+    module = {name: kernels for name in arithmetic} | {"fuse_frame": aiding}
+    return FilterEntries(*(getattr(module.get(name, fk), name) for name in FilterEntries._fields))
 
 
 @functools.cache
@@ -653,6 +661,7 @@ def filter_entries() -> FilterEntries:
         entries.fuse_mag(F, P, ring, stats, windows, A, 0.002, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
         entries.fuse_vision(F, P, ring, stats, windows, A, 0.002, z3, 0.0, 0.01, 0.01)
         entries.fuse_vision_velocity(F, P, ring, stats, windows, A, 0.002, z3, 0.01)
+        entries.fuse_frame(F, P, ring, stats, windows, A, 0.002, aiding.NO_AIDING)
         entries.not_converged(F, P, A)
         for entry in entries:
             freeze(entry)

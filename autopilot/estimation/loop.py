@@ -38,6 +38,7 @@ from __future__ import annotations
 from quadcommon.rigid_body import quaternion_from_euler
 
 from ..records import BaroSample, ImuSample, MagSample, SensorSamples, StateEstimate, VisionPose
+from .aiding import aiding_of
 from .eskf import ErrorStateEkf
 from .parameters import EstimatorParams
 from .status import EstimatorStatus
@@ -85,6 +86,21 @@ class EstimatorLoop:
         if samples is None:
             return
         ekf, t = self.ekf, self._last_t
+        if ekf.initialised:  # the frame's aiding in PX4's order, one compiled call (.aiding)
+            ekf.fuse_frame(t, aiding_of(samples))
+        else:  # each sensor's own method holds what the alignment waits for
+            self._hold_for_alignment(samples, t)
+        if self._external is not None:
+            ekf.fuse_vision(self._external)
+            self._external = None
+        self._frames += 1
+        if self.last_status is None or self._frames % STATUS_EVERY == 0:
+            self.last_status = ekf.status()
+
+    def _hold_for_alignment(self, samples: SensorSamples, t: float) -> None:
+        """Before the filter is initialised: the samples the alignment and the first fusions wait
+        for (the filter may initialise within the frame: the later samples are then fused)."""
+        ekf = self.ekf
         if samples.mag_gauss is not None:
             ekf.fuse_mag(MagSample(t, samples.mag_gauss))
         if samples.baro_height_m is not None:
@@ -93,12 +109,6 @@ class EstimatorLoop:
             ekf.fuse_gps(samples.gps._replace(time_s=t))
         if samples.vision is not None:
             ekf.fuse_vision(samples.vision._replace(time_s=t))
-        if self._external is not None:
-            ekf.fuse_vision(self._external)
-            self._external = None
-        self._frames += 1
-        if self.last_status is None or self._frames % STATUS_EVERY == 0:
-            self.last_status = ekf.status()
 
     def external_vision(self, pose: VisionPose) -> None:
         """A client's vision pose (:mod:`autopilot.mavlink.vision_in`: checked, valid at its

@@ -44,6 +44,7 @@ from autopilot.control.allocation import OUT_SIZE
 from autopilot.control.cascade import GIVEN, CascadeMemory, cascade_step, output_finite
 from autopilot.control.command_filter import S_SIZE as FILTER_STATE_SIZE
 from autopilot.estimation import filter as ekf
+from autopilot.estimation.aiding import Aiding, fuse_frame
 from autopilot.records import StateEstimate
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import borrowed, kernel
@@ -254,38 +255,35 @@ def imu_fresh(delivered) -> bool:
 
 @kernel
 def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
-    """The step's magnetometer, barometer, GNSS and vision samples into the filter, in the
-    autopilot's order (:meth:`~autopilot.estimation.loop.EstimatorLoop.fuse`), as the wire
-    delivers them."""
+    """The step's magnetometer, barometer, GNSS and vision samples into the filter as the wire
+    delivers them (:mod:`quadcommon.wire_values`), through the autopilot's own fusion of a frame's
+    aiding (:func:`autopilot.estimation.aiding.fuse_frame`: PX4's order)."""
     wire = S[SETTINGS.wire] != 0.0
     d = delivered
-    if d[sensors.O_MAG] != 0.0:
-        m = _through_fields(wire, (d[sensors.O_MAG + 2], d[sensors.O_MAG + 3], d[sensors.O_MAG + 4]))
-        ekf.fuse_mag(F, Pf, ring, stats, windows, A, t, m)
-    if d[sensors.O_BARO] != 0.0:
-        height = d[sensors.O_BARO + 3]
-        ekf.fuse_baro(F, Pf, ring, stats, windows, A, t, float_field(height) if wire else height)
+    mag = _through_fields(wire, (d[sensors.O_MAG + 2], d[sensors.O_MAG + 3], d[sensors.O_MAG + 4]))
+    height = d[sensors.O_BARO + 3]
+    if wire:  # HIL_SENSOR's pressure altitude
+        height = float_field(height)
     g = sensors.O_GPS + 1  # time, position, velocity, eph, epv, satellites, speed accuracy, fix type
-    if d[sensors.O_GPS] != 0.0:
-        position = (d[g + 1], d[g + 2], d[g + 3])
-        velocity = (d[g + 4], d[g + 5], d[g + 6])
-        eph, epv, speed_accuracy = d[g + 7], d[g + 8], d[g + 10]
-        if wire:  # through HIL_GPS's fields (it has no speed accuracy)
-            home = _home(S)
-            f = gps_values(position, velocity, eph, epv, home)
-            position, velocity, eph, epv = gps_fix(f[0], f[1], f[2], f[6], f[7], f[8], f[3], f[4], home)
-            speed_accuracy = 0.0
-        fix_type, satellites = d[g + 11], d[g + 9]
-        ekf.fuse_gps(F, Pf, ring, stats, windows, A, t, position, velocity, eph, epv, speed_accuracy,
-                     fix_type, satellites)  # fmt: skip
+    position = (d[g + 1], d[g + 2], d[g + 3])
+    velocity = (d[g + 4], d[g + 5], d[g + 6])
+    eph, epv, speed_accuracy = d[g + 7], d[g + 8], d[g + 10]
+    if wire and d[sensors.O_GPS] != 0.0:  # through HIL_GPS's fields (it has no speed accuracy)
+        home = _home(S)
+        f = gps_values(position, velocity, eph, epv, home)
+        position, velocity, eph, epv = gps_fix(f[0], f[1], f[2], f[6], f[7], f[8], f[3], f[4], home)
+        speed_accuracy = 0.0
     v = sensors.O_VISION + 1  # time, position, yaw, position std, yaw std
-    if d[sensors.O_VISION] != 0.0:
-        position = (d[v + 1], d[v + 2], d[v + 3])
-        yaw, position_std, yaw_std = d[v + 4], d[v + 5], d[v + 6]
-        if wire:  # through VISION_POSITION_ESTIMATE's fields
-            p_ned, yaw_ned, p_var, yaw_var = vision_values(position, yaw, position_std, yaw_std)
-            position, yaw, position_std, yaw_std = vision_pose(p_ned, yaw_ned, p_var, yaw_var)
-        ekf.fuse_vision(F, Pf, ring, stats, windows, A, t, position, yaw, position_std, yaw_std)
+    vision_position = (d[v + 1], d[v + 2], d[v + 3])
+    yaw, position_std, yaw_std = d[v + 4], d[v + 5], d[v + 6]
+    if wire and d[sensors.O_VISION] != 0.0:  # through VISION_POSITION_ESTIMATE's fields
+        p_ned, yaw_ned, p_var, yaw_var = vision_values(vision_position, yaw, position_std, yaw_std)
+        vision_position, yaw, position_std, yaw_std = vision_pose(p_ned, yaw_ned, p_var, yaw_var)
+    fuse_frame(F, Pf, ring, stats, windows, A, t, Aiding(
+        d[sensors.O_MAG] != 0.0, mag, d[sensors.O_BARO] != 0.0, height,
+        d[sensors.O_GPS] != 0.0, position, velocity, (eph, epv, speed_accuracy), (d[g + 11], d[g + 9]),
+        d[sensors.O_VISION] != 0.0, vision_position, yaw, (position_std, yaw_std),
+    ))  # fmt: skip
 
 
 @kernel

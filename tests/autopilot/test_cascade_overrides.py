@@ -3,6 +3,8 @@ a whole attitude reference, a thrust; the rotational law tracks whatever reaches
 
 from __future__ import annotations
 
+import copy
+
 import pytest
 
 from autopilot.control.cascade import AttitudeReference, Cascade
@@ -57,3 +59,13 @@ def test_the_overrides_leave_the_compiled_path_in_step_with_the_laws(backsteppin
     cascade.step(AT_REF._replace(position_m=(0.0, 0.0, 0.9)), HOVER_REF, thrust_n=7.0)
     _, after = cascade.law_states()
     assert after[2] == pytest.approx(before[2], rel=0.05)
+
+
+def test_a_copied_cascade_flies_on_its_own_buffer(cascade):
+    """A deep copy (the failure flights copy whole stacks) reads and writes its own buffer: its
+    overrides reach its step, its outputs come from its step, the original is untouched."""
+    twin = copy.deepcopy(cascade)
+    out = twin.step(AT_REF, HOVER_REF, thrust_n=3.0)
+    assert out.thrust_n == pytest.approx(3.0)
+    assert list(twin.out) == [*out.actuator_controls, *out.rotor_speeds_rad_s]
+    assert not cascade.given.any() and not cascade.out.any()

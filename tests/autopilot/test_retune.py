@@ -163,7 +163,8 @@ def test_command_filter_keeps_its_state_across_a_retune():
     cascade.retune(slow)
     assert list(cascade.filt) == filt
     coefficients = cf.discretise(20.0, config.command_filter.damping, DT)
-    assert list(cascade.K[CASCADE_NUMBERS.filter : CASCADE_NUMBERS.filter + cf.F_SIZE]) == pytest.approx(coefficients, abs=0)
+    at = CASCADE_NUMBERS.filter
+    assert list(cascade.K[at : at + cf.F_SIZE]) == pytest.approx(coefficients, abs=0)
     expected = list(filt)
     raw = cascade.step(state, ref, integrate=False).roll_pitch_raw_rad
     cf.advance(coefficients, 0, expected, *raw)
