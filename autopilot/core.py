@@ -54,6 +54,7 @@ from quadcommon.config import (
 from quadcommon.mavlink_fast import DecodeError
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import Trajectory, trajectory_from_spec
+from quadcommon.wire_values import frame_time_s
 
 from .battery.estimator import BatteryEstimator
 from .commander.commander import Commander, Motors, VehicleState
@@ -474,7 +475,7 @@ class AutopilotCore:
 
     def _control_step(self, frame) -> bytes:
         self._frame_truth = frame.state
-        t = frame.time_usec * 1e-6
+        t = frame_time_s(frame.time_usec)
         self.sim_time = t
         self.last_time_usec = frame.time_usec
         commander = self.commander

@@ -74,6 +74,22 @@ def sat_i32(x: float) -> int:
 
 
 # -------------------------------------------------------------------------------------------------
+# The frame's clock
+# -------------------------------------------------------------------------------------------------
+@kernel
+def frame_time_usec(k: int, usec_per_frame: float) -> int:
+    """The ``time_usec`` every message of lockstep frame ``k`` carries (µs since the simulator
+    started; ``usec_per_frame``: 1e6 / the control rate)."""
+    return round(k * usec_per_frame)
+
+
+@kernel
+def frame_time_s(time_usec: int) -> float:
+    """A frame's ``time_usec`` as the autopilot's time (s)."""
+    return time_usec * 1e-6
+
+
+# -------------------------------------------------------------------------------------------------
 # HIL_SENSOR, VISION_POSITION_ESTIMATE and ODOMETRY: float fields
 # -------------------------------------------------------------------------------------------------
 @kernel

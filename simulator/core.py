@@ -49,6 +49,7 @@ from quadcommon.config import (
     load_vehicle,
 )
 from quadcommon.wire import new_parser, restart_parser
+from quadcommon.wire_values import frame_time_usec
 
 from .battery import BatteryModel
 from .dynamics.plant import HEALTHY, RotorFault, make_plant, motors_of, rotor_of_motor, schedule
@@ -222,7 +223,7 @@ class SimulatorCore:
         if self._pending_schedule is not None:
             self.schedule, self._pending_schedule = self._pending_schedule, None
         k, t = self.k, self.k * self.dt_control
-        self.time_usec = time_usec = round(k * self.usec_per_frame)
+        self.time_usec = time_usec = frame_time_usec(k, self.usec_per_frame)
         if self._fault_row < len(self._scheduled):
             self._scheduled_faults_due(t)
         truth = self.plant.truth()

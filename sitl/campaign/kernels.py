@@ -59,6 +59,8 @@ from quadcommon.rigid_body import (
 from quadcommon.trajectories import Reference
 from quadcommon.wire_values import (
     float_field,
+    frame_time_s,
+    frame_time_usec,
     gps_fix,
     gps_values,
     odometry_state,
@@ -220,7 +222,7 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
     tr = truth(plant_work, P, u)  # what the simulator's frame reads: the inputs held since the last step
     sensors.sensor_frame(rng, sensor, sensor_figures, faults, t, tr[7], tr[5], tr[3], tr[0], tr[1], tr[4][2],
                          delivered)  # fmt: skip
-    t_autopilot = round(k * S[SETTINGS.usec_per_frame]) * 1e-6 if wire else t
+    t_autopilot = frame_time_s(frame_time_usec(k, S[SETTINGS.usec_per_frame])) if wire else t
     force = _through_fields(
         wire, (delivered[sensors.O_FORCE], delivered[sensors.O_FORCE + 1], delivered[sensors.O_FORCE + 2])
     )
