@@ -385,7 +385,8 @@ def vfr_hud(s: VehicleStatus):
     speed = math.hypot(vel[0], vel[1])
     heading = _heading_cdeg(s.state.euler_rad[2]) // 100
     throttle = sat_u16(100 * s.thrust_normalised) if s.armed else 0
-    return m.MAVLink_vfr_hud_message(speed, speed, heading, throttle, s.state.position_m[2], -vel[2])
+    climb = s.state.velocity_m_s[2]  # z up: the paper's frame is already VFR_HUD's sign
+    return m.MAVLink_vfr_hud_message(speed, speed, heading, throttle, s.state.position_m[2], climb)
 
 
 def estimator_status(s: VehicleStatus):
