@@ -15,8 +15,10 @@ a named tuple numba freezes as compile-time constants (``memory[SETTINGS.dt_cont
     SETTINGS.size          # 4
     describe(SETTINGS)     # the fields, offsets, sizes, units and docs as text
 
-A field may name its elements (``Field("final", elements=("x", "y", "z"))``): :func:`column_names`
-gives the flat names a table of such records carries (``final_x``, ...). A layout may continue
+:func:`values` gives a record's numbers in the layout's order from its fields by name (what a
+control law's ``pack`` returns). A field may name its elements
+(``Field("final", elements=("x", "y", "z"))``): :func:`column_names` gives the flat names a table
+of such records carries (``final_x``, ...). A layout may continue
 another (``after=``): its offsets start where the other ends, for a record that extends a shorter one.
 """
 
@@ -63,6 +65,27 @@ def layout(typename: str, fields: Sequence[Field], after: Any = None) -> Any:
     cls.fields = tuple(fields)  # the declaration (for describe and column_names)
     cls.start = start
     return cls(*offsets, at)
+
+
+def values(record_layout: Any, **named: Any) -> tuple[float, ...]:
+    """A record's numbers in its layout's order, each field given by name (a sequence for a field
+    of several floats): what a law's ``pack`` returns, with no order to keep by hand. A missing,
+    unknown or wrongly sized field is a ValueError naming it."""
+    fields = fields_of(record_layout)
+    names = {f.name for f in fields}
+    unknown = sorted(set(named) - names)
+    missing = [f.name for f in fields if f.name not in named]
+    if unknown or missing:
+        name = type(record_layout).__name__
+        raise ValueError(f"{name}: unknown fields {unknown}, missing fields {missing}")
+    out: list[float] = []
+    for f in fields:
+        value = named[f.name]
+        items = [value] if f.width() == 1 and not isinstance(value, (tuple, list)) else list(value)
+        if len(items) != f.width():
+            raise ValueError(f"{type(record_layout).__name__}.{f.name}: {len(items)} values for {f.width()}")
+        out.extend(float(v) for v in items)
+    return tuple(out)
 
 
 def fields_of(record_layout: Any) -> tuple[Field, ...]:

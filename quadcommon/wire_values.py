@@ -115,6 +115,19 @@ def odometry_values(position: Vector3, velocity: Vector3, quaternion, body_rates
 
 
 @kernel
+def frame_float_fields(position: Vector3, velocity: Vector3, quaternion, body_rates: Vector3,
+                       specific_force: Vector3, angular_rate: Vector3, magnetic_field: Vector3,
+                       pressure_altitude: float):  # fmt: skip
+    """The float fields a lockstep frame carries every frame, in one call (the simulator's encoder
+    calls it compiled: one call instead of some twenty float32 roundings in Python): HIL_SENSOR's
+    ``(specific force, rates, field, pressure altitude)`` (FRD) and ODOMETRY's
+    :func:`odometry_values` of the truth."""
+    odometry = odometry_values(position, velocity, quaternion, body_rates)
+    return (vector_field(specific_force), vector_field(angular_rate), vector_field(magnetic_field),
+            float_field(pressure_altitude), odometry)  # fmt: skip
+
+
+@kernel
 def attitude_from_fields(q_ned, rates_frd: Vector3):
     """A NED/FRD quaternion and FRD body rates (ODOMETRY, HIL_STATE_QUATERNION) as the autopilot
     reads them: ``(quaternion, ZYX Euler angles, Euler rates)`` in the paper's frames."""

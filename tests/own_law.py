@@ -19,8 +19,13 @@ from autopilot.control.registry import TRANSLATIONAL, register
 from autopilot.control.translational import thrust_and_tilt
 from autopilot.params.store import ParamSpec
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout, values
 
 import math
+
+GAINS = layout("ToyGains", (
+    Field("kp"), Field("kd"), Field("mass"), Field("gravity"), Field("thrust_max"), Field("sin_tilt_max"),
+))
 
 
 @dataclass(frozen=True)
@@ -33,13 +38,13 @@ class PdGains:
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):
-    kp, kd = g[0], g[1]
+    kp, kd = g[GAINS.kp], g[GAINS.kd]
     ax = ref_acceleration[0] - kp * (position[0] - ref_position[0]) - kd * (velocity[0] - ref_velocity[0])
     ay = ref_acceleration[1] - kp * (position[1] - ref_position[1]) - kd * (velocity[1] - ref_velocity[1])
     az = ref_acceleration[2] - kp * (position[2] - ref_position[2]) - kd * (velocity[2] - ref_velocity[2])
     {failure}
-    thrust, roll, pitch, thrust_limited, tilt_limited = thrust_and_tilt(g[2], g[3], g[4], g[5], ax, ay, az,
-                                                                        euler)
+    thrust, roll, pitch, thrust_limited, tilt_limited = thrust_and_tilt(
+        g[GAINS.mass], g[GAINS.gravity], g[GAINS.thrust_max], g[GAINS.sin_tilt_max], ax, ay, az, euler)
     return thrust, roll, pitch, ax, ay, az, thrust_limited, tilt_limited
 
 
@@ -64,8 +69,8 @@ class ProportionalDerivative:
 
     @staticmethod
     def pack(gains, context):
-        return (gains.kp, gains.kd, context.mass_kg, context.gravity_m_s2, context.thrust_max_n,
-                math.sin(context.tilt_max_rad))
+        return values(GAINS, kp=gains.kp, kd=gains.kd, mass=context.mass_kg, gravity=context.gravity_m_s2,
+                      thrust_max=context.thrust_max_n, sin_tilt_max=math.sin(context.tilt_max_rad))
 '''
 
 

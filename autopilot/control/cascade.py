@@ -152,35 +152,12 @@ def cascade_step(translational, rotational, memory, state, reference, integrate,
 
 
 @kernel
-def output_finite(o):
-    """False when the wrench a cascade step applies is not finite (``o``: a :class:`StepResult`;
-    U1 and the body torque): a NaN or inf anywhere in it shows in their sum (saturation
-    lets NaN through). The one check of a law's output, wherever the cascade flies: the autopilot
-    (:meth:`Cascade.step`) and the campaign engine (:func:`sitl.campaign.kernels.simulate`)."""
-    return math.isfinite(o.thrust + o.torque_body[0] + o.torque_body[1] + o.torque_body[2])
-
-
-@kernel
-def buffered_step(translational, rotational, buf, at, state, reference, integrate):
-    """:func:`cascade_step` with its arrays as parts of one buffer, at the offsets ``at``
-    (:class:`BufferParts`): a compiled call converts each array argument on its own, so one buffer
-    costs one conversion instead of eight. Returns the :class:`StepResult`; the normalised commands
-    and the rotor speeds are in the buffer's ``out`` part."""
-    buf = borrowed(buf)  # the caller's for the call: its parts are passed on without counting
-    memory = CascadeMemory(
-        buf[at.numbers : at.translational_gains], buf[at.translational_gains : at.translational_state],
-        buf[at.translational_state : at.rotational_gains], buf[at.rotational_gains : at.rotational_state],
-        buf[at.rotational_state : at.filter_state], buf[at.filter_state : at.given], buf[at.given : at.out],
-    )  # fmt: skip
-    return cascade_step(translational, rotational, memory, state, reference, integrate, buf[at.out : at.end])
-
-
-class AttitudeReference(NamedTuple):
-    """What the rotational law tracks: eta_d, eta_d', eta_d'' (ZYX Euler, paper frames)."""
-
-    euler_rad: Vector3
-    euler_rates_rad_s: Vector3
-    euler_accelerations_rad_s2: Vector3
+def output_finite(thrust, torque_body):
+    """False when the wrench a cascade step applies is not finite (its U1 and body torque): a NaN
+    or inf anywhere in it shows in their sum (saturation lets NaN through). The one check of a
+    law's output, wherever the cascade flies: the autopilot (:meth:`Cascade.step`) and the
+    campaign engine (:func:`sitl.campaign.kernels.simulate`)."""
+    return math.isfinite(thrust + torque_body[0] + torque_body[1] + torque_body[2])
 
 
 class CascadeOutput(NamedTuple):
@@ -195,6 +172,39 @@ class CascadeOutput(NamedTuple):
     euler_rate_ref_rad_s: Vector3
     roll_pitch_raw_rad: tuple[float, float]  # phi_r, theta_r before the command filter
     acceleration_cmd_m_s2: Vector3
+
+
+@kernel
+def buffered_step(translational, rotational, buf, at, position, velocity, euler, euler_rates, ref_position,
+                  ref_velocity, ref_acceleration, yaw, yaw_rate, yaw_acceleration, integrate):  # fmt: skip
+    """:func:`cascade_step` as the entry :class:`Cascade` calls: its arrays as parts of one buffer
+    at the offsets ``at`` (a :class:`BufferParts` as a plain tuple), the state and the reference
+    as plain tuples and floats. Plain arguments because a compiled call types each argument from
+    Python: a tuple in C, a named tuple through Python (microseconds a call); one buffer because
+    each array argument is converted on its own. Returns the step as the autopilot reads it, a
+    :class:`CascadeOutput` (built here: one record boxed per call)."""
+    buf = borrowed(buf)  # the caller's for the call: its parts are passed on without counting
+    a = BufferParts(at[0], at[1], at[2], at[3], at[4], at[5], at[6], at[7], at[8])
+    memory = CascadeMemory(
+        buf[a.numbers : a.translational_gains], buf[a.translational_gains : a.translational_state],
+        buf[a.translational_state : a.rotational_gains], buf[a.rotational_gains : a.rotational_state],
+        buf[a.rotational_state : a.filter_state], buf[a.filter_state : a.given], buf[a.given : a.out],
+    )  # fmt: skip
+    state = StateEstimate(position, velocity, euler, euler_rates)
+    reference = Reference(ref_position, ref_velocity, ref_acceleration, yaw, yaw_rate, yaw_acceleration)
+    out = buf[a.out : a.end]
+    o = cascade_step(translational, rotational, memory, state, reference, integrate, out)
+    return CascadeOutput(o.thrust, o.torque_euler, o.torque_body, (out[0], out[1], out[2], out[3]),
+                         (out[4], out[5], out[6], out[7]), o.euler_ref, o.euler_rate_ref, o.roll_pitch_raw,
+                         o.acceleration_cmd)  # fmt: skip
+
+
+class AttitudeReference(NamedTuple):
+    """What the rotational law tracks: eta_d, eta_d', eta_d'' (ZYX Euler, paper frames)."""
+
+    euler_rad: Vector3
+    euler_rates_rad_s: Vector3
+    euler_accelerations_rad_s2: Vector3
 
 
 def law_context(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> LawContext:
@@ -253,6 +263,7 @@ class Cascade:
         sizes = (CASCADE_NUMBERS.size, len(packed.gt), len(self.translational.STATE), len(packed.gr),
                  len(self.rotational.STATE), cf.S_SIZE, GIVEN.size, OUT_SIZE)  # fmt: skip
         self._at = BufferParts(*(int(v) for v in np.cumsum((0, *sizes))))
+        self._at_tuple = tuple(self._at)  # (the entry's argument: a plain tuple, see buffered_step)
         self.buffer = np.zeros(self._at.end)
         self.K[:], self.gt[:], self.gr[:] = packed.K, packed.gt, packed.gr
         self._last: tuple[Vector3, Vector3] | None = None  # (eta, eta') of the latest step: for retune
@@ -323,10 +334,9 @@ class Cascade:
 
         A law that raises or gives a non-finite output raises :class:`ControllerFailure`.
         """
-        given = self.given
         overridden = roll_pitch is not None or attitude is not None or thrust_n is not None
         if overridden:
-            flags = 0
+            given, flags = self.given, 0
             if roll_pitch is not None:
                 flags += OVERRIDE_ROLL_PITCH
                 given[GIVEN.roll_pitch : GIVEN.roll_pitch + 2] = roll_pitch
@@ -338,20 +348,21 @@ class Cascade:
                 given[GIVEN.thrust] = thrust_n
             given[GIVEN.flags] = flags
         elif self._overridden:
-            given[GIVEN.flags] = 0.0
+            self.given[GIVEN.flags] = 0.0
         self._overridden = overridden
         try:
-            o = self._step(self.buffer, self._at, state, ref, integrate)
+            o = self._step(
+                self.buffer, self._at_tuple, state.position_m, state.velocity_m_s, state.euler_rad,
+                state.euler_rates_rad_s, ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2, ref.yaw_rad,
+                ref.yaw_rate_rad_s, ref.yaw_acceleration_rad_s2, integrate,
+            )
         except Exception as error:  # noqa: BLE001 - a law (maybe a user's) failed: the failsafe acts
             raise ControllerFailure(f"controller {self.name}: {type(error).__name__}: {error}") from error
-        if not output_finite(o):
-            raise ControllerFailure(f"{non_finite_output(self.name)} (U1 {o.thrust}, tau {o.torque_body})")
+        if not output_finite(o.thrust_n, o.torque_body_n_m):
+            reason = f"{non_finite_output(self.name)} (U1 {o.thrust_n}, tau {o.torque_body_n_m})"
+            raise ControllerFailure(reason)
         self._last = (state.euler_rad, state.euler_rates_rad_s)
-        out = self.out.tolist()  # the normalised commands, then the rotor speeds (allocation.OUT_SIZE)
-        return CascadeOutput(
-            o.thrust, o.torque_euler, o.torque_body, tuple(out[0:4]), tuple(out[4:8]), o.euler_ref,
-            o.euler_rate_ref, o.roll_pitch_raw, o.acceleration_cmd,
-        )  # fmt: skip
+        return o
 
     def law_states(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
         """The laws' states now, named (``translational.<name>``, ``rotational.<name>``), for logs."""
@@ -405,8 +416,7 @@ def _entry(cascade: Cascade):
     if compiling() and not getattr(step, "_quadsitl_warm", False):
         z3, up = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
         try:
-            hover, at_rest = StateEstimate(up, z3, z3, z3), Reference(up, z3, z3, 0.0, 0.0, 0.0)
-            step(cascade.buffer.copy(), cascade._at, hover, at_rest, True)
+            step(cascade.buffer.copy(), cascade._at_tuple, up, z3, z3, z3, up, z3, z3, 0.0, 0.0, 0.0, True)
         except Exception as error:  # numba's typing errors: a law it cannot compile
             laws = f"{cascade.translational.NAME} + {cascade.rotational.NAME}"
             raise ConfigError(not_compiled(laws, error)) from error

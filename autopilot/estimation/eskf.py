@@ -487,7 +487,7 @@ class ErrorStateEkf:
         (:func:`.aiding.fuse_frame`, one compiled call); the filter must be initialised (before,
         each sensor's own method holds its samples for the alignment)."""
         self._entries.fuse_frame(self._F, self.P, self._ring, self._stats, self._windows, self._A, float(t),
-                                 frame_aiding)  # fmt: skip
+                                 tuple(frame_aiding))  # fmt: skip
 
     def fuse_vision(self, pose: VisionPose) -> None:
         """Motion capture / vision position and yaw, and its velocity when it has one (EKF2_EV_CTRL
@@ -634,8 +634,8 @@ class FilterEntries(NamedTuple):
 def filter_kernels() -> FilterEntries:
     """The kernels themselves (what Python runs where nothing compiles)."""
     arithmetic = ("predict", "prior_variances", "joseph_update")
-    module = {name: kernels for name in arithmetic} | {"fuse_frame": aiding}
-    return FilterEntries(*(getattr(module.get(name, fk), name) for name in FilterEntries._fields))
+    own = {name: getattr(kernels, name) for name in arithmetic} | {"fuse_frame": aiding.fuse_frame_fields}
+    return FilterEntries(*(own.get(name) or getattr(fk, name) for name in FilterEntries._fields))
 
 
 @functools.cache
@@ -661,7 +661,7 @@ def filter_entries() -> FilterEntries:
         entries.fuse_mag(F, P, ring, stats, windows, A, 0.002, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
         entries.fuse_vision(F, P, ring, stats, windows, A, 0.002, z3, 0.0, 0.01, 0.01)
         entries.fuse_vision_velocity(F, P, ring, stats, windows, A, 0.002, z3, 0.01)
-        entries.fuse_frame(F, P, ring, stats, windows, A, 0.002, aiding.NO_AIDING)
+        entries.fuse_frame(F, P, ring, stats, windows, A, 0.002, tuple(aiding.NO_AIDING))
         entries.not_converged(F, P, A)
         for entry in entries:
             freeze(entry)

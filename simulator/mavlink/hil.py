@@ -43,6 +43,7 @@ Integer fields are clamped to their wire range so that a wild state cannot crash
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -50,9 +51,10 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
+from quadcommon.kernel import compiled, compiling, freeze
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
-from quadcommon.wire_values import float_field, gps_values, odometry_values, vector_field, vision_values
+from quadcommon.wire_values import frame_float_fields, gps_values, vision_values
 
 from ..battery import BatteryReading
 from ..dynamics.plant import TruthState
@@ -80,6 +82,7 @@ class HilFrameEncoder:
 
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = home
+        self._float_fields = _frame_float_fields()
         self.seq = 0
         ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
         z3 = (0.0, 0.0, 0.0)
@@ -171,11 +174,14 @@ class HilFrameEncoder:
             updated &= ~FIELDS_GYRO
         v[self._s_updated] = updated
         baro = readings.baro
+        force, rate, field, pressure_altitude, odometry = self._float_fields(
+            truth.position_m, truth.velocity_m_s, truth.quaternion, truth.body_rates_rad_s,
+            readings.imu.specific_force_m_s2, readings.imu.angular_rate_rad_s, readings.magnetic_field_gauss,
+            baro.pressure_altitude_m,
+        )
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]], v[i[12]]) = (
-            time_usec, *vector_field(readings.imu.specific_force_m_s2),
-            *vector_field(readings.imu.angular_rate_rad_s), *vector_field(readings.magnetic_field_gauss),
-            baro.pressure_hpa, float_field(baro.pressure_altitude_m), baro.temperature_c,
+            time_usec, *force, *rate, *field, baro.pressure_hpa, pressure_altitude, baro.temperature_c,
         )  # fmt: skip
 
         lat, lon, alt = frames.ned_to_geodetic(pos_ned[0], pos_ned[1], pos_ned[2], self.home)
@@ -195,9 +201,7 @@ class HilFrameEncoder:
         )  # fmt: skip
 
         v, i = self._odometry.values, self._o
-        o_position, o_velocity, o_q, o_rates = odometry_values(
-            truth.position_m, truth.velocity_m_s, truth.quaternion, truth.body_rates_rad_s
-        )
+        o_position, o_velocity, o_q, o_rates = odometry
         p, w, r = o_position, o_velocity, o_rates
         if not math.isfinite(p[0] + p[1] + p[2] + w[0] + w[1] + w[2] + r[0] + r[1] + r[2]):
             raise OverflowError("the state is past the range of ODOMETRY's float32 fields")
@@ -265,6 +269,19 @@ class HilFrameEncoder:
         fields = gps_values(reading.position_m, reading.velocity_m_s, reading.eph_m, reading.epv_m, self.home)
         (v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]], v[i[10]]) = fields
         v[i[0]], v[i[11]] = time_usec, reading.satellites_visible
+
+
+@functools.cache
+def _frame_float_fields():
+    """The frame's float fields' entry (:func:`quadcommon.wire_values.frame_float_fields`),
+    compiled (or loaded from numba's cache) and run once at start, then frozen: a flight never
+    waits for a compilation."""
+    entry = compiled(frame_float_fields)
+    if compiling():
+        z3 = (0.0, 0.0, 0.0)
+        entry(z3, z3, (1.0, 0.0, 0.0, 0.0), z3, z3, z3, z3, 0.0)
+        freeze(entry)
+    return entry
 
 
 def _slots(encoder: FastEncoder, *names: str) -> tuple[int, ...]:

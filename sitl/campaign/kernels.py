@@ -517,7 +517,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         # -- failures end the run at this sample --
         if not (math.isfinite(pos[0]) and math.isfinite(pos[1]) and math.isfinite(pos[2])):
             fail = FAIL_NONFINITE
-        elif not output_finite(o):  # a finite state in, a non-finite wrench out: the law's
+        elif not output_finite(o.thrust, o.torque_body):  # finite state in, non-finite wrench out: the law's
             fail = FAIL_CONTROLLER
         elif err > max_pos_err:
             fail = FAIL_POSITION

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from quadcommon.kernel import compiled, kernel
-from quadcommon.layout import Field, column_names, describe, fields_of, layout
+from quadcommon.layout import Field, column_names, describe, fields_of, layout, values
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -60,3 +60,11 @@ def test_compiled_code_reads_the_generated_offsets():
     entry = compiled(read_and_write)
     assert entry(memory) == 15
     assert memory[7] == 3.0 + 0.0  # home's third element (3) plus dt (0)
+
+
+def test_values_are_ordered_by_the_layout_and_checked_by_name():
+    assert values(SETTINGS, final=(7, 8, 9), dt=0.5, home=[1, 2, 3]) == (0.5, 1.0, 2.0, 3.0, 7.0, 8.0, 9.0)
+    with pytest.raises(ValueError, match=r"unknown fields \['dtt'\], missing fields \['dt'\]"):
+        values(SETTINGS, dtt=0.5, home=(1, 2, 3), final=(1, 2, 3))
+    with pytest.raises(ValueError, match="home: 2 values for 3"):
+        values(SETTINGS, dt=0.5, home=(1, 2), final=(1, 2, 3))
