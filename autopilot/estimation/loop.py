@@ -47,6 +47,12 @@ STATUS_EVERY = 25  # frames between two status() refreshes (50 ms at 500 Hz)
 CONVERGED_HOLD_S = 2.0  # "converged" held this long (filter time) before the vehicle may arm
 
 
+def _brings_aiding(samples: SensorSamples) -> bool:
+    """Whether a frame delivered a magnetometer, barometer, GNSS or vision sample."""
+    return not (samples.mag_gauss is None and samples.baro_height_m is None and samples.gps is None
+                and samples.vision is None)  # fmt: skip
+
+
 class EstimatorLoop:
     def __init__(self, params: EstimatorParams, dt_s: float, gravity_m_s2: float = 9.81) -> None:
         self.ekf = ErrorStateEkf(params, gravity_m_s2=gravity_m_s2)
@@ -87,7 +93,8 @@ class EstimatorLoop:
             return
         ekf, t = self.ekf, self._last_t
         if ekf.initialised:  # the frame's aiding in PX4's order, one compiled call (.aiding)
-            ekf.fuse_frame(t, aiding_of(samples))
+            if _brings_aiding(samples):  # (most frames at 500 Hz bring none: no call)
+                ekf.fuse_frame(t, aiding_of(samples))
         else:  # each sensor's own method holds what the alignment waits for
             self._hold_for_alignment(samples, t)
         if self._external is not None:

@@ -19,6 +19,9 @@ Nothing here is a second copy of an equation: :func:`simulate` calls
   Dryden wind drawn beforehand by the project's own generator;
 * the cascade (:func:`autopilot.control.cascade.cascade_step`) with the run's two laws: what the
   autopilot flies per frame;
+* on the estimate, the sensors' frame (:func:`simulator.sensors.frame.sensor_frame`), the
+  filter's prediction and a frame's aiding fused in PX4's order
+  (:func:`autopilot.estimation.aiding.fuse_frame`), as the autopilot's estimator loop calls them;
 * the wire (switch ``SETTINGS.wire``): what ODOMETRY, HIL_SENSOR, HIL_GPS,
   VISION_POSITION_ESTIMATE and HIL_ACTUATOR_CONTROLS carry, by the simulator's encoders and the
   autopilot's decoders themselves (:mod:`quadcommon.wire_values`: the float32 fields, the scaled
