@@ -95,7 +95,7 @@ from .mavlink.params import ParamService
 from .mavlink.shell import MavlinkShell
 from .mavlink.signing import Signing, SigningOptions
 from .mavlink.validation import RefusalNotices, check_command, reference_problem
-from .mavlink.vehicle_commands import VehicleCommands
+from .mavlink.vehicle_commands import CommandContext, VehicleCommands
 from .mavlink.vision_in import ExternalVision
 from .mission.service import MissionService
 from .params.definitions import (
@@ -285,7 +285,10 @@ class AutopilotCore:
             self.params, self._request_failure, lambda: self.estimator is not None, self.refusals,
             self.statustext,
         )  # fmt: skip
-        self.vehicle_commands = VehicleCommands(self)
+        self.vehicle_commands = VehicleCommands(CommandContext(
+            self.commander, lambda: self.sim_time, lambda: self.status, self.params, self.refusals,
+            self.failure_injection, setup.sitl.home, setup.build, self.system_id,
+        ))  # fmt: skip
         self.vehicle_commands.register(self.commands)
         self.signing = Signing(setup.signing, self.encoder, self.links, self.statustext,
                                lambda: self.commander.armed, self.system_id, log, setup.params_file,

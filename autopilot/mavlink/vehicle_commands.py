@@ -12,19 +12,21 @@ signing ground station refuses one older than the frame before).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from quadcommon import frames
+from quadcommon.build_info import BuildInfo
 
+from ..commander.commander import Commander
 from ..commander.modes import FlightMode
 from ..guidance.orbit import OrbitRequest
+from ..params.store import ParameterStore
 from . import telemetry
 from .codec import mavlink as m
 from .commands import CommandDispatcher, CommandRequest
+from .failure_injection import FailureInjection
 from .validation import FORCE_MAGIC, INT32_MAX, reference_problem
-
-if TYPE_CHECKING:
-    from ..core import AutopilotCore
 
 REPOSITION_FRAMES = {  # COMMAND_INT frame -> altitude relative to home?
     m.MAV_FRAME_GLOBAL: False,
@@ -47,14 +49,32 @@ CAPABILITIES = (
 Result = tuple[int, str]
 
 
+@dataclass(frozen=True)
+class CommandContext:
+    """What the vehicle's commands reach: the commander and the few things beside it they read,
+    not the core that holds them."""
+
+    commander: Commander
+    now: Callable[[], float]  # simulation time (s)
+    status: Callable[[], telemetry.VehicleStatus]  # the vehicle's state as telemetry reports it
+    params: ParameterStore
+    refuse: Callable[[str], None]  # a refusal's STATUSTEXT (rate-limited per reason)
+    failure_injection: FailureInjection
+    home: tuple[float, float, float]  # geodetic home (lat deg, lon deg, alt m AMSL)
+    build: BuildInfo
+    system_id: int
+
+
 class VehicleCommands:
-    def __init__(self, core: AutopilotCore) -> None:
-        self.core = core
+    """The vehicle's MAV_CMD handlers (module docstring), on a :class:`CommandContext`."""
+
+    def __init__(self, context: CommandContext) -> None:
+        self.context = context
         self.after_ack = None  # the message a command asked for (pymavlink), sent after its ACK
 
     def register(self, commands: CommandDispatcher) -> None:
-        c = self.core.commander
-        sim_time = lambda: self.core.sim_time  # noqa: E731
+        c = self.context.commander
+        sim_time = self.context.now
         commands.register(m.MAV_CMD_COMPONENT_ARM_DISARM, self.arm_disarm)
         commands.register(m.MAV_CMD_NAV_TAKEOFF, self.takeoff)
         commands.register(m.MAV_CMD_NAV_LAND, lambda r: c.land(sim_time()))
@@ -78,13 +98,13 @@ class VehicleCommands:
         """MAV_CMD_INJECT_FAILURE (PX4's): param1 FAILURE_UNIT, param2 FAILURE_TYPE, param3 the
         instance (0 or NaN: all), validated as bytes; param4 (this vehicle's) the effectiveness a
         motor's ``wrong`` leaves it; :mod:`.failure_injection` answers it."""
-        return self.core.failure_injection.command(int(r.params[0]), int(r.params[1]), r.params[2],
+        return self.context.failure_injection.command(int(r.params[0]), int(r.params[1]), r.params[2],
                                                    r.params[3])  # fmt: skip
 
     def arm_disarm(self, r: CommandRequest) -> Result:
         # MAVSDK sends param2 = NaN ("unset") with a plain arm; only 21196 means force.
         force = r.params[1] == FORCE_MAGIC
-        commander, t = self.core.commander, self.core.sim_time
+        commander, t = self.context.commander, self.context.now()
         if r.params[0] == 1.0:  # MAV_BOOL, validated: 0 or 1
             return commander.arm(t, force)
         return commander.disarm(t, force)
@@ -96,13 +116,13 @@ class VehicleCommands:
         a height above home instead: that is what ArduPilot-style clients (MAVProxy's ``takeoff
         5``) send.
         """
-        core = self.core
-        commander, t = core.commander, core.sim_time
+        ctx = self.context
+        commander, t = ctx.commander, ctx.now()
         altitude = r.params[6]
         if not math.isfinite(altitude) or altitude == 0.0:
             return commander.takeoff(t, None)
         home_z = commander.home[2] if commander.home else 0.0
-        home_amsl = core.setup.sitl.home[2] + home_z
+        home_amsl = ctx.home[2] + home_z
         if altitude >= home_amsl - UNDERGROUND_MARGIN_M:
             return commander.takeoff(t, altitude - home_amsl)
         return commander.takeoff(t, altitude)
@@ -113,8 +133,8 @@ class VehicleCommands:
         COMMAND_INT: keep), param7 altitude (NaN: keep). COMMAND_LONG and COMMAND_INT in the global
         frames (AMSL or relative to home); anything else, out of range, too far (NAV_REF_MAX_DIST) or
         outside the geofence is DENIED with the reason."""
-        core = self.core
-        commander = core.commander
+        ctx = self.context
+        commander = ctx.commander
         p = r.params
         if r.frame is None:
             relative, lat, lon = False, p[4], p[5]
@@ -133,7 +153,7 @@ class VehicleCommands:
             return self._refuse("reposition refused: no position")
         ref = commander.last_reference
         here = ref.position_m if ref is not None else state.position_m
-        origin = core.setup.sitl.home
+        origin = ctx.home
         if math.isnan(lat):
             x, y = here[0], here[1]
         else:
@@ -144,14 +164,14 @@ class VehicleCommands:
         else:
             z = commander.home[2] + altitude if relative else altitude - origin[2]
         target = (x, y, z)
-        problem = reference_problem(target, commander.home, core.params.values)
+        problem = reference_problem(target, commander.home, ctx.params.values)
         problem = problem or commander.target_problem(target)
         if problem:
             return self._refuse(f"reposition refused: {problem}")
         speed = None if math.isnan(p[0]) or p[0] <= 0.0 else p[0]
         yaw = None if math.isnan(p[3]) else frames.wrap_pi(frames.yaw_from_ned(math.radians(p[3])))
         change_mode = not math.isnan(p[1]) and bool(int(p[1]) & m.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE)
-        return commander.reposition(core.sim_time, target, speed, yaw, change_mode)
+        return commander.reposition(ctx.now(), target, speed, yaw, change_mode)
 
     def orbit(self, r: CommandRequest) -> Result:
         """MAV_CMD_DO_ORBIT (PX4's reading): param1 radius (sign: > 0 clockwise), param2 tangential
@@ -160,8 +180,8 @@ class VehicleCommands:
         vehicle is). COMMAND_LONG, or COMMAND_INT in a global frame (param7 AMSL whatever the frame,
         as PX4 reads it); a centre out of range, too far (NAV_REF_MAX_DIST) or outside the geofence
         is DENIED with the reason; the radius's and the speed's limits are the commander's."""
-        core = self.core
-        commander = core.commander
+        ctx = self.context
+        commander = ctx.commander
         p = r.params
         if r.frame is None:
             lat, lon = p[4], p[5]
@@ -176,7 +196,7 @@ class VehicleCommands:
             return self._refuse(f"orbit refused: centre latitude {lat:g}, longitude {lon:g} invalid")
         if commander.state is None or commander.home is None:
             return self._refuse("orbit refused: no position")
-        origin = core.setup.sitl.home
+        origin = ctx.home
         centre_xy = centre_z = None
         if not math.isnan(lat):
             x, y, _ = frames.vector_from_ned(frames.geodetic_to_ned(lat, lon, origin[2], origin))
@@ -186,7 +206,7 @@ class VehicleCommands:
         if centre_xy is not None or centre_z is not None:
             here = commander.state.position_m
             centre = (*(centre_xy or here[:2]), here[2] if centre_z is None else centre_z)
-            problem = reference_problem(centre, commander.home, core.params.values)
+            problem = reference_problem(centre, commander.home, ctx.params.values)
             problem = problem or commander.target_problem(centre)
             if problem:
                 return self._refuse(f"orbit refused: centre {problem}")
@@ -197,11 +217,11 @@ class VehicleCommands:
             centre_xy,
             centre_z,
         )
-        return commander.orbit_command(core.sim_time, request)
+        return commander.orbit_command(ctx.now(), request)
 
     def _refuse(self, reason: str) -> Result:
         """DENIED, with the reason as a STATUSTEXT too (rate-limited per reason)."""
-        self.core.refusals(reason)
+        self.context.refuse(reason)
         return m.MAV_RESULT_DENIED, reason
 
     def set_mode(self, r: CommandRequest) -> Result:
@@ -210,7 +230,7 @@ class VehicleCommands:
         mode = FlightMode.from_px4(main, sub)
         if mode is None:
             return m.MAV_RESULT_DENIED, f"mode main={main} sub={sub} not available"
-        return self.core.commander.set_mode(self.core.sim_time, mode)
+        return self.context.commander.set_mode(self.context.now(), mode)
 
     def message_interval(self, r: CommandRequest) -> Result:
         """SET_MESSAGE_INTERVAL for one of the link's streams (telemetry.STREAMS): granted at the
@@ -218,17 +238,17 @@ class VehicleCommands:
         frame; GET_MESSAGE_INTERVAL says what was granted); DENIED with the reason for a message
         the vehicle does not send or cannot build here (telemetry.stream_refusal)."""
         msg_id = int(r.params[0])
-        refusal = telemetry.stream_refusal(msg_id, self.core.status) if r.params[1] >= 0 else None
-        if refusal is None and r.link.streams.set_interval_us(msg_id, r.params[1], self.core.sim_time):
+        refusal = telemetry.stream_refusal(msg_id, self.context.status()) if r.params[1] >= 0 else None
+        if refusal is None and r.link.streams.set_interval_us(msg_id, r.params[1], self.context.now()):
             return m.MAV_RESULT_ACCEPTED, ""
-        return m.MAV_RESULT_DENIED, refusal or telemetry.stream_refusal(msg_id, self.core.status) or ""
+        return m.MAV_RESULT_DENIED, refusal or telemetry.stream_refusal(msg_id, self.context.status()) or ""
 
     def get_message_interval(self, r: CommandRequest) -> Result:
         """MESSAGE_INTERVAL after the ACK: the interval granted on this link (µs), -1 off, 0 a
         message the vehicle does not stream or cannot build as configured (ESTIMATOR_STATUS on the
         truth)."""
         msg_id = int(r.params[0])
-        refused = telemetry.stream_refusal(msg_id, self.core.status) is not None
+        refused = telemetry.stream_refusal(msg_id, self.context.status()) is not None
         interval = 0 if refused else r.link.streams.interval_us(msg_id)
         self.after_ack = m.MAVLink_message_interval_message(msg_id, interval)
         return m.MAV_RESULT_ACCEPTED, ""
@@ -238,11 +258,11 @@ class VehicleCommands:
         UNSUPPORTED for one the vehicle does not send, DENIED with the reason for one it cannot
         build here (telemetry.stream_refusal) and, as PX4, for one it has nothing for yet (no state
         yet, no battery report yet...)."""
-        core = self.core
+        ctx = self.context
         if msg_id == m.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             msg = self.autopilot_version()
         else:
-            status = core.status
+            status = ctx.status()
             if msg_id not in telemetry.STREAMS:
                 return m.MAV_RESULT_UNSUPPORTED, telemetry.stream_refusal(msg_id, status) or ""
             refusal = telemetry.stream_refusal(msg_id, status)
@@ -258,8 +278,8 @@ class VehicleCommands:
         """AUTOPILOT_VERSION as PX4 fills it: the build's version and git commit
         (:mod:`quadcommon.build_info`) as the flight software's and the middleware's, no OS or
         board version, a unique id per vehicle."""
-        build = self.core.setup.build
-        uid = 0x5153000000000000 | self.core.system_id
+        build = self.context.build
+        uid = 0x5153000000000000 | self.context.system_id
         version, commit = build.flight_sw_version, build.custom_version
         return m.MAVLink_autopilot_version_message(
             CAPABILITIES, version, version, 0, 0, commit, commit, [0] * 8, 0, 0, uid, [0] * 18
