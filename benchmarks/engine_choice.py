@@ -44,7 +44,7 @@ DIST_TORQUE = (0.1, 0.1, 0.1)
 def _numba_loops():
     from numba import njit
 
-    from simulator.dynamics.equations import U_SIZE, U_TAU, U_THRUST, U_TORQUE, rk4_step
+    from simulator.dynamics.equations import INPUTS, rk4_step
 
     @njit(cache=True)
     def per_run(state0, P, u, steps, runs):
@@ -71,10 +71,10 @@ def _numba_loops():
         return S[:, 2].sum()
 
     def inputs():
-        u = np.zeros(U_SIZE)
-        u[U_THRUST] = THRUST
-        u[U_TAU : U_TAU + 3] = TORQUE
-        u[U_TORQUE : U_TORQUE + 3] = DIST_TORQUE
+        u = np.zeros(INPUTS.size)
+        u[INPUTS.thrust] = THRUST
+        u[INPUTS.torque : INPUTS.torque + 3] = TORQUE
+        u[INPUTS.disturbance_torque : INPUTS.disturbance_torque + 3] = DIST_TORQUE
         return u
 
     return per_run, batch, inputs

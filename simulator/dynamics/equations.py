@@ -13,11 +13,11 @@ to G, body frame), and where O's motion is read out: ``p_O = p_G - R r_G``,
 
 Numbers sit in flat float vectors (what numba takes): ``P`` the plant's parameters (layout
 ``P_*``, :meth:`~.plant.Plant.parameters`), ``u`` the inputs held over one physics step (layout
-``U_*``); a frame's steps take their inputs as consecutive ``U_SIZE`` blocks of one vector.
+``U_*``); a frame's steps take their inputs as consecutive ``INPUTS.size`` blocks of one vector.
 ``work`` holds the state (row 0) and the RK4 scratch (rows 1-5).
 
 Actuator faults live in ``P`` too (a flight's own copy): per rotor its effectiveness (thrust and
-reaction torque scaled), and what its speed does (``P_FAULT_MODE``: follows the command, stuck at
+reaction torque scaled), and what its speed does (``PLANT.fault_mode``: follows the command, stuck at
 the speed it had, or off: the motor unpowered, the rotor spinning down with its time constant).
 :func:`set_rotor_fault` sets them, at a command (the simulator's failure injection) or at a time
 (:func:`rotor_faults_due` over a table of rows ``RF_*`` sorted by onset: a scenario's or a
@@ -29,8 +29,10 @@ the faults act on the shares, and the shares make the applied wrench (:func:`fau
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from quadcommon.kernel import borrowed, kernel
+from quadcommon.layout import Field, layout
 from quadcommon.rigid_body import (
     body_torque_from_euler_torque_sincos,
     cross,
@@ -46,48 +48,78 @@ from quadcommon.rigid_body import (
 from quadcommon.rotor_geometry import squared_speed_parts, wrench_from_squares
 
 # -- parameters P (read off a simulator.dynamics.plant.Plant) -------------------------------------
-P_MASS = 0
-P_GRAVITY = 1
-P_J = 2  # 9 entries, inertia tensor about G, row-major
-P_K = 11  # 9 entries, its inverse
-P_COM = 20  # 3: r_G, CoM from O in the body frame
-P_DRAG = 23  # 3: linear drag per world axis
-P_B = 26  # thrust coefficient b
-P_D = 27  # reaction-torque coefficient d
-P_ARM = 28
-P_JR = 29  # rotor inertia
-P_TAU = 30  # rotor time constant
-P_WMIN = 31  # rotor speed limits
-P_WMAX = 32
-P_THRUST_MAX = 33
-P_TORQUE_MAX = 34  # 3
-P_ROTOR_MODE = 37  # 1.0 when actuation = "rotors"
-P_GROUND = 38  # 1.0 when ground contact is on
-P_HAS_DRAG = 39  # 1.0 when any drag coefficient is non-zero
-P_GROUND_REACH = 40  # |r_G| + 1 mm: with G higher than this above z = 0, O is in the air
-P_EFFECTIVENESS = 41  # 4: each rotor's effectiveness in [0, 1] (1 healthy)
-P_FAULT_MODE = 45  # 4: what each rotor's speed does (ROTOR_FOLLOWS, ROTOR_STUCK, ROTOR_OFF)
-P_HELD_SHARE = 49  # 4: wrench vehicle: a stuck rotor's share of the wrench (Omega^2, rad^2/s^2)
-P_FAULTED = 53  # 1.0 while any rotor is not healthy (the healthy path skips the fault terms)
-P_SIZE = 54
+PLANT = layout("PlantParameters", (
+    Field("mass", unit="kg"),
+    Field("gravity", unit="m/s^2"),
+    Field("inertia", 9, unit="kg m^2", doc="inertia tensor about G, row-major"),
+    Field("inertia_inverse", 9, unit="1/(kg m^2)", doc="its inverse, row-major"),
+    Field("com", 3, unit="m", doc="r_G: the centre of mass from O, body frame"),
+    Field("drag", 3, unit="N s/m", doc="linear drag per world axis"),
+    Field("thrust_coefficient", unit="N s^2", doc="b"),
+    Field("torque_coefficient", unit="N m s^2", doc="d: reaction torque"),
+    Field("arm", unit="m"),
+    Field("rotor_inertia", unit="kg m^2"),
+    Field("rotor_time_constant", unit="s"),
+    Field("rotor_speed_min", unit="rad/s"),
+    Field("rotor_speed_max", unit="rad/s"),
+    Field("thrust_max", unit="N"),
+    Field("torque_max", 3, unit="N m"),
+    Field("rotor_mode", doc="1.0 when actuation = 'rotors'"),
+    Field("ground", doc="1.0 when ground contact is on"),
+    Field("has_drag", doc="1.0 when any drag coefficient is non-zero"),
+    Field("ground_reach", unit="m", doc="|r_G| + 1 mm: with G higher than this above z = 0, O is in the air"),
+    Field("effectiveness", 4, doc="each rotor's effectiveness in [0, 1] (1 healthy)"),
+    Field("fault_mode", 4, doc="what each rotor's speed does (ROTOR_FOLLOWS, ROTOR_STUCK, ROTOR_OFF)"),
+    Field("held_share", 4, unit="rad^2/s^2", doc="wrench vehicle: a stuck rotor's share of the wrench"),
+    Field("faulted", doc="1.0 while any rotor is not healthy (the healthy path skips the fault terms)"),
+))  # fmt: skip
 
 # -- actuator faults ----------------------------------------------------------------------------
 ROTOR_FOLLOWS = 0.0  # the rotor follows its command (healthy, or at a loss of effectiveness)
 ROTOR_STUCK = 1.0  # its speed is held where it was (wrench vehicle: its share of the wrench)
 ROTOR_OFF = 2.0  # the motor is unpowered: no thrust, no torque, the rotor spins down
-# A row of a fault table: from ONSET (s) rotor ROTOR (0-3, the plant's numbering) has MODE and
-# EFFECTIVENESS. Rows sorted by onset.
-RF_ONSET, RF_ROTOR, RF_MODE, RF_EFFECTIVENESS = 0, 1, 2, 3
-RF_SIZE = 4
+# A row of a fault table (rows sorted by onset).
+ROTOR_FAULT = layout("RotorFault", (
+    Field("onset", unit="s", doc="from this time on ..."),
+    Field("rotor", doc="... rotor 0-3 (the plant's numbering) ..."),
+    Field("mode", doc="... has this mode (ROTOR_*) ..."),
+    Field("effectiveness", doc="... and this effectiveness in [0, 1]"),
+))  # fmt: skip
 
 # -- inputs u held over a physics step (zero-order hold) ------------------------------------------
-U_THRUST = 0  # wrench: U1 (saturated by Plant.set_wrench)
-U_TAU = 1  # 3: body torque about O
-U_ROTOR = 4  # 4: rotor speed commands (clipped by Plant.set_rotor_commands)
-U_FORCE = 8  # 3: disturbance force, world, at G
-U_TORQUE = 11  # 3: disturbance torque on the Euler coordinates (eq. 4)
-U_WIND = 14  # 3: wind, world
-U_SIZE = 17
+INPUTS = layout("PlantInputs", (
+    Field("thrust", unit="N", doc="wrench: U1 (saturated by Plant.set_wrench)"),
+    Field("torque", 3, unit="N m", doc="body torque about O"),
+    Field("rotor_commands", 4, unit="rad/s", doc="commanded (clipped by Plant.set_rotor_commands)"),
+    Field("disturbance_force", 3, unit="N", doc="world, at G"),
+    Field("disturbance_torque", 3, unit="N m", doc="on the Euler coordinates (eq. 4)"),
+    Field("wind", 3, unit="m/s", doc="world"),
+))  # fmt: skip
+
+class TruthState(NamedTuple):
+    """Ground truth of the plant at one instant, in the paper's frames (SI units).
+
+    Position, velocity and acceleration are those of the geometric centre O (where the vehicle's
+    position is defined), in the world frame. ``specific_force_body`` is what an ideal
+    accelerometer at O reads (body frame, m/s^2; +g upward at rest).
+
+    (A NamedTuple, immutable: built once per frame, where a frozen dataclass's 12 fields cost
+    1.4 us against 0.5 us.)
+    """
+
+    position_m: tuple[float, float, float]
+    velocity_m_s: tuple[float, float, float]
+    acceleration_m_s2: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float]  # (w, x, y, z), body to world
+    euler_rad: tuple[float, float, float]
+    body_rates_rad_s: tuple[float, float, float]
+    euler_rates_rad_s: tuple[float, float, float]
+    specific_force_body_m_s2: tuple[float, float, float]
+    rotor_speeds_rad_s: tuple[float, float, float, float]
+    thrust_n: float  # applied (saturated) total thrust
+    torque_body_n_m: tuple[float, float, float]  # applied (saturated) control torque about O, body frame
+    on_ground: bool
+
 
 # Ground contact: O within this of z = 0, and G's vertical speed below it, is resting.
 ON_GROUND_TOLERANCE = 1e-6
@@ -102,7 +134,7 @@ def matrix_at(P, i: int) -> tuple:
 @kernel
 def com_offset(P) -> tuple:
     """``r_G``."""
-    return (P[P_COM], P[P_COM + 1], P[P_COM + 2])
+    return (P[PLANT.com], P[PLANT.com + 1], P[PLANT.com + 2])
 
 
 @kernel
@@ -110,11 +142,12 @@ def rotor_wrench(P, s) -> tuple:
     """``(thrust, torque about O)`` of the rotors at the speeds of ``s``, + configuration (1 front,
     2 right, 3 rear, 4 left; 1 and 3 counter-clockwise seen from above): thrust ``e b Omega^2``,
     reaction torque ``e d Omega^2`` each (:func:`~quadcommon.rotor_geometry.wrench_from_squares`),
-    ``e`` the rotor's effectiveness (``P_EFFECTIVENESS``: 1 healthy, 0 a motor that is off)."""
-    e = P_EFFECTIVENESS
+    ``e`` the rotor's effectiveness (``PLANT.effectiveness``: 1 healthy, 0 a motor that is off)."""
+    e = PLANT.effectiveness
     s1, s2 = P[e] * s[13] * s[13], P[e + 1] * s[14] * s[14]
     s3, s4 = P[e + 2] * s[15] * s[15], P[e + 3] * s[16] * s[16]
-    thrust, tx, ty, tz = wrench_from_squares(P[P_B], P[P_D], P[P_ARM], s1, s2, s3, s4)
+    b, d, arm = P[PLANT.thrust_coefficient], P[PLANT.torque_coefficient], P[PLANT.arm]
+    thrust, tx, ty, tz = wrench_from_squares(b, d, arm, s1, s2, s3, s4)
     return thrust, (tx, ty, tz)
 
 
@@ -122,7 +155,7 @@ def rotor_wrench(P, s) -> tuple:
 def rotor_acceleration(P, i: int, command: float, speed: float, tau: float) -> float:
     """``dOmega/dt`` of rotor ``i`` (0-3): first order towards its command, held when stuck,
     towards 0 when off."""
-    mode = P[P_FAULT_MODE + i]
+    mode = P[PLANT.fault_mode + i]
     if mode == ROTOR_STUCK:
         return 0.0
     if mode == ROTOR_OFF:
@@ -134,12 +167,12 @@ def rotor_acceleration(P, i: int, command: float, speed: float, tau: float) -> f
 def faulted_share(P, i: int, share: float) -> float:
     """Rotor ``i``'s share of the wrench (Omega^2) with its fault: scaled by its effectiveness,
     held when stuck, none when off."""
-    mode = P[P_FAULT_MODE + i]
+    mode = P[PLANT.fault_mode + i]
     if mode == ROTOR_STUCK:
-        return P[P_HELD_SHARE + i]
+        return P[PLANT.held_share + i]
     if mode == ROTOR_OFF:
         return 0.0
-    return P[P_EFFECTIVENESS + i] * share
+    return P[PLANT.effectiveness + i] * share
 
 
 @kernel
@@ -148,7 +181,7 @@ def faulted_wrench(P, thrust: float, tx: float, ty: float, tz: float) -> tuple:
     the four rotors' shares by the allocation's equation, each share as its rotor's fault leaves
     it (:func:`faulted_share`), summed back. The ideal actuator's rotors have no limits of their
     own: a share may be of either sign (the wrench's limits act on the command, before)."""
-    b, d, arm = P[P_B], P[P_D], P[P_ARM]
+    b, d, arm = P[PLANT.thrust_coefficient], P[PLANT.torque_coefficient], P[PLANT.arm]
     base, rp, yaw = squared_speed_parts(b, d, arm, thrust, tx, ty, tz)
     s1 = faulted_share(P, 0, base + rp[0] + yaw[0])
     s2 = faulted_share(P, 1, base + rp[1] + yaw[1])
@@ -162,25 +195,26 @@ def set_rotor_fault(P, rotor: int, mode: float, effectiveness: float, u) -> None
     """From now on rotor ``rotor`` (0-3) has ``mode`` (``ROTOR_*``) and ``effectiveness``; a new
     fault replaces the rotor's last one (``ROTOR_FOLLOWS`` at 1 is healthy again). A rotor stuck
     on the wrench vehicle holds its share of the wrench held in ``u`` (the command in force)."""
-    P[P_EFFECTIVENESS + rotor] = effectiveness
-    P[P_FAULT_MODE + rotor] = mode
-    if mode == ROTOR_STUCK and P[P_ROTOR_MODE] == 0.0:
-        base, rp, yaw = squared_speed_parts(P[P_B], P[P_D], P[P_ARM], u[U_THRUST], u[U_TAU], u[U_TAU + 1],
-                                            u[U_TAU + 2])  # fmt: skip
-        P[P_HELD_SHARE + rotor] = base + rp[rotor] + yaw[rotor]
+    P[PLANT.effectiveness + rotor] = effectiveness
+    P[PLANT.fault_mode + rotor] = mode
+    if mode == ROTOR_STUCK and P[PLANT.rotor_mode] == 0.0:
+        b, d, arm, tau = P[PLANT.thrust_coefficient], P[PLANT.torque_coefficient], P[PLANT.arm], INPUTS.torque
+        base, rp, yaw = squared_speed_parts(b, d, arm, u[INPUTS.thrust], u[tau], u[tau + 1], u[tau + 2])
+        P[PLANT.held_share + rotor] = base + rp[rotor] + yaw[rotor]
     faulted = 0.0
     for i in range(4):
-        if P[P_EFFECTIVENESS + i] != 1.0 or P[P_FAULT_MODE + i] != ROTOR_FOLLOWS:
+        if P[PLANT.effectiveness + i] != 1.0 or P[PLANT.fault_mode + i] != ROTOR_FOLLOWS:
             faulted = 1.0
-    P[P_FAULTED] = faulted
+    P[PLANT.faulted] = faulted
 
 
 @kernel
 def rotor_faults_due(P, faults, row: int, t: float, u) -> int:
     """The rows of the fault table ``faults`` (``RF_*``, sorted by onset) from ``row`` on whose
     onset is at or before ``t``, set (:func:`set_rotor_fault`); returns the next row to wait for."""
-    while row < faults.shape[0] and faults[row, RF_ONSET] <= t:
-        set_rotor_fault(P, int(faults[row, RF_ROTOR]), faults[row, RF_MODE], faults[row, RF_EFFECTIVENESS], u)
+    while row < faults.shape[0] and faults[row, ROTOR_FAULT.onset] <= t:
+        rotor, mode = int(faults[row, ROTOR_FAULT.rotor]), faults[row, ROTOR_FAULT.mode]
+        set_rotor_fault(P, rotor, mode, faults[row, ROTOR_FAULT.effectiveness], u)
         row += 1
     return row
 
@@ -197,28 +231,29 @@ def derivative(s, out, P, u) -> None:
 
     # Actuators: thrust along body z at O and the control torque (body).
     dw1 = dw2 = dw3 = dw4 = 0.0
-    if P[P_ROTOR_MODE] != 0.0:
+    if P[PLANT.rotor_mode] != 0.0:
         # First-order speed dynamics towards the command; gyroscopic moment J_r Omega_r (q, -p, 0)
         # with Omega_r = -Omega1 + Omega2 - Omega3 + Omega4, and the reaction to rotor
         # acceleration J_r dOmega_r/dt about z.
-        tau_r, Jr = P[P_TAU], P[P_JR]
-        if P[P_FAULTED] == 0.0:
-            dw1, dw2 = (u[U_ROTOR] - s[13]) / tau_r, (u[U_ROTOR + 1] - s[14]) / tau_r
-            dw3, dw4 = (u[U_ROTOR + 2] - s[15]) / tau_r, (u[U_ROTOR + 3] - s[16]) / tau_r
+        tau_r, Jr = P[PLANT.rotor_time_constant], P[PLANT.rotor_inertia]
+        if P[PLANT.faulted] == 0.0:
+            c = INPUTS.rotor_commands
+            dw1, dw2 = (u[c] - s[13]) / tau_r, (u[c + 1] - s[14]) / tau_r
+            dw3, dw4 = (u[c + 2] - s[15]) / tau_r, (u[c + 3] - s[16]) / tau_r
         else:
-            dw1 = rotor_acceleration(P, 0, u[U_ROTOR], s[13], tau_r)
-            dw2 = rotor_acceleration(P, 1, u[U_ROTOR + 1], s[14], tau_r)
-            dw3 = rotor_acceleration(P, 2, u[U_ROTOR + 2], s[15], tau_r)
-            dw4 = rotor_acceleration(P, 3, u[U_ROTOR + 3], s[16], tau_r)
+            dw1 = rotor_acceleration(P, 0, u[INPUTS.rotor_commands], s[13], tau_r)
+            dw2 = rotor_acceleration(P, 1, u[INPUTS.rotor_commands + 1], s[14], tau_r)
+            dw3 = rotor_acceleration(P, 2, u[INPUTS.rotor_commands + 2], s[15], tau_r)
+            dw4 = rotor_acceleration(P, 3, u[INPUTS.rotor_commands + 3], s[16], tau_r)
         thrust, (tx, ty, tz) = rotor_wrench(P, s)
         omega_r = -s[13] + s[14] - s[15] + s[16]
         tx += Jr * omega_r * w[1]
         ty -= Jr * omega_r * w[0]
         tz += Jr * (-dw1 + dw2 - dw3 + dw4)
     else:
-        thrust = u[U_THRUST]
-        tx, ty, tz = u[U_TAU], u[U_TAU + 1], u[U_TAU + 2]
-        if P[P_FAULTED] != 0.0:
+        thrust = u[INPUTS.thrust]
+        tx, ty, tz = u[INPUTS.torque], u[INPUTS.torque + 1], u[INPUTS.torque + 2]
+        if P[PLANT.faulted] != 0.0:
             thrust, tx, ty, tz = faulted_wrench(P, thrust, tx, ty, tz)
 
     # Moment of the thrust (applied at O) about G: (-r_G) x (0, 0, T).
@@ -227,7 +262,8 @@ def derivative(s, out, P, u) -> None:
 
     # Torque disturbance on the Euler coordinates -> body couple W_eta^-T tau_eta (eq. 4), with
     # the sines and cosines of phi and theta read off R.
-    tau_eta = (u[U_TORQUE], u[U_TORQUE + 1], u[U_TORQUE + 2])
+    t = INPUTS.disturbance_torque
+    tau_eta = (u[t], u[t + 1], u[t + 2])
     if tau_eta[0] != 0.0 or tau_eta[1] != 0.0 or tau_eta[2] != 0.0:
         st = -R[2][0]
         ct = math.sqrt(max(1.0 - st * st, 1e-12))
@@ -237,28 +273,28 @@ def derivative(s, out, P, u) -> None:
         tz += dz
 
     # Euler's equation about G: J w_dot = tau - w x J w.
-    gyro = cross(w, matrix_times(matrix_at(P, P_J), w))
-    dw = matrix_times(matrix_at(P, P_K), (tx - gyro[0], ty - gyro[1], tz - gyro[2]))
+    gyro = cross(w, matrix_times(matrix_at(P, PLANT.inertia), w))
+    dw = matrix_times(matrix_at(P, PLANT.inertia_inverse), (tx - gyro[0], ty - gyro[1], tz - gyro[2]))
 
     # Newton's equation for G (world frame): thrust, the disturbance force, drag on O's
     # air-relative velocity v_G - R (w x r_G) - wind.
-    fx = u[U_FORCE] + R[0][2] * thrust
-    fy = u[U_FORCE + 1] + R[1][2] * thrust
-    fz = u[U_FORCE + 2] + R[2][2] * thrust
-    if P[P_HAS_DRAG] != 0.0:
+    fx = u[INPUTS.disturbance_force] + R[0][2] * thrust
+    fy = u[INPUTS.disturbance_force + 1] + R[1][2] * thrust
+    fz = u[INPUTS.disturbance_force + 2] + R[2][2] * thrust
+    if P[PLANT.has_drag] != 0.0:
         Rc = matrix_times(R, cross(w, r_G))
-        fx -= P[P_DRAG] * (v[0] - Rc[0] - u[U_WIND])
-        fy -= P[P_DRAG + 1] * (v[1] - Rc[1] - u[U_WIND + 1])
-        fz -= P[P_DRAG + 2] * (v[2] - Rc[2] - u[U_WIND + 2])
-    m = P[P_MASS]
+        fx -= P[PLANT.drag] * (v[0] - Rc[0] - u[INPUTS.wind])
+        fy -= P[PLANT.drag + 1] * (v[1] - Rc[1] - u[INPUTS.wind + 1])
+        fz -= P[PLANT.drag + 2] * (v[2] - Rc[2] - u[INPUTS.wind + 2])
+    m = P[PLANT.mass]
 
     # Attitude kinematics q_dot = 1/2 q (x) (0, w).
     dq = quaternion_multiply(q, (0.0, w[0], w[1], w[2]))
     out[0], out[1], out[2] = v[0], v[1], v[2]
-    out[3], out[4], out[5] = fx / m, fy / m, fz / m - P[P_GRAVITY]
+    out[3], out[4], out[5] = fx / m, fy / m, fz / m - P[PLANT.gravity]
     out[6], out[7], out[8], out[9] = 0.5 * dq[0], 0.5 * dq[1], 0.5 * dq[2], 0.5 * dq[3]
     out[10], out[11], out[12] = dw[0], dw[1], dw[2]
-    if P[P_ROTOR_MODE] != 0.0:
+    if P[PLANT.rotor_mode] != 0.0:
         out[13], out[14], out[15], out[16] = dw1, dw2, dw3, dw4
 
 
@@ -314,28 +350,26 @@ def ground_contact(s, P) -> bool:
 def on_ground(s, P) -> bool:
     """Resting on the ground: contact on, O at z = 0 and G not moving vertically."""
     _, p_O, _ = motion_of_O(s, P)
-    return P[P_GROUND] != 0.0 and p_O[2] <= ON_GROUND_TOLERANCE and abs(s[5]) < ON_GROUND_TOLERANCE
+    return P[PLANT.ground] != 0.0 and p_O[2] <= ON_GROUND_TOLERANCE and abs(s[5]) < ON_GROUND_TOLERANCE
 
 
 @kernel
 def physics_steps(work, P, inputs, h: float) -> None:
-    """One RK4 step of ``h`` of ``work[0]`` per ``U_SIZE`` block of ``inputs`` (held over that
+    """One RK4 step of ``h`` of ``work[0]`` per ``INPUTS.size`` block of ``inputs`` (held over that
     step), the ground contact resolved after each."""
     work, P, inputs = borrowed(work), borrowed(P), borrowed(inputs)  # the caller's: no counting per call
     s = work[0]
-    for j in range(len(inputs) // U_SIZE):
-        rk4_step(s, work[1], work[2], work[3], work[4], work[5], P, inputs[j * U_SIZE : (j + 1) * U_SIZE], h)
-        if P[P_GROUND] != 0.0 and s[2] < P[P_GROUND_REACH]:  # O may be at the ground only then
+    for j in range(len(inputs) // INPUTS.size):
+        u = inputs[j * INPUTS.size : (j + 1) * INPUTS.size]
+        rk4_step(s, work[1], work[2], work[3], work[4], work[5], P, u, h)
+        if P[PLANT.ground] != 0.0 and s[2] < P[PLANT.ground_reach]:  # O may be at the ground only then
             ground_contact(s, P)
 
 
 @kernel
 def truth(work, P, u) -> tuple:
-    """The ground truth of ``work[0]`` with the inputs ``u`` held, in the fields' order of
-    :class:`~.plant.TruthState`: O's position, velocity and acceleration, quaternion, Euler angles,
-    body rates, Euler rates, specific force at O (body), rotor speeds, applied thrust and control
-    torque about O, on the ground. One derivative evaluation (into ``work[1]``) gives the
-    accelerations."""
+    """The ground truth of ``work[0]`` with the inputs ``u`` held, a :class:`TruthState`. One
+    derivative evaluation (into ``work[1]``) gives the accelerations."""
     work, P, u = borrowed(work), borrowed(P), borrowed(u)  # the caller's: no counting per call
     s, ds = work[0], work[1]
     derivative(s, ds, P, u)
@@ -351,20 +385,21 @@ def truth(work, P, u) -> tuple:
         a2 = cross(w, cross(w, r_G))
         Ra = matrix_times(R, (a1[0] + a2[0], a1[1] + a2[1], a1[2] + a2[2]))
         a_O = (ds[3] - Ra[0], ds[4] - Ra[1], ds[5] - Ra[2])
-    specific = transpose_times(R, (a_O[0], a_O[1], a_O[2] + P[P_GRAVITY]))
+    specific = transpose_times(R, (a_O[0], a_O[1], a_O[2] + P[PLANT.gravity]))
     euler = euler_from_rotation(R)
     euler_rates = euler_rates_from_body_rates(euler[0], euler[1], w)
-    if P[P_ROTOR_MODE] != 0.0:
+    if P[PLANT.rotor_mode] != 0.0:
         speeds = (s[13], s[14], s[15], s[16])
         thrust, torque = rotor_wrench(P, s)
     else:
         speeds = (0.0, 0.0, 0.0, 0.0)
-        thrust, torque = u[U_THRUST], (u[U_TAU], u[U_TAU + 1], u[U_TAU + 2])
-        if P[P_FAULTED] != 0.0:
-            thrust, tx, ty, tz = faulted_wrench(P, u[U_THRUST], u[U_TAU], u[U_TAU + 1], u[U_TAU + 2])
+        thrust, torque = u[INPUTS.thrust], (u[INPUTS.torque], u[INPUTS.torque + 1], u[INPUTS.torque + 2])
+        if P[PLANT.faulted] != 0.0:
+            tau = INPUTS.torque
+            thrust, tx, ty, tz = faulted_wrench(P, u[INPUTS.thrust], u[tau], u[tau + 1], u[tau + 2])
             torque = (tx, ty, tz)
-    return (p_O, v_O, a_O, (s[6], s[7], s[8], s[9]), euler, w, euler_rates, specific, speeds, thrust, torque,
-            grounded)  # fmt: skip
+    q = (s[6], s[7], s[8], s[9])
+    return TruthState(p_O, v_O, a_O, q, euler, w, euler_rates, specific, speeds, thrust, torque, grounded)
 
 
 @kernel
@@ -372,4 +407,4 @@ def advance(work, P, inputs, h: float) -> tuple:
     """A lockstep frame's physics in one call: :func:`physics_steps`, then the :func:`truth` of the
     result with the last step's inputs held."""
     physics_steps(work, P, inputs, h)
-    return truth(work, P, inputs[len(inputs) - U_SIZE :])
+    return truth(work, P, inputs[len(inputs) - INPUTS.size :])

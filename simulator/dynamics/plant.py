@@ -51,24 +51,18 @@ import numpy as np
 from quadcommon.config import VehicleConfig
 from quadcommon.failures import ALL_INSTANCES, PX4_MOTOR_POSITIONS, ActuatorFault, Type
 from quadcommon.kernel import compiled, compiling, freeze, vector
+from quadcommon.layout import fields_of, values
 from quadcommon.rigid_body import cross, matrix_times, quaternion_from_euler, rotation_from_quaternion, solve3
 
 from . import equations
-from .equations import (
-    P_EFFECTIVENESS,
-    P_FAULT_MODE,
-    P_SIZE,
-    RF_SIZE,
+from .equations import (  # noqa: F401 - TruthState is part of this module's interface
+    INPUTS,
+    PLANT,
+    ROTOR_FAULT,
     ROTOR_FOLLOWS,
     ROTOR_OFF,
     ROTOR_STUCK,
-    U_FORCE,
-    U_ROTOR,
-    U_SIZE,
-    U_TAU,
-    U_THRUST,
-    U_TORQUE,
-    U_WIND,
+    TruthState,
 )
 
 Vector3 = tuple[float, float, float]
@@ -132,7 +126,7 @@ def fault_table(faults: Iterable[ScheduledFault]) -> np.ndarray:
     """``ScheduledFault`` rows as the kernels' table (layout ``RF_*`` of :mod:`.equations`), sorted
     by onset (faults at the same time keep their order)."""
     rows = sorted(faults, key=lambda f: f.onset_s)
-    table = np.zeros((len(rows), RF_SIZE))
+    table = np.zeros((len(rows), ROTOR_FAULT.size))
     for i, f in enumerate(rows):
         table[i] = (f.onset_s, f.rotor - 1, f.fault.mode, f.fault.effectiveness)
     return table
@@ -153,31 +147,6 @@ def schedule(faults: Iterable[ActuatorFault]) -> tuple[list[tuple[ActuatorFault,
 def motors_of(instance: int) -> tuple[int, ...]:
     """PX4's motors a failure's instance addresses: the one, or all four for 0."""
     return (1, 2, 3, 4) if instance == ALL_INSTANCES else (instance,)
-
-
-class TruthState(NamedTuple):
-    """Ground truth of the plant at one instant, in the paper's frames (SI units).
-
-    Position, velocity and acceleration are those of the geometric centre O (where the vehicle's
-    position is defined), in the world frame. ``specific_force_body`` is what an ideal
-    accelerometer at O reads (body frame, m/s^2; +g upward at rest).
-
-    (A NamedTuple, immutable: built once per frame, where a frozen dataclass's 12 fields cost
-    1.4 us against 0.5 us.)
-    """
-
-    position_m: Vector3
-    velocity_m_s: Vector3
-    acceleration_m_s2: Vector3
-    quaternion: tuple[float, float, float, float]  # (w, x, y, z), body to world
-    euler_rad: Vector3
-    body_rates_rad_s: Vector3
-    euler_rates_rad_s: Vector3
-    specific_force_body_m_s2: Vector3
-    rotor_speeds_rad_s: tuple[float, float, float, float]
-    thrust_n: float  # applied (saturated) total thrust
-    torque_body_n_m: Vector3  # applied (saturated) control torque about O, body frame
-    on_ground: bool
 
 
 class Plant:
@@ -221,31 +190,27 @@ class Plant:
         self._P = vector(self.parameters())
         self._work = _rows(6, len(self.state))
         self._s = self._work[0]
-        self._u = vector(U_SIZE)
-        self._frame_u = vector(2 * U_SIZE)
+        self._u = vector(INPUTS.size)
+        self._frame_u = vector(2 * INPUTS.size)
         self._entries = _entries()
         self._truth: tuple[list[float], TruthState] | None = None  # (the state it is of, truth)
 
     def parameters(self) -> list[float]:
-        """The parameter vector the equations read (layout ``P_*`` of :mod:`.equations`)."""
-        P = [0.0] * P_SIZE
-        P[equations.P_MASS] = self.mass
-        P[equations.P_GRAVITY] = self.gravity
-        P[equations.P_J : equations.P_J + 9] = [x for row in self.inertia for x in row]
-        P[equations.P_K : equations.P_K + 9] = [x for row in self.inertia_inv for x in row]
-        P[equations.P_COM : equations.P_COM + 3] = self.com_offset
-        P[equations.P_DRAG : equations.P_DRAG + 3] = self.drag
-        P[equations.P_B], P[equations.P_D], P[equations.P_ARM] = self.b, self.d, self.arm
-        P[equations.P_JR], P[equations.P_TAU] = self.rotor_inertia, self.rotor_tau
-        P[equations.P_WMIN], P[equations.P_WMAX] = self.speed_min, self.speed_max
-        P[equations.P_THRUST_MAX] = self.thrust_max
-        P[equations.P_TORQUE_MAX : equations.P_TORQUE_MAX + 3] = self.torque_max
-        P[equations.P_ROTOR_MODE] = 1.0 if self.rotor_mode else 0.0
-        P[equations.P_GROUND] = 1.0 if self.ground_contact else 0.0
-        P[equations.P_HAS_DRAG] = 1.0 if any(k != 0.0 for k in self.drag) else 0.0
-        P[equations.P_GROUND_REACH] = math.sqrt(sum(c * c for c in self.com_offset)) + 1e-3
-        P[equations.P_EFFECTIVENESS : equations.P_EFFECTIVENESS + 4] = [1.0, 1.0, 1.0, 1.0]  # healthy
-        return [float(x) for x in P]
+        """The parameter vector the equations read (:data:`.equations.PLANT`, filled by name; healthy
+        rotors)."""
+        return list(values(
+            PLANT, mass=self.mass, gravity=self.gravity, inertia=[x for row in self.inertia for x in row],
+            inertia_inverse=[x for row in self.inertia_inv for x in row], com=self.com_offset,
+            drag=self.drag, thrust_coefficient=self.b, torque_coefficient=self.d, arm=self.arm,
+            rotor_inertia=self.rotor_inertia, rotor_time_constant=self.rotor_tau,
+            rotor_speed_min=self.speed_min, rotor_speed_max=self.speed_max, thrust_max=self.thrust_max,
+            torque_max=self.torque_max, rotor_mode=1.0 if self.rotor_mode else 0.0,
+            ground=1.0 if self.ground_contact else 0.0,
+            has_drag=1.0 if any(k != 0.0 for k in self.drag) else 0.0,
+            ground_reach=math.sqrt(sum(c * c for c in self.com_offset)) + 1e-3,
+            effectiveness=(1.0, 1.0, 1.0, 1.0), fault_mode=(0.0, 0.0, 0.0, 0.0),
+            held_share=(0.0, 0.0, 0.0, 0.0), faulted=0.0,
+        ))  # fmt: skip
 
     # -- actuator faults --------------------------------------------------------------------------
     def set_rotor_fault(self, rotor: int, fault: RotorFault) -> None:
@@ -266,12 +231,12 @@ class Plant:
     def rotor_fault(self, rotor: int) -> RotorFault:
         """Rotor ``rotor``'s (1-4) fault now (:data:`HEALTHY` when it has none)."""
         P = self._P
-        return RotorFault(float(P[P_FAULT_MODE + rotor - 1]), float(P[P_EFFECTIVENESS + rotor - 1]))
+        return RotorFault(float(P[PLANT.fault_mode + rotor - 1]), float(P[PLANT.effectiveness + rotor - 1]))
 
     @property
     def rotor_effectiveness(self) -> list[float]:
         """Rotors 1-4: each one's effectiveness (1 healthy, 0 off)."""
-        return [float(e) for e in self._P[P_EFFECTIVENESS : P_EFFECTIVENESS + 4]]
+        return [float(e) for e in self._P[PLANT.effectiveness : PLANT.effectiveness + 4]]
 
     # -- state ------------------------------------------------------------------------------------
     def reset(
@@ -345,14 +310,14 @@ class Plant:
         held = self._held_actuators()
         inputs: list[float] = []
         for force, torque, wind in disturbances:
-            inputs += (*held, *force, *torque, *wind)  # the U_* layout, one block per step
+            inputs += (*held, *force, *torque, *wind)  # the INPUTS layout, one block per step
         frame_u = self._frame_u
         if len(frame_u) != len(inputs):
             frame_u = self._frame_u = vector(len(inputs))
         frame_u[:] = inputs  # one conversion
         s = self._s
         s[:] = self.state
-        truth = TruthState._make(self._entries.advance(self._work, self._P, frame_u, self.dt))
+        truth = (self._entries.advance(self._work, self._P, frame_u, self.dt))
         self.force_dist, self.torque_dist_eta, self.wind = disturbances[-1]
         self.state = _listed(s)
         self._truth = (list(self.state), truth)  # a copy: an in-place change of the state misses it
@@ -367,13 +332,13 @@ class Plant:
         self.state = _listed(s)
 
     def _held_actuators(self) -> tuple[float, ...]:
-        """The actuator part of the held inputs (``U_THRUST`` .. ``U_FORCE``)."""
+        """The actuator part of the held inputs (``INPUTS.thrust`` .. ``INPUTS.disturbance_force``)."""
         if self.rotor_mode:
             return (0.0, 0.0, 0.0, 0.0, *self.rotor_cmd)
         return (self.thrust_cmd, *self.torque_cmd, 0.0, 0.0, 0.0, 0.0)
 
     def _held_inputs(self) -> tuple[float, ...]:
-        """The inputs held over the next step (layout ``U_*``)."""
+        """The inputs held over the next step (:data:`.equations.INPUTS`)."""
         return (*self._held_actuators(), *self.force_dist, *self.torque_dist_eta, *self.wind)
 
     # -- read-out ---------------------------------------------------------------------------------
@@ -396,7 +361,7 @@ class Plant:
         state = list(self.state)  # a copy: an in-place change of the state misses the cache
         self._s[:] = state
         self._u[:] = self._held_inputs()
-        truth = TruthState._make(self._entries.truth(self._work, self._P, self._u))
+        truth = self._entries.truth(self._work, self._P, self._u)
         self._truth = (state, truth)
         return truth
 
@@ -427,8 +392,8 @@ def _entries() -> _Entries:
     entries = _Entries(*(compiled(getattr(equations, name)) for name in _Entries._fields))
     if compiling():
         n = 17
-        work, P, u = np.zeros((6, n)), np.zeros(P_SIZE), np.zeros(U_SIZE)
-        work[0, 6] = P[equations.P_MASS] = P[equations.P_TAU] = 1.0
+        work, P, u = np.zeros((6, n)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
+        work[0, 6] = P[equations.PLANT.mass] = P[equations.PLANT.rotor_time_constant] = 1.0
         entries.physics_steps(work, P, u, 0.001)
         entries.advance(work, P, u, 0.001)
         entries.truth(work, P, u)
@@ -437,8 +402,11 @@ def _entries() -> _Entries:
     return entries
 
 
-# The held-input block, in the order of _held_inputs.
-assert (U_THRUST, U_TAU, U_ROTOR, U_FORCE, U_TORQUE, U_WIND, U_SIZE) == (0, 1, 4, 8, 11, 14, 17)
+# _held_inputs and advance build the held-input blocks in the layout's field order (a tuple per
+# frame is cheaper than writes by offset): the order they build, named, is the layout's.
+assert [f.name for f in fields_of(INPUTS)] == [
+    "thrust", "torque", "rotor_commands", "disturbance_force", "disturbance_torque", "wind"
+]  # fmt: skip
 
 
 # -- small helpers (off the equations) ------------------------------------------------------------

@@ -27,7 +27,7 @@ from quadcommon.config import Rates, TrajectorySpec, VehicleConfig, load_sitl
 from quadcommon.kernel import compiled
 from quadcommon.layout import column_names
 from quadcommon.trajectories import trajectory_from_spec
-from simulator.dynamics.equations import RF_SIZE
+from simulator.dynamics.equations import ROTOR_FAULT
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
 from simulator.environment.gust_profile import GustProfile, element_rows
@@ -54,7 +54,7 @@ def failure_reason(code: int, controller: str) -> str:
         return registry.non_finite_output(controller)
     return FAILURE_NAMES[code]
 
-NO_FAULTS = np.zeros((0, RF_SIZE))  # a flight without rotor faults (writable: the type numba compiled)
+NO_FAULTS = np.zeros((0, ROTOR_FAULT.size))  # a flight without rotor faults (writable: numba's type)
 
 # Names of the metric columns: the kernel's metrics row as its layout names them (kernels.METRICS).
 METRIC_COLUMNS = column_names(lay.METRICS)

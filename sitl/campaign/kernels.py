@@ -74,20 +74,8 @@ from quadcommon.wire_values import (
     vision_values,
 )
 from simulator.dynamics.equations import (  # the plant (what the simulator steps)
-    P_GROUND,
-    P_GROUND_REACH,
-    P_ROTOR_MODE,
-    P_THRUST_MAX,
-    P_TORQUE_MAX,
-    P_WMAX,
-    P_WMIN,
-    U_FORCE,
-    U_ROTOR,
-    U_SIZE,
-    U_TAU,
-    U_THRUST,
-    U_TORQUE,
-    U_WIND,
+    INPUTS,
+    PLANT,
     ground_contact,
     motion_of_O,
     rk4_step,
@@ -187,9 +175,10 @@ def disturbance(t, u, steps, ramps, gusts, dryden, S):
         wx += dryden[n, 0]
         wy += dryden[n, 1]
         wz += dryden[n, 2]
-    u[U_FORCE], u[U_FORCE + 1], u[U_FORCE + 2] = f0, f1, f2
-    u[U_TORQUE], u[U_TORQUE + 1], u[U_TORQUE + 2] = t0, t1, t2
-    u[U_WIND], u[U_WIND + 1], u[U_WIND + 2] = wx, wy, wz
+    f, tq, w = INPUTS.disturbance_force, INPUTS.disturbance_torque, INPUTS.wind
+    u[f], u[f + 1], u[f + 2] = f0, f1, f2
+    u[tq], u[tq + 1], u[tq + 2] = t0, t1, t2
+    u[w], u[w + 1], u[w + 2] = wx, wy, wz
 
 
 # -------------------------------------------------------------------------------------------------
@@ -223,7 +212,8 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
     for i in range(s.shape[0]):
         plant_work[0, i] = s[i]
     tr = truth(plant_work, P, u)  # what the simulator's frame reads: the inputs held since the last step
-    sensors.sensor_frame(rng, sensor, sensor_figures, faults, t, tr[7], tr[5], tr[3], tr[0], tr[1], tr[4][2],
+    sensors.sensor_frame(rng, sensor, sensor_figures, faults, t, tr.specific_force_body_m_s2,
+                         tr.body_rates_rad_s, tr.quaternion, tr.position_m, tr.velocity_m_s, tr.euler_rad[2],
                          delivered)  # fmt: skip
     t_autopilot = frame_time_s(frame_time_usec(k, S[SETTINGS.usec_per_frame])) if wire else t
     force = _through_fields(
@@ -382,7 +372,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     max_pos_err, max_tilt = S[SETTINGS.max_position_error], S[SETTINGS.max_tilt]
     airborne_h = S[SETTINGS.airborne_height]
     do_record = record.shape[0] > 0
-    rotor_plant = P[P_ROTOR_MODE] != 0.0
+    rotor_plant = P[PLANT.rotor_mode] != 0.0
     flight_P = P.copy()  # the flight's own: its faults set into it (P is shared by a run's flights)
 
     # The arrays the loop passes to kernels, borrowed (quadcommon.kernel.borrowed: no reference
@@ -393,9 +383,10 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     dryden, faults_tab = borrowed(dryden), borrowed(faults_tab)
     next_fault = 0
     fault_onset, recovery_bound = S[SETTINGS.fault_onset], S[SETTINGS.recovery_bound]
-    ground_reach = P[P_GROUND_REACH]
+    ground_reach = P[PLANT.ground_reach]
     n = state0.shape[0]
-    o_u, o_x, o_f, o_c = U_SIZE, U_SIZE + nxt + nxr, U_SIZE + nxt + nxr + FILTER_STATE_SIZE, 6 * n
+    o_u = INPUTS.size
+    o_x, o_f, o_c = o_u + nxt + nxr, o_u + nxt + nxr + FILTER_STATE_SIZE, 6 * n
     work = np.zeros(o_c + OUT_SIZE + o_f + GIVEN.size)
     whole = borrowed(work)
     s, k1, k2 = whole[0:n], whole[n : 2 * n], whole[2 * n : 3 * n]
@@ -407,9 +398,9 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     controls = whole[o_c + o_f : o_c + o_f + OUT_SIZE]
     nothing_given = whole[o_c + o_f + OUT_SIZE :]  # (GIVEN: zeros, the cascade computes every part)
     memory = CascadeMemory(K, gt, xt, gr, xr, filt, nothing_given)
-    plant_thrust_max = P[P_THRUST_MAX]
-    ptm0, ptm1, ptm2 = P[P_TORQUE_MAX], P[P_TORQUE_MAX + 1], P[P_TORQUE_MAX + 2]
-    wmin, wmax = P[P_WMIN], P[P_WMAX]
+    plant_thrust_max = P[PLANT.thrust_max]
+    ptm0, ptm1, ptm2 = P[PLANT.torque_max], P[PLANT.torque_max + 1], P[PLANT.torque_max + 2]
+    wmin, wmax = P[PLANT.rotor_speed_min], P[PLANT.rotor_speed_max]
 
     estimated = S[SETTINGS.estimated] != 0.0
     rng, sensor, sensor_figures, faults, delivered = est[0], est[1], est[2], est[3], est[4]
@@ -476,8 +467,8 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
                 row[RECORD.position_ref + j] = rp[j]
                 row[RECORD.euler + j] = euler[j]
                 row[RECORD.position_estimate + j] = c_pos[j]
-                row[RECORD.disturbance_force + j] = u[U_FORCE + j]
-                row[RECORD.disturbance_torque + j] = u[U_TORQUE + j]
+                row[RECORD.disturbance_force + j] = u[INPUTS.disturbance_force + j]
+                row[RECORD.disturbance_torque + j] = u[INPUTS.disturbance_torque + j]
             e_ref, torque = RECORD.euler_ref, RECORD.torque_euler
             row[e_ref], row[e_ref + 1], row[e_ref + 2] = phi_d, theta_d, yaw
             row[RECORD.thrust] = thrust_a
@@ -545,19 +536,19 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         if wire:
             c0, c1, c2, c3 = float_field(c0), float_field(c1), float_field(c2), float_field(c3)
         if rotor_plant:
-            u[U_ROTOR] = clip(c0 * wmax, wmin, wmax)
-            u[U_ROTOR + 1] = clip(c1 * wmax, wmin, wmax)
-            u[U_ROTOR + 2] = clip(c2 * wmax, wmin, wmax)
-            u[U_ROTOR + 3] = clip(c3 * wmax, wmin, wmax)
+            u[INPUTS.rotor_commands] = clip(c0 * wmax, wmin, wmax)
+            u[INPUTS.rotor_commands + 1] = clip(c1 * wmax, wmin, wmax)
+            u[INPUTS.rotor_commands + 2] = clip(c2 * wmax, wmin, wmax)
+            u[INPUTS.rotor_commands + 3] = clip(c3 * wmax, wmin, wmax)
         else:
-            u[U_THRUST] = clip(c0 * plant_thrust_max, 0.0, plant_thrust_max)
-            u[U_TAU] = clip(c1 * ptm0, -ptm0, ptm0)
-            u[U_TAU + 1] = clip(c2 * ptm1, -ptm1, ptm1)
-            u[U_TAU + 2] = clip(c3 * ptm2, -ptm2, ptm2)
+            u[INPUTS.thrust] = clip(c0 * plant_thrust_max, 0.0, plant_thrust_max)
+            u[INPUTS.torque] = clip(c1 * ptm0, -ptm0, ptm0)
+            u[INPUTS.torque + 1] = clip(c2 * ptm1, -ptm1, ptm1)
+            u[INPUTS.torque + 2] = clip(c3 * ptm2, -ptm2, ptm2)
         for j in range(substeps):
             disturbance(t + j * dt_phys, u, steps_tab, ramps_tab, gusts_tab, dryden, S)
             rk4_step(s, k1, k2, k3, k4, tmp, P, u, dt_phys)
-            if P[P_GROUND] != 0.0 and s[2] < ground_reach:  # O may be at the ground only then
+            if P[PLANT.ground] != 0.0 and s[2] < ground_reach:  # O may be at the ground only then
                 falling = -s[5]
                 if ground_contact(s, P) and airborne:
                     if not touched:

@@ -183,7 +183,7 @@ def test_the_fault_columns_say_what_each_run_survived(tmp_path):
 
 def test_a_healthy_fault_changes_nothing(tmp_path):
     """A drawn "wrong" that keeps all its effectiveness (1.0) flies the healthy run bit for bit:
-    the healthy plant skips the fault terms (P_FAULTED), the paired baseline of a fault study."""
+    the healthy plant skips the fault terms (PLANT.faulted), the paired baseline of a fault study."""
     spec = load_campaign(write(tmp_path))
     sample = sample_run(spec, 0)
     healthy = replace(sample, scenario=replace(sample.scenario, actuator_faults=()))
