@@ -15,11 +15,11 @@ sample per frame at most: a coarse caller skips samples), and the sample is deli
 ``latency`` after the time it is valid for (the first frame whose time reaches it; of two due in
 one frame, the newer). The memory is float arrays laid out by the constants below:
 
-* ``C`` (``C_SIZE``, :func:`config_array`): the sensors' figures;
-* ``S`` (``S_SIZE``, :func:`initial_state`): biases, GNSS errors, held readings, the schedules
+* ``C`` (``FIGURES.size``, :func:`config_array`): the sensors' figures;
+* ``S`` (``STATE.size``, :func:`initial_state`): biases, GNSS errors, held readings, the schedules
   and the queues of readings in flight;
 * ``faults`` (n x ``FAULT_SIZE``): kind, start, duration, value (3) per injected fault;
-* ``out`` (``O_SIZE``): what the frame delivers (a flag per sensor: 1 when it delivered).
+* ``out`` (``DELIVERY.size``): what the frame delivers (a flag per sensor: 1 when it delivered).
 
 Failures (``MAV_CMD_INJECT_FAILURE``'s sensor units, :mod:`quadcommon.failures`) are rows of the
 same fault table: kind :func:`fault_code` of ``"<unit>_<type>"`` (``gps_off``, ``baro_stuck``...),
@@ -44,6 +44,7 @@ import numpy as np
 from quadcommon.atmosphere import isa_altitude_m
 from quadcommon.failures import Type, effect_of_kind
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.rigid_body import Quaternion, Vector3
 from quadcommon.rng import normal, uniform
 
@@ -66,45 +67,47 @@ NO_FIX_ACCURACY = 99.99  # eph, epv and speed accuracy of a "no fix" report
 
 MAG, BARO, GPS, VISION = 0, 1, 2, 3  # the scheduled sensors
 
-# -- C: the sensors' figures ---------------------------------------------------------------------
-C_ACCEL_STD, C_GYRO_STD, C_ACCEL_RW, C_GYRO_RW = 0, 1, 2, 3  # per-sample std; random-walk densities
-C_BARO_DRIFT = 4  # hPa/sqrt(s)
-C_MAG_STD = 5
-C_FIELD = 6  # 3: earth field, world (gauss)
-C_BARO_BIAS, C_BARO_STD, C_HOME_ALTITUDE = 9, 10, 11
-C_GPS_TAU_P, C_GPS_TAU_V = 12, 13
-C_GPS_STD_P = 14  # 3: stationary std of the position errors per axis
-C_GPS_STD_V = 17  # 3
-C_GPS_EPH, C_GPS_EPV, C_GPS_SPEED_ACCURACY, C_GPS_SATELLITES = 20, 21, 22, 23
-C_GPS_ON, C_VISION_ON, C_VISION_STD, C_VISION_YAW_STD = 24, 25, 26, 27
-C_PERIOD = 28  # 4: per scheduled sensor
-C_LATENCY = 32  # 4
-C_SIZE = 36
+# -- the sensors' figures (config_array) ----------------------------------------------------------
+FIGURES = layout("SensorFigures", (
+    Field("accel_std", unit="m/s^2", doc="per-sample std"),
+    Field("gyro_std", unit="rad/s", doc="per-sample std"),
+    Field("accel_random_walk", unit="m/s^2/sqrt(s)"), Field("gyro_random_walk", unit="rad/s/sqrt(s)"),
+    Field("baro_drift", unit="hPa/sqrt(s)"), Field("mag_std", unit="gauss"),
+    Field("field", 3, unit="gauss", doc="earth field, world"),
+    Field("baro_bias", unit="hPa"), Field("baro_std", unit="hPa"), Field("home_altitude", unit="m AMSL"),
+    Field("gps_tau_position", unit="s"), Field("gps_tau_velocity", unit="s"),
+    Field("gps_std_position", 3, unit="m", doc="stationary std of the position errors per axis"),
+    Field("gps_std_velocity", 3, unit="m/s"),
+    Field("gps_eph", unit="m"), Field("gps_epv", unit="m"), Field("gps_speed_accuracy", unit="m/s"),
+    Field("gps_satellites"), Field("gps_on"), Field("vision_on"), Field("vision_std", unit="m"),
+    Field("vision_yaw_std", unit="rad"),
+    Field("period", 4, unit="s", doc="per scheduled sensor"),
+    Field("latency", 4, unit="s", doc="per scheduled sensor"),
+))  # fmt: skip
 
-# -- S: the sensors' state -----------------------------------------------------------------------
-S_ACCEL_BIAS, S_GYRO_BIAS, S_MAG_BIAS = 0, 3, 6
-S_BARO_DRIFT = 9
-S_GPS_POS_ERR, S_GPS_VEL_ERR = 10, 13
-S_T_LAST, S_T_GPS = 16, 17  # NaN: none yet
-S_LAST_FIX = 18  # 3: the last good fix's position
-S_HAS_FIX = 21
-S_HELD_MAG = 22  # 3: the last magnetometer reading (what HIL_SENSOR repeats between samples)
-S_HAS_MAG = 25
-S_HELD_BARO = 26  # 4: time, pressure, pressure altitude, temperature
-S_HAS_BARO = 30
-S_NEXT = 31  # 4: per scheduled sensor, the index of its next sample
+# -- the sensors' state --------------------------------------------------------------------------
 PENDING = 128  # readings in flight per sensor (latency / period: 0.2 s delayed at 500 Hz is 100)
 ITEM = 13  # delivery time + up to 12 floats of reading
 Q_HEAD, Q_COUNT, Q_ITEMS = 0, 1, 2
 QUEUE = 2 + PENDING * ITEM
-S_QUEUES = 35  # 4 queues
-S_READING = S_QUEUES + 4 * QUEUE  # 12: the reading being made (room the frame needs, not state)
 GOOD = 12  # floats of a failing unit's last good sample (a reading's after its time)
-S_GOOD = S_READING + 12  # 6 x GOOD: per failing unit (FAILING), its last good sample
-S_HAS_GOOD = S_GOOD + 6 * GOOD  # 6
-S_SLOW_COUNT = S_HAS_GOOD + 6  # 6: due samples counted by a slow failure
-S_HELD_IMU = S_SLOW_COUNT + 6  # 6: the accelerometer's and the gyro's last delivered sample
-S_SIZE = S_HELD_IMU + 6
+STATE = layout("SensorState", (
+    Field("accel_bias", 3, unit="m/s^2"), Field("gyro_bias", 3, unit="rad/s"),
+    Field("mag_bias", 3, unit="gauss"),
+    Field("baro_drift", unit="hPa"),
+    Field("gps_position_error", 3, unit="m"), Field("gps_velocity_error", 3, unit="m/s"),
+    Field("t_last", unit="s", doc="NaN: none yet"), Field("t_gps", unit="s", doc="NaN: none yet"),
+    Field("last_fix", 3, unit="m", doc="the last good fix's position"), Field("has_fix"),
+    Field("held_mag", 3, unit="gauss", doc="the last magnetometer reading (what HIL_SENSOR repeats)"),
+    Field("has_mag"),
+    Field("held_baro", 4, doc="time, pressure, pressure altitude, temperature"), Field("has_baro"),
+    Field("next_sample", 4, doc="per scheduled sensor, the index of its next sample"),
+    Field("queues", 4 * QUEUE, doc="per scheduled sensor, the readings in flight"),
+    Field("reading", 12, doc="the reading being made (room the frame needs, not state)"),
+    Field("good", 6 * GOOD, doc="per failing unit (FAILING), its last good sample"),
+    Field("has_good", 6), Field("slow_count", 6, doc="due samples counted by a slow failure"),
+    Field("held_imu", 6, doc="the accelerometer's and the gyro's last delivered sample"),
+))  # fmt: skip
 
 # -- faults ---------------------------------------------------------------------------------------
 F_KIND, F_START, F_DURATION, F_VALUE = 0, 1, 2, 3
@@ -119,17 +122,30 @@ WRONG, SLOW = int(Type.wrong), int(Type.slow)
 DELAYED, INTERMITTENT = int(Type.delayed), int(Type.intermittent)
 
 # -- out: one frame's delivery ---------------------------------------------------------------------
-O_FORCE, O_RATE = 0, 3  # the IMU sample
-O_MAG = 6  # fresh flag, time, field (3)
-O_BARO = 11  # fresh flag, time, pressure, pressure altitude, temperature
-O_GPS = 16  # fresh flag, time, position (3), velocity (3), eph, epv, satellites, speed accuracy, fix type
-O_VISION = 29  # fresh flag, time, position (3), yaw, position std, yaw std
-O_HELD_MAG = 37  # 3
-O_HELD_BARO = 40  # 4: time, pressure, pressure altitude, temperature
-O_ACCEL_FRESH, O_GYRO_FRESH = 44, 45  # 1 when the IMU's accelerometer / gyro sampled (else held)
-O_SIZE = 46
-READING_SIZE = (4, 4, 12, 7)  # floats of a reading per scheduled sensor (out's after the flag)
-OUT_AT = (O_MAG, O_BARO, O_GPS, O_VISION)
+DELIVERY = layout("SensorDelivery", (
+    Field("force", 3, unit="m/s^2", doc="the IMU sample: specific force, body"),
+    Field("rate", 3, unit="rad/s", doc="the IMU sample: body rates"),
+    Field("mag_fresh"), Field("mag_time", unit="s"), Field("mag_field", 3, unit="gauss"),
+    Field("baro_fresh"), Field("baro_time", unit="s"), Field("baro_pressure", unit="hPa"),
+    Field("baro_altitude", unit="m AMSL"), Field("baro_temperature", unit="deg C"),
+    Field("gps_fresh"), Field("gps_time", unit="s"), Field("gps_position", 3, unit="m"),
+    Field("gps_velocity", 3, unit="m/s"), Field("gps_eph", unit="m"), Field("gps_epv", unit="m"),
+    Field("gps_satellites"), Field("gps_speed_accuracy", unit="m/s"), Field("gps_fix_type"),
+    Field("vision_fresh"), Field("vision_time", unit="s"), Field("vision_position", 3, unit="m"),
+    Field("vision_yaw", unit="rad"), Field("vision_position_std", unit="m"),
+    Field("vision_yaw_std", unit="rad"), Field("held_mag", 3, unit="gauss"),
+    Field("held_baro", 4, doc="time, pressure, pressure altitude, temperature"),
+    Field("accel_fresh", doc="1 when the IMU's accelerometer sampled (else held)"),
+    Field("gyro_fresh", doc="1 when the IMU's gyro sampled (else held)"),
+))  # fmt: skip
+# Each scheduled sensor's reading sits in the delivery after its fresh flag (time first).
+OUT_AT = (DELIVERY.mag_fresh, DELIVERY.baro_fresh, DELIVERY.gps_fresh, DELIVERY.vision_fresh)
+READING_SIZE = (
+    DELIVERY.baro_fresh - DELIVERY.mag_time,
+    DELIVERY.gps_fresh - DELIVERY.baro_time,
+    DELIVERY.vision_fresh - DELIVERY.gps_time,
+    DELIVERY.held_mag - DELIVERY.vision_time,
+)
 
 
 # =================================================================================================
@@ -140,24 +156,38 @@ def config_array(config: SensorConfig, home_altitude_m: float, imu_rate_hz: floa
     density at ``imu_rate_hz``, the frame rate)."""
     a, g, m, b, gps, v = (config.accelerometer, config.gyroscope, config.magnetometer, config.barometer,
                           config.gps, config.vision)  # fmt: skip
-    C = np.zeros(C_SIZE)
-    C[C_ACCEL_STD] = a.noise_density * math.sqrt(imu_rate_hz)
-    C[C_GYRO_STD] = g.noise_density * math.sqrt(imu_rate_hz)
-    C[C_ACCEL_RW], C[C_GYRO_RW], C[C_BARO_DRIFT] = a.bias_random_walk, g.bias_random_walk, b.drift_hpa_rthz
-    C[C_MAG_STD] = m.noise_std_gauss
-    C[C_FIELD : C_FIELD + 3] = [float(c) for c in m.earth_field_world_gauss]
-    C[C_BARO_BIAS], C[C_BARO_STD], C[C_HOME_ALTITUDE] = b.bias_hpa, b.noise_std_hpa, home_altitude_m
-    C[C_GPS_TAU_P], C[C_GPS_TAU_V] = gps.position_correlation_time_s, gps.velocity_correlation_time_s
+    C = np.zeros(FIGURES.size)
+    C[FIGURES.accel_std] = a.noise_density * math.sqrt(imu_rate_hz)
+    C[FIGURES.gyro_std] = g.noise_density * math.sqrt(imu_rate_hz)
+    C[FIGURES.accel_random_walk], C[FIGURES.gyro_random_walk], C[FIGURES.baro_drift] = (
+        a.bias_random_walk,
+        g.bias_random_walk,
+        b.drift_hpa_rthz,
+    )
+    C[FIGURES.mag_std] = m.noise_std_gauss
+    C[FIGURES.field : FIGURES.field + 3] = [float(c) for c in m.earth_field_world_gauss]
+    C[FIGURES.baro_bias], C[FIGURES.baro_std], C[FIGURES.home_altitude] = (
+        b.bias_hpa,
+        b.noise_std_hpa,
+        home_altitude_m,
+    )
+    C[FIGURES.gps_tau_position], C[FIGURES.gps_tau_velocity] = (
+        gps.position_correlation_time_s,
+        gps.velocity_correlation_time_s,
+    )
     sh, sv, s = gps.horizontal_noise_std_m, gps.vertical_noise_std_m, gps.velocity_noise_std_m_s
-    C[C_GPS_STD_P : C_GPS_STD_P + 3] = (sh, sh, sv)
-    C[C_GPS_STD_V : C_GPS_STD_V + 3] = (s, s, s)
-    C[C_GPS_EPH], C[C_GPS_EPV] = gps.reported_eph_m, gps.reported_epv_m
-    C[C_GPS_SPEED_ACCURACY], C[C_GPS_SATELLITES] = gps.reported_speed_accuracy_m_s, gps.satellites_visible
-    C[C_GPS_ON], C[C_VISION_ON] = float(gps.enabled), float(v.enabled)
-    C[C_VISION_STD], C[C_VISION_YAW_STD] = v.position_noise_std_m, v.yaw_noise_std_rad
+    C[FIGURES.gps_std_position : FIGURES.gps_std_position + 3] = (sh, sh, sv)
+    C[FIGURES.gps_std_velocity : FIGURES.gps_std_velocity + 3] = (s, s, s)
+    C[FIGURES.gps_eph], C[FIGURES.gps_epv] = gps.reported_eph_m, gps.reported_epv_m
+    C[FIGURES.gps_speed_accuracy], C[FIGURES.gps_satellites] = (
+        gps.reported_speed_accuracy_m_s,
+        gps.satellites_visible,
+    )
+    C[FIGURES.gps_on], C[FIGURES.vision_on] = float(gps.enabled), float(v.enabled)
+    C[FIGURES.vision_std], C[FIGURES.vision_yaw_std] = v.position_noise_std_m, v.yaw_noise_std_rad
     for i, model in enumerate((m, b, gps, v)):
-        C[C_PERIOD + i] = 1.0 / model.rate_hz
-        C[C_LATENCY + i] = model.latency_s
+        C[FIGURES.period + i] = 1.0 / model.rate_hz
+        C[FIGURES.latency + i] = model.latency_s
     return C
 
 
@@ -170,7 +200,7 @@ def new_sensors(config: SensorConfig, home_altitude_m: float, imu_rate_hz: float
 
     rng = stream(config.seed)
     C = config_array(config, home_altitude_m, imu_rate_hz)
-    S = np.zeros(S_SIZE)
+    S = np.zeros(STATE.size)
     a, g, m = config.accelerometer, config.gyroscope, config.magnetometer
 
     def f3(v: Any) -> Vector3:
@@ -213,20 +243,24 @@ def initial_state(rng: Any, C: Any, accel_bias: Vector3, gyro_bias: Vector3, mag
         S[i] = 0.0
     n = draw3(rng, accel_bias_std)
     for i in range(3):
-        S[S_ACCEL_BIAS + i] = accel_bias[i] + n[i]
+        S[STATE.accel_bias + i] = accel_bias[i] + n[i]
     n = draw3(rng, gyro_bias_std)
     for i in range(3):
-        S[S_GYRO_BIAS + i] = gyro_bias[i] + n[i]
+        S[STATE.gyro_bias + i] = gyro_bias[i] + n[i]
     n = draw3(rng, mag_bias_std)
     for i in range(3):
-        S[S_MAG_BIAS + i] = mag_bias[i] + n[i]
-    e = stationary(rng, (C[C_GPS_STD_P], C[C_GPS_STD_P + 1], C[C_GPS_STD_P + 2]))
-    u = stationary(rng, (C[C_GPS_STD_V], C[C_GPS_STD_V + 1], C[C_GPS_STD_V + 2]))
+        S[STATE.mag_bias + i] = mag_bias[i] + n[i]
+    e = stationary(
+        rng, (C[FIGURES.gps_std_position], C[FIGURES.gps_std_position + 1], C[FIGURES.gps_std_position + 2])
+    )
+    u = stationary(
+        rng, (C[FIGURES.gps_std_velocity], C[FIGURES.gps_std_velocity + 1], C[FIGURES.gps_std_velocity + 2])
+    )
     for i in range(3):
-        S[S_GPS_POS_ERR + i] = e[i]
-        S[S_GPS_VEL_ERR + i] = u[i]
-    S[S_T_LAST] = math.nan
-    S[S_T_GPS] = math.nan
+        S[STATE.gps_position_error + i] = e[i]
+        S[STATE.gps_velocity_error + i] = u[i]
+    S[STATE.t_last] = math.nan
+    S[STATE.t_gps] = math.nan
 
 
 @kernel
@@ -262,9 +296,9 @@ def fault_active(faults: Any, kind: int, t: float) -> bool:
 def due(S: Any, C: Any, sensor: int, t: float) -> bool:
     """True (once) when the sensor's next sample time has been reached; a coarse caller's skipped
     samples are skipped (one sample per call at most)."""
-    period = C[C_PERIOD + sensor]
-    if t + EPS_S >= S[S_NEXT + sensor] * period:
-        S[S_NEXT + sensor] = float(int((t + EPS_S) / period) + 1)
+    period = C[FIGURES.period + sensor]
+    if t + EPS_S >= S[STATE.next_sample + sensor] * period:
+        S[STATE.next_sample + sensor] = float(int((t + EPS_S) / period) + 1)
         return True
     return False
 
@@ -272,7 +306,7 @@ def due(S: Any, C: Any, sensor: int, t: float) -> bool:
 @kernel
 def enqueue(S: Any, sensor: int, t_due: float, reading: Any, size: int) -> None:
     """A reading into the sensor's queue, to be delivered at ``t_due``."""
-    q = S_QUEUES + sensor * QUEUE
+    q = STATE.queues + sensor * QUEUE
     head, count = int(S[q + Q_HEAD]), int(S[q + Q_COUNT])
     if count >= PENDING:  # full (a latency far beyond the period): the oldest is lost
         head = (head + 1) % PENDING
@@ -288,7 +322,7 @@ def enqueue(S: Any, sensor: int, t_due: float, reading: Any, size: int) -> None:
 def dequeue(S: Any, sensor: int, t: float, out: Any, size: int) -> bool:
     """The newest reading whose delivery time has come into ``out`` (older ones in the same
     frame are dropped); False when none has."""
-    q = S_QUEUES + sensor * QUEUE
+    q = STATE.queues + sensor * QUEUE
     head, count = int(S[q + Q_HEAD]), int(S[q + Q_COUNT])
     found = False
     while count > 0:
@@ -311,8 +345,8 @@ def deliver(S: Any, C: Any, sensor: int, t: float, reading: Any, out: Any, extra
     any) into ``out`` (flag, then the reading)."""
     size = READING_SIZE[sensor]
     at = OUT_AT[sensor]
-    q = S_QUEUES + sensor * QUEUE
-    latency = C[C_LATENCY + sensor] + extra_latency
+    q = STATE.queues + sensor * QUEUE
+    latency = C[FIGURES.latency + sensor] + extra_latency
     if latency == 0.0 and S[q + Q_COUNT] == 0.0:
         for i in range(size):
             out[at + 1 + i] = reading[i]
@@ -326,7 +360,7 @@ def deliver(S: Any, C: Any, sensor: int, t: float, reading: Any, out: Any, extra
 def pending(S: Any, sensor: int, t: float, out: Any) -> None:
     """A frame in which the sensor does not sample: what of its queue is due now."""
     at = OUT_AT[sensor]
-    q = S_QUEUES + sensor * QUEUE
+    q = STATE.queues + sensor * QUEUE
     out[at] = 0.0
     if S[q + Q_COUNT] > 0.0:
         size = READING_SIZE[sensor]
@@ -336,7 +370,7 @@ def pending(S: Any, sensor: int, t: float, out: Any) -> None:
 @kernel
 def silence(S: Any, sensor: int, out: Any) -> None:
     """An off sensor: nothing delivered this frame, nothing left in flight."""
-    S[S_QUEUES + sensor * QUEUE + Q_COUNT] = 0.0
+    S[STATE.queues + sensor * QUEUE + Q_COUNT] = 0.0
     out[OUT_AT[sensor]] = 0.0
 
 
@@ -361,11 +395,11 @@ def sample_kept(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int) -
     if mode == OFF:
         return False
     if mode == SLOW:
-        count = S[S_SLOW_COUNT + unit] + 1.0
+        count = S[STATE.slow_count + unit] + 1.0
         if count >= faults[row][F_VALUE]:
-            S[S_SLOW_COUNT + unit] = 0.0
+            S[STATE.slow_count + unit] = 0.0
             return True
-        S[S_SLOW_COUNT + unit] = count
+        S[STATE.slow_count + unit] = count
         return False
     if mode == INTERMITTENT:
         return uniform(rng) >= faults[row][F_VALUE]
@@ -389,8 +423,8 @@ def corrupt(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int, readi
     """A sample of ``unit`` (``reading[1 : 1 + size]``, its values after the time) as the unit's
     failure makes it: stuck repeats the last good sample, wrong adds the offset, garbage draws
     over the range; otherwise it is true and becomes the last good sample."""
-    good = S_GOOD + unit * GOOD
-    if mode == STUCK and S[S_HAS_GOOD + unit] != 0.0:
+    good = STATE.good + unit * GOOD
+    if mode == STUCK and S[STATE.has_good + unit] != 0.0:
         for i in range(size):
             reading[1 + i] = S[good + i]
         return
@@ -423,7 +457,7 @@ def corrupt(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int, readi
         return
     for i in range(size):
         S[good + i] = reading[1 + i]
-    S[S_HAS_GOOD + unit] = 1.0
+    S[STATE.has_good + unit] = 1.0
 
 
 @kernel
@@ -431,7 +465,7 @@ def imu_sample(rng: Any, S: Any, faults: Any, unit: int, t: float, value: Vector
                out: Any, at: int) -> float:  # fmt: skip
     """The accelerometer's or the gyro's sample at ``t`` into ``out[at : at + 3]`` as its failure
     makes it; 1.0 when it sampled, 0.0 when it holds its last sample (off, a skipped one)."""
-    held = S_HELD_IMU + 3 * (unit - F_ACCEL)
+    held = STATE.held_imu + 3 * (unit - F_ACCEL)
     mode, row = failure_of(faults, unit, t)
     if not sample_kept(rng, S, faults, unit, mode, row):
         for i in range(3):
@@ -451,16 +485,20 @@ def imu_sample(rng: Any, S: Any, faults: Any, unit: int, t: float, value: Vector
 def magnetometer(rng: Any, S: Any, C: Any, faults: Any, q: Quaternion, t: float) -> Vector3:
     """One magnetometer sample (gauss, body FLU) at attitude ``q``: the Earth's field rotated into
     the body, plus the hard-iron bias and any injected disturbance active at ``t``, plus noise."""
-    bias = (S[S_MAG_BIAS], S[S_MAG_BIAS + 1], S[S_MAG_BIAS + 2])
+    bias = (S[STATE.mag_bias], S[STATE.mag_bias + 1], S[STATE.mag_bias + 2])
     d = fault_sum(faults, MAG_DISTURBANCE, t)
     bias = (bias[0] + d[0], bias[1] + d[1], bias[2] + d[2])
-    return magnetometer_reading(rng, q, (C[C_FIELD], C[C_FIELD + 1], C[C_FIELD + 2]), bias, C[C_MAG_STD])
+    return magnetometer_reading(
+        rng, q, (C[FIGURES.field], C[FIGURES.field + 1], C[FIGURES.field + 2]), bias, C[FIGURES.mag_std]
+    )
 
 
 @kernel
 def barometer(rng: Any, S: Any, C: Any, height: float) -> tuple[float, float, float]:
     """``(pressure, pressure altitude, temperature)`` at ``height`` (m above home)."""
-    return barometer_reading(rng, C[C_HOME_ALTITUDE] + height, C[C_BARO_BIAS], S[S_BARO_DRIFT], C[C_BARO_STD])
+    return barometer_reading(
+        rng, C[FIGURES.home_altitude] + height, C[FIGURES.baro_bias], S[STATE.baro_drift], C[FIGURES.baro_std]
+    )
 
 
 @kernel
@@ -469,31 +507,43 @@ def gps_fix(rng: Any, S: Any, C: Any, faults: Any, t: float, position: Vector3, 
     """A fix at ``t`` into ``reading`` (time, position, velocity, eph, epv, satellites, speed
     accuracy, fix type): the Gauss-Markov errors advanced since the last fix; in an outage "no
     fix", the last good position repeated (home before any)."""
-    if not math.isnan(S[S_T_GPS]):
-        dt = t - S[S_T_GPS]
-        e = gauss_markov(rng, at3(S, S_GPS_POS_ERR), dt, C[C_GPS_TAU_P], at3(C, C_GPS_STD_P))
-        u = gauss_markov(rng, at3(S, S_GPS_VEL_ERR), dt, C[C_GPS_TAU_V], at3(C, C_GPS_STD_V))
+    if not math.isnan(S[STATE.t_gps]):
+        dt = t - S[STATE.t_gps]
+        e = gauss_markov(
+            rng,
+            at3(S, STATE.gps_position_error),
+            dt,
+            C[FIGURES.gps_tau_position],
+            at3(C, FIGURES.gps_std_position),
+        )
+        u = gauss_markov(
+            rng,
+            at3(S, STATE.gps_velocity_error),
+            dt,
+            C[FIGURES.gps_tau_velocity],
+            at3(C, FIGURES.gps_std_velocity),
+        )
         for i in range(3):
-            S[S_GPS_POS_ERR + i] = e[i]
-            S[S_GPS_VEL_ERR + i] = u[i]
-    S[S_T_GPS] = t
+            S[STATE.gps_position_error + i] = e[i]
+            S[STATE.gps_velocity_error + i] = u[i]
+    S[STATE.t_gps] = t
     reading[0] = t
     if fault_active(faults, GPS_OUTAGE, t):
         for i in range(3):
-            reading[1 + i] = S[S_LAST_FIX + i] if S[S_HAS_FIX] != 0.0 else 0.0
+            reading[1 + i] = S[STATE.last_fix + i] if S[STATE.has_fix] != 0.0 else 0.0
             reading[4 + i] = 0.0
         reading[7], reading[8], reading[9] = NO_FIX_ACCURACY, NO_FIX_ACCURACY, 0.0
         reading[10], reading[11] = NO_FIX_ACCURACY, GPS_FIX_NONE
         return
     glitch = fault_sum(faults, GPS_GLITCH, t)
     for i in range(3):
-        p = position[i] + S[S_GPS_POS_ERR + i] + glitch[i]
+        p = position[i] + S[STATE.gps_position_error + i] + glitch[i]
         reading[1 + i] = p
-        reading[4 + i] = velocity[i] + S[S_GPS_VEL_ERR + i]
-        S[S_LAST_FIX + i] = p
-    S[S_HAS_FIX] = 1.0
-    reading[7], reading[8], reading[9] = C[C_GPS_EPH], C[C_GPS_EPV], C[C_GPS_SATELLITES]
-    reading[10], reading[11] = C[C_GPS_SPEED_ACCURACY], GPS_FIX_3D
+        reading[4 + i] = velocity[i] + S[STATE.gps_velocity_error + i]
+        S[STATE.last_fix + i] = p
+    S[STATE.has_fix] = 1.0
+    reading[7], reading[8], reading[9] = C[FIGURES.gps_eph], C[FIGURES.gps_epv], C[FIGURES.gps_satellites]
+    reading[10], reading[11] = C[FIGURES.gps_speed_accuracy], GPS_FIX_3D
 
 
 @kernel
@@ -504,32 +554,40 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     attitude, position and velocity in the world, the paper's yaw) and write what is delivered
     at ``t`` into ``out`` (layout ``O_*``)."""
     # The biases' random walks and the baro drift since the last frame.
-    if not math.isnan(S[S_T_LAST]):
-        dt = t - S[S_T_LAST]
+    if not math.isnan(S[STATE.t_last]):
+        dt = t - S[STATE.t_last]
         if dt > 0.0:
-            if C[C_ACCEL_RW] > 0.0:
+            if C[FIGURES.accel_random_walk] > 0.0:
                 b = random_walk(
-                    rng, (S[S_ACCEL_BIAS], S[S_ACCEL_BIAS + 1], S[S_ACCEL_BIAS + 2]), C[C_ACCEL_RW], dt
+                    rng,
+                    (S[STATE.accel_bias], S[STATE.accel_bias + 1], S[STATE.accel_bias + 2]),
+                    C[FIGURES.accel_random_walk],
+                    dt,
                 )
-                S[S_ACCEL_BIAS], S[S_ACCEL_BIAS + 1], S[S_ACCEL_BIAS + 2] = b[0], b[1], b[2]
-            if C[C_GYRO_RW] > 0.0:
+                S[STATE.accel_bias], S[STATE.accel_bias + 1], S[STATE.accel_bias + 2] = b[0], b[1], b[2]
+            if C[FIGURES.gyro_random_walk] > 0.0:
                 b = random_walk(
-                    rng, (S[S_GYRO_BIAS], S[S_GYRO_BIAS + 1], S[S_GYRO_BIAS + 2]), C[C_GYRO_RW], dt
+                    rng,
+                    (S[STATE.gyro_bias], S[STATE.gyro_bias + 1], S[STATE.gyro_bias + 2]),
+                    C[FIGURES.gyro_random_walk],
+                    dt,
                 )
-                S[S_GYRO_BIAS], S[S_GYRO_BIAS + 1], S[S_GYRO_BIAS + 2] = b[0], b[1], b[2]
-            if C[C_BARO_DRIFT] > 0.0:
-                S[S_BARO_DRIFT] += C[C_BARO_DRIFT] * math.sqrt(dt) * normal(rng)
-    S[S_T_LAST] = t
+                S[STATE.gyro_bias], S[STATE.gyro_bias + 1], S[STATE.gyro_bias + 2] = b[0], b[1], b[2]
+            if C[FIGURES.baro_drift] > 0.0:
+                S[STATE.baro_drift] += C[FIGURES.baro_drift] * math.sqrt(dt) * normal(rng)
+    S[STATE.t_last] = t
 
     # IMU: every frame (biases with the injected steps).
     sa = fault_sum(faults, ACCEL_BIAS_STEP, t)
     sg = fault_sum(faults, GYRO_BIAS_STEP, t)
-    ba = (S[S_ACCEL_BIAS] + sa[0], S[S_ACCEL_BIAS + 1] + sa[1], S[S_ACCEL_BIAS + 2] + sa[2])
-    bg = (S[S_GYRO_BIAS] + sg[0], S[S_GYRO_BIAS + 1] + sg[1], S[S_GYRO_BIAS + 2] + sg[2])
-    force, rates = imu_reading(rng, specific_force, body_rates, ba, bg, C[C_ACCEL_STD], C[C_GYRO_STD])
-    reading = S[S_READING : S_READING + 12]
-    out[O_ACCEL_FRESH] = imu_sample(rng, S, faults, F_ACCEL, t, force, reading, out, O_FORCE)
-    out[O_GYRO_FRESH] = imu_sample(rng, S, faults, F_GYRO, t, rates, reading, out, O_RATE)
+    ba = (S[STATE.accel_bias] + sa[0], S[STATE.accel_bias + 1] + sa[1], S[STATE.accel_bias + 2] + sa[2])
+    bg = (S[STATE.gyro_bias] + sg[0], S[STATE.gyro_bias + 1] + sg[1], S[STATE.gyro_bias + 2] + sg[2])
+    force, rates = imu_reading(
+        rng, specific_force, body_rates, ba, bg, C[FIGURES.accel_std], C[FIGURES.gyro_std]
+    )
+    reading = S[STATE.reading : STATE.reading + 12]
+    out[DELIVERY.accel_fresh] = imu_sample(rng, S, faults, F_ACCEL, t, force, reading, out, DELIVERY.force)
+    out[DELIVERY.gyro_fresh] = imu_sample(rng, S, faults, F_GYRO, t, rates, reading, out, DELIVERY.rate)
 
     # The scheduled sensors: a sample when due (and kept by the unit's failure), made as the
     # failure says, delivered after its latency (and a delayed failure's).
@@ -554,7 +612,7 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     if mode == OFF:
         silence(S, BARO, out)
     mode, row = failure_of(faults, F_GPS, t)
-    if C[C_GPS_ON] != 0.0 and due(S, C, GPS, t) and sample_kept(rng, S, faults, F_GPS, mode, row):
+    if C[FIGURES.gps_on] != 0.0 and due(S, C, GPS, t) and sample_kept(rng, S, faults, F_GPS, mode, row):
         gps_fix(rng, S, C, faults, t, position, velocity, reading)
         corrupt(rng, S, faults, F_GPS, mode, row, reading, 11)
         deliver(S, C, GPS, t, reading, out, extra_latency(faults, mode, row))
@@ -563,11 +621,11 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     if mode == OFF:
         silence(S, GPS, out)
     mode, row = failure_of(faults, F_VIO, t)
-    if (C[C_VISION_ON] != 0.0 and due(S, C, VISION, t) and not fault_active(faults, VISION_OUTAGE, t)
+    if (C[FIGURES.vision_on] != 0.0 and due(S, C, VISION, t) and not fault_active(faults, VISION_OUTAGE, t)
             and sample_kept(rng, S, faults, F_VIO, mode, row)):  # fmt: skip
-        p3, y = vision_reading(rng, position, yaw, C[C_VISION_STD], C[C_VISION_YAW_STD])
+        p3, y = vision_reading(rng, position, yaw, C[FIGURES.vision_std], C[FIGURES.vision_yaw_std])
         reading[0], reading[1], reading[2], reading[3] = t, p3[0], p3[1], p3[2]
-        reading[4], reading[5], reading[6] = y, C[C_VISION_STD], C[C_VISION_YAW_STD]
+        reading[4], reading[5], reading[6] = y, C[FIGURES.vision_std], C[FIGURES.vision_yaw_std]
         corrupt(rng, S, faults, F_VIO, mode, row, reading, 6)
         deliver(S, C, VISION, t, reading, out, extra_latency(faults, mode, row))
     else:
@@ -577,25 +635,34 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
 
     # What HIL_SENSOR carries between samples: the last magnetometer and barometer readings
     # (before the first, a reading of now).
-    if out[O_MAG] != 0.0:
-        S[S_HELD_MAG], S[S_HELD_MAG + 1], S[S_HELD_MAG + 2] = out[O_MAG + 2], out[O_MAG + 3], out[O_MAG + 4]
-        S[S_HAS_MAG] = 1.0
-    if out[O_BARO] != 0.0:
+    if out[DELIVERY.mag_fresh] != 0.0:
+        S[STATE.held_mag], S[STATE.held_mag + 1], S[STATE.held_mag + 2] = (
+            out[DELIVERY.mag_field],
+            out[DELIVERY.mag_field + 1],
+            out[DELIVERY.mag_field + 2],
+        )
+        S[STATE.has_mag] = 1.0
+    if out[DELIVERY.baro_fresh] != 0.0:
         for i in range(4):
-            S[S_HELD_BARO + i] = out[O_BARO + 1 + i]
-        S[S_HAS_BARO] = 1.0
-    if S[S_HAS_MAG] != 0.0:
+            S[STATE.held_baro + i] = out[DELIVERY.baro_time + i]
+        S[STATE.has_baro] = 1.0
+    if S[STATE.has_mag] != 0.0:
         for i in range(3):
-            out[O_HELD_MAG + i] = S[S_HELD_MAG + i]
+            out[DELIVERY.held_mag + i] = S[STATE.held_mag + i]
     else:
         m = magnetometer(rng, S, C, faults, q, t)
-        out[O_HELD_MAG], out[O_HELD_MAG + 1], out[O_HELD_MAG + 2] = m[0], m[1], m[2]
-    if S[S_HAS_BARO] != 0.0:
+        out[DELIVERY.held_mag], out[DELIVERY.held_mag + 1], out[DELIVERY.held_mag + 2] = m[0], m[1], m[2]
+    if S[STATE.has_baro] != 0.0:
         for i in range(4):
-            out[O_HELD_BARO + i] = S[S_HELD_BARO + i]
+            out[DELIVERY.held_baro + i] = S[STATE.held_baro + i]
     else:
         p, h, temperature = barometer(rng, S, C, position[2])
-        out[O_HELD_BARO], out[O_HELD_BARO + 1], out[O_HELD_BARO + 2], out[O_HELD_BARO + 3] = (
+        (
+            out[DELIVERY.held_baro],
+            out[DELIVERY.held_baro + 1],
+            out[DELIVERY.held_baro + 2],
+            out[DELIVERY.held_baro + 3],
+        ) = (
             t,
             p,
             h,

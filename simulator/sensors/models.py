@@ -139,7 +139,7 @@ class SensorSuite:
         self._k = k = sensor_entries()
         # Switch-on biases: the fixed part plus a draw of the random part (same seed, same bias).
         self.rng, self._S, self._C = frame.new_sensors(config, home_altitude_m, imu_rate_hz, k.initial_state)
-        self._out = np.zeros(frame.O_SIZE)
+        self._out = np.zeros(frame.DELIVERY.size)
         self.faults: list[SensorFault] = []
         self._faults = frame.fault_array(())
         for fault in config.faults:
@@ -153,32 +153,32 @@ class SensorSuite:
     @property
     def accel_bias(self) -> Vector3:
         """Switch-on bias + random walk so far (without injected steps)."""
-        return self._vector(frame.S_ACCEL_BIAS)
+        return self._vector(frame.STATE.accel_bias)
 
     @property
     def gyro_bias(self) -> Vector3:
         """The gyro's bias so far (rad/s, body): switch-on bias plus random walk."""
-        return self._vector(frame.S_GYRO_BIAS)
+        return self._vector(frame.STATE.gyro_bias)
 
     @property
     def mag_bias(self) -> Vector3:
         """The magnetometer's hard-iron bias (gauss, body)."""
-        return self._vector(frame.S_MAG_BIAS)
+        return self._vector(frame.STATE.mag_bias)
 
     @property
     def baro_drift_hpa(self) -> float:
         """The barometer's drifted offset so far (hPa)."""
-        return float(self._S[frame.S_BARO_DRIFT])
+        return float(self._S[frame.STATE.baro_drift])
 
     @property
     def gps_position_error(self) -> Vector3:
         """The GNSS position error now (m, world): the Gauss-Markov processes' state."""
-        return self._vector(frame.S_GPS_POS_ERR)
+        return self._vector(frame.STATE.gps_position_error)
 
     @property
     def gps_velocity_error(self) -> Vector3:
         """The GNSS velocity error now (m/s, world)."""
-        return self._vector(frame.S_GPS_VEL_ERR)
+        return self._vector(frame.STATE.gps_velocity_error)
 
     # -- faults -----------------------------------------------------------------------------------
     def add_fault(self, fault: SensorFault) -> None:
@@ -223,28 +223,40 @@ class SensorSuite:
         self._k.sensor_frame(self.rng, self._S, self._C, self._faults, t_s, truth.specific_force_body_m_s2,
                              truth.body_rates_rad_s, truth.quaternion, truth.position_m, truth.velocity_m_s,
                              truth.euler_rad[2], self._out)  # fmt: skip
-        o = self._out.tolist()
-        imu = ImuReading((o[0], o[1], o[2]), (o[3], o[4], o[5]), t_s)
-        mag = MagReading(o[7], (o[8], o[9], o[10])) if o[6] else None
-        baro = BaroReading(o[13], o[14], o[15], o[12]) if o[11] else None
+        o, D = self._out.tolist(), frame.DELIVERY
+        f, r = D.force, D.rate
+        imu = ImuReading((o[f], o[f + 1], o[f + 2]), (o[r], o[r + 1], o[r + 2]), t_s)
+        m = D.mag_field
+        mag = MagReading(o[D.mag_time], (o[m], o[m + 1], o[m + 2])) if o[D.mag_fresh] else None
+        baro = None
+        if o[D.baro_fresh]:
+            baro = BaroReading(o[D.baro_pressure], o[D.baro_altitude], o[D.baro_temperature], o[D.baro_time])
         gps = None
-        if o[16]:
-            gps = GpsReading((o[18], o[19], o[20]), (o[21], o[22], o[23]), o[24], o[25], int(o[26]), o[17],
-                             o[27], int(o[28]))  # fmt: skip
-        vision = VisionReading(o[30], (o[31], o[32], o[33]), o[34], o[35], o[36]) if o[29] else None
-        held_baro = BaroReading(o[41], o[42], o[43], o[40])
-        readings = SensorReadings(imu, (o[37], o[38], o[39]), held_baro, mag is not None, baro is not None,
-                                  o[44] != 0.0, o[45] != 0.0)  # fmt: skip
+        if o[D.gps_fresh]:
+            p, v = D.gps_position, D.gps_velocity
+            gps = GpsReading((o[p], o[p + 1], o[p + 2]), (o[v], o[v + 1], o[v + 2]), o[D.gps_eph],
+                             o[D.gps_epv], int(o[D.gps_satellites]), o[D.gps_time], o[D.gps_speed_accuracy],
+                             int(o[D.gps_fix_type]))  # fmt: skip
+        vision = None
+        if o[D.vision_fresh]:
+            p = D.vision_position
+            vision = VisionReading(o[D.vision_time], (o[p], o[p + 1], o[p + 2]), o[D.vision_yaw],
+                                   o[D.vision_position_std], o[D.vision_yaw_std])  # fmt: skip
+        b, m = D.held_baro, D.held_mag
+        held_baro = BaroReading(o[b + 1], o[b + 2], o[b + 3], o[b])
+        readings = SensorReadings(imu, (o[m], o[m + 1], o[m + 2]), held_baro, mag is not None,
+                                  baro is not None, o[D.accel_fresh] != 0.0,
+                                  o[D.gyro_fresh] != 0.0)  # fmt: skip
         return SensorFrame(t_s, imu, readings, mag, baro, gps, vision)
 
     # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------
     def _time(self) -> float:
-        t = float(self._S[frame.S_T_LAST])
+        t = float(self._S[frame.STATE.t_last])
         return 0.0 if math.isnan(t) else t
 
     def _imu(self, truth: TruthState, t: float) -> ImuReading:
         ba, bg = self.imu_biases(t)
-        std_a, std_g = float(self._C[frame.C_ACCEL_STD]), float(self._C[frame.C_GYRO_STD])
+        std_a, std_g = float(self._C[frame.FIGURES.accel_std]), float(self._C[frame.FIGURES.gyro_std])
         force, rates = self._k.imu_reading(self.rng, truth.specific_force_body_m_s2, truth.body_rates_rad_s,
                                            ba, bg, std_a, std_g)  # fmt: skip
         return ImuReading(force, rates, t)
@@ -263,8 +275,8 @@ class SensorSuite:
 
     def sample_gps(self, truth: TruthState) -> GpsReading:
         """One GPS fix for ``truth`` now (no latency; the Gauss-Markov errors advance one period)."""
-        t_gps = float(self._S[frame.S_T_GPS])
-        t = 0.0 if math.isnan(t_gps) else t_gps + float(self._C[frame.C_PERIOD + frame.GPS])
+        t_gps = float(self._S[frame.STATE.t_gps])
+        t = 0.0 if math.isnan(t_gps) else t_gps + float(self._C[frame.FIGURES.period + frame.GPS])
         r = np.empty(12)
         self._k.gps_fix(self.rng, self._S, self._C, self._faults, t, truth.position_m, truth.velocity_m_s, r)
         o = r.tolist()
@@ -336,7 +348,8 @@ def sensor_entries() -> SensorEntries:
         entries.vision_reading(rng, z3, 0.0, 1.0, 1.0)
         config = load_sensors("gps")
         C = frame.config_array(config, 488.0, 500.0)
-        S, out, faults = np.zeros(frame.S_SIZE), np.zeros(frame.O_SIZE), frame.fault_array(config.faults)
+        S, out = np.zeros(frame.STATE.size), np.zeros(frame.DELIVERY.size)
+        faults = frame.fault_array(config.faults)
         entries.initial_state(rng, C, z3, z3, z3, 0.1, 0.1, 0.1, S)
         entries.sensor_frame(rng, S, C, faults, 0.0, (0.0, 0.0, 9.81), z3, q, z3, z3, 0.0, out)
         entries.gps_fix(rng, S, C, faults, 0.1, z3, z3, np.empty(12))

@@ -238,8 +238,8 @@ def estimator_memory(sensors: SensorConfig, params: EstimatorParams, gravity_m_s
     faults = sensor_frame.fault_array(sensors.faults)
     F, P, ring, stats, windows = ekf.new_memory()
     A = ekf.parameter_array(params, gravity_m_s2, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
-    return (np.asarray(rng, dtype=float), S, C, faults, np.zeros(sensor_frame.O_SIZE), F, P, ring, stats,
-            windows, A)  # fmt: skip
+    delivery = np.zeros(sensor_frame.DELIVERY.size)
+    return (np.asarray(rng, dtype=float), S, C, faults, delivery, F, P, ring, stats, windows, A)
 
 
 def no_estimation() -> tuple:

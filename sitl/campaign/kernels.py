@@ -84,6 +84,7 @@ from simulator.dynamics.equations import (  # the plant (what the simulator step
 )
 from simulator.environment.gust_profile import one_minus_cosine_wind, steps_and_ramps
 from simulator.sensors import frame as sensors
+from simulator.sensors.frame import DELIVERY
 
 # =================================================================================================
 # The records simulate() takes and returns (flat float64 arrays; offsets generated from these).
@@ -193,6 +194,12 @@ def _through_fields(wire: bool, v: tuple) -> tuple:
 
 
 @kernel
+def _vector_at(memory, at: int) -> tuple:
+    """The three floats of a record's vector field at ``at``."""
+    return (memory[at], memory[at + 1], memory[at + 2])
+
+
+@kernel
 def _home(S) -> tuple:
     """The geodetic home the GNSS fixes cross the wire about."""
     return (S[SETTINGS.home], S[SETTINGS.home + 1], S[SETTINGS.home + 2])
@@ -216,16 +223,12 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
                          tr.body_rates_rad_s, tr.quaternion, tr.position_m, tr.velocity_m_s, tr.euler_rad[2],
                          delivered)  # fmt: skip
     t_autopilot = frame_time_s(frame_time_usec(k, S[SETTINGS.usec_per_frame])) if wire else t
-    force = _through_fields(
-        wire, (delivered[sensors.O_FORCE], delivered[sensors.O_FORCE + 1], delivered[sensors.O_FORCE + 2])
-    )
-    rate = _through_fields(
-        wire, (delivered[sensors.O_RATE], delivered[sensors.O_RATE + 1], delivered[sensors.O_RATE + 2])
-    )
+    force = _through_fields(wire, _vector_at(delivered, DELIVERY.force))
+    rate = _through_fields(wire, _vector_at(delivered, DELIVERY.rate))
     if k == 0:
         offset = 0.0
-        if delivered[sensors.O_BARO] != 0.0:
-            height = delivered[sensors.O_BARO + 3]
+        if delivered[DELIVERY.baro_fresh] != 0.0:
+            height = delivered[DELIVERY.baro_altitude]
             offset = (float_field(height) if wire else height) - c_pos[2]
         q = quaternion_from_euler(c_euler[0], c_euler[1], c_euler[2])
         ekf.reset_state(F, Pf, A, c_pos, c_vel, q, 0.1, 0.1, offset)
@@ -245,7 +248,7 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
 @kernel
 def imu_fresh(delivered) -> bool:
     """Both the accelerometer and the gyro sampled this step (HIL_SENSOR's bits 0-5)."""
-    return delivered[sensors.O_ACCEL_FRESH] != 0.0 and delivered[sensors.O_GYRO_FRESH] != 0.0
+    return delivered[DELIVERY.accel_fresh] != 0.0 and delivered[DELIVERY.gyro_fresh] != 0.0
 
 
 @kernel
@@ -254,30 +257,28 @@ def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
     delivers them (:mod:`quadcommon.wire_values`), through the autopilot's own fusion of a frame's
     aiding (:func:`autopilot.estimation.aiding.fuse_frame`: PX4's order)."""
     wire = S[SETTINGS.wire] != 0.0
-    d = delivered
-    mag = _through_fields(wire, (d[sensors.O_MAG + 2], d[sensors.O_MAG + 3], d[sensors.O_MAG + 4]))
-    height = d[sensors.O_BARO + 3]
+    d, D = delivered, DELIVERY
+    mag = _through_fields(wire, _vector_at(d, D.mag_field))
+    height = d[D.baro_altitude]
     if wire:  # HIL_SENSOR's pressure altitude
         height = float_field(height)
-    g = sensors.O_GPS + 1  # time, position, velocity, eph, epv, satellites, speed accuracy, fix type
-    position = (d[g + 1], d[g + 2], d[g + 3])
-    velocity = (d[g + 4], d[g + 5], d[g + 6])
-    eph, epv, speed_accuracy = d[g + 7], d[g + 8], d[g + 10]
-    if wire and d[sensors.O_GPS] != 0.0:  # through HIL_GPS's fields (it has no speed accuracy)
+    position, velocity = _vector_at(d, D.gps_position), _vector_at(d, D.gps_velocity)
+    eph, epv, speed_accuracy = d[D.gps_eph], d[D.gps_epv], d[D.gps_speed_accuracy]
+    if wire and d[D.gps_fresh] != 0.0:  # through HIL_GPS's fields (it has no speed accuracy)
         home = _home(S)
         f = gps_values(position, velocity, eph, epv, home)
         position, velocity, eph, epv = gps_fix(f[0], f[1], f[2], f[6], f[7], f[8], f[3], f[4], home)
         speed_accuracy = 0.0
-    v = sensors.O_VISION + 1  # time, position, yaw, position std, yaw std
-    vision_position = (d[v + 1], d[v + 2], d[v + 3])
-    yaw, position_std, yaw_std = d[v + 4], d[v + 5], d[v + 6]
-    if wire and d[sensors.O_VISION] != 0.0:  # through VISION_POSITION_ESTIMATE's fields
+    vision_position = _vector_at(d, D.vision_position)
+    yaw, position_std, yaw_std = d[D.vision_yaw], d[D.vision_position_std], d[D.vision_yaw_std]
+    if wire and d[D.vision_fresh] != 0.0:  # through VISION_POSITION_ESTIMATE's fields
         p_ned, yaw_ned, p_var, yaw_var = vision_values(vision_position, yaw, position_std, yaw_std)
         vision_position, yaw, position_std, yaw_std = vision_pose(p_ned, yaw_ned, p_var, yaw_var)
     fuse_frame(F, Pf, ring, stats, windows, A, t, Aiding(
-        d[sensors.O_MAG] != 0.0, mag, d[sensors.O_BARO] != 0.0, height,
-        d[sensors.O_GPS] != 0.0, position, velocity, (eph, epv, speed_accuracy), (d[g + 11], d[g + 9]),
-        d[sensors.O_VISION] != 0.0, vision_position, yaw, (position_std, yaw_std),
+        d[D.mag_fresh] != 0.0, mag, d[D.baro_fresh] != 0.0, height,
+        d[D.gps_fresh] != 0.0, position, velocity, (eph, epv, speed_accuracy),
+        (d[D.gps_fix_type], d[D.gps_satellites]),
+        d[D.vision_fresh] != 0.0, vision_position, yaw, (position_std, yaw_std),
     ))  # fmt: skip
 
 

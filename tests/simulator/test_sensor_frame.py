@@ -32,7 +32,7 @@ def fly_arrays(entries, config, frames: int) -> list[list[float]]:
     """The frames' deliveries from :func:`sf.sensor_frame` called directly."""
     a, g, m = config.accelerometer, config.gyroscope, config.magnetometer
     rng, C = stream(config.seed), sf.config_array(config, HOME_ALTITUDE, 1.0 / DT)
-    S, out, faults = np.zeros(sf.S_SIZE), np.zeros(sf.O_SIZE), sf.fault_array(config.faults)
+    S, out, faults = np.zeros(sf.STATE.size), np.zeros(sf.DELIVERY.size), sf.fault_array(config.faults)
     f3 = lambda v: tuple(float(c) for c in v)  # noqa: E731
     entries.initial_state(rng, C, f3(a.bias), f3(g.bias), f3(m.bias_gauss), float(a.turn_on_bias_std),
                           float(g.turn_on_bias_std), float(m.turn_on_bias_std_gauss), S)  # fmt: skip
@@ -72,11 +72,11 @@ def test_the_suite_is_a_shell_around_the_frame_kernel(profile):
         euler = (0.0, 0.0, yaw)
         truth = TruthState(position, velocity, z3, q, euler, rates, z3, force, rotors, 0.0, z3, False)
         f = suite.step(t, truth)
-        assert f.imu.specific_force_m_s2 == tuple(row[sf.O_FORCE : sf.O_FORCE + 3])
-        assert f.readings.magnetic_field_gauss == tuple(row[sf.O_HELD_MAG : sf.O_HELD_MAG + 3])
-        assert (f.gps is not None) == (row[sf.O_GPS] == 1.0)
+        assert f.imu.specific_force_m_s2 == tuple(row[sf.DELIVERY.force : sf.DELIVERY.force + 3])
+        assert f.readings.magnetic_field_gauss == tuple(row[sf.DELIVERY.held_mag : sf.DELIVERY.held_mag + 3])
+        assert (f.gps is not None) == (row[sf.DELIVERY.gps_fresh] == 1.0)
         if f.gps is not None:
-            assert f.gps.position_m == tuple(row[sf.O_GPS + 2 : sf.O_GPS + 5])
+            assert f.gps.position_m == tuple(row[sf.DELIVERY.gps_position : sf.DELIVERY.gps_position + 3])
             gps_times.append((t, f.gps.time_s))
             gps_fix_types.append((t, f.gps.fix_type))
             glitched.append((f.gps.time_s, f.gps.position_m[0] - position[0]))
