@@ -173,12 +173,12 @@ class ErrorStateEkf:
     arrive (after the prediction of their arrival step); read :meth:`estimate` and
     :meth:`status`. Until aligned it collects samples (:attr:`initialised` False)."""
 
-    _p = _state_property(fk.X_P, 3, "position (m)")
-    _v = _state_property(fk.X_V, 3, "velocity (m/s)")
-    _q = _state_property(fk.X_Q, 4, "attitude, body to world")
-    _bg = _state_property(fk.X_BG, 3, "gyro bias (rad/s)")
-    _ba = _state_property(fk.X_BA, 3, "accelerometer bias (m/s^2)")
-    _bm = _state_property(fk.X_BM, 3, "magnetometer hard iron (gauss)")
+    _p = _state_property(fk.MEMORY.p, 3, "position (m)")
+    _v = _state_property(fk.MEMORY.v, 3, "velocity (m/s)")
+    _q = _state_property(fk.MEMORY.q, 4, "attitude, body to world")
+    _bg = _state_property(fk.MEMORY.gyro_bias, 3, "gyro bias (rad/s)")
+    _ba = _state_property(fk.MEMORY.accel_bias, 3, "accelerometer bias (m/s^2)")
+    _bm = _state_property(fk.MEMORY.mag_bias, 3, "magnetometer hard iron (gauss)")
 
     def __init__(
         self,
@@ -217,28 +217,28 @@ class ErrorStateEkf:
         process noise is derived again; the state and covariance are kept."""
         self.params = params
         self._A = fk.parameter_array(params, self.gravity, self.earth_field)
-        self._F[fk.X_Q_DT] = -1.0
+        self._F[fk.MEMORY.q_dt] = -1.0
 
     # -- read-outs of the memory -------------------------------------------------------------------
     @property
     def time_s(self) -> float:
-        return float(self._F[fk.X_TIME])
+        return float(self._F[fk.MEMORY.time])
 
     @property
     def imu_samples(self) -> int:
-        return int(self._F[fk.X_IMU_SAMPLES])
+        return int(self._F[fk.MEMORY.imu_samples])
 
     @property
     def imu_dt_rejected(self) -> int:
-        return int(self._F[fk.X_IMU_DT_REJECTED])
+        return int(self._F[fk.MEMORY.imu_dt_rejected])
 
     @property
     def bad_accel_detections(self) -> int:
-        return int(self._F[fk.X_BAD_ACCEL_DETECTIONS])
+        return int(self._F[fk.MEMORY.bad_accel_detections])
 
     @property
     def _bh(self) -> float:
-        return float(self._F[fk.X_BH])
+        return float(self._F[fk.MEMORY.baro_bias])
 
     # ------------------------------------------------------------------------------------------
     # Prediction
@@ -246,7 +246,7 @@ class ErrorStateEkf:
     def predict(self, imu: ImuSample) -> None:
         """Propagate the nominal state and the covariance over ``imu.dt_s`` (see module doc)."""
         if not self.initialised:
-            self._F[fk.X_IMU_SAMPLES] += 1.0
+            self._F[fk.MEMORY.imu_samples] += 1.0
             self._align(imu)
             return
         self._entries.predict_step(self._F, self.P, self._ring, self._A, imu.time_s, imu.dt_s,
@@ -261,7 +261,7 @@ class ErrorStateEkf:
     def _align(self, imu: ImuSample) -> None:
         """Collect IMU samples at rest; initialise once ``EST_ALIGN_T`` of them and a position
         source are there (tilt from the mean specific force, gyro bias from the mean rate)."""
-        self._F[fk.X_TIME] = imu.time_s
+        self._F[fk.MEMORY.time] = imu.time_s
         g = imu.angular_rate_rad_s
         f = imu.specific_force_m_s2
         at_rest = (
@@ -404,7 +404,7 @@ class ErrorStateEkf:
             P[IV + 2, IV + 2] = sv * 2.25
         # Baro offset: b_h = baro height - z (error anti-correlated with z's).
         baro = self._pending_baro
-        self._F[fk.X_BH] = baro.height_m - self._p[2] if baro is not None else 0.0
+        self._F[fk.MEMORY.baro_bias] = baro.height_m - self._p[2] if baro is not None else 0.0
         P[IBH, IBH] = P[IP + 2, IP + 2] + p.baro_noise_m**2
         P[IBH, IP + 2] = P[IP + 2, IBH] = -P[IP + 2, IP + 2]
         self.P = P
@@ -438,7 +438,7 @@ class ErrorStateEkf:
         self._entries.reset_state(self._F, self.P, self._A, position, tuple(float(c) for c in velocity_m_s),
                                   tuple(float(c) for c in quaternion), float(position_std_m),
                                   float(velocity_std_m_s), float(offset))  # fmt: skip
-        self._F[fk.X_IMU_SAMPLES] += 1.0
+        self._F[fk.MEMORY.imu_samples] += 1.0
         self._finish_initialisation(imu)
 
     # ------------------------------------------------------------------------------------------
@@ -509,7 +509,7 @@ class ErrorStateEkf:
     # ------------------------------------------------------------------------------------------
     def estimate(self) -> Estimate:
         """The current state estimate (what the controllers are fed)."""
-        x = self._F[: fk.X_RATE + 3].tolist()
+        x = self._F[: fk.MEMORY.rate + 3].tolist()
         q = (x[6], x[7], x[8], x[9])
         euler = euler_from_quaternion(x[6], x[7], x[8], x[9])
         rate = (x[29], x[30], x[31])
@@ -529,7 +529,7 @@ class ErrorStateEkf:
 
     def estimate_biases(self) -> tuple[Vector3, Vector3]:
         """The gyro and accelerometer bias estimates (cheaper than :meth:`estimate`)."""
-        x = self._F[fk.X_BG : fk.X_BA + 3].tolist()
+        x = self._F[fk.MEMORY.gyro_bias : fk.MEMORY.accel_bias + 3].tolist()
         return (x[0], x[1], x[2]), (x[3], x[4], x[5])
 
     def covariance(self) -> np.ndarray:
@@ -548,7 +548,7 @@ class ErrorStateEkf:
                                    self.imu_dt_rejected)  # fmt: skip
         F = self._F
         pos_h, pos_v, vel, tilt, yaw = fk.accuracies(self.P)
-        last_h_aid = float(F[fk.X_LAST_H_AID])
+        last_h_aid = float(F[fk.MEMORY.last_h_aid])
         verdict = self._entries.not_converged(F, self.P, self._A)
         dead_reckoning = verdict == fk.DEAD_RECKONING
         glitch = (
@@ -570,16 +570,16 @@ class ErrorStateEkf:
         flags = ESTIMATOR_ATTITUDE
         if not dead_reckoning:
             flags |= ESTIMATOR_VELOCITY_HORIZ | ESTIMATOR_POS_HORIZ_REL | ESTIMATOR_PRED_POS_HORIZ_REL
-            last_gps = float(F[fk.X_LAST_GPS_POS])
+            last_gps = float(F[fk.MEMORY.last_gps_pos])
             if last_gps >= 0.0 and now - last_gps <= p.no_aid_timeout_s:
                 flags |= ESTIMATOR_POS_HORIZ_ABS | ESTIMATOR_PRED_POS_HORIZ_ABS
         else:
             flags |= ESTIMATOR_CONST_POS_MODE
-        if now - float(F[fk.X_LAST_V_AID]) <= p.no_aid_timeout_s:
+        if now - float(F[fk.MEMORY.last_v_aid]) <= p.no_aid_timeout_s:
             flags |= ESTIMATOR_VELOCITY_VERT | ESTIMATOR_POS_VERT_ABS
         if glitch:
             flags |= ESTIMATOR_GPS_GLITCH
-        if now < float(F[fk.X_BAD_ACCEL_UNTIL]):
+        if now < float(F[fk.MEMORY.bad_accel_until]):
             flags |= ESTIMATOR_ACCEL_ERROR
         pos_ratio = max(src["gps_pos"].test_ratio, src["ev_pos"].test_ratio)
         vert_ratio = max(src["gps_hgt"].test_ratio, src["baro"].test_ratio, src["ev_hgt"].test_ratio)

@@ -8,20 +8,21 @@ loop (:func:`sitl.campaign.kernels.simulate_estimated`), so both fly one filter.
 are those of :mod:`.eskf`'s docstring; the arithmetic of the prediction and of the Joseph update
 is in :mod:`.kernels`.
 
-A filter's memory is five float arrays (:func:`new_memory`), each laid out by the constants below:
+A filter's memory is five float arrays (:func:`new_memory`), each laid out by a layout below
+(:mod:`quadcommon.layout`: fields declared once, offsets generated):
 
-* ``F`` (``X_SIZE``): the nominal state, the trapezoid's previous sample, the cumulative
+* ``F`` (``MEMORY.size``): the nominal state, the trapezoid's previous sample, the cumulative
   corrections the buffered states are brought forward with, the clocks of the last aiding, the
   fusion-rate limits, the step's process noise, counters;
 * ``P`` (19 x 19): the error-state covariance (order :data:`.kernels.STATE_NAMES`);
-* ``ring`` (``RING`` x ``RING_SIZE``): the delayed-state buffer, one row per IMU step;
-* ``stats`` (10 x ``ST_SIZE``): per measurement kind (:data:`.status.SOURCE_NAMES`' order)
+* ``ring`` (``RING`` x ``RING_ROW.size``): the delayed-state buffer, one row per IMU step;
+* ``stats`` (10 x ``STATS.size``): per measurement kind (:data:`.status.SOURCE_NAMES`' order)
   the counters and last innovation :class:`~.status.SourceStats` reports;
-* ``windows`` (2 x ``W_SIZE``): the recent normalised vertical innovations (GNSS vertical
+* ``windows`` (2 x ``WINDOW_ROW.size``): the recent normalised vertical innovations (GNSS vertical
   velocity, vision height) the bad-vertical-acceleration check averages;
 
 and the parameters are one more (``A``, :func:`parameter_array`). Flags and counts are floats
-in these arrays (``int(F[X_HEAD])``): one array type for everything.
+in these arrays (``int(F[MEMORY.head])``): one array type for everything.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ import numpy as np
 
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.rigid_body import (
     Quaternion,
     Vector3,
@@ -76,55 +78,48 @@ PARAMETER_FIELDS = (
     "no_aid_timeout_s", "align_time_s", "pos_reset_timeout_s",
     "converged_tilt_rad", "converged_yaw_rad", "converged_pos_m", "converged_vpos_m",
 )  # fmt: skip
-(A_GYRO_NOISE, A_ACCEL_NOISE, A_GYRO_BIAS_RW, A_ACCEL_BIAS_RW, A_MAG_BIAS_RW, A_BARO_BIAS_RW,
- A_GYRO_BIAS_INIT, A_ACCEL_BIAS_INIT, A_TILT_INIT,
- A_GPS_CTRL, A_GPS_DELAY, A_GPS_POS_NOISE, A_GPS_VEL_NOISE, A_GPS_POS_GATE, A_GPS_VEL_GATE,
- A_GPS_REQ_EPH, A_GPS_REQ_EPV, A_GPS_REQ_NSATS,
- A_BARO_ENABLED, A_BARO_PERIOD, A_BARO_DELAY, A_BARO_NOISE, A_BARO_GATE,
- A_MAG_TYPE, A_MAG_PERIOD, A_MAG_BIAS_INIT, A_MAG_DELAY, A_MAG_NOISE, A_MAG_GATE,
- A_HEADING_NOISE, A_HEADING_GATE, A_MAG_CHECK, A_MAG_STRENGTH_TOL, A_MAG_INCLINATION_TOL,
- A_EV_CTRL, A_EV_DELAY, A_EV_NOISE_MODE, A_EV_POS_NOISE, A_EV_YAW_NOISE, A_EV_POS_GATE,
- A_EV_VEL_NOISE, A_EV_VEL_GATE,
- A_NO_AID_TIMEOUT, A_ALIGN_TIME, A_POS_RESET_TIMEOUT,
- A_CONV_TILT, A_CONV_YAW, A_CONV_POS, A_CONV_VPOS) = range(len(PARAMETER_FIELDS))  # fmt: skip
-A_GRAVITY = len(PARAMETER_FIELDS)
-A_FIELD = A_GRAVITY + 1  # 3: the earth field at home, world frame (gauss)
-A_FIELD_STRENGTH = A_FIELD + 3
-A_FIELD_INCLINATION = A_FIELD + 4  # positive: pointing down
-A_FIELD_HEADING = A_FIELD + 5  # -declination in the paper's frame (z up)
-A_SIZE = A_FIELD + 6
+PARAMETERS = layout("FilterParameters", (
+    *(Field(name) for name in PARAMETER_FIELDS),
+    Field("gravity", unit="m/s^2"),
+    Field("field", 3, unit="gauss", doc="the earth field at home, world frame"),
+    Field("field_strength", unit="gauss"),
+    Field("field_inclination", unit="rad", doc="positive: pointing down"),
+    Field("field_heading", unit="rad", doc="-declination in the paper's frame (z up)"),
+))  # fmt: skip
 
 GPS_FIX_3D = 3
 
 # -- the state F ---------------------------------------------------------------------------------
-X_P, X_V, X_Q, X_BG, X_BA, X_BM, X_BH = 0, 3, 6, 10, 13, 16, 19
-X_PREV_RATE = 20  # 3: raw gyro of the previous sample
-X_PREV_FORCE = 23  # 3: raw accelerometer of the previous sample
-X_PREV_ACC = 26  # 3: R (f - b_a) of the previous sample
-X_RATE = 29  # 3: bias-corrected rate of the last sample (what the controllers get)
-X_CP, X_CV, X_CQ = 32, 35, 38  # cumulative corrections (3, 3, 4) for the buffered states
-X_TIME = 42
-X_DT_AVG = 43
-X_HEAD = 44  # ring: index of the newest row
-X_COUNT = 45  # ring: rows held
-X_LAST_H_AID = 46  # times of the last fusions that constrain the horizontal, vertical drift
-X_LAST_V_AID = 47
-X_LAST_GPS_POS = 48
-X_BAD_ACCEL_UNTIL = 49
-X_BAD_ACCEL_DETECTIONS = 50
-X_NEXT_MAG = 51  # fusion-rate limits (EKF2_MAG_RATE, EKF2_BARO_RATE)
-X_NEXT_BARO = 52
-X_Q_DT = 53  # the dt the process noise was derived for (-1: derive again)
-X_IMU_SAMPLES = 54
-X_IMU_DT_REJECTED = 55
-X_QDIAG = 56  # N: the step's process noise variances
-X_SIZE = X_QDIAG + N
+MEMORY = layout("FilterMemory", (
+    Field("p", 3, unit="m"), Field("v", 3, unit="m/s"), Field("q", 4, doc="attitude quaternion (w, x, y, z)"),
+    Field("gyro_bias", 3, unit="rad/s"), Field("accel_bias", 3, unit="m/s^2"),
+    Field("mag_bias", 3, unit="gauss"),
+    Field("baro_bias", unit="m"),
+    Field("prev_rate", 3, unit="rad/s", doc="raw gyro of the previous sample"),
+    Field("prev_force", 3, unit="m/s^2", doc="raw accelerometer of the previous sample"),
+    Field("prev_acc", 3, unit="m/s^2", doc="R (f - b_a) of the previous sample"),
+    Field("rate", 3, unit="rad/s", doc="bias-corrected rate of the last sample (what the controllers get)"),
+    Field("correction_p", 3, doc="cumulative corrections for the buffered states"),
+    Field("correction_v", 3), Field("correction_q", 4),
+    Field("time", unit="s"), Field("dt_avg", unit="s"),
+    Field("head", doc="ring: index of the newest row"), Field("count_held", doc="ring: rows held"),
+    Field("last_h_aid", unit="s", doc="time of the last fusion that constrains the horizontal drift"),
+    Field("last_v_aid", unit="s", doc="... the vertical drift"),
+    Field("last_gps_pos", unit="s"), Field("bad_accel_until", unit="s"), Field("bad_accel_detections"),
+    Field("next_mag", unit="s", doc="fusion-rate limit (EKF2_MAG_RATE)"),
+    Field("next_baro", unit="s", doc="fusion-rate limit (EKF2_BARO_RATE)"),
+    Field("q_dt", unit="s", doc="the dt the process noise was derived for (-1: derive again)"),
+    Field("imu_samples"), Field("imu_dt_rejected"),
+    Field("qdiag", N, doc="the step's process noise variances"),
+))  # fmt: skip
 
 # -- the delayed-state buffer: per IMU step t, p, v, q, cp, cv, cq ---------------------------------
 RING = 4096  # IMU steps (8 s at 500 Hz; the EKF2_*_DELAY parameters stop at 300 ms); a power of two
 RING_MASK = RING - 1
-R_T, R_P, R_V, R_Q, R_CP, R_CV, R_CQ = 0, 1, 4, 7, 11, 14, 17
-RING_SIZE = 21
+RING_ROW = layout("RingRow", (
+    Field("t", unit="s"), Field("p", 3, unit="m"), Field("v", 3, unit="m/s"), Field("q", 4),
+    Field("correction_p", 3), Field("correction_v", 3), Field("correction_q", 4),
+))  # fmt: skip
 
 # -- per measurement kind (rows in SOURCE_NAMES' order) ---------------------------------------------
 SRC_GPS_POS, SRC_GPS_HGT, SRC_GPS_VEL, SRC_GPS_VVEL, SRC_BARO = 0, 1, 2, 3, 4
@@ -135,17 +130,15 @@ STATS_FIELDS = (
     "normalized_innovation", "last_tested_s", "last_fused_s", "last_rejected_s", "rejecting_since_s",
     "resets",
 )  # fmt: skip
-(ST_FUSED, ST_REJECTED, ST_CHECK_REJECTED, ST_TOO_OLD, ST_SKIPPED, ST_TEST_RATIO, ST_INNOVATION,
- ST_NORMALIZED, ST_LAST_TESTED, ST_LAST_FUSED, ST_LAST_REJECTED, ST_REJECTING_SINCE,
- ST_RESETS) = range(len(STATS_FIELDS))  # fmt: skip
-ST_SIZE = len(STATS_FIELDS)
+STATS = layout("SourceStats", tuple(Field(name) for name in STATS_FIELDS))
 STATS_INITIAL = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, -1.0, 0.0)
 
 # -- the innovation windows of the bad-vertical-acceleration check ---------------------------------
 WINDOW = 256  # samples held (then the oldest goes)
-W_TIMES, W_VALUES = 0, WINDOW
-W_START, W_COUNT, W_TOTAL, W_APPENDS = 2 * WINDOW, 2 * WINDOW + 1, 2 * WINDOW + 2, 2 * WINDOW + 3
-W_SIZE = 2 * WINDOW + 4
+WINDOW_ROW = layout("InnovationWindow", (
+    Field("times", WINDOW, unit="s"), Field("values", WINDOW), Field("start"), Field("count_held"),
+    Field("total"), Field("appends"),
+))  # fmt: skip
 W_GPS_VVEL, W_EV_HGT = 0, 1
 
 MAX_IMU_DT_S = 0.1  # a longer gap is a lost link, not an interval to integrate across
@@ -170,32 +163,32 @@ CONVERGED, DEAD_RECKONING, TILT, YAW, POSITION, HEIGHT = 0, 1, 2, 3, 4, 5
 # Memory and parameters (Python)
 # =================================================================================================
 def parameter_array(params: EstimatorParams, gravity_m_s2: float, earth_field: Vector3) -> np.ndarray:
-    """The parameters as the kernels read them (layout ``A_*``)."""
+    """The parameters as the kernels read them (layout :data:`PARAMETERS`)."""
     names = [f.name for f in dataclasses.fields(EstimatorParams)]
     if sorted(names) != sorted(PARAMETER_FIELDS):
         raise RuntimeError(f"EstimatorParams' fields {names} are not the kernels' {PARAMETER_FIELDS}")
-    A = np.zeros(A_SIZE)
+    A = np.zeros(PARAMETERS.size)
     for i, name in enumerate(PARAMETER_FIELDS):
         A[i] = float(getattr(params, name))
     mx, my, mz = (float(c) for c in earth_field)
-    A[A_GRAVITY] = gravity_m_s2
-    A[A_FIELD : A_FIELD + 3] = (mx, my, mz)
-    A[A_FIELD_STRENGTH] = math.sqrt(mx * mx + my * my + mz * mz)
-    A[A_FIELD_INCLINATION] = math.atan2(-mz, math.hypot(mx, my))
-    A[A_FIELD_HEADING] = math.atan2(my, mx)
+    A[PARAMETERS.gravity] = gravity_m_s2
+    A[PARAMETERS.field : PARAMETERS.field + 3] = (mx, my, mz)
+    A[PARAMETERS.field_strength] = math.sqrt(mx * mx + my * my + mz * mz)
+    A[PARAMETERS.field_inclination] = math.atan2(-mz, math.hypot(mx, my))
+    A[PARAMETERS.field_heading] = math.atan2(my, mx)
     return A
 
 
 def new_memory() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(F, P, ring, stats, windows)`` of a filter not yet started."""
-    F = np.zeros(X_SIZE)
-    F[X_Q] = F[X_CQ] = 1.0
-    F[X_DT_AVG] = 0.002
-    F[X_LAST_H_AID] = F[X_LAST_V_AID] = F[X_LAST_GPS_POS] = -1.0
-    F[X_BAD_ACCEL_UNTIL] = F[X_NEXT_MAG] = F[X_NEXT_BARO] = -math.inf
-    F[X_Q_DT] = -1.0
+    F = np.zeros(MEMORY.size)
+    F[MEMORY.q] = F[MEMORY.correction_q] = 1.0
+    F[MEMORY.dt_avg] = 0.002
+    F[MEMORY.last_h_aid] = F[MEMORY.last_v_aid] = F[MEMORY.last_gps_pos] = -1.0
+    F[MEMORY.bad_accel_until] = F[MEMORY.next_mag] = F[MEMORY.next_baro] = -math.inf
+    F[MEMORY.q_dt] = -1.0
     stats = np.tile(np.array(STATS_INITIAL), (SOURCES, 1))
-    return F, np.zeros((N, N)), np.zeros((RING, RING_SIZE)), stats, np.zeros((2, W_SIZE))
+    return F, np.zeros((N, N)), np.zeros((RING, RING_ROW.size)), stats, np.zeros((2, WINDOW_ROW.size))
 
 
 # =================================================================================================
@@ -276,16 +269,16 @@ def mag_heading(A: Any, m: Vector3, phi: float, theta: float, bias: Vector3) -> 
     # Level-frame field: Ry(theta) Rx(phi) m (yaw left out).
     lx = ct * cx + st * sf * cy + st * cf * cz
     ly = cf * cy - sf * cz
-    return wrap_pi(A[A_FIELD_HEADING] - math.atan2(ly, lx))
+    return wrap_pi(A[PARAMETERS.field_heading] - math.atan2(ly, lx))
 
 
 @kernel
 def gps_variances(A: Any, eph: float, epv: float, speed_accuracy: float) -> Vector3:
     """Horizontal, vertical position and velocity variances of a fix: the reported accuracies
     with the parameters as floors (PX4: the vertical floor 1.5x the horizontal)."""
-    h = max(eph, A[A_GPS_POS_NOISE])
-    v = max(epv, 1.5 * A[A_GPS_POS_NOISE])
-    s = max(speed_accuracy, A[A_GPS_VEL_NOISE])
+    h = max(eph, A[PARAMETERS.gps_pos_noise_m])
+    v = max(epv, 1.5 * A[PARAMETERS.gps_pos_noise_m])
+    s = max(speed_accuracy, A[PARAMETERS.gps_vel_noise_m_s])
     return (h * h, v * v, s * s)
 
 
@@ -293,62 +286,85 @@ def gps_variances(A: Any, eph: float, epv: float, speed_accuracy: float) -> Vect
 def gps_usable(A: Any, fix_type: float, eph: float, epv: float, satellites: float) -> bool:
     return (
         fix_type >= GPS_FIX_3D
-        and eph <= A[A_GPS_REQ_EPH]
-        and epv <= A[A_GPS_REQ_EPV]
-        and satellites >= A[A_GPS_REQ_NSATS]
+        and eph <= A[PARAMETERS.gps_req_eph_m]
+        and epv <= A[PARAMETERS.gps_req_epv_m]
+        and satellites >= A[PARAMETERS.gps_req_nsats]
     )
 
 
 @kernel
 def ev_pos_variance(A: Any, position_std: float) -> float:
     """EKF2_EV_NOISE_MD 0: the reported 1-sigma with EKF2_EVP_NOISE as its floor; 1: the parameter."""
-    s = A[A_EV_POS_NOISE] if A[A_EV_NOISE_MODE] != 0.0 else max(position_std, A[A_EV_POS_NOISE])
+    s = (
+        A[PARAMETERS.ev_pos_noise_m]
+        if A[PARAMETERS.ev_noise_mode] != 0.0
+        else max(position_std, A[PARAMETERS.ev_pos_noise_m])
+    )
     return s * s
 
 
 @kernel
 def ev_vel_variance(A: Any, velocity_std: float) -> float:
     """EKF2_EV_NOISE_MD 0: the reported 1-sigma with EKF2_EVV_NOISE as its floor; 1: the parameter."""
-    s = A[A_EV_VEL_NOISE] if A[A_EV_NOISE_MODE] != 0.0 else max(velocity_std, A[A_EV_VEL_NOISE])
+    s = (
+        A[PARAMETERS.ev_vel_noise_m_s]
+        if A[PARAMETERS.ev_noise_mode] != 0.0
+        else max(velocity_std, A[PARAMETERS.ev_vel_noise_m_s])
+    )
     return s * s
 
 
 @kernel
 def ev_yaw_variance(A: Any, yaw_std: float) -> float:
-    s = A[A_EV_YAW_NOISE] if A[A_EV_NOISE_MODE] != 0.0 else max(yaw_std, A[A_EV_YAW_NOISE])
+    s = (
+        A[PARAMETERS.ev_yaw_noise_rad]
+        if A[PARAMETERS.ev_noise_mode] != 0.0
+        else max(yaw_std, A[PARAMETERS.ev_yaw_noise_rad])
+    )
     return s * s
 
 
 @kernel
 def world_force(F: Any, force: Vector3) -> Vector3:
     """``R (f - b_a)``: a body specific force in the world frame."""
-    q = quat(F, X_Q)
+    q = quat(F, MEMORY.q)
     R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
-    return matrix_times(R, (force[0] - F[X_BA], force[1] - F[X_BA + 1], force[2] - F[X_BA + 2]))
+    return matrix_times(
+        R,
+        (
+            force[0] - F[MEMORY.accel_bias],
+            force[1] - F[MEMORY.accel_bias + 1],
+            force[2] - F[MEMORY.accel_bias + 2],
+        ),
+    )
 
 
 @kernel
 def restart_trapezoid(F: Any, rate: Vector3, force: Vector3) -> None:
     """The trapezoid starts again from this sample (after a gap, at the start, after a reset)."""
-    set3(F, X_PREV_RATE, rate)
-    set3(F, X_PREV_FORCE, force)
-    set3(F, X_PREV_ACC, world_force(F, force))
-    set3(F, X_RATE, (rate[0] - F[X_BG], rate[1] - F[X_BG + 1], rate[2] - F[X_BG + 2]))
+    set3(F, MEMORY.prev_rate, rate)
+    set3(F, MEMORY.prev_force, force)
+    set3(F, MEMORY.prev_acc, world_force(F, force))
+    set3(
+        F,
+        MEMORY.rate,
+        (rate[0] - F[MEMORY.gyro_bias], rate[1] - F[MEMORY.gyro_bias + 1], rate[2] - F[MEMORY.gyro_bias + 2]),
+    )
 
 
 @kernel
 def store(F: Any, ring: Any, row: int) -> None:
     """The nominal state and the corrections so far into the buffer's ``row``."""
     r = ring[row]
-    r[R_T] = F[X_TIME]
+    r[RING_ROW.t] = F[MEMORY.time]
     for i in range(3):
-        r[R_P + i] = F[X_P + i]
-        r[R_V + i] = F[X_V + i]
-        r[R_CP + i] = F[X_CP + i]
-        r[R_CV + i] = F[X_CV + i]
+        r[RING_ROW.p + i] = F[MEMORY.p + i]
+        r[RING_ROW.v + i] = F[MEMORY.v + i]
+        r[RING_ROW.correction_p + i] = F[MEMORY.correction_p + i]
+        r[RING_ROW.correction_v + i] = F[MEMORY.correction_v + i]
     for i in range(4):
-        r[R_Q + i] = F[X_Q + i]
-        r[R_CQ + i] = F[X_CQ + i]
+        r[RING_ROW.q + i] = F[MEMORY.q + i]
+        r[RING_ROW.correction_q + i] = F[MEMORY.correction_q + i]
 
 
 # =================================================================================================
@@ -359,17 +375,17 @@ def start(F: Any, ring: Any, t: float, dt: float, rate: Vector3, force: Vector3)
     """The filter starts at this IMU sample with the state and covariance set (the alignment's or
     :func:`reset_state`'s): the trapezoid, the buffer and the aiding clocks start here."""
     if 0.0 < dt <= MAX_IMU_DT_S:
-        F[X_DT_AVG] = dt
-    F[X_TIME] = t
+        F[MEMORY.dt_avg] = dt
+    F[MEMORY.time] = t
     restart_trapezoid(F, rate, force)
-    set3(F, X_CP, (0.0, 0.0, 0.0))
-    set3(F, X_CV, (0.0, 0.0, 0.0))
-    set4(F, X_CQ, (1.0, 0.0, 0.0, 0.0))
-    F[X_LAST_H_AID] = t
-    F[X_LAST_V_AID] = t
+    set3(F, MEMORY.correction_p, (0.0, 0.0, 0.0))
+    set3(F, MEMORY.correction_v, (0.0, 0.0, 0.0))
+    set4(F, MEMORY.correction_q, (1.0, 0.0, 0.0, 0.0))
+    F[MEMORY.last_h_aid] = t
+    F[MEMORY.last_v_aid] = t
     store(F, ring, 0)
-    F[X_HEAD] = 0.0
-    F[X_COUNT] = 1.0
+    F[MEMORY.head] = 0.0
+    F[MEMORY.count_held] = 1.0
 
 
 @kernel
@@ -378,41 +394,41 @@ def reset_state(F: Any, P: Any, A: Any, position: Vector3, velocity: Vector3, q:
     """A known state (an in-air start, a test): attitude uncertainty from EKF2_ANGERR_INIT (tilt)
     and 5 deg of yaw, biases zero with their EKF2_*BIAS_INIT priors; ``baro_offset``: the baro
     height minus ``position``'s z (0 without a baro sample). Then :func:`start`."""
-    set3(F, X_P, position)
-    set3(F, X_V, velocity)
+    set3(F, MEMORY.p, position)
+    set3(F, MEMORY.v, velocity)
     n = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    set4(F, X_Q, (q[0] * n, q[1] * n, q[2] * n, q[3] * n))
+    set4(F, MEMORY.q, (q[0] * n, q[1] * n, q[2] * n, q[3] * n))
     for i in range(9):
-        F[X_BG + i] = 0.0
-    F[X_BH] = baro_offset
+        F[MEMORY.gyro_bias + i] = 0.0
+    F[MEMORY.baro_bias] = baro_offset
     for i in range(N):
         for j in range(N):
             P[i, j] = 0.0
     for i in range(3):
         P[IP + i, IP + i] = position_std * position_std
         P[IV + i, IV + i] = velocity_std * velocity_std
-        P[IBG + i, IBG + i] = A[A_GYRO_BIAS_INIT] ** 2
-        P[IBA + i, IBA + i] = A[A_ACCEL_BIAS_INIT] ** 2
-        P[IBM + i, IBM + i] = A[A_MAG_BIAS_INIT] ** 2
-    P[ITH, ITH] = A[A_TILT_INIT] ** 2
-    P[ITH + 1, ITH + 1] = A[A_TILT_INIT] ** 2
+        P[IBG + i, IBG + i] = A[PARAMETERS.gyro_bias_init] ** 2
+        P[IBA + i, IBA + i] = A[PARAMETERS.accel_bias_init] ** 2
+        P[IBM + i, IBM + i] = A[PARAMETERS.mag_bias_init_gauss] ** 2
+    P[ITH, ITH] = A[PARAMETERS.tilt_init] ** 2
+    P[ITH + 1, ITH + 1] = A[PARAMETERS.tilt_init] ** 2
     P[ITH + 2, ITH + 2] = math.radians(5.0) ** 2
-    P[IBH, IBH] = position_std * position_std + A[A_BARO_NOISE] ** 2
+    P[IBH, IBH] = position_std * position_std + A[PARAMETERS.baro_noise_m] ** 2
 
 
 @kernel
 def process_noise(F: Any, A: Any, dt: float) -> None:
     """The step's process noise variances (``Q`` of :mod:`.eskf`'s docstring) into ``F``."""
     for i in range(N):
-        F[X_QDIAG + i] = 0.0
+        F[MEMORY.qdiag + i] = 0.0
     for i in range(3):
-        F[X_QDIAG + IV + i] = A[A_ACCEL_NOISE] ** 2 * dt
-        F[X_QDIAG + ITH + i] = A[A_GYRO_NOISE] ** 2 * dt
-        F[X_QDIAG + IBG + i] = A[A_GYRO_BIAS_RW] ** 2 * dt
-        F[X_QDIAG + IBA + i] = A[A_ACCEL_BIAS_RW] ** 2 * dt
-        F[X_QDIAG + IBM + i] = A[A_MAG_BIAS_RW] ** 2 * dt
-    F[X_QDIAG + IBH] = A[A_BARO_BIAS_RW] ** 2 * dt
-    F[X_Q_DT] = dt
+        F[MEMORY.qdiag + IV + i] = A[PARAMETERS.accel_noise_density] ** 2 * dt
+        F[MEMORY.qdiag + ITH + i] = A[PARAMETERS.gyro_noise_density] ** 2 * dt
+        F[MEMORY.qdiag + IBG + i] = A[PARAMETERS.gyro_bias_rw] ** 2 * dt
+        F[MEMORY.qdiag + IBA + i] = A[PARAMETERS.accel_bias_rw] ** 2 * dt
+        F[MEMORY.qdiag + IBM + i] = A[PARAMETERS.mag_bias_rw] ** 2 * dt
+    F[MEMORY.qdiag + IBH] = A[PARAMETERS.baro_bias_rw] ** 2 * dt
+    F[MEMORY.q_dt] = dt
 
 
 @kernel
@@ -421,36 +437,37 @@ def predict_step(
 ) -> None:
     """One IMU sample (raw gyro ``rate``, accelerometer ``force``) at ``t``, ``dt`` after the
     previous: the nominal state and P predicted (:func:`.kernels.predict`), then buffered."""
-    F[X_IMU_SAMPLES] += 1.0
+    F[MEMORY.imu_samples] += 1.0
     if not 0.0 < dt <= MAX_IMU_DT_S:
         # Not an interval to integrate across: restart the trapezoid from this sample.
-        F[X_IMU_DT_REJECTED] += 1.0
-        F[X_TIME] = t
+        F[MEMORY.imu_dt_rejected] += 1.0
+        F[MEMORY.time] = t
         restart_trapezoid(F, rate, force)
         return
-    F[X_TIME] = t
-    F[X_DT_AVG] += 0.01 * (dt - F[X_DT_AVG])
-    if abs(dt - F[X_Q_DT]) > 1e-9:  # time stamps jitter in the last bits: keep the noise
+    F[MEMORY.time] = t
+    F[MEMORY.dt_avg] += 0.01 * (dt - F[MEMORY.dt_avg])
+    if abs(dt - F[MEMORY.q_dt]) > 1e-9:  # time stamps jitter in the last bits: keep the noise
         process_noise(F, A, dt)
-    bg = vec3(F, X_BG)
-    q, p, v, a1 = predict(P, F[X_QDIAG : X_QDIAG + N], dt, A[A_GRAVITY], rate, force, vec3(F, X_PREV_RATE),
-                          vec3(F, X_PREV_ACC), bg, vec3(F, X_BA), quat(F, X_Q), vec3(F, X_P),
-                          vec3(F, X_V))  # fmt: skip
-    set4(F, X_Q, q)
-    set3(F, X_P, p)
-    set3(F, X_V, v)
-    set3(F, X_PREV_ACC, a1)
-    set3(F, X_PREV_RATE, rate)
-    set3(F, X_PREV_FORCE, force)
-    set3(F, X_RATE, (rate[0] - bg[0], rate[1] - bg[1], rate[2] - bg[2]))
-    if t < F[X_BAD_ACCEL_UNTIL]:
+    bg = vec3(F, MEMORY.gyro_bias)
+    qdiag = F[MEMORY.qdiag : MEMORY.qdiag + N]
+    q, p, v, a1 = predict(P, qdiag, dt, A[PARAMETERS.gravity], rate, force, vec3(F, MEMORY.prev_rate),
+                          vec3(F, MEMORY.prev_acc), bg, vec3(F, MEMORY.accel_bias), quat(F, MEMORY.q),
+                          vec3(F, MEMORY.p), vec3(F, MEMORY.v))  # fmt: skip
+    set4(F, MEMORY.q, q)
+    set3(F, MEMORY.p, p)
+    set3(F, MEMORY.v, v)
+    set3(F, MEMORY.prev_acc, a1)
+    set3(F, MEMORY.prev_rate, rate)
+    set3(F, MEMORY.prev_force, force)
+    set3(F, MEMORY.rate, (rate[0] - bg[0], rate[1] - bg[1], rate[2] - bg[2]))
+    if t < F[MEMORY.bad_accel_until]:
         P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
         P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
-    head = (int(F[X_HEAD]) + 1) & RING_MASK
+    head = (int(F[MEMORY.head]) + 1) & RING_MASK
     store(F, ring, head)
-    F[X_HEAD] = head
-    if F[X_COUNT] < RING:
-        F[X_COUNT] += 1.0
+    F[MEMORY.head] = head
+    if F[MEMORY.count_held] < RING:
+        F[MEMORY.count_held] += 1.0
 
 
 # =================================================================================================
@@ -460,46 +477,52 @@ def predict_step(
 def state_at(F: Any, ring: Any, t_m: float) -> tuple[bool, Vector3, Vector3, Quaternion, float]:
     """``(found, p, v, q, D)`` at ``t_m`` (corrected since), ``D = now - t_m``; not found when
     older than the buffer."""
-    now = F[X_TIME]
+    now = F[MEMORY.time]
     if t_m >= now - 1e-9:
-        return True, vec3(F, X_P), vec3(F, X_V), quat(F, X_Q), 0.0
-    dt_avg = F[X_DT_AVG]
-    count, head = int(F[X_COUNT]), int(F[X_HEAD])
+        return True, vec3(F, MEMORY.p), vec3(F, MEMORY.v), quat(F, MEMORY.q), 0.0
+    dt_avg = F[MEMORY.dt_avg]
+    count, head = int(F[MEMORY.count_held]), int(F[MEMORY.head])
     k = int((now - t_m) / dt_avg + 0.5)
     none = (False, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)
     if k >= count:
         return none
     row = (head - k) & RING_MASK
     # The step is nearly uniform; walk at most a few entries to the nearest time.
-    while ring[row, R_T] > t_m and k + 1 < count:
+    while ring[row, RING_ROW.t] > t_m and k + 1 < count:
         nxt = (head - k - 1) & RING_MASK
-        if abs(ring[nxt, R_T] - t_m) >= abs(ring[row, R_T] - t_m):
+        if abs(ring[nxt, RING_ROW.t] - t_m) >= abs(ring[row, RING_ROW.t] - t_m):
             break
         k += 1
         row = nxt
-    while ring[row, R_T] < t_m and k > 0:
+    while ring[row, RING_ROW.t] < t_m and k > 0:
         nxt = (head - k + 1) & RING_MASK
-        if abs(ring[nxt, R_T] - t_m) >= abs(ring[row, R_T] - t_m):
+        if abs(ring[nxt, RING_ROW.t] - t_m) >= abs(ring[row, RING_ROW.t] - t_m):
             break
         k -= 1
         row = nxt
     r = ring[row]
-    te = r[R_T]
+    te = r[RING_ROW.t]
     if t_m < te - 2.0 * dt_avg:
         return none  # older than the buffer's oldest entry
     dtm = t_m - te
     pm = (
-        r[R_P] + F[X_CP] - r[R_CP] + r[R_V] * dtm,
-        r[R_P + 1] + F[X_CP + 1] - r[R_CP + 1] + r[R_V + 1] * dtm,
-        r[R_P + 2] + F[X_CP + 2] - r[R_CP + 2] + r[R_V + 2] * dtm,
+        r[RING_ROW.p] + F[MEMORY.correction_p] - r[RING_ROW.correction_p] + r[RING_ROW.v] * dtm,
+        r[RING_ROW.p + 1]
+        + F[MEMORY.correction_p + 1]
+        - r[RING_ROW.correction_p + 1]
+        + r[RING_ROW.v + 1] * dtm,
+        r[RING_ROW.p + 2]
+        + F[MEMORY.correction_p + 2]
+        - r[RING_ROW.correction_p + 2]
+        + r[RING_ROW.v + 2] * dtm,
     )
     vm = (
-        r[R_V] + F[X_CV] - r[R_CV],
-        r[R_V + 1] + F[X_CV + 1] - r[R_CV + 1],
-        r[R_V + 2] + F[X_CV + 2] - r[R_CV + 2],
+        r[RING_ROW.v] + F[MEMORY.correction_v] - r[RING_ROW.correction_v],
+        r[RING_ROW.v + 1] + F[MEMORY.correction_v + 1] - r[RING_ROW.correction_v + 1],
+        r[RING_ROW.v + 2] + F[MEMORY.correction_v + 2] - r[RING_ROW.correction_v + 2],
     )
-    q = quat(r, R_Q)
-    cq, cq_now = quat(r, R_CQ), quat(F, X_CQ)
+    q = quat(r, RING_ROW.q)
+    cq, cq_now = quat(r, RING_ROW.correction_q), quat(F, MEMORY.correction_q)
     if cq != cq_now:  # corrected since it was stored: the corrections since, cq_now (x) cq^-1
         q = quaternion_multiply(quaternion_multiply(cq_now, quaternion_conjugate(cq)), q)
     return True, pm, vm, q, now - t_m
@@ -513,37 +536,37 @@ def window_append(W: Any, w: int, t: float, value: float) -> None:
     """``(t, value)`` into window ``w`` (the oldest goes when full); its running sum is summed
     again every ``WINDOW`` appends, so round-off cannot build up."""
     row = W[w]
-    start, count = int(row[W_START]), int(row[W_COUNT])
+    start, count = int(row[WINDOW_ROW.start]), int(row[WINDOW_ROW.count_held])
     if count >= WINDOW:
-        row[W_TOTAL] -= row[W_VALUES + start]
+        row[WINDOW_ROW.total] -= row[WINDOW_ROW.values + start]
         start = (start + 1) % WINDOW
         count -= 1
     i = (start + count) % WINDOW
-    row[W_TIMES + i] = t
-    row[W_VALUES + i] = value
+    row[WINDOW_ROW.times + i] = t
+    row[WINDOW_ROW.values + i] = value
     count += 1
-    row[W_TOTAL] += value
-    row[W_START], row[W_COUNT] = start, count
-    row[W_APPENDS] += 1.0
-    if row[W_APPENDS] >= WINDOW:
-        row[W_APPENDS] = 0.0
+    row[WINDOW_ROW.total] += value
+    row[WINDOW_ROW.start], row[WINDOW_ROW.count_held] = start, count
+    row[WINDOW_ROW.appends] += 1.0
+    if row[WINDOW_ROW.appends] >= WINDOW:
+        row[WINDOW_ROW.appends] = 0.0
         total = 0.0
         for j in range(count):
-            total += row[W_VALUES + (start + j) % WINDOW]
-        row[W_TOTAL] = total
+            total += row[WINDOW_ROW.values + (start + j) % WINDOW]
+        row[WINDOW_ROW.total] = total
 
 
 @kernel
 def window_mean_since(W: Any, w: int, t: float) -> tuple[int, float]:
     """Drop the samples of window ``w`` older than ``t``; ``(samples left, their mean)``."""
     row = W[w]
-    start, count = int(row[W_START]), int(row[W_COUNT])
-    while count > 0 and row[W_TIMES + start] < t:
-        row[W_TOTAL] -= row[W_VALUES + start]
+    start, count = int(row[WINDOW_ROW.start]), int(row[WINDOW_ROW.count_held])
+    while count > 0 and row[WINDOW_ROW.times + start] < t:
+        row[WINDOW_ROW.total] -= row[WINDOW_ROW.values + start]
         start = (start + 1) % WINDOW
         count -= 1
-    row[W_START], row[W_COUNT] = start, count
-    return count, (row[W_TOTAL] / count if count > 0 else 0.0)
+    row[WINDOW_ROW.start], row[WINDOW_ROW.count_held] = start, count
+    return count, (row[WINDOW_ROW.total] / count if count > 0 else 0.0)
 
 
 @kernel
@@ -573,7 +596,7 @@ def fuse(F: Any, P: Any, stats: Any, W: Any, H: Any, r: Any, y: Any, row_group: 
     groups = group_source.shape[0]
     prior = np.empty(m)
     prior_variances(P, H, prior)
-    now = F[X_TIME]
+    now = F[MEMORY.time]
     kept = 0
     k = 0
     for g in range(groups):
@@ -589,23 +612,23 @@ def fuse(F: Any, P: Any, stats: Any, W: Any, H: Any, r: Any, y: Any, row_group: 
                 worst = ratio
         last = k - 1
         s = stats[src]
-        s[ST_TEST_RATIO] = worst
-        s[ST_INNOVATION] = y[last]
-        s[ST_NORMALIZED] = y[last] / math.sqrt(max(prior[last] + r[last], MIN_VARIANCE))
-        s[ST_LAST_TESTED] = now
+        s[STATS.test_ratio] = worst
+        s[STATS.innovation] = y[last]
+        s[STATS.normalized_innovation] = y[last] / math.sqrt(max(prior[last] + r[last], MIN_VARIANCE))
+        s[STATS.last_tested_s] = now
         w = window_of(src)
         if w >= 0:
-            window_append(W, w, now, s[ST_NORMALIZED])
+            window_append(W, w, now, s[STATS.normalized_innovation])
         if worst > 1.0:
-            s[ST_REJECTED] += 1.0
-            s[ST_LAST_REJECTED] = now
-            if s[ST_REJECTING_SINCE] < 0.0:
-                s[ST_REJECTING_SINCE] = now
+            s[STATS.rejected] += 1.0
+            s[STATS.last_rejected_s] = now
+            if s[STATS.rejecting_since_s] < 0.0:
+                s[STATS.rejecting_since_s] = now
             accepted[g] = 0.0
         else:
-            s[ST_REJECTING_SINCE] = -1.0
-            s[ST_FUSED] += 1.0
-            s[ST_LAST_FUSED] = now
+            s[STATS.rejecting_since_s] = -1.0
+            s[STATS.fused] += 1.0
+            s[STATS.last_fused_s] = now
             accepted[g] = 1.0
             kept += k - first
     if kept == 0:
@@ -630,22 +653,22 @@ def fuse(F: Any, P: Any, stats: Any, W: Any, H: Any, r: Any, y: Any, row_group: 
 def inject(F: Any, P: Any, dx: Any) -> None:
     """Nominal state <- nominal (+) dx (Solà §6.2, global attitude error), then the reset."""
     for i in range(3):
-        F[X_P + i] += dx[i]
-        F[X_V + i] += dx[3 + i]
-        F[X_BG + i] += dx[9 + i]
-        F[X_BA + i] += dx[12 + i]
-        F[X_BM + i] += dx[15 + i]
+        F[MEMORY.p + i] += dx[i]
+        F[MEMORY.v + i] += dx[3 + i]
+        F[MEMORY.gyro_bias + i] += dx[9 + i]
+        F[MEMORY.accel_bias + i] += dx[12 + i]
+        F[MEMORY.mag_bias + i] += dx[15 + i]
         # Bookkeeping for the buffered past states.
-        F[X_CP + i] += dx[i]
-        F[X_CV + i] += dx[3 + i]
-    F[X_BH] += dx[18]
+        F[MEMORY.correction_p + i] += dx[i]
+        F[MEMORY.correction_v + i] += dx[3 + i]
+    F[MEMORY.baro_bias] += dx[18]
     dq = quaternion_exp(dx[6], dx[7], dx[8])
-    set4(F, X_Q, quaternion_normalised(quaternion_multiply(dq, quat(F, X_Q))))
-    set4(F, X_CQ, quaternion_multiply(dq, quat(F, X_CQ)))
+    set4(F, MEMORY.q, quaternion_normalised(quaternion_multiply(dq, quat(F, MEMORY.q))))
+    set4(F, MEMORY.correction_q, quaternion_multiply(dq, quat(F, MEMORY.correction_q)))
     # The previous sample's world force and the reported rate follow the new q and biases.
-    set3(F, X_PREV_ACC, world_force(F, vec3(F, X_PREV_FORCE)))
+    set3(F, MEMORY.prev_acc, world_force(F, vec3(F, MEMORY.prev_force)))
     for i in range(3):
-        F[X_RATE + i] = F[X_PREV_RATE + i] - F[X_BG + i]
+        F[MEMORY.rate + i] = F[MEMORY.prev_rate + i] - F[MEMORY.gyro_bias + i]
     # Reset, Solà §7.3.3: P <- G P G^T with G_theta = I + [dtheta/2]_x. Below 1 mrad, G - I
     # changes P by less than 0.05 %: skipped there (it costs as much as a fusion).
     hx, hy, hz = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
@@ -669,19 +692,19 @@ def maybe_reset_position(
     """After EST_POS_RST_T of continuous rejections of a good source, the horizontal position
     jumps to it (PX4 does)."""
     s = stats[source]
-    since = s[ST_REJECTING_SINCE]
-    if since < 0.0 or F[X_TIME] - since < A[A_POS_RESET_TIMEOUT]:
+    since = s[STATS.rejecting_since_s]
+    if since < 0.0 or F[MEMORY.time] - since < A[PARAMETERS.pos_reset_timeout_s]:
         return
     for i in range(2):
-        delta = target[i] - F[X_P + i]
-        F[X_P + i] += delta
-        F[X_CP + i] += delta
+        delta = target[i] - F[MEMORY.p + i]
+        F[MEMORY.p + i] += delta
+        F[MEMORY.correction_p + i] += delta
         for j in range(N):
             P[IP + i, j] = 0.0
             P[j, IP + i] = 0.0
         P[IP + i, IP + i] = var
-    s[ST_RESETS] += 1.0
-    s[ST_REJECTING_SINCE] = -1.0
+    s[STATS.resets] += 1.0
+    s[STATS.rejecting_since_s] = -1.0
 
 
 @kernel
@@ -693,27 +716,29 @@ def check_vertical_accel(F: Any, stats: Any, W: Any) -> None:
     mean of n samples has a standard deviation 1/sqrt(n) (0.32 at 10 GPS fixes): by chance
     the test fires about once in 10^5 windows; a vertical accelerometer fault (a bias step the
     random-walk model cannot follow) trips it within about a second."""
-    now = F[X_TIME]
+    now = F[MEMORY.time]
     bad = False
-    if stats[SRC_GPS_VVEL, ST_LAST_TESTED] == now:
+    if stats[SRC_GPS_VVEL, STATS.last_tested_s] == now:
         n, mean = window_mean_since(W, W_GPS_VVEL, now - BAD_ACCEL_WINDOW_S)
         if n >= BAD_ACCEL_MIN_SAMPLES and abs(mean) >= BAD_ACCEL_MEAN:
             # The height source tested last (GNSS height first on a tie) agrees in sign.
             hgt, baro = stats[SRC_GPS_HGT], stats[SRC_BARO]
             latest = -1
-            if hgt[ST_LAST_TESTED] >= 0.0:
+            if hgt[STATS.last_tested_s] >= 0.0:
                 latest = SRC_GPS_HGT
-            if baro[ST_LAST_TESTED] >= 0.0 and (latest < 0 or baro[ST_LAST_TESTED] > hgt[ST_LAST_TESTED]):
+            if baro[STATS.last_tested_s] >= 0.0 and (
+                latest < 0 or baro[STATS.last_tested_s] > hgt[STATS.last_tested_s]
+            ):
                 latest = SRC_BARO
-            bad = latest >= 0 and stats[latest, ST_INNOVATION] * mean > 0.0
-    if stats[SRC_EV_HGT, ST_LAST_TESTED] == now:
+            bad = latest >= 0 and stats[latest, STATS.innovation] * mean > 0.0
+    if stats[SRC_EV_HGT, STATS.last_tested_s] == now:
         n, mean = window_mean_since(W, W_EV_HGT, now - BAD_ACCEL_WINDOW_S)
         if n >= BAD_ACCEL_MIN_SAMPLES and abs(mean) >= BAD_ACCEL_MEAN:
             bad = True
     if bad:
-        if now >= F[X_BAD_ACCEL_UNTIL]:
-            F[X_BAD_ACCEL_DETECTIONS] += 1.0
-        F[X_BAD_ACCEL_UNTIL] = now + BAD_ACCEL_HOLD_S
+        if now >= F[MEMORY.bad_accel_until]:
+            F[MEMORY.bad_accel_detections] += 1.0
+        F[MEMORY.bad_accel_until] = now + BAD_ACCEL_HOLD_S
 
 
 @kernel
@@ -749,100 +774,113 @@ def fuse_gps(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, po
              satellites: float) -> None:  # fmt: skip
     """GNSS position (horizontal, height) and velocity arrived at ``t``, valid EKF2_GPS_DELAY before."""
     if not gps_usable(A, fix_type, eph, epv, satellites):
-        stats[SRC_GPS_POS, ST_CHECK_REJECTED] += 1.0
+        stats[SRC_GPS_POS, STATS.check_rejected] += 1.0
         return
-    found, pm, vm, _, D = state_at(F, ring, t - A[A_GPS_DELAY])
+    found, pm, vm, _, D = state_at(F, ring, t - A[PARAMETERS.gps_delay_s])
     if not found:
-        stats[SRC_GPS_POS, ST_TOO_OLD] += 1.0
+        stats[SRC_GPS_POS, STATS.too_old] += 1.0
         return
     hv, vv, sv = gps_variances(A, eph, epv, speed_accuracy)
-    ctrl = int(A[A_GPS_CTRL])
+    ctrl = int(A[PARAMETERS.gps_ctrl])
     H, r, y, row_group = np.zeros((6, N)), np.empty(6), np.empty(6), np.empty(6)
     group_source, group_gate = np.empty(4), np.empty(4)
     k = g = 0
     if ctrl & GPS_CTRL_HPOS:
         k = position_rows(H, r, y, row_group, k, g, 0, D, position[0] - pm[0], hv)
         k = position_rows(H, r, y, row_group, k, g, 1, D, position[1] - pm[1], hv)
-        group_source[g], group_gate[g] = SRC_GPS_POS, A[A_GPS_POS_GATE]
+        group_source[g], group_gate[g] = SRC_GPS_POS, A[PARAMETERS.gps_pos_gate]
         g += 1
     if ctrl & GPS_CTRL_VPOS:
         k = position_rows(H, r, y, row_group, k, g, 2, D, position[2] - pm[2], vv)
-        group_source[g], group_gate[g] = SRC_GPS_HGT, A[A_BARO_GATE]
+        group_source[g], group_gate[g] = SRC_GPS_HGT, A[PARAMETERS.baro_gate]
         g += 1
     if ctrl & GPS_CTRL_VEL:
         # Horizontal and vertical velocity gated apart (as PX4 does), so that a vertical
         # accelerometer fault does not also cut the horizontal aiding.
         k = velocity_row(H, r, y, row_group, k, g, 0, velocity[0] - vm[0], sv)
         k = velocity_row(H, r, y, row_group, k, g, 1, velocity[1] - vm[1], sv)
-        group_source[g], group_gate[g] = SRC_GPS_VEL, A[A_GPS_VEL_GATE]
+        group_source[g], group_gate[g] = SRC_GPS_VEL, A[PARAMETERS.gps_vel_gate]
         g += 1
         k = velocity_row(H, r, y, row_group, k, g, 2, velocity[2] - vm[2], sv * 2.25)  # PX4: 1.5x
-        group_source[g], group_gate[g] = SRC_GPS_VVEL, A[A_GPS_VEL_GATE]
+        group_source[g], group_gate[g] = SRC_GPS_VVEL, A[PARAMETERS.gps_vel_gate]
         g += 1
     if g == 0:
         return
     accepted = np.zeros(g)
     fuse(F, P, stats, W, H[:k], r[:k], y[:k], row_group[:k], group_source[:g], group_gate[:g], accepted)
-    now = F[X_TIME]
+    now = F[MEMORY.time]
     for j in range(g):
         src, ok = int(group_source[j]), accepted[j] != 0.0
         if src == SRC_GPS_POS:
             if ok:
-                F[X_LAST_H_AID] = now
-                F[X_LAST_GPS_POS] = now
+                F[MEMORY.last_h_aid] = now
+                F[MEMORY.last_gps_pos] = now
             else:
-                target = (position[0] + F[X_P] - pm[0], position[1] + F[X_P + 1] - pm[1], 0.0)
+                target = (position[0] + F[MEMORY.p] - pm[0], position[1] + F[MEMORY.p + 1] - pm[1], 0.0)
                 maybe_reset_position(F, P, stats, A, SRC_GPS_POS, target, hv)
         elif ok and (src in (SRC_GPS_HGT, SRC_GPS_VVEL)):
-            F[X_LAST_V_AID] = now
+            F[MEMORY.last_v_aid] = now
         elif ok and src == SRC_GPS_VEL:
-            F[X_LAST_H_AID] = now
+            F[MEMORY.last_h_aid] = now
     check_vertical_accel(F, stats, W)
 
 
 @kernel
 def fuse_baro(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, height: float) -> None:
     """Barometric height arrived at ``t``: ``h = z + b_h`` (the offset is a state), at most EKF2_BARO_RATE."""
-    if A[A_BARO_ENABLED] == 0.0:
+    if A[PARAMETERS.baro_enabled] == 0.0:
         return
     s = stats[SRC_BARO]
-    if t < F[X_NEXT_BARO]:
-        s[ST_SKIPPED] += 1.0
+    if t < F[MEMORY.next_baro]:
+        s[STATS.skipped] += 1.0
         return
-    F[X_NEXT_BARO] = t + A[A_BARO_PERIOD] - 1e-9
-    found, pm, _, _, D = state_at(F, ring, t - A[A_BARO_DELAY])
+    F[MEMORY.next_baro] = t + A[PARAMETERS.baro_period_s] - 1e-9
+    found, pm, _, _, D = state_at(F, ring, t - A[PARAMETERS.baro_delay_s])
     if not found:
-        s[ST_TOO_OLD] += 1.0
+        s[STATS.too_old] += 1.0
         return
     H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
     H[0, IP + 2], H[0, IV + 2], H[0, IBH] = 1.0, -D, 1.0
-    r[0], y[0] = A[A_BARO_NOISE] ** 2, height - pm[2] - F[X_BH]
+    r[0], y[0] = A[PARAMETERS.baro_noise_m] ** 2, height - pm[2] - F[MEMORY.baro_bias]
     accepted = np.zeros(1)
     fuse(
-        F, P, stats, W, H, r, y, row_group, np.full(1, float(SRC_BARO)), np.full(1, A[A_BARO_GATE]), accepted
+        F,
+        P,
+        stats,
+        W,
+        H,
+        r,
+        y,
+        row_group,
+        np.full(1, float(SRC_BARO)),
+        np.full(1, A[PARAMETERS.baro_gate]),
+        accepted,
     )
     if accepted[0] != 0.0:
-        F[X_LAST_V_AID] = F[X_TIME]
+        F[MEMORY.last_v_aid] = F[MEMORY.time]
     check_vertical_accel(F, stats, W)
 
 
 @kernel
 def mag_checks(F: Any, stats: Any, A: Any, source: int, m: Vector3, q: Quaternion) -> bool:
     """PX4's EKF2_MAG_CHECK: the corrected field's strength and inclination against the model."""
-    c = (m[0] - F[X_BM], m[1] - F[X_BM + 1], m[2] - F[X_BM + 2])
+    c = (m[0] - F[MEMORY.mag_bias], m[1] - F[MEMORY.mag_bias + 1], m[2] - F[MEMORY.mag_bias + 2])
     strength = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
-    check = int(A[A_MAG_CHECK])
+    check = int(A[PARAMETERS.mag_check])
     ok = True
-    if check & MAG_CHECK_STRENGTH and abs(strength - A[A_FIELD_STRENGTH]) > A[A_MAG_STRENGTH_TOL]:
+    if (
+        check & MAG_CHECK_STRENGTH
+        and abs(strength - A[PARAMETERS.field_strength]) > A[PARAMETERS.mag_strength_tol_gauss]
+    ):
         ok = False
     if ok and check & MAG_CHECK_INCLINATION and strength > 0.0:
         R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
         wz = R[2][0] * c[0] + R[2][1] * c[1] + R[2][2] * c[2]
         inclination = math.asin(max(-1.0, min(1.0, -wz / strength)))
-        ok = abs(inclination - A[A_FIELD_INCLINATION]) <= A[A_MAG_INCLINATION_TOL]
+        ok = abs(inclination - A[PARAMETERS.field_inclination]) <= A[PARAMETERS.mag_inclination_tol_rad]
     if not ok:
-        stats[source, ST_CHECK_REJECTED] += 1.0
-        stats[source, ST_LAST_REJECTED] = F[X_TIME]
+        stats[source, STATS.check_rejected] += 1.0
+        stats[source, STATS.last_rejected_s] = F[MEMORY.time]
     return ok
 
 
@@ -850,37 +888,49 @@ def mag_checks(F: Any, stats: Any, A: Any, source: int, m: Vector3, q: Quaternio
 def fuse_mag(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, m: Vector3) -> None:
     """Magnetometer arrived at ``t``, at most EKF2_MAG_RATE: the 3-axis field ``m = R^T m_earth +
     b_m`` (EKF2_MAG_TYPE 0) or the tilt-compensated heading (1)."""
-    mag_type = int(A[A_MAG_TYPE])
+    mag_type = int(A[PARAMETERS.mag_type])
     if mag_type == MAG_TYPE_NONE:
         return
     src = SRC_HEADING if mag_type == MAG_TYPE_HEADING else SRC_MAG
-    if t < F[X_NEXT_MAG]:
-        stats[src, ST_SKIPPED] += 1.0
+    if t < F[MEMORY.next_mag]:
+        stats[src, STATS.skipped] += 1.0
         return
-    F[X_NEXT_MAG] = t + A[A_MAG_PERIOD] - 1e-9
-    found, _, _, q, _ = state_at(F, ring, t - A[A_MAG_DELAY])
+    F[MEMORY.next_mag] = t + A[PARAMETERS.mag_period_s] - 1e-9
+    found, _, _, q, _ = state_at(F, ring, t - A[PARAMETERS.mag_delay_s])
     if not found:
-        stats[src, ST_TOO_OLD] += 1.0
+        stats[src, STATS.too_old] += 1.0
         return
     if not mag_checks(F, stats, A, src, m, q):
         return
     if mag_type == MAG_TYPE_HEADING:
         H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
         phi, theta, _ = euler_from_quaternion(q[0], q[1], q[2], q[3])
-        measured = mag_heading(A, m, phi, theta, vec3(F, X_BM))
-        yaw_row(H, r, y, row_group, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[A_HEADING_NOISE] ** 2)
-        source, gate = np.full(1, float(SRC_HEADING)), np.full(1, A[A_HEADING_GATE])
+        measured = mag_heading(A, m, phi, theta, vec3(F, MEMORY.mag_bias))
+        yaw_row(
+            H, r, y, row_group, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[PARAMETERS.heading_noise_rad] ** 2
+        )
+        source, gate = np.full(1, float(SRC_HEADING)), np.full(1, A[PARAMETERS.heading_gate])
         fuse(F, P, stats, W, H, r, y, row_group, source, gate, np.zeros(1))
         return
-    pred, J = mag_model(q, vec3(A, A_FIELD), vec3(F, X_BM))
+    pred, J = mag_model(q, vec3(A, PARAMETERS.field), vec3(F, MEMORY.mag_bias))
     H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
-    var = A[A_MAG_NOISE] ** 2
+    var = A[PARAMETERS.mag_noise_gauss] ** 2
     for i in range(3):
         H[i, ITH], H[i, ITH + 1], H[i, ITH + 2] = J[i][0], J[i][1], J[i][2]
         H[i, IBM + i] = 1.0
         r[i], y[i] = var, m[i] - pred[i]
     fuse(
-        F, P, stats, W, H, r, y, row_group, np.full(1, float(SRC_MAG)), np.full(1, A[A_MAG_GATE]), np.zeros(1)
+        F,
+        P,
+        stats,
+        W,
+        H,
+        r,
+        y,
+        row_group,
+        np.full(1, float(SRC_MAG)),
+        np.full(1, A[PARAMETERS.mag_gate]),
+        np.zeros(1),
     )
 
 
@@ -888,43 +938,43 @@ def fuse_mag(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, m:
 def fuse_vision(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, position: Vector3,
                 yaw: float, position_std: float, yaw_std: float) -> None:  # fmt: skip
     """Motion capture / vision position and yaw arrived at ``t``, valid EKF2_EV_DELAY before."""
-    found, pm, _, qm, D = state_at(F, ring, t - A[A_EV_DELAY])
+    found, pm, _, qm, D = state_at(F, ring, t - A[PARAMETERS.ev_delay_s])
     if not found:
-        stats[SRC_EV_POS, ST_TOO_OLD] += 1.0
+        stats[SRC_EV_POS, STATS.too_old] += 1.0
         return
     var = ev_pos_variance(A, position_std)
-    ctrl = int(A[A_EV_CTRL])
+    ctrl = int(A[PARAMETERS.ev_ctrl])
     H, r, y, row_group = np.zeros((4, N)), np.empty(4), np.empty(4), np.empty(4)
     group_source, group_gate = np.empty(3), np.empty(3)
     k = g = 0
     if ctrl & EV_CTRL_HPOS:
         k = position_rows(H, r, y, row_group, k, g, 0, D, position[0] - pm[0], var)
         k = position_rows(H, r, y, row_group, k, g, 1, D, position[1] - pm[1], var)
-        group_source[g], group_gate[g] = SRC_EV_POS, A[A_EV_POS_GATE]
+        group_source[g], group_gate[g] = SRC_EV_POS, A[PARAMETERS.ev_pos_gate]
         g += 1
     if ctrl & EV_CTRL_VPOS:
         k = position_rows(H, r, y, row_group, k, g, 2, D, position[2] - pm[2], var)
-        group_source[g], group_gate[g] = SRC_EV_HGT, A[A_EV_POS_GATE]
+        group_source[g], group_gate[g] = SRC_EV_HGT, A[PARAMETERS.ev_pos_gate]
         g += 1
     if ctrl & EV_CTRL_YAW:
         k = yaw_row(H, r, y, row_group, k, g, qm, wrap_pi(yaw - yaw_of(qm)), ev_yaw_variance(A, yaw_std))
-        group_source[g], group_gate[g] = SRC_EV_YAW, A[A_HEADING_GATE]
+        group_source[g], group_gate[g] = SRC_EV_YAW, A[PARAMETERS.heading_gate]
         g += 1
     if g == 0:
         return
     accepted = np.zeros(g)
     fuse(F, P, stats, W, H[:k], r[:k], y[:k], row_group[:k], group_source[:g], group_gate[:g], accepted)
-    now = F[X_TIME]
+    now = F[MEMORY.time]
     for j in range(g):
         src, ok = int(group_source[j]), accepted[j] != 0.0
         if src == SRC_EV_POS:
             if ok:
-                F[X_LAST_H_AID] = now
+                F[MEMORY.last_h_aid] = now
             else:
-                target = (position[0] + F[X_P] - pm[0], position[1] + F[X_P + 1] - pm[1], 0.0)
+                target = (position[0] + F[MEMORY.p] - pm[0], position[1] + F[MEMORY.p + 1] - pm[1], 0.0)
                 maybe_reset_position(F, P, stats, A, SRC_EV_POS, target, var)
         elif ok and src == SRC_EV_HGT:
-            F[X_LAST_V_AID] = now
+            F[MEMORY.last_v_aid] = now
     check_vertical_accel(F, stats, W)
 
 
@@ -934,11 +984,11 @@ def fuse_vision_velocity(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, 
     """External vision velocity (world, paper frame) arrived at ``t``, valid EKF2_EV_DELAY before:
     the three axes gated together (EKF2_EVV_GATE), as PX4's EKF2 fuses ``ev_vel`` when
     EKF2_EV_CTRL bit 2 is set. Accepted, it is horizontal aiding (no dead reckoning)."""
-    if not int(A[A_EV_CTRL]) & EV_CTRL_VEL:
+    if not int(A[PARAMETERS.ev_ctrl]) & EV_CTRL_VEL:
         return
-    found, _, vm, _, _ = state_at(F, ring, t - A[A_EV_DELAY])
+    found, _, vm, _, _ = state_at(F, ring, t - A[PARAMETERS.ev_delay_s])
     if not found:
-        stats[SRC_EV_VEL, ST_TOO_OLD] += 1.0
+        stats[SRC_EV_VEL, STATS.too_old] += 1.0
         return
     var = ev_vel_variance(A, velocity_std)
     H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
@@ -946,10 +996,10 @@ def fuse_vision_velocity(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, 
     for axis in range(3):
         k = velocity_row(H, r, y, row_group, k, 0, axis, velocity[axis] - vm[axis], var)
     accepted = np.zeros(1)
-    source, gate = np.full(1, float(SRC_EV_VEL)), np.full(1, A[A_EV_VEL_GATE])
+    source, gate = np.full(1, float(SRC_EV_VEL)), np.full(1, A[PARAMETERS.ev_vel_gate])
     fuse(F, P, stats, W, H, r, y, row_group, source, gate, accepted)
     if accepted[0] != 0.0:
-        F[X_LAST_H_AID] = F[X_TIME]
+        F[MEMORY.last_h_aid] = F[MEMORY.time]
     check_vertical_accel(F, stats, W)
 
 
@@ -973,15 +1023,15 @@ def not_converged(F: Any, P: Any, A: Any) -> int:
     """Why the estimate is not fit to fly on (``CONVERGED``: it is): no aiding for EKF2_NOAID_TOUT,
     else the first 1-sigma above its EST_CONV_* threshold (tilt, yaw, horizontal position, height:
     just after the alignment the height is one GNSS fix, 0.5-1 m 1-sigma)."""
-    if F[X_TIME] - F[X_LAST_H_AID] > A[A_NO_AID_TIMEOUT]:
+    if F[MEMORY.time] - F[MEMORY.last_h_aid] > A[PARAMETERS.no_aid_timeout_s]:
         return DEAD_RECKONING
     pos_h, pos_v, _, tilt, yaw = accuracies(P)
-    if tilt > A[A_CONV_TILT]:
+    if tilt > A[PARAMETERS.converged_tilt_rad]:
         return TILT
-    if yaw > A[A_CONV_YAW]:
+    if yaw > A[PARAMETERS.converged_yaw_rad]:
         return YAW
-    if pos_h > A[A_CONV_POS]:
+    if pos_h > A[PARAMETERS.converged_pos_m]:
         return POSITION
-    if pos_v > A[A_CONV_VPOS]:
+    if pos_v > A[PARAMETERS.converged_vpos_m]:
         return HEIGHT
     return CONVERGED

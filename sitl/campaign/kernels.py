@@ -233,16 +233,16 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
         q = quaternion_from_euler(c_euler[0], c_euler[1], c_euler[2])
         ekf.reset_state(F, Pf, A, c_pos, c_vel, q, 0.1, 0.1, offset)
         ekf.start(F, ring, t_autopilot, dt, rate, force)
-        F[ekf.X_IMU_SAMPLES] += 1.0
+        F[ekf.MEMORY.imu_samples] += 1.0
         return c_pos, c_vel, c_euler, c_rates, t_autopilot  # the frame's pose flies this step
     if imu_fresh(delivered):
         ekf.predict_step(F, Pf, ring, A, t_autopilot, t_autopilot - t_previous, rate, force)
     else:
         t_autopilot = t_previous
-    q = ekf.quat(F, ekf.X_Q)
+    q = ekf.quat(F, ekf.MEMORY.q)
     euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
-    rates = euler_rates_from_body_rates(euler[0], euler[1], ekf.vec3(F, ekf.X_RATE))
-    return ekf.vec3(F, ekf.X_P), ekf.vec3(F, ekf.X_V), euler, rates, t_autopilot
+    rates = euler_rates_from_body_rates(euler[0], euler[1], ekf.vec3(F, ekf.MEMORY.rate))
+    return ekf.vec3(F, ekf.MEMORY.p), ekf.vec3(F, ekf.MEMORY.v), euler, rates, t_autopilot
 
 
 @kernel
@@ -291,8 +291,8 @@ def estimator_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, w
     if ekf.not_converged(F, Pf, A) != ekf.CONVERGED:
         metrics[ESTIMATION_METRICS.time_not_converged_s] += dt
     for j in range(stats.shape[0]):
-        if stats[j, ekf.ST_TEST_RATIO] > metrics[ESTIMATION_METRICS.worst_test_ratio]:
-            metrics[ESTIMATION_METRICS.worst_test_ratio] = stats[j, ekf.ST_TEST_RATIO]
+        if stats[j, ekf.STATS.test_ratio] > metrics[ESTIMATION_METRICS.worst_test_ratio]:
+            metrics[ESTIMATION_METRICS.worst_test_ratio] = stats[j, ekf.STATS.test_ratio]
 
 
 @kernel
@@ -300,7 +300,7 @@ def estimator_rejected(stats):
     """Samples the gates and the quality checks rejected over the flight."""
     rejected = 0.0
     for j in range(stats.shape[0]):
-        rejected += stats[j, ekf.ST_REJECTED] + stats[j, ekf.ST_CHECK_REJECTED]
+        rejected += stats[j, ekf.STATS.rejected] + stats[j, ekf.STATS.check_rejected]
     return rejected
 
 

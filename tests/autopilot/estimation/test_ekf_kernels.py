@@ -66,7 +66,7 @@ def fly_kernels(entries, params, frames):
     q0 = quaternion_from_euler(0.02, -0.01, 0.0)
     entries.reset_state(F, P, A, (1.0, 0.0, 1.0), (0.0, 0.2, 0.1), q0, 0.1, 0.1, 0.0)
     entries.start(F, ring, first.time_s, first.dt_s, first.angular_rate_rad_s, first.specific_force_m_s2)
-    F[fk.X_IMU_SAMPLES] += 1.0  # the class counts the sample it starts at
+    F[fk.MEMORY.imu_samples] += 1.0  # the class counts the sample it starts at
     for frame in frames[1:]:
         imu = frame["imu"]
         entries.predict_step(
@@ -141,8 +141,8 @@ def test_compiled_and_python_run_one_source():
     Fc, Pc, sc, vc = fly_kernels(filter_entries(), params, frames)
     Fp, Pp, sp, vp = fly_kernels(filter_kernels(), params, frames)
     assert vc == vp
-    assert np.array_equal(sc[:, fk.ST_FUSED], sp[:, fk.ST_FUSED])
-    assert np.array_equal(sc[:, fk.ST_REJECTED], sp[:, fk.ST_REJECTED])
+    assert np.array_equal(sc[:, fk.STATS.fused], sp[:, fk.STATS.fused])
+    assert np.array_equal(sc[:, fk.STATS.rejected], sp[:, fk.STATS.rejected])
     finite = np.isfinite(Fp)
     assert np.array_equal(finite, np.isfinite(Fc))
     assert np.allclose(Fc[finite], Fp[finite], rtol=1e-9, atol=1e-12)
@@ -154,7 +154,7 @@ def test_the_parameter_array_covers_every_parameter():
     parameter the batch engine silently ignores)."""
     params = estimator_params({"EKF2_GPS_DELAY": 123.0, "EKF2_EVP_GATE": 4.5, "EST_CONV_VPOS": 0.7})
     A = fk.parameter_array(params, G, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
-    assert A[fk.A_GPS_DELAY] == pytest.approx(0.123)
-    assert A[fk.A_EV_POS_GATE] == 4.5 and A[fk.A_CONV_VPOS] == 0.7
+    assert A[fk.PARAMETERS.gps_delay_s] == pytest.approx(0.123)
+    assert A[fk.PARAMETERS.ev_pos_gate] == 4.5 and A[fk.PARAMETERS.converged_vpos_m] == 0.7
     for i, name in enumerate(fk.PARAMETER_FIELDS):
         assert A[i] == float(getattr(params, name)), name
