@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from .kernel import kernel
+from .layout import Field, layout
 
 
 @kernel
@@ -38,10 +39,12 @@ def low_pass_alpha(cutoff_hz: float, dt: float) -> float:
     return b / (1.0 + b)
 
 
-# Layout of a filtered derivative's state, from its offset: the previous sample (3), the filtered
-# derivative (3), 1.0 once a sample is held.
-DERIVATIVE_PREVIOUS, DERIVATIVE_FILTERED, DERIVATIVE_READY = 0, 3, 6
-DERIVATIVE_SIZE = 7
+# A filtered derivative's state, from its offset in a law's state.
+DERIVATIVE = layout("FilteredDerivative", (
+    Field("previous", 3, doc="the previous sample"),
+    Field("filtered", 3, doc="the filtered derivative"),
+    Field("ready", doc="1.0 once a sample is held"),
+))  # fmt: skip
 
 
 def derivative_names(signal: str) -> tuple[str, ...]:
@@ -54,10 +57,10 @@ def derivative_names(signal: str) -> tuple[str, ...]:
 def filtered_derivative(x, at, values, alpha, dt, integrate):
     """The time derivative of a 3-vector signal sampled every ``dt`` s: the difference of two
     samples over ``dt``, low-passed with weight ``alpha`` (:func:`low_pass_alpha`), as PX4's
-    BlockDerivative. Its state is ``x[at:at + DERIVATIVE_SIZE]``; the first sample gives zero
+    BlockDerivative. Its state is ``x[at:at + DERIVATIVE.size]``; the first sample gives zero
     (nothing to differentiate yet). The state advances only when ``integrate``."""
-    f = at + DERIVATIVE_FILTERED
-    if x[at + DERIVATIVE_READY] == 0.0:
+    f = at + DERIVATIVE.filtered
+    if x[at + DERIVATIVE.ready] == 0.0:
         d0, d1, d2 = 0.0, 0.0, 0.0
     else:
         d0 = x[f] + alpha * ((values[0] - x[at]) / dt - x[f])
@@ -66,5 +69,5 @@ def filtered_derivative(x, at, values, alpha, dt, integrate):
     if integrate:
         x[at], x[at + 1], x[at + 2] = values[0], values[1], values[2]
         x[f], x[f + 1], x[f + 2] = d0, d1, d2
-        x[at + DERIVATIVE_READY] = 1.0
+        x[at + DERIVATIVE.ready] = 1.0
     return d0, d1, d2

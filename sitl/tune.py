@@ -128,7 +128,7 @@ def identify_axis(stack: Lockstep, axis: int, options: TuneOptions) -> at.AxisMo
                                            options.order or model_order(cascade.vehicle))  # fmt: skip
     excitation = at.Excitation(options.amplitude_rad_s)
     torque_max = cascade.context.torque_max_n_m[axis]
-    slot = px4_attitude.G_AUTOTUNE_RATE + axis
+    slot = px4_attitude.GAINS.autotune_rate + axis
     start, next_update = stack.t, stack.t
     try:
         while True:

@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 from quadcommon.config import VehicleConfig
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.numerics import clip
 from quadcommon.rotor_geometry import squared_speed_parts, wrench_from_squares
 
@@ -30,8 +31,16 @@ Vector3 = tuple[float, float, float]
 
 # The actuators' numbers: U1_max, tau_max (3), rotor constants b, d, arm, the limits of Omega^2,
 # Omega_max.
-A_THRUST_MAX, A_TORQUE_MAX, A_B, A_D, A_ARM, A_SQ_MIN, A_SQ_MAX, A_SPEED_MAX = 0, 1, 4, 5, 6, 7, 8, 9
-A_SIZE = 10
+ACTUATORS = layout("ActuatorNumbers", (
+    Field("thrust_max"),
+    Field("torque_max", 3),
+    Field("thrust_coefficient"),
+    Field("torque_coefficient"),
+    Field("arm"),
+    Field("squared_speed_min"),
+    Field("squared_speed_max"),
+    Field("speed_max"),
+))  # fmt: skip
 # out: the four normalised commands, then the four rotor speeds (rad/s; zeros under "wrench").
 OUT_SIZE = 8
 
@@ -50,8 +59,8 @@ def actuator_numbers(vehicle: VehicleConfig) -> tuple[float, ...]:
 def saturate_wrench(a, o, thrust, tx, ty, tz, out):
     """U1 clipped to [0, U1_max], each body torque to [-tau_max, tau_max]: ``(U1, tau, saturated)``;
     the normalised commands into ``out``."""
-    thrust_max = a[o + A_THRUST_MAX]
-    m0, m1, m2 = a[o + A_TORQUE_MAX], a[o + A_TORQUE_MAX + 1], a[o + A_TORQUE_MAX + 2]
+    thrust_max = a[o + ACTUATORS.thrust_max]
+    m0, m1, m2 = a[o + ACTUATORS.torque_max], a[o + ACTUATORS.torque_max + 1], a[o + ACTUATORS.torque_max + 2]
     thrust_a = clip(thrust, 0.0, thrust_max)
     t0, t1, t2 = clip(tx, -m0, m0), clip(ty, -m1, m1), clip(tz, -m2, m2)
     saturated = 1.0 if (thrust_a != thrust or t0 != tx or t1 != ty or t2 != tz) else 0.0
@@ -77,8 +86,8 @@ def largest_scale(base, delta, lo, hi):
 def allocate_rotors(a, o, thrust, tx, ty, tz, out):
     """Rotor speeds for (U1, tau) with the saturation order of the module: ``(U1, tau, saturated)``
     achieved; normalised commands and speeds into ``out``."""
-    b, d, arm = a[o + A_B], a[o + A_D], a[o + A_ARM]
-    lo, hi = a[o + A_SQ_MIN], a[o + A_SQ_MAX]
+    b, d, arm = a[o + ACTUATORS.thrust_coefficient], a[o + ACTUATORS.torque_coefficient], a[o + ACTUATORS.arm]
+    lo, hi = a[o + ACTUATORS.squared_speed_min], a[o + ACTUATORS.squared_speed_max]
     raw, rp, yaw = squared_speed_parts(b, d, arm, thrust, tx, ty, tz)
     base = clip(raw, lo, hi)
     k_rp = largest_scale((base, base, base, base), rp, lo, hi)
@@ -88,7 +97,7 @@ def allocate_rotors(a, o, thrust, tx, ty, tz, out):
     s2 = clip(partial[1] + k_yaw * yaw[1], lo, hi)
     s3 = clip(partial[2] + k_yaw * yaw[2], lo, hi)
     s4 = clip(partial[3] + k_yaw * yaw[3], lo, hi)
-    top = a[o + A_SPEED_MAX]
+    top = a[o + ACTUATORS.speed_max]
     out[4], out[5], out[6], out[7] = math.sqrt(s1), math.sqrt(s2), math.sqrt(s3), math.sqrt(s4)
     out[0], out[1], out[2], out[3] = out[4] / top, out[5] / top, out[6] / top, out[7] / top
     saturated = 1.0 if (raw != base or k_rp < 1.0 or k_yaw < 1.0) else 0.0

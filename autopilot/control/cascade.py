@@ -37,7 +37,7 @@ from quadcommon.trajectories import Reference
 from ..records import StateEstimate
 from . import command_filter as cf
 from . import registry
-from .allocation import A_SIZE, OUT_SIZE, actuator_numbers, allocate_rotors, saturate_wrench
+from .allocation import ACTUATORS, OUT_SIZE, actuator_numbers, allocate_rotors, saturate_wrench
 from .config import ControllerConfig
 from .registry import ROTATIONAL, TRANSLATIONAL, ControllerFailure, LawContext, non_finite_output
 
@@ -47,8 +47,8 @@ Vector3 = tuple[float, float, float]
 CASCADE_NUMBERS = layout("CascadeNumbers", (
     Field("dt", unit="s", doc="control period"),
     Field("rotors", doc="1.0: the wrench allocated to the rotors; 0.0: the wrench saturated"),
-    Field("filter", cf.F_SIZE, doc="the command filter's coefficients (command_filter.F_*)"),
-    Field("actuators", A_SIZE, doc="the actuators' numbers (allocation.A_*)"),
+    Field("filter", cf.FILTER_COEFFICIENTS.size, doc="the command filter's coefficients"),
+    Field("actuators", ACTUATORS.size, doc="the actuators' numbers (allocation.ACTUATORS)"),
 ))  # fmt: skip
 # What a step may be given instead of computing it (Cascade.step's overrides).
 OVERRIDE_ROLL_PITCH, OVERRIDE_ATTITUDE, OVERRIDE_THRUST = 1, 2, 4
@@ -261,7 +261,7 @@ class Cascade:
         # One buffer, and views of its parts (buffered_step): the cascade's numbers, the laws' gains and
         # states, the filter's state, the overrides given, the outputs.
         sizes = (CASCADE_NUMBERS.size, len(packed.gt), len(self.translational.STATE), len(packed.gr),
-                 len(self.rotational.STATE), cf.S_SIZE, GIVEN.size, OUT_SIZE)  # fmt: skip
+                 len(self.rotational.STATE), cf.FILTER_STATE.size, GIVEN.size, OUT_SIZE)  # fmt: skip
         self._at = BufferParts(*(int(v) for v in np.cumsum((0, *sizes))))
         self._at_tuple = tuple(self._at)  # (the entry's argument: a plain tuple, see buffered_step)
         self.buffer = np.zeros(self._at.end)

@@ -14,14 +14,22 @@ coefficients inside the cascade's array, ``S_*`` of the filter's state).
 from __future__ import annotations
 
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 
 # Coefficients, from an offset into the cascade's array: on/off, wn^2, 2 zeta wn, the first two rows
 # of the discrete transition (a00, a01, a02, a10, a11, a12) of [y, y', r].
-F_ON, F_WN2, F_2ZW, F_PHI = 0, 1, 2, 3
-F_SIZE = 9
+FILTER_COEFFICIENTS = layout("CommandFilterCoefficients", (
+    Field("on"),
+    Field("omega_n_squared"),
+    Field("two_zeta_omega"),
+    Field("phi", 6),
+))  # fmt: skip
 # State: y (roll, pitch), y' (roll, pitch), initialised (1.0 / 0.0).
-S_Y, S_YD, S_READY = 0, 2, 4
-S_SIZE = 5
+FILTER_STATE = layout("CommandFilterState", (
+    Field("y", 2),
+    Field("y_dot", 2),
+    Field("ready"),
+))  # fmt: skip
 
 
 def discretise(
@@ -29,7 +37,7 @@ def discretise(
 ) -> tuple[float, ...]:
     """The filter's coefficients (layout ``F_*``) for the control period ``dt``."""
     import numpy as np
-    from scipy.linalg import expm  # here: importing scipy.linalg costs every process start ~0.2 s
+    from scipy.linalg import expm  # here: importing scipy
 
     wn2 = natural_frequency_rad_s**2
     two_zeta_wn = 2.0 * damping * natural_frequency_rad_s
@@ -44,20 +52,21 @@ def advance(f, offset, state, roll_ref, pitch_ref):
     """``(phi_d, theta_d, phi_d', theta_d', phi_d'', theta_d'')`` now, for the references held over
     the next step, then the state advanced by one step. The first step starts at the references,
     at rest."""
-    if f[offset + F_ON] == 0.0:
+    if f[offset + FILTER_COEFFICIENTS.on] == 0.0:
         return roll_ref, pitch_ref, 0.0, 0.0, 0.0, 0.0
-    if state[S_READY] == 0.0:
-        state[S_Y], state[S_Y + 1] = roll_ref, pitch_ref
-        state[S_YD], state[S_YD + 1] = 0.0, 0.0
-        state[S_READY] = 1.0
-    phi_d, theta_d = state[S_Y], state[S_Y + 1]
-    phi_dd, theta_dd = state[S_YD], state[S_YD + 1]
-    wn2, two_zeta_wn = f[offset + F_WN2], f[offset + F_2ZW]
+    if state[FILTER_STATE.ready] == 0.0:
+        state[FILTER_STATE.y], state[FILTER_STATE.y + 1] = roll_ref, pitch_ref
+        state[FILTER_STATE.y_dot], state[FILTER_STATE.y_dot + 1] = 0.0, 0.0
+        state[FILTER_STATE.ready] = 1.0
+    phi_d, theta_d = state[FILTER_STATE.y], state[FILTER_STATE.y + 1]
+    phi_dd, theta_dd = state[FILTER_STATE.y_dot], state[FILTER_STATE.y_dot + 1]
+    wn2 = f[offset + FILTER_COEFFICIENTS.omega_n_squared]
+    two_zeta_wn = f[offset + FILTER_COEFFICIENTS.two_zeta_omega]
     phi_ddd = wn2 * (roll_ref - phi_d) - two_zeta_wn * phi_dd
     theta_ddd = wn2 * (pitch_ref - theta_d) - two_zeta_wn * theta_dd
-    a = offset + F_PHI
-    state[S_Y] = f[a] * phi_d + f[a + 1] * phi_dd + f[a + 2] * roll_ref
-    state[S_YD] = f[a + 3] * phi_d + f[a + 4] * phi_dd + f[a + 5] * roll_ref
-    state[S_Y + 1] = f[a] * theta_d + f[a + 1] * theta_dd + f[a + 2] * pitch_ref
-    state[S_YD + 1] = f[a + 3] * theta_d + f[a + 4] * theta_dd + f[a + 5] * pitch_ref
+    a = offset + FILTER_COEFFICIENTS.phi
+    state[FILTER_STATE.y] = f[a] * phi_d + f[a + 1] * phi_dd + f[a + 2] * roll_ref
+    state[FILTER_STATE.y_dot] = f[a + 3] * phi_d + f[a + 4] * phi_dd + f[a + 5] * roll_ref
+    state[FILTER_STATE.y + 1] = f[a] * theta_d + f[a + 1] * theta_dd + f[a + 2] * pitch_ref
+    state[FILTER_STATE.y_dot + 1] = f[a + 3] * theta_d + f[a + 4] * theta_dd + f[a + 5] * pitch_ref
     return phi_d, theta_d, phi_dd, theta_dd, phi_ddd, theta_ddd

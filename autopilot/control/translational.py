@@ -23,6 +23,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.numerics import clip
 from quadcommon.schema import Section
 
@@ -65,9 +66,18 @@ def thrust_and_tilt(
 
 # -- the backstepping family ---------------------------------------------------------------------
 # Gains array of the three backstepping laws: per axis (x, y, z) from each offset.
-G_C1, G_C2, G_K, G_ONE_C1C2, G_C1_C2, G_BOUND = 0, 3, 6, 9, 12, 15
-G_MASS, G_GRAVITY, G_THRUST_MAX, G_SIN_TILT = 18, 19, 20, 21
-G_SIZE = 22
+BACKSTEPPING_GAINS = layout("BacksteppingGains", (
+    Field("c1", 3),
+    Field("c2", 3),
+    Field("k", 3),
+    Field("one_c1c2", 3),
+    Field("c1_c2", 3),
+    Field("bound", 3),
+    Field("mass"),
+    Field("gravity"),
+    Field("thrust_max"),
+    Field("sin_tilt"),
+))  # fmt: skip
 
 
 @kernel
@@ -82,7 +92,14 @@ def backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_v
     az = axis(g, x, 2, position[2] - ref_position[2], velocity[2] - ref_velocity[2], ref_acceleration[2], dt,
               integrate)  # fmt: skip
     thrust, roll_ref, pitch_ref, thrust_limited, tilt_limited = thrust_and_tilt(
-        g[G_MASS], g[G_GRAVITY], g[G_THRUST_MAX], g[G_SIN_TILT], ax, ay, az, euler
+        g[BACKSTEPPING_GAINS.mass],
+        g[BACKSTEPPING_GAINS.gravity],
+        g[BACKSTEPPING_GAINS.thrust_max],
+        g[BACKSTEPPING_GAINS.sin_tilt],
+        ax,
+        ay,
+        az,
+        euler,
     )
     return thrust, roll_ref, pitch_ref, ax, ay, az, thrust_limited, tilt_limited
 

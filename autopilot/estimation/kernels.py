@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.rigid_body import (
     Matrix3,
     Quaternion,
@@ -41,9 +42,17 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
 
-# Error-state layout: dx = [dp, dv, dtheta, db_g, db_a, db_m, db_h].
-N = 19
-IP, IV, ITH, IBG, IBA, IBM, IBH = 0, 3, 6, 9, 12, 15, 18
+# The error state dx = [dp, dv, dtheta, db_g, db_a, db_m, db_h]: the covariance's rows and columns.
+ERROR_STATE = layout("ErrorState", (
+    Field("p", 3, unit="m"), Field("v", 3, unit="m/s"), Field("theta", 3, unit="rad", doc="attitude error"),
+    Field("gyro_bias", 3, unit="rad/s"), Field("accel_bias", 3, unit="m/s^2"),
+    Field("mag_bias", 3, unit="gauss"), Field("baro_bias", unit="m"),
+))  # fmt: skip
+N = ERROR_STATE.size
+# The covariance algebra reads the blocks by these short names (the filter literature's), taken
+# from the layout: I + the block's state.
+E = ERROR_STATE
+IP, IV, ITH, IBG, IBA, IBM, IBH = E.p, E.v, E.theta, E.gyro_bias, E.accel_bias, E.mag_bias, E.baro_bias
 STATE_NAMES = (
     "px", "py", "pz", "vx", "vy", "vz", "thx", "thy", "thz",
     "bgx", "bgy", "bgz", "bax", "bay", "baz", "bmx", "bmy", "bmz", "bh",

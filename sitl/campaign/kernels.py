@@ -45,7 +45,7 @@ import numpy as np
 
 from autopilot.control.allocation import OUT_SIZE
 from autopilot.control.cascade import GIVEN, CascadeMemory, cascade_step, output_finite
-from autopilot.control.command_filter import S_SIZE as FILTER_STATE_SIZE
+from autopilot.control.command_filter import FILTER_STATE
 from autopilot.estimation import filter as ekf
 from autopilot.estimation.aiding import Aiding, fuse_frame
 from autopilot.records import StateEstimate
@@ -387,7 +387,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     ground_reach = P[PLANT.ground_reach]
     n = state0.shape[0]
     o_u = INPUTS.size
-    o_x, o_f, o_c = o_u + nxt + nxr, o_u + nxt + nxr + FILTER_STATE_SIZE, 6 * n
+    o_x, o_f, o_c = o_u + nxt + nxr, o_u + nxt + nxr + FILTER_STATE.size, 6 * n
     work = np.zeros(o_c + OUT_SIZE + o_f + GIVEN.size)
     whole = borrowed(work)
     s, k1, k2 = whole[0:n], whole[n : 2 * n], whole[2 * n : 3 * n]

@@ -199,7 +199,7 @@ def quaternion_p(law, euler, eta_d):
     q, qd = quaternion_from_euler(*euler), quaternion_from_euler(*eta_d)
     qe = quaternion_multiply(quaternion_conjugate(q), qd)
     qe = qe if qe[0] >= 0.0 else tuple(-c for c in qe)
-    return np.array(law.g[px4_attitude.G_ATT_P : px4_attitude.G_ATT_P + 3]) * 2.0 * np.array(qe[1:])
+    return np.array(law.g[px4_attitude.GAINS.att_p : px4_attitude.GAINS.att_p + 3]) * 2.0 * np.array(qe[1:])
 
 
 def test_yaw_weight_one_is_the_plain_quaternion_p_law():
@@ -307,8 +307,8 @@ def test_integral_gains_change_without_a_jump():
 
 def test_state_layouts_match_the_names():
     assert len(px4_position.Px4Position.STATE) == 10 and len(px4_attitude.Px4Attitude.STATE) == 10
-    assert len(translational("px4_pid").g) == px4_position.G_SIZE
-    assert len(rotational("px4_pid").g) == px4_attitude.G_SIZE
+    assert len(translational("px4_pid").g) == px4_position.GAINS.size
+    assert len(rotational("px4_pid").g) == px4_attitude.GAINS.size
 
 
 def roll_under_a_torque_step(law, torque_n_m, seconds):

@@ -164,7 +164,7 @@ def test_command_filter_keeps_its_state_across_a_retune():
     assert list(cascade.filt) == filt
     coefficients = cf.discretise(20.0, config.command_filter.damping, DT)
     at = CASCADE_NUMBERS.filter
-    assert list(cascade.K[at : at + cf.F_SIZE]) == pytest.approx(coefficients, abs=0)
+    assert list(cascade.K[at : at + cf.FILTER_COEFFICIENTS.size]) == pytest.approx(coefficients, abs=0)
     expected = list(filt)
     raw = cascade.step(state, ref, integrate=False).roll_pitch_raw_rad
     cf.advance(coefficients, 0, expected, *raw)

@@ -5,8 +5,7 @@ import math
 import pytest
 
 from quadcommon.numerics import (
-    DERIVATIVE_FILTERED,
-    DERIVATIVE_SIZE,
+    DERIVATIVE,
     clip,
     filtered_derivative,
     low_pass_alpha,
@@ -26,7 +25,7 @@ def test_low_pass_alpha_is_px4s_block_low_pass():
 
 def test_filtered_derivative_of_a_ramp_converges_to_its_slope():
     dt, alpha = 0.002, low_pass_alpha(5.0, 0.002)
-    x = [0.0] * (2 + DERIVATIVE_SIZE)  # at an offset, as inside a law's state
+    x = [0.0] * (2 + DERIVATIVE.size)  # at an offset, as inside a law's state
     assert filtered_derivative(x, 2, (1.0, 2.0, 3.0), alpha, dt, True) == (0.0, 0.0, 0.0)  # first sample
     slope = (0.5, -1.0, 2.0)
     for k in range(1, 2000):  # 4 s: 125 time constants of the 5 Hz low pass
@@ -34,15 +33,15 @@ def test_filtered_derivative_of_a_ramp_converges_to_its_slope():
         d = filtered_derivative(x, 2, sample, alpha, dt, True)
     assert d == pytest.approx(slope, rel=1e-9)
     # after one step, the filter has moved by alpha towards the raw difference quotient
-    x = [0.0] * DERIVATIVE_SIZE
+    x = [0.0] * DERIVATIVE.size
     filtered_derivative(x, 0, (0.0, 0.0, 0.0), alpha, dt, True)
     assert filtered_derivative(x, 0, (0.01, 0.0, 0.0), alpha, dt, True)[0] == pytest.approx(alpha * 0.01 / dt)
-    assert x[DERIVATIVE_FILTERED] == pytest.approx(alpha * 0.01 / dt)
+    assert x[DERIVATIVE.filtered] == pytest.approx(alpha * 0.01 / dt)
 
 
 def test_filtered_derivative_state_does_not_move_without_integrate():
     dt, alpha = 0.002, 0.3
-    x = [0.0] * DERIVATIVE_SIZE
+    x = [0.0] * DERIVATIVE.size
     filtered_derivative(x, 0, (1.0, 1.0, 1.0), alpha, dt, True)
     saved = list(x)
     assert filtered_derivative(x, 0, (1.1, 1.0, 1.0), alpha, dt, False)[0] == pytest.approx(alpha * 0.1 / dt)

@@ -51,7 +51,7 @@ def test_gains_are_parameters_and_a_param_set_retunes_the_flying_law(controller,
     cascade = stack.autopilot.cascade
     name, value = tuned
     assert value_of(param_set(gcs, name, value)) == pytest.approx(value)
-    where = {"MPC_XY_P": ("mpc_xy_p", px4_position.G_POS_P), "SE3_KX": ("k_x", se3_position.G_KX)}
+    where = {"MPC_XY_P": ("mpc_xy_p", px4_position.GAINS.pos_p), "SE3_KX": ("k_x", se3_position.GAINS.kx)}
     field, index = where[name]
     assert getattr(cascade.config.translational, field) == pytest.approx(value)
     assert cascade.gt[index] == pytest.approx(value)  # what the compiled step reads

@@ -9,8 +9,7 @@ from quadcommon.kernel import kernel
 
 from ..registry import TRANSLATIONAL, register
 from ..translational import (
-    G_C1_C2,
-    G_ONE_C1C2,
+    BACKSTEPPING_GAINS,
     backstepping_from_params,
     backstepping_parameters,
     backstepping_step,
@@ -21,7 +20,7 @@ from ..translational import (
 
 @kernel
 def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
-    return ref_acc - g[G_ONE_C1C2 + i] * e1 - g[G_C1_C2 + i] * e1_dot
+    return ref_acc - g[BACKSTEPPING_GAINS.one_c1c2 + i] * e1 - g[BACKSTEPPING_GAINS.c1_c2 + i] * e1_dot
 
 
 @kernel

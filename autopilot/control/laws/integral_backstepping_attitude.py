@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.numerics import clip_symmetric
 from quadcommon.rigid_body import body_torque_from_euler_torque, coriolis_matrix, inertia_matrix, matrix_times
 from quadcommon.schema import Section
@@ -29,14 +30,19 @@ EULER_AXES = ("R", "P", "Y")  # parameter suffixes: roll, pitch, yaw
 _POSITIVE = {"lo": 0.0, "lo_open": True, "hi": 1e4}
 
 # Gains array, per Euler axis from each offset: c1, c2, lambda, the nominal inertia, the bounds.
-G_C1, G_C2, G_LAMBDA, G_INERTIA, G_BOUND = 0, 3, 6, 9, 12
-G_SIZE = 15
+GAINS = layout("IntegralBacksteppingAttitudeGains", (
+    Field("c1", 3),
+    Field("c2", 3),
+    Field("lambda_", 3, doc="the integral gain lambda"),
+    Field("inertia", 3),
+    Field("bound", 3),
+))  # fmt: skip
 
 
 @kernel
 def commanded_acceleration(g, x, i, e, e_dot, ref_acc):
     """eta_cmd'' on Euler axis i (the module's formula)."""
-    c1, c2, lam = g[G_C1 + i], g[G_C2 + i], g[G_LAMBDA + i]
+    c1, c2, lam = g[GAINS.c1 + i], g[GAINS.c2 + i], g[GAINS.lambda_ + i]
     chi = x[i]
     e2 = e_dot + c1 * e + lam * chi
     return ref_acc + (c1 * c1 - 1.0 - lam) * e - (c1 + c2) * e2 + c1 * lam * chi
@@ -51,10 +57,10 @@ def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
         commanded_acceleration(g, x, 2, e2, euler_rates[2] - eta_d_dot[2], eta_d_ddot[2]),
     )
     if integrate:
-        x[0] = clip_symmetric(x[0] + e0 * dt, g[G_BOUND])
-        x[1] = clip_symmetric(x[1] + e1 * dt, g[G_BOUND + 1])
-        x[2] = clip_symmetric(x[2] + e2 * dt, g[G_BOUND + 2])
-    inertia = (g[G_INERTIA], g[G_INERTIA + 1], g[G_INERTIA + 2])
+        x[0] = clip_symmetric(x[0] + e0 * dt, g[GAINS.bound])
+        x[1] = clip_symmetric(x[1] + e1 * dt, g[GAINS.bound + 1])
+        x[2] = clip_symmetric(x[2] + e2 * dt, g[GAINS.bound + 2])
+    inertia = (g[GAINS.inertia], g[GAINS.inertia + 1], g[GAINS.inertia + 2])
     Ma = matrix_times(inertia_matrix(inertia, euler[0], euler[1]), acc)
     Ce = matrix_times(coriolis_matrix(inertia, euler, euler_rates), euler_rates)
     return body_torque_from_euler_torque(euler[0], euler[1], (Ma[0] + Ce[0], Ma[1] + Ce[1], Ma[2] + Ce[2]))

@@ -14,10 +14,7 @@ from quadcommon.numerics import clip_symmetric
 
 from ..registry import TRANSLATIONAL, register
 from ..translational import (
-    G_BOUND,
-    G_C1,
-    G_C1_C2,
-    G_K,
+    BACKSTEPPING_GAINS,
     backstepping_from_params,
     backstepping_parameters,
     backstepping_step,
@@ -29,12 +26,12 @@ from ..translational import (
 
 @kernel
 def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
-    c1, k = g[G_C1 + i], g[G_K + i]
+    c1, k = g[BACKSTEPPING_GAINS.c1 + i], g[BACKSTEPPING_GAINS.k + i]
     chi = x[i]
     e2 = e1_dot + c1 * e1 + k * chi
-    a = ref_acc + (c1 * c1 - 1.0 - k) * e1 - g[G_C1_C2 + i] * e2 + c1 * k * chi
+    a = ref_acc + (c1 * c1 - 1.0 - k) * e1 - g[BACKSTEPPING_GAINS.c1_c2 + i] * e2 + c1 * k * chi
     if integrate:
-        x[i] = clip_symmetric(chi + e1 * dt, g[G_BOUND + i])
+        x[i] = clip_symmetric(chi + e1 * dt, g[BACKSTEPPING_GAINS.bound + i])
     return a
 
 

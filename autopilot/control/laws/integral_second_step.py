@@ -15,11 +15,7 @@ from quadcommon.numerics import clip_symmetric
 
 from ..registry import TRANSLATIONAL, register
 from ..translational import (
-    G_BOUND,
-    G_C1,
-    G_C1_C2,
-    G_K,
-    G_ONE_C1C2,
+    BACKSTEPPING_GAINS,
     backstepping_from_params,
     backstepping_parameters,
     backstepping_step,
@@ -32,17 +28,26 @@ from ..translational import (
 @kernel
 def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
     """eq. 28 on axis i, and the integral of e2 = e1' + c1 e1 (eq. 24)."""
-    a = ref_acc - g[G_K + i] * x[i] - g[G_ONE_C1C2 + i] * e1 - g[G_C1_C2 + i] * e1_dot
+    a = (
+        ref_acc
+        - g[BACKSTEPPING_GAINS.k + i] * x[i]
+        - g[BACKSTEPPING_GAINS.one_c1c2 + i] * e1
+        - g[BACKSTEPPING_GAINS.c1_c2 + i] * e1_dot
+    )
     if integrate:
-        x[i] = clip_symmetric(x[i] + (e1_dot + g[G_C1 + i] * e1) * dt, g[G_BOUND + i])
+        x[i] = clip_symmetric(
+            x[i] + (e1_dot + g[BACKSTEPPING_GAINS.c1 + i] * e1) * dt, g[BACKSTEPPING_GAINS.bound + i]
+        )
     return a
 
 
 @kernel
-def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
-         integrate):
-    return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
-                             ref_acceleration, dt, integrate)
+def step(
+    g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt, integrate
+):
+    return backstepping_step(
+        axis, g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, dt, integrate
+    )
 
 
 @register(TRANSLATIONAL)

@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.numerics import clip_symmetric
 from quadcommon.rigid_body import (
     body_torque_from_euler_torque,
@@ -44,15 +45,20 @@ from ..translational import GAIN_HI, INTEGRAL_LO
 Vector3 = tuple[float, float, float]
 
 # Gains array: k_d, k_p, 1 / omega_u^2, the nominal inertia, the integrals' bounds.
-G_KD, G_KP, G_RINV, G_INERTIA, G_BOUND = 0, 1, 2, 3, 6
-G_SIZE = 9
+GAINS = layout("NlhinfGains", (
+    Field("kd"),
+    Field("kp"),
+    Field("r_inv"),
+    Field("inertia", 3),
+    Field("bound", 3),
+))  # fmt: skip
 
 
 @kernel
 def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
     """eq. (43) as the module docstring writes it; returns the body torque (N m)."""
-    k_d, k_p, r_inv = g[G_KD], g[G_KP], g[G_RINV]
-    inertia = (g[G_INERTIA], g[G_INERTIA + 1], g[G_INERTIA + 2])
+    k_d, k_p, r_inv = g[GAINS.kd], g[GAINS.kp], g[GAINS.r_inv]
+    inertia = (g[GAINS.inertia], g[GAINS.inertia + 1], g[GAINS.inertia + 2])
     e0, e1, e2 = euler[0] - eta_d[0], euler[1] - eta_d[1], wrap_pi(euler[2] - eta_d[2])
     ed0 = euler_rates[0] - eta_d_dot[0]
     ed1 = euler_rates[1] - eta_d_dot[1]
@@ -65,9 +71,9 @@ def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt,
     Ce = matrix_times(C, euler_rates)
     Cs = matrix_times(C, s)
     if integrate and k_p != 0.0:  # omega3 = 0: no integral action, no state to grow
-        x[0] = clip_symmetric(x[0] + e0 * dt, g[G_BOUND])
-        x[1] = clip_symmetric(x[1] + e1 * dt, g[G_BOUND + 1])
-        x[2] = clip_symmetric(x[2] + e2 * dt, g[G_BOUND + 2])
+        x[0] = clip_symmetric(x[0] + e0 * dt, g[GAINS.bound])
+        x[1] = clip_symmetric(x[1] + e1 * dt, g[GAINS.bound + 1])
+        x[2] = clip_symmetric(x[2] + e2 * dt, g[GAINS.bound + 2])
     tau_eta = (Mv[0] + Ce[0] - Cs[0] - r_inv * s[0], Mv[1] + Ce[1] - Cs[1] - r_inv * s[1],
                Mv[2] + Ce[2] - Cs[2] - r_inv * s[2])  # fmt: skip
     return body_torque_from_euler_torque(euler[0], euler[1], tau_eta)

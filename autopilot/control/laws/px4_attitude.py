@@ -31,7 +31,7 @@ of the yaw torque (MC_YAW_TQ_CUTOFF) and its attitude reference model (MC_REF_*,
 are not modelled. Rates from the command filter are not used (``px4_pid`` passes the roll/pitch
 references through, as PX4 has no such filter); the reference's yaw rate is.
 
-The autotune's input: three entries of the gains array (``G_AUTOTUNE_RATE``, rad/s per body axis,
+The autotune's input: three entries of the gains array (``GAINS.autotune_rate``, rad/s per body axis,
 zero as packed) are added to the rate setpoint after its limits, as mc_att_control adds the rate
 setpoint PX4's autotune publishes; ``quadsitl tune`` (:mod:`sitl.tune`) writes its excitation
 there while it identifies an axis.
@@ -43,6 +43,7 @@ import math
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.numerics import clip, clip_symmetric, derivative_names, filtered_derivative, low_pass_alpha
 from quadcommon.rigid_body import (
     cross,
@@ -60,10 +61,19 @@ from ..tunable import Tunable, TunableLaw
 # yaw weight), rate limits (rad/s), rate P, I, D (times K), rate FF, integrator limits, the actuators'
 # torque limits (N m); then the yaw weight, the rate derivative's low-pass weight and the autotune's
 # rate setpoint (rad/s per body axis: zero except while sitl.autotune excites an axis).
-G_ATT_P, G_RATE_MAX, G_RATE_P, G_RATE_I, G_RATE_D = 0, 3, 6, 9, 12
-G_RATE_FF, G_INT_LIM, G_TORQUE_MAX = 15, 18, 21
-G_YAW_WEIGHT, G_ALPHA, G_AUTOTUNE_RATE = 24, 25, 26
-G_SIZE = 29
+GAINS = layout("Px4AttitudeGains", (
+    Field("att_p", 3),
+    Field("rate_max", 3),
+    Field("rate_p", 3),
+    Field("rate_i", 3),
+    Field("rate_d", 3),
+    Field("rate_ff", 3),
+    Field("int_lim", 3),
+    Field("torque_max", 3),
+    Field("yaw_weight"),
+    Field("alpha"),
+    Field("autotune_rate", 3),
+))  # fmt: skip
 # State: the rate integrals (normalised torque), then the rate derivative's filter.
 X_INT, X_DERIVATIVE = 0, 3
 I_FACTOR_RATE = math.radians(400.0)  # rate error at which the i-factor reaches zero (rad/s)
@@ -109,27 +119,32 @@ def rate_setpoint(g, euler, eta_d, yaw_rate):
     else:
         q_red = quaternion_multiply(q_red, q)
     q_mix = canonical(quaternion_multiply(quaternion_conjugate(q_red), qd))
-    weight = g[G_YAW_WEIGHT]
+    weight = g[GAINS.yaw_weight]
     w, z = clip(q_mix[0], -1.0, 1.0), clip(q_mix[3], -1.0, 1.0)
     q_yaw = (math.cos(weight * math.acos(w)), 0.0, 0.0, math.sin(weight * math.asin(z)))
     q_sp = quaternion_multiply(q_red, q_yaw)
     q_e = canonical(quaternion_multiply(quaternion_conjugate(q), q_sp))
     # world z in body axes (last row of R) times the reference's yaw rate: the yaw feed-forward
-    r0 = 2.0 * q_e[1] * g[G_ATT_P] + R[2][0] * yaw_rate
-    r1 = 2.0 * q_e[2] * g[G_ATT_P + 1] + R[2][1] * yaw_rate
-    r2 = 2.0 * q_e[3] * g[G_ATT_P + 2] + R[2][2] * yaw_rate
+    r0 = 2.0 * q_e[1] * g[GAINS.att_p] + R[2][0] * yaw_rate
+    r1 = 2.0 * q_e[2] * g[GAINS.att_p + 1] + R[2][1] * yaw_rate
+    r2 = 2.0 * q_e[3] * g[GAINS.att_p + 2] + R[2][2] * yaw_rate
     # clipped to the rate limits, then the autotune's excitation added (as mc_att_control adds
     # autotune_attitude_control_status.rate_sp after AttitudeControl::update)
-    return (clip_symmetric(r0, g[G_RATE_MAX]) + g[G_AUTOTUNE_RATE],
-            clip_symmetric(r1, g[G_RATE_MAX + 1]) + g[G_AUTOTUNE_RATE + 1],
-            clip_symmetric(r2, g[G_RATE_MAX + 2]) + g[G_AUTOTUNE_RATE + 2])  # fmt: skip
+    return (clip_symmetric(r0, g[GAINS.rate_max]) + g[GAINS.autotune_rate],
+            clip_symmetric(r1, g[GAINS.rate_max + 1]) + g[GAINS.autotune_rate + 1],
+            clip_symmetric(r2, g[GAINS.rate_max + 2]) + g[GAINS.autotune_rate + 2])  # fmt: skip
 
 
 @kernel
 def rate_axis(g, x, i, rate_sp, rate, rate_dot, dt, integrate):
     """PX4's RateControl on body axis ``i``: the torque (N m); the integral advanced."""
     e = rate_sp - rate
-    u = g[G_RATE_P + i] * e + x[X_INT + i] - g[G_RATE_D + i] * rate_dot + g[G_RATE_FF + i] * rate_sp
+    u = (
+        g[GAINS.rate_p + i] * e
+        + x[X_INT + i]
+        - g[GAINS.rate_d + i] * rate_dot
+        + g[GAINS.rate_ff + i] * rate_sp
+    )
     if integrate:
         if u >= 1.0 and e > 0.0 or u <= -1.0 and e < 0.0:  # saturated: no integration further into the limit
             e = 0.0
@@ -137,14 +152,14 @@ def rate_axis(g, x, i, rate_sp, rate, rate_dot, dt, integrate):
         f = 1.0 - f * f
         if f < 0.0:
             f = 0.0
-        x[X_INT + i] = clip_symmetric(x[X_INT + i] + f * g[G_RATE_I + i] * e * dt, g[G_INT_LIM + i])
-    return u * g[G_TORQUE_MAX + i]
+        x[X_INT + i] = clip_symmetric(x[X_INT + i] + f * g[GAINS.rate_i + i] * e * dt, g[GAINS.int_lim + i])
+    return u * g[GAINS.torque_max + i]
 
 
 @kernel
 def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
     s0, s1, s2 = rate_setpoint(g, euler, eta_d, eta_d_dot[2])
-    d0, d1, d2 = filtered_derivative(x, X_DERIVATIVE, body_rates, g[G_ALPHA], dt, integrate)
+    d0, d1, d2 = filtered_derivative(x, X_DERIVATIVE, body_rates, g[GAINS.alpha], dt, integrate)
     return (rate_axis(g, x, 0, s0, body_rates[0], d0, dt, integrate),
             rate_axis(g, x, 1, s1, body_rates[1], d1, dt, integrate),
             rate_axis(g, x, 2, s2, body_rates[2], d2, dt, integrate))  # fmt: skip

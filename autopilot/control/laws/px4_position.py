@@ -39,6 +39,7 @@ import math
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.numerics import clip, derivative_names, filtered_derivative, low_pass_alpha
 from quadcommon.rigid_body import limit_tilt, roll_pitch_from_body_z
 from quadcommon.schema import Section
@@ -49,11 +50,24 @@ from ..tunable import Tunable, TunableLaw
 # Gains array: position P (x, y, z), velocity P, I, D (x, y, z), the velocity derivative's low-pass
 # weight, MPC_ACC_DECOUPLE (1.0/0.0), the velocity limits (xy, up, down), the hover thrust, the
 # thrust limits (min, max, horizontal margin; normalised), U1_max, g, the tilt limit.
-G_POS_P, G_VEL_P, G_VEL_I, G_VEL_D = 0, 3, 6, 9
-G_ALPHA, G_DECOUPLE, G_VEL_MAX_XY, G_VEL_MAX_UP, G_VEL_MAX_DOWN = 12, 13, 14, 15, 16
-G_HOVER, G_THR_MIN, G_THR_MAX, G_THR_XY_MARGIN = 17, 18, 19, 20
-G_THRUST_MAX_N, G_GRAVITY, G_TILT_MAX = 21, 22, 23
-G_SIZE = 24
+GAINS = layout("Px4PositionGains", (
+    Field("pos_p", 3),
+    Field("vel_p", 3),
+    Field("vel_i", 3),
+    Field("vel_d", 3),
+    Field("alpha"),
+    Field("decouple"),
+    Field("vel_max_xy"),
+    Field("vel_max_up"),
+    Field("vel_max_down"),
+    Field("hover"),
+    Field("thr_min"),
+    Field("thr_max"),
+    Field("thr_xy_margin"),
+    Field("thrust_max"),
+    Field("gravity"),
+    Field("tilt_max"),
+))  # fmt: skip
 # State: the velocity integral (m/s^2, PX4's _vel_int), then the velocity derivative's filter.
 X_INT, X_DERIVATIVE = 0, 3
 
@@ -82,14 +96,14 @@ def constrain_xy(v0x, v0y, v1x, v1y, limit):
 def thrust_setpoint(g, ax, ay, az):
     """PX4's accelerationControl: the normalised thrust vector for the commanded acceleration
     (world z up), 1.0 if the tilt limit acted, 1.0 if the minimum thrust did."""
-    gravity = g[G_GRAVITY]
-    vertical = gravity if g[G_DECOUPLE] != 0.0 else gravity + az
-    bx, by, bz, tilt_limited = limit_tilt(ax, ay, vertical, g[G_TILT_MAX])
-    hover = g[G_HOVER]
+    gravity = g[GAINS.gravity]
+    vertical = gravity if g[GAINS.decouple] != 0.0 else gravity + az
+    bx, by, bz, tilt_limited = limit_tilt(ax, ay, vertical, g[GAINS.tilt_max])
+    hover = g[GAINS.hover]
     collective = hover * (gravity + az) / gravity / bz
     floored = 0.0
-    if collective < g[G_THR_MIN]:
-        collective, floored = g[G_THR_MIN], 1.0
+    if collective < g[GAINS.thr_min]:
+        collective, floored = g[GAINS.thr_min], 1.0
     return bx * collective, by * collective, bz * collective, tilt_limited, floored
 
 
@@ -97,26 +111,26 @@ def thrust_setpoint(g, ax, ay, az):
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):  # fmt: skip
     # 1. position P -> velocity setpoint
-    px = g[G_POS_P] * (ref_position[0] - position[0])
-    py = g[G_POS_P + 1] * (ref_position[1] - position[1])
-    pz = g[G_POS_P + 2] * (ref_position[2] - position[2])
-    vx, vy = constrain_xy(px, py, ref_velocity[0], ref_velocity[1], g[G_VEL_MAX_XY])
-    vz = clip(ref_velocity[2] + pz, -g[G_VEL_MAX_DOWN], g[G_VEL_MAX_UP])
+    px = g[GAINS.pos_p] * (ref_position[0] - position[0])
+    py = g[GAINS.pos_p + 1] * (ref_position[1] - position[1])
+    pz = g[GAINS.pos_p + 2] * (ref_position[2] - position[2])
+    vx, vy = constrain_xy(px, py, ref_velocity[0], ref_velocity[1], g[GAINS.vel_max_xy])
+    vz = clip(ref_velocity[2] + pz, -g[GAINS.vel_max_down], g[GAINS.vel_max_up])
     # 2. velocity PID, D on the measured acceleration
-    dvx, dvy, dvz = filtered_derivative(x, X_DERIVATIVE, velocity, g[G_ALPHA], dt, integrate)
+    dvx, dvy, dvz = filtered_derivative(x, X_DERIVATIVE, velocity, g[GAINS.alpha], dt, integrate)
     ex, ey, ez = vx - velocity[0], vy - velocity[1], vz - velocity[2]
-    ax = ref_acceleration[0] + g[G_VEL_P] * ex + x[X_INT] - g[G_VEL_D] * dvx
-    ay = ref_acceleration[1] + g[G_VEL_P + 1] * ey + x[X_INT + 1] - g[G_VEL_D + 1] * dvy
-    az = ref_acceleration[2] + g[G_VEL_P + 2] * ez + x[X_INT + 2] - g[G_VEL_D + 2] * dvz
+    ax = ref_acceleration[0] + g[GAINS.vel_p] * ex + x[X_INT] - g[GAINS.vel_d] * dvx
+    ay = ref_acceleration[1] + g[GAINS.vel_p + 1] * ey + x[X_INT + 1] - g[GAINS.vel_d + 1] * dvy
+    az = ref_acceleration[2] + g[GAINS.vel_p + 2] * ez + x[X_INT + 2] - g[GAINS.vel_d + 2] * dvz
     # 3. thrust vector
     tx, ty, tz, tilt_limited, thrust_limited = thrust_setpoint(g, ax, ay, az)
-    thr_min, thr_max = g[G_THR_MIN], g[G_THR_MAX]
+    thr_min, thr_max = g[GAINS.thr_min], g[GAINS.thr_max]
     # 5a. vertical anti-windup: no integration further into a thrust limit
     if (tz <= thr_min and ez <= 0.0) or (tz >= thr_max and ez >= 0.0):
         ez = 0.0
     # 4. saturation, vertical first with a horizontal margin
     horizontal = math.sqrt(tx * tx + ty * ty)
-    allocated = horizontal if horizontal < g[G_THR_XY_MARGIN] else g[G_THR_XY_MARGIN]
+    allocated = horizontal if horizontal < g[GAINS.thr_xy_margin] else g[GAINS.thr_xy_margin]
     tz_max = math.sqrt(thr_max * thr_max - allocated * allocated)
     if tz > tz_max:
         tz, thrust_limited = tz_max, 1.0
@@ -125,20 +139,20 @@ def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_accele
     if horizontal > horizontal_max:
         tx, ty, thrust_limited = tx / horizontal * horizontal_max, ty / horizontal * horizontal_max, 1.0
     # 5b. horizontal tracking anti-reset-windup on what the saturated thrust gives
-    to_acceleration = g[G_GRAVITY] / g[G_HOVER]
+    to_acceleration = g[GAINS.gravity] / g[GAINS.hover]
     produced_x, produced_y = tx * to_acceleration, ty * to_acceleration
     if ax * ax + ay * ay > produced_x * produced_x + produced_y * produced_y:
-        arw = 2.0 / g[G_VEL_P]
+        arw = 2.0 / g[GAINS.vel_p]
         ex -= arw * (ax - produced_x)
         ey -= arw * (ay - produced_y)
     if integrate:
-        x[X_INT] += ex * g[G_VEL_I] * dt
-        x[X_INT + 1] += ey * g[G_VEL_I + 1] * dt
-        x[X_INT + 2] = clip(x[X_INT + 2] + ez * g[G_VEL_I + 2] * dt, -g[G_GRAVITY], g[G_GRAVITY])
+        x[X_INT] += ex * g[GAINS.vel_i] * dt
+        x[X_INT + 1] += ey * g[GAINS.vel_i + 1] * dt
+        x[X_INT + 2] = clip(x[X_INT + 2] + ez * g[GAINS.vel_i + 2] * dt, -g[GAINS.gravity], g[GAINS.gravity])
     # 6. attitude setpoint and thrust
     collective = math.sqrt(tx * tx + ty * ty + tz * tz)
     roll_ref, pitch_ref = roll_pitch_from_body_z(tx / collective, ty / collective, tz / collective, ref_yaw)
-    return collective * g[G_THRUST_MAX_N], roll_ref, pitch_ref, ax, ay, az, thrust_limited, tilt_limited
+    return collective * g[GAINS.thrust_max], roll_ref, pitch_ref, ax, ay, az, thrust_limited, tilt_limited
 
 
 TUNABLE_GAINS = (

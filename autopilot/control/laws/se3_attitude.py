@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.rigid_body import (
     body_acceleration_from_euler,
     body_rates_from_euler_rates,
@@ -35,8 +36,11 @@ from ..registry import ROTATIONAL, LawContext, register
 from ..tunable import Tunable, TunableLaw
 
 # Gains array, per body axis from each offset: k_R (N m/rad), k_W (N m s/rad), the nominal inertia.
-G_KR, G_KW, G_INERTIA = 0, 3, 6
-G_SIZE = 9
+GAINS = layout("Se3AttitudeGains", (
+    Field("kr", 3),
+    Field("kw", 3),
+    Field("inertia", 3),
+))  # fmt: skip
 
 
 @kernel
@@ -71,13 +75,13 @@ def errors(euler, body_rates, eta_d, eta_d_dot, eta_d_ddot):
 @kernel
 def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
     e_R, e_W, w_d, w_d_dot = errors(euler, body_rates, eta_d, eta_d_dot, eta_d_ddot)
-    J = (g[G_INERTIA], g[G_INERTIA + 1], g[G_INERTIA + 2])
+    J = (g[GAINS.inertia], g[GAINS.inertia + 1], g[GAINS.inertia + 2])
     gyro = cross(body_rates, (J[0] * body_rates[0], J[1] * body_rates[1], J[2] * body_rates[2]))
     h = cross(body_rates, w_d)
     return (
-        -g[G_KR] * e_R[0] - g[G_KW] * e_W[0] + gyro[0] - J[0] * (h[0] - w_d_dot[0]),
-        -g[G_KR + 1] * e_R[1] - g[G_KW + 1] * e_W[1] + gyro[1] - J[1] * (h[1] - w_d_dot[1]),
-        -g[G_KR + 2] * e_R[2] - g[G_KW + 2] * e_W[2] + gyro[2] - J[2] * (h[2] - w_d_dot[2]),
+        -g[GAINS.kr] * e_R[0] - g[GAINS.kw] * e_W[0] + gyro[0] - J[0] * (h[0] - w_d_dot[0]),
+        -g[GAINS.kr + 1] * e_R[1] - g[GAINS.kw + 1] * e_W[1] + gyro[1] - J[1] * (h[1] - w_d_dot[1]),
+        -g[GAINS.kr + 2] * e_R[2] - g[GAINS.kw + 2] * e_W[2] + gyro[2] - J[2] * (h[2] - w_d_dot[2]),
     )
 
 

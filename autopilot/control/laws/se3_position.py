@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
+from quadcommon.layout import Field, layout
 from quadcommon.numerics import clip
 from quadcommon.rigid_body import limit_tilt, roll_pitch_from_body_z, rotation_matrix
 
@@ -34,28 +35,34 @@ from ..registry import TRANSLATIONAL, LawContext, register
 from ..tunable import Tunable, TunableLaw
 
 # Gains array: k_x (N/m), k_v (N s/m), the nominal mass, g, U1_max, the tilt limit.
-G_KX, G_KV, G_MASS, G_GRAVITY, G_THRUST_MAX, G_TILT_MAX = 0, 1, 2, 3, 4, 5
-G_SIZE = 6
+GAINS = layout("Se3PositionGains", (
+    Field("kx"),
+    Field("kv"),
+    Field("mass"),
+    Field("gravity"),
+    Field("thrust_max"),
+    Field("tilt_max"),
+))  # fmt: skip
 
 
 @kernel
 def force(g, e_x, e_v, acceleration):
     """One axis of ``F_d = -k_x e_x - k_v e_v + m (p_d'' + g e3)`` (``acceleration``: p_d'' + g e3)."""
-    return g[G_MASS] * acceleration - g[G_KX] * e_x - g[G_KV] * e_v
+    return g[GAINS.mass] * acceleration - g[GAINS.kx] * e_x - g[GAINS.kv] * e_v
 
 
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):  # fmt: skip
-    m, gravity = g[G_MASS], g[G_GRAVITY]
+    m, gravity = g[GAINS.mass], g[GAINS.gravity]
     fx = force(g, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0])
     fy = force(g, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1])
     fz = force(g, position[2] - ref_position[2], velocity[2] - ref_velocity[2], ref_acceleration[2] + gravity)
     R = rotation_matrix(euler[0], euler[1], euler[2])
     thrust = fx * R[0][2] + fy * R[1][2] + fz * R[2][2]  # F_d . R e3
-    thrust_max = g[G_THRUST_MAX]
+    thrust_max = g[GAINS.thrust_max]
     thrust_limited = 1.0 if thrust < 0.0 or thrust > thrust_max else 0.0
-    bx, by, bz, tilt_limited = limit_tilt(fx, fy, fz, g[G_TILT_MAX])  # b3_d
+    bx, by, bz, tilt_limited = limit_tilt(fx, fy, fz, g[GAINS.tilt_max])  # b3_d
     roll_ref, pitch_ref = roll_pitch_from_body_z(bx, by, bz, ref_yaw)
     thrust = clip(thrust, 0.0, thrust_max)
     return thrust, roll_ref, pitch_ref, fx / m, fy / m, fz / m - gravity, thrust_limited, tilt_limited
