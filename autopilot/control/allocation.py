@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 from quadcommon.config import VehicleConfig
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, values
 from quadcommon.numerics import clip
 from quadcommon.rotor_geometry import squared_speed_parts, wrench_from_squares
 
@@ -46,13 +46,14 @@ OUT_SIZE = 8
 
 
 def actuator_numbers(vehicle: VehicleConfig) -> tuple[float, ...]:
-    """The layout ``A_*`` for ``vehicle``."""
+    """The actuators' numbers (:data:`ACTUATORS`) of ``vehicle``."""
     rotors, actuation = vehicle.rotors, vehicle.actuation
-    return (
-        actuation.thrust_max_n, *actuation.torque_max_n_m, rotors.thrust_coefficient_n_s2,
-        rotors.drag_coefficient_n_m_s2, vehicle.nominal.arm_length_m, rotors.speed_min_rad_s**2,
-        rotors.speed_max_rad_s**2, rotors.speed_max_rad_s,
-    )  # fmt: skip
+    return values(
+        ACTUATORS, thrust_max=actuation.thrust_max_n, torque_max=actuation.torque_max_n_m,
+        thrust_coefficient=rotors.thrust_coefficient_n_s2, torque_coefficient=rotors.drag_coefficient_n_m_s2,
+        arm=vehicle.nominal.arm_length_m, squared_speed_min=rotors.speed_min_rad_s**2,
+        squared_speed_max=rotors.speed_max_rad_s**2, speed_max=rotors.speed_max_rad_s,
+    )
 
 
 @kernel

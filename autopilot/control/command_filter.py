@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from quadcommon.kernel import kernel
 from quadcommon.layout import Field, layout
+from quadcommon.layout import values as layout_values
 
 # Coefficients, from an offset into the cascade's array: on/off, wn^2, 2 zeta wn, the first two rows
 # of the discrete transition (a00, a01, a02, a10, a11, a12) of [y, y', r].
@@ -35,7 +36,7 @@ FILTER_STATE = layout("CommandFilterState", (
 def discretise(
     natural_frequency_rad_s: float, damping: float, dt: float, enabled: bool = True
 ) -> tuple[float, ...]:
-    """The filter's coefficients (layout ``F_*``) for the control period ``dt``."""
+    """The filter's coefficients (:data:`FILTER_COEFFICIENTS`) for the control period ``dt``."""
     import numpy as np
     from scipy.linalg import expm  # here: importing scipy
 
@@ -44,7 +45,11 @@ def discretise(
     # Augmented continuous system [y, y', r]' with r constant over the step.
     A = np.array([[0.0, 1.0, 0.0], [-wn2, -two_zeta_wn, wn2], [0.0, 0.0, 0.0]])
     phi = expm(A * dt)[:2].ravel()
-    return (1.0 if enabled else 0.0, wn2, two_zeta_wn, *(float(v) for v in phi))
+    on = 1.0 if enabled else 0.0
+    phi_values = [float(v) for v in phi]
+    return layout_values(
+        FILTER_COEFFICIENTS, on=on, omega_n_squared=wn2, two_zeta_omega=two_zeta_wn, phi=phi_values
+    )
 
 
 @kernel

@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 
 from quadcommon.kernel import kernel
 from quadcommon.layout import Field, layout
+from quadcommon.layout import values as layout_values
 from quadcommon.numerics import clip
 from quadcommon.schema import Section
 
@@ -172,14 +173,16 @@ def acceleration_limits(context: LawContext) -> Vector3:
 
 
 def pack_backstepping(gains: BacksteppingGains, context: LawContext, weights: Vector3) -> tuple[float, ...]:
-    """The gains array (layout ``G_*``); ``weights[i]``: the integral state's weight in ``a_i``
+    """The gains array (:data:`BACKSTEPPING_GAINS`); ``weights[i]``: the integral state's weight in ``a_i``
     (its term is ``-weights[i] * state[i]``), which sets its anti-windup bound."""
     a_max = acceleration_limits(context)
     bound = tuple(a_max[i] / w if w > 0.0 else math.inf for i, w in enumerate(weights))
     c1, c2, k = gains.c1, gains.c2, gains.k_integral
-    return (
-        *c1, *c2, *k, *(1.0 + c1[i] * c2[i] for i in range(3)), *(c1[i] + c2[i] for i in range(3)), *bound,
-        context.mass_kg, context.gravity_m_s2, context.thrust_max_n, math.sin(context.tilt_max_rad),
+    return layout_values(
+        BACKSTEPPING_GAINS, c1=c1, c2=c2, k=k, one_c1c2=[1.0 + c1[i] * c2[i] for i in range(3)],
+        c1_c2=[c1[i] + c2[i] for i in range(3)], bound=bound, mass=context.mass_kg,
+        gravity=context.gravity_m_s2, thrust_max=context.thrust_max_n,
+        sin_tilt=math.sin(context.tilt_max_rad),
     )  # fmt: skip
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
 from quadcommon.layout import Field, layout
+from quadcommon.layout import values as layout_values
 from quadcommon.numerics import clip_symmetric
 from quadcommon.rigid_body import body_torque_from_euler_torque, coriolis_matrix, inertia_matrix, matrix_times
 from quadcommon.schema import Section
@@ -118,7 +119,9 @@ class IntegralBacksteppingAttitude:
         inertia, tau = context.inertia_kg_m2, context.torque_max_n_m
         w = integral_weights(gains)
         bound = tuple(tau[i] / (inertia[i] * w[i]) if w[i] > 0.0 else math.inf for i in range(3))
-        return (*gains.c1, *gains.c2, *gains.k_integral, *inertia, *bound)
+        return layout_values(
+            GAINS, c1=gains.c1, c2=gains.c2, lambda_=gains.k_integral, inertia=inertia, bound=bound
+        )
 
     @staticmethod
     def retune(old, new, context, state, euler, euler_rates) -> list[float]:

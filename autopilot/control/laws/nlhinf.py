@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, values
 from quadcommon.numerics import clip_symmetric
 from quadcommon.rigid_body import (
     body_torque_from_euler_torque,
@@ -159,7 +159,7 @@ class NonlinearHinfAttitude:
     def pack(g: NlHinfGains, context) -> tuple[float, ...]:
         gain = g.r_inv * g.k_p
         bound = tuple(t / gain if gain > 0.0 else math.inf for t in context.torque_max_n_m)
-        return (g.k_d, g.k_p, g.r_inv, *context.inertia_kg_m2, *bound)
+        return values(GAINS, kd=g.k_d, kp=g.k_p, r_inv=g.r_inv, inertia=context.inertia_kg_m2, bound=bound)
 
     @staticmethod
     def retune(old: NlHinfGains, new: NlHinfGains, context, state, euler, euler_rates) -> list[float]:

@@ -43,7 +43,7 @@ import math
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, values
 from quadcommon.numerics import clip, clip_symmetric, derivative_names, filtered_derivative, low_pass_alpha
 from quadcommon.rigid_body import (
     cross,
@@ -244,14 +244,15 @@ class Px4Attitude(TunableLaw):
         weight = k.mc_yaw_weight
         yaw_p = k.mc_yaw_p / weight if weight > 1e-4 else k.mc_yaw_p  # PX4's compensation of the weight
         rate_k = (k.mc_rollrate_k, k.mc_pitchrate_k, k.mc_yawrate_k)
-        return (
-            k.mc_roll_p, k.mc_pitch_p, yaw_p,
-            *(math.radians(v) for v in (k.mc_rollrate_max, k.mc_pitchrate_max, k.mc_yawrate_max)),
-            *(rate_k[i] * v for i, v in enumerate((k.mc_rollrate_p, k.mc_pitchrate_p, k.mc_yawrate_p))),
-            *(rate_k[i] * v for i, v in enumerate((k.mc_rollrate_i, k.mc_pitchrate_i, k.mc_yawrate_i))),
-            *(rate_k[i] * v for i, v in enumerate((k.mc_rollrate_d, k.mc_pitchrate_d, k.mc_yawrate_d))),
-            k.mc_rollrate_ff, k.mc_pitchrate_ff, k.mc_yawrate_ff,
-            k.mc_rr_int_lim, k.mc_pr_int_lim, k.mc_yr_int_lim,
-            *context.torque_max_n_m, weight, low_pass_alpha(k.imu_dgyro_cutoff, context.dt_s),
-            0.0, 0.0, 0.0,  # the autotune's rate setpoint: none
+        return values(
+            GAINS, att_p=(k.mc_roll_p, k.mc_pitch_p, yaw_p),
+            rate_max=[math.radians(v) for v in (k.mc_rollrate_max, k.mc_pitchrate_max, k.mc_yawrate_max)],
+            rate_p=[rate_k[i] * v for i, v in enumerate((k.mc_rollrate_p, k.mc_pitchrate_p, k.mc_yawrate_p))],
+            rate_i=[rate_k[i] * v for i, v in enumerate((k.mc_rollrate_i, k.mc_pitchrate_i, k.mc_yawrate_i))],
+            rate_d=[rate_k[i] * v for i, v in enumerate((k.mc_rollrate_d, k.mc_pitchrate_d, k.mc_yawrate_d))],
+            rate_ff=(k.mc_rollrate_ff, k.mc_pitchrate_ff, k.mc_yawrate_ff),
+            int_lim=(k.mc_rr_int_lim, k.mc_pr_int_lim, k.mc_yr_int_lim),
+            torque_max=context.torque_max_n_m, yaw_weight=weight,
+            alpha=low_pass_alpha(k.imu_dgyro_cutoff, context.dt_s),
+            autotune_rate=(0.0, 0.0, 0.0),  # the autotune's rate setpoint: none
         )  # fmt: skip

@@ -39,7 +39,7 @@ import math
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, values
 from quadcommon.numerics import clip, derivative_names, filtered_derivative, low_pass_alpha
 from quadcommon.rigid_body import limit_tilt, roll_pitch_from_body_z
 from quadcommon.schema import Section
@@ -225,14 +225,15 @@ class Px4Position(TunableLaw):
             raise ValueError(f"thrust_max {gains.thrust_max:g} is not above the hover thrust m g / U1_max = "
                              f"{hover:.3g}")  # fmt: skip
         k = gains
-        return (
-            k.mpc_xy_p, k.mpc_xy_p, k.mpc_z_p,
-            k.mpc_xy_vel_p_acc, k.mpc_xy_vel_p_acc, k.mpc_z_vel_p_acc,
-            k.mpc_xy_vel_i_acc, k.mpc_xy_vel_i_acc, k.mpc_z_vel_i_acc,
-            k.mpc_xy_vel_d_acc, k.mpc_xy_vel_d_acc, k.mpc_z_vel_d_acc,
-            low_pass_alpha(k.mpc_veld_lp, context.dt_s), 1.0 if k.mpc_acc_decouple else 0.0,
-            k.velocity_max_xy_m_s, k.velocity_max_up_m_s, k.velocity_max_down_m_s,
-            hover, k.thrust_min, k.thrust_max, k.thrust_xy_margin,
-            context.thrust_max_n, context.gravity_m_s2, context.tilt_max_rad,
+        return values(
+            GAINS, pos_p=(k.mpc_xy_p, k.mpc_xy_p, k.mpc_z_p),
+            vel_p=(k.mpc_xy_vel_p_acc, k.mpc_xy_vel_p_acc, k.mpc_z_vel_p_acc),
+            vel_i=(k.mpc_xy_vel_i_acc, k.mpc_xy_vel_i_acc, k.mpc_z_vel_i_acc),
+            vel_d=(k.mpc_xy_vel_d_acc, k.mpc_xy_vel_d_acc, k.mpc_z_vel_d_acc),
+            alpha=low_pass_alpha(k.mpc_veld_lp, context.dt_s), decouple=1.0 if k.mpc_acc_decouple else 0.0,
+            vel_max_xy=k.velocity_max_xy_m_s, vel_max_up=k.velocity_max_up_m_s,
+            vel_max_down=k.velocity_max_down_m_s, hover=hover, thr_min=k.thrust_min, thr_max=k.thrust_max,
+            thr_xy_margin=k.thrust_xy_margin, thrust_max=context.thrust_max_n, gravity=context.gravity_m_s2,
+            tilt_max=context.tilt_max_rad,
         )  # fmt: skip
 

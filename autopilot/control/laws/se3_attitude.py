@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, values
 from quadcommon.rigid_body import (
     body_acceleration_from_euler,
     body_rates_from_euler_rates,
@@ -108,4 +108,4 @@ class Se3Attitude(TunableLaw):
 
     @staticmethod
     def pack(gains: Se3AttitudeGains, context: LawContext) -> tuple[float, ...]:
-        return (*gains.k_R, *gains.k_W, *context.inertia_kg_m2)
+        return values(GAINS, kr=gains.k_R, kw=gains.k_W, inertia=context.inertia_kg_m2)

@@ -27,7 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, values
 from quadcommon.numerics import clip
 from quadcommon.rigid_body import limit_tilt, roll_pitch_from_body_z, rotation_matrix
 
@@ -91,5 +91,5 @@ class Se3Position(TunableLaw):
 
     @staticmethod
     def pack(gains: Se3PositionGains, context: LawContext) -> tuple[float, ...]:
-        return (gains.k_x, gains.k_v, context.mass_kg, context.gravity_m_s2, context.thrust_max_n,
-                context.tilt_max_rad)  # fmt: skip
+        return values(GAINS, kx=gains.k_x, kv=gains.k_v, mass=context.mass_kg, gravity=context.gravity_m_s2,
+                      thrust_max=context.thrust_max_n, tilt_max=context.tilt_max_rad)  # fmt: skip
