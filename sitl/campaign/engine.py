@@ -27,6 +27,7 @@ from quadcommon.config import Rates, TrajectorySpec, VehicleConfig, load_sitl
 from quadcommon.kernel import compiled
 from quadcommon.layout import column_names
 from quadcommon.trajectories import trajectory_from_spec
+from quadcommon.wire_values import frame_time_s, frame_time_usec
 from simulator.dynamics.equations import ROTOR_FAULT
 from simulator.dynamics.plant import Plant
 from simulator.environment.dryden import DrydenWind
@@ -147,7 +148,7 @@ def pack_controller(controller: ControllerConfig, vehicle: VehicleConfig, dt_con
 def reference_table(spec: TrajectorySpec, rates: Rates, duration_s: float, wire_float32: bool) -> np.ndarray:
     """Row k: the reference the controller gets at control step k, from the project's trajectory.
 
-    Columns: p_d (3), p_d' (3), p_d'' (3), yaw, yaw', yaw'' (paper frames, SI). The time is
+    Columns: :data:`~.kernels.REFERENCE_ROW` (paper frames, SI). The time is
     ``k dt`` in-process, and ``time_usec * 1e-6`` with ``time_usec = round(k * 1e6 / control_hz)``
     through the wire (the autopilot reads its clock off the frame), as the two runners sample it.
     The same for every run of a campaign, so it is sampled once per process.
@@ -156,14 +157,17 @@ def reference_table(spec: TrajectorySpec, rates: Rates, duration_s: float, wire_
     dt_control = 1.0 / rates.control_hz
     usec_per_frame = 1e6 / rates.control_hz
     steps = int(round(duration_s / dt_control))
-    table = np.empty((steps + 1, 12))
+    R = lay.REFERENCE_ROW
+    table = np.empty((steps + 1, R.size))
     for k in range(steps + 1):
-        t = round(k * usec_per_frame) * 1e-6 if wire_float32 else k * dt_control
+        t = frame_time_s(frame_time_usec(k, usec_per_frame)) if wire_float32 else k * dt_control
         r = trajectory.sample(t)
-        table[k, 0:3] = r.position_m
-        table[k, 3:6] = r.velocity_m_s
-        table[k, 6:9] = r.acceleration_m_s2
-        table[k, 9:12] = (r.yaw_rad, r.yaw_rate_rad_s, r.yaw_acceleration_rad_s2)
+        row = table[k]
+        row[R.position : R.position + 3] = r.position_m
+        row[R.velocity : R.velocity + 3] = r.velocity_m_s
+        row[R.acceleration : R.acceleration + 3] = r.acceleration_m_s2
+        row[R.yaw], row[R.yaw_rate] = r.yaw_rad, r.yaw_rate_rad_s
+        row[R.yaw_acceleration] = r.yaw_acceleration_rad_s2
     return table
 
 
@@ -229,7 +233,7 @@ def sim_array(
 
 
 def estimator_memory(sensors: SensorConfig, params: EstimatorParams, gravity_m_s2: float,
-                     home_altitude_m: float, imu_rate_hz: float) -> tuple:  # fmt: skip
+                     home_altitude_m: float, imu_rate_hz: float) -> lay.EstimatorArrays:  # fmt: skip
     """The memory of one flight's sensors and filter, as :func:`~sitl.campaign.kernels.simulate`
     takes it: the sensors switched on as :class:`~simulator.sensors.SensorSuite` switches them on
     (same seed, same switch-on biases and GNSS errors), a filter not yet started with the
@@ -239,14 +243,15 @@ def estimator_memory(sensors: SensorConfig, params: EstimatorParams, gravity_m_s
     F, P, ring, stats, windows = ekf.new_memory()
     A = ekf.parameter_array(params, gravity_m_s2, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
     delivery = np.zeros(sensor_frame.DELIVERY.size)
-    return (np.asarray(rng, dtype=float), S, C, faults, delivery, F, P, ring, stats, windows, A)
+    rng = np.asarray(rng, dtype=float)
+    return lay.EstimatorArrays(rng, S, C, faults, delivery, F, P, ring, stats, windows, A)
 
 
-def no_estimation() -> tuple:
+def no_estimation() -> lay.EstimatorArrays:
     """Placeholder memory of a flight on the truth (the types :func:`estimator_memory`'s has)."""
     one, square = np.zeros(1), np.zeros((1, 1))
-    return (one, one, one, np.zeros((0, sensor_frame.FAULT_SIZE)), one, one, square, square, square,
-            square, one)  # fmt: skip
+    no_faults = np.zeros((0, sensor_frame.FAULT_SIZE))
+    return lay.EstimatorArrays(one, one, one, no_faults, one, one, square, square, square, square, one)
 
 
 @functools.cache
@@ -279,10 +284,10 @@ def fly(flight: Flight, record: bool = False) -> tuple[np.ndarray, np.ndarray | 
     rows = np.zeros((flight.samples if record else 0, lay.RECORD.size))
     c = flight.controller
     estimation = flight.estimation or no_estimation()
-    metrics = entry(c.translational, c.rotational, bool(flight.estimation))(
-        flight.state0, flight.plant, c.K, c.gt, c.gr, c.nxt, c.nxr, flight.reference, flight.sim,
-        flight.steps, flight.ramps, flight.gusts, flight.dryden, flight.faults, rows, estimation,
-    )  # fmt: skip
+    arrays = lay.FlightArrays(flight.state0, flight.plant, c.K, c.gt, c.gr, c.nxt, c.nxr, flight.reference,
+                              flight.sim, flight.steps, flight.ramps, flight.gusts, flight.dryden,
+                              flight.faults)  # fmt: skip
+    metrics = entry(c.translational, c.rotational, bool(flight.estimation))(arrays, estimation, rows)
     if not record:
         return metrics, None
     flown = int(round(metrics[lay.RUN_END.end_time] / flight.sim[lay.SETTINGS.dt_control])) + 1

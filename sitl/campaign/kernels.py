@@ -40,6 +40,7 @@ the controller's (``FAIL_CONTROLLER``), by the check the autopilot makes
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -159,6 +160,49 @@ RECORD = layout("RecordRow", (
 ))  # fmt: skip
 RECORD_COLUMNS = column_names(RECORD)
 
+# The reference the controllers get at each control step (engine.reference_table's rows).
+REFERENCE_ROW = layout("ReferenceRow", (
+    Field("position", 3, unit="m"), Field("velocity", 3, unit="m/s"), Field("acceleration", 3, unit="m/s^2"),
+    Field("yaw", unit="rad"), Field("yaw_rate", unit="rad/s"), Field("yaw_acceleration", unit="rad/s^2"),
+))  # fmt: skip
+
+
+class FlightArrays(NamedTuple):
+    """What :func:`simulate` reads of one run x controller
+    (:meth:`sitl.campaign.engine.Flight.arrays`)."""
+
+    state0: Any  # the plant's initial state
+    plant: Any  # the plant's parameters (simulator.dynamics.equations.PLANT)
+    numbers: Any  # the cascade's numbers (autopilot.control.cascade.CASCADE_NUMBERS)
+    translational_gains: Any
+    rotational_gains: Any
+    translational_states: int  # entries of the translational law's state
+    rotational_states: int
+    reference: Any  # one REFERENCE_ROW per control step
+    settings: Any  # SETTINGS
+    steps: Any  # the disturbance profile's steps, ramps and 1-cos gusts (gust_profile.element_rows)
+    ramps: Any
+    gusts: Any
+    dryden: Any  # the Dryden wind at each step of the turbulence
+    faults: Any  # the run's rotor faults (ROTOR_FAULT rows, by onset; none: zero rows)
+
+
+class EstimatorArrays(NamedTuple):
+    """The memory of a flight's sensors (:mod:`simulator.sensors.frame`) and filter
+    (:mod:`autopilot.estimation.filter`) (:func:`sitl.campaign.engine.estimator_memory`)."""
+
+    rng: Any
+    sensor_state: Any  # frame.STATE
+    sensor_figures: Any  # frame.FIGURES
+    sensor_faults: Any
+    delivered: Any  # frame.DELIVERY
+    memory: Any  # filter.MEMORY
+    covariance: Any
+    ring: Any
+    stats: Any
+    windows: Any
+    parameters: Any  # filter.PARAMETERS
+
 
 # -------------------------------------------------------------------------------------------------
 # Disturbances
@@ -206,15 +250,18 @@ def _home(S) -> tuple:
 
 
 @kernel
-def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_previous, rng, sensor,
-             sensor_figures, faults, delivered, F, Pf, ring, A):  # fmt: skip
+def estimate(k, t, dt, S, s, P, u, plant_work, pose, t_previous, est):
     """Step ``k``'s sensor samples (:func:`simulator.sensors.frame.sensor_frame` on the truth at
     ``t``), then the state the controllers fly on: at step 0 the frame's state (``c_*``, from
     ODOMETRY through the wire), from whose pose the filter starts
     (:func:`~autopilot.estimation.filter.reset_state`); afterwards the filter's prediction on the
     IMU sample (none while an injected failure stops the IMU: the estimate as it is, the next
     prediction spans the gap, as the autopilot's). Returns ``(position, velocity, euler, euler
-    rates, the autopilot's time of the last prediction)``."""
+    rates, the autopilot's time of the last prediction)``: ``(StateEstimate, time)``; ``pose``: the
+    frame's state, ``est``: the :class:`EstimatorArrays`."""
+    rng, sensor, sensor_figures, faults, delivered = (est.rng, est.sensor_state, est.sensor_figures,
+                                                      est.sensor_faults, est.delivered)  # fmt: skip
+    F, Pf, ring, A = est.memory, est.covariance, est.ring, est.parameters
     wire = S[SETTINGS.wire] != 0.0
     for i in range(s.shape[0]):
         plant_work[0, i] = s[i]
@@ -229,12 +276,13 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
         offset = 0.0
         if delivered[DELIVERY.baro_fresh] != 0.0:
             height = delivered[DELIVERY.baro_altitude]
-            offset = (float_field(height) if wire else height) - c_pos[2]
-        q = quaternion_from_euler(c_euler[0], c_euler[1], c_euler[2])
-        ekf.reset_state(F, Pf, A, c_pos, c_vel, q, 0.1, 0.1, offset)
+            offset = (float_field(height) if wire else height) - pose.position_m[2]
+        e = pose.euler_rad
+        q = quaternion_from_euler(e[0], e[1], e[2])
+        ekf.reset_state(F, Pf, A, pose.position_m, pose.velocity_m_s, q, 0.1, 0.1, offset)
         ekf.start(F, ring, t_autopilot, dt, rate, force)
         F[ekf.MEMORY.imu_samples] += 1.0
-        return c_pos, c_vel, c_euler, c_rates, t_autopilot  # the frame's pose flies this step
+        return pose, t_autopilot  # the frame's pose flies this step
     if imu_fresh(delivered):
         ekf.predict_step(F, Pf, ring, A, t_autopilot, t_autopilot - t_previous, rate, force)
     else:
@@ -242,7 +290,7 @@ def estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t
     q = ekf.quat(F, ekf.MEMORY.q)
     euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
     rates = euler_rates_from_body_rates(euler[0], euler[1], ekf.vec3(F, ekf.MEMORY.rate))
-    return ekf.vec3(F, ekf.MEMORY.p), ekf.vec3(F, ekf.MEMORY.v), euler, rates, t_autopilot
+    return StateEstimate(ekf.vec3(F, ekf.MEMORY.p), ekf.vec3(F, ekf.MEMORY.v), euler, rates), t_autopilot
 
 
 @kernel
@@ -252,12 +300,12 @@ def imu_fresh(delivered) -> bool:
 
 
 @kernel
-def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
+def fuse_aiding(t, S, est):
     """The step's magnetometer, barometer, GNSS and vision samples into the filter as the wire
     delivers them (:mod:`quadcommon.wire_values`), through the autopilot's own fusion of a frame's
     aiding (:func:`autopilot.estimation.aiding.fuse_frame`: PX4's order)."""
     wire = S[SETTINGS.wire] != 0.0
-    d, D = delivered, DELIVERY
+    d, D = est.delivered, DELIVERY
     mag = _through_fields(wire, _vector_at(d, D.mag_field))
     height = d[D.baro_altitude]
     if wire:  # HIL_SENSOR's pressure altitude
@@ -274,7 +322,7 @@ def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
     if wire and d[D.vision_fresh] != 0.0:  # through VISION_POSITION_ESTIMATE's fields
         p_ned, yaw_ned, p_var, yaw_var = vision_values(vision_position, yaw, position_std, yaw_std)
         vision_position, yaw, position_std, yaw_std = vision_pose(p_ned, yaw_ned, p_var, yaw_var)
-    fuse_frame(F, Pf, ring, stats, windows, A, t, Aiding(
+    fuse_frame(est.memory, est.covariance, est.ring, est.stats, est.windows, est.parameters, t, Aiding(
         d[D.mag_fresh] != 0.0, mag, d[D.baro_fresh] != 0.0, height,
         d[D.gps_fresh] != 0.0, position, velocity, (eph, epv, speed_accuracy),
         (d[D.gps_fix_type], d[D.gps_satellites]),
@@ -283,13 +331,14 @@ def fuse_aiding(t, S, delivered, F, Pf, ring, stats, windows, A):
 
 
 @kernel
-def estimator_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics):
+def estimator_after_step(k, t_estimator, dt, S, est, metrics):
     """After the controllers' answer: the step's aiding into the filter (as the autopilot fuses it),
     then the step's share of the estimation metrics (time not converged, worst test ratio)."""
-    if k > 0 and imu_fresh(delivered):  # (no IMU sample: no prediction, no fusion, as the autopilot)
-        fuse_aiding(t_estimator, S, delivered, F, Pf, ring, stats, windows, A)
-    if ekf.not_converged(F, Pf, A) != ekf.CONVERGED:
+    if k > 0 and imu_fresh(est.delivered):  # (no IMU sample: no prediction, no fusion, as the autopilot)
+        fuse_aiding(t_estimator, S, est)
+    if ekf.not_converged(est.memory, est.covariance, est.parameters) != ekf.CONVERGED:
         metrics[ESTIMATION_METRICS.time_not_converged_s] += dt
+    stats = est.stats
     for j in range(stats.shape[0]):
         if stats[j, ekf.STATS.test_ratio] > metrics[ESTIMATION_METRICS.worst_test_ratio]:
             metrics[ESTIMATION_METRICS.worst_test_ratio] = stats[j, ekf.STATS.test_ratio]
@@ -307,14 +356,13 @@ def estimator_rejected(stats):
 # A flight on the truth binds these in their place (:func:`sitl.campaign.engine.entry`): the flight
 # numba compiles then holds no sensor model and no filter, and compiles in a fraction of the time.
 @kernel
-def truth_estimate(k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_previous, rng, sensor,
-                   sensor_figures, faults, delivered, F, Pf, ring, A):  # fmt: skip
+def truth_estimate(k, t, dt, S, s, P, u, plant_work, pose, t_previous, est):
     """On the truth: the frame's state as it is."""
-    return c_pos, c_vel, c_euler, c_rates, t_previous
+    return pose, t_previous
 
 
 @kernel
-def truth_after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics):
+def truth_after_step(k, t_estimator, dt, S, est, metrics):
     """On the truth: nothing to fuse."""
     return
 
@@ -335,10 +383,9 @@ ON_TRUTH = (truth_estimate, truth_after_step, truth_rejected)
 # An entry per law pair: compiled(simulate, translational.step, rotational.step, nogil=True) (nogil:
 # a Dask worker with several threads flies several runs at once; nothing here touches Python objects).
 @kernel
-def simulate(translational, rotational, estimate_step, after_step, rejected, state0, P, K, gt, gr, nxt, nxr,
-             ref, S, steps_tab, ramps_tab, gusts_tab, dryden, faults_tab, record, est):  # noqa: C901  # fmt: skip
-    """Fly one run from ``state0`` with the laws ``translational`` and ``rotational`` (their gains
-    ``gt``, ``gr``; ``nxt``, ``nxr`` entries of state); return the metrics row (:data:`METRICS` and
+def simulate(translational, rotational, estimate_step, after_step, rejected, flight, est, record):  # noqa: C901
+    """Fly one run (``flight``: a :class:`FlightArrays`) with the laws ``translational`` and
+    ``rotational``; return the metrics row (:data:`METRICS` and
     the layouts after it, ``METRICS_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``:
     :data:`ON_ESTIMATE` for a flight on the estimate, :data:`ON_TRUTH` (no sensors, no filter) for
     one on the truth.
@@ -365,6 +412,11 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     in cm, no speed accuracy, the GNSS position in 1e-7 deg and mm about the home ``SETTINGS.home``.
     Otherwise ``est`` holds placeholder arrays and is not read.
     """
+    state0, P, K = flight.state0, flight.plant, flight.numbers
+    gt, gr, nxt, nxr = (flight.translational_gains, flight.rotational_gains, flight.translational_states,
+                        flight.rotational_states)  # fmt: skip
+    ref, S, steps_tab, ramps_tab = flight.reference, flight.settings, flight.steps, flight.ramps
+    gusts_tab, dryden, faults_tab = flight.gusts, flight.dryden, flight.faults
     dt = S[SETTINGS.dt_control]
     dt_phys = S[SETTINGS.dt_physics]
     substeps = int(S[SETTINGS.substeps])
@@ -404,12 +456,13 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     wmin, wmax = P[PLANT.rotor_speed_min], P[PLANT.rotor_speed_max]
 
     estimated = S[SETTINGS.estimated] != 0.0
-    rng, sensor, sensor_figures, faults, delivered = est[0], est[1], est[2], est[3], est[4]
-    F, Pf, ring, stats, windows, A = est[5], est[6], est[7], est[8], est[9], est[10]
-    rng, sensor, sensor_figures = borrowed(rng), borrowed(sensor), borrowed(sensor_figures)
-    faults, delivered = borrowed(faults), borrowed(delivered)
-    F, Pf, ring, stats, windows, A = (borrowed(F), borrowed(Pf), borrowed(ring), borrowed(stats),
-                                      borrowed(windows), borrowed(A))  # fmt: skip
+    owned = est  # (read after the loop: its arrays stay alive until then)
+    est = EstimatorArrays(
+        borrowed(est.rng), borrowed(est.sensor_state), borrowed(est.sensor_figures),
+        borrowed(est.sensor_faults),
+        borrowed(est.delivered), borrowed(est.memory), borrowed(est.covariance), borrowed(est.ring),
+        borrowed(est.stats), borrowed(est.windows), borrowed(est.parameters),
+    )
     plant_work = np.zeros((2, n))  # truth()'s state and derivative
     t_estimator = 0.0
     squared_error = 0.0
@@ -442,19 +495,21 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
             c_pos, c_vel, c_euler = pos, vel, euler
             c_rates = euler_rates_from_body_rates(euler[0], euler[1], (p_w, q_w, r_w))
         if estimated:
-            c_pos, c_vel, c_euler, c_rates, t_estimator = estimate_step(
-                k, t, dt, S, s, P, u, plant_work, c_pos, c_vel, c_euler, c_rates, t_estimator, rng, sensor,
-                sensor_figures, faults, delivered, F, Pf, ring, A)  # fmt: skip
+            pose = StateEstimate(c_pos, c_vel, c_euler, c_rates)
+            flown, t_estimator = estimate_step(k, t, dt, S, s, P, u, plant_work, pose, t_estimator, est)
+            c_pos, c_vel, c_euler, c_rates = flown
             ex, ey, ez = c_pos[0] - pos[0], c_pos[1] - pos[1], c_pos[2] - pos[2]
             squared_error += ex * ex + ey * ey + ez * ez
-        rp = (ref[k, 0], ref[k, 1], ref[k, 2])
-        rv = (ref[k, 3], ref[k, 4], ref[k, 5])
-        ra = (ref[k, 6], ref[k, 7], ref[k, 8])
-        yaw = ref[k, 9]
+        row_k = ref[k]
+        rp = _vector_at(row_k, REFERENCE_ROW.position)
+        rv = _vector_at(row_k, REFERENCE_ROW.velocity)
+        ra = _vector_at(row_k, REFERENCE_ROW.acceleration)
+        yaw = row_k[REFERENCE_ROW.yaw]
 
         # -- the cascade (what the autopilot flies) --
         o = cascade_step(translational, rotational, memory, StateEstimate(c_pos, c_vel, c_euler, c_rates),
-                         Reference(rp, rv, ra, yaw, ref[k, 10], ref[k, 11]), True, controls)  # fmt: skip
+                         Reference(rp, rv, ra, yaw, row_k[REFERENCE_ROW.yaw_rate],
+                                   row_k[REFERENCE_ROW.yaw_acceleration]), True, controls)  # fmt: skip
         thrust_a, (tq0, tq1, tq2), (phi_d, theta_d, _) = o.thrust, o.torque_euler, o.euler_ref
         sat, tilt_lim = o.saturated != 0.0, o.tilt_limited != 0.0
 
@@ -530,7 +585,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
         if tilt_lim:
             metrics[METRICS.time_tilt_limited_s] += dt
         if estimated:  # the step's aiding, fused after the controllers' answer (as the autopilot does)
-            after_step(k, t_estimator, dt, S, delivered, F, Pf, ring, stats, windows, A, metrics)
+            after_step(k, t_estimator, dt, S, est, metrics)
 
         # -- actuator controls into the plant (Plant.set_actuator_controls), float32 on the wire --
         c0, c1, c2, c3 = controls[0], controls[1], controls[2], controls[3]
@@ -559,12 +614,12 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, sta
     if estimated:
         samples = int(round(t / dt)) + 1
         metrics[ESTIMATION_METRICS.estimate_rms_error_m] = math.sqrt(squared_error / samples)
-        metrics[ESTIMATION_METRICS.rejected_samples] = rejected(stats)
+        metrics[ESTIMATION_METRICS.rejected_samples] = rejected(est.stats)
     else:
         for j in range(RUN_END.size, ESTIMATION_METRICS.size):  # no estimate: NaN
             metrics[j] = np.nan
     metrics[RUN_END.failure] = fail
     # (reads of work, plant_work and est: their arrays stay alive until here)
-    metrics[RUN_END.end_time] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + est[0].shape[0]
-                                           + est[6].shape[0] + flight_P.shape[0])  # fmt: skip
+    metrics[RUN_END.end_time] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + owned.rng.shape[0]
+                                           + owned.covariance.shape[0] + flight_P.shape[0])  # fmt: skip
     return metrics
