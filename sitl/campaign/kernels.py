@@ -500,16 +500,16 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
             c_pos, c_vel, c_euler, c_rates = flown
             ex, ey, ez = c_pos[0] - pos[0], c_pos[1] - pos[1], c_pos[2] - pos[2]
             squared_error += ex * ex + ey * ey + ez * ez
-        row_k = ref[k]
-        rp = _vector_at(row_k, REFERENCE_ROW.position)
-        rv = _vector_at(row_k, REFERENCE_ROW.velocity)
-        ra = _vector_at(row_k, REFERENCE_ROW.acceleration)
-        yaw = row_k[REFERENCE_ROW.yaw]
+        R = REFERENCE_ROW  # (scalar loads: a row view per step would count references)
+        rp = (ref[k, R.position], ref[k, R.position + 1], ref[k, R.position + 2])
+        rv = (ref[k, R.velocity], ref[k, R.velocity + 1], ref[k, R.velocity + 2])
+        ra = (ref[k, R.acceleration], ref[k, R.acceleration + 1], ref[k, R.acceleration + 2])
+        yaw = ref[k, R.yaw]
 
         # -- the cascade (what the autopilot flies) --
         o = cascade_step(translational, rotational, memory, StateEstimate(c_pos, c_vel, c_euler, c_rates),
-                         Reference(rp, rv, ra, yaw, row_k[REFERENCE_ROW.yaw_rate],
-                                   row_k[REFERENCE_ROW.yaw_acceleration]), True, controls)  # fmt: skip
+                         Reference(rp, rv, ra, yaw, ref[k, R.yaw_rate], ref[k, R.yaw_acceleration]), True,
+                         controls)  # fmt: skip
         thrust_a, (tq0, tq1, tq2), (phi_d, theta_d, _) = o.thrust, o.torque_euler, o.euler_ref
         sat, tilt_lim = o.saturated != 0.0, o.tilt_limited != 0.0
 
