@@ -259,7 +259,7 @@ def test_mavsdk_python3s_own_follow_me_orbit_and_offboard_attitude_examples_run_
     call they make succeeds (the FLW_TGT_* configuration, AUTO.FOLLOW_TARGET, the target reports,
     DO_ORBIT, the return, OFFBOARD on SET_ATTITUDE_TARGET and its stop), and the vehicle says it flew
     them. What they fly is checked in simulation time (tests/sitl/test_orbit_follow.py,
-    tests/autopilot/test_offboard_attitude.py)."""
+    tests/autopilot/mavlink/test_offboard.py)."""
     why = _namespaces_available()
     if why:
         pytest.skip(f"MAVSDK-Python 3 needs a loopback-only network namespace for its mavsdk_server: {why}")

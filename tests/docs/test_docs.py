@@ -149,7 +149,7 @@ HISTORY_ALLOWED = {
     "autopilot/mavlink/signing.py": re.compile(r"2015-01-01"),  # MAVLink signing's epoch
     "docs/security.md": re.compile(r"2015-01-01|issue 1060"),  # the epoch; MAVSDK's tracker, linked
     "tests/gcs_scripts/test_upload_gusts.py": re.compile(r"2024-01-01"),  # a TOML date as bad input
-    "tests/autopilot/test_flight_log.py": re.compile(r"2025-06-15"),  # a log directory's expected name
+    "tests/autopilot/logger/test_logger.py": re.compile(r"2025-06-15"),  # a log directory's expected name
 }
 SOURCE_DIRS = ("autopilot", "simulator", "quadcommon", "gcs_scripts", "sitl", "benchmarks", "config", "tests")
 

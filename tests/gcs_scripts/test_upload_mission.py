@@ -150,7 +150,7 @@ def test_bad_file_exits_2_without_contacting_a_vehicle(tmp_path):
 @pytest.fixture(scope="module")
 def autopilot():
     """An autopilot process alone (no simulator needed for the mission protocol), for the script's
-    command line; the protocol itself is tested in-process (tests/autopilot/test_mission_wire.py)."""
+    command line; the protocol itself is tested in-process (tests/autopilot/mission/test_mission_wire.py)."""
     instance = 22
     with Launcher() as launcher:
         proc = launcher.spawn("autopilot", [sys.executable, "-u", "-m", "autopilot", "--instance",

@@ -211,7 +211,7 @@ EXPECTED: dict[tuple[Unit, Type], Expected] = {
         HOLDS, frozenset({"battery"}), ("Battery 1: over voltage. Land now!",), params=LOW_BATTERY
     ),
     # No sticks were ever in use: there is no manual control to lose (PX4 acts only on a loss of
-    # sticks it had; tests/autopilot/test_failure_injection.py flies that case).
+    # sticks it had; tests/autopilot/mavlink/test_failure_injection.py flies that case).
     (Unit.rc_signal, Type.off): Expected(HOLDS),
     # The ground station's heartbeats are dropped: data-link loss after COM_DL_LOSS_T, NAV_DLL_ACT 3 lands.
     (Unit.mavlink_signal, Type.off): Expected(

@@ -2,7 +2,8 @@
 autopilot started by the launcher, UDP on loopback), with pymavlink as a joystick would: POSCTL,
 ALTCTL, STABILIZED, ACRO and MANUAL entered by DO_SET_MODE and answering their sticks (what the
 telemetry shows), a manual mode refused without sticks, then the sticks lost: NAV_RCL_ACT returns
-and lands. The in-process tests measure the same behaviour closely (tests/autopilot/test_manual_*);
+and lands. The in-process tests measure the same behaviour closely
+(tests/autopilot/guidance/test_manual.py, tests/autopilot/mavlink/test_manual.py);
 this one checks it holds across real processes and sockets.
 
 It runs at ``--speed 2``; the

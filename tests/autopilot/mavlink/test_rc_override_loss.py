@@ -11,9 +11,8 @@ import pytest
 from pymavlink.dialects.v20 import common as m
 
 from autopilot.commander.modes import MAIN_ALTCTL, MAIN_POSCTL, MAIN_STABILIZED, FlightMode
-
-from ..sitl.test_params_failsafes import INT32, param_set
-from .test_manual_control import airborne, enter_mode, hold_sticks, texts, truth
+from tests.autopilot.mavlink.test_manual import airborne, enter_mode, hold_sticks, texts, truth
+from tests.sitl.test_params_failsafes import INT32, param_set
 
 LOITER, RTL, LAND = FlightMode.AUTO_LOITER, FlightMode.AUTO_RTL, FlightMode.AUTO_LAND
 
@@ -121,8 +120,7 @@ def test_the_override_takes_over_a_mission_and_can_be_disabled():
 def _here_plus(gcs, north: float) -> tuple[float, float]:
     """Latitude, longitude (deg) ``north`` m north of the vehicle's home (COMMAND_LONG params)."""
     from quadcommon import frames
-
-    from ..sitl.test_reposition import HOME
+    from tests.sitl.test_reposition import HOME
 
     lat, lon, _ = frames.ned_to_geodetic(north, 0.0, 0.0, HOME)
     return lat, lon

@@ -18,8 +18,7 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
     rotation_matrix,
 )
-
-from .laws import DT, rotational, translational
+from tests.autopilot.laws import DT, rotational, translational
 
 M, G = 0.74, 9.81
 J = np.array([0.004, 0.004, 0.0084])

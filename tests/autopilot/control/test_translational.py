@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from autopilot.control.config import load_controller
-
-from .laws import DT, translational
+from tests.autopilot.laws import DT, translational
 
 M, G = 0.74, 9.81
 Z3 = (0.0, 0.0, 0.0)

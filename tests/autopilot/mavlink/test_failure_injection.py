@@ -21,9 +21,8 @@ from quadcommon.wire import new_parser, parse_datagram
 from simulator.core import SimulatorSetup
 from simulator.dynamics.plant import ROTOR_POSITIONS
 from sitl.inprocess import Lockstep
-
-from ..sitl.test_params_failsafes import INT32, keep_link, param_set, take_off
-from ..stack import Gcs, connect, make_stack
+from tests.sitl.test_params_failsafes import INT32, keep_link, param_set, take_off
+from tests.stack import Gcs, connect, make_stack
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -311,7 +310,7 @@ def test_mavlink_signal_off_is_a_data_link_loss_and_the_recovery_gets_through():
 
 @pytest.mark.timeout(180)
 def test_rc_signal_off_is_a_manual_control_loss():
-    from .test_manual_control import enter_mode, hold_sticks
+    from tests.autopilot.mavlink.test_manual import enter_mode, hold_sticks
 
     stack = make_stack()
     stack.autopilot.params.set("SYS_FAILURE_EN", 1.0)

@@ -10,8 +10,7 @@ from autopilot.commander.modes import FlightMode
 from autopilot.guidance.offboard import OffboardGuidance, OffboardSetpoint
 from autopilot.guidance.planner import Limits
 from quadcommon.trajectories import Reference
-
-from ..stack import Gcs, make_stack
+from tests.stack import Gcs, make_stack
 
 ZERO3 = (0.0, 0.0, 0.0)
 LIMITS = Limits(speed_horizontal=2.0, speed_up=1.5, speed_down=1.0, acceleration=2.0, yaw_rate=1.0)

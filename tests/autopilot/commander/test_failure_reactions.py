@@ -21,8 +21,7 @@ from gcs_scripts.upload_mission import MissionLink, items_from_list
 from simulator.core import SimulatorSetup
 from simulator.sensors import SensorFault
 from sitl.inprocess import Lockstep
-
-from ..stack import Gcs, connect
+from tests.stack import Gcs, connect
 
 pytestmark = pytest.mark.timeout(300)
 LAND_MODE = (4 << 16) | (6 << 24)  # AUTO.LAND: PX4 shows Descend as it

@@ -21,9 +21,8 @@ from autopilot.commander.commander import Phase
 from autopilot.commander.failsafe import LAND, RTL, WARN, BatteryWatch
 from autopilot.commander.modes import FlightMode
 from autopilot.params.definitions import default_parameters
-
-from ..stack import Gcs, make_stack
-from .test_failsafe import airborne, fly, texts
+from tests.autopilot.commander.test_failsafe import airborne, fly, texts
+from tests.stack import Gcs, make_stack
 
 REMAINING = {WARNING_NONE: 0.5, WARNING_LOW: 0.1, WARNING_CRITICAL: 0.06, WARNING_EMERGENCY: 0.02}
 

@@ -9,8 +9,7 @@ from pymavlink.dialects.v20 import common as m
 
 from sitl.inprocess import GCS_LINK
 from sitl.spray import HOSTILE_KINDS, HostileTraffic
-
-from ..stack import make_stack
+from tests.stack import make_stack
 
 PER_FRAME = 6  # 3,000 datagrams per simulated second
 

@@ -18,8 +18,7 @@ from autopilot.guidance.planner import Limits
 from autopilot.mavlink.offboard import decode_attitude_target
 from quadcommon import frames
 from quadcommon.rigid_body import quaternion_from_euler
-
-from ..stack import Gcs, make_stack
+from tests.stack import Gcs, make_stack
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -18,8 +18,7 @@ from quadcommon.rigid_body import (
     roll_pitch_from_body_z,
     rotation_matrix,
 )
-
-from .laws import DT, rotational, translational
+from tests.autopilot.laws import DT, rotational, translational
 
 M, G, U1_MAX, TAU_MAX = 0.74, 9.81, 28.0, 1.5
 Z3 = (0.0, 0.0, 0.0)

@@ -16,8 +16,7 @@ from autopilot.mavlink.links import MAX_PEERS, PEER_EXPIRY_S
 from gcs_scripts.upload_mission import CMD_TIMED, MissionError, MissionLink, make_item
 from simulator.core import SimulatorCore
 from sitl.inprocess import API_LINK
-
-from ..stack import Gcs, connect, make_stack
+from tests.stack import Gcs, connect, make_stack
 
 LOCAL = m.MAV_FRAME_LOCAL_NED
 POSITION_ONLY = 8 | 16 | 32 | 64 | 128 | 256 | 1024 | 2048

@@ -17,9 +17,8 @@ from quadcommon.atmosphere import isa_altitude_m
 from simulator.core import SimulatorSetup
 from simulator.sensors import SensorFault
 from sitl.inprocess import Lockstep
-
-from ..sitl.test_params_failsafes import INT32, param_set
-from ..stack import Gcs, make_stack
+from tests.sitl.test_params_failsafes import INT32, param_set
+from tests.stack import Gcs, make_stack
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -13,9 +13,9 @@ from autopilot.mission.items import WireItem
 from autopilot.mission.plans import Geofence, check_fence, parse_fence_item
 from autopilot.mission.protocol import MissionProtocol, TransferState
 from quadcommon import frames
-from tests.autopilot.test_mission_protocol import COMP, SYS, acks, kinds, waypoints
-from tests.autopilot.test_mission_protocol import upload as upload_mission
-from tests.autopilot.test_mission_protocol import wire as arrive
+from tests.autopilot.mission.test_protocol import COMP, SYS, acks, kinds, waypoints
+from tests.autopilot.mission.test_protocol import upload as upload_mission
+from tests.autopilot.mission.test_protocol import wire as arrive
 
 HOME = (47.397742, 8.545594, 488.0)
 FENCE, RALLY = m.MAV_MISSION_TYPE_FENCE, m.MAV_MISSION_TYPE_RALLY

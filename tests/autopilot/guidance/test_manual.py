@@ -17,10 +17,9 @@ from autopilot.commander.modes import MAIN_ACRO, MAIN_ALTCTL, MAIN_MANUAL, MAIN_
 from autopilot.guidance.sticks import stick_tilt, throttle_curve
 from quadcommon.bus_records import CONTROLLER_FIELDS
 from quadcommon.rigid_body import body_rates_from_euler_rates
-
-from ..sitl.test_params_failsafes import INT32, param_set
-from ..stack import Gcs, make_stack
-from .test_manual_control import airborne, enter_mode, hold_sticks, texts, truth
+from tests.autopilot.mavlink.test_manual import airborne, enter_mode, hold_sticks, texts, truth
+from tests.sitl.test_params_failsafes import INT32, param_set
+from tests.stack import Gcs, make_stack
 
 DEG = math.radians(1.0)
 TILT_MAX = math.radians(35.0)  # MPC_MAN_TILT_MAX

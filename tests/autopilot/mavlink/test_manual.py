@@ -24,9 +24,8 @@ from autopilot.guidance.manual import ManualGuidance, ManualLimits
 from autopilot.guidance.sticks import Sticks
 from autopilot.mavlink.manual import decode_sticks
 from quadcommon.trajectories import Reference
-
-from ..sitl.test_params_failsafes import take_off
-from ..stack import Gcs, make_stack
+from tests.sitl.test_params_failsafes import take_off
+from tests.stack import Gcs, make_stack
 
 POSCTL = FlightMode.POSCTL.custom_mode
 LOITER = FlightMode.AUTO_LOITER.custom_mode

@@ -10,9 +10,9 @@ from autopilot.mission.executor import MissionExecutor, MissionState, check_miss
 from autopilot.mission.items import ItemKind, WireItem, parse_item
 from autopilot.mission.protocol import MissionProtocol
 from autopilot.params.definitions import default_parameters
-from tests.autopilot.test_mission_commander import fly, reached_log, state, wire
-from tests.autopilot.test_mission_protocol import GCS, SYS, acks, item, upload
-from tests.autopilot.test_mission_protocol import wire as arrive
+from tests.autopilot.mission.test_mission_commander import fly, reached_log, state, wire
+from tests.autopilot.mission.test_protocol import GCS, SYS, acks, item, upload
+from tests.autopilot.mission.test_protocol import wire as arrive
 
 m = mavlink
 HOME = (47.397742, 8.545594, 488.0)

@@ -15,8 +15,7 @@ from quadcommon.mavlink_fast import split_frames
 from simulator.battery import BatteryReading
 from simulator.core import SimulatorCore, SimulatorSetup
 from simulator.mavlink.hil import HilFrameEncoder
-
-from ..stack import Gcs, make_stack
+from tests.stack import Gcs, make_stack
 
 HOME = (47.397742, 8.545594, 488.0)
 

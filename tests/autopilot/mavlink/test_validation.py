@@ -21,8 +21,7 @@ from autopilot.records import StateEstimate
 from quadcommon import wire
 from quadcommon.config import load_vehicle
 from quadcommon.trajectories import Reference
-
-from . import laws
+from tests.autopilot import laws
 
 NAN, INF = math.nan, math.inf
 ZERO3 = (0.0, 0.0, 0.0)

@@ -15,9 +15,8 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.mavlink import vision_in as v
 from quadcommon import frames
 from quadcommon.rigid_body import euler_from_quaternion, quaternion_from_euler
-
-from ..sitl.test_params_failsafes import INT32, LOITER, param_set
-from ..stack import Gcs, make_stack
+from tests.sitl.test_params_failsafes import INT32, LOITER, param_set
+from tests.stack import Gcs, make_stack
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -14,8 +14,7 @@ from autopilot.records import StateEstimate
 from quadcommon.config import load_vehicle
 from quadcommon.rigid_body import euler_torque_from_body_torque
 from quadcommon.trajectories import Reference
-
-from .laws import DT, rotational, state_term, translational
+from tests.autopilot.laws import DT, rotational, state_term, translational
 
 M, G = 0.74, 9.81
 Z3 = (0.0, 0.0, 0.0)

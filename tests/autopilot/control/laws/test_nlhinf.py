@@ -5,8 +5,7 @@ import pytest
 
 from autopilot.control.config import load_controller
 from quadcommon.rigid_body import coriolis_matrix, euler_torque_from_body_torque, inertia_matrix
-
-from .laws import rotational
+from tests.autopilot.laws import rotational
 
 INERTIA = (0.004, 0.004, 0.0084)
 Z3 = (0.0, 0.0, 0.0)

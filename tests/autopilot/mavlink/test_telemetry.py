@@ -15,9 +15,8 @@ from autopilot.mavlink import telemetry
 from quadcommon import frames
 from quadcommon.bus_records import TRUTH_FIELDS
 from quadcommon.rigid_body import quaternion_from_euler
-
-from ..sitl.test_params_failsafes import take_off
-from ..stack import Gcs, make_stack
+from tests.sitl.test_params_failsafes import take_off
+from tests.stack import Gcs, make_stack
 
 pytestmark = pytest.mark.timeout(120)
 

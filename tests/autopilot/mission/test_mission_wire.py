@@ -19,8 +19,7 @@ from gcs_scripts.upload_mission import (
     make_item,
     same_item,
 )
-
-from ..stack import connect, make_stack
+from tests.stack import connect, make_stack
 
 m = __import__("gcs_scripts.link", fromlist=["mavutil"]).mavutil.mavlink
 LOCAL, GLOBAL_REL, MISSION = m.MAV_FRAME_LOCAL_NED, m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, m.MAV_FRAME_MISSION
