@@ -58,7 +58,6 @@ from quadcommon.wire_values import frame_time_s
 
 from .battery.estimator import BatteryEstimator
 from .commander.commander import Commander, Motors, VehicleState
-from .commander.modes import FlightMode
 from .control.cascade import AttitudeReference, Cascade
 from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
@@ -69,12 +68,12 @@ from .logger.logger import FlightLogger, LogOptions, log_info
 from .logger.topics import Snapshot
 from .mavlink import telemetry
 from .mavlink.codec import Encoder, mavlink, new_parser
-from .mavlink.commands import CommandDispatcher, CommandRequest, command_ack, request_from_message
+from .mavlink.commands import CommandDispatcher, CommandRequest
 from .mavlink.console import Console, ConsoleContext
 from .mavlink.dispatch import FaultLog, MessageDispatcher
 from .mavlink.failure_injection import FailureInjection
-from .mavlink.follow_target import decode_follow_target
 from .mavlink.ftp import FileSystem, FtpServer, NoFiles
+from .mavlink.handlers import HandlerContext, MessageHandlers
 from .mavlink.hil import (
     BATTERY_ID,
     DISTURBANCE_ID,
@@ -89,12 +88,10 @@ from .mavlink.hil import (
 )
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
-from .mavlink.manual import decode_sticks
-from .mavlink.offboard import decode_attitude_target, decode_setpoint
 from .mavlink.params import ParamService
 from .mavlink.shell import MavlinkShell
 from .mavlink.signing import Signing, SigningOptions
-from .mavlink.validation import RefusalNotices, check_command, reference_problem
+from .mavlink.validation import RefusalNotices
 from .mavlink.vehicle_commands import CommandContext, VehicleCommands
 from .mavlink.vision_in import ExternalVision
 from .mission.service import MissionService
@@ -308,19 +305,13 @@ class AutopilotCore:
         self.shell = MavlinkShell(console, self.encoder, self.links, self.system_id, clock, greeting)
         self.shell.register(self.dispatcher)  # SERIAL_CONTROL (device SHELL)
         self._latest: tuple | None = None  # (frame, guidance, output, controller row): the listener's
-        d = self.dispatcher
-        d[m.MAVLINK_MSG_ID_COMMAND_LONG] = self._on_command
-        d[m.MAVLINK_MSG_ID_COMMAND_INT] = self._on_command
-        d[m.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED] = self._on_setpoint
-        d[m.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET] = self._on_attitude_target
-        d[m.MAVLINK_MSG_ID_MANUAL_CONTROL] = self._on_manual_control
-        d[m.MAVLINK_MSG_ID_FOLLOW_TARGET] = self._on_follow_target
-        d[m.MAVLINK_MSG_ID_SET_MODE] = self._on_set_mode_message
-        d[m.MAVLINK_MSG_ID_HEARTBEAT] = self._on_gcs_heartbeat
-        d[m.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
         self.external_vision = ExternalVision()  # a client's vision (mocap bridge, VIO) for the EKF
-        d[m.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE] = self._on_vision
-        d[m.MAVLINK_MSG_ID_ODOMETRY] = self._on_vision
+        self.handlers = MessageHandlers(HandlerContext(
+            self.system_id, self.commander, lambda: self.sim_time, lambda: self.wall_now, self.params,
+            self.refusals, self.statustext, self.send_events, self.encoder.pack, self.log, setup.sitl.home,
+            lambda: self.estimator, self.commands, self.vehicle_commands, self.external_vision,
+        ))  # fmt: skip
+        self.handlers.register(self.dispatcher)
 
     # -- entry points ---------------------------------------------------------------------------
     def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:
@@ -767,35 +758,10 @@ class AutopilotCore:
             for link in self.links:
                 link.send(data)
 
-    def _for_us(self, msg) -> bool:
-        return msg.target_system in (0, self.system_id)
-
-    def _on_command(self, msg, link: GcsLink, address: Address) -> None:
-        if not self._for_us(msg) or msg.target_component not in (0, wire.AUTOPILOT_COMPONENT_ID):
-            return
-        request = request_from_message(msg, link, address)
-        self.vehicle_commands.after_ack = None
-        result, reason = self.run_command(request)
-        link.send_to(self.encoder.pack(command_ack(request, result)), address)
-        if self.vehicle_commands.after_ack is not None:  # a requested message, after its ACK (PX4)
-            link.send_to(self.encoder.pack(self.vehicle_commands.after_ack), address)
-            self.vehicle_commands.after_ack = None
-        self.send_events()
-
     def run_command(self, request: CommandRequest) -> tuple[int, str]:
-        """A MAV_CMD through the vehicle's one command path: its parameters checked
-        (:mod:`.mavlink.validation`), then its handler; (MAV_RESULT, reason)."""
-        known = request.command in self.commands.handlers  # an unknown one is UNSUPPORTED, not DENIED
-        problem = check_command(request.command, request.params, request.frame is not None) if known else None
-        if problem:
-            name = getattr(m.enums["MAV_CMD"].get(request.command), "name", f"command {request.command}")
-            result, reason = m.MAV_RESULT_DENIED, f"{name} refused: {problem}"
-            self.refusals(reason)
-        else:
-            result, reason = self.commands.dispatch(request)
-        if reason and result != m.MAV_RESULT_ACCEPTED:
-            self.log(f"command {request.command} -> result {result}: {reason}")
-        return result, reason
+        """A MAV_CMD through the vehicle's one command path
+        (:meth:`.mavlink.handlers.MessageHandlers.run_command`): (MAV_RESULT, reason)."""
+        return self.handlers.run_command(request)
 
     def _console_command(self, command: int, params: tuple[float, ...]) -> tuple[int, str]:
         """The console's command (``commander arm``, ``failure gps off``...), as a COMMAND_LONG
@@ -830,86 +796,6 @@ class AutopilotCore:
             return False
         requests.command(m.MAV_CMD_INJECT_FAILURE, unit, failure_type, instance, effectiveness)
         return True
-
-    def _on_set_mode_message(self, msg, link: GcsLink, address: Address) -> None:
-        if not self._for_us(msg):
-            return
-        mode = FlightMode.from_custom_mode(msg.custom_mode)
-        if mode is not None:
-            self.commander.set_mode(self.sim_time, mode)
-            self.send_events()
-
-    def _on_setpoint(self, msg, link: GcsLink, address: Address) -> None:
-        state = self.commander.state
-        if not self._for_us(msg) or state is None:
-            return
-        ref = self.commander.last_reference
-        ref_pos = ref.position_m if ref is not None else state.position_m
-        setpoint, reason = decode_setpoint(msg, self.sim_time, state.position_m, state.euler_rad[2], ref_pos)
-        if setpoint is not None and setpoint.position is not None:
-            home = self.commander.home or (0.0, 0.0, 0.0)
-            reason = reference_problem(setpoint.position, home, self.params.values) or ""
-            setpoint = None if reason else setpoint
-        if setpoint is None:
-            self.refusals(f"setpoint refused: {reason}")
-            return
-        self.commander.offboard_setpoint(setpoint)
-
-    def _on_attitude_target(self, msg, link: GcsLink, address: Address) -> None:
-        """SET_ATTITUDE_TARGET: offboard attitude or body rates with a collective thrust."""
-        if not self._for_us(msg) or msg.target_component not in (0, wire.AUTOPILOT_COMPONENT_ID):
-            return
-        setpoint, reason = decode_attitude_target(msg, self.sim_time)
-        if setpoint is None:
-            self.refusals(f"attitude target refused: {reason}")
-            return
-        self.commander.offboard_setpoint(setpoint)
-
-    def _on_manual_control(self, msg, link: GcsLink, address: Address) -> None:
-        """The sticks (flown in POSCTL, :mod:`autopilot.guidance.manual`)."""
-        if msg.target not in (0, self.system_id):
-            return
-        sticks, reason = decode_sticks(msg, self.sim_time)
-        if sticks is None:
-            self.refusals(f"sticks refused: {reason}")
-            return
-        self.commander.manual_sticks(sticks)
-
-    def _on_follow_target(self, msg, link: GcsLink, address: Address) -> None:
-        """The follow-me target (:mod:`.mavlink.follow_target`): checked at the edge, then the
-        commander's target estimate; a refusal is counted and said (rate-limited STATUSTEXT)."""
-        c = self.commander
-        home = c.home or (0.0, 0.0, 0.0)
-        origin = self.setup.sitl.home
-        report, reason = decode_follow_target(msg, self.sim_time, origin, home, self.params.values)
-        if report is None:
-            self.refusals(f"FOLLOW_TARGET refused: {reason}")
-            return
-        c.follow_target_report(report)
-
-    def _on_gcs_heartbeat(self, msg, link: GcsLink, address: Address) -> None:
-        if msg.type != m.MAV_TYPE_GCS:
-            return  # another vehicle or an onboard component: only ground stations count (link loss)
-        link.last_heartbeat_s = self.sim_time
-        self.commander.gcs_heartbeat(self.sim_time)
-        self.send_events()
-
-    def _on_timesync(self, msg, link: GcsLink, address: Address) -> None:
-        if msg.tc1 == 0:  # a request: answer with our (simulation) clock in ns
-            reply = m.MAVLink_timesync_message(int(self.sim_time * 1e9), msg.ts1)
-            link.send_to(self.encoder.pack(reply), address)
-
-    def _on_vision(self, msg, link: GcsLink, address: Address) -> None:
-        """A client's VISION_POSITION_ESTIMATE or ODOMETRY: checked and timed at the edge
-        (:mod:`.mavlink.vision_in`), then fused by the EKF with the next frame's aiding; a refusal
-        is counted and said (STATUSTEXT, rate-limited per reason)."""
-        sender = (link.index, address, msg.get_srcSystem(), msg.get_srcComponent())
-        vision, on_ekf = self.external_vision, self.estimator is not None
-        pose = vision.receive(msg, sender, self.sim_time, self.wall_now, on_ekf, self.params.values)
-        if pose is not None:
-            self.estimator.external_vision(pose)
-        for text in vision.take_announcements():
-            self.statustext(m.MAV_SEVERITY_WARNING, text)
 
     def _on_param_change(self, name: str, value: float) -> None:
         """Gains take effect between two control steps (this runs between frames), no jump in
