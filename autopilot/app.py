@@ -3,10 +3,9 @@
 One thread, one loop. ``select`` waits on the HIL socket and the two GCS sockets; every datagram
 goes into the core with the wall clock, and whatever the core returns goes out on the socket of
 its link. A lockstep frame is answered before anything else is sent (the simulator is waiting).
-Every 50 ms of wall time the core's housekeeping runs, its controller internals go to zenoh, the
-flight log it wrote goes to the log writer's thread (:mod:`autopilot.logger.storage`: the
-files, off the lockstep's critical path) and the info queryable is answered. Nothing here
-decides anything about the vehicle.
+Every 50 ms of wall time the core's housekeeping runs, its rows go to zenoh and its queries are
+answered (:mod:`autopilot.bus_link`), and the flight log goes to the writer's thread
+(:mod:`autopilot.logger.storage`). Nothing here decides anything about the vehicle.
 
 With an impairment (``[impair]`` of sitl.toml, ``--impair``, or ``quadsitl impair`` on zenoh's
 ``quadsitl/<N>/impair`` while running) every send goes through the link's outgoing channel and every
@@ -18,15 +17,14 @@ Run: ``python -m autopilot --instance N --controller NAME --vehicle NAME``.
 
 from __future__ import annotations
 
-import json
 import selectors
 import time
 
-from quadcommon import bus, wire
-from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC
+from quadcommon import wire
 from quadcommon.impaired_udp import ImpairedLinks, ImpairedReceiver, ImpairedSender, wait_s
 from quadcommon.udp import bind_udp
 
+from .bus_link import AutopilotBus
 from .core import AutopilotCore, AutopilotSetup
 from .logger.storage import LogDirectory, LogWriter
 from .mavlink.codec import mavlink
@@ -36,10 +34,6 @@ from .vehicle_files import VehicleFiles
 HOUSEKEEPING_S = 0.05
 LINK_NAMES = {HIL_LINK: "hil", GCS_LINK: "gcs", API_LINK: "api"}  # as --impair names them
 SPIN_BELOW_GAP_S = 0.001  # frames closer than this (wall): spin-wait for the next one
-CONTROLLER_BATCH = 10  # controller rows per zenoh sample
-# Wall seconds the first rows wait for a subscriber declared before this process started (a
-# recorder) to be discovered, so that none of its rows is lost; then they flow regardless.
-SUBSCRIBER_GRACE_S = 1.0
 MAX_DATAGRAM = 65535
 # Ground-station datagrams handled per link and lockstep frame (and per housekeeping tick while no
 # frame comes): 4,000 a simulated second per link at 500 Hz, far above any client's needs. A flood
@@ -65,15 +59,14 @@ class Autopilot:
         self.selector = selectors.DefaultSelector()
         self.hil_only = selectors.DefaultSelector()  # while the GCS links' budgets are spent
         self.gcs_budget: dict[int, int] = {}
-        self.session = self.controller_pub = self.estimator_pub = self.info_queryable = None
-        self.impair_queryable = None
         self.impaired = ImpairedLinks(setup.sitl.impair, "autopilot")  # live: quadsitl/<N>/impair
+        self.bus = AutopilotBus(self.core, self.impaired, self.log)  # zenoh: rows out, queries answered
         self.senders: dict[int, ImpairedSender] = {}
         self.receivers: dict[int, ImpairedReceiver] = {}
-        self._hold_rows_until: float | None = None  # the first rows wait for a subscriber (below)
         self._running = True
 
     def log(self, text: str) -> None:
+        """A line on stdout (none with ``quiet``)."""
         if not self.quiet:
             print(f"autopilot: {text}", flush=True)
 
@@ -95,22 +88,11 @@ class Autopilot:
             else:
                 self.gcs_budget[link] = GCS_DATAGRAMS_PER_FRAME
         if self.use_zenoh:
-            import zenoh
-
-            n = self.core.setup.instance
-            self.session = bus.open_peer(self.ports.zenoh, self.core.setup.sitl.zenoh_router)
-            self.controller_pub = self.session.declare_publisher(wire.zenoh_key(n, "controller"))
-            self._hold_rows_until = time.monotonic() + SUBSCRIBER_GRACE_S
-            self.estimator_pub = self.session.declare_publisher(wire.zenoh_key(n, "estimator"))
-            self.info_queryable = self.session.declare_queryable(
-                wire.zenoh_key(n, "autopilot/info"), zenoh.handlers.FifoChannel(16)
-            )
-            self.impair_queryable = self.session.declare_queryable(
-                wire.zenoh_key(n, "impair"), zenoh.handlers.FifoChannel(16)
-            )
+            self.bus.open(self.ports.zenoh)
 
     def close(self) -> None:
-        self._publish_rows(force=True)
+        """Everything out (the last rows, the flight log, the signing timestamp), then the sockets."""
+        self.bus.publish_rows(force=True)
         if self.log_writer is not None:
             self.core.flight_log.stop()
             self._write_log()
@@ -119,10 +101,10 @@ class Autopilot:
         self.core.signing.save()  # the newest signing timestamp, so a restart refuses older frames
         for sock in self.socks.values():
             sock.close()
-        if self.session is not None:
-            self.session.close()
+        self.bus.close()
 
     def stop(self, *_args) -> None:
+        """End the loop (a signal handler)."""
         self._running = False
 
     def send(self, out: list[Outgoing]) -> None:
@@ -143,24 +125,6 @@ class Autopilot:
     def _next_due(self) -> list[float | None]:
         return [e.next_due() for e in self.impaired.endpoints.values()]
 
-    def _publish_rows(self, force: bool = False) -> None:
-        core = self.core
-        if len(core.controller_rows) < (1 if force else CONTROLLER_BATCH):
-            return
-        if self._hold_rows_until is not None and not force:
-            if not bus.publisher_matched(self.controller_pub) and time.monotonic() < self._hold_rows_until:
-                return  # keep them (the core buffers): a subscriber may still be being discovered
-            self._hold_rows_until = None
-        rows = core.take_controller_rows()
-        estimates = core.take_estimator_rows()
-        if self.controller_pub is not None:
-            try:
-                self.controller_pub.put(CONTROLLER_CODEC.encode(rows))
-                if estimates:
-                    self.estimator_pub.put(ESTIMATOR_CODEC.encode(estimates))
-            except Exception:
-                pass  # session closing under us at shutdown
-
     def _write_log(self) -> None:
         """The flight log the core wrote since the last call, to the writer's thread; a write
         failure is announced once (STATUSTEXT), and the vehicle flies on."""
@@ -170,36 +134,8 @@ class Autopilot:
             self._log_error_reported = True
             self.core.statustext(mavlink.MAV_SEVERITY_CRITICAL, f"flight log not written: {error}"[:200])
 
-    def info(self) -> dict:
-        """The answer of ``quadsitl/<N>/autopilot/info``: the core's, and the links' impairment."""
-        return {**self.core.info(), "impairment": self.impaired.info()}
-
-    def _poll_info(self) -> None:
-        if self.info_queryable is None:
-            return
-        try:
-            query = self.info_queryable.try_recv()
-        except Exception:
-            query = None
-        if query is not None:
-            with query:
-                query.reply(query.key_expr, json.dumps(self.info()).encode())
-        try:
-            query = self.impair_queryable.try_recv()
-        except Exception:
-            return
-        if query is not None:
-            with query:
-                payload = query.payload.to_bytes() if query.payload is not None else b""
-                ok, reply = self.impaired.change(payload)
-                if ok:
-                    now_impaired = self.impaired.config.describe()
-                    self.log(f"impairment changed at t={self.core.sim_time:.3f} s: {now_impaired}")
-                    query.reply(query.key_expr, reply)
-                else:
-                    query.reply_err(reply)
-
     def run(self, max_wall_s: float | None = None) -> int:
+        """The loop until stopped (or ``max_wall_s`` of wall time); the exit status."""
         core, hil = self.core, self.socks[HIL_LINK]
         deadline = None if max_wall_s is None else time.monotonic() + max_wall_s
         spin_s = core.setup.sitl.lockstep_spin_s
@@ -219,10 +155,10 @@ class Autopilot:
                 next_housekeeping = now + HOUSEKEEPING_S
                 self._refill_gcs_budgets()  # served even while no frame comes (simulator lost)
                 self.send(core.tick(now))
-                self._publish_rows(force=now - core.last_frame_wall > HOUSEKEEPING_S)
+                self.bus.publish_rows(force=now - core.last_frame_wall > HOUSEKEEPING_S)
                 if self.log_writer is not None:
                     self._write_log()
-                self._poll_info()
+                self.bus.poll()
             # Frames in quick succession (faster than real time): wait for the next one awake
             # (see quadcommon.wire.spin_until_readable); paced at real time, just block.
             gap = core.frame_gap_s
@@ -265,7 +201,7 @@ class Autopilot:
                     self.send([Outgoing(HIL_LINK, None, answer)])  # first: the simulator waits
                     self._refill_gcs_budgets()
                 self.send(core.after_frame())
-                self._publish_rows()
+                self.bus.publish_rows()
             else:
                 gcs_budget[link] -= 1
                 for held, sender in self.receivers[link].received(data, address, now):
