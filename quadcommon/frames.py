@@ -88,9 +88,9 @@ def wrap_pi(angle: float) -> float:
 
 
 @kernel
-def _home_terms(lat0_deg: float, lon0_deg: float) -> tuple[float, float, float]:
-    """``(lon0 rad, sin lat0, cos lat0)`` of a home (three math calls: cheaper to compute at every
-    frame than to look up)."""
+def home_terms(lat0_deg: float, lon0_deg: float) -> tuple[float, float, float]:
+    """``(lon0 rad, sin lat0, cos lat0)`` of a home: the last three arguments of
+    :func:`ned_to_geodetic_about` (a caller converting every frame computes them once)."""
     lat0_r = math.radians(lat0_deg)
     return math.radians(lon0_deg), math.sin(lat0_r), math.cos(lat0_r)
 
@@ -105,7 +105,7 @@ def ned_to_geodetic(
     millimetres over the few kilometres a SITL flies.
     """
     lat0, lon0, alt0 = home[0], home[1], home[2]
-    lon0_r, sin_lat0, cos_lat0 = _home_terms(lat0, lon0)
+    lon0_r, sin_lat0, cos_lat0 = home_terms(lat0, lon0)
     return ned_to_geodetic_about(north_m, east_m, down_m, lat0, lon0, alt0, lon0_r, sin_lat0, cos_lat0)
 
 
@@ -113,7 +113,7 @@ def ned_to_geodetic(
 def ned_to_geodetic_about(north_m: float, east_m: float, down_m: float, lat0: float, lon0: float,
                           alt0: float, lon0_r: float, sin_lat0: float,
                           cos_lat0: float) -> tuple[float, float, float]:  # fmt: skip
-    """:func:`ned_to_geodetic` with the home's terms (:func:`_home_terms`) computed beforehand."""
+    """:func:`ned_to_geodetic` with the home's terms (:func:`home_terms`) computed beforehand."""
     x_rad = north_m / EARTH_RADIUS_M
     y_rad = east_m / EARTH_RADIUS_M
     c = math.hypot(x_rad, y_rad)

@@ -182,7 +182,8 @@ def buffered_step(translational, rotational, buf, at, position, velocity, euler,
     as plain tuples and floats. Plain arguments because a compiled call types each argument from
     Python: a tuple in C, a named tuple through Python (microseconds a call); one buffer because
     each array argument is converted on its own. Returns the step as the autopilot reads it, a
-    :class:`CascadeOutput` (built here: one record boxed per call)."""
+    :class:`CascadeOutput`'s fields as a plain tuple (``CascadeOutput._make``: compiled code boxes
+    a named tuple for Python at several times the cost of a tuple)."""
     buf = borrowed(buf)  # the caller's for the call: its parts are passed on without counting
     a = BufferParts(at[0], at[1], at[2], at[3], at[4], at[5], at[6], at[7], at[8])
     memory = CascadeMemory(
@@ -196,7 +197,7 @@ def buffered_step(translational, rotational, buf, at, position, velocity, euler,
     o = cascade_step(translational, rotational, memory, state, reference, integrate, out)
     return CascadeOutput(o.thrust, o.torque_euler, o.torque_body, (out[0], out[1], out[2], out[3]),
                          (out[4], out[5], out[6], out[7]), o.euler_ref, o.euler_rate_ref, o.roll_pitch_raw,
-                         o.acceleration_cmd)  # fmt: skip
+                         o.acceleration_cmd)[:]  # fmt: skip
 
 
 class AttitudeReference(NamedTuple):
@@ -205,6 +206,9 @@ class AttitudeReference(NamedTuple):
     euler_rad: Vector3
     euler_rates_rad_s: Vector3
     euler_accelerations_rad_s2: Vector3
+
+
+_make_output = CascadeOutput._make
 
 
 def law_context(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> LawContext:
@@ -351,11 +355,11 @@ class Cascade:
             self.given[GIVEN.flags] = 0.0
         self._overridden = overridden
         try:
-            o = self._step(
+            o = _make_output(self._step(
                 self.buffer, self._at_tuple, state.position_m, state.velocity_m_s, state.euler_rad,
                 state.euler_rates_rad_s, ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2, ref.yaw_rad,
                 ref.yaw_rate_rad_s, ref.yaw_acceleration_rad_s2, integrate,
-            )
+            ))
         except Exception as error:  # noqa: BLE001 - a law (maybe a user's) failed: the failsafe acts
             raise ControllerFailure(f"controller {self.name}: {type(error).__name__}: {error}") from error
         if not output_finite(o.thrust_n, o.torque_body_n_m):

@@ -405,6 +405,13 @@ def truth(work, P, u) -> tuple:
 @kernel
 def advance(work, P, inputs, h: float) -> tuple:
     """A lockstep frame's physics in one call: :func:`physics_steps`, then the :func:`truth` of the
-    result with the last step's inputs held."""
+    result with the last step's inputs held, as a plain tuple of its fields (``TruthState._make``:
+    compiled code boxes a named tuple for Python at several times the cost of a tuple)."""
     physics_steps(work, P, inputs, h)
-    return truth(work, P, inputs[len(inputs) - INPUTS.size :])
+    return truth(work, P, inputs[len(inputs) - INPUTS.size :])[:]
+
+
+@kernel
+def truth_fields(work, P, u) -> tuple:
+    """:func:`truth` as a plain tuple of its fields, for Python (``TruthState._make``)."""
+    return truth(work, P, u)[:]

@@ -317,7 +317,7 @@ class Plant:
         frame_u[:] = inputs  # one conversion
         s = self._s
         s[:] = self.state
-        truth = (self._entries.advance(self._work, self._P, frame_u, self.dt))
+        truth = TruthState._make(self._entries.advance(self._work, self._P, frame_u, self.dt))
         self.force_dist, self.torque_dist_eta, self.wind = disturbances[-1]
         self.state = _listed(s)
         self._truth = (list(self.state), truth)  # a copy: an in-place change of the state misses it
@@ -361,7 +361,7 @@ class Plant:
         state = list(self.state)  # a copy: an in-place change of the state misses the cache
         self._s[:] = state
         self._u[:] = self._held_inputs()
-        truth = self._entries.truth(self._work, self._P, self._u)
+        truth = TruthState._make(self._entries.truth_fields(self._work, self._P, self._u))
         self._truth = (state, truth)
         return truth
 
@@ -381,7 +381,7 @@ class _Entries(NamedTuple):
 
     physics_steps: Callable[..., None]
     advance: Callable[..., tuple]
-    truth: Callable[..., tuple]
+    truth_fields: Callable[..., tuple]
 
 
 @functools.cache
@@ -396,7 +396,7 @@ def _entries() -> _Entries:
         work[0, 6] = P[equations.PLANT.mass] = P[equations.PLANT.rotor_time_constant] = 1.0
         entries.physics_steps(work, P, u, 0.001)
         entries.advance(work, P, u, 0.001)
-        entries.truth(work, P, u)
+        entries.truth_fields(work, P, u)
         for entry in entries:
             freeze(entry)
     return entries

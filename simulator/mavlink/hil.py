@@ -83,6 +83,7 @@ class HilFrameEncoder:
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = home
         self._float_fields = _frame_float_fields()
+        self._home_about = (*home, *frames.home_terms(home[0], home[1]))  # (per frame: computed once)
         self.seq = 0
         ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
         z3 = (0.0, 0.0, 0.0)
@@ -184,7 +185,7 @@ class HilFrameEncoder:
             time_usec, *force, *rate, *field, baro.pressure_hpa, pressure_altitude, baro.temperature_c,
         )  # fmt: skip
 
-        lat, lon, alt = frames.ned_to_geodetic(pos_ned[0], pos_ned[1], pos_ned[2], self.home)
+        lat, lon, alt = frames.ned_to_geodetic_about(pos_ned[0], pos_ned[1], pos_ned[2], *self._home_about)
         f_frd = to_ned(truth.specific_force_body_m_s2)
         to_mg = 1000.0 / STANDARD_GRAVITY_M_S2
         wx, wy, wz = wind_world_m_s
