@@ -384,12 +384,17 @@ class _Entries(NamedTuple):
     truth_fields: Callable[..., tuple]
 
 
+def plant_kernels() -> tuple:
+    """The equations' kernels the plant calls (what ``quadsitl compile`` compiles for it)."""
+    return tuple(getattr(equations, name) for name in _Entries._fields)
+
+
 @functools.cache
 def _entries() -> _Entries:
     """The entries, made once per process. Compiled, each is called once now on scratch buffers
     (loaded from numba's cache, or compiled: ~1 s or more, which in the middle of lockstep the
     autopilot would see as a simulator stall) and frozen: nothing compiles mid-flight."""
-    entries = _Entries(*(compiled(getattr(equations, name)) for name in _Entries._fields))
+    entries = _Entries(*(compiled(fn) for fn in plant_kernels()))
     if compiling():
         n = 17
         work, P, u = np.zeros((6, n)), np.zeros(PLANT.size), np.zeros(INPUTS.size)

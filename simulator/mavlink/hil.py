@@ -82,7 +82,7 @@ class HilFrameEncoder:
 
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = home
-        self._float_fields = _frame_float_fields()
+        self._float_fields = frame_float_fields_entry()
         self._home_about = (*home, *frames.home_terms(home[0], home[1]))  # (per frame: computed once)
         self.seq = 0
         ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
@@ -273,7 +273,7 @@ class HilFrameEncoder:
 
 
 @functools.cache
-def _frame_float_fields():
+def frame_float_fields_entry():
     """The frame's float fields' entry (:func:`quadcommon.wire_values.frame_float_fields`),
     compiled (or loaded from numba's cache) and run once at start, then frozen: a flight never
     waits for a compilation."""
