@@ -208,6 +208,8 @@ class FailsafeFlags(NamedTuple):
     vision: SensorHealth = _ABSENT
 
     def sensor(self, name: str) -> SensorHealth:
+        """The :class:`SensorHealth` of one sensor by its field name (one of :data:`SENSORS`: ``gyro``,
+        ``accel``, ``mag``, ``baro``, ``gps``, ``vision``)."""
         return getattr(self, name)
 
     def unhealthy_sensors(self) -> list[str]:

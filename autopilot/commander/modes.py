@@ -54,6 +54,8 @@ class FlightMode(Enum):
 
     @property
     def px4_name(self) -> str:
+        """The mode's name as PX4 spells it in its shell and pymavlink's ``px4_map``: ``AUTO.LOITER``,
+        ``AUTO.RTL``, ...; the other modes by their own name (``POSCTL``, ``OFFBOARD``)."""
         return self.name.replace("_", ".", 1) if self.name.startswith("AUTO_") else self.name
 
     @classmethod
