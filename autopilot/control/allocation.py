@@ -121,6 +121,8 @@ class Allocator:
         self.speed_max = vehicle.rotors.speed_max_rad_s
 
     def to_rotors(self, thrust_n: float, torque_body_n_m: Vector3) -> RotorAllocation:
+        """The rotor speeds (rad/s) and normalised commands of a wrench (U1 in N, body FLU torque in N m),
+        saturated with thrust first (module docstring), with the thrust and torque they actually give."""
         out = [0.0] * OUT_SIZE
         thrust, tx, ty, tz, _ = allocate_rotors(self.numbers, 0, thrust_n, *torque_body_n_m, out)
         return RotorAllocation(tuple(out[4:]), tuple(out[:4]), thrust, (tx, ty, tz))  # type: ignore[arg-type]

@@ -73,10 +73,14 @@ class Excitation:
         self.reset()
 
     def reset(self) -> None:
+        """Back to the start of the sequence: a step on, its first half-period 0.6 s, the washout settled at
+        zero."""
         # half-periods of 6 calls, then 10, 9, ... 2, then 6, 5, ... 2 over and over
         self.steps, self.max_steps, self.on, self.low_pass = 5, 10, True, 0.0
 
     def advance(self) -> float:
+        """The next rate setpoint to add (rad/s): the step washed out by its low pass, one call per
+        :data:`EXCITATION_PERIOD_S`."""
         if self.steps > self.max_steps:
             self.on, self.steps = not self.on, 0
             self.max_steps = self.max_steps - 1 if self.max_steps > 1 else 5
@@ -109,6 +113,8 @@ class SecondOrderLowPass:
             self.d1 = self.d2 = value / (1.0 + self.a1 + self.a2)
 
     def apply(self, x: float) -> float:
+        """One sample ``x`` through the filter; the filtered value (``x`` itself when the filter is
+        inactive)."""
         if not self.active:
             return x
         d0 = x - self.a1 * self.d1 - self.a2 * self.d2
@@ -131,6 +137,8 @@ class ArxRls:
         self.reset()
 
     def reset(self) -> None:
+        """The covariance back to :data:`INITIAL_VARIANCE` times identity, the coefficients and the regressors
+        to zero (PX4's ``ArxRls::reset``)."""
         n = 5 if self.order == 2 else 2
         self.P = np.eye(n) * INITIAL_VARIANCE
         self.estimate = np.zeros(n)
@@ -139,6 +147,8 @@ class ArxRls:
         self.samples = 0
 
     def update(self, u: float, y: float) -> None:
+        """One RLS step on the input ``u`` (normalised torque) and output ``y`` (body rate, rad/s) of this
+        sample; the first five samples only fill the regressors."""
         self.u = self.u[1:] + [u]
         self.y = self.y[1:] + [y]
         if self.samples < 5:  # the regressors still hold zeros (PX4's isBufferFull)
@@ -161,6 +171,7 @@ class ArxRls:
 
     @property
     def variances(self) -> np.ndarray:
+        """The variance of each coefficient (the diagonal of the RLS covariance), in :attr:`theta`'s order."""
         return np.diag(self.P)
 
 
@@ -211,6 +222,8 @@ class AxisIdentification:
         self.started = False
 
     def update(self, torque: float, rate_rad_s: float) -> None:
+        """One sample: ``torque`` the rate controller's normalised output on this axis, ``rate_rad_s`` the
+        body rate; both low-passed and high-passed, the RLS fed every ``every``-th sample."""
         u = self.input_scale * torque
         if not self.started:  # the filters start settled on the first sample
             self.u_low.reset(u)
@@ -227,6 +240,8 @@ class AxisIdentification:
             self.rls.update(self.u_high, self.y_high)
 
     def converged(self) -> bool:
+        """True when every coefficient's variance is below :data:`CONVERGED_VARIANCE` (PX4's test; the caller
+        also waits :data:`MIN_AXIS_TIME_S`)."""
         return bool(np.all(self.rls.variances < CONVERGED_VARIANCE))
 
     def model(self, duration_s: float) -> AxisModel:
@@ -249,6 +264,8 @@ class AxisGains:
 
     @property
     def parallel(self) -> tuple[float, float, float]:
+        """The gains in PX4's parallel form, ``(MC_*RATE_P, MC_*RATE_I, MC_*RATE_D) = (kc, kc ki, kc kd)``
+        (with MC_*RATE_K = 1)."""
         return self.kc, self.kc * self.ki, self.kc * self.kd
 
 
@@ -300,6 +317,8 @@ def attitude_gain(kc: float) -> float:
 
 
 def axis_gains(model: AxisModel, rise_time_s: float) -> AxisGains:
+    """The gains of one identified axis: the GMVC PID for the closed-loop rise time ``rise_time_s``
+    (:func:`gmvc_pid`) and the attitude P gain from its kc (:func:`attitude_gain`)."""
     kc, ki, kd = gmvc_pid(model, rise_time_s)
     return AxisGains(kc, ki, kd, attitude_gain(kc))
 

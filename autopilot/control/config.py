@@ -43,11 +43,14 @@ class ControllerConfig:
     tilt_max_rad: float = 0.7  # limit of phi_r, theta_r (translational loop, eq. 29)
 
     def with_gains(self, translational=None, rotational=None, **changes) -> ControllerConfig:
+        """A copy with other gains records (``None`` keeps the loop's) and any other fields changed."""
         return replace(self, translational=translational or self.translational,
                        rotational=rotational or self.rotational, **changes)  # fmt: skip
 
 
 def load_controller(name_or_path: str | Path = "intbs_nlhinf") -> ControllerConfig:
+    """The controller file ``config/controllers/NAME.toml`` (a name or a path), validated: each loop's law by
+    name with its gains, the tilt limit, the command filter; ConfigError naming file, key, value and range."""
     path = config_path("controllers", name_or_path)
     root = load_toml(path)
     name = root.string("name", Path(path).stem)

@@ -111,6 +111,7 @@ class BrokenLawFile:
     stamp: float  # the file's modification time: an edited file is imported again
 
     def message(self) -> str:
+        """How the file's failure is reported: ``control law file WHERE: Type: message``."""
         return f"control law file {self.where}: {self.error}"
 
 
@@ -147,6 +148,8 @@ def register(loop: str) -> Callable[[type], type]:
 
 
 def names(loop: str) -> tuple[str, ...]:
+    """The names of the registered laws of ``loop`` (:data:`TRANSLATIONAL` or :data:`ROTATIONAL`): the
+    built-in ones, those of the configuration directories' ``laws/`` and of entry points."""
     _load()
     return tuple(_LAWS[loop])
 
@@ -232,6 +235,8 @@ class BoundLaw:
         return tuple(out)
 
     def retune(self, gains: Any) -> None:
+        """Switch to ``gains`` as in flight: the law's ``retune`` (if it has one) maps the state at the last
+        step's attitude, then the gains array is packed and checked again."""
         retune = getattr(self.cls, "retune", None)
         if retune is not None:
             self.state = list(retune(self.gains, gains, self.context, list(self.state), *self._last))

@@ -153,6 +153,8 @@ def backstepping_parameters(gains: BacksteppingGains, integral_meaning: str | No
 
 
 def backstepping_from_params(gains: BacksteppingGains, params: Mapping[str, float]) -> BacksteppingGains:
+    """The gains with the parameters ``BS_C1_X`` ... ``BS_KI_Z`` of ``params`` applied; a vector keeps its
+    configured value unless all three of its axes are given."""
     def vec(prefix: str, default: Vector3) -> Vector3:
         names = [f"{prefix}_{a}" for a in AXES]
         if not all(n in params for n in names):

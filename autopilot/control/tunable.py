@@ -42,6 +42,8 @@ class Tunable:
     switch: bool = False
 
     def names(self) -> tuple[str, ...]:
+        """The parameter names of this gain: ``param``, or ``param_R``, ``param_P``, ``param_Y`` for a
+        per-axis gain."""
         return tuple(f"{self.param}_{a}" for a in AXES) if self.per_axis else (self.param,)
 
 

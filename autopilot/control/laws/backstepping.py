@@ -20,18 +20,25 @@ from ..translational import (
 
 @kernel
 def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
+    """The commanded acceleration on axis ``i`` (m/s^2): ``p_d'' - (1 + c1 c2) e1 - (c1 + c2) e1'``; no
+    state."""
     return ref_acc - g[BACKSTEPPING_GAINS.one_c1c2 + i] * e1 - g[BACKSTEPPING_GAINS.c1_c2 + i] * e1_dot
 
 
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):
+    """The translational step of the registry's contract: :func:`axis` per world axis, then thrust and tilt;
+    ``(U1, phi_r, theta_r, a_x, a_y, a_z, thrust_limited, tilt_limited)``."""
     return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
                              ref_acceleration, dt, integrate)
 
 
 @register(TRANSLATIONAL)
 class Backstepping:
+    """Plain backstepping, the translational loop of BS-NLHinf (``law = "backstepping"``): the backstepping
+    gains c1, c2 per axis, no integral and no state."""
+
     NAME = "backstepping"
     STATE = ()
     step = staticmethod(step)

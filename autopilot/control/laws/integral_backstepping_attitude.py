@@ -51,6 +51,8 @@ def commanded_acceleration(g, x, i, e, e_dot, ref_acc):
 
 @kernel
 def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
+    """The rotational step of the registry's contract: eta_cmd'' per Euler axis, the chi integrals advanced
+    (held within the anti-windup bound), and the body torque ``W_eta^-T (M eta_cmd'' + C eta')`` (N m)."""
     e0, e1, e2 = euler[0] - eta_d[0], euler[1] - eta_d[1], wrap_pi(euler[2] - eta_d[2])
     acc = (
         commanded_acceleration(g, x, 0, e0, euler_rates[0] - eta_d_dot[0], eta_d_ddot[0]),
@@ -78,11 +80,17 @@ class IntBSAttitudeGains:
 
 
 def integral_weights(gains: IntBSAttitudeGains) -> Vector3:
+    """The weight ``c2 lambda`` of chi in each axis's commanded angular acceleration (1/s^3): it sets the
+    anti-windup bound and how a retune rescales chi."""
     return tuple(gains.c2[i] * gains.k_integral[i] for i in range(3))  # type: ignore[return-value]
 
 
 @register(ROTATIONAL)
 class IntegralBacksteppingAttitude:
+    """IntBS attitude law (``law = "integral_backstepping"`` in ``[rotational]``): c1, c2 and the integral
+    gain lambda per Euler axis, tunable in flight as ``ATT_C1_*``, ``ATT_C2_*``, ``ATT_KI_*``; its state
+    the integrals chi of the roll, pitch and yaw errors (rad s)."""
+
     NAME = "integral_backstepping"
     STATE = ("chi_roll", "chi_pitch", "chi_yaw")
     step = staticmethod(step)

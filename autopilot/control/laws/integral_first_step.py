@@ -26,6 +26,8 @@ from ..translational import (
 
 @kernel
 def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
+    """The commanded acceleration on axis ``i`` (m/s^2), the module's formula, and chi advanced by e1 dt
+    within its anti-windup bound when ``integrate``."""
     c1, k = g[BACKSTEPPING_GAINS.c1 + i], g[BACKSTEPPING_GAINS.k + i]
     chi = x[i]
     e2 = e1_dot + c1 * e1 + k * chi
@@ -38,17 +40,25 @@ def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):
+    """The translational step of the registry's contract: :func:`axis` per world axis, then thrust and tilt;
+    ``(U1, phi_r, theta_r, a_x, a_y, a_z, thrust_limited, tilt_limited)``."""
     return backstepping_step(axis, g, x, position, velocity, euler, ref_position, ref_velocity,
                              ref_acceleration, dt, integrate)
 
 
 def integral_weights(gains):
+    """The weight ``c2 lambda`` of chi in each axis's commanded acceleration (1/s^3): it sets the anti-windup
+    bound and how a retune rescales chi."""
     c2, k = gains.c2, gains.k_integral
     return (c2[0] * k[0], c2[1] * k[1], c2[2] * k[2])
 
 
 @register(TRANSLATIONAL)
 class IntegralFirstStep:
+    """IntBS translational law (``law = "integral_first_step"``): c1, c2 and lambda per axis, tunable in
+    flight as ``BS_C1_*``, ``BS_C2_*``, ``BS_KI_*``; its state the integrals chi of the position errors (m
+    s)."""
+
     NAME = "integral_first_step"
     STATE = ("chi_x", "chi_y", "chi_z")
     step = staticmethod(step)

@@ -45,6 +45,8 @@ def axis(g, x, i, e1, e1_dot, ref_acc, dt, integrate):
 def step(
     g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt, integrate
 ):
+    """The translational step of the registry's contract: :func:`axis` per world axis, then thrust and tilt
+    (eqs. 23-29); ``(U1, phi_r, theta_r, a_x, a_y, a_z, thrust_limited, tilt_limited)``."""
     return backstepping_step(
         axis, g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, dt, integrate
     )
@@ -52,6 +54,9 @@ def step(
 
 @register(TRANSLATIONAL)
 class IntegralSecondStep:
+    """The paper's translational law (``law = "integral_second_step"``): c1, c2 and k_xi per axis, tunable in
+    flight as ``BS_C1_*``, ``BS_C2_*``, ``BS_KI_*``; its state the integrals xi of e2 (m)."""
+
     NAME = "integral_second_step"
     STATE = ("xi_x", "xi_y", "xi_z")
     step = staticmethod(step)

@@ -91,18 +91,22 @@ class NlHinfGains:
 
     @property
     def k_d(self) -> float:
+        """``k_d = sqrt(omega2^2 + 2 omega1 omega3) / omega1`` (1/s), eq. (44)'s derivative weight."""
         return math.sqrt(self.omega2**2 + 2.0 * self.omega1 * self.omega3) / self.omega1
 
     @property
     def k_p(self) -> float:
+        """``k_p = omega3 / omega1`` (1/s^2), eq. (44)'s proportional weight."""
         return self.omega3 / self.omega1
 
     @property
     def r_inv(self) -> float:
+        """``w_u^-2 = 1 / omega_u^2``, the inverse of the control weight R (eq. 44)."""
         return 1.0 / self.omega_u**2
 
 
 def nlhinf_gains(omega1: float, omega2: float, omega3: float, omega_u: float) -> NlHinfGains:
+    """The gains record of the nonlinear H-infinity law from its four weights (eq. 44)."""
     return NlHinfGains(NonlinearHinfAttitude.NAME, omega1, omega2, omega3, omega_u)
 
 

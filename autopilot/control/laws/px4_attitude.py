@@ -158,6 +158,8 @@ def rate_axis(g, x, i, rate_sp, rate, rate_dot, dt, integrate):
 
 @kernel
 def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
+    """The rotational step of the registry's contract: the attitude P's rate setpoint, then the rate PID per
+    body axis on the filtered rate derivative; the body torque (N m)."""
     s0, s1, s2 = rate_setpoint(g, euler, eta_d, eta_d_dot[2])
     d0, d1, d2 = filtered_derivative(x, X_DERIVATIVE, body_rates, g[GAINS.alpha], dt, integrate)
     return (rate_axis(g, x, 0, s0, body_rates[0], d0, dt, integrate),

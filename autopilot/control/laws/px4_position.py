@@ -110,6 +110,8 @@ def thrust_setpoint(g, ax, ay, az):
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):  # fmt: skip
+    """The translational step of the registry's contract, steps 1-6 of the module docstring; ``(U1, phi_r,
+    theta_r, a_x, a_y, a_z, thrust_limited, tilt_limited)``."""
     # 1. position P -> velocity setpoint
     px = g[GAINS.pos_p] * (ref_position[0] - position[0])
     py = g[GAINS.pos_p + 1] * (ref_position[1] - position[1])

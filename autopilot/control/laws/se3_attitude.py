@@ -74,6 +74,8 @@ def errors(euler, body_rates, eta_d, eta_d_dot, eta_d_ddot):
 
 @kernel
 def step(g, x, euler, euler_rates, body_rates, eta_d, eta_d_dot, eta_d_ddot, dt, integrate):
+    """The rotational step of the registry's contract: Lee et al.'s moment ``M`` (N m, body FLU), the module's
+    last equation; no state."""
     e_R, e_W, w_d, w_d_dot = errors(euler, body_rates, eta_d, eta_d_dot, eta_d_ddot)
     J = (g[GAINS.inertia], g[GAINS.inertia + 1], g[GAINS.inertia + 2])
     gyro = cross(body_rates, (J[0] * body_rates[0], J[1] * body_rates[1], J[2] * body_rates[2]))

@@ -54,6 +54,9 @@ def force(g, e_x, e_v, acceleration):
 @kernel
 def step(g, x, position, velocity, euler, ref_position, ref_velocity, ref_acceleration, ref_yaw, dt,
          integrate):  # fmt: skip
+    """The translational step of the registry's contract: ``F_d``, ``U1 = F_d . R e3`` and the tilt-limited
+    ``b3_d`` as roll and pitch references; ``(U1, phi_r, theta_r, a_x, a_y, a_z, thrust_limited,
+    tilt_limited)``."""
     m, gravity = g[GAINS.mass], g[GAINS.gravity]
     fx = force(g, position[0] - ref_position[0], velocity[0] - ref_velocity[0], ref_acceleration[0])
     fy = force(g, position[1] - ref_position[1], velocity[1] - ref_velocity[1], ref_acceleration[1])
