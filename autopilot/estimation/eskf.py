@@ -141,19 +141,23 @@ class SourceRow:
         self._row = row
 
     def snapshot(self) -> SourceStats:
+        """The row as a :class:`~.status.SourceStats` record (a copy: it no longer follows the filter)."""
         values = self._row.tolist()
         return SourceStats(**{name: (int(v) if isinstance(getattr(SourceStats, name), int) else v)
                               for name, v in zip(fk.STATS_FIELDS, values, strict=True)})  # fmt: skip
 
 
-def _stats_property(index: int, integer: bool) -> property:
+def _stats_property(index: int, integer: bool, doc: str) -> property:
     if integer:
-        return property(lambda self: int(self._row[index]))
-    return property(lambda self: float(self._row[index]))
+        return property(lambda self: int(self._row[index]), doc=doc)
+    return property(lambda self: float(self._row[index]), doc=doc)
 
 
 for _i, _name in enumerate(fk.STATS_FIELDS):
-    setattr(SourceRow, _name, _stats_property(_i, isinstance(getattr(SourceStats, _name), int)))
+    setattr(SourceRow, _name, _stats_property(
+        _i, isinstance(getattr(SourceStats, _name), int),
+        f"This source's :attr:`~.status.SourceStats.{_name}`, read from the filter as it is now.",
+    ))  # fmt: skip
 
 
 def _state_property(index: int, size: int, doc: str) -> property:
@@ -222,18 +226,25 @@ class ErrorStateEkf:
     # -- read-outs of the memory -------------------------------------------------------------------
     @property
     def time_s(self) -> float:
+        """Simulation time (s) of the nominal state: the last IMU sample predicted to, or the
+        initialisation."""
         return float(self._F[fk.MEMORY.time])
 
     @property
     def imu_samples(self) -> int:
+        """IMU samples received, counted from the first one (alignment included)."""
         return int(self._F[fk.MEMORY.imu_samples])
 
     @property
     def imu_dt_rejected(self) -> int:
+        """IMU samples not integrated because their interval was not within (0, 0.1] s."""
         return int(self._F[fk.MEMORY.imu_dt_rejected])
 
     @property
     def bad_accel_detections(self) -> int:
+        """Detections of bad vertical accelerometer data (PX4's bad-acceleration check: over 1 s, large
+        vertical velocity innovations of one sign, which the height innovation shares); each starts a hold
+        of PX4's larger vertical process noise (``BAD_ACCEL_HOLD_S``)."""
         return int(self._F[fk.MEMORY.bad_accel_detections])
 
     @property
