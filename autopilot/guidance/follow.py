@@ -79,6 +79,7 @@ class TargetEstimator:
         self.reset()
 
     def reset(self) -> None:
+        """Forget the target: the next report starts the estimate afresh."""
         self._position: Vector3 | None = None
         self._velocity: Vector3 = (0.0, 0.0, 0.0)
         self._last_measured: Vector3 = (0.0, 0.0, 0.0)
@@ -86,6 +87,9 @@ class TargetEstimator:
         self.last_report_s = -math.inf
 
     def report(self, r: TargetReport, responsiveness: float) -> None:
+        """Fuse one FOLLOW_TARGET report with weight ``max(1 - FLW_TGT_RS, WEIGHT_MIN)`` on the prediction at
+        constant velocity; its velocity from the report, else from the last two positions. The first
+        report, or one after :data:`TARGET_STALE_S` of silence, restarts the estimate at the report."""
         weight = max(1.0 - responsiveness, WEIGHT_MIN)
         if self._position is None or r.time_s - self.last_report_s > TARGET_STALE_S:
             self._position = r.position_m

@@ -120,10 +120,13 @@ class Orbit:
 
     @property
     def status(self) -> OrbitStatus:
+        """What ORBIT_EXECUTION_STATUS reports now: the radius signed by the direction (> 0 clockwise), the
+        centre and the yaw behaviour."""
         return OrbitStatus(math.copysign(self.radius_m, self.velocity_m_s), self.centre, self.yaw_behaviour)
 
     @property
     def approaching(self) -> bool:
+        """True while the vehicle flies to the circle, False once it flies on it."""
         return self._approach is not None
 
     def enter(self, position_m: Vector3, yaw_rad: float, limits: OrbitLimits) -> None:

@@ -111,6 +111,8 @@ class LineMove:
         return self.distance, 0.0, 0.0
 
     def sample(self, t: float) -> Reference:
+        """The reference at ``t`` s from the move's start: along the line at the S-curve's distance, speed and
+        acceleration, the yaw on its quintic; at rest at ``end`` after :attr:`duration_s`."""
         dist, speed, accel = self._progress(t)
         d = self.direction
         yaw = self.yaw.sample(t)

@@ -52,9 +52,12 @@ class Sticks:
     yaw: float = 0.0  # counter-clockwise seen from above
 
     def deflected(self, deadzone: float) -> bool:
+        """True when any stick is beyond ``deadzone`` (fraction of full travel): the pilot is moving the
+        sticks."""
         return max(abs(self.forward), abs(self.left), abs(self.up), abs(self.yaw)) > deadzone
 
     def axes(self) -> tuple[float, float, float, float]:
+        """``(forward, left, up, yaw)``, each in [-1, 1]."""
         return (self.forward, self.left, self.up, self.yaw)
 
 
