@@ -50,6 +50,7 @@ class LogOptions:
 
     @property
     def enabled(self) -> bool:
+        """True when the autopilot writes a flight log (a directory is given)."""
         return self.directory is not None
 
 

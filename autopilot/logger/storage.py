@@ -32,6 +32,9 @@ SUFFIX = ".ulg"
 
 
 class LogDirectory:
+    """The logs under ``root`` in PX4's layout (module docstring): names for a new log, and the
+    :class:`~autopilot.mavlink.log_transfer.LogStore` the MAVLink log download reads (list, read, erase)."""
+
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
         self.writing: Path | None = None  # the log being written (never erased)
@@ -107,6 +110,7 @@ class LogDirectory:
         return erased
 
     def close(self) -> None:
+        """Close the file a log download was reading, if any."""
         self._close_reader()
 
     def _close_reader(self) -> None:

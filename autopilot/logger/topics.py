@@ -160,6 +160,8 @@ class TopicSpec(NamedTuple):
     nested: tuple[Format, ...] = ()
 
     def format(self, extra: str = "") -> Format:
+        """The topic's ULog format: ``uint64_t timestamp`` first, then its fields and ``extra`` (the law
+        states' fields of ``cascade_status``)."""
         return Format(self.name, fields(f"uint64_t timestamp; {self.fields}; {extra}", self.nested))
 
 
@@ -198,10 +200,13 @@ def _local_position(s: Snapshot, state, estimator) -> tuple:
 
 
 def vehicle_local_position(s: Snapshot) -> tuple | None:
+    """PX4's ``vehicle_local_position`` of the estimate the vehicle flies on (NED from the home origin, with
+    the estimator's accuracies); None without an estimate."""
     return None if s.estimate is None else _local_position(s, s.estimate, s.estimator)
 
 
 def vehicle_local_position_groundtruth(s: Snapshot) -> tuple:
+    """PX4 SITL's ``vehicle_local_position_groundtruth``: the simulator's state from the frame, NED."""
     return _local_position(s, s.truth, None)
 
 
@@ -220,10 +225,14 @@ def _global_position(s: Snapshot, state, estimator) -> tuple:
 
 
 def vehicle_global_position(s: Snapshot) -> tuple | None:
+    """PX4's ``vehicle_global_position`` of the estimate (WGS84 from the home origin, altitude AMSL); None
+    without an estimate."""
     return None if s.estimate is None else _global_position(s, s.estimate, s.estimator)
 
 
 def vehicle_global_position_groundtruth(s: Snapshot) -> tuple:
+    """PX4 SITL's ``vehicle_global_position_groundtruth``: the simulator's position as latitude, longitude and
+    altitude."""
     return _global_position(s, s.truth, None)
 
 
@@ -231,12 +240,15 @@ ATTITUDE = "uint64_t timestamp_sample; float[4] q; float[4] delta_q_reset; uint8
 
 
 def vehicle_attitude(s: Snapshot) -> tuple | None:
+    """PX4's ``vehicle_attitude``: the estimate's attitude as the NED/FRD quaternion; None without an
+    estimate."""
     if s.estimate is None:
         return None
     return (s.t_us, s.t_us, *_q_ned(s.estimate.euler_rad), 1.0, 0.0, 0.0, 0.0, 0)
 
 
 def vehicle_attitude_groundtruth(s: Snapshot) -> tuple:
+    """PX4 SITL's ``vehicle_attitude_groundtruth``: the simulator's attitude as the NED/FRD quaternion."""
     return (s.t_us, s.t_us, *_q_ned(s.truth.euler_rad), 1.0, 0.0, 0.0, 0.0, 0)
 
 
@@ -251,6 +263,7 @@ def vehicle_angular_velocity(s: Snapshot) -> tuple | None:
 
 
 def vehicle_angular_velocity_groundtruth(s: Snapshot) -> tuple:
+    """PX4 SITL's ``vehicle_angular_velocity_groundtruth``: the simulator's body rates (FRD, rad/s)."""
     return (s.t_us, s.t_us, *_rates_frd(s.truth))
 
 
@@ -261,6 +274,8 @@ ATTITUDE_SETPOINT = (
 
 
 def vehicle_attitude_setpoint(s: Snapshot) -> tuple | None:
+    """PX4's ``vehicle_attitude_setpoint``: eta_d (after the command filter) in NED, its quaternion, the
+    reference's yaw rate and the thrust as PX4's normalised body z thrust; None with the motors off."""
     eta_d = s.row[ROW_EULER_REF]
     if s.output is None or not math.isfinite(eta_d[0]):
         return None
@@ -274,6 +289,8 @@ RATES_SETPOINT = "float roll; float pitch; float yaw; float[3] thrust_body; bool
 
 
 def vehicle_rates_setpoint(s: Snapshot) -> tuple | None:
+    """PX4's ``vehicle_rates_setpoint``: the body rates (FRD, rad/s) of the filtered eta_d', and the
+    normalised thrust; None with the motors off."""
     out = s.output
     if out is None:
         return None
@@ -289,6 +306,8 @@ LOCAL_POSITION_SETPOINT = (
 
 
 def vehicle_local_position_setpoint(s: Snapshot) -> tuple | None:
+    """PX4's ``vehicle_local_position_setpoint``: the reference (NED position, velocity, acceleration, yaw and
+    yaw rate) and the normalised thrust (NaN with the motors off); None without a reference."""
     ref = s.reference
     if ref is None:
         return None
@@ -318,6 +337,8 @@ OUTPUTS = "uint32_t noutputs; float[16] output"
 
 
 def actuator_outputs(s: Snapshot) -> tuple:
+    """PX4's ``actuator_outputs``: the normalised actuator controls sent to the simulator (rotor speeds over
+    Omega_max, or under wrench actuation thrust and torques over their maxima); the other outputs zero."""
     c = s.controls
     return (s.t_us, len(c), *c, *(0.0,) * (ACTUATOR_OUTPUTS - len(c)))
 
@@ -343,6 +364,8 @@ def nav_state(custom_mode: int) -> int:
 
 
 def vehicle_status(s: Snapshot) -> tuple:
+    """PX4's ``vehicle_status``: arming state and time, nav_state from the frame's custom mode, the vehicle
+    type (rotary wing, MAV_TYPE_QUADROTOR) and system id."""
     armed = s.row[ROW_ARMED] > 0.5
     state = nav_state(int(s.row[ROW_CUSTOM_MODE]))
     return (s.t_us, s.arming_time_us if armed else 0, 0, s.mode_time_us,
@@ -478,6 +501,8 @@ _UNKNOWN_U16 = 65535
 
 
 def vehicle_gps_position(s: Snapshot) -> tuple | None:
+    """PX4's ``sensor_gps`` as ``vehicle_gps_position``: the frame's HIL_GPS in SI units (degrees, metres,
+    m/s, course in rad; MAVLink's unknown 65535 as NaN); None when the frame has none."""
     g = s.gps
     if g is None:
         return None
@@ -526,6 +551,8 @@ ESTIMATOR_STATUS = (
 
 
 def estimator_status(s: Snapshot) -> tuple | None:
+    """PX4's ``estimator_status``: the EKF's accuracies, test ratios and ESTIMATOR_STATUS_FLAGS, with the
+    older health and timeout flags Flight Review plots; None when flying on the truth."""
     e = s.estimator
     if e is None:
         return None

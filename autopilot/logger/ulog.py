@@ -67,6 +67,7 @@ class Field(NamedTuple):
 
     @property
     def text(self) -> str:
+        """The field in PX4's notation: ``float[4] q``, ``uint64_t timestamp``."""
         return f"{self.type}[{self.count}] {self.name}" if self.count else f"{self.type} {self.name}"
 
     @property
@@ -103,10 +104,13 @@ class Format(NamedTuple):
 
     @property
     def text(self) -> str:
+        """The format message's text: ``name:type field;type field;...``."""
         return f"{self.name}:" + "".join(f"{f.text};" for f in self.fields)
 
     @property
     def struct(self) -> struct.Struct:
+        """The little-endian :class:`struct.Struct` that packs one sample (timestamp first, arrays and nested
+        messages inline)."""
         return struct.Struct("<" + self.codes)
 
     @property
@@ -168,6 +172,8 @@ def flag_bits() -> bytes:
 
 
 def format_message(fmt: Format) -> bytes:
+    """The ``F`` (format definition) message of ``fmt``, checked first (ValueError if a reader would refuse
+    it)."""
     fmt.check()
     return message(FORMAT, fmt.text.encode("ascii"))
 
@@ -216,6 +222,7 @@ def sync() -> bytes:
 
 
 def dropout(duration_ms: int) -> bytes:
+    """A dropout message (``O``): ``duration_ms`` of data lost, clipped to [0, 65535] ms."""
     return message(DROPOUT, struct.pack("<H", min(max(int(duration_ms), 0), 0xFFFF)))
 
 
