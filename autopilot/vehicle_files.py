@@ -104,6 +104,8 @@ class VehicleFiles:
 
     # -- FileSystem -----------------------------------------------------------------------------
     def list(self, path: tuple[str, ...]) -> list[Entry]:
+        """The root's mounts, or a directory's regular files (with sizes) and directories, sorted; symbolic
+        links and other kinds are not listed, at most :data:`MAX_LIST_ENTRIES` looked at."""
         if not path:
             return [entry for mount in self.mounts.values() if (entry := self._mount_entry(mount))]
         mount, target = self._resolve(path)
@@ -135,6 +137,8 @@ class VehicleFiles:
             return None  # a parameter file not saved yet
 
     def open(self, path: tuple[str, ...], mode: OpenMode) -> tuple[int, int]:
+        """Open a regular file without following a symbolic link: read-only anywhere, for writing only below a
+        writable mount and never the log being written; the descriptor and the size."""
         target = self._resolve(path)[1] if mode is OpenMode.READ else self._writable(path)
         fd = os.open(target, _OPEN_FLAGS[mode] | _NOFOLLOW, 0o644)
         try:
@@ -147,37 +151,48 @@ class VehicleFiles:
         return fd, info.st_size
 
     def read(self, handle: int, offset: int, count: int) -> bytes:
+        """``os.pread`` of the descriptor: up to ``count`` bytes from ``offset``."""
         return os.pread(handle, count, offset)
 
     def write(self, handle: int, offset: int, data: bytes) -> int:
+        """``os.pwrite`` of ``data`` at ``offset``; the count written."""
         return os.pwrite(handle, data, offset)
 
     def close(self, handle: int) -> None:
+        """Close the descriptor."""
         os.close(handle)
 
     def identity(self, handle: int) -> tuple:
+        """The open file's device, inode, modification time (ns) and size: a changed file gets a new CRC."""
         info = os.fstat(handle)
         return (info.st_dev, info.st_ino, info.st_mtime_ns, info.st_size)
 
     def remove_file(self, path: tuple[str, ...]) -> None:
+        """Delete a file below a writable mount (a directory: IsADirectoryError; the log being written:
+        FileProtected)."""
         target = self._writable(path)
         if os.path.isdir(target):
             raise IsADirectoryError(f"a directory: /{'/'.join(path)}")
         os.unlink(target)
 
     def create_directory(self, path: tuple[str, ...]) -> None:
+        """Create a directory below a writable mount (mode 0755)."""
         os.mkdir(self._writable(path), 0o755)
 
     def remove_directory(self, path: tuple[str, ...]) -> None:
+        """Delete an empty directory below a writable mount, unless it holds the log being written."""
         os.rmdir(self._writable(path, whole_tree=True))
 
     def rename(self, old: tuple[str, ...], new: tuple[str, ...]) -> None:
+        """Rename within one writable mount; neither name may be or hold the log being written."""
         source, target = self._writable(old, whole_tree=True), self._writable(new, whole_tree=True)
         if old[0] != new[0]:
             raise FtpError(ERR_FILE_PROTECTED, why="a rename stays within its mount")
         os.rename(source, target)
 
     def truncate(self, path: tuple[str, ...], length: int) -> None:
+        """Cut or extend a regular file below a writable mount to ``length`` bytes (without following a
+        symbolic link)."""
         fd = os.open(self._writable(path), os.O_WRONLY | _NOFOLLOW)
         try:
             if not stat.S_ISREG(os.fstat(fd).st_mode):

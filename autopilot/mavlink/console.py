@@ -77,6 +77,9 @@ class ConsoleContext:
 
 
 class Console:
+    """PX4's shell commands on a line of text (module docstring): :meth:`run` gives a line's output, every
+    command acting through the vehicle's own paths (:class:`ConsoleContext`)."""
+
     def __init__(self, context: ConsoleContext) -> None:
         self.vehicle = context
         self.commands: dict[str, tuple[Callable[[list[str]], str], str]] = {

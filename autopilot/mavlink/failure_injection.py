@@ -145,5 +145,7 @@ class FailureInjection:
         self.dropped[unit] = self.dropped.get(unit, 0) + 1
 
     def info(self) -> dict:
+        """The counters for ``quadsitl/<N>/autopilot/info``: whether SYS_FAILURE_EN allows injection, the
+        active failures (PX4's unit and type names) and the messages the links' failures dropped."""
         return {"enabled": self.params["SYS_FAILURE_EN"] == 1.0, "active": dict(self.active),
                 "dropped": dict(self.dropped)}  # fmt: skip

@@ -125,61 +125,82 @@ class FileSystem(Protocol):
     """The files FTP serves, named by path components below its root (``("log", "x.ulg")``;
     ``()`` is the root). Refusals raise :class:`FtpError`, the system's failures ``OSError``."""
 
-    def list(self, path: tuple[str, ...]) -> list[Entry]: ...
+    def list(self, path: tuple[str, ...]) -> list[Entry]:
+        """The entries of directory ``path`` (``()``: the root), files with their size in bytes."""
 
-    def open(self, path: tuple[str, ...], mode: OpenMode) -> tuple[object, int]: ...
+    def open(self, path: tuple[str, ...], mode: OpenMode) -> tuple[object, int]:
+        """Open file ``path`` in ``mode``: a handle and the file's size (bytes) when opened."""
 
-    def read(self, handle: object, offset: int, count: int) -> bytes: ...
+    def read(self, handle: object, offset: int, count: int) -> bytes:
+        """Up to ``count`` bytes of the open file from ``offset`` (fewer at its end, ``b""`` past it)."""
 
-    def write(self, handle: object, offset: int, data: bytes) -> int: ...
+    def write(self, handle: object, offset: int, data: bytes) -> int:
+        """Write ``data`` at ``offset`` of the open file; how many bytes were written."""
 
-    def close(self, handle: object) -> None: ...
+    def close(self, handle: object) -> None:
+        """Close the handle (the session ended)."""
 
-    def identity(self, handle: object) -> tuple: ...
+    def identity(self, handle: object) -> tuple:
+        """What identifies the open file's content (device, inode, modification time, size): the key under
+        which the server caches its CRC-32."""
 
-    def remove_file(self, path: tuple[str, ...]) -> None: ...
+    def remove_file(self, path: tuple[str, ...]) -> None:
+        """Delete file ``path`` (RemoveFile)."""
 
-    def create_directory(self, path: tuple[str, ...]) -> None: ...
+    def create_directory(self, path: tuple[str, ...]) -> None:
+        """Create directory ``path`` (CreateDirectory)."""
 
-    def remove_directory(self, path: tuple[str, ...]) -> None: ...
+    def remove_directory(self, path: tuple[str, ...]) -> None:
+        """Delete the empty directory ``path`` (RemoveDirectory)."""
 
-    def rename(self, old: tuple[str, ...], new: tuple[str, ...]) -> None: ...
+    def rename(self, old: tuple[str, ...], new: tuple[str, ...]) -> None:
+        """Rename ``old`` to ``new`` (Rename)."""
 
-    def truncate(self, path: tuple[str, ...], length: int) -> None: ...
+    def truncate(self, path: tuple[str, ...], length: int) -> None:
+        """Cut or extend file ``path`` to ``length`` bytes (TruncateFile)."""
 
 
 class NoFiles:
     """A vehicle with nothing to serve: the root lists empty, every name is FileNotFound."""
 
     def list(self, path: tuple[str, ...]) -> list[Entry]:
+        """The root lists empty; any other path is FileNotFound."""
         if path:
             raise FtpError(ERR_FILE_NOT_FOUND)
         return []
 
     def open(self, path: tuple[str, ...], mode: OpenMode) -> tuple[object, int]:
+        """Refused: FileNotFound (there is nothing to open)."""
         raise FtpError(ERR_FILE_NOT_FOUND)
 
     def read(self, handle: object, offset: int, count: int) -> bytes:
+        """Nothing: no handle is ever open."""
         return b""
 
     def write(self, handle: object, offset: int, data: bytes) -> int:
+        """Nothing written: no handle is ever open."""
         return 0
 
     def close(self, handle: object) -> None:
+        """Nothing to close."""
         pass
 
     def identity(self, handle: object) -> tuple:
+        """An empty identity: no handle is ever open."""
         return ()
 
     def remove_file(self, path: tuple[str, ...]) -> None:
+        """Refused: FileNotFound (also as ``create_directory`` and ``remove_directory``)."""
         raise FtpError(ERR_FILE_NOT_FOUND)
 
     create_directory = remove_directory = remove_file
 
     def rename(self, old: tuple[str, ...], new: tuple[str, ...]) -> None:
+        """Refused: FileNotFound."""
         raise FtpError(ERR_FILE_NOT_FOUND)
 
     def truncate(self, path: tuple[str, ...], length: int) -> None:
+        """Refused: FileNotFound."""
         raise FtpError(ERR_FILE_NOT_FOUND)
 
 
@@ -261,6 +282,9 @@ class _Station:
 
 
 class FtpServer:
+    """PX4's ``mavlink_ftp`` over ``files`` (module docstring): a session, a paced burst and the last answer
+    per station on each link; counters for the autopilot's info."""
+
     def __init__(
         self,
         files: FileSystem,
@@ -302,14 +326,19 @@ class FtpServer:
         }
 
     def register(self, dispatcher) -> None:
+        """Put :meth:`on_message` in the dispatcher's table for FILE_TRANSFER_PROTOCOL."""
         dispatcher[m.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL] = self.on_message
 
     def info(self) -> dict:
+        """The counters for ``quadsitl/<N>/autopilot/info``: requests by opcode, NAKs by error, bytes written
+        and files and directories created."""
         return {"requests": dict(self.requests), "refused": dict(self.refused),
                 "written_bytes": self.written_bytes, "created": self.created}  # fmt: skip
 
     # -- requests -------------------------------------------------------------------------------
     def on_message(self, msg, link: GcsLink, address: Address) -> None:
+        """Answer one FILE_TRANSFER_PROTOCOL from ``address`` on ``link``: an ACK or a NAK (a resent request
+        gets its answer again), or a burst started; requests for another system or component are ignored."""
         if msg.target_system not in (0, self.system_id) or msg.target_component not in (
             0, wire.AUTOPILOT_COMPONENT_ID):  # fmt: skip
             return

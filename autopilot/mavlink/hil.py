@@ -417,6 +417,8 @@ def state_from_odometry_fields(
 
 
 def state_from_hil_state(msg, home: tuple[float, float, float]) -> StateEstimate:
+    """The truth in a HIL_STATE_QUATERNION, in the paper's frames: its geodetic position made local against
+    ``home`` (lat, lon in degrees, alt in m), velocity and attitude from NED/FRD."""
     q, euler, euler_rates = attitude_from_fields(
         tuple(msg.attitude_quaternion), (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
     )
@@ -441,6 +443,9 @@ class ActuatorEncoder:
         self._zeros = [0.0] * 16
 
     def encode(self, time_usec: int, controls: tuple[float, ...], armed: bool) -> bytes:
+        """The HIL_ACTUATOR_CONTROLS frame of one lockstep answer: ``controls`` (the first four, zero while
+        disarmed), the armed flag in ``mode`` and the lockstep (and wrench) flags, on the encoder's
+        sequence."""
         v = self._fast.values
         v[self._time] = time_usec
         v[self._mode] = _CUSTOM | (_ARMED if armed else 0)
@@ -466,6 +471,7 @@ class SimulatorRequests:
 
     @property
     def full(self) -> bool:
+        """True when :data:`MAX_PENDING` requests wait: a new one is refused (TEMPORARILY_REJECTED)."""
         return len(self.pending) >= self.MAX_PENDING
 
     def command(self, command: int, *params: float) -> None:

@@ -71,6 +71,9 @@ class SendAllowance:
 
 
 class GcsLink:
+    """One ground-station link (UDP): its peers (who last spoke, and the default remote), its MAVLink parser,
+    its stream table, the messages queued for it in the shared outbox."""
+
     def __init__(
         self, index: int, default_remote: Address | None, outbox: list[Outgoing], frame_period_s: float = 0.0
     ) -> None:
@@ -96,6 +99,7 @@ class GcsLink:
             append(Outgoing(index, address, data))
 
     def send_to(self, data: bytes, address: Address) -> None:
+        """Queue ``data`` (a packed MAVLink frame) for one address of the link only."""
         self._outbox.append(Outgoing(self.index, address, data))
 
     def listen(self, address: Address) -> None:

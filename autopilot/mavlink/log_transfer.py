@@ -66,23 +66,29 @@ class LogEntry(NamedTuple):
 class LogStore(Protocol):
     """The logs on the vehicle (oldest first), their bytes, erasing them."""
 
-    def entries(self) -> list[LogEntry]: ...
+    def entries(self) -> list[LogEntry]:
+        """The logs now, oldest first, each with its key, size (bytes) and start time."""
 
-    def read(self, key: str, offset: int, count: int) -> bytes: ...
+    def read(self, key: str, offset: int, count: int) -> bytes:
+        """Up to ``count`` bytes of log ``key`` from ``offset`` (fewer at its end; ``b""`` if gone)."""
 
-    def erase(self) -> int: ...
+    def erase(self) -> int:
+        """Delete every log but the one being written; how many were deleted."""
 
 
 class NoLogs:
     """A vehicle that keeps no logs (logging off): every listing is empty."""
 
     def entries(self) -> list[LogEntry]:
+        """No logs: an empty list."""
         return []
 
     def read(self, key: str, offset: int, count: int) -> bytes:
+        """Nothing: there are no logs."""
         return b""
 
     def erase(self) -> int:
+        """Nothing erased: 0."""
         return 0
 
 
@@ -105,6 +111,9 @@ class _Station:
 
 
 class LogTransfer:
+    """PX4's ``mavlink_log_handler`` over ``store`` (module docstring): a listing and a transfer per station
+    on each link, streamed within the links' budgets by :meth:`pump`."""
+
     def __init__(
         self,
         store: LogStore,
@@ -130,6 +139,8 @@ class LogTransfer:
         self._refused_at: dict[str, float] = {}
 
     def register(self, dispatcher) -> None:
+        """Put its handlers in the dispatcher's table: LOG_REQUEST_LIST, LOG_REQUEST_DATA, LOG_REQUEST_END,
+        LOG_ERASE."""
         dispatcher[m.MAVLINK_MSG_ID_LOG_REQUEST_LIST] = self._on_request_list
         dispatcher[m.MAVLINK_MSG_ID_LOG_REQUEST_DATA] = self._on_request_data
         dispatcher[m.MAVLINK_MSG_ID_LOG_REQUEST_END] = self._on_request_end

@@ -146,6 +146,8 @@ class ParamService:
 
     # -- encoding ------------------------------------------------------------------------------------
     def value_frame(self, name: str) -> bytes:
+        """The packed PARAM_VALUE of ``name``: its current value (INT32 bytewise), type, index and the
+        parameter count."""
         spec = self.store.specs[name]
         return pack_param_value(
             self.encoder, name, self.store[name], spec.kind, len(self.store), self.store.index(name)
@@ -156,6 +158,8 @@ class ParamService:
 
     # -- messages --------------------------------------------------------------------------------------
     def on_message(self, msg, link, address) -> None:
+        """Answer PARAM_REQUEST_LIST (a paced stream to the sender), PARAM_REQUEST_READ and PARAM_SET
+        addressed to this vehicle (module docstring)."""
         if not self._for_us(msg):
             return
         kind = msg.get_msgId()
@@ -255,6 +259,7 @@ class ParamService:
 
     @property
     def streaming(self) -> bool:
+        """True while a PARAM_REQUEST_LIST stream still has values to send."""
         return bool(self._streams)
 
     # -- storage ------------------------------------------------------------------------------------------
@@ -290,6 +295,8 @@ class ParamService:
         return None
 
     def reset_to_defaults(self) -> None:
+        """Every writable parameter back to its default (MAV_CMD_PREFLIGHT_STORAGE param1 2): the file saved
+        once, each changed value announced as PARAM_VALUE on every link."""
         before = dict(self.store.values)
         self._autosave = False
         try:

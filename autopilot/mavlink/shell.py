@@ -61,6 +61,9 @@ class _Terminal:
 
 
 class MavlinkShell:
+    """PX4's MAVLink shell (module docstring) over a :class:`~.console.Console`: a terminal per station on
+    each link, its output paced as SERIAL_CONTROL replies."""
+
     def __init__(
         self,
         console: Console,
@@ -82,10 +85,13 @@ class MavlinkShell:
         self._waiting = False  # output may be waiting: pump() has work
 
     def register(self, dispatcher) -> None:
+        """Put :meth:`on_message` in the dispatcher's table for SERIAL_CONTROL."""
         dispatcher[m.MAVLINK_MSG_ID_SERIAL_CONTROL] = self.on_message
 
     # -- input ----------------------------------------------------------------------------------
     def on_message(self, msg, link: GcsLink, address: Address) -> None:
+        """One SERIAL_CONTROL: a shell message for this vehicle is typed into its station's terminal (opened,
+        with the greeting and prompt, on its first message); any other is ignored."""
         if msg.device != m.SERIAL_CONTROL_DEV_SHELL or msg.flags & m.SERIAL_CONTROL_FLAG_REPLY:
             return
         if msg.count > DATA_LEN or not self._for_us(msg):

@@ -309,6 +309,8 @@ class Signing:
 
     @property
     def enabled(self) -> bool:
+        """True while a key is set: every frame sent on the GCS links is signed, and every frame received must
+        be validly signed (but those of :data:`ACCEPT_UNSIGNED`)."""
         return self.key is not None
 
     @property

@@ -110,11 +110,14 @@ class VehicleStatus:
 
     @property
     def time_boot_ms(self) -> int:
+        """The frame's time since boot in ms, as a uint32 (wraps after 49.7 days, as on PX4)."""
         return (self.time_usec // 1000) & 0xFFFFFFFF  # uint32: wraps after 49.7 days, as on PX4
 
 
 # -- message builders --------------------------------------------------------------------------------
 def heartbeat(s: VehicleStatus):
+    """HEARTBEAT as PX4 sends it: quadrotor, MAV_AUTOPILOT_PX4, the custom mode, armed flag; MAV_STATE_STANDBY
+    or ACTIVE, CRITICAL in a failsafe, FLIGHT_TERMINATION once terminated."""
     base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (m.MAV_MODE_FLAG_SAFETY_ARMED if s.armed else 0)
     state = m.MAV_STATE_ACTIVE if s.armed else m.MAV_STATE_STANDBY
     if s.armed and s.failsafe:  # PX4: vehicle_status.failsafe
@@ -127,6 +130,8 @@ def heartbeat(s: VehicleStatus):
 
 
 def sys_status(s: VehicleStatus):
+    """SYS_STATUS: the sensors and controls present, enabled and healthy (from the failsafe flags and the
+    estimator, PX4's rules), the pre-arm bit, geofence and battery (MAVLink's unknown without one)."""
     health = SENSORS_PRESENT if s.armable or s.armed else SENSORS_PRESENT & ~m.MAV_SYS_STATUS_PREARM_CHECK
     if s.state is None:
         health &= ~(m.MAV_SYS_STATUS_SENSOR_GPS | m.MAV_SYS_STATUS_AHRS)
@@ -227,6 +232,7 @@ def _sensor_bits(flags: FailsafeFlags, present: bool) -> int:
 
 
 def extended_sys_state(s: VehicleStatus):
+    """EXTENDED_SYS_STATE: no VTOL state, the commander's MAV_LANDED_STATE."""
     return m.MAVLink_extended_sys_state_message(m.MAV_VTOL_STATE_UNDEFINED, s.landed_state)
 
 
@@ -247,18 +253,21 @@ def _body_rates_frd(st: StateEstimate) -> Vector3:
 
 
 def attitude(s: VehicleStatus):
+    """ATTITUDE: roll, pitch, yaw (rad, NED) and the body rates (rad/s, FRD) of the state flown on."""
     _, _, eta = _ned_state(s)
     p, q, r = _body_rates_frd(s.state)
     return m.MAVLink_attitude_message(s.time_boot_ms, eta[0], eta[1], eta[2], p, q, r)
 
 
 def attitude_quaternion(s: VehicleStatus):
+    """ATTITUDE_QUATERNION: the NED/FRD attitude quaternion and the body rates (rad/s, FRD)."""
     q = frames.quaternion_to_ned(quaternion_from_euler(*s.state.euler_rad))
     p, qq, r = _body_rates_frd(s.state)
     return m.MAVLink_attitude_quaternion_message(s.time_boot_ms, *q, p, qq, r, [0.0, 0.0, 0.0, 0.0])
 
 
 def local_position_ned(s: VehicleStatus):
+    """LOCAL_POSITION_NED: position (m) and velocity (m/s) in NED from the local origin."""
     pos, vel, _ = _ned_state(s)
     return m.MAVLink_local_position_ned_message(s.time_boot_ms, *pos, *vel)
 
@@ -273,6 +282,8 @@ def _heading_cdeg(psi: float) -> int:
 
 
 def global_position_int(s: VehicleStatus):
+    """GLOBAL_POSITION_INT: latitude, longitude (degE7), altitude AMSL and above home (mm), NED velocity
+    (cm/s) and heading (cdeg)."""
     pos, vel, _ = _ned_state(s)
     lat, lon, alt = _geodetic(s, s.state.position_m)
     home_alt = _geodetic(s, s.home_local)[2]
@@ -315,6 +326,8 @@ def gps_raw_int(s: VehicleStatus):
 
 
 def home_position(s: VehicleStatus):
+    """HOME_POSITION: home geodetic (degE7, mm) and in the local NED frame (m), identity approach
+    quaternion."""
     lat, lon, alt = _geodetic(s, s.home_local)
     x, y, z = frames.vector_to_ned(s.home_local)
     return m.MAVLink_home_position_message(
@@ -333,6 +346,7 @@ def home_position(s: VehicleStatus):
 
 
 def attitude_target(s: VehicleStatus):
+    """ATTITUDE_TARGET: eta_d as the NED/FRD quaternion (body rates ignored) and the normalised thrust."""
     q = frames.quaternion_to_ned(quaternion_from_euler(*s.euler_ref))
     ignore_rates = 7  # body roll/pitch/yaw rates not set: the target is an attitude
     return m.MAVLink_attitude_target_message(
@@ -341,6 +355,8 @@ def attitude_target(s: VehicleStatus):
 
 
 def position_target_local_ned(s: VehicleStatus):
+    """POSITION_TARGET_LOCAL_NED: the reference (position, velocity, acceleration, yaw, yaw rate) in NED; None
+    without a reference."""
     ref = s.reference
     if ref is None:
         return None
@@ -372,15 +388,20 @@ def _pwm(s: VehicleStatus) -> list[int]:
 
 
 def servo_output_raw(s: VehicleStatus):
+    """SERVO_OUTPUT_RAW: the actuator controls as PWM microseconds (rotors 1000-2000, wrench torques 1500 +-
+    500; disarmed: 900 and 1500)."""
     return m.MAVLink_servo_output_raw_message(s.time_usec & 0xFFFFFFFF, 0, *_pwm(s))
 
 
 def actuator_output_status(s: VehicleStatus):
+    """ACTUATOR_OUTPUT_STATUS: the four normalised actuator controls (zero while disarmed)."""
     values = list(s.controls if s.armed else (0.0, 0.0, 0.0, 0.0)) + [0.0] * 28
     return m.MAVLink_actuator_output_status_message(s.time_usec, 4, values)
 
 
 def vfr_hud(s: VehicleStatus):
+    """VFR_HUD: ground speed as airspeed (no wind model), heading (deg), throttle (%), altitude above the
+    origin and climb rate (m/s, up)."""
     _, vel, _ = _ned_state(s)
     speed = math.hypot(vel[0], vel[1])
     heading = _heading_cdeg(s.state.euler_rad[2]) // 100
@@ -585,6 +606,8 @@ class StreamTable:
             self.set_rate(msg_id, hz)
 
     def set_rate(self, msg_id: int, hz: float, now: float = 0.0) -> None:
+        """Stream ``msg_id`` at ``hz`` from ``now`` (first due at once), no faster than one per frame; 0 or
+        less stops it."""
         if hz <= 0.0:
             self.interval_s.pop(msg_id, None)
             self.next_due.pop(msg_id, None)

@@ -61,6 +61,8 @@ class Param:
     nan_ok: bool = False  # NaN allowed: "unset" (MAVSDK sends it for parameters it does not use)
 
     def problem(self, value: float) -> str | None:
+        """Why ``value`` is not allowed for this parameter (NaN where not allowed, not one of ``values``, not
+        an integer, out of [lo, hi]), or None."""
         if math.isnan(value):
             return None if self.nan_ok else f"param{self.number} ({self.what}) is NaN"
         if self.values:
@@ -209,6 +211,8 @@ class Slots:
 
     @property
     def unused(self) -> tuple[int, ...]:
+        """The slots (1-7) the command does not use: they must hold 0 or NaN (INT32_MAX for COMMAND_INT's x,
+        y)."""
         return tuple(slot for slot in range(1, 8) if slot not in self.used)
 
     def problem(self, params: Sequence[float], integer_xy: bool) -> tuple[int, str] | None:

@@ -285,8 +285,10 @@ class ExternalVision:
             self.announcements.append(text)
 
     def take_announcements(self) -> list[str]:
+        """The STATUSTEXTs announced since the last call (why poses were refused), emptied."""
         texts, self.announcements = self.announcements, []
         return texts
 
     def info(self) -> dict:
+        """The counters for ``quadsitl/<N>/autopilot/info``: poses accepted, refusals by reason."""
         return {"accepted": self.accepted, "refused": dict(self.refused)}
