@@ -371,6 +371,7 @@ class MissionExecutor:
 
     @property
     def count(self) -> int:
+        """The number of items in the mission."""
         return len(self.items)
 
     def _note(self, severity: int, text: str) -> None:
@@ -443,6 +444,8 @@ class MissionExecutor:
 
     @property
     def awaiting_landing(self) -> bool:
+        """True after the mission's LAND item handed the landing to the commander and until touchdown
+        (:meth:`landed`) or a pause."""
         return self._awaiting_landing
 
     @property

@@ -237,6 +237,7 @@ class MissionItem:
 
     @property
     def autocontinue(self) -> bool:
+        """The item's ``autocontinue`` flag: go on to the next item once this one is reached."""
         return bool(self.wire.autocontinue)
 
 

@@ -135,6 +135,8 @@ def fence_notes(items: Sequence[MissionItem]) -> list[str]:
 
 
 def parse_rally_item(wire: WireItem, origin: tuple[float, float, float]) -> MissionItem:
+    """A rally plan's item decoded and checked (NAV_RALLY_POINT, global frame, within range of home);
+    ItemRejected with its MAV_MISSION_RESULT otherwise."""
     seq = wire.seq
     if wire.command != CMD_RALLY_POINT:
         raise ItemRejected(m.MAV_MISSION_UNSUPPORTED, f"rally item {seq}: command {wire.command} unsupported")
@@ -258,6 +260,7 @@ class RallyPoint:
     relative: bool
 
     def z(self, home: Vector3) -> float:
+        """The point's height in the paper frame (m, up), a relative altitude taken above ``home``."""
         return home[2] + self.altitude_m if self.relative else self.altitude_m
 
 

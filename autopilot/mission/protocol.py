@@ -93,6 +93,7 @@ class Mission:
 
     @property
     def count(self) -> int:
+        """The number of items in the plan."""
         return len(self.items)
 
 
@@ -217,6 +218,7 @@ class MissionProtocol:
 
     @property
     def mission(self) -> Mission:
+        """The stored mission plan (MAV_MISSION_TYPE_MISSION)."""
         return self.plans[MISSION]
 
     @mission.setter
@@ -234,6 +236,7 @@ class MissionProtocol:
 
     @property
     def busy(self) -> bool:
+        """True while an upload or a download is in progress."""
         return self.state != TransferState.IDLE
 
     # -- upload ---------------------------------------------------------------------------------

@@ -44,6 +44,9 @@ MISSION_MODE_ACTIVE, MISSION_MODE_SUSPENDED = 1, 2  # MISSION_CURRENT.mission_mo
 
 
 class MissionService:
+    """The mission service (module docstring): the mission protocol on the GCS links, accepted plans handed to
+    the commander, and MISSION_CURRENT and MISSION_ITEM_REACHED sent."""
+
     def __init__(
         self,
         commander: Commander,
@@ -86,6 +89,8 @@ class MissionService:
 
     # -- messages -------------------------------------------------------------------------------------
     def on_message(self, msg, link, address) -> None:
+        """One mission-protocol message: handled with the wall clock, its replies sent to the sender, an
+        accepted upload or clear applied to the commander."""
         if (
             msg.get_msgId() == m.MAVLINK_MSG_ID_MISSION_COUNT
             and msg.count > 0
