@@ -49,6 +49,7 @@ class ParamSpec:
         return None
 
     def range_text(self) -> str:
+        """The allowed range as text, ``[lo, hi] unit``, for refusals and listings."""
         unit = f" {self.unit}" if self.unit else ""
         return f"[{self.lo:g}, {self.hi:g}]{unit}"
 
@@ -78,15 +79,18 @@ class ParameterStore:
         return self.values[name]
 
     def get(self, name: str, default: float) -> float:
+        """The value of ``name``, or ``default`` when the store has no such parameter."""
         return self.values.get(name, default)
 
     def __len__(self) -> int:
         return len(self.specs)
 
     def names(self) -> list[str]:
+        """Every parameter's name in declaration order (the MAVLink ``param_index`` order)."""
         return list(self.specs)
 
     def index(self, name: str) -> int:
+        """The MAVLink ``param_index`` of ``name`` (KeyError if unknown)."""
         return self._index[name]
 
     def on_change(self, listener: Callable[[str, float], None]) -> None:
@@ -125,4 +129,5 @@ class ParameterStore:
         return None
 
     def writable(self) -> list[str]:
+        """The names of the parameters a ground station may set (all but the read-only ones)."""
         return [n for n, s in self.specs.items() if not s.read_only]
