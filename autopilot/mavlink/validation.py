@@ -167,7 +167,7 @@ class SlotOverride(NamedTuple):
 
 
 # Where this vehicle deliberately differs from pymavlink's common.xml, and why. Each entry must change
-# what the definition says (tests/autopilot/test_param_slots.py), so a pymavlink that catches up
+# what the definition says (tests/autopilot/mavlink/test_validation_slots.py), so a pymavlink that catches up
 # shows which to remove.
 SLOT_OVERRIDES: tuple[SlotOverride, ...] = (
     SlotOverride(

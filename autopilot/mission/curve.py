@@ -173,7 +173,7 @@ class _Pieces:
     spline's own derivatives there), evaluated with Horner's scheme in plain floats: p, p', p'' for
     the four channels in one pass. Why: the control loop samples the curve every step, and three
     scipy calls (p, p', p'') cost ~25 µs of a ~100 µs lockstep frame; this costs a few. Equal to
-    the spline to rounding (tests/autopilot/test_mission_curve.py)."""
+    the spline to rounding (tests/autopilot/mission/test_mission_curve.py)."""
 
     def __init__(self, spline) -> None:
         if hasattr(spline, "c") and hasattr(spline, "x"):  # CubicSpline: a PPoly already

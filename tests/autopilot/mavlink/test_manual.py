@@ -1,7 +1,7 @@
 """MANUAL_CONTROL on the wire: POSCTL flown from the sticks as PX4's position mode, and the sticks'
 bad input (out of range, not an integer, a flood, a manual mode or an arm without a stream),
 refused with a reason and never a crash. In simulation time, the whole stack in-process, the
-messages as a ground station sends them. The other manual modes: test_manual_modes.py; the
+messages as a ground station sends them. The other manual modes: tests/autopilot/guidance/test_manual.py; the
 override and the loss of the stream: test_rc_override_loss.py."""
 
 from __future__ import annotations

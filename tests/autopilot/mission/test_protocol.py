@@ -207,7 +207,7 @@ def test_fence_and_rally_plans_start_empty(proto):
     assert out.replies[0].mission_type == m.MAV_MISSION_TYPE_FENCE
     out = proto.handle(wire(m.MAVLink_mission_count_message(SYS, COMP, 0, m.MAV_MISSION_TYPE_RALLY)), 0.0)
     assert acks(out) == [m.MAV_MISSION_ACCEPTED] and out.replies[0].mission_type == m.MAV_MISSION_TYPE_RALLY
-    # (uploads, downloads and clears of both: test_mission_plans.py)
+    # (uploads, downloads and clears of both: test_plans.py)
 
 
 def test_set_current_in_and_out_of_range(proto):
