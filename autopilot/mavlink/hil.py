@@ -471,7 +471,8 @@ class SimulatorRequests:
 
     @property
     def full(self) -> bool:
-        """True when :data:`MAX_PENDING` requests wait: a new one is refused (TEMPORARILY_REJECTED)."""
+        """True when :data:`MAX_PENDING` requests wait: the caller refuses a new one (a failure injection
+        is answered TEMPORARILY_REJECTED)."""
         return len(self.pending) >= self.MAX_PENDING
 
     def command(self, command: int, *params: float) -> None:

@@ -388,8 +388,8 @@ def _pwm(s: VehicleStatus) -> list[int]:
 
 
 def servo_output_raw(s: VehicleStatus):
-    """SERVO_OUTPUT_RAW: the actuator controls as PWM microseconds (rotors 1000-2000, wrench torques 1500 +-
-    500; disarmed: 900 and 1500)."""
+    """SERVO_OUTPUT_RAW: the actuator controls as PWM microseconds (rotors 1000-2000, wrench torques
+    1500 +- 500; disarmed: 900 and 1500)."""
     return m.MAVLink_servo_output_raw_message(s.time_usec & 0xFFFFFFFF, 0, *_pwm(s))
 
 
