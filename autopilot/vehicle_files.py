@@ -137,8 +137,8 @@ class VehicleFiles:
             return None  # a parameter file not saved yet
 
     def open(self, path: tuple[str, ...], mode: OpenMode) -> tuple[int, int]:
-        """Open a regular file without following a symbolic link: read-only anywhere, for writing only below a
-        writable mount and never the log being written; the descriptor and the size."""
+        """Open a regular file without following a symbolic link: for reading below any mount, for writing
+        only below a writable one and never the log being written; the descriptor and the size."""
         target = self._resolve(path)[1] if mode is OpenMode.READ else self._writable(path)
         fd = os.open(target, _OPEN_FLAGS[mode] | _NOFOLLOW, 0o644)
         try:

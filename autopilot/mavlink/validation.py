@@ -211,8 +211,8 @@ class Slots:
 
     @property
     def unused(self) -> tuple[int, ...]:
-        """The slots (1-7) the command does not use: they must hold 0 or NaN (INT32_MAX for COMMAND_INT's x,
-        y)."""
+        """The slots (1-7) the command does not use: each must hold 0 or NaN (0 or INT32_MAX in the int32
+        x and y of COMMAND_INT and MISSION_ITEM_INT)."""
         return tuple(slot for slot in range(1, 8) if slot not in self.used)
 
     def problem(self, params: Sequence[float], integer_xy: bool) -> tuple[int, str] | None:
