@@ -3,10 +3,11 @@
 numba compiles each kernel entry (:mod:`quadcommon.kernel`) the first time a process needs it and
 caches it on disk, so after an install, an upgrade or an edited equation the first simulator,
 autopilot or campaign of each controller spends seconds compiling (~3-10 s per entry). Here the
-entries a flight needs are compiled up front, one process per core: the plant and the frame
-encoder's float fields, the sensor models, the estimator, the cascade of each controller and the
-campaign engine's flight of each controller. Already cached entries cost a fraction of a second
-each. ``make test`` runs it before the suite, so no test's process waits on a compilation.
+entries a flight needs are compiled up front, one process per core: the plant (coupled and
+nominal) and the frame encoder's float fields, the sensor models, the estimator, the cascade of
+each controller and the campaign engine's flight of each controller. Already cached entries cost
+a fraction of a second each. ``make test`` runs it before the suite, so no test's process waits
+on a compilation.
 """
 
 from __future__ import annotations
@@ -32,11 +33,16 @@ def compile_target(target: str) -> tuple[str, float]:
     start = time.perf_counter()
     kind, _, name = target.partition(":")
     if kind == "plant":
+        from dataclasses import replace
+
         from quadcommon.config import load_vehicle
+        from simulator.dynamics.nominal_plant import NominalPlant
         from simulator.dynamics.plant import Plant
         from simulator.mavlink.hil import frame_float_fields_entry
 
-        Plant(load_vehicle("paper_quad"), 0.001)
+        vehicle = load_vehicle("paper_quad")
+        Plant(vehicle, 0.001)
+        NominalPlant(replace(vehicle, plant=replace(vehicle.plant, model="nominal")), 0.001)
         frame_float_fields_entry()  # the frame encoder's float fields
     elif kind == "estimator":
         from autopilot.estimation.eskf import ErrorStateEkf
@@ -67,9 +73,10 @@ def entries_of(target: str) -> list[tuple]:
     kind, _, name = target.partition(":")
     if kind == "plant":
         from quadcommon.wire_values import frame_float_fields
+        from simulator.dynamics.nominal_plant import nominal_kernels
         from simulator.dynamics.plant import plant_kernels
 
-        return [*((fn,) for fn in plant_kernels()), (frame_float_fields,)]
+        return [*((fn,) for fn in (*plant_kernels(), *nominal_kernels())), (frame_float_fields,)]
     if kind == "estimator":
         from autopilot.estimation.eskf import filter_kernels
 

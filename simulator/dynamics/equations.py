@@ -12,15 +12,15 @@ to G, body frame), and where O's motion is read out: ``p_O = p_G - R r_G``,
 ``v_O = v_G - R (omega x r_G)``.
 
 Numbers sit in flat float vectors (what numba takes): ``P`` the plant's parameters (layout
-``P_*``, :meth:`~.plant.Plant.parameters`), ``u`` the inputs held over one physics step (layout
-``U_*``); a frame's steps take their inputs as consecutive ``INPUTS.size`` blocks of one vector.
+:data:`PLANT`, :meth:`~.plant.Plant.parameters`), ``u`` the inputs held over one physics step (layout
+:data:`INPUTS`); a frame's steps take their inputs as consecutive ``INPUTS.size`` blocks of one vector.
 ``work`` holds the state (row 0) and the RK4 scratch (rows 1-5).
 
 Actuator faults live in ``P`` too (a flight's own copy): per rotor its effectiveness (thrust and
 reaction torque scaled), and what its speed does (``PLANT.fault_mode``: follows the command, stuck at
 the speed it had, or off: the motor unpowered, the rotor spinning down with its time constant).
 :func:`set_rotor_fault` sets them, at a command (the simulator's failure injection) or at a time
-(:func:`rotor_faults_due` over a table of rows ``RF_*`` sorted by onset: a scenario's or a
+(:func:`rotor_faults_due` over a table of :data:`ROTOR_FAULT` rows sorted by onset: a scenario's or a
 campaign run's faults). On the ideal-wrench vehicle a rotor fails through the allocation's
 equation (:mod:`quadcommon.rotor_geometry`): the commanded wrench is split into the rotors' shares,
 the faults act on the shares, and the shares make the applied wrench (:func:`faulted_wrench`).
@@ -210,7 +210,7 @@ def set_rotor_fault(P, rotor: int, mode: float, effectiveness: float, u) -> None
 
 @kernel
 def rotor_faults_due(P, faults, row: int, t: float, u) -> int:
-    """The rows of the fault table ``faults`` (``RF_*``, sorted by onset) from ``row`` on whose
+    """The rows of the fault table ``faults`` (:data:`ROTOR_FAULT`, sorted by onset) from ``row`` on whose
     onset is at or before ``t``, set (:func:`set_rotor_fault`); returns the next row to wait for."""
     while row < faults.shape[0] and faults[row, ROTOR_FAULT.onset] <= t:
         rotor, mode = int(faults[row, ROTOR_FAULT.rotor]), faults[row, ROTOR_FAULT.mode]
@@ -299,24 +299,33 @@ def derivative(s, out, P, u) -> None:
 
 
 @kernel
-def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
-    """One classical RK4 step of ``s`` (in place) with the inputs ``u`` held, then the quaternion
-    put back on the unit sphere (RK4 drifts off it by O(h^5) per step)."""
+def rk4(derivative_of, s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
+    """One classical RK4 step of ``h`` of ``s`` (in place) under ``ds/dt = derivative_of(s, out, P, u)``
+    (a kernel writing the derivative into ``out``) with the inputs ``u`` held; ``k1`` .. ``k4`` and
+    ``tmp`` are scratch of ``s``'s length. The one integrator of both plants (this one, and the
+    nominal model of :mod:`.nominal_plant`)."""
     n = len(s)
     h2 = 0.5 * h
-    derivative(s, k1, P, u)
+    derivative_of(s, k1, P, u)
     for i in range(n):
         tmp[i] = s[i] + h2 * k1[i]
-    derivative(tmp, k2, P, u)
+    derivative_of(tmp, k2, P, u)
     for i in range(n):
         tmp[i] = s[i] + h2 * k2[i]
-    derivative(tmp, k3, P, u)
+    derivative_of(tmp, k3, P, u)
     for i in range(n):
         tmp[i] = s[i] + h * k3[i]
-    derivative(tmp, k4, P, u)
+    derivative_of(tmp, k4, P, u)
     h6 = h / 6.0
     for i in range(n):
         s[i] = s[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+
+
+@kernel
+def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
+    """One :func:`rk4` step of the coupled plant's :func:`derivative`, then the quaternion put back
+    on the unit sphere (RK4 drifts off it by O(h^5) per step)."""
+    rk4(derivative, s, k1, k2, k3, k4, tmp, P, u, h)
     s[6], s[7], s[8], s[9] = quaternion_normalised((s[6], s[7], s[8], s[9]))
 
 

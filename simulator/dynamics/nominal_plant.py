@@ -2,12 +2,26 @@
 
 The model the controllers are designed on (``plant.model = "nominal"``), for checking them against
 their own assumptions; the simulator's default is the coupled plant of :mod:`.plant`. Same inputs
-and read-outs as that plant under ``actuation = "wrench"``. Pure: no clocks, no I/O.
+and read-outs as that plant under ``actuation = "wrench"``, and the same machinery: the parameters
+and held inputs are the layouts :data:`.equations.PLANT` and :data:`.equations.INPUTS` (of which the
+model reads the mass, gravity, the principal moments of inertia, ground contact, the wrench and the
+disturbances: no centre-of-mass offset, products of inertia, drag or wind), the one integrator is
+:func:`.equations.rk4`, and the equations below are kernels (:mod:`quadcommon.kernel`), compiled
+with numba or run as Python as the coupled plant's are. Pure: no clocks, no I/O.
+
+The state (12 floats): the position ``xi`` and velocity ``xi'`` of the body (world), the ZYX
+Euler angles ``eta = (phi, theta, psi)`` and their rates ``eta'``.
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
+import numpy as np
+
 from quadcommon.config import VehicleConfig
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel
 from quadcommon.rigid_body import (
     body_rates_from_euler_rates,
     coriolis_times,
@@ -20,48 +34,119 @@ from quadcommon.rigid_body import (
     transpose_times,
 )
 
-from .plant import ZERO3, Plant, TruthState, Vector3
+from .equations import INPUTS, PLANT, TruthState, rk4
+from .plant import ZERO3, Plant, PlantEntries, Vector3
+
+# Resting on the ground: at z = 0 and not moving vertically, within this (m, m/s).
+RESTING_TOLERANCE = 1e-9
 
 
-class NominalPlant:
-    """The Section II model, eqs. (1)-(6), integrated in ``(xi, xi_dot, eta, eta_dot)`` by RK4.
+@kernel
+def nominal_derivative(s, out, P, u) -> None:
+    """``out = ds/dt`` with the inputs ``u`` held: eq. (2) for the translation, eq. (4) (the
+    Euler-Lagrange form with its inertia and Coriolis matrices) for the rotation, the body torque
+    entering as ``W_eta^T tau_body``."""
+    m, g = P[PLANT.mass], P[PLANT.gravity]
+    J = PLANT.inertia  # row-major: the principal moments on its diagonal
+    inertia = (P[J], P[J + 4], P[J + 8])
+    phi, theta, psi = s[6], s[7], s[8]
+    eta = (phi, theta, psi)
+    eta_dot = (s[9], s[10], s[11])
+    U1 = u[INPUTS.thrust]
+    f = INPUTS.disturbance_force
+    # eq. (2): m xi'' = R e3 U1 + F_d - m g e3 (R e3: the last column of R)
+    R = rotation_matrix(phi, theta, psi)
+    out[0], out[1], out[2] = s[3], s[4], s[5]
+    out[3] = (R[0][2] * U1 + u[f]) / m
+    out[4] = (R[1][2] * U1 + u[f + 1]) / m
+    out[5] = -g + (R[2][2] * U1 + u[f + 2]) / m
+    # eq. (4): M eta'' + C eta' = tau_eta_a + tau_eta_d
+    t, d = INPUTS.torque, INPUTS.disturbance_torque
+    tau = euler_torque_from_body_torque(phi, theta, (u[t], u[t + 1], u[t + 2]))
+    c = coriolis_times(inertia, eta, eta_dot, eta_dot)
+    rhs = (tau[0] + u[d] - c[0], tau[1] + u[d + 1] - c[1], tau[2] + u[d + 2] - c[2])
+    eta_ddot = solve3(inertia_matrix(inertia, phi, theta), rhs)
+    out[6], out[7], out[8] = eta_dot[0], eta_dot[1], eta_dot[2]
+    out[9], out[10], out[11] = eta_ddot[0], eta_ddot[1], eta_ddot[2]
 
-    Inputs are the same as :class:`Plant` under ``actuation = "wrench"``: thrust and a body
+
+@kernel
+def nominal_physics_steps(work, P, inputs, h: float) -> None:
+    """One :func:`~.equations.rk4` step of ``h`` of ``work[0]`` per ``INPUTS.size`` block of
+    ``inputs`` (held over that step); with ground contact on, a body at or below z = 0 and moving
+    down is put to rest there, level at its heading."""
+    work, P, inputs = borrowed(work), borrowed(P), borrowed(inputs)  # the caller's: no counting per call
+    s = work[0]
+    for j in range(len(inputs) // INPUTS.size):
+        u = inputs[j * INPUTS.size : (j + 1) * INPUTS.size]
+        rk4(nominal_derivative, s, work[1], work[2], work[3], work[4], work[5], P, u, h)
+        if P[PLANT.ground] != 0.0 and s[2] <= 0.0 and s[5] <= 0.0:
+            s[2], s[3], s[4], s[5] = 0.0, 0.0, 0.0, 0.0
+            s[6], s[7] = 0.0, 0.0
+            s[9], s[10], s[11] = 0.0, 0.0, 0.0
+
+
+@kernel
+def nominal_on_ground(s, P) -> bool:
+    """Resting on the ground: contact on, at z = 0 and not moving vertically."""
+    return P[PLANT.ground] != 0.0 and s[2] <= RESTING_TOLERANCE and abs(s[5]) < RESTING_TOLERANCE
+
+
+@kernel
+def nominal_truth(work, P, u) -> tuple:
+    """The ground truth of ``work[0]`` with the inputs ``u`` held, a :class:`~.equations.TruthState`:
+    pose, velocities, the body rates of eq. (3), the acceleration (one derivative evaluation, into
+    ``work[1]``) and the specific force an ideal IMU would read."""
+    work, P, u = borrowed(work), borrowed(P), borrowed(u)  # the caller's: no counting per call
+    s, ds = work[0], work[1]
+    nominal_derivative(s, ds, P, u)
+    euler = (s[6], s[7], s[8])
+    eta_dot = (s[9], s[10], s[11])
+    R = rotation_matrix(euler[0], euler[1], euler[2])
+    w = body_rates_from_euler_rates(euler[0], euler[1], eta_dot)  # eq. (3)
+    grounded = nominal_on_ground(s, P)
+    acc = (0.0, 0.0, 0.0) if grounded else (ds[3], ds[4], ds[5])
+    specific = transpose_times(R, (acc[0], acc[1], acc[2] + P[PLANT.gravity]))
+    q = quaternion_from_euler(euler[0], euler[1], euler[2])
+    t = INPUTS.torque
+    torque = (u[t], u[t + 1], u[t + 2])
+    return TruthState((s[0], s[1], s[2]), (s[3], s[4], s[5]), acc, q, euler, w, eta_dot, specific,
+                      (0.0, 0.0, 0.0, 0.0), u[INPUTS.thrust], torque, grounded)  # fmt: skip
+
+
+@kernel
+def nominal_advance(work, P, inputs, h: float) -> tuple:
+    """A lockstep frame in one call: :func:`nominal_physics_steps`, then the :func:`nominal_truth`
+    of the result with the last step's inputs held, as a plain tuple of its fields."""
+    nominal_physics_steps(work, P, inputs, h)
+    return nominal_truth(work, P, inputs[len(inputs) - INPUTS.size :])[:]
+
+
+@kernel
+def nominal_truth_fields(work, P, u) -> tuple:
+    """:func:`nominal_truth` as a plain tuple of its fields, for Python (``TruthState._make``)."""
+    return nominal_truth(work, P, u)[:]
+
+
+class NominalPlant(Plant):
+    """The Section II model, eqs. (1)-(6), integrated in ``(xi, xi', eta, eta')`` by RK4: a
+    :class:`~.plant.Plant` (the same inputs, saturation, :meth:`advance`, :meth:`step` and
+    :meth:`truth`) on the nominal model's equations.
+
+    Inputs are those of :class:`~.plant.Plant` under ``actuation = "wrench"``: thrust and a body
     torque, whose generalised torque on the Euler coordinates is ``W_eta^T tau_body``.
     """
+
+    model = "nominal"
 
     def __init__(self, vehicle: VehicleConfig, physics_dt_s: float) -> None:
         if vehicle.actuation.mode != "wrench":
             raise ValueError("the nominal Section II plant takes actuation = 'wrench' only")
-        self.vehicle = vehicle
-        self.dt = physics_dt_s
-        self.mass = vehicle.plant.mass_kg
-        self.gravity = vehicle.nominal.gravity_m_s2
-        self.inertia_diag = vehicle.plant.inertia_kg_m2
-        self.thrust_max = vehicle.actuation.thrust_max_n
-        self.torque_max = vehicle.actuation.torque_max_n_m
-        self.ground_contact = vehicle.plant.ground_contact
-        self.thrust_cmd = 0.0
-        self.torque_cmd: Vector3 = ZERO3
-        self.force_dist: Vector3 = ZERO3
-        self.torque_dist_eta: Vector3 = ZERO3
-        self.wind: Vector3 = ZERO3
-        self.state: list[float] = [0.0] * 12
+        super().__init__(vehicle, physics_dt_s)
 
-    set_wrench = Plant.set_wrench
-    set_actuator_controls = Plant.set_actuator_controls
-    set_disturbance = Plant.set_disturbance
-    rotor_mode = False
-
-    def advance(self, disturbances) -> None:
-        """:meth:`Plant.advance`'s contract, one :meth:`step` at a time."""
-        for force, torque, wind in disturbances:
-            self.set_disturbance(force, torque, wind)
-            self.step()
-
-    def set_rotor_commands(self, speeds_rad_s: tuple[float, float, float, float]) -> None:
-        """Refused: the nominal plant is actuated by its wrench only (ValueError)."""
-        raise ValueError("the nominal plant has no rotors")
+    @staticmethod
+    def _make_entries() -> PlantEntries:
+        return _nominal_entries()
 
     def reset(
         self,
@@ -72,83 +157,42 @@ class NominalPlant:
     ) -> None:
         """Put the body at ``position_m`` (m), ``euler_rad`` (ZYX), with ``velocity_m_s`` (world) and
         ``body_rates_rad_s`` (FLU; stored as the Euler rates of eq. (3))."""
+        self._truth = None
         eta_dot = euler_rates_from_body_rates(euler_rad[0], euler_rad[1], body_rates_rad_s)
         self.state = [*position_m, *velocity_m_s, *euler_rad, *eta_dot]
 
-    def derivative(self, s: list[float]) -> list[float]:
-        """The state's derivative: eq. (2) for the translation, eq. (4) (the Euler-Lagrange form with
-        its inertia and Coriolis matrices) for the rotation, under the held wrench and disturbances."""
-        m, g = self.mass, self.gravity
-        phi, theta, psi = s[6], s[7], s[8]
-        eta = (phi, theta, psi)
-        eta_dot = (s[9], s[10], s[11])
-        U1 = self.thrust_cmd
-        fx, fy, fz = self.force_dist
-        # eq. (2): m xi'' = R e3 U1 + F_d - m g e3 (R e3: the last column of R)
-        R = rotation_matrix(phi, theta, psi)
-        ax = (R[0][2] * U1 + fx) / m
-        ay = (R[1][2] * U1 + fy) / m
-        az = -g + (R[2][2] * U1 + fz) / m
-        # eq. (4): M eta_ddot + C eta_dot = tau_eta_a + tau_eta_d
-        tau_ctrl = euler_torque_from_body_torque(phi, theta, self.torque_cmd)
-        rhs_c = coriolis_times(self.inertia_diag, eta, eta_dot, eta_dot)
-        td = self.torque_dist_eta
-        rhs = tuple(tau_ctrl[i] + td[i] - rhs_c[i] for i in range(3))
-        eta_ddot = solve3(inertia_matrix(self.inertia_diag, phi, theta), rhs)
-        return [s[3], s[4], s[5], ax, ay, az, *eta_dot, *eta_ddot]
+    def set_rotor_commands(self, speeds_rad_s: tuple[float, float, float, float]) -> None:
+        """Refused: the nominal plant is actuated by its wrench only (ValueError)."""
+        raise ValueError("the nominal plant has no rotors")
 
-    def step(self) -> None:
-        """One RK4 step of ``dt``; on the ground (contact enabled) the body rests level at z = 0."""
-        f = self.derivative
-        s = self.state
-        h = self.dt
-        k1 = f(s)
-        k2 = f([a + 0.5 * h * b for a, b in zip(s, k1, strict=True)])
-        k3 = f([a + 0.5 * h * b for a, b in zip(s, k2, strict=True)])
-        k4 = f([a + h * b for a, b in zip(s, k3, strict=True)])
-        self.state = [
-            a + h / 6.0 * (b1 + 2.0 * (b2 + b3) + b4)
-            for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4, strict=True)
-        ]
-        if self.ground_contact and self.state[2] <= 0.0 and self.state[5] <= 0.0:
-            s = self.state
-            s[2] = 0.0
-            s[3:6] = [0.0, 0.0, 0.0]
-            s[6], s[7] = 0.0, 0.0
-            s[9:12] = [0.0, 0.0, 0.0]
+    def set_rotor_fault(self, rotor: int, fault) -> None:  # noqa: ANN001 - a RotorFault
+        """Refused: the nominal plant has no rotors to fail (ValueError)."""
+        raise ValueError("the nominal plant has no rotors")
 
-    def kinematics(self) -> tuple[Vector3, Vector3, Vector3, Vector3]:
-        """``(position, velocity, euler, euler_rates)``: the paper's state of O (world, ZYX)."""
-        s = self.state
-        return ((s[0], s[1], s[2]), (s[3], s[4], s[5]), (s[6], s[7], s[8]), (s[9], s[10], s[11]))
+    def faults_due(self, table, row: int, t: float) -> int:  # noqa: ANN001 - a fault table
+        """``row`` when the table has no rows left; a row to apply is refused (ValueError): the
+        nominal plant has no rotors to fail."""
+        if row < len(table):
+            raise ValueError("the nominal plant has no rotors")
+        return row
 
-    def on_ground(self) -> bool:
-        """Resting on the ground: contact enabled, at z = 0 and not moving vertically."""
-        return self.ground_contact and self.state[2] <= 1e-9 and abs(self.state[5]) < 1e-9
 
-    def truth(self) -> TruthState:
-        """The state as the simulator reports it (:class:`TruthState`): pose, velocities, body rates
-        (eq. (3)), acceleration and the specific force an ideal IMU would read."""
-        s = self.state
-        ds = self.derivative(s)
-        euler = (s[6], s[7], s[8])
-        eta_dot = (s[9], s[10], s[11])
-        R = rotation_matrix(*euler)
-        w = body_rates_from_euler_rates(euler[0], euler[1], eta_dot)  # eq. (3)
-        on_ground = self.on_ground()
-        acc = ZERO3 if on_ground else (ds[3], ds[4], ds[5])
-        specific = transpose_times(R, (acc[0], acc[1], acc[2] + self.gravity))
-        return TruthState(
-            position_m=(s[0], s[1], s[2]),
-            velocity_m_s=(s[3], s[4], s[5]),
-            acceleration_m_s2=acc,
-            quaternion=quaternion_from_euler(*euler),
-            euler_rad=euler,
-            body_rates_rad_s=w,
-            euler_rates_rad_s=eta_dot,
-            specific_force_body_m_s2=specific,
-            rotor_speeds_rad_s=(0.0, 0.0, 0.0, 0.0),
-            thrust_n=self.thrust_cmd,
-            torque_body_n_m=self.torque_cmd,
-            on_ground=on_ground,
-        )
+def nominal_kernels() -> tuple[Callable[..., object], ...]:
+    """The kernels :class:`NominalPlant` calls, in the order of :class:`~.plant.PlantEntries`."""
+    return (nominal_physics_steps, nominal_advance, nominal_truth_fields)
+
+
+@functools.cache
+def _nominal_entries() -> PlantEntries:
+    """The entries, made once per process when the first nominal plant is built (compiled, each
+    called once now and frozen, as the coupled plant's)."""
+    entries = PlantEntries(*(compiled(fn) for fn in nominal_kernels()))
+    if compiling():
+        work, P, u = np.zeros((6, 12)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
+        P[PLANT.mass] = P[PLANT.inertia] = P[PLANT.inertia + 4] = P[PLANT.inertia + 8] = 1.0
+        entries.physics_steps(work, P, u, 0.001)
+        entries.advance(work, P, u, 0.001)
+        entries.truth_fields(work, P, u)
+        for entry in entries:
+            freeze(entry)
+    return entries

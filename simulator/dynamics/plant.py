@@ -123,7 +123,7 @@ class ScheduledFault(NamedTuple):
 
 
 def fault_table(faults: Iterable[ScheduledFault]) -> np.ndarray:
-    """``ScheduledFault`` rows as the kernels' table (layout ``RF_*`` of :mod:`.equations`), sorted
+    """``ScheduledFault`` rows as the kernels' table (rows of :data:`.equations.ROTOR_FAULT`), sorted
     by onset (faults at the same time keep their order)."""
     rows = sorted(faults, key=lambda f: f.onset_s)
     table = np.zeros((len(rows), ROTOR_FAULT.size))
@@ -152,9 +152,12 @@ def motors_of(instance: int) -> tuple[int, ...]:
 class Plant:
     """Coupled quadrotor integrated by RK4 at a fixed physics step."""
 
+    model = "coupled"  # the plant.model whose equations it integrates
+
     def __init__(self, vehicle: VehicleConfig, physics_dt_s: float) -> None:
-        if vehicle.plant.model != "coupled":
-            raise ValueError("Plant integrates the coupled model; use NominalPlant for 'nominal'")
+        if vehicle.plant.model != self.model:
+            raise ValueError(f"{type(self).__name__} integrates the {self.model!r} model, not "
+                             f"{vehicle.plant.model!r} (make_plant builds the one it asks for)")  # fmt: skip
         self.vehicle = vehicle
         self.dt = physics_dt_s
         plant, act, rot = vehicle.plant, vehicle.actuation, vehicle.rotors
@@ -192,8 +195,13 @@ class Plant:
         self._s = self._work[0]
         self._u = vector(INPUTS.size)
         self._frame_u = vector(2 * INPUTS.size)
-        self._entries = _entries()
+        self._entries = self._make_entries()
         self._truth: tuple[list[float], TruthState] | None = None  # (the state it is of, truth)
+
+    @staticmethod
+    def _make_entries() -> PlantEntries:
+        """The compiled entries of this plant's equations (made once per process)."""
+        return _entries()
 
     def parameters(self) -> list[float]:
         """The parameter vector the equations read (:data:`.equations.PLANT`, filled by name; healthy
@@ -376,8 +384,9 @@ def make_plant(vehicle: VehicleConfig, physics_dt_s: float):
     return Plant(vehicle, physics_dt_s)
 
 
-class _Entries(NamedTuple):
-    """What :class:`Plant` calls: the equations' entries (:func:`quadcommon.kernel.compiled`)."""
+class PlantEntries(NamedTuple):
+    """What :class:`Plant` calls: the equations' entries (:func:`quadcommon.kernel.compiled`); a
+    :class:`~.nominal_plant.NominalPlant` has its own."""
 
     physics_steps: Callable[..., None]
     advance: Callable[..., tuple]
@@ -386,15 +395,15 @@ class _Entries(NamedTuple):
 
 def plant_kernels() -> tuple:
     """The equations' kernels the plant calls (what ``quadsitl compile`` compiles for it)."""
-    return tuple(getattr(equations, name) for name in _Entries._fields)
+    return tuple(getattr(equations, name) for name in PlantEntries._fields)
 
 
 @functools.cache
-def _entries() -> _Entries:
+def _entries() -> PlantEntries:
     """The entries, made once per process. Compiled, each is called once now on scratch buffers
     (loaded from numba's cache, or compiled: ~1 s or more, which in the middle of lockstep the
     autopilot would see as a simulator stall) and frozen: nothing compiles mid-flight."""
-    entries = _Entries(*(compiled(fn) for fn in plant_kernels()))
+    entries = PlantEntries(*(compiled(fn) for fn in plant_kernels()))
     if compiling():
         n = 17
         work, P, u = np.zeros((6, n)), np.zeros(PLANT.size), np.zeros(INPUTS.size)

@@ -13,13 +13,15 @@ barometer sample) the held readings' stand-ins.
 Rates and latency: a sensor samples when ``t`` reaches its next multiple of the period (one
 sample per frame at most: a coarse caller skips samples), and the sample is delivered
 ``latency`` after the time it is valid for (the first frame whose time reaches it; of two due in
-one frame, the newer). The memory is float arrays laid out by the constants below:
+one frame, the newer). The memory is float arrays laid out by the layouts below
+(:mod:`quadcommon.layout`):
 
-* ``C`` (``FIGURES.size``, :func:`config_array`): the sensors' figures;
-* ``S`` (``STATE.size``, :func:`initial_state`): biases, GNSS errors, held readings, the schedules
-  and the queues of readings in flight;
-* ``faults`` (n x ``FAULT_SIZE``): kind, start, duration, value (3) per injected fault;
-* ``out`` (``DELIVERY.size``): what the frame delivers (a flag per sensor: 1 when it delivered).
+* ``C`` (:data:`FIGURES`, :func:`config_array`): the sensors' figures;
+* ``S`` (:data:`STATE`, :func:`initial_state`): biases, GNSS errors, held readings, the schedules
+  and the queues of readings in flight (:data:`QUEUE`);
+* ``faults`` (n rows of :data:`FAULT`): kind, start, duration, value (3) per injected fault;
+* ``out`` (:data:`DELIVERY`): what the frame delivers (a flag per sensor: 1 when it delivered, then
+  its reading: :data:`MAG_READING`, :data:`BARO_READING`, :data:`GPS_READING`, :data:`VISION_READING`).
 
 Failures (``MAV_CMD_INJECT_FAILURE``'s sensor units, :mod:`quadcommon.failures`) are rows of the
 same fault table: kind :func:`fault_code` of ``"<unit>_<type>"`` (``gps_off``, ``baro_stuck``...),
@@ -44,7 +46,7 @@ import numpy as np
 from quadcommon.atmosphere import isa_altitude_m
 from quadcommon.failures import Type, effect_of_kind
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, fields_of, layout, values
 from quadcommon.rigid_body import Quaternion, Vector3
 from quadcommon.rng import normal, uniform
 
@@ -85,12 +87,37 @@ FIGURES = layout("SensorFigures", (
     Field("latency", 4, unit="s", doc="per scheduled sensor"),
 ))  # fmt: skip
 
+# -- a scheduled sensor's reading: its time, then its values ----------------------------------------
+TIME = Field("time", unit="s", doc="the time the sample is valid for")
+MAG_READING = layout("MagnetometerRecord", (TIME, Field("field", 3, unit="gauss", doc="body FLU")))
+BARO_READING = layout("BarometerRecord", (
+    TIME, Field("pressure", unit="hPa"), Field("altitude", unit="m AMSL", doc="pressure altitude (ISA)"),
+    Field("temperature", unit="deg C"),
+))  # fmt: skip
+GPS_READING = layout("GpsRecord", (
+    TIME, Field("position", 3, unit="m", doc="world"), Field("velocity", 3, unit="m/s", doc="world"),
+    Field("eph", unit="m"), Field("epv", unit="m"), Field("satellites"), Field("speed_accuracy", unit="m/s"),
+    Field("fix_type", doc="GPS_FIX_TYPE (GPS_FIX_NONE in an outage)"),
+))  # fmt: skip
+VISION_READING = layout("VisionRecord", (
+    TIME, Field("position", 3, unit="m", doc="world"), Field("yaw", unit="rad"),
+    Field("position_std", unit="m"), Field("yaw_std", unit="rad"),
+))  # fmt: skip
+READINGS = (MAG_READING, BARO_READING, GPS_READING, VISION_READING)  # by scheduled sensor (MAG ...)
+READING_ROOM = max(r.size for r in READINGS)  # floats a reading may hold
+# Any reading, as the code common to all sensors sees it (the IMU's too: its time, its vector).
+READING = layout("Reading", (TIME, Field("values", READING_ROOM - 1, doc="the sensor's values (above)")))
+
 # -- the sensors' state --------------------------------------------------------------------------
 PENDING = 128  # readings in flight per sensor (latency / period: 0.2 s delayed at 500 Hz is 100)
-ITEM = 13  # delivery time + up to 12 floats of reading
-Q_HEAD, Q_COUNT, Q_ITEMS = 0, 1, 2
-QUEUE = 2 + PENDING * ITEM
-GOOD = 12  # floats of a failing unit's last good sample (a reading's after its time)
+QUEUED = layout("QueuedReading", (
+    Field("due", unit="s", doc="when it is delivered"), Field("reading", READING_ROOM),
+))  # fmt: skip
+QUEUE = layout("ReadingQueue", (
+    Field("oldest", doc="the index of the oldest item"), Field("in_flight", doc="the items in flight"),
+    Field("items", PENDING * QUEUED.size, doc="a ring of PENDING QUEUED records"),
+))  # fmt: skip
+GOOD = READING_ROOM  # room for a failing unit's last good sample (a reading's values)
 STATE = layout("SensorState", (
     Field("accel_bias", 3, unit="m/s^2"), Field("gyro_bias", 3, unit="rad/s"),
     Field("mag_bias", 3, unit="gauss"),
@@ -100,18 +127,21 @@ STATE = layout("SensorState", (
     Field("last_fix", 3, unit="m", doc="the last good fix's position"), Field("has_fix"),
     Field("held_mag", 3, unit="gauss", doc="the last magnetometer reading (what HIL_SENSOR repeats)"),
     Field("has_mag"),
-    Field("held_baro", 4, doc="time, pressure, pressure altitude, temperature"), Field("has_baro"),
+    Field("held_baro", BARO_READING.size, doc="the last barometer reading (BARO_READING)"), Field("has_baro"),
     Field("next_sample", 4, doc="per scheduled sensor, the index of its next sample"),
-    Field("queues", 4 * QUEUE, doc="per scheduled sensor, the readings in flight"),
-    Field("reading", 12, doc="the reading being made (room the frame needs, not state)"),
+    Field("queues", 4 * QUEUE.size, doc="per scheduled sensor, the readings in flight (QUEUE)"),
+    Field("reading", READING_ROOM, doc="the reading being made (room the frame needs, not state)"),
     Field("good", 6 * GOOD, doc="per failing unit (FAILING), its last good sample"),
     Field("has_good", 6), Field("slow_count", 6, doc="due samples counted by a slow failure"),
     Field("held_imu", 6, doc="the accelerometer's and the gyro's last delivered sample"),
 ))  # fmt: skip
 
 # -- faults ---------------------------------------------------------------------------------------
-F_KIND, F_START, F_DURATION, F_VALUE = 0, 1, 2, 3
-FAULT_SIZE = 6
+FAULT = layout("SensorFaultRow", (
+    Field("kind", doc="fault_code: a profile fault's kind, or a failure's FAILURE_BASE + 8 * unit + type"),
+    Field("onset", unit="s"), Field("duration", unit="s", doc="active over [onset, onset + duration)"),
+    Field("value", 3, doc="the kind's figures (a vector, a range, a count, a probability, a delay)"),
+))  # fmt: skip
 GPS_OUTAGE, GPS_GLITCH, VISION_OUTAGE, MAG_DISTURBANCE, ACCEL_BIAS_STEP, GYRO_BIAS_STEP = range(6)
 # Failures: the failing units by their names in quadcommon.failures, and a failure's kind code.
 FAILING = ("accel", "gyro", "mag", "baro", "gps", "vio")
@@ -121,31 +151,28 @@ OK, OFF, STUCK, GARBAGE = int(Type.ok), int(Type.off), int(Type.stuck), int(Type
 WRONG, SLOW = int(Type.wrong), int(Type.slow)
 DELAYED, INTERMITTENT = int(Type.delayed), int(Type.intermittent)
 
+
 # -- out: one frame's delivery ---------------------------------------------------------------------
+def _fields_as(prefix: str, record) -> tuple[Field, ...]:  # noqa: ANN001 - a layout
+    """``record``'s fields named ``prefix_name``: a reading as it sits in the delivery."""
+    return tuple(f._replace(name=f"{prefix}_{f.name}") for f in fields_of(record))
+
+
 DELIVERY = layout("SensorDelivery", (
     Field("force", 3, unit="m/s^2", doc="the IMU sample: specific force, body"),
     Field("rate", 3, unit="rad/s", doc="the IMU sample: body rates"),
-    Field("mag_fresh"), Field("mag_time", unit="s"), Field("mag_field", 3, unit="gauss"),
-    Field("baro_fresh"), Field("baro_time", unit="s"), Field("baro_pressure", unit="hPa"),
-    Field("baro_altitude", unit="m AMSL"), Field("baro_temperature", unit="deg C"),
-    Field("gps_fresh"), Field("gps_time", unit="s"), Field("gps_position", 3, unit="m"),
-    Field("gps_velocity", 3, unit="m/s"), Field("gps_eph", unit="m"), Field("gps_epv", unit="m"),
-    Field("gps_satellites"), Field("gps_speed_accuracy", unit="m/s"), Field("gps_fix_type"),
-    Field("vision_fresh"), Field("vision_time", unit="s"), Field("vision_position", 3, unit="m"),
-    Field("vision_yaw", unit="rad"), Field("vision_position_std", unit="m"),
-    Field("vision_yaw_std", unit="rad"), Field("held_mag", 3, unit="gauss"),
-    Field("held_baro", 4, doc="time, pressure, pressure altitude, temperature"),
+    Field("mag_fresh"), *_fields_as("mag", MAG_READING),
+    Field("baro_fresh"), *_fields_as("baro", BARO_READING),
+    Field("gps_fresh"), *_fields_as("gps", GPS_READING),
+    Field("vision_fresh"), *_fields_as("vision", VISION_READING),
+    Field("held_mag", 3, unit="gauss"), *_fields_as("held_baro", BARO_READING),
     Field("accel_fresh", doc="1 when the IMU's accelerometer sampled (else held)"),
     Field("gyro_fresh", doc="1 when the IMU's gyro sampled (else held)"),
 ))  # fmt: skip
-# Each scheduled sensor's reading sits in the delivery after its fresh flag (time first).
-OUT_AT = (DELIVERY.mag_fresh, DELIVERY.baro_fresh, DELIVERY.gps_fresh, DELIVERY.vision_fresh)
-READING_SIZE = (
-    DELIVERY.baro_fresh - DELIVERY.mag_time,
-    DELIVERY.gps_fresh - DELIVERY.baro_time,
-    DELIVERY.vision_fresh - DELIVERY.gps_time,
-    DELIVERY.held_mag - DELIVERY.vision_time,
-)
+# Per scheduled sensor: where its flag (1 when it delivered) and its reading sit in the delivery.
+FRESH_AT = (DELIVERY.mag_fresh, DELIVERY.baro_fresh, DELIVERY.gps_fresh, DELIVERY.vision_fresh)
+READING_AT = (DELIVERY.mag_time, DELIVERY.baro_time, DELIVERY.gps_time, DELIVERY.vision_time)
+READING_SIZE = tuple(r.size for r in READINGS)
 
 
 # =================================================================================================
@@ -224,9 +251,10 @@ def fault_code(kind: str) -> int:
 
 def fault_array(faults) -> np.ndarray:  # noqa: ANN001 - a sequence of SensorFault
     """Injected faults (:class:`~.config.SensorFault`) as rows of :func:`sensor_frame`'s table."""
-    rows = np.zeros((len(faults), FAULT_SIZE))
+    rows = np.zeros((len(faults), FAULT.size))
     for i, f in enumerate(faults):
-        rows[i] = (fault_code(f.kind), f.start_s, f.duration_s, *(float(c) for c in f.value))
+        rows[i] = values(FAULT, kind=fault_code(f.kind), onset=f.start_s, duration=f.duration_s,
+                         value=f.value)  # fmt: skip
     return rows
 
 
@@ -275,10 +303,10 @@ def fault_sum(faults: Any, kind: int, t: float) -> Vector3:
     x = y = z = 0.0
     for i in range(faults.shape[0]):
         f = faults[i]
-        if int(f[F_KIND]) == kind and f[F_START] <= t < f[F_START] + f[F_DURATION]:
-            x += f[F_VALUE]
-            y += f[F_VALUE + 1]
-            z += f[F_VALUE + 2]
+        if int(f[FAULT.kind]) == kind and f[FAULT.onset] <= t < f[FAULT.onset] + f[FAULT.duration]:
+            x += f[FAULT.value]
+            y += f[FAULT.value + 1]
+            z += f[FAULT.value + 2]
     return (x, y, z)
 
 
@@ -287,7 +315,7 @@ def fault_active(faults: Any, kind: int, t: float) -> bool:
     """Whether a fault of ``kind`` acts at ``t`` (within ``[start, start + duration)``)."""
     for i in range(faults.shape[0]):
         f = faults[i]
-        if int(f[F_KIND]) == kind and f[F_START] <= t < f[F_START] + f[F_DURATION]:
+        if int(f[FAULT.kind]) == kind and f[FAULT.onset] <= t < f[FAULT.onset] + f[FAULT.duration]:
             return True
     return False
 
@@ -306,35 +334,35 @@ def due(S: Any, C: Any, sensor: int, t: float) -> bool:
 @kernel
 def enqueue(S: Any, sensor: int, t_due: float, reading: Any, size: int) -> None:
     """A reading into the sensor's queue, to be delivered at ``t_due``."""
-    q = STATE.queues + sensor * QUEUE
-    head, count = int(S[q + Q_HEAD]), int(S[q + Q_COUNT])
+    q = STATE.queues + sensor * QUEUE.size
+    head, count = int(S[q + QUEUE.oldest]), int(S[q + QUEUE.in_flight])
     if count >= PENDING:  # full (a latency far beyond the period): the oldest is lost
         head = (head + 1) % PENDING
         count -= 1
-    at = q + Q_ITEMS + ((head + count) % PENDING) * ITEM
-    S[at] = t_due
+    at = q + QUEUE.items + ((head + count) % PENDING) * QUEUED.size
+    S[at + QUEUED.due] = t_due
     for i in range(size):
-        S[at + 1 + i] = reading[i]
-    S[q + Q_HEAD], S[q + Q_COUNT] = head, count + 1
+        S[at + QUEUED.reading + i] = reading[i]
+    S[q + QUEUE.oldest], S[q + QUEUE.in_flight] = head, count + 1
 
 
 @kernel
 def dequeue(S: Any, sensor: int, t: float, out: Any, size: int) -> bool:
     """The newest reading whose delivery time has come into ``out`` (older ones in the same
     frame are dropped); False when none has."""
-    q = STATE.queues + sensor * QUEUE
-    head, count = int(S[q + Q_HEAD]), int(S[q + Q_COUNT])
+    q = STATE.queues + sensor * QUEUE.size
+    head, count = int(S[q + QUEUE.oldest]), int(S[q + QUEUE.in_flight])
     found = False
     while count > 0:
-        at = q + Q_ITEMS + head * ITEM
-        if S[at] > t + EPS_S:
+        at = q + QUEUE.items + head * QUEUED.size
+        if S[at + QUEUED.due] > t + EPS_S:
             break
         for i in range(size):
-            out[i] = S[at + 1 + i]
+            out[i] = S[at + QUEUED.reading + i]
         found = True
         head = (head + 1) % PENDING
         count -= 1
-    S[q + Q_HEAD], S[q + Q_COUNT] = head, count
+    S[q + QUEUE.oldest], S[q + QUEUE.in_flight] = head, count
     return found
 
 
@@ -344,34 +372,32 @@ def deliver(S: Any, C: Any, sensor: int, t: float, reading: Any, out: Any, extra
     queued for its latency (plus ``extra_latency``, a delayed failure's); the frame's delivery (if
     any) into ``out`` (flag, then the reading)."""
     size = READING_SIZE[sensor]
-    at = OUT_AT[sensor]
-    q = STATE.queues + sensor * QUEUE
+    fresh, at = FRESH_AT[sensor], READING_AT[sensor]
     latency = C[FIGURES.latency + sensor] + extra_latency
-    if latency == 0.0 and S[q + Q_COUNT] == 0.0:
+    if latency == 0.0 and S[STATE.queues + sensor * QUEUE.size + QUEUE.in_flight] == 0.0:
         for i in range(size):
-            out[at + 1 + i] = reading[i]
-        out[at] = 1.0
+            out[at + i] = reading[i]
+        out[fresh] = 1.0
         return
     enqueue(S, sensor, t + latency, reading, size)
-    out[at] = 1.0 if dequeue(S, sensor, t, out[at + 1 : at + 1 + size], size) else 0.0
+    out[fresh] = 1.0 if dequeue(S, sensor, t, out[at : at + size], size) else 0.0
 
 
 @kernel
 def pending(S: Any, sensor: int, t: float, out: Any) -> None:
     """A frame in which the sensor does not sample: what of its queue is due now."""
-    at = OUT_AT[sensor]
-    q = STATE.queues + sensor * QUEUE
-    out[at] = 0.0
-    if S[q + Q_COUNT] > 0.0:
-        size = READING_SIZE[sensor]
-        out[at] = 1.0 if dequeue(S, sensor, t, out[at + 1 : at + 1 + size], size) else 0.0
+    fresh = FRESH_AT[sensor]
+    out[fresh] = 0.0
+    if S[STATE.queues + sensor * QUEUE.size + QUEUE.in_flight] > 0.0:
+        at, size = READING_AT[sensor], READING_SIZE[sensor]
+        out[fresh] = 1.0 if dequeue(S, sensor, t, out[at : at + size], size) else 0.0
 
 
 @kernel
 def silence(S: Any, sensor: int, out: Any) -> None:
     """An off sensor: nothing delivered this frame, nothing left in flight."""
-    S[STATE.queues + sensor * QUEUE + Q_COUNT] = 0.0
-    out[OUT_AT[sensor]] = 0.0
+    S[STATE.queues + sensor * QUEUE.size + QUEUE.in_flight] = 0.0
+    out[FRESH_AT[sensor]] = 0.0
 
 
 @kernel
@@ -382,9 +408,9 @@ def failure_of(faults: Any, unit: int, t: float) -> tuple[int, int]:
     mode, row, start = OK, -1, -math.inf
     for i in range(faults.shape[0]):
         f = faults[i]
-        code = int(f[F_KIND])
-        if lo < code < lo + 8 and f[F_START] <= t < f[F_START] + f[F_DURATION] and f[F_START] >= start:
-            mode, row, start = code - lo, i, f[F_START]
+        code, began = int(f[FAULT.kind]), f[FAULT.onset]
+        if lo < code < lo + 8 and began <= t < began + f[FAULT.duration] and began >= start:
+            mode, row, start = code - lo, i, began
     return mode, row
 
 
@@ -396,20 +422,20 @@ def sample_kept(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int) -
         return False
     if mode == SLOW:
         count = S[STATE.slow_count + unit] + 1.0
-        if count >= faults[row][F_VALUE]:
+        if count >= faults[row][FAULT.value]:
             S[STATE.slow_count + unit] = 0.0
             return True
         S[STATE.slow_count + unit] = count
         return False
     if mode == INTERMITTENT:
-        return uniform(rng) >= faults[row][F_VALUE]
+        return uniform(rng) >= faults[row][FAULT.value]
     return True
 
 
 @kernel
 def extra_latency(faults: Any, mode: int, row: int) -> float:
     """The latency a ``delayed`` failure (``faults[row]``) adds (s); 0 for any other mode."""
-    return faults[row][F_VALUE] if mode == DELAYED else 0.0
+    return faults[row][FAULT.value] if mode == DELAYED else 0.0
 
 
 @kernel
@@ -420,43 +446,45 @@ def spread(rng: Any, half_width: float) -> float:
 
 @kernel
 def corrupt(rng: Any, S: Any, faults: Any, unit: int, mode: int, row: int, reading: Any, size: int) -> None:
-    """A sample of ``unit`` (``reading[1 : 1 + size]``, its values after the time) as the unit's
+    """A sample of ``unit`` (a :data:`READING`: its ``size`` values after its time) as the unit's
     failure makes it: stuck repeats the last good sample, wrong adds the offset, garbage draws
     over the range; otherwise it is true and becomes the last good sample."""
     good = STATE.good + unit * GOOD
+    values = READING.values
     if mode == STUCK and S[STATE.has_good + unit] != 0.0:
         for i in range(size):
-            reading[1 + i] = S[good + i]
+            reading[values + i] = S[good + i]
         return
     if mode == WRONG:
         f = faults[row]
         if unit == F_BARO:  # the pressure (hPa); the altitude is what it means under the ISA
-            reading[1] += f[F_VALUE]
-            reading[2] = isa_altitude_m(reading[1])
+            reading[BARO_READING.pressure] += f[FAULT.value]
+            reading[BARO_READING.altitude] = isa_altitude_m(reading[BARO_READING.pressure])
         else:  # the first three values: a vector (m/s^2, rad/s, gauss, m)
             for i in range(3):
-                reading[1 + i] += f[F_VALUE + i]
+                reading[values + i] += f[FAULT.value + i]
         return
     if mode == GARBAGE:
         f = faults[row]
         if unit == F_BARO:  # uniform over [value[0], value[1]] hPa
-            reading[1] = f[F_VALUE] + (f[F_VALUE + 1] - f[F_VALUE]) * uniform(rng)
-            reading[2] = isa_altitude_m(reading[1])
+            low, high = f[FAULT.value], f[FAULT.value + 1]
+            reading[BARO_READING.pressure] = low + (high - low) * uniform(rng)
+            reading[BARO_READING.altitude] = isa_altitude_m(reading[BARO_READING.pressure])
         elif unit == F_GPS:  # position +-value[0] m, velocity +-value[1] m/s about the truth
             for i in range(3):
-                reading[1 + i] += spread(rng, f[F_VALUE])
+                reading[GPS_READING.position + i] += spread(rng, f[FAULT.value])
             for i in range(3):
-                reading[4 + i] += spread(rng, f[F_VALUE + 1])
+                reading[GPS_READING.velocity + i] += spread(rng, f[FAULT.value + 1])
         elif unit == F_VIO:  # position +-value[0] m about the truth, any yaw
             for i in range(3):
-                reading[1 + i] += spread(rng, f[F_VALUE])
-            reading[4] = spread(rng, math.pi)
+                reading[VISION_READING.position + i] += spread(rng, f[FAULT.value])
+            reading[VISION_READING.yaw] = spread(rng, math.pi)
         else:  # accelerometer, gyro, magnetometer: anywhere in +-value[0]
             for i in range(3):
-                reading[1 + i] = spread(rng, f[F_VALUE])
+                reading[values + i] = spread(rng, f[FAULT.value])
         return
     for i in range(size):
-        S[good + i] = reading[1 + i]
+        S[good + i] = reading[values + i]
     S[STATE.has_good + unit] = 1.0
 
 
@@ -471,13 +499,13 @@ def imu_sample(rng: Any, S: Any, faults: Any, unit: int, t: float, value: Vector
         for i in range(3):
             out[at + i] = S[held + i]
         return 0.0
-    reading[0] = t
+    reading[READING.time] = t
     for i in range(3):
-        reading[1 + i] = value[i]
+        reading[READING.values + i] = value[i]
     corrupt(rng, S, faults, unit, mode, row, reading, 3)
     for i in range(3):
-        out[at + i] = reading[1 + i]
-        S[held + i] = reading[1 + i]
+        out[at + i] = reading[READING.values + i]
+        S[held + i] = reading[READING.values + i]
     return 1.0
 
 
@@ -504,9 +532,8 @@ def barometer(rng: Any, S: Any, C: Any, height: float) -> tuple[float, float, fl
 @kernel
 def gps_fix(rng: Any, S: Any, C: Any, faults: Any, t: float, position: Vector3, velocity: Vector3,
             reading: Any) -> None:  # fmt: skip
-    """A fix at ``t`` into ``reading`` (time, position, velocity, eph, epv, satellites, speed
-    accuracy, fix type): the Gauss-Markov errors advanced since the last fix; in an outage "no
-    fix", the last good position repeated (home before any)."""
+    """A fix at ``t`` into ``reading`` (:data:`GPS_READING`): the Gauss-Markov errors advanced since
+    the last fix; in an outage "no fix", the last good position repeated (home before any)."""
     if not math.isnan(S[STATE.t_gps]):
         dt = t - S[STATE.t_gps]
         e = gauss_markov(
@@ -527,23 +554,25 @@ def gps_fix(rng: Any, S: Any, C: Any, faults: Any, t: float, position: Vector3, 
             S[STATE.gps_position_error + i] = e[i]
             S[STATE.gps_velocity_error + i] = u[i]
     S[STATE.t_gps] = t
-    reading[0] = t
+    G = GPS_READING
+    reading[G.time] = t
     if fault_active(faults, GPS_OUTAGE, t):
         for i in range(3):
-            reading[1 + i] = S[STATE.last_fix + i] if S[STATE.has_fix] != 0.0 else 0.0
-            reading[4 + i] = 0.0
-        reading[7], reading[8], reading[9] = NO_FIX_ACCURACY, NO_FIX_ACCURACY, 0.0
-        reading[10], reading[11] = NO_FIX_ACCURACY, GPS_FIX_NONE
+            reading[G.position + i] = S[STATE.last_fix + i] if S[STATE.has_fix] != 0.0 else 0.0
+            reading[G.velocity + i] = 0.0
+        reading[G.eph], reading[G.epv], reading[G.satellites] = NO_FIX_ACCURACY, NO_FIX_ACCURACY, 0.0
+        reading[G.speed_accuracy], reading[G.fix_type] = NO_FIX_ACCURACY, GPS_FIX_NONE
         return
     glitch = fault_sum(faults, GPS_GLITCH, t)
     for i in range(3):
         p = position[i] + S[STATE.gps_position_error + i] + glitch[i]
-        reading[1 + i] = p
-        reading[4 + i] = velocity[i] + S[STATE.gps_velocity_error + i]
+        reading[G.position + i] = p
+        reading[G.velocity + i] = velocity[i] + S[STATE.gps_velocity_error + i]
         S[STATE.last_fix + i] = p
     S[STATE.has_fix] = 1.0
-    reading[7], reading[8], reading[9] = C[FIGURES.gps_eph], C[FIGURES.gps_epv], C[FIGURES.gps_satellites]
-    reading[10], reading[11] = C[FIGURES.gps_speed_accuracy], GPS_FIX_3D
+    reading[G.eph], reading[G.epv] = C[FIGURES.gps_eph], C[FIGURES.gps_epv]
+    reading[G.satellites] = C[FIGURES.gps_satellites]
+    reading[G.speed_accuracy], reading[G.fix_type] = C[FIGURES.gps_speed_accuracy], GPS_FIX_3D
 
 
 @kernel
@@ -552,7 +581,7 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
                  out: Any) -> None:  # fmt: skip
     """Advance the sensors to ``t`` (the truth of O: specific force and rates in the body,
     attitude, position and velocity in the world, the paper's yaw) and write what is delivered
-    at ``t`` into ``out`` (layout ``O_*``)."""
+    at ``t`` into ``out`` (:data:`DELIVERY`)."""
     # The biases' random walks and the baro drift since the last frame.
     if not math.isnan(S[STATE.t_last]):
         dt = t - S[STATE.t_last]
@@ -585,7 +614,7 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     force, rates = imu_reading(
         rng, specific_force, body_rates, ba, bg, C[FIGURES.accel_std], C[FIGURES.gyro_std]
     )
-    reading = S[STATE.reading : STATE.reading + 12]
+    reading = S[STATE.reading : STATE.reading + READING_ROOM]
     out[DELIVERY.accel_fresh] = imu_sample(rng, S, faults, F_ACCEL, t, force, reading, out, DELIVERY.force)
     out[DELIVERY.gyro_fresh] = imu_sample(rng, S, faults, F_GYRO, t, rates, reading, out, DELIVERY.rate)
 
@@ -594,8 +623,9 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     mode, row = failure_of(faults, F_MAG, t)
     if due(S, C, MAG, t) and sample_kept(rng, S, faults, F_MAG, mode, row):
         m = magnetometer(rng, S, C, faults, q, t)
-        reading[0], reading[1], reading[2], reading[3] = t, m[0], m[1], m[2]
-        corrupt(rng, S, faults, F_MAG, mode, row, reading, 3)
+        M = MAG_READING
+        reading[M.time], reading[M.field], reading[M.field + 1], reading[M.field + 2] = t, m[0], m[1], m[2]
+        corrupt(rng, S, faults, F_MAG, mode, row, reading, M.size - READING.values)
         deliver(S, C, MAG, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, MAG, t, out)
@@ -604,8 +634,10 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     mode, row = failure_of(faults, F_BARO, t)
     if due(S, C, BARO, t) and sample_kept(rng, S, faults, F_BARO, mode, row):
         p, h, temperature = barometer(rng, S, C, position[2])
-        reading[0], reading[1], reading[2], reading[3] = t, p, h, temperature
-        corrupt(rng, S, faults, F_BARO, mode, row, reading, 3)
+        B = BARO_READING
+        reading[B.time], reading[B.pressure] = t, p
+        reading[B.altitude], reading[B.temperature] = h, temperature
+        corrupt(rng, S, faults, F_BARO, mode, row, reading, B.size - READING.values)
         deliver(S, C, BARO, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, BARO, t, out)
@@ -614,7 +646,7 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     mode, row = failure_of(faults, F_GPS, t)
     if C[FIGURES.gps_on] != 0.0 and due(S, C, GPS, t) and sample_kept(rng, S, faults, F_GPS, mode, row):
         gps_fix(rng, S, C, faults, t, position, velocity, reading)
-        corrupt(rng, S, faults, F_GPS, mode, row, reading, 11)
+        corrupt(rng, S, faults, F_GPS, mode, row, reading, GPS_READING.size - READING.values)
         deliver(S, C, GPS, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, GPS, t, out)
@@ -624,9 +656,13 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
     if (C[FIGURES.vision_on] != 0.0 and due(S, C, VISION, t) and not fault_active(faults, VISION_OUTAGE, t)
             and sample_kept(rng, S, faults, F_VIO, mode, row)):  # fmt: skip
         p3, y = vision_reading(rng, position, yaw, C[FIGURES.vision_std], C[FIGURES.vision_yaw_std])
-        reading[0], reading[1], reading[2], reading[3] = t, p3[0], p3[1], p3[2]
-        reading[4], reading[5], reading[6] = y, C[FIGURES.vision_std], C[FIGURES.vision_yaw_std]
-        corrupt(rng, S, faults, F_VIO, mode, row, reading, 6)
+        V = VISION_READING
+        reading[V.time] = t
+        for i in range(3):
+            reading[V.position + i] = p3[i]
+        reading[V.yaw] = y
+        reading[V.position_std], reading[V.yaw_std] = C[FIGURES.vision_std], C[FIGURES.vision_yaw_std]
+        corrupt(rng, S, faults, F_VIO, mode, row, reading, V.size - READING.values)
         deliver(S, C, VISION, t, reading, out, extra_latency(faults, mode, row))
     else:
         pending(S, VISION, t, out)
@@ -643,7 +679,7 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
         )
         S[STATE.has_mag] = 1.0
     if out[DELIVERY.baro_fresh] != 0.0:
-        for i in range(4):
+        for i in range(BARO_READING.size):
             S[STATE.held_baro + i] = out[DELIVERY.baro_time + i]
         S[STATE.has_baro] = 1.0
     if S[STATE.has_mag] != 0.0:
@@ -653,18 +689,9 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
         m = magnetometer(rng, S, C, faults, q, t)
         out[DELIVERY.held_mag], out[DELIVERY.held_mag + 1], out[DELIVERY.held_mag + 2] = m[0], m[1], m[2]
     if S[STATE.has_baro] != 0.0:
-        for i in range(4):
-            out[DELIVERY.held_baro + i] = S[STATE.held_baro + i]
+        for i in range(BARO_READING.size):
+            out[DELIVERY.held_baro_time + i] = S[STATE.held_baro + i]
     else:
         p, h, temperature = barometer(rng, S, C, position[2])
-        (
-            out[DELIVERY.held_baro],
-            out[DELIVERY.held_baro + 1],
-            out[DELIVERY.held_baro + 2],
-            out[DELIVERY.held_baro + 3],
-        ) = (
-            t,
-            p,
-            h,
-            temperature,
-        )
+        out[DELIVERY.held_baro_time], out[DELIVERY.held_baro_pressure] = t, p
+        out[DELIVERY.held_baro_altitude], out[DELIVERY.held_baro_temperature] = h, temperature

@@ -242,8 +242,9 @@ class SensorSuite:
             p = D.vision_position
             vision = VisionReading(o[D.vision_time], (o[p], o[p + 1], o[p + 2]), o[D.vision_yaw],
                                    o[D.vision_position_std], o[D.vision_yaw_std])  # fmt: skip
-        b, m = D.held_baro, D.held_mag
-        held_baro = BaroReading(o[b + 1], o[b + 2], o[b + 3], o[b])
+        held_baro = BaroReading(o[D.held_baro_pressure], o[D.held_baro_altitude], o[D.held_baro_temperature],
+                                o[D.held_baro_time])  # fmt: skip
+        m = D.held_mag
         readings = SensorReadings(imu, (o[m], o[m + 1], o[m + 2]), held_baro, mag is not None,
                                   baro is not None, o[D.accel_fresh] != 0.0,
                                   o[D.gyro_fresh] != 0.0)  # fmt: skip
@@ -277,12 +278,13 @@ class SensorSuite:
         """One GPS fix for ``truth`` now (no latency; the Gauss-Markov errors advance one period)."""
         t_gps = float(self._S[frame.STATE.t_gps])
         t = 0.0 if math.isnan(t_gps) else t_gps + float(self._C[frame.FIGURES.period + frame.GPS])
-        r = np.empty(12)
+        r, G = np.empty(frame.GPS_READING.size), frame.GPS_READING
         self._k.gps_fix(self.rng, self._S, self._C, self._faults, t, truth.position_m, truth.velocity_m_s, r)
         o = r.tolist()
-        return GpsReading(
-            (o[1], o[2], o[3]), (o[4], o[5], o[6]), o[7], o[8], int(o[9]), o[0], o[10], int(o[11])
-        )
+        p, v = G.position, G.velocity
+        return GpsReading((o[p], o[p + 1], o[p + 2]), (o[v], o[v + 1], o[v + 2]), o[G.eph], o[G.epv],
+                          int(o[G.satellites]), o[G.time], o[G.speed_accuracy],
+                          int(o[G.fix_type]))  # fmt: skip
 
 
 def _add(a: Vector3, b: Vector3) -> Vector3:

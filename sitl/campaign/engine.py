@@ -250,7 +250,7 @@ def estimator_memory(sensors: SensorConfig, params: EstimatorParams, gravity_m_s
 def no_estimation() -> lay.EstimatorArrays:
     """Placeholder memory of a flight on the truth (the types :func:`estimator_memory`'s has)."""
     one, square = np.zeros(1), np.zeros((1, 1))
-    no_faults = np.zeros((0, sensor_frame.FAULT_SIZE))
+    no_faults = np.zeros((0, sensor_frame.FAULT.size))
     return lay.EstimatorArrays(one, one, one, no_faults, one, one, square, square, square, square, one)
 
 

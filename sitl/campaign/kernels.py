@@ -389,7 +389,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
     the layouts after it, ``METRICS_SIZE`` long). ``estimate_step``, ``after_step``, ``rejected``:
     :data:`ON_ESTIMATE` for a flight on the estimate, :data:`ON_TRUTH` (no sensors, no filter) for
     one on the truth.
-    ``faults_tab``: the run's rotor faults (rows ``RF_*`` of :mod:`simulator.dynamics.equations`,
+    ``faults_tab``: the run's rotor faults (rows of :data:`simulator.dynamics.equations.ROTOR_FAULT`,
     by onset; none: zero rows), set into the flight's own copy of ``P`` at the start of the first
     step at or after their onset.
 

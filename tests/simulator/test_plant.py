@@ -14,8 +14,10 @@ import pytest
 
 from quadcommon.config import load_vehicle
 from quadcommon.kernel import compiling
+from quadcommon.layout import values
 from quadcommon.rigid_body import rotation_from_quaternion
-from simulator.dynamics.nominal_plant import NominalPlant
+from simulator.dynamics.equations import INPUTS
+from simulator.dynamics.nominal_plant import NominalPlant, nominal_derivative
 from simulator.dynamics.plant import Plant, TruthState
 
 DT = 0.001
@@ -123,11 +125,14 @@ def test_euler_torque_disturbance_is_the_generalised_force_of_eq_4():
     )
     nominal = NominalPlant(replace(v, plant=replace(v.plant, model="nominal")), DT)
     nominal.reset((0.0, 0.0, 3.0), (0.3, 0.2, 0.0))
-    nominal.set_disturbance((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
     from quadcommon.rigid_body import inertia_matrix, solve3
 
     expected = solve3(inertia_matrix(v.plant.inertia_kg_m2, 0.3, 0.2), (0.0, 0.0, 1.0))
-    assert nominal.derivative(nominal.state)[9:12] == pytest.approx(expected, rel=1e-12)
+    held = values(INPUTS, thrust=0.0, torque=(0.0, 0.0, 0.0), rotor_commands=(0.0, 0.0, 0.0, 0.0),
+                  disturbance_force=(0.0, 0.0, 0.0), disturbance_torque=(0.0, 0.0, 1.0), wind=(0.0, 0.0, 0.0))
+    derivative = [0.0] * 12
+    nominal_derivative(nominal.state, derivative, nominal.parameters(), held)
+    assert derivative[9:12] == pytest.approx(expected, rel=1e-12)
     coupled = Plant(v, DT)
     coupled.reset((0.0, 0.0, 3.0), (0.3, 0.2, 0.0))
     coupled.set_disturbance((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
@@ -233,10 +238,14 @@ def random_flight(frames: int = 1500) -> dict[str, list]:
     """Each vehicle model flown from a tumbling start under random controls and disturbances
     (wind with drag, rotors with their lag, torques on the Euler coordinates), frames of two
     physics steps flown by ``advance`` and by ``step`` in turn, down onto the ground: the final
-    state and the truth every 50 frames, flattened."""
+    state and the truth every 50 frames, flattened; and the nominal Section II model."""
     flown = {}
-    for name in ("paper_quad", "paper_quad_drag", "paper_quad_rotors"):
-        plant = Plant(load_vehicle(name), DT)
+    for name in ("paper_quad", "paper_quad_drag", "paper_quad_rotors", "nominal"):
+        if name == "nominal":
+            v = load_vehicle("paper_quad")
+            plant = NominalPlant(replace(v, plant=replace(v.plant, model="nominal")), DT)
+        else:
+            plant = Plant(load_vehicle(name), DT)
         rng = random.Random(7)
         plant.reset((0.0, 0.0, 0.3), (0.05, -0.03, 0.5), (0.2, -0.1, 0.0), (0.1, 0.0, -0.2))
         numbers: list = []
