@@ -155,13 +155,13 @@ class Autopilot:
                 next_housekeeping = now + HOUSEKEEPING_S
                 self._refill_gcs_budgets()  # served even while no frame comes (simulator lost)
                 self.send(core.tick(now))
-                self.bus.publish_rows(force=now - core.last_frame_wall > HOUSEKEEPING_S)
+                self.bus.publish_rows(force=now - core.simulator.last_frame_wall > HOUSEKEEPING_S)
                 if self.log_writer is not None:
                     self._write_log()
                 self.bus.poll()
             # Frames in quick succession (faster than real time): wait for the next one awake
             # (see quadcommon.wire.spin_until_readable); paced at real time, just block.
-            gap = core.frame_gap_s
+            gap = core.simulator.frame_gap_s
             if gap < SPIN_BELOW_GAP_S:
                 wire.spin_until_readable(hil, min(spin_s, 3.0 * gap))
             selector = self.selector if any(self.gcs_budget.values()) else self.hil_only

@@ -37,37 +37,24 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 from quadcommon import wire
-from quadcommon.build_info import BuildInfo
 from quadcommon.bus_records import ESTIMATOR_FIELDS
-from quadcommon.config import (
-    SIM_BATTERY_PARAMETERS,
-    SitlConfig,
-    VehicleConfig,
-    config_path,
-    load_scenario,
-    load_sitl,
-    load_vehicle,
-)
+from quadcommon.config import SIM_BATTERY_PARAMETERS
 from quadcommon.mavlink_fast import DecodeError
-from quadcommon.schema import ConfigError
-from quadcommon.trajectories import Trajectory, trajectory_from_spec
 from quadcommon.wire_values import frame_time_s
 
 from .battery.estimator import BatteryEstimator
 from .commander.commander import Commander, Motors, VehicleState
 from .control.cascade import AttitudeReference, Cascade
-from .control.config import ControllerConfig, load_controller
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
-from .estimation.parameters import estimator_params, load_estimator_params
+from .estimation.parameters import estimator_params
 from .logger import topics
-from .logger.logger import FlightLogger, LogOptions, log_info
+from .logger.logger import FlightLogger, log_info
 from .logger.topics import Snapshot
 from .mavlink import telemetry
-from .mavlink.codec import Encoder, mavlink, new_parser
+from .mavlink.codec import Encoder, mavlink
 from .mavlink.commands import CommandDispatcher, CommandRequest
 from .mavlink.console import Console, ConsoleContext
 from .mavlink.dispatch import FaultLog, MessageDispatcher
@@ -80,9 +67,7 @@ from .mavlink.hil import (
     ActuatorEncoder,
     CorruptFrame,
     RefusedReport,
-    SimulatorRequests,
     battery_report,
-    decode_frame,
     disturbance_of,
     sensor_samples,
 )
@@ -90,7 +75,8 @@ from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgo
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.params import ParamService
 from .mavlink.shell import MavlinkShell
-from .mavlink.signing import Signing, SigningOptions
+from .mavlink.signing import Signing
+from .mavlink.simulator_link import FrameOrder, SimulatorLink
 from .mavlink.validation import RefusalNotices
 from .mavlink.vehicle_commands import CommandContext, VehicleCommands
 from .mavlink.vision_in import ExternalVision
@@ -99,19 +85,13 @@ from .params.definitions import (
     consistency_problems,
     controller_config_from_params,
     controller_params,
-    default_parameters,
 )
-from .params.storage import load_params_file
 from .records import SensorSamples, StateEstimate
+from .setup import AutopilotSetup, starting_parameters
 
 m = mavlink
 WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)
-HIL_HELLO_S = 0.2  # heartbeat to the simulator until frames flow: it learns our address from it
 _NAN3 = (math.nan, math.nan, math.nan)
-ESTIMATORS = ("truth", "ekf")
-# A frame for t = 0 this long (s of ``now``) after the run's first one is a restarted simulator's,
-# not a late copy of the first frame (a link delays a copy by at most a few 100 ms).
-LATE_COPY_S = 1.0
 IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it (no alignment)
 # Log download (LOG_DATA / LOG_ENTRY) messages per ground station link: per control frame (4 at
 # 500 Hz: 180 kB/s of simulation time, ~10 us of a frame's bookkeeping), and per housekeeping
@@ -124,49 +104,6 @@ FTP_MESSAGES_PER_TICK = 50
 SHELL_MESSAGES_PER_FRAME = 1  # the console's output (SERIAL_CONTROL, 70 bytes each), likewise
 SHELL_MESSAGES_PER_TICK = 25
 NO_FRAMES_S = 0.1  # wall time without frames after which the housekeeping streams the download
-
-
-@dataclass(frozen=True)
-class AutopilotSetup:
-    """What one autopilot is: configuration loaded and validated, nothing running."""
-
-    sitl: SitlConfig
-    vehicle: VehicleConfig
-    controller: ControllerConfig
-    instance: int = 0
-    autostart: Trajectory | None = None  # armed at the first frame, flying this from t = 0
-    use_odometry: bool = True  # the state from ODOMETRY (float32) or HIL_STATE_QUATERNION (1 cm)
-    params_file: str | None = None  # params.toml: loaded at start if it exists, saved on change
-    default_remotes: bool = True  # the GCS/API links send to 14550 / 14540+N (wire.ports) before anyone talks
-    signing: SigningOptions = SigningOptions()  # MAVLink 2 signing on the GCS links: key, state, wall clock
-    estimator: str = "truth"  # "truth": fly on the simulator's state; "ekf": on the EKF (EKF2_EN)
-    estimator_profile: str = "default"  # config/estimator/NAME.toml: the EKF2_* values to start from
-    log: LogOptions = LogOptions()  # the flight log (ULog): where, and the wall clock for its UTC times
-    build: BuildInfo = BuildInfo()  # version and git commit (AUTOPILOT_VERSION); the shell reads them
-
-    @classmethod
-    def load(
-        cls,
-        instance: int = 0,
-        controller: str = "intbs_nlhinf",
-        vehicle: str = "paper_quad",
-        sitl_config: str | None = None,
-        autostart: str | None = None,
-        state_source: str = "odometry",
-        params_file: str | None = None,
-        estimator: str = "truth",
-        estimator_profile: str = "default",
-    ) -> AutopilotSetup:
-        """By names (config/...), as the command line gives them; ConfigError names file and key."""
-        trajectory = trajectory_from_spec(load_scenario(autostart).trajectory) if autostart else None
-        if estimator not in ESTIMATORS:
-            raise ConfigError(f"estimator {estimator!r}: one of {', '.join(ESTIMATORS)}")
-        load_estimator_params(estimator_profile)  # a bad profile fails here, naming file and key
-        return cls(
-            load_sitl(sitl_config), load_vehicle(vehicle), load_controller(controller), instance,
-            trajectory, state_source == "odometry", params_file, estimator=estimator,
-            estimator_profile=estimator_profile,
-        )  # fmt: skip
 
 
 class AutopilotCore:
@@ -189,21 +126,13 @@ class AutopilotCore:
         self.wrench = setup.vehicle.actuation.mode == "wrench"
         self.wall_now = 0.0  # the caller's clock at the latest entry point
         self.sim_time = 0.0
-        self.last_time_usec = -1
         self.frames = 0
-        self.linked = False
-        self.sim_lost = False
-        self.last_frame_wall = 0.0
-        self.frame_gap_s = 1.0  # wall time between the last two frames (the shell spins below 1 ms)
         self.controller_rows: list[tuple[float, ...]] = []  # one per frame, drained by the caller
         self._out: list[Outgoing] = []
         self._next_wall_heartbeat = 0.0
-        self._next_hil_hello = 0.0
         self._flying = False
         self._controls = (0.0, 0.0, 0.0, 0.0)
         self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
-        self._last_answer: bytes | None = None  # sent again for a resent or duplicated frame
-        self._first_frame_wall = 0.0  # ``now`` at this run's first frame (see _restarted)
         self._estimator_done: tuple | None = None  # (t, estimate, loop) of the frame, for its row
         self._statustext_id = 0
         self._frame_truth: StateEstimate | None = None  # the frame's truth (before the EKF's estimate)
@@ -211,18 +140,7 @@ class AutopilotCore:
         # process flies on; an in-process experiment ends there (sitl.inprocess).
         self.controller_failure: tuple[float, ControllerFailure] | None = None
 
-        self.params = default_parameters(setup.controller, sitl.rates, estimator=True, vehicle=setup.vehicle)
-        self.params.values["MAV_SYS_ID"] = float(self.system_id)
-        self.params.values["EKF2_EN"] = 1.0 if setup.estimator == "ekf" else 0.0
-        load_params_file(config_path("estimator", setup.estimator_profile), self.params)
-        if setup.params_file:
-            from pathlib import Path
-
-            if Path(setup.params_file).exists():
-                loaded = load_params_file(setup.params_file, self.params)  # ConfigError: file, key
-                log(f"{len(loaded)} parameters loaded from {setup.params_file}")
-        for problem in consistency_problems(self.params):
-            log(f"warning: parameters inconsistent (arming refused until fixed): {problem}")
+        self.params = starting_parameters(setup, log)  # ConfigError names the file and key
         self.commander = Commander(self.params)
         self.battery = BatteryEstimator(self.params)  # the one estimate of the flight battery
         gains = controller_config_from_params(setup.controller, self.params)
@@ -246,7 +164,7 @@ class AutopilotCore:
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
         self._status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
         self._status_of: tuple | None = None  # (frame, guidance, output) not yet in _status
-        self.hil_parser = new_parser()
+        self.simulator = SimulatorLink(self.encoder, self.system_id, sitl.home, setup.use_odometry)
         self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
         self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
         self._switch_estimator()
@@ -277,9 +195,9 @@ class AutopilotCore:
             refusals=self.refusals,
         )  # fmt: skip
         self.param_service.register(self.dispatcher, self.commands)
-        self.simulator_requests = SimulatorRequests(self.encoder, self.system_id)  # in the next answer
+        self.simulator_requests = self.simulator.requests  # in the next answer
         self.failure_injection = FailureInjection(
-            self.params, self._request_failure, lambda: self.estimator is not None, self.refusals,
+            self.params, self.simulator.request_failure, lambda: self.estimator is not None, self.refusals,
             self.statustext,
         )  # fmt: skip
         self.vehicle_commands = VehicleCommands(CommandContext(
@@ -407,22 +325,23 @@ class AutopilotCore:
 
     # -- frames ---------------------------------------------------------------------------------
     def _frame(self, data: bytes, now: float) -> bytes | None:
+        link = self.simulator
         try:
-            frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry,
-                                 sensors=self.estimator is not None)  # fmt: skip
+            frame = link.decode(data, sensors=self.estimator is not None)
         except CorruptFrame:
             self.on_foreign_datagram("HIL frame with a bad checksum")
             return None  # the simulator resends a frame it gets no answer to
         if frame is None:
             return None  # a heartbeat from the simulator, or no state in it
-        if frame.time_usec <= self.last_time_usec:
-            if frame.time_usec == self.last_time_usec:
-                # The simulator resent a frame it got no answer to (or the link duplicated it): the
-                # same answer again, byte for byte, without stepping twice.
-                return self._last_answer
-            if not self._restarted(frame.time_usec, now):
-                self.on_foreign_datagram("HIL frame already answered (a late copy)")
-                return None  # the simulator has moved on: nobody waits for this answer
+        order = link.order(frame.time_usec, now)
+        if order is FrameOrder.AGAIN:
+            # The simulator resent a frame it got no answer to (or the link duplicated it): the same
+            # answer again, byte for byte, without stepping twice.
+            return link.last_answer
+        if order is FrameOrder.LATE:
+            self.on_foreign_datagram("HIL frame already answered (a late copy)")
+            return None  # the simulator has moved on: nobody waits for this answer
+        if order is FrameOrder.RESTARTED:
             self._simulator_restarted()
         p, v, e, w = frame.state
         total = p[0] + p[1] + p[2] + v[0] + v[1] + v[2] + e[0] + e[1] + e[2] + w[0] + w[1] + w[2]
@@ -435,23 +354,12 @@ class AutopilotCore:
             frame = frame._replace(
                 state=StateEstimate(c.position_m, c.velocity_m_s, c.euler_rad, c.euler_rates_rad_s)
             )
-        if self.last_time_usec < 0:
-            self._first_frame_wall = now
-        self.frame_gap_s = now - self.last_frame_wall
-        self.last_frame_wall = now
-        if not self.linked or self.sim_lost:
+        became = link.arrived(frame.time_usec, now)
+        if became is not None:
             self.log(f"linked with simulator (frames at t={frame.time_usec * 1e-6:.3f} s)")
-            if self.sim_lost:
+            if became == "recovered":
                 self.statustext(m.MAV_SEVERITY_INFO, "simulator link recovered")
-            self.linked, self.sim_lost = True, False
         return self._control_step(frame)
-
-    def _restarted(self, time_usec: int, now: float) -> bool:
-        """A frame older than the last answered one: a restarted simulator (it starts again at
-        t = 0, after this autopilot reported it lost, or more than :data:`LATE_COPY_S` after this
-        run's first frame) or else a late copy of a frame already answered (a duplicated or
-        reordered datagram), which is dropped."""
-        return self.sim_lost or (time_usec == 0 and now - self._first_frame_wall > LATE_COPY_S)
 
     def _simulator_restarted(self) -> None:
         self.log("simulator time went backwards: simulator restarted; resetting")
@@ -459,8 +367,8 @@ class AutopilotCore:
         self.commander.home = None
         self.battery.reset()
         self.failure_injection.simulator_restarted()
-        self._forward_simulator_parameters()  # a restarted simulator starts from its vehicle file
-        self.last_time_usec = -1
+        self.simulator.forward_parameters(self.params)  # a restarted simulator starts from its vehicle file
+        self.simulator.restart()
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
         self.external_vision.restart()  # so were the vision senders' stamps
@@ -471,7 +379,6 @@ class AutopilotCore:
         self._frame_truth = frame.state
         t = frame_time_s(frame.time_usec)
         self.sim_time = t
-        self.last_time_usec = frame.time_usec
         commander = self.commander
         # What the vehicle knows of its sensors (commander/health.py): every frame, on either
         # estimator. On the truth nothing else reads the samples: the frame says which streams
@@ -496,7 +403,7 @@ class AutopilotCore:
         commander.observe_sensors(t, samples, frame.streams)
         self._battery_step(t, frame.parts)
         if self.frames == 0:
-            self._forward_simulator_parameters()
+            self.simulator.forward_parameters(self.params)
             if self.setup.autostart is not None:
                 commander.start_scenario(t, self.setup.autostart)
         self.frames += 1
@@ -517,11 +424,8 @@ class AutopilotCore:
             controls = (0.0, 0.0, 0.0, 0.0)
         self._controls = controls
         self._frame_done = (frame, guidance, output)
-        answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
-        if self.simulator_requests.pending:  # requests to the simulator ride in the answer
-            answer += self.simulator_requests.take()
-        self._last_answer = answer
-        return answer
+        # The requests to the simulator ride in the answer.
+        return self.simulator.answer(self.actuators.encode(frame.time_usec, controls, commander.armed))
 
     def _battery_step(self, t: float, parts: dict | None) -> None:
         """The frame's battery report (if any) into the estimate, refused at the edge when it is no
@@ -788,15 +692,6 @@ class AutopilotCore:
         )  # fmt: skip
         return self.flight_log.sample_now(name, snapshot)
 
-    def _request_failure(self, unit: int, failure_type: int, instance: int, effectiveness: float) -> bool:
-        """MAV_CMD_INJECT_FAILURE for the simulator, in the next answer (param4: a motor's
-        effectiveness); False when too many wait."""
-        requests = self.simulator_requests
-        if requests.full:
-            return False
-        requests.command(m.MAV_CMD_INJECT_FAILURE, unit, failure_type, instance, effectiveness)
-        return True
-
     def _on_param_change(self, name: str, value: float) -> None:
         """Gains take effect between two control steps (this runs between frames), no jump in
         the integral action (Cascade.retune)."""
@@ -809,28 +704,12 @@ class AutopilotCore:
         if name.startswith(("EKF2_", "EST_")) and self.estimator is not None:
             self.estimator.ekf.set_params(estimator_params(self.params))
         if name in SIM_BATTERY_PARAMETERS:  # PX4's battery simulator's: the simulator's own
-            self._forward_simulator_parameter(name, value)
+            self.simulator.forward_parameter(name, value)
         if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_", "BAT")):
             for problem in consistency_problems(self.params):
                 self.statustext(
                     m.MAV_SEVERITY_WARNING, f"parameters inconsistent (arming refused): {problem}"
                 )
-
-    def _forward_simulator_parameter(self, name: str, value: float) -> None:
-        """A ``SIM_*`` parameter to the simulator, as a PARAM_SET in the next answer, its value a
-        plain float whatever its type (the channel is ours: :mod:`quadcommon.wire`); the simulator
-        validates it again and counts a refusal."""
-        target = (self.system_id, wire.SIMULATOR_COMPONENT_ID)
-        self.simulator_requests.send(
-            m.MAVLink_param_set_message(*target, name.encode(), value, m.MAV_PARAM_TYPE_REAL32)
-        )
-
-    def _forward_simulator_parameters(self) -> None:
-        """At the first frame of a simulator: the ``SIM_*`` parameters that differ from the vehicle
-        file's (a parameters file or a PARAM_SET before it started), which the simulator starts from."""
-        for name in SIM_BATTERY_PARAMETERS:
-            if self.params[name] != self.params.specs[name].default:
-                self._forward_simulator_parameter(name, self.params[name])
 
     # -- wall-clock housekeeping ----------------------------------------------------------------
     def _housekeeping(self, now: float) -> None:
@@ -839,18 +718,18 @@ class AutopilotCore:
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
         self.signing.poll(now)  # wall clock -> timestamps, refusals announced, state saved
-        if now - self.last_frame_wall > NO_FRAMES_S:  # else each frame streams the downloads
+        link = self.simulator
+        if now - link.last_frame_wall > NO_FRAMES_S:  # else each frame streams the downloads
             self.log_transfer.pump(LOG_MESSAGES_PER_TICK)
             self.ftp.pump(FTP_MESSAGES_PER_TICK)
             self.shell.pump(SHELL_MESSAGES_PER_TICK)
         sim_loss_s = self.params["COM_SIM_LOSS_T"]
-        if self.linked and now - self.last_frame_wall <= sim_loss_s:
+        if not link.silent(now, sim_loss_s):
             return
-        if self.linked and not self.sim_lost:
+        if link.lose():
             # The cascade keeps its state: in lockstep the plant has not moved either, so frames that
             # resume after a stall (a loaded machine) continue the same flight, as in-process. A
             # restarted simulator shows as time going backwards (_simulator_restarted: disarm).
-            self.sim_lost = True
             self.commander.simulator_lost()  # no position: arming refused until frames resume
             self.statustext(
                 m.MAV_SEVERITY_CRITICAL,
@@ -864,8 +743,6 @@ class AutopilotCore:
                 link.send(heartbeat)
                 link.send(sys_status)
             self.missions.update(self.sim_time, force=True)
-        if now >= self._next_hil_hello:
-            # Say hello until frames flow: a (re)started simulator learns our address from it.
-            self._next_hil_hello = now + HIL_HELLO_S
+        if link.hello_due(now):  # until frames flow: a (re)started simulator learns our address from it
             hello = self.encoder.pack_unsigned(telemetry.heartbeat(self.status))  # HIL: never signed
             self._out.append(Outgoing(HIL_LINK, None, hello))
