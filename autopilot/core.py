@@ -34,12 +34,10 @@ those modules.)
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 
 from quadcommon import wire
-from quadcommon.bus_records import ESTIMATOR_FIELDS
 from quadcommon.config import SIM_BATTERY_PARAMETERS
 from quadcommon.mavlink_fast import DecodeError
 from quadcommon.wire_values import frame_time_s
@@ -51,6 +49,7 @@ from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
 from .estimation.parameters import estimator_params
 from .logger import topics
+from .logger.frame_records import FrameRecords, RecordContext
 from .logger.logger import FlightLogger, log_info
 from .logger.topics import Snapshot
 from .mavlink import telemetry
@@ -63,12 +62,10 @@ from .mavlink.ftp import FileSystem, FtpServer, NoFiles
 from .mavlink.handlers import HandlerContext, MessageHandlers
 from .mavlink.hil import (
     BATTERY_ID,
-    DISTURBANCE_ID,
     ActuatorEncoder,
     CorruptFrame,
     RefusedReport,
     battery_report,
-    disturbance_of,
     sensor_samples,
 )
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
@@ -77,6 +74,7 @@ from .mavlink.params import ParamService
 from .mavlink.shell import MavlinkShell
 from .mavlink.signing import Signing
 from .mavlink.simulator_link import FrameOrder, SimulatorLink
+from .mavlink.telemetry_feed import FeedContext, TelemetryFeed
 from .mavlink.validation import RefusalNotices
 from .mavlink.vehicle_commands import CommandContext, VehicleCommands
 from .mavlink.vision_in import ExternalVision
@@ -91,7 +89,6 @@ from .setup import AutopilotSetup, starting_parameters
 
 m = mavlink
 WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)
-_NAN3 = (math.nan, math.nan, math.nan)
 IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it (no alignment)
 # Log download (LOG_DATA / LOG_ENTRY) messages per ground station link: per control frame (4 at
 # 500 Hz: 180 kB/s of simulation time, ~10 us of a frame's bookkeeping), and per housekeeping
@@ -127,7 +124,6 @@ class AutopilotCore:
         self.wall_now = 0.0  # the caller's clock at the latest entry point
         self.sim_time = 0.0
         self.frames = 0
-        self.controller_rows: list[tuple[float, ...]] = []  # one per frame, drained by the caller
         self._out: list[Outgoing] = []
         self._next_wall_heartbeat = 0.0
         self._flying = False
@@ -160,13 +156,17 @@ class AutopilotCore:
             enabled=setup.log.enabled,
         )  # fmt: skip
         self.params.on_change(self._on_param_change)
+        self.records = FrameRecords(RecordContext(self.flight_log, self.commander, self.battery,
+                                                  lambda: self.estimator))  # fmt: skip
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
         self._status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
-        self._status_of: tuple | None = None  # (frame, guidance, output) not yet in _status
+        self.telemetry = TelemetryFeed(self._status, FeedContext(
+            self.commander, self.params, self.battery, setup.vehicle.actuation.thrust_max_n,
+            lambda: self.sim_time, lambda: self.estimator is not None, lambda: self._controls,
+        ))  # fmt: skip
         self.simulator = SimulatorLink(self.encoder, self.system_id, sitl.home, setup.use_odometry)
         self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
-        self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
         self._switch_estimator()
 
         ports = sitl.ports(setup.instance)
@@ -215,14 +215,13 @@ class AutopilotCore:
         self.ftp = FtpServer(files or NoFiles(), self.encoder, self.links, self.system_id, clock)
         self.ftp.register(self.dispatcher)  # FILE_TRANSFER_PROTOCOL
         console = Console(ConsoleContext(
-            self.params, self.param_service.set_value, self._console_command, self._topic_now,
+            self.params, self.param_service.set_value, self._console_command, self.records.topic_now,
             tuple(spec.name for spec in topics.TOPICS), self.info, self.commander, lambda: self.sim_time,
             setup.build,
         ))  # fmt: skip
         greeting = f"\nquadsitl {setup.build.version or '(version unknown)'}: 'help' lists the commands\n"
         self.shell = MavlinkShell(console, self.encoder, self.links, self.system_id, clock, greeting)
         self.shell.register(self.dispatcher)  # SERIAL_CONTROL (device SHELL)
-        self._latest: tuple | None = None  # (frame, guidance, output, controller row): the listener's
         self.external_vision = ExternalVision()  # a client's vision (mocap bridge, VIO) for the EKF
         self.handlers = MessageHandlers(HandlerContext(
             self.system_id, self.commander, lambda: self.sim_time, lambda: self.wall_now, self.params,
@@ -281,8 +280,21 @@ class AutopilotCore:
 
     def take_controller_rows(self) -> list[tuple[float, ...]]:
         """The controller internals of every frame since the last call (CONTROLLER_FIELDS order)."""
-        rows, self.controller_rows = self.controller_rows, []
-        return rows
+        return self.records.take_controller_rows()
+
+    def take_estimator_rows(self) -> list[tuple[float, ...]]:
+        """The estimator rows of every frame since the last call (ESTIMATOR_FIELDS order)."""
+        return self.records.take_estimator_rows()
+
+    @property
+    def controller_rows(self) -> list[tuple[float, ...]]:
+        """The controller rows not taken yet (:mod:`.logger.frame_records`)."""
+        return self.records.controller_rows
+
+    @property
+    def estimator_rows(self) -> list[tuple[float, ...]]:
+        """The estimator rows not taken yet (on the EKF)."""
+        return self.records.estimator_rows
 
     def info(self) -> dict:
         """What ``quadsitl/<N>/autopilot/info`` answers."""
@@ -511,138 +523,26 @@ class AutopilotCore:
         self._estimator_done = (t, est, loop)  # its row is written after the answer is out
         return est
 
-    def _record_estimator(self, t: float, est: StateEstimate | None, loop: EstimatorLoop) -> None:
-        """One ESTIMATOR_FIELDS row per frame (NaN until the filter has an estimate)."""
-        e, st, src = loop.ekf, loop.last_status, loop.ekf.sources
-        if st is None or est is None:
-            self.estimator_rows.append((t, *(math.nan,) * (len(ESTIMATOR_FIELDS) - 1)))
-            return
-        bg, ba = e.estimate_biases()
-        self.estimator_rows.append(
-            (t, *est.position_m, *est.velocity_m_s, *est.euler_rad, *bg, *ba,
-             st.pos_horiz_accuracy_m, st.pos_vert_accuracy_m, st.vel_accuracy_m_s, st.tilt_accuracy_rad,
-             st.yaw_accuracy_rad, st.vel_ratio, st.pos_horiz_ratio, st.pos_vert_ratio, st.mag_ratio,
-             src["gps_pos"].normalized_innovation, src["gps_vel"].normalized_innovation,
-             src["baro"].normalized_innovation, src["mag"].normalized_innovation,
-             src["ev_pos"].normalized_innovation, src["ev_yaw"].normalized_innovation,
-             float(st.flags), float(st.converged))
-        )  # fmt: skip
-
-    def take_estimator_rows(self) -> list[tuple[float, ...]]:
-        """The estimator rows of every frame since the last call (ESTIMATOR_FIELDS order)."""
-        rows, self.estimator_rows = self.estimator_rows, []
-        return rows
-
     def _bookkeeping(self, frame, guidance, output) -> None:
         t = self.sim_time
         if self._estimator_done is not None:
             t_est, est, loop = self._estimator_done
             self._estimator_done = None
             loop.fuse()  # this frame's aiding, now that the answer is out (see estimation/loop.py)
-            self._record_estimator(t_est, loop.estimate() if est is not None else None, loop)
-        self._status_of = (frame, guidance, output)  # brought into the status when it is read
-        self._record_controller(t, guidance, output)
-        self._latest = (frame, guidance, output, self.controller_rows[-1])
-        self._log_frame(frame, guidance, output)
-        self._send_telemetry(t)
+            self.records.estimator_row(t_est, loop.estimate() if est is not None else None, loop)
+        self.telemetry.frame_done(frame, guidance, output)  # brought into the status when it is read
+        self.records.frame(t, frame, self._frame_truth, guidance, output, self._controls)
+        self.telemetry.send_due(t, self.links, self.encoder.pack)
         self.missions.update(t)  # MISSION_CURRENT, MISSION_ITEM_REACHED
         self.send_events()
         self.log_transfer.pump(LOG_MESSAGES_PER_FRAME)
         self.ftp.pump(FTP_MESSAGES_PER_FRAME)
         self.shell.pump(SHELL_MESSAGES_PER_FRAME)
 
-    def _log_frame(self, frame, guidance, output) -> None:
-        """The frame into the flight log (autopilot/logger/), when one is open; the simulator's
-        disturbance and rotors' health when the frame reports them (kept while no log is open: a log
-        starts with them)."""
-        log = self.flight_log
-        parts = frame.parts
-        due = log.frame(frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1],
-                        parts, frame.state, output)  # fmt: skip
-        if parts is not None and DISTURBANCE_ID in parts:  # a change, or a reminder (quadcommon.wire)
-            report = disturbance_of(parts)
-            if report is not None:
-                log.disturbance(report.time_usec, report.force_n, report.torque_n_m)
-                log.rotor_health(report.time_usec, report.rotor_effectiveness, report.rotor_failure)
-        if due:  # the periodic topics (one frame in ten, at most)
-            s = log.snapshot
-            s.reference = guidance.reference
-            s.controls = self._controls
-            s.estimator = self.estimator.last_status if self.estimator is not None else None
-            s.battery = self.battery.status
-            log.sample_due()
-
     @property
     def status(self) -> telemetry.VehicleStatus:
-        """What telemetry reports: the latest frame and the commander now. Refreshed when read
-        (a stream due, a requested message, a heartbeat), not at every frame: most frames send
-        nothing."""
-        if self._status_of is not None:
-            self._update_status(*self._status_of)
-            self._status_of = None
-        return self._status
-
-    def _update_status(self, frame, guidance, output) -> None:
-        s, c = self._status, self.commander
-        s.time_usec = frame.time_usec
-        s.state = frame.state
-        s.parts = frame.parts
-        s.on_ekf = self.estimator is not None
-        s.armed = c.armed
-        s.custom_mode = c.mode.custom_mode
-        s.landed_state = c.landed_state.value
-        if c.home is not None:
-            s.home_local = c.home
-        s.reference = guidance.reference
-        s.controls = self._controls
-        s.armable = not c.armed and c.arm_problem(self.sim_time) is None
-        values = self.params.values
-        s.geofence_enabled = values["GF_MAX_HOR_DIST"] > 0.0 or values["GF_MAX_VER_DIST"] > 0.0
-        s.geofence_breached = c.failsafes.fence_breached
-        s.battery = self.battery.status
-        s.battery_unhealthy = c.battery.unhealthy
-        s.flags = c.health_flags(self.sim_time)
-        s.failsafe = c.in_failsafe
-        s.terminated = c.terminated
-        s.orbit = c.orbit_status
-        if output is not None:
-            s.euler_ref = output.euler_ref_rad
-            s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n
-        else:
-            s.euler_ref = (0.0, 0.0, frame.state.euler_rad[2] if frame.state is not None else 0.0)
-            s.thrust_normalised = 0.0
-
-    def _record_controller(self, t: float, guidance, output) -> None:
-        ref = guidance.reference
-        if ref is not None:
-            p, v, a = ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2
-        else:
-            p = v = a = _NAN3
-        if output is not None:
-            eta_d, raw = output.euler_ref_rad, output.roll_pitch_raw_rad
-            u1, tau = output.thrust_n, output.torque_euler_n_m
-        else:
-            eta_d, raw, u1, tau = _NAN3, (math.nan, math.nan), 0.0, (0.0, 0.0, 0.0)
-        c = self.commander
-        self.controller_rows.append(
-            (t, *p, *v, *a, *eta_d, *raw, u1, *tau, float(c.armed), float(c.mode.custom_mode))
-        )
-
-    def _send_telemetry(self, t: float) -> None:
-        cache: dict[int, bytes | None] = {}  # one message built per frame for every link
-        for link in self.links:
-            if not link.peers:
-                continue
-            due = link.streams.due(t)
-            if not due:  # most frames
-                continue
-            for msg_id in due:
-                if msg_id not in cache:
-                    msg = telemetry.build(msg_id, self.status)  # (refreshes the status)
-                    cache[msg_id] = self.encoder.pack(msg) if msg is not None else None
-                data = cache[msg_id]
-                if data is not None:
-                    link.send(data)
+        """What telemetry reports: the latest frame and the commander now (:mod:`.mavlink.telemetry_feed`)."""
+        return self.telemetry.status
 
     # -- ground stations ------------------------------------------------------------------------
     def send_events(self) -> None:
@@ -676,22 +576,6 @@ class AutopilotCore:
         self.send_events()
         return outcome
 
-    def _topic_now(self, name: str) -> tuple[list[str], tuple] | None:
-        """Flight-log topic ``name`` at the latest frame (the console's ``listener``), built by the
-        log's own builders from a copy of its snapshot refreshed with that frame."""
-        if self._latest is None:
-            return None
-        frame, guidance, output, row = self._latest
-        parts = frame.parts
-        gps = topics.gps_of(parts) if parts is not None and topics.GPS_ID in parts else None
-        snapshot = dataclasses.replace(
-            self.flight_log.snapshot, t_us=frame.time_usec, truth=self._frame_truth, estimate=frame.state,
-            row=row, parts=parts, output=output, reference=guidance.reference, controls=self._controls,
-            estimator=self.estimator.last_status if self.estimator is not None else None,
-            battery=self.battery.status, gps=gps or self.flight_log.snapshot.gps,
-        )  # fmt: skip
-        return self.flight_log.sample_now(name, snapshot)
-
     def _on_param_change(self, name: str, value: float) -> None:
         """Gains take effect between two control steps (this runs between frames), no jump in
         the integral action (Cascade.retune)."""
@@ -718,15 +602,15 @@ class AutopilotCore:
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
         self.signing.poll(now)  # wall clock -> timestamps, refusals announced, state saved
-        link = self.simulator
-        if now - link.last_frame_wall > NO_FRAMES_S:  # else each frame streams the downloads
+        sim = self.simulator
+        if now - sim.last_frame_wall > NO_FRAMES_S:  # else each frame streams the downloads
             self.log_transfer.pump(LOG_MESSAGES_PER_TICK)
             self.ftp.pump(FTP_MESSAGES_PER_TICK)
             self.shell.pump(SHELL_MESSAGES_PER_TICK)
         sim_loss_s = self.params["COM_SIM_LOSS_T"]
-        if not link.silent(now, sim_loss_s):
+        if not sim.silent(now, sim_loss_s):
             return
-        if link.lose():
+        if sim.lose():
             # The cascade keeps its state: in lockstep the plant has not moved either, so frames that
             # resume after a stall (a loaded machine) continue the same flight, as in-process. A
             # restarted simulator shows as time going backwards (_simulator_restarted: disarm).
@@ -743,6 +627,6 @@ class AutopilotCore:
                 link.send(heartbeat)
                 link.send(sys_status)
             self.missions.update(self.sim_time, force=True)
-        if link.hello_due(now):  # until frames flow: a (re)started simulator learns our address from it
+        if sim.hello_due(now):  # until frames flow: a (re)started simulator learns our address from it
             hello = self.encoder.pack_unsigned(telemetry.heartbeat(self.status))  # HIL: never signed
             self._out.append(Outgoing(HIL_LINK, None, hello))
