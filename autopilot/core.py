@@ -43,11 +43,12 @@ from quadcommon.mavlink_fast import DecodeError
 from quadcommon.wire_values import frame_time_s
 
 from .battery.estimator import BatteryEstimator
-from .commander.commander import Commander, Motors, VehicleState
-from .control.cascade import AttitudeReference, Cascade
+from .commander.commander import Commander, VehicleState
+from .control.cascade import Cascade
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
-from .estimation.parameters import estimator_params
+from .estimator_switch import EstimatorSwitch
+from .flight_control import MOTORS_OFF, FlightControl
 from .logger import topics
 from .logger.frame_records import FrameRecords, RecordContext
 from .logger.logger import FlightLogger, log_info
@@ -89,7 +90,6 @@ from .setup import AutopilotSetup, starting_parameters
 
 m = mavlink
 WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)
-IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it (no alignment)
 # Log download (LOG_DATA / LOG_ENTRY) messages per ground station link: per control frame (4 at
 # 500 Hz: 180 kB/s of simulation time, ~10 us of a frame's bookkeeping), and per housekeeping
 # tick (wall) while no frames flow.
@@ -126,10 +126,8 @@ class AutopilotCore:
         self.frames = 0
         self._out: list[Outgoing] = []
         self._next_wall_heartbeat = 0.0
-        self._flying = False
         self._controls = (0.0, 0.0, 0.0, 0.0)
         self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
-        self._estimator_done: tuple | None = None  # (t, estimate, loop) of the frame, for its row
         self._statustext_id = 0
         self._frame_truth: StateEstimate | None = None  # the frame's truth (before the EKF's estimate)
         # The latest flight terminated because a law failed: (simulation time s, the failure). The
@@ -141,7 +139,7 @@ class AutopilotCore:
         self.battery = BatteryEstimator(self.params)  # the one estimate of the flight battery
         gains = controller_config_from_params(setup.controller, self.params)
         self.cascade = Cascade(gains, setup.vehicle, self.dt)
-        self._thrust_max_n = setup.vehicle.actuation.thrust_max_n  # U1_max: the manual modes' thrust scale
+        self.flight = FlightControl(self.cascade, setup.vehicle.actuation.thrust_max_n)
         self._gain_names = {spec.name for spec in controller_params(setup.controller)}
         self.flight_log = FlightLogger(
             self.params,
@@ -166,8 +164,8 @@ class AutopilotCore:
             lambda: self.sim_time, lambda: self.estimator is not None, lambda: self._controls,
         ))  # fmt: skip
         self.simulator = SimulatorLink(self.encoder, self.system_id, sitl.home, setup.use_odometry)
-        self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
-        self._switch_estimator()
+        self.estimators = EstimatorSwitch(self.params, self.commander, self._status, self.dt,
+                                          setup.vehicle.nominal.gravity_m_s2, log, self.on_foreign_datagram)
 
         ports = sitl.ports(setup.instance)
         remotes = (
@@ -400,8 +398,8 @@ class AutopilotCore:
             samples = self._sensor_samples(frame.parts)
         if samples is not None and samples.gps is not None:
             self._status.gps = samples.gps  # GPS_RAW_INT reports the receiver's last sample
-        if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:
-            est = self._estimate(t, frame)
+        if self.estimators.wanted:
+            est = self.estimators.estimate(t, frame, first_frame=self.frames == 0)
             frame = frame._replace(state=est)  # telemetry reports what the vehicle flies on
         else:
             est = frame.state
@@ -420,20 +418,10 @@ class AutopilotCore:
                 commander.start_scenario(t, self.setup.autostart)
         self.frames += 1
         guidance = commander.step(t, self.dt)
-        output = None
-        if guidance.motors == Motors.FLY and est is not None:
-            if not self._flying:
-                self.cascade.reset()
-                self._flying = True
-            try:
-                output = self._cascade_step(est, guidance)
-                controls = output.actuator_controls
-            except ControllerFailure as failure:
-                output, controls = None, self._controller_failed(t, failure)
-        else:
-            self._flying = False
-            self.cascade.reset()
-            controls = (0.0, 0.0, 0.0, 0.0)
+        try:
+            output, controls = self.flight.step(est, guidance)
+        except ControllerFailure as failure:
+            output, controls = None, self._controller_failed(t, failure)
         self._controls = controls
         self._frame_done = (frame, guidance, output)
         # The requests to the simulator ride in the answer.
@@ -458,18 +446,6 @@ class AutopilotCore:
         except DecodeError:  # (decode_frame checked the messages already: not expected)
             return None
 
-    def _cascade_step(self, est: StateEstimate, guidance):
-        """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'
-        tilt, attitude, thrust as a fraction of the vehicle's U1_max) go in through the cascade's
-        own override arguments."""
-        manual = guidance.manual
-        if manual is None:
-            return self.cascade.step(est, guidance.reference)
-        attitude = AttitudeReference(*manual.attitude) if manual.attitude is not None else None
-        thrust = manual.thrust * self._thrust_max_n if manual.thrust is not None else None
-        return self.cascade.step(est, guidance.reference, roll_pitch=manual.roll_pitch, attitude=attitude,
-                                 thrust_n=thrust)  # fmt: skip
-
     def _controller_failed(self, t: float, failure: ControllerFailure) -> tuple[float, float, float, float]:
         """A law gave a non-finite output or raised: flight termination (motors off, disarmed), as
         PX4's failure detector terminates; the process flies on, the reason on every link."""
@@ -477,59 +453,14 @@ class AutopilotCore:
         self.log(f"flight terminated: {failure}")
         self.controller_failure = (t, failure)
         self.commander.disarm(t, force=True)
-        self._flying = False
-        self.cascade.reset()
-        return (0.0, 0.0, 0.0, 0.0)
-
-    # -- the estimator ----------------------------------------------------------------------------
-    def _switch_estimator(self) -> None:
-        """Start or stop the EKF to follow EKF2_EN (only while disarmed: never in flight)."""
-        want = self.params.values["EKF2_EN"] == 1.0
-        if want == (self.estimator is not None) or self.commander.armed:
-            return
-        if want:
-            self.estimator = EstimatorLoop(estimator_params(self.params), self.dt,
-                                           self.setup.vehicle.nominal.gravity_m_s2)  # fmt: skip
-        else:
-            self.estimator = None
-            self.commander.estimator_problem = None
-            self.commander.height_uncertainty_m = 0.0  # the truth
-        self._status.estimator = None
-        self._status.on_ekf = want
-        self.log(f"flying on {'the EKF estimate' if want else 'the simulator truth'} (EKF2_EN {int(want)})")
-
-    def _estimate(self, t: float, frame) -> StateEstimate | None:
-        """This frame's EKF estimate (None until it has aligned); the commander's pre-arm verdict."""
-        self._switch_estimator()
-        loop = self.estimator
-        if loop is None:  # EKF2_EN = 1 set in flight: the switch waits for the disarm
-            return frame.state
-        samples = frame.sensors
-        if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
-            self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
-            return None
-        for name in samples.refused:  # never fed to the filter
-            self.on_foreign_datagram(f"HIL frame with a non-finite {name} sample")
-        if "imu" in samples.refused or not samples.imu_fresh:  # no prediction, no fusion this frame:
-            est = loop.estimate()  # fly on the filter as it is (the next sample integrates across the gap)
-        elif self.frames == 0 and frame.state.position_m[2] > IN_AIR_START_M:
-            loop.start_in_air(t, samples, frame.state)  # the paper's experiments start in the air
-            est = frame.state
-        else:
-            est = loop.predict(t, samples)  # the frame's aiding is fused after the answer
-        self.commander.estimator_problem = loop.problem()
-        self.commander.height_uncertainty_m = loop.height_uncertainty_m()
-        self._status.estimator = loop.last_status
-        self._estimator_done = (t, est, loop)  # its row is written after the answer is out
-        return est
+        self.flight.stop()
+        return MOTORS_OFF
 
     def _bookkeeping(self, frame, guidance, output) -> None:
         t = self.sim_time
-        if self._estimator_done is not None:
-            t_est, est, loop = self._estimator_done
-            self._estimator_done = None
-            loop.fuse()  # this frame's aiding, now that the answer is out (see estimation/loop.py)
-            self.records.estimator_row(t_est, loop.estimate() if est is not None else None, loop)
+        fused = self.estimators.fuse()  # this frame's aiding, now that the answer is out
+        if fused is not None:
+            self.records.estimator_row(*fused)
         self.telemetry.frame_done(frame, guidance, output)  # brought into the status when it is read
         self.records.frame(t, frame, self._frame_truth, guidance, output, self._controls)
         self.telemetry.send_due(t, self.links, self.encoder.pack)
@@ -538,6 +469,11 @@ class AutopilotCore:
         self.log_transfer.pump(LOG_MESSAGES_PER_FRAME)
         self.ftp.pump(FTP_MESSAGES_PER_FRAME)
         self.shell.pump(SHELL_MESSAGES_PER_FRAME)
+
+    @property
+    def estimator(self) -> EstimatorLoop | None:
+        """The EKF's loop while the vehicle flies on it (EKF2_EN 1), else None (the truth)."""
+        return self.estimators.loop
 
     @property
     def status(self) -> telemetry.VehicleStatus:
@@ -585,8 +521,7 @@ class AutopilotCore:
                 self.cascade.retune(controller_config_from_params(self.setup.controller, self.params))
             except ValueError as exc:  # not reachable with the declared parameters; never crash
                 self.statustext(m.MAV_SEVERITY_CRITICAL, f"retune failed: {exc}")
-        if name.startswith(("EKF2_", "EST_")) and self.estimator is not None:
-            self.estimator.ekf.set_params(estimator_params(self.params))
+        self.estimators.parameter_changed(name)
         if name in SIM_BATTERY_PARAMETERS:  # PX4's battery simulator's: the simulator's own
             self.simulator.forward_parameter(name, value)
         if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_", "BAT")):

@@ -96,7 +96,8 @@ AUTOPILOT_FLOORS: tuple[tuple[str, ...], ...] = (
     ("commander",),  # the commander: modes, transitions, failsafes, health
     ("mavlink", "mission.service"),  # the protocol handlers and services around the commander
     ("logger", "vehicle_files"),  # the flight log, the vehicle's files
-    ("core", "setup"),  # AutopilotCore: wires the rooms; what an autopilot is before it runs
+    # AutopilotCore wires the rooms; beside it, what it is made from and the two steps it runs
+    ("core", "setup", "estimator_switch", "flight_control"),
     ("app", "__main__", "bus_link"),  # the process shell
 )
 # Imports that run back up, each with why it stands (a new one fails the suite): none.
