@@ -1,8 +1,8 @@
 """The whole autopilot as a step machine: bytes and times in, bytes out; no socket, no clock.
 
-:class:`AutopilotCore` holds every rule of the flight controller: the commander, guidance,
-missions, parameters, failsafes, telemetry scheduling and the control cascade, behind four entry
-points, each given the time by its caller:
+:class:`AutopilotCore` wires the rooms of the flight controller (the commander, guidance,
+missions, parameters, failsafes, the estimator, telemetry, the flight log and the control cascade)
+to the links, and runs them behind four entry points, each given the time by its caller:
 
 * :meth:`~AutopilotCore.on_hil_datagram` ``(data, now) -> answer``: one lockstep frame from the
   simulator; runs exactly one control step and returns the ``HIL_ACTUATOR_CONTROLS`` datagram to
@@ -27,9 +27,13 @@ The process shell (:mod:`autopilot.app`) owns the sockets, the selector and the 
 in-process runner (:mod:`sitl.inprocess`) couples this core with the simulator's through the same
 bytes.
 
-(One module: the core is the autopilot's one composition point, wiring commander, guidance,
-missions, parameters, estimator, telemetry and signing to the links; the behaviour itself lives in
-those modules.)
+The rules live in the rooms, each given a narrow context (the commander, the parameters, the
+clocks, the refusal and STATUSTEXT sinks it needs), never the core: the ground station's messages
+in :mod:`.mavlink.handlers` and :mod:`.mavlink.vehicle_commands`, the lockstep link's rules in
+:mod:`.mavlink.simulator_link`, what the vehicle flies on in :mod:`.estimator_switch`, the cascade
+behind the commander in :mod:`.flight_control`, telemetry's status in :mod:`.mavlink.telemetry_feed`,
+the frame's rows and flight log in :mod:`.logger.frame_records`. The core decides the order of a
+frame's steps, what a simulator restart resets and what a parameter change reaches.
 """
 
 from __future__ import annotations
@@ -104,6 +108,8 @@ NO_FRAMES_S = 0.1  # wall time without frames after which the housekeeping strea
 
 
 class AutopilotCore:
+    """One autopilot (module docstring): the rooms of ``setup`` wired to the GCS, API and HIL links."""
+
     def __init__(
         self,
         setup: AutopilotSetup,

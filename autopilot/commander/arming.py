@@ -45,6 +45,8 @@ class Arming:
     """Arming, disarming and the pre-arm checks (module docstring): a part of the Commander."""
 
     def arm(self, t: float, force: bool = False) -> Outcome:
+        """Arm (``force``: without the pre-arm checks, as MAV_CMD_COMPONENT_ARM_DISARM's 21196);
+        armed in OFFBOARD or AUTO.MISSION, the vehicle enters it at once (PX4)."""
         if self.armed:
             return Outcome(ACCEPTED, "already armed")
         outcome = self._fire(t, Event.ARM, force=force)
@@ -63,6 +65,7 @@ class Arming:
         return Outcome(ACCEPTED)
 
     def disarm(self, t: float, force: bool = False) -> Outcome:
+        """Disarm; in the air only with ``force`` (motors off wherever the vehicle is)."""
         if not self.armed:
             return Outcome(ACCEPTED, "already disarmed")
         return self._fire(t, Event.DISARM, force=force, why="disarmed")

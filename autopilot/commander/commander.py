@@ -161,10 +161,14 @@ class Commander(Arming, ModeRequests, FailsafeReactions, Plans, OrbitFollow, Mis
     # -- reading the state ----------------------------------------------------------------------
     @property
     def armed(self) -> bool:
+        """Any phase but DISARMED."""
         return self.phase != Phase.DISARMED
 
     @property
     def landed_state(self) -> LandedState:
+        """MAV_LANDED_STATE as PX4's land detector reports it: TAKEOFF while taking off, LANDING
+        while descending to a touchdown not yet confirmed, else on the ground or in the air
+        (:meth:`in_air`)."""
         if self.phase == Phase.TAKEOFF:
             return LandedState.TAKEOFF
         if self.phase in DESCENDING or self.phase == Phase.DESCEND:
@@ -176,6 +180,8 @@ class Commander(Arming, ModeRequests, FailsafeReactions, Plans, OrbitFollow, Mis
         return LandedState.IN_AIR
 
     def limits(self) -> Limits:
+        """The planner's limits of the AUTO modes from the parameters (MPC_XY_VEL_MAX, MPC_Z_VEL_MAX_UP
+        and _DN, MPC_ACC_HOR, MPC_YAWRAUTO_MAX)."""
         p = self.params
         return Limits(
             speed_horizontal=p["MPC_XY_VEL_MAX"],
@@ -186,6 +192,8 @@ class Commander(Arming, ModeRequests, FailsafeReactions, Plans, OrbitFollow, Mis
         )
 
     def manual_limits(self) -> ManualLimits:
+        """The manual modes' limits from the parameters (MPC_*, MC_ACRO_*, COM_RC_LOSS_T,
+        COM_RC_STICK_OV; angles in rad)."""
         p = self.params
         rad = math.radians
         return ManualLimits(
@@ -251,6 +259,7 @@ class Commander(Arming, ModeRequests, FailsafeReactions, Plans, OrbitFollow, Mis
         return state.position_m[2] - GROUND_Z_M < IN_AIR_HEIGHT_M
 
     def drain_events(self) -> list[tuple[int, str]]:
+        """The queued events, (MAV_SEVERITY, text) in order, removed from the queue."""
         events, self.events = self.events, []
         return events
 
@@ -319,6 +328,8 @@ class Commander(Arming, ModeRequests, FailsafeReactions, Plans, OrbitFollow, Mis
 
     # -- commands ----------------------------------------------------------------------------------
     def update_state(self, state: VehicleState) -> None:
+        """This control step's state (truth or estimate); home, until arming, below where the
+        vehicle first is, on the ground."""
         self.state = state
         self.position_valid = True
         if self.home is None:  # until arming: below where the vehicle booted, on the ground
@@ -329,15 +340,18 @@ class Commander(Arming, ModeRequests, FailsafeReactions, Plans, OrbitFollow, Mis
         return self._fire(t, Event.TAKEOFF, altitude_m=altitude_m)
 
     def hold(self, t: float, reason: str = "") -> Outcome:
+        """AUTO.LOITER: brake and hold where the reference stops (``reason``: announced with it)."""
         outcome = self._fire(t, Event.HOLD)
         if reason:
             self._event(SEVERITY_WARNING, reason)
         return outcome
 
     def land(self, t: float) -> Outcome:
+        """AUTO.LAND: brake, then descend at MPC_LAND_SPEED to touchdown."""
         return self._fire(t, Event.LAND)
 
     def return_to_launch(self, t: float) -> Outcome:
+        """AUTO.RTL: return to home or a rally point (RTL_TYPE) and land there."""
         return self._fire(t, Event.RTL)
 
     def start_scenario(self, t: float, trajectory: Trajectory, then: FlightMode | None = None) -> Outcome:

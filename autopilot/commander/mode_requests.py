@@ -62,6 +62,8 @@ class ModeRequests:
     """Mode requests and what each mode needs (module docstring): a part of the Commander."""
 
     def set_mode(self, t: float, mode: FlightMode) -> Outcome:
+        """Select ``mode`` (DO_SET_MODE, SET_MODE): its event of the table; selecting AUTO.MISSION
+        again may (re)start the mission, re-selecting any other mode changes nothing."""
         if mode == self.mode and mode != FlightMode.AUTO_MISSION:  # re-selecting it may (re)start
             return Outcome(ACCEPTED)
         event = MODE_EVENTS.get(mode)

@@ -20,12 +20,14 @@ class OrbitFollow:
     """Orbit and follow-me (module docstring): a part of the Commander."""
 
     def orbit_limits(self) -> OrbitLimits:
+        """Orbit's limits from the parameters (MC_ORBIT_RAD_MAX, MC_ORBIT_YAW_MOD, the AUTO limits)."""
         p = self.params
         limits = self.limits()
         return OrbitLimits(p["MC_ORBIT_RAD_MAX"], min(SPEED_MAX_M_S, limits.speed_horizontal), limits,
                            int(p["MC_ORBIT_YAW_MOD"]))  # fmt: skip
 
     def follow_settings(self) -> FollowSettings:
+        """Follow-me's settings from the parameters (FLW_TGT_*, the AUTO limits)."""
         p = self.params
         return FollowSettings(p["FLW_TGT_HT"], p["FLW_TGT_DST"], p["FLW_TGT_FA"], int(p["FLW_TGT_ALT_M"]),
                               p["FLW_TGT_MAX_VEL"], p["FLW_TGT_RS"], self.limits())  # fmt: skip
