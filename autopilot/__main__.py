@@ -14,9 +14,9 @@ from quadcommon.schema import ConfigError
 from quadcommon.udp import PortInUse
 
 from .app import Autopilot
-from .core import AutopilotSetup
 from .logger.logger import LogOptions
 from .mavlink.signing import SigningOptions
+from .setup import AutopilotSetup
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -5,7 +5,7 @@ goes into the core with the wall clock, and whatever the core returns goes out o
 its link. A lockstep frame is answered before anything else is sent (the simulator is waiting).
 Every 50 ms of wall time the core's housekeeping runs, its rows go to zenoh and its queries are
 answered (:mod:`autopilot.bus_link`), and the flight log goes to the writer's thread
-(:mod:`autopilot.logger.storage`). Nothing here decides anything about the vehicle.
+(:mod:`autopilot.log_files`). Nothing here decides anything about the vehicle.
 
 With an impairment (``[impair]`` of sitl.toml, ``--impair``, or ``quadsitl impair`` on zenoh's
 ``quadsitl/<N>/impair`` while running) every send goes through the link's outgoing channel and every
@@ -25,10 +25,10 @@ from quadcommon.impaired_udp import ImpairedLinks, ImpairedReceiver, ImpairedSen
 from quadcommon.udp import bind_udp
 
 from .bus_link import AutopilotBus
-from .core import AutopilotCore, AutopilotSetup
-from .logger.storage import LogDirectory, LogWriter
-from .mavlink.codec import mavlink
+from .core import AutopilotCore
+from .log_files import FlightLogFiles
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Outgoing
+from .setup import AutopilotSetup
 from .vehicle_files import VehicleFiles
 
 HOUSEKEEPING_S = 0.05
@@ -43,14 +43,15 @@ GCS_DATAGRAMS_PER_FRAME = 8
 
 
 class Autopilot:
+    """The autopilot process around one :class:`~autopilot.core.AutopilotCore`; ``open`` -> ``run``
+    -> ``close`` (in ``finally``)."""
+
     def __init__(self, setup: AutopilotSetup, zenoh: bool = True, quiet: bool = False) -> None:
         self.quiet = quiet
-        directory = setup.log.directory
-        self.log_directory = LogDirectory(directory) if directory is not None else None
-        self.log_writer = LogWriter(self.log_directory) if self.log_directory is not None else None
-        self._log_error_reported = False
-        files = VehicleFiles.for_vehicle(self.log_directory, setup.params_file)  # MAVLink FTP's root
-        self.core = AutopilotCore(setup, self.log, log_store=self.log_directory, files=files)
+        self.log_files = FlightLogFiles(setup.log.directory)
+        logs = self.log_files.directory
+        files = VehicleFiles.for_vehicle(logs, setup.params_file)  # MAVLink FTP's root
+        self.core = AutopilotCore(setup, self.log, log_store=logs, files=files)
         sitl = setup.sitl
         self.ports = sitl.ports(setup.instance)
         self.hil_address = (wire.LOOPBACK, self.ports.hil)
@@ -93,11 +94,7 @@ class Autopilot:
     def close(self) -> None:
         """Everything out (the last rows, the flight log, the signing timestamp), then the sockets."""
         self.bus.publish_rows(force=True)
-        if self.log_writer is not None:
-            self.core.flight_log.stop()
-            self._write_log()
-            self.log_writer.close()
-            self.log_directory.close()
+        self.log_files.close(self.core)
         self.core.signing.save()  # the newest signing timestamp, so a restart refuses older frames
         for sock in self.socks.values():
             sock.close()
@@ -125,15 +122,6 @@ class Autopilot:
     def _next_due(self) -> list[float | None]:
         return [e.next_due() for e in self.impaired.endpoints.values()]
 
-    def _write_log(self) -> None:
-        """The flight log the core wrote since the last call, to the writer's thread; a write
-        failure is announced once (STATUSTEXT), and the vehicle flies on."""
-        self.log_writer.handle(self.core.take_log())
-        error = self.log_writer.error
-        if error is not None and not self._log_error_reported:
-            self._log_error_reported = True
-            self.core.statustext(mavlink.MAV_SEVERITY_CRITICAL, f"flight log not written: {error}"[:200])
-
     def run(self, max_wall_s: float | None = None) -> int:
         """The loop until stopped (or ``max_wall_s`` of wall time); the exit status."""
         core, hil = self.core, self.socks[HIL_LINK]
@@ -155,13 +143,12 @@ class Autopilot:
                 next_housekeeping = now + HOUSEKEEPING_S
                 self._refill_gcs_budgets()  # served even while no frame comes (simulator lost)
                 self.send(core.tick(now))
-                self.bus.publish_rows(force=now - core.last_frame_wall > HOUSEKEEPING_S)
-                if self.log_writer is not None:
-                    self._write_log()
+                self.bus.publish_rows(force=now - core.simulator.last_frame_wall > HOUSEKEEPING_S)
+                self.log_files.write(core)
                 self.bus.poll()
             # Frames in quick succession (faster than real time): wait for the next one awake
             # (see quadcommon.wire.spin_until_readable); paced at real time, just block.
-            gap = core.frame_gap_s
+            gap = core.simulator.frame_gap_s
             if gap < SPIN_BELOW_GAP_S:
                 wire.spin_until_readable(hil, min(spin_s, 3.0 * gap))
             selector = self.selector if any(self.gcs_budget.values()) else self.hil_only

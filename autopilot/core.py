@@ -1,8 +1,8 @@
 """The whole autopilot as a step machine: bytes and times in, bytes out; no socket, no clock.
 
-:class:`AutopilotCore` holds every rule of the flight controller: the commander, guidance,
-missions, parameters, failsafes, telemetry scheduling and the control cascade, behind four entry
-points, each given the time by its caller:
+:class:`AutopilotCore` wires the rooms of the flight controller (the commander, guidance,
+missions, parameters, failsafes, the estimator, telemetry, the flight log and the control cascade)
+to the links, and runs them behind four entry points, each given the time by its caller:
 
 * :meth:`~AutopilotCore.on_hil_datagram` ``(data, now) -> answer``: one lockstep frame from the
   simulator; runs exactly one control step and returns the ``HIL_ACTUATOR_CONTROLS`` datagram to
@@ -27,47 +27,38 @@ The process shell (:mod:`autopilot.app`) owns the sockets, the selector and the 
 in-process runner (:mod:`sitl.inprocess`) couples this core with the simulator's through the same
 bytes.
 
-(One module: the core is the autopilot's one composition point, wiring commander, guidance,
-missions, parameters, estimator, telemetry and signing to the links; the behaviour itself lives in
-those modules.)
+The rules live in the rooms, each given a narrow context (the commander, the parameters, the
+clocks, the refusal and STATUSTEXT sinks it needs), never the core: the ground station's messages
+in :mod:`.mavlink.handlers` and :mod:`.mavlink.vehicle_commands`, the lockstep link's rules in
+:mod:`.mavlink.simulator_link`, what the vehicle flies on in :mod:`.estimator_switch`, the cascade
+behind the commander in :mod:`.flight_control`, telemetry's status in :mod:`.mavlink.telemetry_feed`,
+the frame's rows and flight log in :mod:`.logger.frame_records`. The core decides the order of a
+frame's steps, what a simulator restart resets and what a parameter change reaches.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 from quadcommon import wire
-from quadcommon.build_info import BuildInfo
-from quadcommon.bus_records import ESTIMATOR_FIELDS
-from quadcommon.config import (
-    SIM_BATTERY_PARAMETERS,
-    SitlConfig,
-    VehicleConfig,
-    config_path,
-    load_scenario,
-    load_sitl,
-    load_vehicle,
-)
+from quadcommon.config import SIM_BATTERY_PARAMETERS
 from quadcommon.mavlink_fast import DecodeError
-from quadcommon.schema import ConfigError
-from quadcommon.trajectories import Trajectory, trajectory_from_spec
 from quadcommon.wire_values import frame_time_s
 
 from .battery.estimator import BatteryEstimator
-from .commander.commander import Commander, Motors, VehicleState
-from .control.cascade import AttitudeReference, Cascade
-from .control.config import ControllerConfig, load_controller
+from .commander.commander import Commander, VehicleState
+from .control.cascade import Cascade
 from .control.registry import ControllerFailure
 from .estimation.loop import EstimatorLoop
-from .estimation.parameters import estimator_params, load_estimator_params
+from .estimator_switch import EstimatorSwitch
+from .flight_control import MOTORS_OFF, FlightControl
 from .logger import topics
-from .logger.logger import FlightLogger, LogOptions, log_info
+from .logger.frame_records import FrameRecords, RecordContext
+from .logger.logger import FlightLogger, log_info
 from .logger.topics import Snapshot
 from .mavlink import telemetry
-from .mavlink.codec import Encoder, mavlink, new_parser
+from .mavlink.codec import Encoder, mavlink
 from .mavlink.commands import CommandDispatcher, CommandRequest
 from .mavlink.console import Console, ConsoleContext
 from .mavlink.dispatch import FaultLog, MessageDispatcher
@@ -76,21 +67,19 @@ from .mavlink.ftp import FileSystem, FtpServer, NoFiles
 from .mavlink.handlers import HandlerContext, MessageHandlers
 from .mavlink.hil import (
     BATTERY_ID,
-    DISTURBANCE_ID,
     ActuatorEncoder,
     CorruptFrame,
     RefusedReport,
-    SimulatorRequests,
     battery_report,
-    decode_frame,
-    disturbance_of,
     sensor_samples,
 )
 from .mavlink.links import API_LINK, GCS_LINK, HIL_LINK, Address, GcsLink, Outgoing
 from .mavlink.log_transfer import LogStore, LogTransfer, NoLogs
 from .mavlink.params import ParamService
 from .mavlink.shell import MavlinkShell
-from .mavlink.signing import Signing, SigningOptions
+from .mavlink.signing import Signing
+from .mavlink.simulator_link import FrameOrder, SimulatorLink
+from .mavlink.telemetry_feed import FeedContext, TelemetryFeed
 from .mavlink.validation import RefusalNotices
 from .mavlink.vehicle_commands import CommandContext, VehicleCommands
 from .mavlink.vision_in import ExternalVision
@@ -99,20 +88,12 @@ from .params.definitions import (
     consistency_problems,
     controller_config_from_params,
     controller_params,
-    default_parameters,
 )
-from .params.storage import load_params_file
 from .records import SensorSamples, StateEstimate
+from .setup import AutopilotSetup, starting_parameters
 
 m = mavlink
 WALL_HEARTBEAT_S = 1.0  # HEARTBEAT + SYS_STATUS while no frames flow (wall)
-HIL_HELLO_S = 0.2  # heartbeat to the simulator until frames flow: it learns our address from it
-_NAN3 = (math.nan, math.nan, math.nan)
-ESTIMATORS = ("truth", "ekf")
-# A frame for t = 0 this long (s of ``now``) after the run's first one is a restarted simulator's,
-# not a late copy of the first frame (a link delays a copy by at most a few 100 ms).
-LATE_COPY_S = 1.0
-IN_AIR_START_M = 0.1  # a first frame above this height: the EKF starts from it (no alignment)
 # Log download (LOG_DATA / LOG_ENTRY) messages per ground station link: per control frame (4 at
 # 500 Hz: 180 kB/s of simulation time, ~10 us of a frame's bookkeeping), and per housekeeping
 # tick (wall) while no frames flow.
@@ -126,50 +107,9 @@ SHELL_MESSAGES_PER_TICK = 25
 NO_FRAMES_S = 0.1  # wall time without frames after which the housekeeping streams the download
 
 
-@dataclass(frozen=True)
-class AutopilotSetup:
-    """What one autopilot is: configuration loaded and validated, nothing running."""
-
-    sitl: SitlConfig
-    vehicle: VehicleConfig
-    controller: ControllerConfig
-    instance: int = 0
-    autostart: Trajectory | None = None  # armed at the first frame, flying this from t = 0
-    use_odometry: bool = True  # the state from ODOMETRY (float32) or HIL_STATE_QUATERNION (1 cm)
-    params_file: str | None = None  # params.toml: loaded at start if it exists, saved on change
-    default_remotes: bool = True  # the GCS/API links send to 14550 / 14540+N (wire.ports) before anyone talks
-    signing: SigningOptions = SigningOptions()  # MAVLink 2 signing on the GCS links: key, state, wall clock
-    estimator: str = "truth"  # "truth": fly on the simulator's state; "ekf": on the EKF (EKF2_EN)
-    estimator_profile: str = "default"  # config/estimator/NAME.toml: the EKF2_* values to start from
-    log: LogOptions = LogOptions()  # the flight log (ULog): where, and the wall clock for its UTC times
-    build: BuildInfo = BuildInfo()  # version and git commit (AUTOPILOT_VERSION); the shell reads them
-
-    @classmethod
-    def load(
-        cls,
-        instance: int = 0,
-        controller: str = "intbs_nlhinf",
-        vehicle: str = "paper_quad",
-        sitl_config: str | None = None,
-        autostart: str | None = None,
-        state_source: str = "odometry",
-        params_file: str | None = None,
-        estimator: str = "truth",
-        estimator_profile: str = "default",
-    ) -> AutopilotSetup:
-        """By names (config/...), as the command line gives them; ConfigError names file and key."""
-        trajectory = trajectory_from_spec(load_scenario(autostart).trajectory) if autostart else None
-        if estimator not in ESTIMATORS:
-            raise ConfigError(f"estimator {estimator!r}: one of {', '.join(ESTIMATORS)}")
-        load_estimator_params(estimator_profile)  # a bad profile fails here, naming file and key
-        return cls(
-            load_sitl(sitl_config), load_vehicle(vehicle), load_controller(controller), instance,
-            trajectory, state_source == "odometry", params_file, estimator=estimator,
-            estimator_profile=estimator_profile,
-        )  # fmt: skip
-
-
 class AutopilotCore:
+    """One autopilot (module docstring): the rooms of ``setup`` wired to the GCS, API and HIL links."""
+
     def __init__(
         self,
         setup: AutopilotSetup,
@@ -189,45 +129,23 @@ class AutopilotCore:
         self.wrench = setup.vehicle.actuation.mode == "wrench"
         self.wall_now = 0.0  # the caller's clock at the latest entry point
         self.sim_time = 0.0
-        self.last_time_usec = -1
         self.frames = 0
-        self.linked = False
-        self.sim_lost = False
-        self.last_frame_wall = 0.0
-        self.frame_gap_s = 1.0  # wall time between the last two frames (the shell spins below 1 ms)
-        self.controller_rows: list[tuple[float, ...]] = []  # one per frame, drained by the caller
         self._out: list[Outgoing] = []
         self._next_wall_heartbeat = 0.0
-        self._next_hil_hello = 0.0
-        self._flying = False
         self._controls = (0.0, 0.0, 0.0, 0.0)
         self._frame_done = None  # (frame, guidance, output) awaiting after_frame()
-        self._last_answer: bytes | None = None  # sent again for a resent or duplicated frame
-        self._first_frame_wall = 0.0  # ``now`` at this run's first frame (see _restarted)
-        self._estimator_done: tuple | None = None  # (t, estimate, loop) of the frame, for its row
         self._statustext_id = 0
         self._frame_truth: StateEstimate | None = None  # the frame's truth (before the EKF's estimate)
         # The latest flight terminated because a law failed: (simulation time s, the failure). The
         # process flies on; an in-process experiment ends there (sitl.inprocess).
         self.controller_failure: tuple[float, ControllerFailure] | None = None
 
-        self.params = default_parameters(setup.controller, sitl.rates, estimator=True, vehicle=setup.vehicle)
-        self.params.values["MAV_SYS_ID"] = float(self.system_id)
-        self.params.values["EKF2_EN"] = 1.0 if setup.estimator == "ekf" else 0.0
-        load_params_file(config_path("estimator", setup.estimator_profile), self.params)
-        if setup.params_file:
-            from pathlib import Path
-
-            if Path(setup.params_file).exists():
-                loaded = load_params_file(setup.params_file, self.params)  # ConfigError: file, key
-                log(f"{len(loaded)} parameters loaded from {setup.params_file}")
-        for problem in consistency_problems(self.params):
-            log(f"warning: parameters inconsistent (arming refused until fixed): {problem}")
+        self.params = starting_parameters(setup, log)  # ConfigError names the file and key
         self.commander = Commander(self.params)
         self.battery = BatteryEstimator(self.params)  # the one estimate of the flight battery
         gains = controller_config_from_params(setup.controller, self.params)
         self.cascade = Cascade(gains, setup.vehicle, self.dt)
-        self._thrust_max_n = setup.vehicle.actuation.thrust_max_n  # U1_max: the manual modes' thrust scale
+        self.flight = FlightControl(self.cascade, setup.vehicle.actuation.thrust_max_n)
         self._gain_names = {spec.name for spec in controller_params(setup.controller)}
         self.flight_log = FlightLogger(
             self.params,
@@ -242,14 +160,18 @@ class AutopilotCore:
             enabled=setup.log.enabled,
         )  # fmt: skip
         self.params.on_change(self._on_param_change)
+        self.records = FrameRecords(RecordContext(self.flight_log, self.commander, self.battery,
+                                                  lambda: self.estimator))  # fmt: skip
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
         self._status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
-        self._status_of: tuple | None = None  # (frame, guidance, output) not yet in _status
-        self.hil_parser = new_parser()
-        self.estimator: EstimatorLoop | None = None  # flying on the EKF (EKF2_EN = 1), else truth
-        self.estimator_rows: list[tuple[float, ...]] = []  # ESTIMATOR_FIELDS, one per frame on the EKF
-        self._switch_estimator()
+        self.telemetry = TelemetryFeed(self._status, FeedContext(
+            self.commander, self.params, self.battery, setup.vehicle.actuation.thrust_max_n,
+            lambda: self.sim_time, lambda: self.estimator is not None, lambda: self._controls,
+        ))  # fmt: skip
+        self.simulator = SimulatorLink(self.encoder, self.system_id, sitl.home, setup.use_odometry)
+        self.estimators = EstimatorSwitch(self.params, self.commander, self._status, self.dt,
+                                          setup.vehicle.nominal.gravity_m_s2, log, self.on_foreign_datagram)
 
         ports = sitl.ports(setup.instance)
         remotes = (
@@ -277,9 +199,9 @@ class AutopilotCore:
             refusals=self.refusals,
         )  # fmt: skip
         self.param_service.register(self.dispatcher, self.commands)
-        self.simulator_requests = SimulatorRequests(self.encoder, self.system_id)  # in the next answer
+        self.simulator_requests = self.simulator.requests  # in the next answer
         self.failure_injection = FailureInjection(
-            self.params, self._request_failure, lambda: self.estimator is not None, self.refusals,
+            self.params, self.simulator.request_failure, lambda: self.estimator is not None, self.refusals,
             self.statustext,
         )  # fmt: skip
         self.vehicle_commands = VehicleCommands(CommandContext(
@@ -297,14 +219,13 @@ class AutopilotCore:
         self.ftp = FtpServer(files or NoFiles(), self.encoder, self.links, self.system_id, clock)
         self.ftp.register(self.dispatcher)  # FILE_TRANSFER_PROTOCOL
         console = Console(ConsoleContext(
-            self.params, self.param_service.set_value, self._console_command, self._topic_now,
+            self.params, self.param_service.set_value, self._console_command, self.records.topic_now,
             tuple(spec.name for spec in topics.TOPICS), self.info, self.commander, lambda: self.sim_time,
             setup.build,
         ))  # fmt: skip
         greeting = f"\nquadsitl {setup.build.version or '(version unknown)'}: 'help' lists the commands\n"
         self.shell = MavlinkShell(console, self.encoder, self.links, self.system_id, clock, greeting)
         self.shell.register(self.dispatcher)  # SERIAL_CONTROL (device SHELL)
-        self._latest: tuple | None = None  # (frame, guidance, output, controller row): the listener's
         self.external_vision = ExternalVision()  # a client's vision (mocap bridge, VIO) for the EKF
         self.handlers = MessageHandlers(HandlerContext(
             self.system_id, self.commander, lambda: self.sim_time, lambda: self.wall_now, self.params,
@@ -363,8 +284,21 @@ class AutopilotCore:
 
     def take_controller_rows(self) -> list[tuple[float, ...]]:
         """The controller internals of every frame since the last call (CONTROLLER_FIELDS order)."""
-        rows, self.controller_rows = self.controller_rows, []
-        return rows
+        return self.records.take_controller_rows()
+
+    def take_estimator_rows(self) -> list[tuple[float, ...]]:
+        """The estimator rows of every frame since the last call (ESTIMATOR_FIELDS order)."""
+        return self.records.take_estimator_rows()
+
+    @property
+    def controller_rows(self) -> list[tuple[float, ...]]:
+        """The controller rows not taken yet (:mod:`.logger.frame_records`)."""
+        return self.records.controller_rows
+
+    @property
+    def estimator_rows(self) -> list[tuple[float, ...]]:
+        """The estimator rows not taken yet (on the EKF)."""
+        return self.records.estimator_rows
 
     def info(self) -> dict:
         """What ``quadsitl/<N>/autopilot/info`` answers."""
@@ -407,22 +341,23 @@ class AutopilotCore:
 
     # -- frames ---------------------------------------------------------------------------------
     def _frame(self, data: bytes, now: float) -> bytes | None:
+        link = self.simulator
         try:
-            frame = decode_frame(data, self.hil_parser, self.setup.sitl.home, self.setup.use_odometry,
-                                 sensors=self.estimator is not None)  # fmt: skip
+            frame = link.decode(data, sensors=self.estimator is not None)
         except CorruptFrame:
             self.on_foreign_datagram("HIL frame with a bad checksum")
             return None  # the simulator resends a frame it gets no answer to
         if frame is None:
             return None  # a heartbeat from the simulator, or no state in it
-        if frame.time_usec <= self.last_time_usec:
-            if frame.time_usec == self.last_time_usec:
-                # The simulator resent a frame it got no answer to (or the link duplicated it): the
-                # same answer again, byte for byte, without stepping twice.
-                return self._last_answer
-            if not self._restarted(frame.time_usec, now):
-                self.on_foreign_datagram("HIL frame already answered (a late copy)")
-                return None  # the simulator has moved on: nobody waits for this answer
+        order = link.order(frame.time_usec, now)
+        if order is FrameOrder.AGAIN:
+            # The simulator resent a frame it got no answer to (or the link duplicated it): the same
+            # answer again, byte for byte, without stepping twice.
+            return link.last_answer
+        if order is FrameOrder.LATE:
+            self.on_foreign_datagram("HIL frame already answered (a late copy)")
+            return None  # the simulator has moved on: nobody waits for this answer
+        if order is FrameOrder.RESTARTED:
             self._simulator_restarted()
         p, v, e, w = frame.state
         total = p[0] + p[1] + p[2] + v[0] + v[1] + v[2] + e[0] + e[1] + e[2] + w[0] + w[1] + w[2]
@@ -435,23 +370,12 @@ class AutopilotCore:
             frame = frame._replace(
                 state=StateEstimate(c.position_m, c.velocity_m_s, c.euler_rad, c.euler_rates_rad_s)
             )
-        if self.last_time_usec < 0:
-            self._first_frame_wall = now
-        self.frame_gap_s = now - self.last_frame_wall
-        self.last_frame_wall = now
-        if not self.linked or self.sim_lost:
+        became = link.arrived(frame.time_usec, now)
+        if became is not None:
             self.log(f"linked with simulator (frames at t={frame.time_usec * 1e-6:.3f} s)")
-            if self.sim_lost:
+            if became == "recovered":
                 self.statustext(m.MAV_SEVERITY_INFO, "simulator link recovered")
-            self.linked, self.sim_lost = True, False
         return self._control_step(frame)
-
-    def _restarted(self, time_usec: int, now: float) -> bool:
-        """A frame older than the last answered one: a restarted simulator (it starts again at
-        t = 0, after this autopilot reported it lost, or more than :data:`LATE_COPY_S` after this
-        run's first frame) or else a late copy of a frame already answered (a duplicated or
-        reordered datagram), which is dropped."""
-        return self.sim_lost or (time_usec == 0 and now - self._first_frame_wall > LATE_COPY_S)
 
     def _simulator_restarted(self) -> None:
         self.log("simulator time went backwards: simulator restarted; resetting")
@@ -459,8 +383,8 @@ class AutopilotCore:
         self.commander.home = None
         self.battery.reset()
         self.failure_injection.simulator_restarted()
-        self._forward_simulator_parameters()  # a restarted simulator starts from its vehicle file
-        self.last_time_usec = -1
+        self.simulator.forward_parameters(self.params)  # a restarted simulator starts from its vehicle file
+        self.simulator.restart()
         for link in self.links:  # stream deadlines were on the old run's clock
             link.streams.restart()
         self.external_vision.restart()  # so were the vision senders' stamps
@@ -471,7 +395,6 @@ class AutopilotCore:
         self._frame_truth = frame.state
         t = frame_time_s(frame.time_usec)
         self.sim_time = t
-        self.last_time_usec = frame.time_usec
         commander = self.commander
         # What the vehicle knows of its sensors (commander/health.py): every frame, on either
         # estimator. On the truth nothing else reads the samples: the frame says which streams
@@ -481,8 +404,8 @@ class AutopilotCore:
             samples = self._sensor_samples(frame.parts)
         if samples is not None and samples.gps is not None:
             self._status.gps = samples.gps  # GPS_RAW_INT reports the receiver's last sample
-        if self.estimator is not None or self.params.values["EKF2_EN"] == 1.0:
-            est = self._estimate(t, frame)
+        if self.estimators.wanted:
+            est = self.estimators.estimate(t, frame, first_frame=self.frames == 0)
             frame = frame._replace(state=est)  # telemetry reports what the vehicle flies on
         else:
             est = frame.state
@@ -496,32 +419,19 @@ class AutopilotCore:
         commander.observe_sensors(t, samples, frame.streams)
         self._battery_step(t, frame.parts)
         if self.frames == 0:
-            self._forward_simulator_parameters()
+            self.simulator.forward_parameters(self.params)
             if self.setup.autostart is not None:
                 commander.start_scenario(t, self.setup.autostart)
         self.frames += 1
         guidance = commander.step(t, self.dt)
-        output = None
-        if guidance.motors == Motors.FLY and est is not None:
-            if not self._flying:
-                self.cascade.reset()
-                self._flying = True
-            try:
-                output = self._cascade_step(est, guidance)
-                controls = output.actuator_controls
-            except ControllerFailure as failure:
-                output, controls = None, self._controller_failed(t, failure)
-        else:
-            self._flying = False
-            self.cascade.reset()
-            controls = (0.0, 0.0, 0.0, 0.0)
+        try:
+            output, controls = self.flight.step(est, guidance)
+        except ControllerFailure as failure:
+            output, controls = None, self._controller_failed(t, failure)
         self._controls = controls
         self._frame_done = (frame, guidance, output)
-        answer = self.actuators.encode(frame.time_usec, controls, commander.armed)
-        if self.simulator_requests.pending:  # requests to the simulator ride in the answer
-            answer += self.simulator_requests.take()
-        self._last_answer = answer
-        return answer
+        # The requests to the simulator ride in the answer.
+        return self.simulator.answer(self.actuators.encode(frame.time_usec, controls, commander.armed))
 
     def _battery_step(self, t: float, parts: dict | None) -> None:
         """The frame's battery report (if any) into the estimate, refused at the edge when it is no
@@ -542,18 +452,6 @@ class AutopilotCore:
         except DecodeError:  # (decode_frame checked the messages already: not expected)
             return None
 
-    def _cascade_step(self, est: StateEstimate, guidance):
-        """One cascade step towards the guidance's reference; a manual mode's overrides (sticks'
-        tilt, attitude, thrust as a fraction of the vehicle's U1_max) go in through the cascade's
-        own override arguments."""
-        manual = guidance.manual
-        if manual is None:
-            return self.cascade.step(est, guidance.reference)
-        attitude = AttitudeReference(*manual.attitude) if manual.attitude is not None else None
-        thrust = manual.thrust * self._thrust_max_n if manual.thrust is not None else None
-        return self.cascade.step(est, guidance.reference, roll_pitch=manual.roll_pitch, attitude=attitude,
-                                 thrust_n=thrust)  # fmt: skip
-
     def _controller_failed(self, t: float, failure: ControllerFailure) -> tuple[float, float, float, float]:
         """A law gave a non-finite output or raised: flight termination (motors off, disarmed), as
         PX4's failure detector terminates; the process flies on, the reason on every link."""
@@ -561,184 +459,32 @@ class AutopilotCore:
         self.log(f"flight terminated: {failure}")
         self.controller_failure = (t, failure)
         self.commander.disarm(t, force=True)
-        self._flying = False
-        self.cascade.reset()
-        return (0.0, 0.0, 0.0, 0.0)
-
-    # -- the estimator ----------------------------------------------------------------------------
-    def _switch_estimator(self) -> None:
-        """Start or stop the EKF to follow EKF2_EN (only while disarmed: never in flight)."""
-        want = self.params.values["EKF2_EN"] == 1.0
-        if want == (self.estimator is not None) or self.commander.armed:
-            return
-        if want:
-            self.estimator = EstimatorLoop(estimator_params(self.params), self.dt,
-                                           self.setup.vehicle.nominal.gravity_m_s2)  # fmt: skip
-        else:
-            self.estimator = None
-            self.commander.estimator_problem = None
-            self.commander.height_uncertainty_m = 0.0  # the truth
-        self._status.estimator = None
-        self._status.on_ekf = want
-        self.log(f"flying on {'the EKF estimate' if want else 'the simulator truth'} (EKF2_EN {int(want)})")
-
-    def _estimate(self, t: float, frame) -> StateEstimate | None:
-        """This frame's EKF estimate (None until it has aligned); the commander's pre-arm verdict."""
-        self._switch_estimator()
-        loop = self.estimator
-        if loop is None:  # EKF2_EN = 1 set in flight: the switch waits for the disarm
-            return frame.state
-        samples = frame.sensors
-        if samples is None:  # no HIL_SENSOR in this frame (a simulator without sensors)
-            self.commander.estimator_problem = "estimator: no HIL_SENSOR in the frames"
-            return None
-        for name in samples.refused:  # never fed to the filter
-            self.on_foreign_datagram(f"HIL frame with a non-finite {name} sample")
-        if "imu" in samples.refused or not samples.imu_fresh:  # no prediction, no fusion this frame:
-            est = loop.estimate()  # fly on the filter as it is (the next sample integrates across the gap)
-        elif self.frames == 0 and frame.state.position_m[2] > IN_AIR_START_M:
-            loop.start_in_air(t, samples, frame.state)  # the paper's experiments start in the air
-            est = frame.state
-        else:
-            est = loop.predict(t, samples)  # the frame's aiding is fused after the answer
-        self.commander.estimator_problem = loop.problem()
-        self.commander.height_uncertainty_m = loop.height_uncertainty_m()
-        self._status.estimator = loop.last_status
-        self._estimator_done = (t, est, loop)  # its row is written after the answer is out
-        return est
-
-    def _record_estimator(self, t: float, est: StateEstimate | None, loop: EstimatorLoop) -> None:
-        """One ESTIMATOR_FIELDS row per frame (NaN until the filter has an estimate)."""
-        e, st, src = loop.ekf, loop.last_status, loop.ekf.sources
-        if st is None or est is None:
-            self.estimator_rows.append((t, *(math.nan,) * (len(ESTIMATOR_FIELDS) - 1)))
-            return
-        bg, ba = e.estimate_biases()
-        self.estimator_rows.append(
-            (t, *est.position_m, *est.velocity_m_s, *est.euler_rad, *bg, *ba,
-             st.pos_horiz_accuracy_m, st.pos_vert_accuracy_m, st.vel_accuracy_m_s, st.tilt_accuracy_rad,
-             st.yaw_accuracy_rad, st.vel_ratio, st.pos_horiz_ratio, st.pos_vert_ratio, st.mag_ratio,
-             src["gps_pos"].normalized_innovation, src["gps_vel"].normalized_innovation,
-             src["baro"].normalized_innovation, src["mag"].normalized_innovation,
-             src["ev_pos"].normalized_innovation, src["ev_yaw"].normalized_innovation,
-             float(st.flags), float(st.converged))
-        )  # fmt: skip
-
-    def take_estimator_rows(self) -> list[tuple[float, ...]]:
-        """The estimator rows of every frame since the last call (ESTIMATOR_FIELDS order)."""
-        rows, self.estimator_rows = self.estimator_rows, []
-        return rows
+        self.flight.stop()
+        return MOTORS_OFF
 
     def _bookkeeping(self, frame, guidance, output) -> None:
         t = self.sim_time
-        if self._estimator_done is not None:
-            t_est, est, loop = self._estimator_done
-            self._estimator_done = None
-            loop.fuse()  # this frame's aiding, now that the answer is out (see estimation/loop.py)
-            self._record_estimator(t_est, loop.estimate() if est is not None else None, loop)
-        self._status_of = (frame, guidance, output)  # brought into the status when it is read
-        self._record_controller(t, guidance, output)
-        self._latest = (frame, guidance, output, self.controller_rows[-1])
-        self._log_frame(frame, guidance, output)
-        self._send_telemetry(t)
+        fused = self.estimators.fuse()  # this frame's aiding, now that the answer is out
+        if fused is not None:
+            self.records.estimator_row(*fused)
+        self.telemetry.frame_done(frame, guidance, output)  # brought into the status when it is read
+        self.records.frame(t, frame, self._frame_truth, guidance, output, self._controls)
+        self.telemetry.send_due(t, self.links, self.encoder.pack)
         self.missions.update(t)  # MISSION_CURRENT, MISSION_ITEM_REACHED
         self.send_events()
         self.log_transfer.pump(LOG_MESSAGES_PER_FRAME)
         self.ftp.pump(FTP_MESSAGES_PER_FRAME)
         self.shell.pump(SHELL_MESSAGES_PER_FRAME)
 
-    def _log_frame(self, frame, guidance, output) -> None:
-        """The frame into the flight log (autopilot/logger/), when one is open; the simulator's
-        disturbance and rotors' health when the frame reports them (kept while no log is open: a log
-        starts with them)."""
-        log = self.flight_log
-        parts = frame.parts
-        due = log.frame(frame.time_usec, self.commander.armed, self._frame_truth, self.controller_rows[-1],
-                        parts, frame.state, output)  # fmt: skip
-        if parts is not None and DISTURBANCE_ID in parts:  # a change, or a reminder (quadcommon.wire)
-            report = disturbance_of(parts)
-            if report is not None:
-                log.disturbance(report.time_usec, report.force_n, report.torque_n_m)
-                log.rotor_health(report.time_usec, report.rotor_effectiveness, report.rotor_failure)
-        if due:  # the periodic topics (one frame in ten, at most)
-            s = log.snapshot
-            s.reference = guidance.reference
-            s.controls = self._controls
-            s.estimator = self.estimator.last_status if self.estimator is not None else None
-            s.battery = self.battery.status
-            log.sample_due()
+    @property
+    def estimator(self) -> EstimatorLoop | None:
+        """The EKF's loop while the vehicle flies on it (EKF2_EN 1), else None (the truth)."""
+        return self.estimators.loop
 
     @property
     def status(self) -> telemetry.VehicleStatus:
-        """What telemetry reports: the latest frame and the commander now. Refreshed when read
-        (a stream due, a requested message, a heartbeat), not at every frame: most frames send
-        nothing."""
-        if self._status_of is not None:
-            self._update_status(*self._status_of)
-            self._status_of = None
-        return self._status
-
-    def _update_status(self, frame, guidance, output) -> None:
-        s, c = self._status, self.commander
-        s.time_usec = frame.time_usec
-        s.state = frame.state
-        s.parts = frame.parts
-        s.on_ekf = self.estimator is not None
-        s.armed = c.armed
-        s.custom_mode = c.mode.custom_mode
-        s.landed_state = c.landed_state.value
-        if c.home is not None:
-            s.home_local = c.home
-        s.reference = guidance.reference
-        s.controls = self._controls
-        s.armable = not c.armed and c.arm_problem(self.sim_time) is None
-        values = self.params.values
-        s.geofence_enabled = values["GF_MAX_HOR_DIST"] > 0.0 or values["GF_MAX_VER_DIST"] > 0.0
-        s.geofence_breached = c.failsafes.fence_breached
-        s.battery = self.battery.status
-        s.battery_unhealthy = c.battery.unhealthy
-        s.flags = c.health_flags(self.sim_time)
-        s.failsafe = c.in_failsafe
-        s.terminated = c.terminated
-        s.orbit = c.orbit_status
-        if output is not None:
-            s.euler_ref = output.euler_ref_rad
-            s.thrust_normalised = output.thrust_n / self.setup.vehicle.actuation.thrust_max_n
-        else:
-            s.euler_ref = (0.0, 0.0, frame.state.euler_rad[2] if frame.state is not None else 0.0)
-            s.thrust_normalised = 0.0
-
-    def _record_controller(self, t: float, guidance, output) -> None:
-        ref = guidance.reference
-        if ref is not None:
-            p, v, a = ref.position_m, ref.velocity_m_s, ref.acceleration_m_s2
-        else:
-            p = v = a = _NAN3
-        if output is not None:
-            eta_d, raw = output.euler_ref_rad, output.roll_pitch_raw_rad
-            u1, tau = output.thrust_n, output.torque_euler_n_m
-        else:
-            eta_d, raw, u1, tau = _NAN3, (math.nan, math.nan), 0.0, (0.0, 0.0, 0.0)
-        c = self.commander
-        self.controller_rows.append(
-            (t, *p, *v, *a, *eta_d, *raw, u1, *tau, float(c.armed), float(c.mode.custom_mode))
-        )
-
-    def _send_telemetry(self, t: float) -> None:
-        cache: dict[int, bytes | None] = {}  # one message built per frame for every link
-        for link in self.links:
-            if not link.peers:
-                continue
-            due = link.streams.due(t)
-            if not due:  # most frames
-                continue
-            for msg_id in due:
-                if msg_id not in cache:
-                    msg = telemetry.build(msg_id, self.status)  # (refreshes the status)
-                    cache[msg_id] = self.encoder.pack(msg) if msg is not None else None
-                data = cache[msg_id]
-                if data is not None:
-                    link.send(data)
+        """What telemetry reports: the latest frame and the commander now (:mod:`.mavlink.telemetry_feed`)."""
+        return self.telemetry.status
 
     # -- ground stations ------------------------------------------------------------------------
     def send_events(self) -> None:
@@ -772,31 +518,6 @@ class AutopilotCore:
         self.send_events()
         return outcome
 
-    def _topic_now(self, name: str) -> tuple[list[str], tuple] | None:
-        """Flight-log topic ``name`` at the latest frame (the console's ``listener``), built by the
-        log's own builders from a copy of its snapshot refreshed with that frame."""
-        if self._latest is None:
-            return None
-        frame, guidance, output, row = self._latest
-        parts = frame.parts
-        gps = topics.gps_of(parts) if parts is not None and topics.GPS_ID in parts else None
-        snapshot = dataclasses.replace(
-            self.flight_log.snapshot, t_us=frame.time_usec, truth=self._frame_truth, estimate=frame.state,
-            row=row, parts=parts, output=output, reference=guidance.reference, controls=self._controls,
-            estimator=self.estimator.last_status if self.estimator is not None else None,
-            battery=self.battery.status, gps=gps or self.flight_log.snapshot.gps,
-        )  # fmt: skip
-        return self.flight_log.sample_now(name, snapshot)
-
-    def _request_failure(self, unit: int, failure_type: int, instance: int, effectiveness: float) -> bool:
-        """MAV_CMD_INJECT_FAILURE for the simulator, in the next answer (param4: a motor's
-        effectiveness); False when too many wait."""
-        requests = self.simulator_requests
-        if requests.full:
-            return False
-        requests.command(m.MAV_CMD_INJECT_FAILURE, unit, failure_type, instance, effectiveness)
-        return True
-
     def _on_param_change(self, name: str, value: float) -> None:
         """Gains take effect between two control steps (this runs between frames), no jump in
         the integral action (Cascade.retune)."""
@@ -806,31 +527,14 @@ class AutopilotCore:
                 self.cascade.retune(controller_config_from_params(self.setup.controller, self.params))
             except ValueError as exc:  # not reachable with the declared parameters; never crash
                 self.statustext(m.MAV_SEVERITY_CRITICAL, f"retune failed: {exc}")
-        if name.startswith(("EKF2_", "EST_")) and self.estimator is not None:
-            self.estimator.ekf.set_params(estimator_params(self.params))
+        self.estimators.parameter_changed(name)
         if name in SIM_BATTERY_PARAMETERS:  # PX4's battery simulator's: the simulator's own
-            self._forward_simulator_parameter(name, value)
+            self.simulator.forward_parameter(name, value)
         if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_", "BAT")):
             for problem in consistency_problems(self.params):
                 self.statustext(
                     m.MAV_SEVERITY_WARNING, f"parameters inconsistent (arming refused): {problem}"
                 )
-
-    def _forward_simulator_parameter(self, name: str, value: float) -> None:
-        """A ``SIM_*`` parameter to the simulator, as a PARAM_SET in the next answer, its value a
-        plain float whatever its type (the channel is ours: :mod:`quadcommon.wire`); the simulator
-        validates it again and counts a refusal."""
-        target = (self.system_id, wire.SIMULATOR_COMPONENT_ID)
-        self.simulator_requests.send(
-            m.MAVLink_param_set_message(*target, name.encode(), value, m.MAV_PARAM_TYPE_REAL32)
-        )
-
-    def _forward_simulator_parameters(self) -> None:
-        """At the first frame of a simulator: the ``SIM_*`` parameters that differ from the vehicle
-        file's (a parameters file or a PARAM_SET before it started), which the simulator starts from."""
-        for name in SIM_BATTERY_PARAMETERS:
-            if self.params[name] != self.params.specs[name].default:
-                self._forward_simulator_parameter(name, self.params[name])
 
     # -- wall-clock housekeeping ----------------------------------------------------------------
     def _housekeeping(self, now: float) -> None:
@@ -839,18 +543,18 @@ class AutopilotCore:
         self.missions.poll()  # mission transfer retries and timeouts run on the wall clock
         self.param_service.poll()  # paced PARAM_REQUEST_LIST streams
         self.signing.poll(now)  # wall clock -> timestamps, refusals announced, state saved
-        if now - self.last_frame_wall > NO_FRAMES_S:  # else each frame streams the downloads
+        sim = self.simulator
+        if now - sim.last_frame_wall > NO_FRAMES_S:  # else each frame streams the downloads
             self.log_transfer.pump(LOG_MESSAGES_PER_TICK)
             self.ftp.pump(FTP_MESSAGES_PER_TICK)
             self.shell.pump(SHELL_MESSAGES_PER_TICK)
         sim_loss_s = self.params["COM_SIM_LOSS_T"]
-        if self.linked and now - self.last_frame_wall <= sim_loss_s:
+        if not sim.silent(now, sim_loss_s):
             return
-        if self.linked and not self.sim_lost:
+        if sim.lose():
             # The cascade keeps its state: in lockstep the plant has not moved either, so frames that
             # resume after a stall (a loaded machine) continue the same flight, as in-process. A
             # restarted simulator shows as time going backwards (_simulator_restarted: disarm).
-            self.sim_lost = True
             self.commander.simulator_lost()  # no position: arming refused until frames resume
             self.statustext(
                 m.MAV_SEVERITY_CRITICAL,
@@ -864,8 +568,6 @@ class AutopilotCore:
                 link.send(heartbeat)
                 link.send(sys_status)
             self.missions.update(self.sim_time, force=True)
-        if now >= self._next_hil_hello:
-            # Say hello until frames flow: a (re)started simulator learns our address from it.
-            self._next_hil_hello = now + HIL_HELLO_S
+        if sim.hello_due(now):  # until frames flow: a (re)started simulator learns our address from it
             hello = self.encoder.pack_unsigned(telemetry.heartbeat(self.status))  # HIL: never signed
             self._out.append(Outgoing(HIL_LINK, None, hello))

@@ -8,9 +8,10 @@ machine is shared, CPU time moves less than the wall time). Two figures:
 * the ratio of the CPU time per run, on / off (the median of the pairs). An upper bound of what
   logging adds to the lockstep: here the log's bytes are also written to disk in the loop (the
   SITL's autopilot writes them in a thread), and the denominator has no MAVLink transport;
-* the time inside the core's per-frame logging (``AutopilotCore._log_frame``: every sample the
-  frame gives, its bytes packed; wall time of each call, summed) per control step, and the whole
-  lockstep's CPU per control step with the log off, for scale.
+* the time inside the autopilot's per-frame logging (``FrameRecords.log_frame`` of
+  ``autopilot/logger/frame_records.py``: every sample the frame gives, its bytes packed; wall time
+  of each call, summed) per control step, and the whole lockstep's CPU per control step with the
+  log off, for scale.
 
 Run: ``.venv/bin/python benchmarks/flight_log.py [--repeat 5] [--duration 20] [--scenario circle]``.
 Last lines: ``name: value unit``.
@@ -30,11 +31,11 @@ from sitl.inprocess import RunOptions, paper_stack
 
 
 def fly(scenario, controller, duration_s: float, log_dir: str | None) -> tuple[float, float, int]:
-    """One run: (CPU s of the run, s inside _log_frame, control steps)."""
+    """One run: (CPU s of the run, s inside log_frame, control steps)."""
     stack = paper_stack(scenario, controller, RunOptions(duration_s=duration_s, log_dir=log_dir))
-    core = stack.autopilot
+    records = stack.autopilot.records
     inside = [0.0]
-    log_frame = core._log_frame
+    log_frame = records.log_frame
     clock, tick = time.process_time, time.perf_counter  # (process_time is a syscall: not per frame)
 
     def timed_log_frame(*args) -> None:
@@ -43,7 +44,7 @@ def fly(scenario, controller, duration_s: float, log_dir: str | None) -> tuple[f
         inside[0] += tick() - t0
 
     if log_dir is not None:
-        core._log_frame = timed_log_frame
+        records.log_frame = timed_log_frame
     steps = int(round(duration_s / stack.sim.dt_control))
     start = clock()
     for _ in range(steps):
@@ -81,7 +82,7 @@ def main() -> None:
                     off_us.append(run_cpu / steps * 1e6)
             ratios.append(cpu[True] / cpu[False])
             print(f"pair {k + 1}: off {cpu[False]:.2f} s CPU, on {cpu[True]:.2f} s CPU, "
-                  f"on/off {ratios[-1]:.3f}, _log_frame {inside_us[-1]:.1f} us per control step")  # fmt: skip
+                  f"on/off {ratios[-1]:.3f}, log_frame {inside_us[-1]:.1f} us per control step")  # fmt: skip
     print(f"scenario {args.scenario}, {args.duration:g} s simulated per run, {args.repeat} pairs; "
           f"on/off from {min(ratios):.3f} to {max(ratios):.3f}")  # fmt: skip
     print(f"flight_log_inprocess_cpu_on_over_off: {statistics.median(ratios):.3f} ratio")

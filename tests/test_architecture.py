@@ -96,8 +96,9 @@ AUTOPILOT_FLOORS: tuple[tuple[str, ...], ...] = (
     ("commander",),  # the commander: modes, transitions, failsafes, health
     ("mavlink", "mission.service"),  # the protocol handlers and services around the commander
     ("logger", "vehicle_files"),  # the flight log, the vehicle's files
-    ("core",),  # AutopilotCore: wires the rooms
-    ("app", "__main__", "bus_link"),  # the process shell
+    # AutopilotCore wires the rooms; beside it, what it is made from and the two steps it runs
+    ("core", "setup", "estimator_switch", "flight_control"),
+    ("app", "__main__", "bus_link", "log_files"),  # the process shell
 )
 # Imports that run back up, each with why it stands (a new one fails the suite): none.
 KNOWN_UPWARD: set[tuple[str, str]] = set()
@@ -159,3 +160,38 @@ def test_the_floors_see_an_import_running_back_up():
         autopilot_floor("autopilot.mission.service")[0] > autopilot_floor("autopilot.commander.commander")[0]
     )
     assert autopilot_floor("autopilot.mavlink.codec")[0] == 0
+
+
+# The core is wired by the process shell and composed by sitl/; no room reaches up to it.
+CORE_IMPORTERS = frozenset(
+    {"autopilot/app.py", "autopilot/__main__.py", "autopilot/bus_link.py", "autopilot/log_files.py"}
+)
+
+
+def core_importers() -> list[str]:
+    """``file:line`` of every autopilot module that imports ``autopilot.core``, the shell's aside."""
+    found = []
+    for path in package_files("autopilot"):
+        name = str(path.relative_to(ROOT))
+        for line, module in imported_modules(path):
+            core = module == "autopilot.core" or module.startswith("autopilot.core.")
+            if core and name not in CORE_IMPORTERS and f"{name}:{line}" not in found:
+                found.append(f"{name}:{line}")
+    return found
+
+
+def test_only_the_shell_imports_the_core():
+    assert core_importers() == []
+
+
+def test_the_rules_see_the_core_imported_behind_type_checking(tmp_path, monkeypatch):
+    """A room naming the core's type only for the type checker still imports it: both checks fail."""
+    room = tmp_path / "autopilot" / "mavlink"
+    room.mkdir(parents=True)
+    (tmp_path / "autopilot" / "__init__.py").write_text("")
+    (room / "bad.py").write_text(
+        "from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    from ..core import AutopilotCore\n"
+    )
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    assert upward_imports()[0] == "autopilot/mavlink/bad.py:4 -> autopilot.core"
+    assert core_importers() == ["autopilot/mavlink/bad.py:4"]

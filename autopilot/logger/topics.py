@@ -38,6 +38,9 @@ rate loop above 50 Hz into them) and ``vehicle_torque_setpoint`` / ``vehicle_thr
 no such data now (no estimate yet, no GPS fix in this frame, not flying on the EKF, motors off).
 
 Pure: no file, no clock; :mod:`.logger` decides when a log runs and packs these samples.
+
+(One module: every builder reads the same :class:`Snapshot` and the one table of topics names each
+builder beside its rate and layout; split by topic, each part would need both.)
 """
 
 from __future__ import annotations

@@ -2,7 +2,8 @@
 
 Handlers are registered per MAV_CMD id and return ``(MAV_RESULT, reason)``; an unknown command is
 answered ``MAV_RESULT_UNSUPPORTED``. Handlers live with the code that owns the behaviour
-(the autopilot shell registers commander, stream and mission handlers here); a command is
+(the core wires the vehicle's commands, :mod:`.vehicle_commands`, and the mission and parameter
+services' here); a command is
 registered only if :data:`~.validation.COMMAND_RULES` lists it, the one table of what each handled
 command's parameters may be and which of its slots it uses.
 """
@@ -17,6 +18,8 @@ from .validation import COMMAND_RULES
 
 
 class CommandRequest(NamedTuple):
+    """One MAV_CMD as its handler reads it, from COMMAND_LONG or COMMAND_INT (or the console)."""
+
     command: int
     params: tuple[float, float, float, float, float, float, float]  # param1..7 (COMMAND_INT x, y scaled back)
     frame: int | None  # COMMAND_INT frame, None for COMMAND_LONG
@@ -51,15 +54,21 @@ def request_from_message(msg, link, address) -> CommandRequest:
 
 
 class CommandDispatcher:
+    """The MAV_CMD handlers by command id (module docstring)."""
+
     def __init__(self) -> None:
         self.handlers: dict[int, Handler] = {}
 
     def register(self, command: int, handler: Handler) -> None:
+        """``handler`` answers MAV_CMD ``command``; ValueError if :data:`~.validation.COMMAND_RULES`
+        has no rules for it."""
         if command not in COMMAND_RULES:  # a programming error: found when the autopilot starts
             raise ValueError(f"MAV_CMD {command} is not in validation.COMMAND_RULES: add its rules there")
         self.handlers[command] = handler
 
     def dispatch(self, request: CommandRequest) -> tuple[int, str]:
+        """(MAV_RESULT, reason) of ``request``: UNSUPPORTED without a handler, FAILED when the
+        handler raises (never an exception, never silence)."""
         handler = self.handlers.get(request.command)
         if handler is None:
             return mavlink.MAV_RESULT_UNSUPPORTED, f"command {request.command} not supported"
@@ -70,6 +79,7 @@ class CommandDispatcher:
 
 
 def command_ack(request: CommandRequest, result: int):
+    """The COMMAND_ACK answering ``request`` with ``result`` (MAV_RESULT), addressed to its sender."""
     return mavlink.MAVLink_command_ack_message(
         request.command, result, 0, 0, request.source_system, request.source_component
     )

@@ -28,6 +28,8 @@ class FaultLog:
         self._announced_at: dict[str, float] = {}
 
     def record(self, kind: str, exc: BaseException, now: float) -> None:
+        """Count ``exc`` caught in ``kind`` (where it happened) at ``now`` (the caller's clock, s):
+        logged with its traceback the first time, announced at most every :data:`ANNOUNCE_EVERY_S`."""
         self.counts[kind] += 1
         count = self.counts[kind]
         if count == 1:
@@ -51,6 +53,9 @@ class MessageDispatcher:
         self.handlers[msg_id] = handler
 
     def dispatch(self, msg, link, address: tuple[str, int], now: float) -> None:
+        """Route ``msg`` (pymavlink, from ``address`` on ``link``) to its handler by
+        ``get_msgId()``; bad data, unknown and unhandled messages counted and dropped, a handler's
+        exception caught and recorded (:class:`FaultLog`, at ``now``)."""
         msg_id = msg.get_msgId()
         if msg_id < 0:  # BAD_DATA (-1) or a frame of a message outside the dialect (-2)
             self.received["bad data" if msg_id == -1 else "unknown message"] += 1

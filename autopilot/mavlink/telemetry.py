@@ -7,6 +7,10 @@ request for it is granted (:func:`stream_refusal`). Each GCS link has its own :c
 PX4-like default rates, changed by ``MAV_CMD_SET_MESSAGE_INTERVAL``; intervals count simulation
 time (lockstep), so at ``--speed 4`` a 1 Hz HEARTBEAT arrives 4 times per wall second, as in PX4
 SITL, and no stream runs faster than the control frames (one message per frame at most).
+
+(One module: each row of :data:`STREAMS` names its message's builder, rate and what it is built
+from, beside the builder; split, what one message says and when it is sent would be read in two
+places.)
 """
 
 from __future__ import annotations

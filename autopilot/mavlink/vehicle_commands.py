@@ -73,6 +73,7 @@ class VehicleCommands:
         self.after_ack = None  # the message a command asked for (pymavlink), sent after its ACK
 
     def register(self, commands: CommandDispatcher) -> None:
+        """Each of the vehicle's MAV_CMDs on ``commands``, with its handler."""
         c = self.context.commander
         sim_time = self.context.now
         commands.register(m.MAV_CMD_COMPONENT_ARM_DISARM, self.arm_disarm)
@@ -102,7 +103,8 @@ class VehicleCommands:
                                                    r.params[3])  # fmt: skip
 
     def arm_disarm(self, r: CommandRequest) -> Result:
-        # MAVSDK sends param2 = NaN ("unset") with a plain arm; only 21196 means force.
+        """MAV_CMD_COMPONENT_ARM_DISARM: param1 1 arms, 0 disarms; param2 21196 forces (MAVSDK
+        sends NaN, "unset", with a plain arm)."""
         force = r.params[1] == FORCE_MAGIC
         commander, t = self.context.commander, self.context.now()
         if r.params[0] == 1.0:  # MAV_BOOL, validated: 0 or 1
@@ -225,7 +227,8 @@ class VehicleCommands:
         return m.MAV_RESULT_DENIED, reason
 
     def set_mode(self, r: CommandRequest) -> Result:
-        # (validated: base mode with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, bytes; sub mode NaN = 0)
+        """MAV_CMD_DO_SET_MODE: param2 PX4's main mode, param3 its sub mode (NaN: 0); an unknown
+        pair is DENIED. (Validated: the base mode has MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.)"""
         main, sub = int(r.params[1]), 0 if math.isnan(r.params[2]) else int(r.params[2])
         mode = FlightMode.from_px4(main, sub)
         if mode is None:

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from autopilot.control.config import load_controller
-from autopilot.core import LATE_COPY_S, AutopilotCore, AutopilotSetup
+from autopilot.core import AutopilotCore, AutopilotSetup
+from autopilot.mavlink.simulator_link import LATE_COPY_S
 from gcs_scripts import fly_setpoints
 from gcs_scripts.link import land_and_disarm
 from gcs_scripts.upload_mission import MissionLink, items_from_list, same_item
@@ -101,7 +102,7 @@ def test_a_late_copy_is_dropped_an_out_of_date_answer_discarded_and_a_restart_st
     assert sim.answer_to_frame(old_answer) is None  # the answer to frame 1 cannot end frame 3
     restarted = SimulatorCore(sim.setup)  # a new simulator: t = 0 again, long after our first frame
     assert ap.on_hil_datagram(restarted.begin_frame(), LATE_COPY_S + 0.5) is not None
-    assert not ap.commander.armed and ap.last_time_usec == 0
+    assert not ap.commander.armed and ap.simulator.last_time_usec == 0
 
 
 @pytest.mark.timeout(60)
@@ -116,10 +117,10 @@ def test_every_frame_lost_the_simulator_descends_and_resumes_once_the_link_is_ba
     assert stack.t - cut == pytest.approx(timeout, abs=0.01)  # the lockstep timeout, never a hang
     assert stack.sim.resends == pytest.approx(timeout / stack.sim.resend_after_s, abs=1)
     _fly(stack, 0.5)
-    assert stack.sim.emergency and stack.autopilot.sim_lost  # each side reports the other lost
+    assert stack.sim.emergency and stack.autopilot.simulator.lost  # each side reports the other lost
     stack.impair("hil:none")
     _fly(stack, 0.1)
-    assert not stack.sim.emergency and not stack.autopilot.sim_lost
+    assert not stack.sim.emergency and not stack.autopilot.simulator.lost
 
 
 # -- ground-station protocols over a lossy, slow link -----------------------------------------------
