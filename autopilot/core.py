@@ -161,13 +161,13 @@ class AutopilotCore:
         )  # fmt: skip
         self.params.on_change(self._on_param_change)
         self.records = FrameRecords(RecordContext(self.flight_log, self.commander, self.battery,
-                                                  lambda: self.estimator))  # fmt: skip
+                                                  self._estimator_loop))  # fmt: skip
         self.encoder = Encoder(self.system_id, wire.AUTOPILOT_COMPONENT_ID)
         self.actuators = ActuatorEncoder(self.encoder, self.wrench)
         self._status = telemetry.VehicleStatus(self.system_id, home_geodetic=sitl.home, wrench=self.wrench)
         self.telemetry = TelemetryFeed(self._status, FeedContext(
             self.commander, self.params, self.battery, setup.vehicle.actuation.thrust_max_n,
-            lambda: self.sim_time, lambda: self.estimator is not None, lambda: self._controls,
+            self._sim_time, self._on_ekf, self._latest_controls,
         ))  # fmt: skip
         self.simulator = SimulatorLink(self.encoder, self.system_id, sitl.home, setup.use_odometry)
         self.estimators = EstimatorSwitch(self.params, self.commander, self._status, self.dt,
@@ -181,17 +181,17 @@ class AutopilotCore:
         )
         self.links = [GcsLink(GCS_LINK, remotes[0], self._out, self.dt),
                       GcsLink(API_LINK, remotes[1], self._out, self.dt)]  # fmt: skip
-        self.faults = FaultLog(log, lambda text: self.statustext(m.MAV_SEVERITY_ERROR, text))
-        self.refusals = RefusalNotices(self.statustext, lambda: self.wall_now)
+        self.faults = FaultLog(log, self._error_text)
+        self.refusals = RefusalNotices(self.statustext, self._wall_time)
         self.dispatcher = MessageDispatcher(self.faults)
         self.dropped: dict[str, int] = {}  # datagrams the shell dropped before parsing, by reason
         self.commands = CommandDispatcher()
-        clock = lambda: self.wall_now  # noqa: E731 - the services' wall clock is the caller's
+        clock = self._wall_time  # the services' wall clock is the caller's
         self.missions = MissionService(
             self.commander, self.encoder, self.links, self.statustext, sitl.home, self.system_id,
             wire.AUTOPILOT_COMPONENT_ID, clock,
         )  # fmt: skip
-        self.missions.register(self.dispatcher, self.commands, lambda: self.sim_time)
+        self.missions.register(self.dispatcher, self.commands, self._sim_time)
         self.param_service = ParamService(
             self.params, self.encoder, self.links, self.statustext, self.system_id,
             wire.AUTOPILOT_COMPONENT_ID, setup.params_file,
@@ -201,26 +201,26 @@ class AutopilotCore:
         self.param_service.register(self.dispatcher, self.commands)
         self.simulator_requests = self.simulator.requests  # in the next answer
         self.failure_injection = FailureInjection(
-            self.params, self.simulator.request_failure, lambda: self.estimator is not None, self.refusals,
+            self.params, self.simulator.request_failure, self._on_ekf, self.refusals,
             self.statustext,
         )  # fmt: skip
         self.vehicle_commands = VehicleCommands(CommandContext(
-            self.commander, lambda: self.sim_time, lambda: self.status, self.params, self.refusals,
+            self.commander, self._sim_time, self._read_status, self.params, self.refusals,
             self.failure_injection, setup.sitl.home, setup.build, self.system_id,
         ))  # fmt: skip
         self.vehicle_commands.register(self.commands)
         self.signing = Signing(setup.signing, self.encoder, self.links, self.statustext,
-                               lambda: self.commander.armed, self.system_id, log, setup.params_file,
+                               self._armed, self.system_id, log, setup.params_file,
                                setup.instance)  # fmt: skip
         self.signing.register(self.dispatcher)  # SETUP_SIGNING
         self.log_transfer = LogTransfer(log_store or NoLogs(), self.encoder, self.links, self.statustext,
-                                        lambda: self.commander.armed, self.system_id, clock)  # fmt: skip
+                                        self._armed, self.system_id, clock)  # fmt: skip
         self.log_transfer.register(self.dispatcher)  # LOG_REQUEST_LIST, _DATA, _END, LOG_ERASE
         self.ftp = FtpServer(files or NoFiles(), self.encoder, self.links, self.system_id, clock)
         self.ftp.register(self.dispatcher)  # FILE_TRANSFER_PROTOCOL
         console = Console(ConsoleContext(
             self.params, self.param_service.set_value, self._console_command, self.records.topic_now,
-            tuple(spec.name for spec in topics.TOPICS), self.info, self.commander, lambda: self.sim_time,
+            tuple(spec.name for spec in topics.TOPICS), self.info, self.commander, self._sim_time,
             setup.build,
         ))  # fmt: skip
         greeting = f"\nquadsitl {setup.build.version or '(version unknown)'}: 'help' lists the commands\n"
@@ -228,11 +228,38 @@ class AutopilotCore:
         self.shell.register(self.dispatcher)  # SERIAL_CONTROL (device SHELL)
         self.external_vision = ExternalVision()  # a client's vision (mocap bridge, VIO) for the EKF
         self.handlers = MessageHandlers(HandlerContext(
-            self.system_id, self.commander, lambda: self.sim_time, lambda: self.wall_now, self.params,
+            self.system_id, self.commander, self._sim_time, self._wall_time, self.params,
             self.refusals, self.statustext, self.send_events, self.encoder.pack, self.log, setup.sitl.home,
-            lambda: self.estimator, self.commands, self.vehicle_commands, self.external_vision,
+            self._estimator_loop, self.commands, self.vehicle_commands, self.external_vision,
         ))  # fmt: skip
         self.handlers.register(self.dispatcher)
+
+    # -- the rooms' views of the core: bound methods, never lambdas. A deep copy of the core (the
+    # failure flights fly copies of one hover) rebinds a bound method to the copy; a lambda's
+    # closure would go on reading and steering the original.
+    def _sim_time(self) -> float:
+        return self.sim_time
+
+    def _wall_time(self) -> float:
+        return self.wall_now
+
+    def _on_ekf(self) -> bool:
+        return self.estimators.loop is not None
+
+    def _estimator_loop(self) -> EstimatorLoop | None:
+        return self.estimators.loop
+
+    def _latest_controls(self) -> tuple[float, float, float, float]:
+        return self._controls
+
+    def _read_status(self) -> telemetry.VehicleStatus:
+        return self.telemetry.status
+
+    def _armed(self) -> bool:
+        return self.commander.armed
+
+    def _error_text(self, text: str) -> None:
+        self.statustext(m.MAV_SEVERITY_ERROR, text)
 
     # -- entry points ---------------------------------------------------------------------------
     def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:

@@ -307,18 +307,18 @@ class FtpServer:
         self._crc_cache: OrderedDict[tuple, int] = OrderedDict()
         self._busy = False  # a station has a session or a burst: pump() has work
         self._handlers: dict[int, Callable[[_Station, Request, tuple[int, int]], Reply | None]] = {
-            m.MAV_FTP_OPCODE_NONE: lambda st, r, t: Reply(),
+            m.MAV_FTP_OPCODE_NONE: self._none,
             m.MAV_FTP_OPCODE_TERMINATESESSION: self._terminate,
             m.MAV_FTP_OPCODE_RESETSESSION: self._reset,
             m.MAV_FTP_OPCODE_LISTDIRECTORY: self._list,
-            m.MAV_FTP_OPCODE_OPENFILERO: lambda st, r, t: self._open(st, r, OpenMode.READ),
+            m.MAV_FTP_OPCODE_OPENFILERO: self._open_read,
             m.MAV_FTP_OPCODE_READFILE: self._read,
-            m.MAV_FTP_OPCODE_CREATEFILE: lambda st, r, t: self._open(st, r, OpenMode.CREATE),
+            m.MAV_FTP_OPCODE_CREATEFILE: self._open_create,
             m.MAV_FTP_OPCODE_WRITEFILE: self._write,
-            m.MAV_FTP_OPCODE_REMOVEFILE: lambda st, r, t: self._path_op(self.files.remove_file, r),
+            m.MAV_FTP_OPCODE_REMOVEFILE: self._remove_file,
             m.MAV_FTP_OPCODE_CREATEDIRECTORY: self._create_directory,
-            m.MAV_FTP_OPCODE_REMOVEDIRECTORY: lambda st, r, t: self._path_op(self.files.remove_directory, r),
-            m.MAV_FTP_OPCODE_OPENFILEWO: lambda st, r, t: self._open(st, r, OpenMode.WRITE),
+            m.MAV_FTP_OPCODE_REMOVEDIRECTORY: self._remove_directory,
+            m.MAV_FTP_OPCODE_OPENFILEWO: self._open_write,
             m.MAV_FTP_OPCODE_TRUNCATEFILE: self._truncate,
             m.MAV_FTP_OPCODE_RENAME: self._rename,
             m.MAV_FTP_OPCODE_CALCFILECRC: self._crc,
@@ -411,6 +411,25 @@ class FtpServer:
                 break
             out += item
         return Reply(bytes(out), r.session, r.offset)
+
+    # The table's handlers are bound methods, not lambdas: a deep copy of the server rebinds them.
+    def _none(self, station: _Station, r: Request, target) -> Reply:
+        return Reply()
+
+    def _open_read(self, station: _Station, r: Request, target) -> Reply:
+        return self._open(station, r, OpenMode.READ)
+
+    def _open_create(self, station: _Station, r: Request, target) -> Reply:
+        return self._open(station, r, OpenMode.CREATE)
+
+    def _open_write(self, station: _Station, r: Request, target) -> Reply:
+        return self._open(station, r, OpenMode.WRITE)
+
+    def _remove_file(self, station: _Station, r: Request, target) -> Reply:
+        return self._path_op(self.files.remove_file, r)
+
+    def _remove_directory(self, station: _Station, r: Request, target) -> Reply:
+        return self._path_op(self.files.remove_directory, r)
 
     def _open(self, station: _Station, r: Request, mode: OpenMode) -> Reply:
         if station.session is not None:

@@ -74,26 +74,40 @@ class VehicleCommands:
 
     def register(self, commands: CommandDispatcher) -> None:
         """Each of the vehicle's MAV_CMDs on ``commands``, with its handler."""
-        c = self.context.commander
-        sim_time = self.context.now
+        # (bound methods, not lambdas: a deep copy of the vehicle rebinds them to the copy)
         commands.register(m.MAV_CMD_COMPONENT_ARM_DISARM, self.arm_disarm)
         commands.register(m.MAV_CMD_NAV_TAKEOFF, self.takeoff)
-        commands.register(m.MAV_CMD_NAV_LAND, lambda r: c.land(sim_time()))
-        commands.register(m.MAV_CMD_NAV_RETURN_TO_LAUNCH, lambda r: c.return_to_launch(sim_time()))
+        commands.register(m.MAV_CMD_NAV_LAND, self.land)
+        commands.register(m.MAV_CMD_NAV_RETURN_TO_LAUNCH, self.return_to_launch)
         commands.register(m.MAV_CMD_DO_SET_MODE, self.set_mode)
         commands.register(m.MAV_CMD_DO_REPOSITION, self.reposition)
         commands.register(m.MAV_CMD_DO_ORBIT, self.orbit)
         commands.register(m.MAV_CMD_SET_MESSAGE_INTERVAL, self.message_interval)
         commands.register(m.MAV_CMD_GET_MESSAGE_INTERVAL, self.get_message_interval)
-        commands.register(m.MAV_CMD_REQUEST_MESSAGE, lambda r: self.send_requested(r, int(r.params[0])))
-        commands.register(
-            m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
-            lambda r: self.send_requested(r, m.MAVLINK_MSG_ID_AUTOPILOT_VERSION),
-        )
-        commands.register(
-            m.MAV_CMD_GET_HOME_POSITION, lambda r: self.send_requested(r, m.MAVLINK_MSG_ID_HOME_POSITION)
-        )
+        commands.register(m.MAV_CMD_REQUEST_MESSAGE, self.request_message)
+        commands.register(m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, self.request_autopilot_version)
+        commands.register(m.MAV_CMD_GET_HOME_POSITION, self.request_home_position)
         commands.register(m.MAV_CMD_INJECT_FAILURE, self.inject_failure)
+
+    def land(self, r: CommandRequest) -> Result:
+        """MAV_CMD_NAV_LAND: land where the vehicle is (the commander's Land)."""
+        return self.context.commander.land(self.context.now())
+
+    def return_to_launch(self, r: CommandRequest) -> Result:
+        """MAV_CMD_NAV_RETURN_TO_LAUNCH: the commander's RTL."""
+        return self.context.commander.return_to_launch(self.context.now())
+
+    def request_message(self, r: CommandRequest) -> Result:
+        """MAV_CMD_REQUEST_MESSAGE: the message whose id is param1."""
+        return self.send_requested(r, int(r.params[0]))
+
+    def request_autopilot_version(self, r: CommandRequest) -> Result:
+        """MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: AUTOPILOT_VERSION."""
+        return self.send_requested(r, m.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+
+    def request_home_position(self, r: CommandRequest) -> Result:
+        """MAV_CMD_GET_HOME_POSITION: HOME_POSITION."""
+        return self.send_requested(r, m.MAVLINK_MSG_ID_HOME_POSITION)
 
     def inject_failure(self, r: CommandRequest) -> Result:
         """MAV_CMD_INJECT_FAILURE (PX4's): param1 FAILURE_UNIT, param2 FAILURE_TYPE, param3 the

@@ -70,14 +70,19 @@ class MissionService:
             system_id,
             component_id,
             origin,
-            check=lambda items: check_mission(items, origin, commander.limits(), commander.params.values,
-                                              fence=commander.target_problem,
-                                              home_local=commander.home or (0.0, 0.0, 0.0)),
+            check=self._check,
         )
         self._peer: tuple[object, tuple[str, int]] | None = None  # the transfer client's link, address
         self._sim_time: Callable[[], float] = lambda: 0.0
         self._last_current: tuple[int, int, int, int] | None = None
         self._next_current_s = 0.0
+
+    def _check(self, items):
+        """An uploaded plan checked against the vehicle's limits, the geofence and home (a bound
+        method, not a lambda: a deep copy of the service checks against its own commander)."""
+        commander = self.commander
+        return check_mission(items, self.origin, commander.limits(), commander.params.values,
+                             fence=commander.target_problem, home_local=commander.home or (0.0, 0.0, 0.0))
 
     def register(self, handlers: dict, commands: CommandDispatcher, sim_time: Callable[[], float]) -> None:
         """Hook into the process shell's message table and command dispatcher."""
