@@ -41,7 +41,8 @@ def reachable(root: object) -> dict[int, object]:
             continue
         seen[id(obj)] = obj
         if isinstance(obj, types.FunctionType):
-            todo.extend(cell.cell_contents for cell in obj.__closure__ or () if cell.cell_contents is not None)
+            cells = obj.__closure__ or ()
+            todo.extend(cell.cell_contents for cell in cells if cell.cell_contents is not None)
             continue
         if (type(obj).__module__ or "").startswith("numba"):
             continue
