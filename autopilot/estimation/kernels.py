@@ -26,11 +26,12 @@ Both covariance updates leave P exactly symmetric (the upper triangle mirrored).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, fields_of, layout
 from quadcommon.rigid_body import (
     Matrix3,
     Quaternion,
@@ -42,21 +43,33 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
 
-# The error state dx = [dp, dv, dtheta, db_g, db_a, db_m, db_h]: the covariance's rows and columns.
+# The error state dx = [dp, dv, dtheta, db_g, db_a, db_m, db_h]: the covariance's rows and columns,
+# each element named as the logs and the tests print it (STATE_NAMES).
 ERROR_STATE = layout("ErrorState", (
-    Field("p", 3, unit="m"), Field("v", 3, unit="m/s"), Field("theta", 3, unit="rad", doc="attitude error"),
-    Field("gyro_bias", 3, unit="rad/s"), Field("accel_bias", 3, unit="m/s^2"),
-    Field("mag_bias", 3, unit="gauss"), Field("baro_bias", unit="m"),
+    Field("p", unit="m", elements=("px", "py", "pz")),
+    Field("v", unit="m/s", elements=("vx", "vy", "vz")),
+    Field("theta", unit="rad", doc="attitude error, world frame", elements=("thx", "thy", "thz")),
+    Field("gyro_bias", unit="rad/s", elements=("bgx", "bgy", "bgz")),
+    Field("accel_bias", unit="m/s^2", elements=("bax", "bay", "baz")),
+    Field("mag_bias", unit="gauss", elements=("bmx", "bmy", "bmz")),
+    Field("baro_bias", unit="m", elements=("bh",)),
 ))  # fmt: skip
 N = ERROR_STATE.size
 # The covariance algebra reads the blocks by these short names (the filter literature's), taken
 # from the layout: I + the block's state.
 E = ERROR_STATE
 IP, IV, ITH, IBG, IBA, IBM, IBH = E.p, E.v, E.theta, E.gyro_bias, E.accel_bias, E.mag_bias, E.baro_bias
-STATE_NAMES = (
-    "px", "py", "pz", "vx", "vy", "vz", "thx", "thy", "thz",
-    "bgx", "bgy", "bgz", "bax", "bay", "baz", "bmx", "bmy", "bmz", "bh",
-)  # fmt: skip
+STATE_NAMES = tuple(name for field in fields_of(ERROR_STATE) for name in field.elements)
+
+
+class NominalPrediction(NamedTuple):
+    """What :func:`predict` returns: the nominal state after the step, and the sample's world
+    specific force ``R (f - b_a)`` (the next step's trapezoid starts from it)."""
+
+    attitude: Quaternion  # (w, x, y, z), body to world
+    position_m: Vector3
+    velocity_m_s: Vector3
+    world_force_m_s2: Vector3
 
 
 @kernel
@@ -74,12 +87,12 @@ def predict(
     q: Quaternion,
     p: Vector3,
     v: Vector3,
-) -> tuple[Quaternion, Vector3, Vector3, Vector3]:
+) -> NominalPrediction:
     """One prediction over ``dt`` (s): the nominal attitude, position and velocity from the raw
     gyro ``rate`` (rad/s) and accelerometer ``force`` (m/s^2) of this and the previous sample
     (``previous_world_force``: the previous sample's ``R (f - b_a)``), then ``P`` in place with
-    the diagonal ``process_noise`` (the step's variances). Returns the new ``(q, p, v)`` and this
-    sample's world specific force ``R (f - b_a)``."""
+    the diagonal ``process_noise`` (the step's variances). Returns the new attitude, position and
+    velocity and this sample's world specific force ``R (f - b_a)``."""
     # Attitude: the mean bias-corrected rate over the step (trapezoid), body-frame increment.
     h = 0.5 * dt
     rx = (rate[0] + previous_rate[0]) * h - gyro_bias[0] * dt
@@ -99,7 +112,7 @@ def predict(
     mx, my, mz = 0.5 * (a0[0] + a1[0]), 0.5 * (a0[1] + a1[1]), 0.5 * (a0[2] + a1[2])
     v1 = (v[0] + mx * dt, v[1] + my * dt, v[2] + (mz - gravity) * dt)
     predict_covariance(P, process_noise, dt, (mx * dt, my * dt, mz * dt), R)
-    return q1, p1, v1, a1
+    return NominalPrediction(q1, p1, v1, a1)
 
 
 @kernel

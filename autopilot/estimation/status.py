@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from quadcommon.layout import Field, fields_of, layout
+
 Vector3 = tuple[float, float, float]
 Quaternion = tuple[float, float, float, float]
 
@@ -28,20 +30,22 @@ ESTIMATOR_PRED_POS_HORIZ_ABS = 512
 ESTIMATOR_GPS_GLITCH = 1024
 ESTIMATOR_ACCEL_ERROR = 2048
 
-# Names of the fused measurement kinds (keys of EstimatorStatus.sources).
-SOURCE_NAMES = (
-    "gps_pos",
-    "gps_hgt",
-    "gps_vel",
-    "gps_vvel",
-    "baro",
-    "mag",
-    "heading",
-    "ev_pos",
-    "ev_hgt",
-    "ev_yaw",
-    "ev_vel",
-)
+# The fused measurement kinds: the rows of the filter's per-source figures (``stats``), in this
+# order, and the keys of EstimatorStatus.sources.
+SOURCE = layout("MeasurementKinds", (
+    Field("gps_pos", doc="GNSS horizontal position"),
+    Field("gps_hgt", doc="GNSS height"),
+    Field("gps_vel", doc="GNSS horizontal velocity"),
+    Field("gps_vvel", doc="GNSS vertical velocity (gated apart from the horizontal)"),
+    Field("baro", doc="barometric height"),
+    Field("mag", doc="3-axis magnetometer field (EKF2_MAG_TYPE 0)"),
+    Field("heading", doc="tilt-compensated magnetic heading (EKF2_MAG_TYPE 1)"),
+    Field("ev_pos", doc="external vision horizontal position"),
+    Field("ev_hgt", doc="external vision height"),
+    Field("ev_yaw", doc="external vision yaw"),
+    Field("ev_vel", doc="external vision velocity"),
+))  # fmt: skip
+SOURCE_NAMES = tuple(f.name for f in fields_of(SOURCE))
 
 
 class Estimate(NamedTuple):
