@@ -3,9 +3,9 @@ loop (:meth:`~.eskf.ErrorStateEkf.fuse_frame`) and the campaign engine
 (:func:`sitl.campaign.kernels.fuse_aiding`) both call.
 
 PX4's EKF2 fuses, per IMU step, the magnetometer, then the barometer, then the GNSS, then external
-vision; each fusion's own rate limits, gates and quality checks live in :mod:`.filter`. A frame's
-samples come as one :class:`Aiding` record: every field a float or a tuple of floats, a flag per
-sensor saying whether it delivered (compiled code has no ``None``).
+vision; each fusion's own rate limits and gates live in :mod:`.fusion`, its quality checks in
+:mod:`.checks`. A frame's samples come as one :class:`Aiding` record: every field a float or a
+tuple of floats, a flag per sensor saying whether it delivered (compiled code has no ``None``).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 from quadcommon.kernel import kernel
 
 from ..records import SensorSamples
-from .filter import fuse_baro, fuse_gps, fuse_mag, fuse_vision
+from .fusion import fuse_baro, fuse_gps, fuse_mag, fuse_vision
 
 Vector3 = tuple[float, float, float]
 Z3 = (0.0, 0.0, 0.0)
@@ -71,7 +71,7 @@ def aiding_of(samples: SensorSamples) -> Aiding:
 def fuse_frame(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, aiding: Aiding) -> None:
     """Fuse a frame's ``aiding`` at the time ``t`` of its IMU sample, in PX4's order:
     magnetometer, barometer, GNSS, vision (the filter's memory ``F, P, ring, stats, W`` and its
-    parameters ``A``: :mod:`.filter`)."""
+    parameters ``A``: :mod:`.filter`'s layouts)."""
     if aiding.mag_fresh:
         fuse_mag(F, P, ring, stats, W, A, t, aiding.mag_gauss)
     if aiding.baro_fresh:

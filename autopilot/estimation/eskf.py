@@ -48,9 +48,10 @@ This is the "delayed-state buffer" of PX4's EKF2 without its delayed time horizo
 one propagation, no output predictor; the neglected terms are of order ``D x (velocity and
 attitude uncertainty)``, well below the noise of the delayed sensors (mm for a 0.1 s GPS delay).
 
-Hot path: the filter's steps are kernels written once in :mod:`.filter` (prediction and
-buffering, the fusions with their gates, checks and resets, the convergence verdict), over the
-arithmetic of :mod:`.kernels`; this class is their shell. It calls their compiled entries (numba:
+Hot path: the filter's steps are kernels written once: :mod:`.filter` (its memory's layouts,
+prediction and buffering, the convergence verdict), :mod:`.fusion` (the fusions with their gates)
+and :mod:`.checks` (their quality checks and resets), over the arithmetic of :mod:`.kernels`; this
+class is their shell. It calls their compiled entries (numba:
 one call per IMU sample, one per fusion), or the same functions run by Python where nothing
 compiles (``QUADSITL_PURE_PYTHON=1``; slower), and keeps in Python what runs once or reports: the
 alignment at rest, the records and the messages. The filter's memory is the float arrays of
@@ -64,12 +65,15 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from quadcommon import frames
 from quadcommon.kernel import compiled, compiling, freeze
+from quadcommon.layout import fields_of
 from quadcommon.rigid_body import (
     euler_from_quaternion,
     euler_rates_from_body_rates,
@@ -78,17 +82,9 @@ from quadcommon.rigid_body import (
 )
 
 from ..records import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
-from . import aiding, kernels
+from . import aiding, checks, fusion, kernels
 from . import filter as fk
 from .aiding import Aiding
-from .filter import (  # noqa: F401 - part of this module's interface
-    BAD_ACCEL_HOLD_S,
-    MAX_IMU_DT_S,
-    RING,
-    mag_model,
-    yaw_jacobian,
-    yaw_of,
-)
 from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N
 from .parameters import (
     DEFAULT_PARAMS,
@@ -131,6 +127,9 @@ GLITCH_FLAG_S = 1.0  # ESTIMATOR_GPS_GLITCH while a GPS position was gated out t
 _Z3 = (0.0, 0.0, 0.0)
 
 
+_STATS_INTEGERS = {f.name for f in fields_of(fk.STATS) if isinstance(getattr(SourceStats, f.name), int)}
+
+
 class SourceRow:
     """One measurement kind's figures (:class:`~.status.SourceStats`' fields), read from the
     filter's ``stats`` array as they are now."""
@@ -143,8 +142,8 @@ class SourceRow:
     def snapshot(self) -> SourceStats:
         """The row as a :class:`~.status.SourceStats` record (a copy: it no longer follows the filter)."""
         values = self._row.tolist()
-        return SourceStats(**{name: (int(v) if isinstance(getattr(SourceStats, name), int) else v)
-                              for name, v in zip(fk.STATS_FIELDS, values, strict=True)})  # fmt: skip
+        return SourceStats(**{f.name: (int(v) if f.name in _STATS_INTEGERS else v)
+                              for f, v in zip(fields_of(fk.STATS), values, strict=True)})  # fmt: skip
 
 
 def _stats_property(index: int, integer: bool, doc: str) -> property:
@@ -153,23 +152,42 @@ def _stats_property(index: int, integer: bool, doc: str) -> property:
     return property(lambda self: float(self._row[index]), doc=doc)
 
 
-for _i, _name in enumerate(fk.STATS_FIELDS):
-    setattr(SourceRow, _name, _stats_property(
-        _i, isinstance(getattr(SourceStats, _name), int),
-        f"This source's :attr:`~.status.SourceStats.{_name}`, read from the filter as it is now.",
+for _field in fields_of(fk.STATS):
+    setattr(SourceRow, _field.name, _stats_property(
+        getattr(fk.STATS, _field.name), _field.name in _STATS_INTEGERS,
+        f"This source's :attr:`~.status.SourceStats.{_field.name}`, read from the filter as it is now.",
     ))  # fmt: skip
 
 
-def _state_property(index: int, size: int, doc: str) -> property:
-    """A part of the nominal state as a tuple (read), or set from any sequence of floats."""
+def _span(name: str) -> tuple[int, int]:
+    """Where the nominal state's field ``name`` lies in the memory (layout :data:`.filter.MEMORY`)."""
+    start = getattr(fk.MEMORY, name)
+    return start, start + next(f.width() for f in fields_of(fk.MEMORY) if f.name == name)
+
+
+def _state_property(name: str, doc: str) -> property:
+    """The memory's field ``name`` as a tuple (read), or set from any sequence of floats."""
+    start, end = _span(name)
 
     def get(self: ErrorStateEkf) -> tuple[float, ...]:
-        return tuple(self._F[index : index + size].tolist())
+        return tuple(self._F[start:end].tolist())
 
     def put(self: ErrorStateEkf, value: Any) -> None:
-        self._F[index : index + size] = [float(c) for c in value]
+        self._F[start:end] = [float(c) for c in value]
 
     return property(get, put, doc=doc)
+
+
+def _reader(name: str) -> Callable[[list[float]], tuple[float, ...]]:
+    """The memory's field ``name`` out of the memory as a list (one C call)."""
+    return operator.itemgetter(*range(*_span(name)))
+
+
+# What estimate() reads: one list of the memory's head, then each field by its getter.
+_ESTIMATED = ("p", "v", "q", "rate", "gyro_bias", "accel_bias", "mag_bias", "baro_bias")
+_ESTIMATE_END = max(_span(name)[1] for name in _ESTIMATED)
+_POSITION, _VELOCITY, _ATTITUDE, _RATE = _reader("p"), _reader("v"), _reader("q"), _reader("rate")
+_GYRO_BIAS, _ACCEL_BIAS, _MAG_BIAS = _reader("gyro_bias"), _reader("accel_bias"), _reader("mag_bias")
 
 
 class ErrorStateEkf:
@@ -177,12 +195,12 @@ class ErrorStateEkf:
     arrive (after the prediction of their arrival step); read :meth:`estimate` and
     :meth:`status`. Until aligned it collects samples (:attr:`initialised` False)."""
 
-    _p = _state_property(fk.MEMORY.p, 3, "position (m)")
-    _v = _state_property(fk.MEMORY.v, 3, "velocity (m/s)")
-    _q = _state_property(fk.MEMORY.q, 4, "attitude, body to world")
-    _bg = _state_property(fk.MEMORY.gyro_bias, 3, "gyro bias (rad/s)")
-    _ba = _state_property(fk.MEMORY.accel_bias, 3, "accelerometer bias (m/s^2)")
-    _bm = _state_property(fk.MEMORY.mag_bias, 3, "magnetometer hard iron (gauss)")
+    _p = _state_property("p", "position (m)")
+    _v = _state_property("v", "velocity (m/s)")
+    _q = _state_property("q", "attitude, body to world")
+    _bg = _state_property("gyro_bias", "gyro bias (rad/s)")
+    _ba = _state_property("accel_bias", "accelerometer bias (m/s^2)")
+    _bm = _state_property("mag_bias", "magnetometer hard iron (gauss)")
 
     def __init__(
         self,
@@ -327,7 +345,7 @@ class ErrorStateEkf:
         self._initialise_from_alignment(imu)
 
     def _mag_heading(self, m: Vector3, phi: float, theta: float, bias: Vector3) -> float:
-        return fk.mag_heading(self._A, m, phi, theta, bias)
+        return fusion.mag_heading(self._A, m, phi, theta, bias)
 
     def _initialise_from_alignment(self, imu: ImuSample) -> None:
         p = self.params
@@ -341,7 +359,7 @@ class ErrorStateEkf:
         vision = self._pending_vision
         if vision is not None and p.ev_ctrl & EV_CTRL_YAW:
             yaw = vision.yaw_rad
-            yaw_var = fk.ev_yaw_variance(self._A, vision.yaw_std_rad)
+            yaw_var = fusion.ev_yaw_variance(self._A, vision.yaw_std_rad)
         else:  # the magnetometer (_align checked that one of the two is there)
             mbar = tuple(s / self._align_mn for s in self._align_m)
             yaw = self._mag_heading(mbar, phi, theta, _Z3)
@@ -400,14 +418,14 @@ class ErrorStateEkf:
         gps = self._pending_gps
         if vision is not None and p.ev_ctrl & (EV_CTRL_HPOS | EV_CTRL_VPOS):
             self._p = vision.position_m
-            var = fk.ev_pos_variance(self._A, vision.position_std_m)
+            var = fusion.ev_pos_variance(self._A, vision.position_std_m)
             P[IP, IP] = P[IP + 1, IP + 1] = P[IP + 2, IP + 2] = var
             self._v = _Z3
             P[IV, IV] = P[IV + 1, IV + 1] = P[IV + 2, IV + 2] = 0.1**2
         else:
             assert gps is not None
             self._p = gps.position_m
-            hv, vv, sv = fk.gps_variances(self._A, gps.eph_m, gps.epv_m, gps.speed_accuracy_m_s)
+            hv, vv, sv = fusion.gps_variances(self._A, gps.eph_m, gps.epv_m, gps.speed_accuracy_m_s)
             P[IP, IP] = P[IP + 1, IP + 1] = hv
             P[IP + 2, IP + 2] = vv
             self._v = gps.velocity_m_s if p.gps_ctrl & GPS_CTRL_VEL else _Z3
@@ -453,12 +471,12 @@ class ErrorStateEkf:
         self._finish_initialisation(imu)
 
     # ------------------------------------------------------------------------------------------
-    # Fusion (the kernels of .filter; before the alignment, the samples it waits for)
+    # Fusion (the kernels of .fusion; before the alignment, the samples it waits for)
     # ------------------------------------------------------------------------------------------
     def fuse_gps(self, fix: GpsFix) -> None:
         """GNSS position (horizontal, height) and velocity, valid EKF2_GPS_DELAY before arrival."""
         if not self.initialised:
-            if fk.gps_usable(
+            if checks.gps_usable(
                 self._A, float(fix.fix_type), fix.eph_m, fix.epv_m, float(fix.satellites_visible)
             ):
                 self._pending_gps = fix
@@ -520,28 +538,28 @@ class ErrorStateEkf:
     # ------------------------------------------------------------------------------------------
     def estimate(self) -> Estimate:
         """The current state estimate (what the controllers are fed)."""
-        x = self._F[: fk.MEMORY.rate + 3].tolist()
-        q = (x[6], x[7], x[8], x[9])
-        euler = euler_from_quaternion(x[6], x[7], x[8], x[9])
-        rate = (x[29], x[30], x[31])
+        x = self._F[:_ESTIMATE_END].tolist()
+        q = _ATTITUDE(x)
+        euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
+        rate = _RATE(x)
         return Estimate(
             self.time_s,
-            (x[0], x[1], x[2]),
-            (x[3], x[4], x[5]),
+            _POSITION(x),
+            _VELOCITY(x),
             q,
             euler,
             rate,
             euler_rates_from_body_rates(euler[0], euler[1], rate),
-            (x[10], x[11], x[12]),
-            (x[13], x[14], x[15]),
-            (x[16], x[17], x[18]),
-            x[19],
+            _GYRO_BIAS(x),
+            _ACCEL_BIAS(x),
+            _MAG_BIAS(x),
+            x[fk.MEMORY.baro_bias],
         )
 
     def estimate_biases(self) -> tuple[Vector3, Vector3]:
         """The gyro and accelerometer bias estimates (cheaper than :meth:`estimate`)."""
-        x = self._F[fk.MEMORY.gyro_bias : fk.MEMORY.accel_bias + 3].tolist()
-        return (x[0], x[1], x[2]), (x[3], x[4], x[5])
+        x = self._F[:_ESTIMATE_END].tolist()
+        return _GYRO_BIAS(x), _ACCEL_BIAS(x)
 
     def covariance(self) -> np.ndarray:
         """A copy of the 19x19 error-state covariance (order: :data:`.kernels.STATE_NAMES`)."""
@@ -558,7 +576,9 @@ class ErrorStateEkf:
                                    inf, inf, inf, False, False, src, self.imu_samples,
                                    self.imu_dt_rejected)  # fmt: skip
         F = self._F
-        pos_h, pos_v, vel, tilt, yaw = fk.accuracies(self.P)
+        sigma = fk.accuracies(self.P)
+        pos_h, pos_v = sigma.horizontal_position_m, sigma.vertical_position_m
+        tilt, yaw = sigma.tilt_rad, sigma.yaw_rad
         last_h_aid = float(F[fk.MEMORY.last_h_aid])
         verdict = self._entries.not_converged(F, self.P, self._A)
         dead_reckoning = verdict == fk.DEAD_RECKONING
@@ -607,7 +627,7 @@ class ErrorStateEkf:
             mag_ratio,
             pos_h,
             pos_v,
-            vel,
+            sigma.velocity_m_s,
             tilt,
             yaw,
             glitch,
@@ -623,9 +643,9 @@ def _floats(v: Any) -> Vector3:
 
 
 class FilterEntries(NamedTuple):
-    """What the filter calls per IMU sample and per fusion: :mod:`.filter`'s compiled entries, or
-    the kernels themselves where nothing compiles (and :mod:`.kernels`' arithmetic they call,
-    for tests and benchmarks of its own)."""
+    """What the filter calls per IMU sample and per fusion: :mod:`.filter`'s and :mod:`.fusion`'s
+    compiled entries, or the kernels themselves where nothing compiles (and :mod:`.kernels`'
+    arithmetic they call, for tests and benchmarks of its own)."""
 
     predict: Any
     prior_variances: Any
@@ -645,7 +665,9 @@ class FilterEntries(NamedTuple):
 def filter_kernels() -> FilterEntries:
     """The kernels themselves (what Python runs where nothing compiles)."""
     arithmetic = ("predict", "prior_variances", "joseph_update")
+    fusions = ("fuse_gps", "fuse_baro", "fuse_mag", "fuse_vision", "fuse_vision_velocity")
     own = {name: getattr(kernels, name) for name in arithmetic} | {"fuse_frame": aiding.fuse_frame_fields}
+    own |= {name: getattr(fusion, name) for name in fusions}
     return FilterEntries(*(own.get(name) or getattr(fk, name) for name in FilterEntries._fields))
 
 

@@ -28,6 +28,7 @@ from autopilot.estimation import (
     MagSample,
     VisionPose,
 )
+from autopilot.estimation.kernels import IBA, IBG, IP, ITH, IV
 from autopilot.records import StateEstimate
 from quadcommon.config import apply_uncertainty, load_scenario, load_sitl, load_vehicle
 from quadcommon.rigid_body import quaternion_multiply, rotation_from_quaternion
@@ -38,6 +39,7 @@ from simulator.sensors import SensorConfig, SensorSuite
 
 PRE_ROLL_S = 2.0  # held still at the start pose before the helix starts
 HOME_ALT_M = 488.0
+MOVING = IBA + 3  # the error state up to the accelerometer bias: what a run's errors and sigmas hold
 
 
 @functools.lru_cache(maxsize=2)
@@ -115,7 +117,7 @@ class FilterRun:
     att_err: np.ndarray  # (n, 3) rad, world frame
     gyro_bias_err: np.ndarray  # (n, 3) rad/s
     accel_bias_err: np.ndarray  # (n, 3) m/s^2
-    sigma: np.ndarray  # (n, 15) sqrt of the covariance diagonal of the first 15 error states
+    sigma: np.ndarray  # (n, MOVING) sqrt of the covariance diagonal up to the accelerometer bias
     nees: np.ndarray  # (n,) NEES of the first 15 error states
     gps_err: np.ndarray  # (m, 3) raw GPS fix errors against the truth at their validity time
     gps_t: np.ndarray
@@ -204,20 +206,20 @@ def run_filter(
         if k % nees_every:
             continue
         est = ekf.estimate()
-        e = np.empty(15)
-        e[0:3] = np.subtract(tr.position_m, est.position_m)
-        e[3:6] = np.subtract(tr.velocity_m_s, est.velocity_m_s)
-        e[6:9] = attitude_error(tr.quaternion, est.quaternion)
+        e = np.empty(MOVING)
+        e[IP : IP + 3] = np.subtract(tr.position_m, est.position_m)
+        e[IV : IV + 3] = np.subtract(tr.velocity_m_s, est.velocity_m_s)
+        e[ITH : ITH + 3] = attitude_error(tr.quaternion, est.quaternion)
         ba_true, bg_true = suite.imu_biases(t)
-        e[9:12] = np.subtract(bg_true, est.gyro_bias_rad_s)
-        e[12:15] = np.subtract(ba_true, est.accel_bias_m_s2)
-        P = ekf.P[:15, :15]
+        e[IBG : IBG + 3] = np.subtract(bg_true, est.gyro_bias_rad_s)
+        e[IBA : IBA + 3] = np.subtract(ba_true, est.accel_bias_m_s2)
+        P = ekf.P[:MOVING, :MOVING]
         ts.append(t)
-        pe.append(e[0:3])
-        ve.append(e[3:6])
-        ae.append(e[6:9])
-        bge.append(e[9:12])
-        bae.append(e[12:15])
+        pe.append(e[IP : IP + 3])
+        ve.append(e[IV : IV + 3])
+        ae.append(e[ITH : ITH + 3])
+        bge.append(e[IBG : IBG + 3])
+        bae.append(e[IBA : IBA + 3])
         sig.append(np.sqrt(np.diag(P)))
         nees.append(float(e @ _solve_covariance(P, e)))
     return FilterRun(

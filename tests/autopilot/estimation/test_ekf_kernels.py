@@ -1,8 +1,9 @@
-"""The filter's steps as kernels (autopilot/estimation/filter.py): the class is their shell, and the
-compiled entries run the same function as Python does."""
+"""The filter's steps as kernels (autopilot/estimation/filter.py, fusion.py, checks.py): the class is
+their shell, and the compiled entries run the same function as Python does."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -156,5 +157,5 @@ def test_the_parameter_array_covers_every_parameter():
     A = fk.parameter_array(params, G, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
     assert A[fk.PARAMETERS.gps_delay_s] == pytest.approx(0.123)
     assert A[fk.PARAMETERS.ev_pos_gate] == 4.5 and A[fk.PARAMETERS.converged_vpos_m] == 0.7
-    for i, name in enumerate(fk.PARAMETER_FIELDS):
-        assert A[i] == float(getattr(params, name)), name
+    for field in dataclasses.fields(params):
+        assert A[getattr(fk.PARAMETERS, field.name)] == float(getattr(params, field.name)), field.name

@@ -19,7 +19,8 @@ from autopilot.estimation import (
     VisionPose,
     estimator_params,
 )
-from autopilot.estimation.eskf import N, mag_model, yaw_jacobian, yaw_of
+from autopilot.estimation.fusion import mag_model, yaw_jacobian, yaw_of
+from autopilot.estimation.kernels import IBA, IBG, IP, ITH, IV, N
 from quadcommon.rigid_body import (
     quaternion_conjugate,
     quaternion_exp,
@@ -39,18 +40,22 @@ def rest_force(q) -> tuple[float, float, float]:
     return (R[2][0] * G, R[2][1] * G, R[2][2] * G)  # R^T (0, 0, g)
 
 
+# The error state up to the accelerometer bias (what these tests perturb and differentiate).
+MOVING = IBA + 3
+
+
 def filter_at(dx=None, params=DEFAULT_PARAMS) -> tuple[ErrorStateEkf, ImuSample]:
-    """A filter reset to a moving, rotating state; ``dx`` (15) perturbs it as the true state."""
+    """A filter reset to a moving, rotating state; ``dx`` (``MOVING``) perturbs it as the true state."""
     ekf = ErrorStateEkf(params)
     imu = ImuSample(0.0, 0.002, (0.3, -0.5, 0.7), (1.0, -0.5, 9.0))
     ekf.reset_to(imu, (1.0, 2.0, 3.0), (0.5, -0.2, 0.1), Q0)
     ekf._bg, ekf._ba = (0.01, -0.02, 0.03), (0.1, -0.2, 0.05)
     if dx is not None:
-        ekf._p = tuple(np.add(ekf._p, dx[0:3]))
-        ekf._v = tuple(np.add(ekf._v, dx[3:6]))
-        ekf._q = quaternion_multiply(quaternion_exp(*dx[6:9]), ekf._q)  # global error: q_true = Exp(dth) q
-        ekf._bg = tuple(np.add(ekf._bg, dx[9:12]))
-        ekf._ba = tuple(np.add(ekf._ba, dx[12:15]))
+        ekf._p = tuple(np.add(ekf._p, dx[IP : IP + 3]))
+        ekf._v = tuple(np.add(ekf._v, dx[IV : IV + 3]))
+        ekf._q = quaternion_multiply(quaternion_exp(*dx[ITH : ITH + 3]), ekf._q)  # q_true = Exp(dth) q
+        ekf._bg = tuple(np.add(ekf._bg, dx[IBG : IBG + 3]))
+        ekf._ba = tuple(np.add(ekf._ba, dx[IBA : IBA + 3]))
     ekf._restart_trapezoid(imu)
     return ekf, imu
 
@@ -89,11 +94,11 @@ def test_transition_matrix_is_the_jacobian_of_the_nominal_propagation():
     step = ImuSample(dt, dt, (0.3, -0.5, 0.7), (1.0, -0.5, 9.0))
     nominal, _ = filter_at()
     nominal.predict(step)
-    F = propagated_transition(step)[:15, :15]
+    F = propagated_transition(step)[:MOVING, :MOVING]
     eps = 1e-6
-    numeric = np.zeros((15, 15))
-    for j in range(15):
-        dx = np.zeros(15)
+    numeric = np.zeros((MOVING, MOVING))
+    for j in range(MOVING):
+        dx = np.zeros(MOVING)
         dx[j] = eps
         plus, _ = filter_at(dx)
         plus.predict(step)
@@ -104,7 +109,8 @@ def test_transition_matrix_is_the_jacobian_of_the_nominal_propagation():
     # What first order leaves out is O(dt^2 |a|, dt^2 |w|): below 1e-4 here.
     assert np.abs(F - numeric).max() < 1e-4
     # ... and the first-order blocks themselves are right to 1 %.
-    for rows, cols in ((slice(3, 6), slice(6, 9)), (slice(3, 6), slice(12, 15)), (slice(6, 9), slice(9, 12))):
+    v, theta, bg, ba = (slice(i, i + 3) for i in (IV, ITH, IBG, IBA))
+    for rows, cols in ((v, theta), (v, ba), (theta, bg)):
         assert F[rows, cols] == pytest.approx(numeric[rows, cols], rel=0.01, abs=1e-6)
 
 
@@ -117,7 +123,7 @@ def test_measurement_jacobians_are_the_derivatives_of_the_models():
     for j in range(3):
         d = [0.0, 0.0, 0.0]
         d[j] = eps
-        moved = mag_model(quaternion_multiply(quaternion_exp(*d), Q0), field, bias)[0]
+        moved = mag_model(quaternion_multiply(quaternion_exp(*d), Q0), field, bias).field_gauss
         assert [(moved[i] - pred[i]) / eps for i in range(3)] == pytest.approx(
             [H[i][j] for i in range(3)], abs=1e-6
         )
@@ -134,8 +140,8 @@ def test_joseph_update_is_the_kalman_update_and_stays_symmetric_positive():
     P = A @ A.T + np.eye(N) * 1e-4
     ekf.P = P.copy()
     H = np.zeros((4, N))
-    H[0, 0] = H[1, 1] = H[2, 2] = 1.0
-    H[3, 6:9] = yaw_jacobian(ekf._q)
+    H[0, IP] = H[1, IP + 1] = H[2, IP + 2] = 1.0
+    H[3, ITH : ITH + 3] = yaw_jacobian(ekf._q)
     r = np.array([0.1**2] * 3 + [0.1**2])  # EKF2_EVP_NOISE, EKF2_EVA_NOISE floors
     y = np.array([0.001, -0.0006, 0.0004, 4e-5])
     pose = VisionPose(ekf.time_s, tuple(np.add(ekf._p, y[:3])), yaw_of(ekf._q) + y[3], 0.001, 0.001)
@@ -143,10 +149,10 @@ def test_joseph_update_is_the_kalman_update_and_stays_symmetric_positive():
     ekf.fuse_vision(pose)
     S = H @ P @ H.T + np.diag(r)
     K = P @ H.T @ np.linalg.inv(S)
-    assert np.abs(K @ y)[6:9].max() < 1e-3  # below the 1 mrad of the attitude reset: no G here
+    assert np.abs(K @ y)[ITH : ITH + 3].max() < 1e-3  # below the 1 mrad of the attitude reset: no G here
     expected = P - K @ S @ K.T
     assert np.allclose(ekf.P, expected, rtol=1e-9, atol=1e-14)
-    assert np.array(ekf._p) - p_before == pytest.approx((K @ y)[:3], rel=1e-9, abs=1e-14)
+    assert np.array(ekf._p) - p_before == pytest.approx((K @ y)[IP : IP + 3], rel=1e-9, abs=1e-14)
     assert np.abs(ekf.P - ekf.P.T).max() < 1e-15
     assert np.linalg.eigvalsh(ekf.P).min() > 0.0
     assert {k: ekf.sources[k].fused for k in ("ev_pos", "ev_hgt", "ev_yaw")} == dict.fromkeys(
@@ -264,7 +270,8 @@ def test_tilt_error_of_the_alignment_is_correlated_with_the_accelerometer_bias()
     w, x, y, z = quaternion_multiply(q, quaternion_conjugate(ekf.estimate().quaternion))
     tilt_error = np.array((x, y)) * 2.0
     P = ekf.P
-    regression = P[6:8, 12:15] @ np.linalg.inv(P[12:15, 12:15])  # E[dth | db] = C db
+    tilt, ba = slice(ITH, ITH + 2), slice(IBA, IBA + 3)
+    regression = P[tilt, ba] @ np.linalg.inv(P[ba, ba])  # E[dth | db] = C db
     # To 5 %: the heading taken from the tilted field carries a yaw error that rotates it slightly.
     assert tilt_error == pytest.approx(regression @ bias, abs=5e-4)
     assert np.linalg.norm(tilt_error) == pytest.approx(np.linalg.norm(bias[:2]) / G, rel=0.05)
@@ -303,7 +310,7 @@ def test_gates_reject_and_count_an_outlier_and_leave_the_state_alone():
     assert ekf.sources["ev_hgt"].rejected == 0  # the height and yaw of the same pose are fine
     assert ekf.estimate().position_m[0] == pytest.approx(before[0], abs=1e-4)
     # A sample just inside the gate (4 sigma of a 5 sigma gate) is fused.
-    sigma = math.sqrt(ekf.P[0, 0] + 0.1**2)
+    sigma = math.sqrt(ekf.P[IP, IP] + 0.1**2)
     ekf.fuse_vision(VisionPose(t, (before[0] + 4.0 * sigma, before[1], before[2]), yaw_of(q), 0.001, 0.001))
     assert stats.fused > 0 and stats.rejected == 1 and 0.5 < stats.test_ratio < 1.0
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from autopilot.estimation import load_estimator_params
+from autopilot.estimation.kernels import IP
 from autopilot.estimation.status import ESTIMATOR_ACCEL_ERROR, ESTIMATOR_GPS_GLITCH
 from simulator.sensors import SensorFault, load_sensors
 
@@ -52,7 +53,7 @@ def test_gps_outage_of_10_s_drifts_boundedly_and_recovers():
     r = fly(SensorFault("gps_outage", T_FAULT, 10.0), after_s=20.0)
     err = np.linalg.norm(r.pos_err, axis=1)
     out = window(r, T_FAULT, T_FAULT + 10.0)
-    sigma = np.linalg.norm(r.sigma[:, 0:3], axis=1)
+    sigma = np.linalg.norm(r.sigma[:, IP : IP + 3], axis=1)
     end_sigma = sigma[r.at(T_FAULT + 9.99)]
     print(f"outage: largest error {err[out].max():.2f} m, 1-sigma at its end {end_sigma:.2f} m")
     assert err[out].max() < 2.0  # dead reckoning on IMU, baro and compass

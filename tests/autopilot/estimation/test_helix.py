@@ -16,6 +16,7 @@ import pytest
 from scipy.stats import chi2
 
 from autopilot.estimation import estimator_params, load_estimator_params
+from autopilot.estimation.kernels import IBA, IBG
 from simulator.sensors import load_sensors
 
 from .helpers import helix_truth, run_filter
@@ -99,10 +100,10 @@ def test_biases_converge_in_flight(profile):
     )
     assert switch_on.max() > 0.005  # there was something to learn
     assert np.abs(r.gyro_bias_err[end]).max() < 1e-3
-    assert np.all(np.abs(r.gyro_bias_err[end]) < 3.0 * r.sigma[end, 9:12])
+    assert np.all(np.abs(r.gyro_bias_err[end]) < 3.0 * r.sigma[end, IBG : IBG + 3])
     assert abs(r.accel_bias_err[end, 2]) < 0.01
-    assert np.all(np.abs(r.accel_bias_err[end]) < 3.0 * r.sigma[end, 12:15])
-    assert np.all(r.sigma[end, 9:12] < 0.05 * r.sigma[0, 9:12])  # from the 0.1 rad/s prior
+    assert np.all(np.abs(r.accel_bias_err[end]) < 3.0 * r.sigma[end, IBA : IBA + 3])
+    assert np.all(r.sigma[end, IBG : IBG + 3] < 0.05 * r.sigma[0, IBG : IBG + 3])  # from the 0.1 rad/s prior
 
 
 def test_hard_iron_is_learned_by_the_3_axis_fusion(gps_run):
