@@ -572,13 +572,15 @@ class ErrorStateEkf:
         src = {name: row.snapshot() for name, row in self.sources.items()}
         if not self.initialised:
             inf = math.inf
-            return EstimatorStatus(now, False, False, self._align_reason, 0, 0.0, 0.0, 0.0, 0.0, inf, inf,
-                                   inf, inf, inf, False, False, src, self.imu_samples,
-                                   self.imu_dt_rejected)  # fmt: skip
+            return EstimatorStatus(
+                time_s=now, initialised=False, converged=False, reason=self._align_reason, flags=0,
+                vel_ratio=0.0, pos_horiz_ratio=0.0, pos_vert_ratio=0.0, mag_ratio=0.0,
+                pos_horiz_accuracy_m=inf, pos_vert_accuracy_m=inf, vel_accuracy_m_s=inf,
+                tilt_accuracy_rad=inf, yaw_accuracy_rad=inf, gps_glitch=False, dead_reckoning=False,
+                sources=src, imu_samples=self.imu_samples, imu_dt_rejected=self.imu_dt_rejected,
+            )  # fmt: skip
         F = self._F
         sigma = fk.accuracies(self.P)
-        pos_h, pos_v = sigma.horizontal_position_m, sigma.vertical_position_m
-        tilt, yaw = sigma.tilt_rad, sigma.yaw_rad
         last_h_aid = float(F[fk.MEMORY.last_h_aid])
         verdict = self._entries.not_converged(F, self.P, self._A)
         dead_reckoning = verdict == fk.DEAD_RECKONING
@@ -590,14 +592,16 @@ class ErrorStateEkf:
             reason = f"dead reckoning: no position or velocity aiding for {now - last_h_aid:.1f} s"
         elif verdict == fk.TILT:
             limit = math.degrees(p.converged_tilt_rad)
-            reason = f"tilt not converged (1-sigma {math.degrees(tilt):.2f} deg > {limit:g} deg)"
+            reason = f"tilt not converged (1-sigma {math.degrees(sigma.tilt_rad):.2f} deg > {limit:g} deg)"
         elif verdict == fk.YAW:
             limit = math.degrees(p.converged_yaw_rad)
-            reason = f"yaw not converged (1-sigma {math.degrees(yaw):.2f} deg > {limit:g} deg)"
+            reason = f"yaw not converged (1-sigma {math.degrees(sigma.yaw_rad):.2f} deg > {limit:g} deg)"
         elif verdict == fk.POSITION:
-            reason = f"horizontal position not converged (1-sigma {pos_h:.2f} m > {p.converged_pos_m:g} m)"
+            sigma_m, limit = sigma.horizontal_position_m, p.converged_pos_m
+            reason = f"horizontal position not converged (1-sigma {sigma_m:.2f} m > {limit:g} m)"
         elif verdict == fk.HEIGHT:
-            reason = f"vertical position not converged (1-sigma {pos_v:.2f} m > {p.converged_vpos_m:g} m)"
+            sigma_m, limit = sigma.vertical_position_m, p.converged_vpos_m
+            reason = f"vertical position not converged (1-sigma {sigma_m:.2f} m > {limit:g} m)"
         flags = ESTIMATOR_ATTITUDE
         if not dead_reckoning:
             flags |= ESTIMATOR_VELOCITY_HORIZ | ESTIMATOR_POS_HORIZ_REL | ESTIMATOR_PRED_POS_HORIZ_REL
@@ -616,25 +620,25 @@ class ErrorStateEkf:
         vert_ratio = max(src["gps_hgt"].test_ratio, src["baro"].test_ratio, src["ev_hgt"].test_ratio)
         mag_ratio = max(src["mag"].test_ratio, src["heading"].test_ratio, src["ev_yaw"].test_ratio)
         return EstimatorStatus(
-            now,
-            True,
-            reason == "",
-            reason,
-            flags,
-            max(src["gps_vel"].test_ratio, src["gps_vvel"].test_ratio, src["ev_vel"].test_ratio),
-            pos_ratio,
-            vert_ratio,
-            mag_ratio,
-            pos_h,
-            pos_v,
-            sigma.velocity_m_s,
-            tilt,
-            yaw,
-            glitch,
-            dead_reckoning,
-            src,
-            self.imu_samples,
-            self.imu_dt_rejected,
+            time_s=now,
+            initialised=True,
+            converged=reason == "",
+            reason=reason,
+            flags=flags,
+            vel_ratio=max(src["gps_vel"].test_ratio, src["gps_vvel"].test_ratio, src["ev_vel"].test_ratio),
+            pos_horiz_ratio=pos_ratio,
+            pos_vert_ratio=vert_ratio,
+            mag_ratio=mag_ratio,
+            pos_horiz_accuracy_m=sigma.horizontal_position_m,
+            pos_vert_accuracy_m=sigma.vertical_position_m,
+            vel_accuracy_m_s=sigma.velocity_m_s,
+            tilt_accuracy_rad=sigma.tilt_rad,
+            yaw_accuracy_rad=sigma.yaw_rad,
+            gps_glitch=glitch,
+            dead_reckoning=dead_reckoning,
+            sources=src,
+            imu_samples=self.imu_samples,
+            imu_dt_rejected=self.imu_dt_rejected,
         )
 
 
