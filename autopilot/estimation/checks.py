@@ -1,7 +1,8 @@
 """The quality checks and resets the fusions call, written once as kernels: a GNSS fix's quality
-(EKF2_GPS_CHECK's figures), the magnetic field checks (EKF2_MAG_CHECK), the bad-vertical-acceleration
-check over its windows of normalised innovations, and the horizontal position reset after a run of
-rejections (EST_POS_RST_T). The filter's memory and its layouts are :mod:`.filter`'s.
+(EKF2_REQ_EPH, EKF2_REQ_EPV, EKF2_REQ_NSATS), the magnetic field checks (EKF2_MAG_CHECK), the
+bad-vertical-acceleration check over its windows of normalised innovations, and the horizontal
+position reset after a run of rejections (EST_POS_RST_T). The filter's memory and its layouts are
+:mod:`.filter`'s.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ BAD_ACCEL_MIN_SAMPLES = 8
 # =================================================================================================
 @kernel
 def gps_usable(A: Any, fix_type: float, eph: float, epv: float, satellites: float) -> bool:
+    """A fix the filter may fuse or align on: 3D, its accuracies within EKF2_REQ_EPH / EKF2_REQ_EPV,
+    at least EKF2_REQ_NSATS satellites."""
     return (
         fix_type >= GPS_FIX_3D
         and eph <= A[PARAMETERS.gps_req_eph_m]

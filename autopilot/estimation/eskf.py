@@ -51,14 +51,13 @@ attitude uncertainty)``, well below the noise of the delayed sensors (mm for a 0
 Hot path: the filter's steps are kernels written once: :mod:`.filter` (its memory's layouts,
 prediction and buffering, the convergence verdict), :mod:`.fusion` (the fusions with their gates)
 and :mod:`.checks` (their quality checks and resets), over the arithmetic of :mod:`.kernels`; this
-class is their shell. It calls their compiled entries (numba:
-one call per IMU sample, one per fusion), or the same functions run by Python where nothing
-compiles (``QUADSITL_PURE_PYTHON=1``; slower), and keeps in Python what runs once or reports: the
-alignment at rest, the records and the messages. The filter's memory is the float arrays of
-:func:`.filter.new_memory`, which a batch engine's compiled loop holds in the same layout
-(:func:`sitl.campaign.kernels.simulate_estimated`). ``benchmarks/estimator.py`` measures the
-choices: a prediction costs a few microseconds, so the covariance is predicted at every IMU
-sample (PX4's 100 Hz down-sampling is not needed).
+class is their shell. It calls their compiled entries (numba: one call per IMU sample, one per
+fusion), or the same functions run by Python where nothing compiles (``QUADSITL_PURE_PYTHON=1``;
+slower), and keeps in Python what runs once or reports: the alignment at rest, the records and the
+messages. The filter's memory is the float arrays of :func:`.filter.new_memory`, which a batch
+engine's compiled loop holds in the same layout (:func:`sitl.campaign.kernels.simulate_estimated`).
+``benchmarks/estimator.py`` measures the choices: a prediction costs a few microseconds, so the
+covariance is predicted at every IMU sample (PX4's 100 Hz down-sampling is not needed).
 """
 
 from __future__ import annotations
@@ -108,6 +107,7 @@ from .status import (
     ESTIMATOR_PRED_POS_HORIZ_REL,
     ESTIMATOR_VELOCITY_HORIZ,
     ESTIMATOR_VELOCITY_VERT,
+    SOURCE,
     SOURCE_NAMES,
     Estimate,
     EstimatorStatus,
@@ -215,7 +215,7 @@ class ErrorStateEkf:
         self.set_params(params)
         self._entries = filter_entries()
         self.sources: dict[str, SourceRow] = {
-            name: SourceRow(self._stats[i]) for i, name in enumerate(SOURCE_NAMES)
+            name: SourceRow(self._stats[getattr(SOURCE, name)]) for name in SOURCE_NAMES
         }
         self.initialised = False
         self.init_time_s = -1.0
