@@ -212,6 +212,8 @@ _make_output = CascadeOutput._make
 
 
 def law_context(controller: ControllerConfig, vehicle: VehicleConfig, dt: float) -> LawContext:
+    """What a law is built from besides its gains: the nominal vehicle's mass, gravity, inertia and
+    arm, the actuation's limits and the control period ``dt`` (s)."""
     nominal, actuation = vehicle.nominal, vehicle.actuation
     return LawContext(
         mass_kg=nominal.mass_kg, gravity_m_s2=nominal.gravity_m_s2, inertia_kg_m2=nominal.inertia_kg_m2,

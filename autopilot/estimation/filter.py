@@ -188,21 +188,25 @@ def new_memory() -> FilterArrays:
 # =================================================================================================
 @kernel
 def vec3(a: Any, i: int) -> Vector3:
+    """The three floats of ``a`` from offset ``i``."""
     return (a[i], a[i + 1], a[i + 2])
 
 
 @kernel
 def set3(a: Any, i: int, v: Vector3) -> None:
+    """Write ``v`` into ``a`` from offset ``i``."""
     a[i], a[i + 1], a[i + 2] = v[0], v[1], v[2]
 
 
 @kernel
 def quat(a: Any, i: int) -> Quaternion:
+    """The quaternion (w, x, y, z) of ``a`` from offset ``i``."""
     return (a[i], a[i + 1], a[i + 2], a[i + 3])
 
 
 @kernel
 def set4(a: Any, i: int, q: Quaternion) -> None:
+    """Write the quaternion ``q`` into ``a`` from offset ``i``."""
     a[i], a[i + 1], a[i + 2], a[i + 3] = q[0], q[1], q[2], q[3]
 
 

@@ -155,6 +155,8 @@ def ev_vel_variance(A: Any, velocity_std: float) -> float:
 
 @kernel
 def ev_yaw_variance(A: Any, yaw_std: float) -> float:
+    """A vision yaw's variance (rad^2): EKF2_EVA_NOISE alone (EKF2_EV_NOISE_MD 1), else the larger of
+    it and the sample's own standard deviation ``yaw_std``."""
     s = (
         A[PARAMETERS.ev_yaw_noise_rad]
         if A[PARAMETERS.ev_noise_mode] != 0.0
@@ -288,6 +290,7 @@ def position_rows(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: 
 @kernel
 def velocity_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: int, innovation: float,
                  var: float) -> int:  # fmt: skip
+    """Row ``k``: a velocity axis measured directly; the next row."""
     H[k, IV + axis] = 1.0
     r[k], y[k], row_group[k] = var, innovation, g
     return k + 1
@@ -296,6 +299,7 @@ def velocity_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: i
 @kernel
 def yaw_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, q: Quaternion, innovation: float,
             var: float) -> int:  # fmt: skip
+    """Row ``k``: the yaw of the attitude ``q`` through its Jacobian in the attitude error; the next row."""
     J = yaw_jacobian(q)
     H[k, ITH], H[k, ITH + 1], H[k, ITH + 2] = J[0], J[1], J[2]
     r[k], y[k], row_group[k] = var, innovation, g

@@ -54,6 +54,11 @@ def _brings_aiding(samples: SensorSamples) -> bool:
 
 
 class EstimatorLoop:
+    """The EKF as the autopilot runs it each frame: predict with the IMU sample before the
+    answer, fuse the frame's aiding (and a client's vision) after it, PX4's order
+    (:mod:`.aiding`); its status every :data:`STATUS_EVERY` frames and the pre-arm verdict
+    (converged for :data:`CONVERGED_HOLD_S`)."""
+
     def __init__(self, params: EstimatorParams, dt_s: float, gravity_m_s2: float = 9.81) -> None:
         self.ekf = ErrorStateEkf(params, gravity_m_s2=gravity_m_s2)
         self.dt = dt_s

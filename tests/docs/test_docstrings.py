@@ -3,7 +3,7 @@
 Public: no leading underscore, defined in the module that is walked (not imported into it), and
 listed in ``__all__`` where the module has one; a public class's public methods and properties
 too (a docstring inherited from the method it overrides counts). The packages covered are in
-``DOCUMENTED``; the modules of those packages not yet covered are in ``PENDING``.
+``DOCUMENTED``: every package of the product.
 """
 
 from __future__ import annotations
@@ -18,15 +18,6 @@ pytestmark = pytest.mark.timeout(120)
 
 DOCUMENTED = ("quadcommon", "simulator", "gcs_scripts", "sitl", "autopilot")
 
-# Modules of the DOCUMENTED packages whose docstrings are not complete yet: skipped by the walk.
-# A module leaves this list once it documents itself (the last test says when).
-PENDING = (
-    "autopilot.control.cascade",
-    "autopilot.estimation.filter",
-    "autopilot.estimation.loop",
-)
-
-
 def modules(package: str):
     root = importlib.import_module(package)
     yield root
@@ -40,13 +31,10 @@ def _defined_here(obj, module) -> bool:
     return getattr(obj, "__module__", None) == module.__name__
 
 
-def undocumented(package: str, skip: tuple[str, ...] = ()) -> list[str]:
-    """``module.name`` of every public function, class, method and property without a docstring (the
-    modules named in ``skip`` left out)."""
+def undocumented(package: str) -> list[str]:
+    """``module.name`` of every public function, class, method and property without a docstring."""
     missing = []
     for module in modules(package):
-        if module.__name__ in skip:
-            continue
         listed = getattr(module, "__all__", None)
         for name, obj in vars(module).items():
             if name.startswith("_") or (listed is not None and name not in listed):
@@ -67,11 +55,5 @@ def undocumented(package: str, skip: tuple[str, ...] = ()) -> list[str]:
 
 @pytest.mark.parametrize("package", DOCUMENTED)
 def test_every_public_function_and_class_documents_itself(package):
-    assert undocumented(package, skip=PENDING) == []
+    assert undocumented(package) == []
 
-
-def test_every_pending_module_is_still_undocumented():
-    """A module that documents itself comes off PENDING, so the walk covers it from then on."""
-    missing = [name for package in DOCUMENTED for name in undocumented(package)]
-    complete = [module for module in PENDING if not any(name.startswith(module + ".") for name in missing)]
-    assert complete == [], f"documented now, remove from PENDING: {complete}"
