@@ -20,6 +20,9 @@ command line and ``QUADSITL_CONFIG_DIR`` (several joined by ``:``), then the shi
 only what it changes (``scenarios/mine.toml``); ``quadsitl config copy DIR`` writes the defaults out
 for editing. Values are validated at load; errors name file, key, value and the allowed range (see
 :mod:`.schema`).
+
+(One module: one schema for the files a user edits, validated in one place with the messages
+naming file, key, value and range; the laws' own schemas live with the laws.)
 """
 
 from __future__ import annotations

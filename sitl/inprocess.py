@@ -33,6 +33,10 @@ trajectory: ``--autostart``), returning the time series as a FlightRecord. An ex
 because a law failed (a non-finite output: the SITL's STATUSTEXT, flight termination):
 :meth:`Lockstep.step` raises :class:`~autopilot.control.registry.ControllerFailure` with the
 autopilot's reason, instead of flying on to indices of NaN.
+
+(One module: the lockstep exchange, its impaired variant and the in-process ground stations are
+one contract with the processes, the bytes they trade and the order of a frame's steps, read
+together; the experiments on it are the few functions at the end.)
 """
 
 from __future__ import annotations

@@ -195,3 +195,40 @@ def test_the_rules_see_the_core_imported_behind_type_checking(tmp_path, monkeypa
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     assert upward_imports()[0] == "autopilot/mavlink/bad.py:4 -> autopilot.core"
     assert core_importers() == ["autopilot/mavlink/bad.py:4"]
+
+
+# -- file sizes ---------------------------------------------------------------------------------------
+LINES_MAX = 600  # a source file longer than this says in its docstring why it is one file
+ONE_FILE_REASON = ("(One module:", "(One script")
+
+
+def long_files_without_a_reason(root: Path = ROOT) -> list[str]:
+    """``path (lines)`` of every source file over :data:`LINES_MAX` lines whose module docstring does
+    not say why it is one file (a paragraph opening with one of :data:`ONE_FILE_REASON`)."""
+    found = []
+    for package in PACKAGES:
+        for path in sorted(p for p in (root / package).rglob("*.py") if "vendor" not in p.parts):
+            text = path.read_text()
+            lines = text.count("\n")
+            if lines <= LINES_MAX:
+                continue
+            doc = ast.get_docstring(ast.parse(text)) or ""
+            if not any(opening in doc for opening in ONE_FILE_REASON):
+                found.append(f"{path.relative_to(root)} ({lines})")
+    return found
+
+
+def test_every_long_source_file_says_why_it_is_one_file():
+    assert long_files_without_a_reason() == []
+
+
+def test_the_size_rule_sees_a_long_file_without_a_reason(tmp_path):
+    module = tmp_path / "autopilot" / "long.py"
+    module.parent.mkdir()
+    module.write_text('"""A module."""\n' + "x = 1\n" * LINES_MAX)
+    (tmp_path / "autopilot" / "short.py").write_text('"""Short."""\n')
+    for package in PACKAGES[1:]:
+        (tmp_path / package).mkdir()
+    assert long_files_without_a_reason(tmp_path) == [f"autopilot/long.py ({LINES_MAX + 1})"]
+    module.write_text('"""A module.\n\n(One module: the reason.)\n"""\n' + "x = 1\n" * LINES_MAX)
+    assert long_files_without_a_reason(tmp_path) == []

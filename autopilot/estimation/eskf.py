@@ -58,6 +58,10 @@ messages. The filter's memory is the float arrays of :func:`.filter.new_memory`,
 engine's compiled loop holds in the same layout (:func:`sitl.campaign.kernels.simulate_estimated`).
 ``benchmarks/estimator.py`` measures the choices: a prediction costs a few microseconds, so the
 covariance is predicted at every IMU sample (PX4's 100 Hz down-sampling is not needed).
+
+(One module: the filter's Python face, one class over one memory: the alignment, the calls of
+the compiled entries, the records and the messages; the kernels are in :mod:`.filter`,
+:mod:`.fusion` and :mod:`.checks`.)
 """
 
 from __future__ import annotations

@@ -49,6 +49,9 @@ station (an address on a link) has its own session, burst and last answer; a lin
 
 Pure: the files come in as a :class:`FileSystem` (the shell's, on disk:
 :class:`autopilot.vehicle_files.VehicleFiles`).
+
+(One module: one protocol's opcodes, sessions, resends and refusals, each opcode a row of one
+table; the file system it serves is the other side, :mod:`autopilot.vehicle_files`.)
 """
 
 from __future__ import annotations

@@ -34,6 +34,9 @@ sample, *garbage* uniform draws over the range, *wrong* the offset added, *slow*
 ``value[0]``, *delayed* ``value[0]`` s more latency, *intermittent* each due sample dropped with
 probability ``value[0]``. The draws of garbage and intermittent come from the sensors' stream
 after the sample's own.
+
+(One module: the sensors' memory layouts and the one kernel that reads and writes them; a
+sensor's schedule, queue and failure rows are read together every frame.)
 """
 
 from __future__ import annotations

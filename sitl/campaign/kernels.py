@@ -35,6 +35,9 @@ division by zero gives inf/NaN. A run whose plant state goes non-finite ends as 
 (``FAIL_NONFINITE``); one whose cascade applies a non-finite U1 or torque to a finite state ends as
 the controller's (``FAIL_CONTROLLER``), by the check the autopilot makes
 (:func:`~autopilot.control.cascade.output_finite`).
+
+(One module: the flight composed per law pair is one compiled unit; its settings, metrics and
+recorded rows are laid out beside the loop that reads and fills them.)
 """
 
 from __future__ import annotations
