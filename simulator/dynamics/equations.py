@@ -4,10 +4,10 @@ Every function here is a kernel (:mod:`quadcommon.kernel`): :class:`~.plant.Plan
 through compiled entries when numba is there and as plain Python otherwise (``QUADSITL_PURE_PYTHON=1``),
 and the campaign's batch engine compiles them into its flights: one source for all three.
 
-The state ``s`` (13 floats, 17 with rotors): position and velocity of the centre of mass G
-(world), the attitude quaternion ``(w, x, y, z)`` (body to world), the body rates ``(p, q, r)``,
-then the four rotor speeds. Newton-Euler is written about G, where it is exact and decoupled; the
-coupling enters where thrust and control torques act, at the geometric centre O (``r_G`` from O
+The state ``s`` (layout :data:`STATE`: 13 floats, 17 with rotors): position and velocity of the
+centre of mass G (world), the attitude quaternion ``(w, x, y, z)`` (body to world), the body rates
+``(p, q, r)``, then the four rotor speeds. Newton-Euler is written about G, where it is exact and
+decoupled; the coupling enters where thrust and control torques act, at the geometric centre O (``r_G`` from O
 to G, body frame), and where O's motion is read out: ``p_O = p_G - R r_G``,
 ``v_O = v_G - R (omega x r_G)``.
 
@@ -96,6 +96,38 @@ INPUTS = layout("PlantInputs", (
     Field("wind", 3, unit="m/s", doc="world"),
 ))  # fmt: skip
 
+# -- the state s (row 0 of ``work``) ----------------------------------------------------------------
+STATE = layout("PlantState", (
+    Field("position", 3, unit="m", doc="of the centre of mass G, world"),
+    Field("velocity", 3, unit="m/s", doc="of G, world"),
+    Field("attitude", 4, doc="quaternion (w, x, y, z), body to world"),
+    Field("body_rates", 3, unit="rad/s", doc="(p, q, r), body"),
+    Field("rotor_speeds", 4, unit="rad/s", doc="with actuation = 'rotors' only: a wrench vehicle's "
+          "state ends before them"),
+))  # fmt: skip
+WRENCH_STATE_SIZE = STATE.rotor_speeds  # the ideal-wrench vehicle's state: no rotor speeds
+
+
+@kernel
+def state3(s, i: int) -> tuple:
+    """The three floats of the state from its field's offset ``i`` (:data:`STATE`)."""
+    return (s[i], s[i + 1], s[i + 2])
+
+
+@kernel
+def state_attitude(s) -> tuple:
+    """The state's attitude quaternion (w, x, y, z)."""
+    a = STATE.attitude
+    return (s[a], s[a + 1], s[a + 2], s[a + 3])
+
+
+@kernel
+def state_rotor_speeds(s) -> tuple:
+    """The state's four rotor speeds (rad/s; a rotor vehicle's only)."""
+    r = STATE.rotor_speeds
+    return (s[r], s[r + 1], s[r + 2], s[r + 3])
+
+
 class TruthState(NamedTuple):
     """Ground truth of the plant at one instant, in the paper's frames (SI units).
 
@@ -144,8 +176,9 @@ def rotor_wrench(P, s) -> tuple:
     reaction torque ``e d Omega^2`` each (:func:`~quadcommon.rotor_geometry.wrench_from_squares`),
     ``e`` the rotor's effectiveness (``PLANT.effectiveness``: 1 healthy, 0 a motor that is off)."""
     e = PLANT.effectiveness
-    s1, s2 = P[e] * s[13] * s[13], P[e + 1] * s[14] * s[14]
-    s3, s4 = P[e + 2] * s[15] * s[15], P[e + 3] * s[16] * s[16]
+    w1, w2, w3, w4 = state_rotor_speeds(s)
+    s1, s2 = P[e] * w1 * w1, P[e + 1] * w2 * w2
+    s3, s4 = P[e + 2] * w3 * w3, P[e + 3] * w4 * w4
     b, d, arm = P[PLANT.thrust_coefficient], P[PLANT.torque_coefficient], P[PLANT.arm]
     thrust, tx, ty, tz = wrench_from_squares(b, d, arm, s1, s2, s3, s4)
     return thrust, (tx, ty, tz)
@@ -223,10 +256,10 @@ def rotor_faults_due(P, faults, row: int, t: float, u) -> int:
 def derivative(s, out, P, u) -> None:
     """``out = ds/dt`` with the inputs ``u`` held: Newton-Euler about G, thrust and control
     torques at O, rotor lag and gyroscopic terms, disturbances, drag."""
-    v = (s[3], s[4], s[5])
-    q = (s[6], s[7], s[8], s[9])
-    w = (s[10], s[11], s[12])
-    R = rotation_from_quaternion(s[6], s[7], s[8], s[9])
+    v = state3(s, STATE.velocity)
+    q = state_attitude(s)
+    w = state3(s, STATE.body_rates)
+    R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
     r_G = com_offset(P)
 
     # Actuators: thrust along body z at O and the control torque (body).
@@ -236,17 +269,18 @@ def derivative(s, out, P, u) -> None:
         # with Omega_r = -Omega1 + Omega2 - Omega3 + Omega4, and the reaction to rotor
         # acceleration J_r dOmega_r/dt about z.
         tau_r, Jr = P[PLANT.rotor_time_constant], P[PLANT.rotor_inertia]
+        o1, o2, o3, o4 = state_rotor_speeds(s)
         if P[PLANT.faulted] == 0.0:
             c = INPUTS.rotor_commands
-            dw1, dw2 = (u[c] - s[13]) / tau_r, (u[c + 1] - s[14]) / tau_r
-            dw3, dw4 = (u[c + 2] - s[15]) / tau_r, (u[c + 3] - s[16]) / tau_r
+            dw1, dw2 = (u[c] - o1) / tau_r, (u[c + 1] - o2) / tau_r
+            dw3, dw4 = (u[c + 2] - o3) / tau_r, (u[c + 3] - o4) / tau_r
         else:
-            dw1 = rotor_acceleration(P, 0, u[INPUTS.rotor_commands], s[13], tau_r)
-            dw2 = rotor_acceleration(P, 1, u[INPUTS.rotor_commands + 1], s[14], tau_r)
-            dw3 = rotor_acceleration(P, 2, u[INPUTS.rotor_commands + 2], s[15], tau_r)
-            dw4 = rotor_acceleration(P, 3, u[INPUTS.rotor_commands + 3], s[16], tau_r)
+            dw1 = rotor_acceleration(P, 0, u[INPUTS.rotor_commands], o1, tau_r)
+            dw2 = rotor_acceleration(P, 1, u[INPUTS.rotor_commands + 1], o2, tau_r)
+            dw3 = rotor_acceleration(P, 2, u[INPUTS.rotor_commands + 2], o3, tau_r)
+            dw4 = rotor_acceleration(P, 3, u[INPUTS.rotor_commands + 3], o4, tau_r)
         thrust, (tx, ty, tz) = rotor_wrench(P, s)
-        omega_r = -s[13] + s[14] - s[15] + s[16]
+        omega_r = -o1 + o2 - o3 + o4
         tx += Jr * omega_r * w[1]
         ty -= Jr * omega_r * w[0]
         tz += Jr * (-dw1 + dw2 - dw3 + dw4)
@@ -290,12 +324,14 @@ def derivative(s, out, P, u) -> None:
 
     # Attitude kinematics q_dot = 1/2 q (x) (0, w).
     dq = quaternion_multiply(q, (0.0, w[0], w[1], w[2]))
-    out[0], out[1], out[2] = v[0], v[1], v[2]
-    out[3], out[4], out[5] = fx / m, fy / m, fz / m - P[PLANT.gravity]
-    out[6], out[7], out[8], out[9] = 0.5 * dq[0], 0.5 * dq[1], 0.5 * dq[2], 0.5 * dq[3]
-    out[10], out[11], out[12] = dw[0], dw[1], dw[2]
+    x, v_dot, a, w_dot = STATE.position, STATE.velocity, STATE.attitude, STATE.body_rates
+    out[x], out[x + 1], out[x + 2] = v[0], v[1], v[2]
+    out[v_dot], out[v_dot + 1], out[v_dot + 2] = fx / m, fy / m, fz / m - P[PLANT.gravity]
+    out[a], out[a + 1], out[a + 2], out[a + 3] = 0.5 * dq[0], 0.5 * dq[1], 0.5 * dq[2], 0.5 * dq[3]
+    out[w_dot], out[w_dot + 1], out[w_dot + 2] = dw[0], dw[1], dw[2]
     if P[PLANT.rotor_mode] != 0.0:
-        out[13], out[14], out[15], out[16] = dw1, dw2, dw3, dw4
+        r = STATE.rotor_speeds
+        out[r], out[r + 1], out[r + 2], out[r + 3] = dw1, dw2, dw3, dw4
 
 
 @kernel
@@ -326,17 +362,21 @@ def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
     """One :func:`rk4` step of the coupled plant's :func:`derivative`, then the quaternion put back
     on the unit sphere (RK4 drifts off it by O(h^5) per step)."""
     rk4(derivative, s, k1, k2, k3, k4, tmp, P, u, h)
-    s[6], s[7], s[8], s[9] = quaternion_normalised((s[6], s[7], s[8], s[9]))
+    a = STATE.attitude
+    s[a], s[a + 1], s[a + 2], s[a + 3] = quaternion_normalised(state_attitude(s))
 
 
 @kernel
 def motion_of_O(s, P) -> tuple:
     """``(R, p_O, v_O)``: the rotation, and the position and velocity of O (world)."""
-    R = rotation_from_quaternion(s[6], s[7], s[8], s[9])
+    q = state_attitude(s)
+    R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
     r_G = com_offset(P)
     Rr = matrix_times(R, r_G)
-    Rc = matrix_times(R, cross((s[10], s[11], s[12]), r_G))
-    return R, (s[0] - Rr[0], s[1] - Rr[1], s[2] - Rr[2]), (s[3] - Rc[0], s[4] - Rc[1], s[5] - Rc[2])
+    Rc = matrix_times(R, cross(state3(s, STATE.body_rates), r_G))
+    p_G, v_G = state3(s, STATE.position), state3(s, STATE.velocity)
+    p_O = (p_G[0] - Rr[0], p_G[1] - Rr[1], p_G[2] - Rr[2])
+    return R, p_O, (v_G[0] - Rc[0], v_G[1] - Rc[1], v_G[2] - Rc[2])
 
 
 @kernel
@@ -348,10 +388,11 @@ def ground_contact(s, P) -> bool:
         return False
     level = quaternion_from_euler(0.0, 0.0, math.atan2(R[1][0], R[0][0]))
     Rr = matrix_times(rotation_from_quaternion(level[0], level[1], level[2], level[3]), com_offset(P))
-    s[0], s[1], s[2] = p_O[0] + Rr[0], p_O[1] + Rr[1], Rr[2]
-    s[3], s[4], s[5] = 0.0, 0.0, 0.0
-    s[6], s[7], s[8], s[9] = level[0], level[1], level[2], level[3]
-    s[10], s[11], s[12] = 0.0, 0.0, 0.0
+    x, v, a, w = STATE.position, STATE.velocity, STATE.attitude, STATE.body_rates
+    s[x], s[x + 1], s[x + 2] = p_O[0] + Rr[0], p_O[1] + Rr[1], Rr[2]
+    s[v], s[v + 1], s[v + 2] = 0.0, 0.0, 0.0
+    s[a], s[a + 1], s[a + 2], s[a + 3] = level[0], level[1], level[2], level[3]
+    s[w], s[w + 1], s[w + 2] = 0.0, 0.0, 0.0
     return True
 
 
@@ -359,7 +400,8 @@ def ground_contact(s, P) -> bool:
 def on_ground(s, P) -> bool:
     """Resting on the ground: contact on, O at z = 0 and G not moving vertically."""
     _, p_O, _ = motion_of_O(s, P)
-    return P[PLANT.ground] != 0.0 and p_O[2] <= ON_GROUND_TOLERANCE and abs(s[5]) < ON_GROUND_TOLERANCE
+    climb = s[STATE.velocity + 2]
+    return P[PLANT.ground] != 0.0 and p_O[2] <= ON_GROUND_TOLERANCE and abs(climb) < ON_GROUND_TOLERANCE
 
 
 @kernel
@@ -371,7 +413,8 @@ def physics_steps(work, P, inputs, h: float) -> None:
     for j in range(len(inputs) // INPUTS.size):
         u = inputs[j * INPUTS.size : (j + 1) * INPUTS.size]
         rk4_step(s, work[1], work[2], work[3], work[4], work[5], P, u, h)
-        if P[PLANT.ground] != 0.0 and s[2] < P[PLANT.ground_reach]:  # O may be at the ground only then
+        # O may be at the ground only when G is this low
+        if P[PLANT.ground] != 0.0 and s[STATE.position + 2] < P[PLANT.ground_reach]:
             ground_contact(s, P)
 
 
@@ -384,21 +427,22 @@ def truth(work, P, u) -> tuple:
     derivative(s, ds, P, u)
     R, p_O, v_O = motion_of_O(s, P)
     r_G = com_offset(P)
-    w = (s[10], s[11], s[12])
+    w = state3(s, STATE.body_rates)
     grounded = on_ground(s, P)
     if grounded:
         a_O = (0.0, 0.0, 0.0)
     else:
         # a_O = a_G - R (w_dot x r_G + w x (w x r_G))
-        a1 = cross((ds[10], ds[11], ds[12]), r_G)
+        a1 = cross(state3(ds, STATE.body_rates), r_G)
         a2 = cross(w, cross(w, r_G))
         Ra = matrix_times(R, (a1[0] + a2[0], a1[1] + a2[1], a1[2] + a2[2]))
-        a_O = (ds[3] - Ra[0], ds[4] - Ra[1], ds[5] - Ra[2])
+        a_G = state3(ds, STATE.velocity)  # the velocity's derivative
+        a_O = (a_G[0] - Ra[0], a_G[1] - Ra[1], a_G[2] - Ra[2])
     specific = transpose_times(R, (a_O[0], a_O[1], a_O[2] + P[PLANT.gravity]))
     euler = euler_from_rotation(R)
     euler_rates = euler_rates_from_body_rates(euler[0], euler[1], w)
     if P[PLANT.rotor_mode] != 0.0:
-        speeds = (s[13], s[14], s[15], s[16])
+        speeds = state_rotor_speeds(s)
         thrust, torque = rotor_wrench(P, s)
     else:
         speeds = (0.0, 0.0, 0.0, 0.0)
@@ -407,7 +451,7 @@ def truth(work, P, u) -> tuple:
             tau = INPUTS.torque
             thrust, tx, ty, tz = faulted_wrench(P, u[INPUTS.thrust], u[tau], u[tau + 1], u[tau + 2])
             torque = (tx, ty, tz)
-    q = (s[6], s[7], s[8], s[9])
+    q = state_attitude(s)
     return TruthState(p_O, v_O, a_O, q, euler, w, euler_rates, specific, speeds, thrust, torque, grounded)
 
 

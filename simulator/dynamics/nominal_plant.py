@@ -9,8 +9,8 @@ disturbances: no centre-of-mass offset, products of inertia, drag or wind), the 
 :func:`.equations.rk4`, and the equations below are kernels (:mod:`quadcommon.kernel`), compiled
 with numba or run as Python as the coupled plant's are. Pure: no clocks, no I/O.
 
-The state (12 floats): the position ``xi`` and velocity ``xi'`` of the body (world), the ZYX
-Euler angles ``eta = (phi, theta, psi)`` and their rates ``eta'``.
+The state (layout :data:`NOMINAL_STATE`, 12 floats): the position ``xi`` and velocity ``xi'`` of
+the body (world), the ZYX Euler angles ``eta = (phi, theta, psi)`` and their rates ``eta'``.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 
 from quadcommon.config import VehicleConfig
 from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel
+from quadcommon.layout import Field, layout, values
 from quadcommon.rigid_body import (
     body_rates_from_euler_rates,
     coriolis_times,
@@ -34,8 +35,15 @@ from quadcommon.rigid_body import (
     transpose_times,
 )
 
-from .equations import INPUTS, PLANT, TruthState, rk4
+from .equations import INPUTS, PLANT, TruthState, rk4, state3
 from .plant import ZERO3, Plant, PlantEntries, Vector3
+
+NOMINAL_STATE = layout("NominalState", (
+    Field("position", 3, unit="m", doc="xi, world"),
+    Field("velocity", 3, unit="m/s", doc="xi', world"),
+    Field("euler", 3, unit="rad", doc="eta = (phi, theta, psi), ZYX"),
+    Field("euler_rates", 3, unit="rad/s", doc="eta'"),
+))  # fmt: skip
 
 # Resting on the ground: at z = 0 and not moving vertically, within this (m, m/s).
 RESTING_TOLERANCE = 1e-9
@@ -49,25 +57,27 @@ def nominal_derivative(s, out, P, u) -> None:
     m, g = P[PLANT.mass], P[PLANT.gravity]
     J = PLANT.inertia  # row-major: the principal moments on its diagonal
     inertia = (P[J], P[J + 4], P[J + 8])
-    phi, theta, psi = s[6], s[7], s[8]
-    eta = (phi, theta, psi)
-    eta_dot = (s[9], s[10], s[11])
+    eta = state3(s, NOMINAL_STATE.euler)
+    phi, theta, psi = eta
+    eta_dot = state3(s, NOMINAL_STATE.euler_rates)
     U1 = u[INPUTS.thrust]
     f = INPUTS.disturbance_force
     # eq. (2): m xi'' = R e3 U1 + F_d - m g e3 (R e3: the last column of R)
     R = rotation_matrix(phi, theta, psi)
-    out[0], out[1], out[2] = s[3], s[4], s[5]
-    out[3] = (R[0][2] * U1 + u[f]) / m
-    out[4] = (R[1][2] * U1 + u[f + 1]) / m
-    out[5] = -g + (R[2][2] * U1 + u[f + 2]) / m
+    x, v = NOMINAL_STATE.position, NOMINAL_STATE.velocity
+    out[x], out[x + 1], out[x + 2] = s[v], s[v + 1], s[v + 2]
+    out[v] = (R[0][2] * U1 + u[f]) / m
+    out[v + 1] = (R[1][2] * U1 + u[f + 1]) / m
+    out[v + 2] = -g + (R[2][2] * U1 + u[f + 2]) / m
     # eq. (4): M eta'' + C eta' = tau_eta_a + tau_eta_d
     t, d = INPUTS.torque, INPUTS.disturbance_torque
     tau = euler_torque_from_body_torque(phi, theta, (u[t], u[t + 1], u[t + 2]))
     c = coriolis_times(inertia, eta, eta_dot, eta_dot)
     rhs = (tau[0] + u[d] - c[0], tau[1] + u[d + 1] - c[1], tau[2] + u[d + 2] - c[2])
     eta_ddot = solve3(inertia_matrix(inertia, phi, theta), rhs)
-    out[6], out[7], out[8] = eta_dot[0], eta_dot[1], eta_dot[2]
-    out[9], out[10], out[11] = eta_ddot[0], eta_ddot[1], eta_ddot[2]
+    e, r = NOMINAL_STATE.euler, NOMINAL_STATE.euler_rates
+    out[e], out[e + 1], out[e + 2] = eta_dot[0], eta_dot[1], eta_dot[2]
+    out[r], out[r + 1], out[r + 2] = eta_ddot[0], eta_ddot[1], eta_ddot[2]
 
 
 @kernel
@@ -80,16 +90,19 @@ def nominal_physics_steps(work, P, inputs, h: float) -> None:
     for j in range(len(inputs) // INPUTS.size):
         u = inputs[j * INPUTS.size : (j + 1) * INPUTS.size]
         rk4(nominal_derivative, s, work[1], work[2], work[3], work[4], work[5], P, u, h)
-        if P[PLANT.ground] != 0.0 and s[2] <= 0.0 and s[5] <= 0.0:
-            s[2], s[3], s[4], s[5] = 0.0, 0.0, 0.0, 0.0
-            s[6], s[7] = 0.0, 0.0
-            s[9], s[10], s[11] = 0.0, 0.0, 0.0
+        x, v = NOMINAL_STATE.position, NOMINAL_STATE.velocity
+        e, r = NOMINAL_STATE.euler, NOMINAL_STATE.euler_rates
+        if P[PLANT.ground] != 0.0 and s[x + 2] <= 0.0 and s[v + 2] <= 0.0:
+            s[x + 2], s[v], s[v + 1], s[v + 2] = 0.0, 0.0, 0.0, 0.0
+            s[e], s[e + 1] = 0.0, 0.0  # level, at its heading
+            s[r], s[r + 1], s[r + 2] = 0.0, 0.0, 0.0
 
 
 @kernel
 def nominal_on_ground(s, P) -> bool:
     """Resting on the ground: contact on, at z = 0 and not moving vertically."""
-    return P[PLANT.ground] != 0.0 and s[2] <= RESTING_TOLERANCE and abs(s[5]) < RESTING_TOLERANCE
+    height, climb = s[NOMINAL_STATE.position + 2], s[NOMINAL_STATE.velocity + 2]
+    return P[PLANT.ground] != 0.0 and height <= RESTING_TOLERANCE and abs(climb) < RESTING_TOLERANCE
 
 
 @kernel
@@ -100,17 +113,18 @@ def nominal_truth(work, P, u) -> tuple:
     work, P, u = borrowed(work), borrowed(P), borrowed(u)  # the caller's: no counting per call
     s, ds = work[0], work[1]
     nominal_derivative(s, ds, P, u)
-    euler = (s[6], s[7], s[8])
-    eta_dot = (s[9], s[10], s[11])
+    euler = state3(s, NOMINAL_STATE.euler)
+    eta_dot = state3(s, NOMINAL_STATE.euler_rates)
     R = rotation_matrix(euler[0], euler[1], euler[2])
     w = body_rates_from_euler_rates(euler[0], euler[1], eta_dot)  # eq. (3)
     grounded = nominal_on_ground(s, P)
-    acc = (0.0, 0.0, 0.0) if grounded else (ds[3], ds[4], ds[5])
+    acc = (0.0, 0.0, 0.0) if grounded else state3(ds, NOMINAL_STATE.velocity)
     specific = transpose_times(R, (acc[0], acc[1], acc[2] + P[PLANT.gravity]))
     q = quaternion_from_euler(euler[0], euler[1], euler[2])
     t = INPUTS.torque
     torque = (u[t], u[t + 1], u[t + 2])
-    return TruthState((s[0], s[1], s[2]), (s[3], s[4], s[5]), acc, q, euler, w, eta_dot, specific,
+    position, velocity = state3(s, NOMINAL_STATE.position), state3(s, NOMINAL_STATE.velocity)
+    return TruthState(position, velocity, acc, q, euler, w, eta_dot, specific,
                       (0.0, 0.0, 0.0, 0.0), u[INPUTS.thrust], torque, grounded)  # fmt: skip
 
 
@@ -159,7 +173,8 @@ class NominalPlant(Plant):
         ``body_rates_rad_s`` (FLU; stored as the Euler rates of eq. (3))."""
         self._truth = None
         eta_dot = euler_rates_from_body_rates(euler_rad[0], euler_rad[1], body_rates_rad_s)
-        self.state = [*position_m, *velocity_m_s, *euler_rad, *eta_dot]
+        self.state = list(values(NOMINAL_STATE, position=position_m, velocity=velocity_m_s, euler=euler_rad,
+                                 euler_rates=eta_dot))  # fmt: skip
 
     def set_rotor_commands(self, speeds_rad_s: tuple[float, float, float, float]) -> None:
         """Refused: the nominal plant is actuated by its wrench only (ValueError)."""
@@ -188,7 +203,7 @@ def _nominal_entries() -> PlantEntries:
     called once now and frozen, as the coupled plant's)."""
     entries = PlantEntries(*(compiled(fn) for fn in nominal_kernels()))
     if compiling():
-        work, P, u = np.zeros((6, 12)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
+        work, P, u = np.zeros((6, NOMINAL_STATE.size)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
         P[PLANT.mass] = P[PLANT.inertia] = P[PLANT.inertia + 4] = P[PLANT.inertia + 8] = 1.0
         entries.physics_steps(work, P, u, 0.001)
         entries.advance(work, P, u, 0.001)

@@ -62,6 +62,8 @@ from .equations import (  # noqa: F401 - TruthState is part of this module's int
     ROTOR_FOLLOWS,
     ROTOR_OFF,
     ROTOR_STUCK,
+    STATE,
+    WRENCH_STATE_SIZE,
     TruthState,
 )
 
@@ -262,9 +264,9 @@ class Plant:
         Rwxr = matrix_times(R, cross(body_rates_rad_s, self.com_offset))
         p_G = [position_m[i] + Rr[i] for i in range(3)]
         v_G = [velocity_m_s[i] + Rwxr[i] for i in range(3)]
-        self.state = [*p_G, *v_G, *q, *body_rates_rad_s]
-        if self.rotor_mode:
-            self.state += [0.0, 0.0, 0.0, 0.0]
+        state = values(STATE, position=p_G, velocity=v_G, attitude=q, body_rates=body_rates_rad_s,
+                       rotor_speeds=(0.0, 0.0, 0.0, 0.0))  # fmt: skip
+        self.state = list(state if self.rotor_mode else state[:WRENCH_STATE_SIZE])
 
     def set_wrench(self, thrust_n: float, torque_body_n_m: Vector3) -> None:
         """Actuation "wrench": total thrust and body torque about O, saturated here."""
@@ -405,9 +407,8 @@ def _entries() -> PlantEntries:
     autopilot would see as a simulator stall) and frozen: nothing compiles mid-flight."""
     entries = PlantEntries(*(compiled(fn) for fn in plant_kernels()))
     if compiling():
-        n = 17
-        work, P, u = np.zeros((6, n)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
-        work[0, 6] = P[equations.PLANT.mass] = P[equations.PLANT.rotor_time_constant] = 1.0
+        work, P, u = np.zeros((6, STATE.size)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
+        work[0, STATE.attitude] = P[equations.PLANT.mass] = P[equations.PLANT.rotor_time_constant] = 1.0
         entries.physics_steps(work, P, u, 0.001)
         entries.advance(work, P, u, 0.001)
         entries.truth_fields(work, P, u)

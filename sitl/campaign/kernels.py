@@ -80,10 +80,13 @@ from quadcommon.wire_values import (
 from simulator.dynamics.equations import (  # the plant (what the simulator steps)
     INPUTS,
     PLANT,
+    STATE,
     ground_contact,
     motion_of_O,
     rk4_step,
     rotor_faults_due,
+    state3,
+    state_attitude,
     truth,
 )
 from simulator.environment.gust_profile import one_minus_cosine_wind, steps_and_ramps
@@ -489,10 +492,10 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
             next_fault = rotor_faults_due(P, faults_tab, next_fault, t, u)
         R, pos, vel = motion_of_O(s, P)
         euler, cos_tilt = euler_from_rotation(R), R[2][2]
-        p_w, q_w, r_w = s[10], s[11], s[12]
+        p_w, q_w, r_w = state3(s, STATE.body_rates)
         if wire:  # through ODOMETRY's fields, read as the autopilot reads them
             c_pos, c_vel, c_euler, c_rates = odometry_state(
-                *odometry_values(pos, vel, (s[6], s[7], s[8], s[9]), (p_w, q_w, r_w))
+                *odometry_values(pos, vel, state_attitude(s), (p_w, q_w, r_w))
             )
         else:
             c_pos, c_vel, c_euler = pos, vel, euler
@@ -607,8 +610,9 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
         for j in range(substeps):
             disturbance(t + j * dt_phys, u, steps_tab, ramps_tab, gusts_tab, dryden, S)
             rk4_step(s, k1, k2, k3, k4, tmp, P, u, dt_phys)
-            if P[PLANT.ground] != 0.0 and s[2] < ground_reach:  # O may be at the ground only then
-                falling = -s[5]
+            # O may be at the ground only when G is this low
+            if P[PLANT.ground] != 0.0 and s[STATE.position + 2] < ground_reach:
+                falling = -s[STATE.velocity + 2]
                 if ground_contact(s, P) and airborne:
                     if not touched:
                         metrics[FAULT_METRICS.impact_speed] = falling

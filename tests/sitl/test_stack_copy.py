@@ -87,7 +87,8 @@ def stack_and_twin():
 def test_no_closure_in_a_copied_stack_reaches_the_original(stack_and_twin):
     stack, twin = stack_and_twin
     assert closures_reaching_back(stack, twin) == []
-    shared = [obj for key, obj in reachable(twin).items() if key in reachable(stack) and _state(obj)]
+    theirs = reachable(stack)
+    shared = [obj for key, obj in reachable(twin).items() if key in theirs and _state(obj)]
     assert shared == []
 
 
