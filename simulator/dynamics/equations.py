@@ -29,9 +29,10 @@ the faults act on the shares, and the shares make the applied wrench (:func:`fau
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
-from quadcommon.kernel import borrowed, kernel
+from quadcommon.kernel import borrowed, inlined_kernel, kernel
 from quadcommon.layout import Field, layout
 from quadcommon.rigid_body import (
     body_torque_from_euler_torque_sincos,
@@ -334,34 +335,44 @@ def derivative(s, out, P, u) -> None:
         out[r], out[r + 1], out[r + 2], out[r + 3] = dw1, dw2, dw3, dw4
 
 
-@kernel
-def rk4(derivative_of, s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
-    """One classical RK4 step of ``h`` of ``s`` (in place) under ``ds/dt = derivative_of(s, out, P, u)``
-    (a kernel writing the derivative into ``out``) with the inputs ``u`` held; ``k1`` .. ``k4`` and
-    ``tmp`` are scratch of ``s``'s length. The one integrator of both plants (this one, and the
-    nominal model of :mod:`.nominal_plant`)."""
-    n = len(s)
-    h2 = 0.5 * h
-    derivative_of(s, k1, P, u)
-    for i in range(n):
-        tmp[i] = s[i] + h2 * k1[i]
-    derivative_of(tmp, k2, P, u)
-    for i in range(n):
-        tmp[i] = s[i] + h2 * k2[i]
-    derivative_of(tmp, k3, P, u)
-    for i in range(n):
-        tmp[i] = s[i] + h * k3[i]
-    derivative_of(tmp, k4, P, u)
-    h6 = h / 6.0
-    for i in range(n):
-        s[i] = s[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+def rk4_of(derivative_of: Callable[..., None]) -> Callable[..., None]:
+    """The one integrator: a kernel ``rk4(s, k1, k2, k3, k4, tmp, P, u, h)`` taking one classical
+    RK4 step of ``h`` of ``s`` (in place) under ``ds/dt = derivative_of(s, out, P, u)`` (a kernel
+    writing the derivative into ``out``) with the inputs ``u`` held; ``k1`` .. ``k4`` and ``tmp``
+    are scratch of ``s``'s length. One per plant (this one's :data:`rk4_coupled`, the nominal
+    model's in :mod:`.nominal_plant`), inlined where it is called (:func:`~quadcommon.kernel.inlined_kernel`:
+    as a call of its own it costs ~15 % of a plant step, ``benchmarks/engine_choice.py``)."""
+
+    def rk4(s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
+        n = len(s)
+        h2 = 0.5 * h
+        derivative_of(s, k1, P, u)
+        for i in range(n):
+            tmp[i] = s[i] + h2 * k1[i]
+        derivative_of(tmp, k2, P, u)
+        for i in range(n):
+            tmp[i] = s[i] + h2 * k2[i]
+        derivative_of(tmp, k3, P, u)
+        for i in range(n):
+            tmp[i] = s[i] + h * k3[i]
+        derivative_of(tmp, k4, P, u)
+        h6 = h / 6.0
+        for i in range(n):
+            s[i] = s[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+
+    rk4.__name__ = rk4.__qualname__ = f"rk4_of_{derivative_of.__name__}"
+    rk4.__doc__ = f"One RK4 step under :func:`{derivative_of.__name__}` (:func:`rk4_of`)."
+    return inlined_kernel(rk4)
+
+
+rk4_coupled = rk4_of(derivative)
 
 
 @kernel
 def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
-    """One :func:`rk4` step of the coupled plant's :func:`derivative`, then the quaternion put back
-    on the unit sphere (RK4 drifts off it by O(h^5) per step)."""
-    rk4(derivative, s, k1, k2, k3, k4, tmp, P, u, h)
+    """One RK4 step of the coupled plant's :func:`derivative` (:data:`rk4_coupled`), then the
+    quaternion put back on the unit sphere (RK4 drifts off it by O(h^5) per step)."""
+    rk4_coupled(s, k1, k2, k3, k4, tmp, P, u, h)
     a = STATE.attitude
     s[a], s[a + 1], s[a + 2], s[a + 3] = quaternion_normalised(state_attitude(s))
 

@@ -6,8 +6,9 @@ and read-outs as that plant under ``actuation = "wrench"``, and the same machine
 and held inputs are the layouts :data:`.equations.PLANT` and :data:`.equations.INPUTS` (of which the
 model reads the mass, gravity, the principal moments of inertia, ground contact, the wrench and the
 disturbances: no centre-of-mass offset, products of inertia, drag or wind), the one integrator is
-:func:`.equations.rk4`, and the equations below are kernels (:mod:`quadcommon.kernel`), compiled
-with numba or run as Python as the coupled plant's are. Pure: no clocks, no I/O.
+:func:`.equations.rk4_of` (of :func:`nominal_derivative`), and the equations below are
+kernels (:mod:`quadcommon.kernel`), compiled with numba or run as Python as the coupled plant's
+are. Pure: no clocks, no I/O.
 
 The state (layout :data:`NOMINAL_STATE`, 12 floats): the position ``xi`` and velocity ``xi'`` of
 the body (world), the ZYX Euler angles ``eta = (phi, theta, psi)`` and their rates ``eta'``.
@@ -35,7 +36,7 @@ from quadcommon.rigid_body import (
     transpose_times,
 )
 
-from .equations import INPUTS, PLANT, TruthState, rk4, state3
+from .equations import INPUTS, PLANT, TruthState, rk4_of, state3
 from .plant import ZERO3, Plant, PlantEntries, Vector3
 
 NOMINAL_STATE = layout("NominalState", (
@@ -80,16 +81,19 @@ def nominal_derivative(s, out, P, u) -> None:
     out[r], out[r + 1], out[r + 2] = eta_ddot[0], eta_ddot[1], eta_ddot[2]
 
 
+nominal_rk4 = rk4_of(nominal_derivative)  # the one integrator, on eqs. (2) and (4)
+
+
 @kernel
 def nominal_physics_steps(work, P, inputs, h: float) -> None:
-    """One :func:`~.equations.rk4` step of ``h`` of ``work[0]`` per ``INPUTS.size`` block of
+    """One RK4 step (:data:`nominal_rk4`) of ``h`` of ``work[0]`` per ``INPUTS.size`` block of
     ``inputs`` (held over that step); with ground contact on, a body at or below z = 0 and moving
     down is put to rest there, level at its heading."""
     work, P, inputs = borrowed(work), borrowed(P), borrowed(inputs)  # the caller's: no counting per call
     s = work[0]
     for j in range(len(inputs) // INPUTS.size):
         u = inputs[j * INPUTS.size : (j + 1) * INPUTS.size]
-        rk4(nominal_derivative, s, work[1], work[2], work[3], work[4], work[5], P, u, h)
+        nominal_rk4(s, work[1], work[2], work[3], work[4], work[5], P, u, h)
         x, v = NOMINAL_STATE.position, NOMINAL_STATE.velocity
         e, r = NOMINAL_STATE.euler, NOMINAL_STATE.euler_rates
         if P[PLANT.ground] != 0.0 and s[x + 2] <= 0.0 and s[v + 2] <= 0.0:
