@@ -15,16 +15,25 @@ from typing import Any, NamedTuple
 from quadcommon.kernel import kernel
 
 from ..records import SensorSamples
-from .fusion import fuse_baro, fuse_gps, fuse_mag, fuse_vision
+from .filter import FilterArrays
+from .fusion import (
+    GnssMeasurement,
+    VisionMeasurement,
+    fuse_baro,
+    fuse_gps,
+    fuse_mag,
+    fuse_vision,
+    fuse_vision_velocity,
+)
 
 Vector3 = tuple[float, float, float]
 Z3 = (0.0, 0.0, 0.0)
 
 
 class Aiding(NamedTuple):
-    """The aiding one frame delivered (paper frames, SI units); a sensor's values are read only
-    when its ``*_fresh`` flag is set. (A frame's vision is VISION_POSITION_ESTIMATE: a pose, no
-    velocity; a client's ODOMETRY with a velocity is fused on its own, after the frame's.)"""
+    """The aiding one frame delivered (paper frames, SI units), or one sample of it; a sensor's
+    values are read only when its ``*_fresh`` flag is set. (A frame's vision is
+    VISION_POSITION_ESTIMATE: a pose, no velocity; a client's ODOMETRY brings a velocity too.)"""
 
     mag_fresh: bool
     mag_gauss: Vector3  # body front-left-up
@@ -39,9 +48,13 @@ class Aiding(NamedTuple):
     vision_position_m: Vector3  # world
     vision_yaw_rad: float
     vision_std: tuple[float, float]  # position (m), yaw (rad); 0: unknown
+    vision_velocity_fresh: bool
+    vision_velocity_m_s: Vector3  # world
+    vision_velocity_std_m_s: float  # 0: unknown
 
 
-NO_AIDING = Aiding(False, Z3, False, 0.0, False, Z3, Z3, Z3, (0.0, 0.0), False, Z3, 0.0, (0.0, 0.0))
+NO_AIDING = Aiding(False, Z3, False, 0.0, False, Z3, Z3, Z3, (0.0, 0.0), False, Z3, 0.0, (0.0, 0.0),
+                   False, Z3, 0.0)  # fmt: skip
 
 
 def _floats(v: Any) -> Vector3:
@@ -64,29 +77,35 @@ def aiding_of(samples: SensorSamples) -> Aiding:
         _floats(vision.position_m) if vision is not None else Z3,
         float(vision.yaw_rad) if vision is not None else 0.0,
         (float(vision.position_std_m), float(vision.yaw_std_rad)) if vision is not None else (0.0, 0.0),
+        False, Z3, 0.0,  # (a frame's vision is a pose)
     )  # fmt: skip
 
 
 @kernel
-def fuse_frame(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, aiding: Aiding) -> None:
-    """Fuse a frame's ``aiding`` at the time ``t`` of its IMU sample, in PX4's order:
-    magnetometer, barometer, GNSS, vision (the filter's memory ``F, P, ring, stats, W`` and its
-    parameters ``A``: :mod:`.filter`'s layouts)."""
+def fuse_frame(memory: FilterArrays, A: Any, t: float, aiding: Aiding) -> None:
+    """Fuse ``aiding`` at the time ``t`` of its IMU sample, in PX4's order: magnetometer,
+    barometer, GNSS, vision (pose, then velocity), into the filter's ``memory`` with its
+    parameters ``A`` (:mod:`.filter`'s layouts)."""
     if aiding.mag_fresh:
-        fuse_mag(F, P, ring, stats, W, A, t, aiding.mag_gauss)
+        fuse_mag(memory, A, t, aiding.mag_gauss)
     if aiding.baro_fresh:
-        fuse_baro(F, P, ring, stats, W, A, t, aiding.baro_height_m)
+        fuse_baro(memory, A, t, aiding.baro_height_m)
     if aiding.gps_fresh:
         eph, epv, speed_accuracy = aiding.gps_accuracy
-        fuse_gps(F, P, ring, stats, W, A, t, aiding.gps_position_m, aiding.gps_velocity_m_s, eph, epv,
-                 speed_accuracy, aiding.gps_fix[0], aiding.gps_fix[1])  # fmt: skip
+        fix_type, satellites = aiding.gps_fix
+        fuse_gps(memory, A, t, GnssMeasurement(aiding.gps_position_m, aiding.gps_velocity_m_s, eph, epv,
+                                               speed_accuracy, fix_type, satellites))  # fmt: skip
     if aiding.vision_fresh:
-        fuse_vision(F, P, ring, stats, W, A, t, aiding.vision_position_m, aiding.vision_yaw_rad,
-                    aiding.vision_std[0], aiding.vision_std[1])  # fmt: skip
+        position_std, yaw_std = aiding.vision_std
+        vision = VisionMeasurement(aiding.vision_position_m, aiding.vision_yaw_rad, position_std, yaw_std)
+        fuse_vision(memory, A, t, vision)
+    if aiding.vision_velocity_fresh:
+        fuse_vision_velocity(memory, A, t, aiding.vision_velocity_m_s, aiding.vision_velocity_std_m_s)
 
 
 @kernel
 def fuse_frame_fields(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, fields: tuple) -> None:
-    """:func:`fuse_frame` as the entry Python calls: the :class:`Aiding` as a plain tuple (a
+    """:func:`fuse_frame` as the entry Python calls, for a frame's aiding and for each sample the
+    filter is given on its own: the memory's arrays and the :class:`Aiding` as plain arguments (a
     compiled call types a plain tuple in C, a named tuple through Python: microseconds a call)."""
-    fuse_frame(F, P, ring, stats, W, A, t, Aiding(*fields))
+    fuse_frame(FilterArrays(F, P, ring, stats, W), A, t, Aiding(*fields))

@@ -86,7 +86,7 @@ from quadcommon.rigid_body import (
 from ..records import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from . import aiding, checks, fusion, kernels
 from . import filter as fk
-from .aiding import Aiding
+from .aiding import NO_AIDING, Aiding
 from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N
 from .parameters import (
     DEFAULT_PARAMS,
@@ -494,10 +494,12 @@ class ErrorStateEkf:
             ):
                 self._pending_gps = fix
             return
-        self._entries.fuse_gps(self._F, self.P, self._ring, self._stats, self._windows, self._A,
-                               float(fix.time_s), _floats(fix.position_m), _floats(fix.velocity_m_s),
-                               float(fix.eph_m), float(fix.epv_m), float(fix.speed_accuracy_m_s),
-                               float(fix.fix_type), float(fix.satellites_visible))  # fmt: skip
+        self._fuse(fix.time_s, NO_AIDING._replace(
+            gps_fresh=True, gps_position_m=_floats(fix.position_m),
+            gps_velocity_m_s=_floats(fix.velocity_m_s),
+            gps_accuracy=(float(fix.eph_m), float(fix.epv_m), float(fix.speed_accuracy_m_s)),
+            gps_fix=(float(fix.fix_type), float(fix.satellites_visible)),
+        ))  # fmt: skip
 
     def fuse_baro(self, sample: BaroSample) -> None:
         """Barometric height: ``h = z + b_h`` (the offset is a state), at most EKF2_BARO_RATE."""
@@ -506,8 +508,7 @@ class ErrorStateEkf:
         if not self.initialised:
             self._pending_baro = sample
             return
-        self._entries.fuse_baro(self._F, self.P, self._ring, self._stats, self._windows, self._A,
-                                float(sample.time_s), float(sample.height_m))  # fmt: skip
+        self._fuse(sample.time_s, NO_AIDING._replace(baro_fresh=True, baro_height_m=float(sample.height_m)))
 
     def fuse_mag(self, sample: MagSample) -> None:
         """Magnetometer, at most EKF2_MAG_RATE: the 3-axis field ``m = R^T m_earth + b_m``
@@ -521,15 +522,18 @@ class ErrorStateEkf:
                     self._align_m[i] += m[i]
                 self._align_mn += 1
             return
-        self._entries.fuse_mag(self._F, self.P, self._ring, self._stats, self._windows, self._A,
-                               float(sample.time_s), _floats(m))  # fmt: skip
+        self._fuse(sample.time_s, NO_AIDING._replace(mag_fresh=True, mag_gauss=_floats(m)))
 
     def fuse_frame(self, t: float, frame_aiding: Aiding) -> None:
         """A frame's aiding at the time ``t`` of its IMU sample, in PX4's order
         (:func:`.aiding.fuse_frame`, one compiled call); the filter must be initialised (before,
         each sensor's own method holds its samples for the alignment)."""
+        self._fuse(t, frame_aiding)
+
+    def _fuse(self, t: float, aiding: Aiding) -> None:
+        """One compiled call of :func:`.aiding.fuse_frame`: a frame's aiding or a single sample."""
         self._entries.fuse_frame(self._F, self.P, self._ring, self._stats, self._windows, self._A, float(t),
-                                 tuple(frame_aiding))  # fmt: skip
+                                 tuple(aiding))  # fmt: skip
 
     def fuse_vision(self, pose: VisionPose) -> None:
         """Motion capture / vision position and yaw, and its velocity when it has one (EKF2_EV_CTRL
@@ -537,14 +541,14 @@ class ErrorStateEkf:
         if not self.initialised:
             self._pending_vision = pose
             return
-        entries, t = self._entries, float(pose.time_s)
-        entries.fuse_vision(self._F, self.P, self._ring, self._stats, self._windows, self._A, t,
-                            _floats(pose.position_m), float(pose.yaw_rad), float(pose.position_std_m),
-                            float(pose.yaw_std_rad))  # fmt: skip
-        if pose.velocity_m_s is not None:
-            velocity, std = _floats(pose.velocity_m_s), float(pose.velocity_std_m_s)
-            entries.fuse_vision_velocity(self._F, self.P, self._ring, self._stats, self._windows, self._A, t,
-                                         velocity, std)  # fmt: skip
+        velocity = pose.velocity_m_s
+        self._fuse(pose.time_s, NO_AIDING._replace(
+            vision_fresh=True, vision_position_m=_floats(pose.position_m), vision_yaw_rad=float(pose.yaw_rad),
+            vision_std=(float(pose.position_std_m), float(pose.yaw_std_rad)),
+            vision_velocity_fresh=velocity is not None,
+            vision_velocity_m_s=_floats(velocity) if velocity is not None else aiding.Z3,
+            vision_velocity_std_m_s=float(pose.velocity_std_m_s),
+        ))  # fmt: skip
 
     # ------------------------------------------------------------------------------------------
     # Outputs
@@ -665,12 +669,7 @@ class FilterEntries(NamedTuple):
     prior_variances: Any
     joseph_update: Any
     predict_step: Any
-    fuse_gps: Any
-    fuse_baro: Any
-    fuse_mag: Any
-    fuse_vision: Any
-    fuse_vision_velocity: Any
-    fuse_frame: Any
+    fuse_frame: Any  # every fusion: a frame's aiding or one sample (.aiding.fuse_frame_fields)
     reset_state: Any
     start: Any
     not_converged: Any
@@ -679,9 +678,7 @@ class FilterEntries(NamedTuple):
 def filter_kernels() -> FilterEntries:
     """The kernels themselves (what Python runs where nothing compiles)."""
     arithmetic = ("predict", "prior_variances", "joseph_update")
-    fusions = ("fuse_gps", "fuse_baro", "fuse_mag", "fuse_vision", "fuse_vision_velocity")
     own = {name: getattr(kernels, name) for name in arithmetic} | {"fuse_frame": aiding.fuse_frame_fields}
-    own |= {name: getattr(fusion, name) for name in fusions}
     return FilterEntries(*(own.get(name) or getattr(fk, name) for name in FilterEntries._fields))
 
 
@@ -703,11 +700,6 @@ def filter_entries() -> FilterEntries:
         entries.reset_state(F, P, A, z3, z3, q, 0.1, 0.1, 0.0)
         entries.start(F, ring, 0.0, 0.002, z3, g3)
         entries.predict_step(F, P, ring, A, 0.002, 0.002, z3, g3)
-        entries.fuse_gps(F, P, ring, stats, windows, A, 0.002, z3, z3, 0.3, 0.5, 0.1, 3.0, 10.0)
-        entries.fuse_baro(F, P, ring, stats, windows, A, 0.002, 0.0)
-        entries.fuse_mag(F, P, ring, stats, windows, A, 0.002, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
-        entries.fuse_vision(F, P, ring, stats, windows, A, 0.002, z3, 0.0, 0.01, 0.01)
-        entries.fuse_vision_velocity(F, P, ring, stats, windows, A, 0.002, z3, 0.01)
         entries.fuse_frame(F, P, ring, stats, windows, A, 0.002, tuple(aiding.NO_AIDING))
         entries.not_converged(F, P, A)
         for entry in entries:

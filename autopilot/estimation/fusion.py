@@ -37,7 +37,7 @@ from .checks import (
     window_append,
     window_of,
 )
-from .filter import MEMORY, PARAMETERS, STATS, quat, set3, set4, state_at, vec3, world_force
+from .filter import MEMORY, PARAMETERS, STATS, FilterArrays, quat, set3, set4, state_at, vec3, world_force
 from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N, joseph_update, prior_variances
 from .parameters import (  # the EKF2_* bit fields and values, defined with the parameters
     EV_CTRL_HPOS,
@@ -306,14 +306,37 @@ def yaw_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, q: Quaternio
     return k + 1
 
 
+class GnssMeasurement(NamedTuple):
+    """What a GNSS fix brings the filter (paper frames; every number a float: one compiled type)."""
+
+    position_m: Vector3  # world, about home
+    velocity_m_s: Vector3  # world
+    eph_m: float  # reported 1-sigma horizontal position accuracy
+    epv_m: float  # reported 1-sigma vertical position accuracy
+    speed_accuracy_m_s: float  # 0: unknown
+    fix_type: float  # GPS_FIX_TYPE
+    satellites: float  # visible
+
+
+class VisionMeasurement(NamedTuple):
+    """What a vision pose brings the filter (paper frames; floats)."""
+
+    position_m: Vector3  # world
+    yaw_rad: float  # the paper's psi
+    position_std_m: float  # reported 1-sigma per axis (0: unknown)
+    yaw_std_rad: float  # (0: unknown)
+
+
 # =================================================================================================
 # The fusions
 # =================================================================================================
 @kernel
-def fuse_gps(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, position: Vector3,
-             velocity: Vector3, eph: float, epv: float, speed_accuracy: float, fix_type: float,
-             satellites: float) -> None:  # fmt: skip
+def fuse_gps(memory: FilterArrays, A: Any, t: float, gnss: GnssMeasurement) -> None:
     """GNSS position (horizontal, height) and velocity arrived at ``t``, valid EKF2_GPS_DELAY before."""
+    F, P, ring, stats, W = memory
+    position, velocity = gnss.position_m, gnss.velocity_m_s
+    eph, epv, speed_accuracy = gnss.eph_m, gnss.epv_m, gnss.speed_accuracy_m_s
+    fix_type, satellites = gnss.fix_type, gnss.satellites
     if not gps_usable(A, fix_type, eph, epv, satellites):
         stats[SOURCE.gps_pos, STATS.check_rejected] += 1.0
         return
@@ -368,8 +391,9 @@ def fuse_gps(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, po
 
 
 @kernel
-def fuse_baro(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, height: float) -> None:
+def fuse_baro(memory: FilterArrays, A: Any, t: float, height: float) -> None:
     """Barometric height arrived at ``t``: ``h = z + b_h`` (the offset is a state), at most EKF2_BARO_RATE."""
+    F, P, ring, stats, W = memory
     if A[PARAMETERS.baro_enabled] == 0.0:
         return
     s = stats[SOURCE.baro]
@@ -405,9 +429,10 @@ def fuse_baro(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, h
 
 
 @kernel
-def fuse_mag(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, m: Vector3) -> None:
+def fuse_mag(memory: FilterArrays, A: Any, t: float, m: Vector3) -> None:
     """Magnetometer arrived at ``t``, at most EKF2_MAG_RATE: the 3-axis field ``m = R^T m_earth +
     b_m`` (EKF2_MAG_TYPE 0) or the tilt-compensated heading (1)."""
+    F, P, ring, stats, W = memory
     mag_type = int(A[PARAMETERS.mag_type])
     if mag_type == MAG_TYPE_NONE:
         return
@@ -456,9 +481,11 @@ def fuse_mag(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, m:
 
 
 @kernel
-def fuse_vision(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, position: Vector3,
-                yaw: float, position_std: float, yaw_std: float) -> None:  # fmt: skip
+def fuse_vision(memory: FilterArrays, A: Any, t: float, vision: VisionMeasurement) -> None:
     """Motion capture / vision position and yaw arrived at ``t``, valid EKF2_EV_DELAY before."""
+    F, P, ring, stats, W = memory
+    position, yaw = vision.position_m, vision.yaw_rad
+    position_std, yaw_std = vision.position_std_m, vision.yaw_std_rad
     past = state_at(F, ring, t - A[PARAMETERS.ev_delay_s])
     if not past.found:
         stats[SOURCE.ev_pos, STATS.too_old] += 1.0
@@ -501,11 +528,12 @@ def fuse_vision(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float,
 
 
 @kernel
-def fuse_vision_velocity(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, velocity: Vector3,
+def fuse_vision_velocity(memory: FilterArrays, A: Any, t: float, velocity: Vector3,
                          velocity_std: float) -> None:  # fmt: skip
     """External vision velocity (world, paper frame) arrived at ``t``, valid EKF2_EV_DELAY before:
     the three axes gated together (EKF2_EVV_GATE), as PX4's EKF2 fuses ``ev_vel`` when
     EKF2_EV_CTRL bit 2 is set. Accepted, it is horizontal aiding (no dead reckoning)."""
+    F, P, ring, stats, W = memory
     if not int(A[PARAMETERS.ev_ctrl]) & EV_CTRL_VEL:
         return
     past = state_at(F, ring, t - A[PARAMETERS.ev_delay_s])

@@ -52,6 +52,7 @@ from autopilot.control.cascade import GIVEN, CascadeMemory, cascade_step, output
 from autopilot.control.command_filter import FILTER_STATE
 from autopilot.estimation import filter as ekf
 from autopilot.estimation.aiding import Aiding, fuse_frame
+from autopilot.estimation.filter import FilterArrays
 from autopilot.records import StateEstimate
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import borrowed, kernel
@@ -328,11 +329,13 @@ def fuse_aiding(t, S, est):
     if wire and d[D.vision_fresh] != 0.0:  # through VISION_POSITION_ESTIMATE's fields
         p_ned, yaw_ned, p_var, yaw_var = vision_values(vision_position, yaw, position_std, yaw_std)
         vision_position, yaw, position_std, yaw_std = vision_pose(p_ned, yaw_ned, p_var, yaw_var)
-    fuse_frame(est.memory, est.covariance, est.ring, est.stats, est.windows, est.parameters, t, Aiding(
+    memory = FilterArrays(est.memory, est.covariance, est.ring, est.stats, est.windows)
+    fuse_frame(memory, est.parameters, t, Aiding(
         d[D.mag_fresh] != 0.0, mag, d[D.baro_fresh] != 0.0, height,
         d[D.gps_fresh] != 0.0, position, velocity, (eph, epv, speed_accuracy),
         (d[D.gps_fix_type], d[D.gps_satellites]),
         d[D.vision_fresh] != 0.0, vision_position, yaw, (position_std, yaw_std),
+        False, (0.0, 0.0, 0.0), 0.0,  # (the sensors' vision is a pose)
     ))  # fmt: skip
 
 

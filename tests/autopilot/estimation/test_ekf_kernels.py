@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from autopilot.estimation import filter as fk
+from autopilot.estimation.aiding import NO_AIDING
 from autopilot.estimation.eskf import (
     DEFAULT_EARTH_FIELD_WORLD_GAUSS,
     ErrorStateEkf,
@@ -73,18 +74,24 @@ def fly_kernels(entries, params, frames):
         entries.predict_step(
             F, P, ring, A, imu.time_s, imu.dt_s, imu.angular_rate_rad_s, imu.specific_force_m_s2
         )
+        aiding = NO_AIDING  # the frame's samples in one call, in PX4's order (.aiding.fuse_frame)
         if "mag" in frame:
-            entries.fuse_mag(F, P, ring, stats, W, A, imu.time_s, frame["mag"].field_gauss)
+            aiding = aiding._replace(mag_fresh=True, mag_gauss=tuple(frame["mag"].field_gauss))
         if "baro" in frame:
-            entries.fuse_baro(F, P, ring, stats, W, A, imu.time_s, frame["baro"].height_m)
+            aiding = aiding._replace(baro_fresh=True, baro_height_m=frame["baro"].height_m)
         if "gps" in frame:
             g = frame["gps"]
-            entries.fuse_gps(F, P, ring, stats, W, A, imu.time_s, g.position_m, g.velocity_m_s, g.eph_m,
-                             g.epv_m, g.speed_accuracy_m_s, 3.0, 10.0)  # fmt: skip
+            aiding = aiding._replace(gps_fresh=True, gps_position_m=tuple(g.position_m),
+                                     gps_velocity_m_s=tuple(g.velocity_m_s),
+                                     gps_accuracy=(g.eph_m, g.epv_m, g.speed_accuracy_m_s),
+                                     gps_fix=(3.0, 10.0))  # fmt: skip
         if "vision" in frame:
             v = frame["vision"]
-            entries.fuse_vision(F, P, ring, stats, W, A, imu.time_s, v.position_m, v.yaw_rad,
-                                v.position_std_m, v.yaw_std_rad)  # fmt: skip
+            aiding = aiding._replace(vision_fresh=True, vision_position_m=tuple(v.position_m),
+                                     vision_yaw_rad=v.yaw_rad,
+                                     vision_std=(v.position_std_m, v.yaw_std_rad))  # fmt: skip
+        if aiding is not NO_AIDING:
+            entries.fuse_frame(F, P, ring, stats, W, A, imu.time_s, tuple(aiding))
     return F, P, stats, int(entries.not_converged(F, P, A))
 
 
