@@ -694,7 +694,8 @@ def filter_entries() -> FilterEntries:
         z3, g3, q = (0.0, 0.0, 0.0), (0.0, 0.0, 9.81), (1.0, 0.0, 0.0, 0.0)
         H = np.zeros((2, N))
         H[0, IP] = H[1, IP + 1] = 1.0
-        entries.predict(P, np.zeros(N), 0.002, 9.81, z3, z3, z3, z3, z3, z3, q, z3, z3)
+        entries.predict(P, np.zeros(N), 0.002, 9.81, kernels.ImuStep(z3, z3, z3, z3),
+                        kernels.NominalState(q, z3, z3, z3, z3))
         entries.prior_variances(P, H, np.empty(2))
         entries.joseph_update(np.eye(N), H, np.ones(2), np.zeros(2), np.empty(N))
         entries.reset_state(F, P, A, z3, z3, q, 0.1, 0.1, 0.0)

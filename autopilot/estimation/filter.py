@@ -48,7 +48,7 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
 
-from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N, predict
+from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, ImuStep, N, NominalState, predict
 from .parameters import EstimatorParams
 from .status import SOURCE, SourceStats
 
@@ -336,9 +336,10 @@ def predict_step(
         process_noise(F, A, dt)
     bg = vec3(F, MEMORY.gyro_bias)
     qdiag = F[MEMORY.qdiag : MEMORY.qdiag + N]
-    q, p, v, a1 = predict(P, qdiag, dt, A[PARAMETERS.gravity], rate, force, vec3(F, MEMORY.prev_rate),
-                          vec3(F, MEMORY.prev_acc), bg, vec3(F, MEMORY.accel_bias), quat(F, MEMORY.q),
-                          vec3(F, MEMORY.p), vec3(F, MEMORY.v))  # fmt: skip
+    imu = ImuStep(rate, force, vec3(F, MEMORY.prev_rate), vec3(F, MEMORY.prev_acc))
+    nominal = NominalState(quat(F, MEMORY.q), vec3(F, MEMORY.p), vec3(F, MEMORY.v), bg,
+                           vec3(F, MEMORY.accel_bias))  # fmt: skip
+    q, p, v, a1 = predict(P, qdiag, dt, A[PARAMETERS.gravity], imu, nominal)
     set4(F, MEMORY.q, q)
     set3(F, MEMORY.p, p)
     set3(F, MEMORY.v, v)

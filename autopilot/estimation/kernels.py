@@ -72,27 +72,37 @@ class NominalPrediction(NamedTuple):
     world_force_m_s2: Vector3
 
 
+class ImuStep(NamedTuple):
+    """The two IMU samples a prediction integrates across (raw, body frame)."""
+
+    rate_rad_s: Vector3  # this sample's gyro
+    specific_force_m_s2: Vector3  # this sample's accelerometer
+    previous_rate_rad_s: Vector3  # the previous sample's gyro
+    previous_world_force_m_s2: Vector3  # the previous sample's R (f - b_a), world
+
+
+class NominalState(NamedTuple):
+    """The part of the nominal state a prediction reads."""
+
+    attitude: Quaternion  # (w, x, y, z), body to world
+    position_m: Vector3
+    velocity_m_s: Vector3
+    gyro_bias_rad_s: Vector3
+    accel_bias_m_s2: Vector3
+
+
 @kernel
 def predict(
-    P: np.ndarray,
-    process_noise: np.ndarray,
-    dt: float,
-    gravity: float,
-    rate: Vector3,
-    force: Vector3,
-    previous_rate: Vector3,
-    previous_world_force: Vector3,
-    gyro_bias: Vector3,
-    accel_bias: Vector3,
-    q: Quaternion,
-    p: Vector3,
-    v: Vector3,
+    P: np.ndarray, process_noise: np.ndarray, dt: float, gravity: float, imu: ImuStep, nominal: NominalState
 ) -> NominalPrediction:
     """One prediction over ``dt`` (s): the nominal attitude, position and velocity from the raw
-    gyro ``rate`` (rad/s) and accelerometer ``force`` (m/s^2) of this and the previous sample
-    (``previous_world_force``: the previous sample's ``R (f - b_a)``), then ``P`` in place with
-    the diagonal ``process_noise`` (the step's variances). Returns the new attitude, position and
-    velocity and this sample's world specific force ``R (f - b_a)``."""
+    gyro and accelerometer samples of ``imu`` (this one and the previous), then ``P`` in place
+    with the diagonal ``process_noise`` (the step's variances). Returns the new attitude, position
+    and velocity and this sample's world specific force ``R (f - b_a)``."""
+    rate, force = imu.rate_rad_s, imu.specific_force_m_s2
+    previous_rate, previous_world_force = imu.previous_rate_rad_s, imu.previous_world_force_m_s2
+    gyro_bias, accel_bias = nominal.gyro_bias_rad_s, nominal.accel_bias_m_s2
+    q, p, v = nominal.attitude, nominal.position_m, nominal.velocity_m_s
     # Attitude: the mean bias-corrected rate over the step (trapezoid), body-frame increment.
     h = 0.5 * dt
     rx = (rate[0] + previous_rate[0]) * h - gyro_bias[0] * dt

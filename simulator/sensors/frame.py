@@ -42,7 +42,7 @@ sensor's schedule, queue and failure rows are read together every frame.)
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -52,6 +52,7 @@ from quadcommon.kernel import kernel
 from quadcommon.layout import Field, fields_of, layout, values
 from quadcommon.rigid_body import Quaternion, Vector3
 from quadcommon.rng import normal, uniform
+from simulator.dynamics.equations import TruthState
 
 from .config import FAULT_KINDS, SensorConfig
 from .kernels import (
@@ -578,13 +579,23 @@ def gps_fix(rng: Any, S: Any, C: Any, faults: Any, t: float, position: Vector3, 
     reading[G.speed_accuracy], reading[G.fix_type] = C[FIGURES.gps_speed_accuracy], GPS_FIX_3D
 
 
+class SensorMemory(NamedTuple):
+    """The sensors' memory (the module's docstring describes each array)."""
+
+    rng: Any  # the sensors' random stream (quadcommon.rng)
+    state: Any  # S, layout STATE
+    figures: Any  # C, layout FIGURES
+    faults: Any  # rows of FAULT
+
+
 @kernel
-def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force: Vector3,
-                 body_rates: Vector3, q: Quaternion, position: Vector3, velocity: Vector3, yaw: float,
-                 out: Any) -> None:  # fmt: skip
-    """Advance the sensors to ``t`` (the truth of O: specific force and rates in the body,
-    attitude, position and velocity in the world, the paper's yaw) and write what is delivered
-    at ``t`` into ``out`` (:data:`DELIVERY`)."""
+def sensor_frame(memory: SensorMemory, t: float, truth: TruthState, out: Any) -> None:
+    """Advance the sensors to ``t`` from the plant's ``truth`` at O (specific force and rates in
+    the body, attitude, position and velocity in the world, the paper's yaw) and write what is
+    delivered at ``t`` into ``out`` (:data:`DELIVERY`)."""
+    rng, S, C, faults = memory
+    specific_force, body_rates, q = truth.specific_force_body_m_s2, truth.body_rates_rad_s, truth.quaternion
+    position, velocity, yaw = truth.position_m, truth.velocity_m_s, truth.euler_rad[2]
     # The biases' random walks and the baro drift since the last frame.
     if not math.isnan(S[STATE.t_last]):
         dt = t - S[STATE.t_last]
@@ -698,3 +709,11 @@ def sensor_frame(rng: Any, S: Any, C: Any, faults: Any, t: float, specific_force
         p, h, temperature = barometer(rng, S, C, position[2])
         out[DELIVERY.held_baro_time], out[DELIVERY.held_baro_pressure] = t, p
         out[DELIVERY.held_baro_altitude], out[DELIVERY.held_baro_temperature] = h, temperature
+
+
+@kernel
+def sensor_frame_fields(rng: Any, S: Any, C: Any, faults: Any, t: float, truth: tuple, out: Any) -> None:
+    """:func:`sensor_frame` as the entry Python calls: the memory's arrays and the
+    :class:`~simulator.dynamics.equations.TruthState` as plain arguments (a compiled call types a
+    plain tuple in C, a named tuple through Python: microseconds a call)."""
+    sensor_frame(SensorMemory(rng, S, C, faults), t, TruthState(*truth), out)

@@ -220,9 +220,7 @@ class SensorSuite:
     # -- the timed interface ------------------------------------------------------------------------
     def step(self, t_s: float, truth: TruthState) -> SensorFrame:
         """Advance the sensors' random walks to ``t_s`` and return what is delivered at ``t_s``."""
-        self._k.sensor_frame(self.rng, self._S, self._C, self._faults, t_s, truth.specific_force_body_m_s2,
-                             truth.body_rates_rad_s, truth.quaternion, truth.position_m, truth.velocity_m_s,
-                             truth.euler_rad[2], self._out)  # fmt: skip
+        self._k.sensor_frame_fields(self.rng, self._S, self._C, self._faults, t_s, tuple(truth), self._out)
         o, D = self._out.tolist(), frame.DELIVERY
         f, r = D.force, D.rate
         imu = ImuReading((o[f], o[f + 1], o[f + 2]), (o[r], o[r + 1], o[r + 2]), t_s)
@@ -309,7 +307,7 @@ class SensorEntries(NamedTuple):
     gauss_markov: Any
     vision_reading: Any
     initial_state: Any
-    sensor_frame: Any
+    sensor_frame_fields: Any
     gps_fix: Any
     magnetometer: Any
     barometer: Any
@@ -353,7 +351,8 @@ def sensor_entries() -> SensorEntries:
         S, out = np.zeros(frame.STATE.size), np.zeros(frame.DELIVERY.size)
         faults = frame.fault_array(config.faults)
         entries.initial_state(rng, C, z3, z3, z3, 0.1, 0.1, 0.1, S)
-        entries.sensor_frame(rng, S, C, faults, 0.0, (0.0, 0.0, 9.81), z3, q, z3, z3, 0.0, out)
+        truth = (z3, z3, z3, q, z3, z3, z3, (0.0, 0.0, 9.81), (0.0, 0.0, 0.0, 0.0), 0.0, z3, True)
+        entries.sensor_frame_fields(rng, S, C, faults, 0.0, truth, out)
         entries.gps_fix(rng, S, C, faults, 0.1, z3, z3, np.empty(12))
         entries.magnetometer(rng, S, C, faults, q, 0.0)
         entries.barometer(rng, S, C, 1.0)

@@ -273,9 +273,7 @@ def estimate(k, t, dt, S, s, P, u, plant_work, pose, t_previous, est):
     for i in range(s.shape[0]):
         plant_work[0, i] = s[i]
     tr = truth(plant_work, P, u)  # what the simulator's frame reads: the inputs held since the last step
-    sensors.sensor_frame(rng, sensor, sensor_figures, faults, t, tr.specific_force_body_m_s2,
-                         tr.body_rates_rad_s, tr.quaternion, tr.position_m, tr.velocity_m_s, tr.euler_rad[2],
-                         delivered)  # fmt: skip
+    sensors.sensor_frame(sensors.SensorMemory(rng, sensor, sensor_figures, faults), t, tr, delivered)
     t_autopilot = frame_time_s(frame_time_usec(k, S[SETTINGS.usec_per_frame])) if wire else t
     force = _through_fields(wire, _vector_at(delivered, DELIVERY.force))
     rate = _through_fields(wire, _vector_at(delivered, DELIVERY.rate))

@@ -11,6 +11,7 @@ import pytest
 from quadcommon.kernel import compiling
 from quadcommon.rigid_body import quaternion_from_euler
 from quadcommon.rng import stream
+from simulator.dynamics.equations import TruthState
 from simulator.sensors import SensorFault, SensorSuite, load_sensors
 from simulator.sensors import frame as sf
 from simulator.sensors.models import sensor_entries, sensor_kernels
@@ -29,7 +30,7 @@ def truth_at(t: float):
 
 
 def fly_arrays(entries, config, frames: int) -> list[list[float]]:
-    """The frames' deliveries from :func:`sf.sensor_frame` called directly."""
+    """The frames' deliveries from :func:`sf.sensor_frame` called directly (its entry)."""
     a, g, m = config.accelerometer, config.gyroscope, config.magnetometer
     rng, C = stream(config.seed), sf.config_array(config, HOME_ALTITUDE, 1.0 / DT)
     S, out, faults = np.zeros(sf.STATE.size), np.zeros(sf.DELIVERY.size), sf.fault_array(config.faults)
@@ -40,7 +41,10 @@ def fly_arrays(entries, config, frames: int) -> list[list[float]]:
     for k in range(frames):
         t = k * DT
         force, rates, q, position, velocity, yaw = truth_at(t)
-        entries.sensor_frame(rng, S, C, faults, t, force, rates, q, position, velocity, yaw, out)
+        z3 = (0.0, 0.0, 0.0)  # (what the sensors do not read)
+        truth = TruthState(position, velocity, z3, q, (0.0, 0.0, yaw), rates, z3, force, (0.0,) * 4, 0.0, z3,
+                           False)  # fmt: skip
+        entries.sensor_frame_fields(rng, S, C, faults, t, tuple(truth), out)
         rows.append(out.tolist())
     return rows
 

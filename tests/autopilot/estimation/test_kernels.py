@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from autopilot.estimation import load_estimator_params
 from autopilot.estimation.eskf import filter_entries
-from autopilot.estimation.kernels import IBA, IBG, IP, ITH, IV, N
+from autopilot.estimation.kernels import IBA, IBG, IP, ITH, IV, ImuStep, N, NominalState
 from quadcommon.kernel import PROJECT_ROOT, compiling
 from simulator.sensors import load_sensors
 
@@ -63,8 +63,9 @@ def test_a_prediction_is_the_trapezoid_and_f_p_ft_plus_q(seed):
 
     P = P0.copy()
     q1, p1, v1, a1 = filter_entries().predict(
-        P, noise, dt, G, rate, force, previous_rate, previous_world_force, gyro_bias, accel_bias, q, p, v
-    )
+        P, noise, dt, G, ImuStep(rate, force, previous_rate, previous_world_force),
+        NominalState(q, p, v, gyro_bias, accel_bias),
+    )  # fmt: skip
 
     # Nominal: q1 = q (x) Exp(((w_prev + w)/2 - b_g) dt), a = R (f - b_a), the trapezoid for p, v.
     increment = (np.add(rate, previous_rate) / 2.0 - gyro_bias) * dt
