@@ -165,30 +165,50 @@ def ev_yaw_variance(A: Any, yaw_std: float) -> float:
     return s * s
 
 
+class MeasurementRows(NamedTuple):
+    """One measurement's rows for :func:`fuse` (m rows, the error state's N columns)."""
+
+    H: np.ndarray  # m x N: each row's Jacobian in the error state
+    r: np.ndarray  # m: each row's noise variance
+    y: np.ndarray  # m: each row's innovation
+    group: np.ndarray  # m: each row's group (a kind's axes gated together)
+
+
+class Groups(NamedTuple):
+    """The groups of a measurement's rows: what each is and its gate; :func:`fuse` writes whether
+    each passed."""
+
+    source: np.ndarray  # each group's row of figures (SOURCE)
+    gate: np.ndarray  # each group's gate (standard deviations)
+    accepted: np.ndarray  # out: 1.0 fused, 0.0 rejected
+
+
 # =================================================================================================
 # Gates, update, injection
 # =================================================================================================
 @kernel
-def fuse(F: Any, P: Any, stats: Any, W: Any, H: Any, r: Any, y: Any, row_group: Any, group_source: Any,
-         group_gate: Any, accepted: Any) -> None:  # fmt: skip
-    """Gate, then fuse one measurement: rows ``H`` (m x N) with noise variances ``r``,
-    innovations ``y``, each row in group ``row_group[k]`` (groups in order, rows of a group
-    consecutive); a group is one kind's axes (``group_source``, gate ``group_gate``).
+def fuse(memory: FilterArrays, rows: MeasurementRows, groups: Groups) -> None:
+    """Gate, then fuse one measurement: its ``rows`` (``H``, m x N, with noise variances ``r``,
+    innovations ``y``, each row in group ``group[k]``: groups in order, rows of a group
+    consecutive); a group is one kind's axes (``groups.source``, gate ``groups.gate``).
 
     Each group passes or fails its gate as a whole on the prior innovation variances, as PX4
-    does (``accepted`` 1/0 per group); the accepted rows are then fused in one batch, in Joseph
+    does (``groups.accepted`` 1/0 per group); the accepted rows are then fused in one batch, in Joseph
     form (:func:`.kernels.joseph_update`, Solà §6.1), and the error ``K y`` injected
     (:func:`inject`). A batch equals the sequence of scalar updates for a linear ``h`` and costs
     one set of 19x19 products instead of one per axis.
     """
+    F, P, _, stats, W = memory
+    H, r, y, row_group = rows
+    group_source, group_gate, accepted = groups
     m = H.shape[0]
-    groups = group_source.shape[0]
+    n_groups = group_source.shape[0]
     prior = np.empty(m)
     prior_variances(P, H, prior)
     now = F[MEMORY.time]
     kept = 0
     k = 0
-    for g in range(groups):
+    for g in range(n_groups):
         src = int(group_source[g])
         gate = group_gate[g]
         first = k
@@ -278,9 +298,11 @@ def inject(F: Any, P: Any, dx: Any) -> None:
 # Rows of H
 # =================================================================================================
 @kernel
-def position_rows(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: int, D: float,
-                  innovation: float, var: float) -> int:  # fmt: skip
-    """Row ``k``: a position axis measured ``D`` s ago (``dp(t_m) = dp - D dv``); the next row."""
+def position_rows(rows: MeasurementRows, k: int, g: int, axis: int, D: float, innovation: float,
+                  var: float) -> int:  # fmt: skip
+    """Row ``k`` (of group ``g``): a position axis measured ``D`` s ago (``dp(t_m) = dp - D dv``);
+    the next row."""
+    H, r, y, row_group = rows
     H[k, IP + axis] = 1.0
     H[k, IV + axis] = -D
     r[k], y[k], row_group[k] = var, innovation, g
@@ -288,18 +310,19 @@ def position_rows(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: 
 
 
 @kernel
-def velocity_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, axis: int, innovation: float,
-                 var: float) -> int:  # fmt: skip
-    """Row ``k``: a velocity axis measured directly; the next row."""
+def velocity_row(rows: MeasurementRows, k: int, g: int, axis: int, innovation: float, var: float) -> int:
+    """Row ``k`` (of group ``g``): a velocity axis measured directly; the next row."""
+    H, r, y, row_group = rows
     H[k, IV + axis] = 1.0
     r[k], y[k], row_group[k] = var, innovation, g
     return k + 1
 
 
 @kernel
-def yaw_row(H: Any, r: Any, y: Any, row_group: Any, k: int, g: int, q: Quaternion, innovation: float,
-            var: float) -> int:  # fmt: skip
-    """Row ``k``: the yaw of the attitude ``q`` through its Jacobian in the attitude error; the next row."""
+def yaw_row(rows: MeasurementRows, k: int, g: int, q: Quaternion, innovation: float, var: float) -> int:
+    """Row ``k`` (of group ``g``): the yaw of the attitude ``q`` through its Jacobian in the
+    attitude error; the next row."""
+    H, r, y, row_group = rows
     J = yaw_jacobian(q)
     H[k, ITH], H[k, ITH + 1], H[k, ITH + 2] = J[0], J[1], J[2]
     r[k], y[k], row_group[k] = var, innovation, g
@@ -348,31 +371,33 @@ def fuse_gps(memory: FilterArrays, A: Any, t: float, gnss: GnssMeasurement) -> N
     hv, vv, sv = gps_variances(A, eph, epv, speed_accuracy)
     ctrl = int(A[PARAMETERS.gps_ctrl])
     H, r, y, row_group = np.zeros((6, N)), np.empty(6), np.empty(6), np.empty(6)
+    rows = MeasurementRows(H, r, y, row_group)
     group_source, group_gate = np.empty(4), np.empty(4)
     k = g = 0
     if ctrl & GPS_CTRL_HPOS:
-        k = position_rows(H, r, y, row_group, k, g, 0, D, position[0] - pm[0], hv)
-        k = position_rows(H, r, y, row_group, k, g, 1, D, position[1] - pm[1], hv)
+        k = position_rows(rows, k, g, 0, D, position[0] - pm[0], hv)
+        k = position_rows(rows, k, g, 1, D, position[1] - pm[1], hv)
         group_source[g], group_gate[g] = SOURCE.gps_pos, A[PARAMETERS.gps_pos_gate]
         g += 1
     if ctrl & GPS_CTRL_VPOS:
-        k = position_rows(H, r, y, row_group, k, g, 2, D, position[2] - pm[2], vv)
+        k = position_rows(rows, k, g, 2, D, position[2] - pm[2], vv)
         group_source[g], group_gate[g] = SOURCE.gps_hgt, A[PARAMETERS.baro_gate]
         g += 1
     if ctrl & GPS_CTRL_VEL:
         # Horizontal and vertical velocity gated apart (as PX4 does), so that a vertical
         # accelerometer fault does not also cut the horizontal aiding.
-        k = velocity_row(H, r, y, row_group, k, g, 0, velocity[0] - vm[0], sv)
-        k = velocity_row(H, r, y, row_group, k, g, 1, velocity[1] - vm[1], sv)
+        k = velocity_row(rows, k, g, 0, velocity[0] - vm[0], sv)
+        k = velocity_row(rows, k, g, 1, velocity[1] - vm[1], sv)
         group_source[g], group_gate[g] = SOURCE.gps_vel, A[PARAMETERS.gps_vel_gate]
         g += 1
-        k = velocity_row(H, r, y, row_group, k, g, 2, velocity[2] - vm[2], sv * 2.25)  # PX4: 1.5x
+        k = velocity_row(rows, k, g, 2, velocity[2] - vm[2], sv * 2.25)  # PX4: 1.5x
         group_source[g], group_gate[g] = SOURCE.gps_vvel, A[PARAMETERS.gps_vel_gate]
         g += 1
     if g == 0:
         return
     accepted = np.zeros(g)
-    fuse(F, P, stats, W, H[:k], r[:k], y[:k], row_group[:k], group_source[:g], group_gate[:g], accepted)
+    fuse(memory, MeasurementRows(H[:k], r[:k], y[:k], row_group[:k]),
+         Groups(group_source[:g], group_gate[:g], accepted))  # fmt: skip
     now = F[MEMORY.time]
     for j in range(g):
         src, ok = int(group_source[j]), accepted[j] != 0.0
@@ -407,22 +432,12 @@ def fuse_baro(memory: FilterArrays, A: Any, t: float, height: float) -> None:
         return
     pm, D = past.position_m, past.age_s
     H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
+    rows = MeasurementRows(H, r, y, row_group)
     H[0, IP + 2], H[0, IV + 2], H[0, IBH] = 1.0, -D, 1.0
     r[0], y[0] = A[PARAMETERS.baro_noise_m] ** 2, height - pm[2] - F[MEMORY.baro_bias]
     accepted = np.zeros(1)
-    fuse(
-        F,
-        P,
-        stats,
-        W,
-        H,
-        r,
-        y,
-        row_group,
-        np.full(1, float(SOURCE.baro)),
-        np.full(1, A[PARAMETERS.baro_gate]),
-        accepted,
-    )
+    groups = Groups(np.full(1, float(SOURCE.baro)), np.full(1, A[PARAMETERS.baro_gate]), accepted)
+    fuse(memory, rows, groups)
     if accepted[0] != 0.0:
         F[MEMORY.last_v_aid] = F[MEMORY.time]
     check_vertical_accel(F, stats, W)
@@ -450,34 +465,24 @@ def fuse_mag(memory: FilterArrays, A: Any, t: float, m: Vector3) -> None:
         return
     if mag_type == MAG_TYPE_HEADING:
         H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
+        rows = MeasurementRows(H, r, y, row_group)
         phi, theta, _ = euler_from_quaternion(q[0], q[1], q[2], q[3])
         measured = mag_heading(A, m, phi, theta, vec3(F, MEMORY.mag_bias))
-        yaw_row(
-            H, r, y, row_group, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[PARAMETERS.heading_noise_rad] ** 2
+        yaw_row(rows, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[PARAMETERS.heading_noise_rad] ** 2
         )
         source, gate = np.full(1, float(SOURCE.heading)), np.full(1, A[PARAMETERS.heading_gate])
-        fuse(F, P, stats, W, H, r, y, row_group, source, gate, np.zeros(1))
+        fuse(memory, rows, Groups(source, gate, np.zeros(1)))
         return
     pred, J = mag_model(q, vec3(A, PARAMETERS.field), vec3(F, MEMORY.mag_bias))
     H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
+    rows = MeasurementRows(H, r, y, row_group)
     var = A[PARAMETERS.mag_noise_gauss] ** 2
     for i in range(3):
         H[i, ITH], H[i, ITH + 1], H[i, ITH + 2] = J[i][0], J[i][1], J[i][2]
         H[i, IBM + i] = 1.0
         r[i], y[i] = var, m[i] - pred[i]
-    fuse(
-        F,
-        P,
-        stats,
-        W,
-        H,
-        r,
-        y,
-        row_group,
-        np.full(1, float(SOURCE.mag)),
-        np.full(1, A[PARAMETERS.mag_gate]),
-        np.zeros(1),
-    )
+    groups = Groups(np.full(1, float(SOURCE.mag)), np.full(1, A[PARAMETERS.mag_gate]), np.zeros(1))
+    fuse(memory, rows, groups)
 
 
 @kernel
@@ -494,25 +499,27 @@ def fuse_vision(memory: FilterArrays, A: Any, t: float, vision: VisionMeasuremen
     var = ev_pos_variance(A, position_std)
     ctrl = int(A[PARAMETERS.ev_ctrl])
     H, r, y, row_group = np.zeros((4, N)), np.empty(4), np.empty(4), np.empty(4)
+    rows = MeasurementRows(H, r, y, row_group)
     group_source, group_gate = np.empty(3), np.empty(3)
     k = g = 0
     if ctrl & EV_CTRL_HPOS:
-        k = position_rows(H, r, y, row_group, k, g, 0, D, position[0] - pm[0], var)
-        k = position_rows(H, r, y, row_group, k, g, 1, D, position[1] - pm[1], var)
+        k = position_rows(rows, k, g, 0, D, position[0] - pm[0], var)
+        k = position_rows(rows, k, g, 1, D, position[1] - pm[1], var)
         group_source[g], group_gate[g] = SOURCE.ev_pos, A[PARAMETERS.ev_pos_gate]
         g += 1
     if ctrl & EV_CTRL_VPOS:
-        k = position_rows(H, r, y, row_group, k, g, 2, D, position[2] - pm[2], var)
+        k = position_rows(rows, k, g, 2, D, position[2] - pm[2], var)
         group_source[g], group_gate[g] = SOURCE.ev_hgt, A[PARAMETERS.ev_pos_gate]
         g += 1
     if ctrl & EV_CTRL_YAW:
-        k = yaw_row(H, r, y, row_group, k, g, qm, wrap_pi(yaw - yaw_of(qm)), ev_yaw_variance(A, yaw_std))
+        k = yaw_row(rows, k, g, qm, wrap_pi(yaw - yaw_of(qm)), ev_yaw_variance(A, yaw_std))
         group_source[g], group_gate[g] = SOURCE.ev_yaw, A[PARAMETERS.heading_gate]
         g += 1
     if g == 0:
         return
     accepted = np.zeros(g)
-    fuse(F, P, stats, W, H[:k], r[:k], y[:k], row_group[:k], group_source[:g], group_gate[:g], accepted)
+    fuse(memory, MeasurementRows(H[:k], r[:k], y[:k], row_group[:k]),
+         Groups(group_source[:g], group_gate[:g], accepted))  # fmt: skip
     now = F[MEMORY.time]
     for j in range(g):
         src, ok = int(group_source[j]), accepted[j] != 0.0
@@ -543,12 +550,13 @@ def fuse_vision_velocity(memory: FilterArrays, A: Any, t: float, velocity: Vecto
     vm = past.velocity_m_s
     var = ev_vel_variance(A, velocity_std)
     H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
+    rows = MeasurementRows(H, r, y, row_group)
     k = 0
     for axis in range(3):
-        k = velocity_row(H, r, y, row_group, k, 0, axis, velocity[axis] - vm[axis], var)
+        k = velocity_row(rows, k, 0, axis, velocity[axis] - vm[axis], var)
     accepted = np.zeros(1)
     source, gate = np.full(1, float(SOURCE.ev_vel)), np.full(1, A[PARAMETERS.ev_vel_gate])
-    fuse(F, P, stats, W, H, r, y, row_group, source, gate, accepted)
+    fuse(memory, rows, Groups(source, gate, accepted))
     if accepted[0] != 0.0:
         F[MEMORY.last_h_aid] = F[MEMORY.time]
     check_vertical_accel(F, stats, W)
