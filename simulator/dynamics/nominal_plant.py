@@ -22,7 +22,7 @@ from collections.abc import Callable
 import numpy as np
 
 from quadcommon.config import VehicleConfig
-from quadcommon.kernel import borrowed, compiled, compiling, freeze, kernel
+from quadcommon.kernel import borrowed, kernel
 from quadcommon.layout import Field, layout, values
 from quadcommon.rigid_body import (
     body_rates_from_euler_rates,
@@ -37,7 +37,7 @@ from quadcommon.rigid_body import (
 )
 
 from .equations import INPUTS, PLANT, TruthState, rk4_of, state3
-from .plant import ZERO3, Plant, PlantEntries, Vector3
+from .plant import ZERO3, Plant, PlantEntries, Vector3, warmed_entries
 
 NOMINAL_STATE = layout("NominalState", (
     Field("position", 3, unit="m", doc="xi, world"),
@@ -203,15 +203,10 @@ def nominal_kernels() -> tuple[Callable[..., object], ...]:
 
 @functools.cache
 def _nominal_entries() -> PlantEntries:
-    """The entries, made once per process when the first nominal plant is built (compiled, each
-    called once now and frozen, as the coupled plant's)."""
-    entries = PlantEntries(*(compiled(fn) for fn in nominal_kernels()))
-    if compiling():
-        work, P, u = np.zeros((6, NOMINAL_STATE.size)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
-        P[PLANT.mass] = P[PLANT.inertia] = P[PLANT.inertia + 4] = P[PLANT.inertia + 8] = 1.0
-        entries.physics_steps(work, P, u, 0.001)
-        entries.advance(work, P, u, 0.001)
-        entries.truth_fields(work, P, u)
-        for entry in entries:
-            freeze(entry)
-    return entries
+    """The entries, made once per process when the first nominal plant is built
+    (:func:`~.plant.warmed_entries`, as the coupled plant's)."""
+    return warmed_entries(nominal_kernels(), NOMINAL_STATE.size, _nominal_scratch)
+
+
+def _nominal_scratch(work: np.ndarray, P: np.ndarray) -> None:
+    P[PLANT.mass] = P[PLANT.inertia] = P[PLANT.inertia + 4] = P[PLANT.inertia + 8] = 1.0

@@ -400,21 +400,33 @@ def plant_kernels() -> tuple:
     return tuple(getattr(equations, name) for name in PlantEntries._fields)
 
 
-@functools.cache
-def _entries() -> PlantEntries:
-    """The entries, made once per process. Compiled, each is called once now on scratch buffers
-    (loaded from numba's cache, or compiled: ~1 s or more, which in the middle of lockstep the
-    autopilot would see as a simulator stall) and frozen: nothing compiles mid-flight."""
-    entries = PlantEntries(*(compiled(fn) for fn in plant_kernels()))
+def warmed_entries(kernels: Iterable[Callable[..., object]], state_size: int,
+                   scratch: Callable[[np.ndarray, np.ndarray], None]) -> PlantEntries:  # fmt: skip
+    """A plant's entries (``kernels`` in :class:`PlantEntries`' order). Compiled, each is called
+    once now on scratch buffers (``state_size`` floats of state; ``scratch(work, P)`` makes them a
+    plant that can step) so it is loaded from numba's cache, or compiled (~1 s or more, which in
+    the middle of lockstep the autopilot would see as a simulator stall), and frozen: nothing
+    compiles mid-flight."""
+    entries = PlantEntries(*(compiled(fn) for fn in kernels))
     if compiling():
-        work, P, u = np.zeros((6, STATE.size)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
-        work[0, STATE.attitude] = P[equations.PLANT.mass] = P[equations.PLANT.rotor_time_constant] = 1.0
+        work, P, u = np.zeros((6, state_size)), np.zeros(PLANT.size), np.zeros(INPUTS.size)
+        scratch(work, P)
         entries.physics_steps(work, P, u, 0.001)
         entries.advance(work, P, u, 0.001)
         entries.truth_fields(work, P, u)
         for entry in entries:
             freeze(entry)
     return entries
+
+
+def _coupled_scratch(work: np.ndarray, P: np.ndarray) -> None:
+    work[0, STATE.attitude] = P[PLANT.mass] = P[PLANT.rotor_time_constant] = 1.0
+
+
+@functools.cache
+def _entries() -> PlantEntries:
+    """The coupled plant's entries, made once per process (:func:`warmed_entries`)."""
+    return warmed_entries(plant_kernels(), STATE.size, _coupled_scratch)
 
 
 # _held_inputs and advance build the held-input blocks in the layout's field order (a tuple per
