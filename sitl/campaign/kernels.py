@@ -194,6 +194,15 @@ class FlightArrays(NamedTuple):
     faults: Any  # the run's rotor faults (ROTOR_FAULT rows, by onset; none: zero rows)
 
 
+class PlantNow(NamedTuple):
+    """The plant as a step's estimate reads it (its truth: what the sensors sample)."""
+
+    state: Any  # the plant's state (simulator.dynamics.equations.STATE)
+    parameters: Any  # PLANT
+    inputs: Any  # the inputs held since the last step (INPUTS)
+    work: Any  # scratch for truth(): its state and derivative
+
+
 class EstimatorArrays(NamedTuple):
     """The memory of a flight's sensors (:mod:`simulator.sensors.frame`) and filter
     (:mod:`autopilot.estimation.filter`) (:func:`sitl.campaign.engine.estimator_memory`)."""
@@ -257,7 +266,7 @@ def _home(S) -> tuple:
 
 
 @kernel
-def estimate(k, t, dt, S, s, P, u, plant_work, pose, t_previous, est):
+def estimate(k, t, dt, S, plant, pose, t_previous, est):
     """Step ``k``'s sensor samples (:func:`simulator.sensors.frame.sensor_frame` on the truth at
     ``t``), then the state the controllers fly on: at step 0 the frame's state (``c_*``, from
     ODOMETRY through the wire), from whose pose the filter starts
@@ -265,7 +274,9 @@ def estimate(k, t, dt, S, s, P, u, plant_work, pose, t_previous, est):
     IMU sample (none while an injected failure stops the IMU: the estimate as it is, the next
     prediction spans the gap, as the autopilot's). Returns ``(position, velocity, euler, euler
     rates, the autopilot's time of the last prediction)``: ``(StateEstimate, time)``; ``pose``: the
-    frame's state, ``est``: the :class:`EstimatorArrays`."""
+    frame's state, ``plant``: the :class:`PlantNow` whose truth the sensors read, ``est``: the
+    :class:`EstimatorArrays`."""
+    s, P, u, plant_work = plant
     rng, sensor, sensor_figures, faults, delivered = (est.rng, est.sensor_state, est.sensor_figures,
                                                       est.sensor_faults, est.delivered)  # fmt: skip
     F, Pf, ring, A = est.memory, est.covariance, est.ring, est.parameters
@@ -363,7 +374,7 @@ def estimator_rejected(stats):
 # A flight on the truth binds these in their place (:func:`sitl.campaign.engine.entry`): the flight
 # numba compiles then holds no sensor model and no filter, and compiles in a fraction of the time.
 @kernel
-def truth_estimate(k, t, dt, S, s, P, u, plant_work, pose, t_previous, est):
+def truth_estimate(k, t, dt, S, plant, pose, t_previous, est):
     """On the truth: the frame's state as it is."""
     return pose, t_previous
 
@@ -503,7 +514,8 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
             c_rates = euler_rates_from_body_rates(euler[0], euler[1], (p_w, q_w, r_w))
         if estimated:
             pose = StateEstimate(c_pos, c_vel, c_euler, c_rates)
-            flown, t_estimator = estimate_step(k, t, dt, S, s, P, u, plant_work, pose, t_estimator, est)
+            plant = PlantNow(s, P, u, plant_work)
+            flown, t_estimator = estimate_step(k, t, dt, S, plant, pose, t_estimator, est)
             c_pos, c_vel, c_euler, c_rates = flown
             ex, ey, ez = c_pos[0] - pos[0], c_pos[1] - pos[1], c_pos[2] - pos[2]
             squared_error += ex * ex + ey * ey + ez * ez
