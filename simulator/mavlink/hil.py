@@ -158,8 +158,6 @@ class HilFrameEncoder:
         its sample time (µs) and (force (world), torque (Euler coordinates), the rotors' health) in
         the paper's frames, + BATTERY_STATUS when ``battery``)."""
         to_ned = frames.vector_to_ned
-        q_ned = frames.quaternion_to_ned(truth.quaternion)
-        rates_frd = to_ned(truth.body_rates_rad_s)
         pos_ned = to_ned(truth.position_m)
         vel_ned = to_ned(truth.velocity_m_s)
 
@@ -191,6 +189,8 @@ class HilFrameEncoder:
         wx, wy, wz = wind_world_m_s
         w = truth.velocity_m_s
         airspeed_cm_s = sat_u16(100.0 * math.sqrt((w[0] - wx) ** 2 + (w[1] - wy) ** 2 + (w[2] - wz) ** 2))
+        # HIL_STATE_QUATERNION's attitude and rates are float fields too: ODOMETRY's, the same bits.
+        _, _, q_ned, rates_frd = odometry
         v, i = self._state.values, self._h
         v[self._h_q] = q_ned
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
