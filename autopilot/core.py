@@ -370,7 +370,7 @@ class AutopilotCore:
     def _frame(self, data: bytes, now: float) -> bytes | None:
         link = self.simulator
         try:
-            frame = link.decode(data, sensors=self.estimator is not None)
+            frame = link.decode(data, sensors=self.estimators.loop is not None)
         except CorruptFrame:
             self.on_foreign_datagram("HIL frame with a bad checksum")
             return None  # the simulator resends a frame it gets no answer to
@@ -436,8 +436,9 @@ class AutopilotCore:
             frame = frame._replace(state=est)  # telemetry reports what the vehicle flies on
         else:
             est = frame.state
-        commander.on_ekf = self.estimator is not None
-        commander.estimator_status = self.estimator.last_status if self.estimator is not None else None
+        loop = self.estimators.loop
+        commander.on_ekf = loop is not None
+        commander.estimator_status = loop.last_status if loop is not None else None
         if est is not None:
             commander.update_state(
                 VehicleState(t, est.position_m, est.velocity_m_s, est.euler_rad, est.euler_rates_rad_s)
