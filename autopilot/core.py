@@ -234,9 +234,8 @@ class AutopilotCore:
         ))  # fmt: skip
         self.handlers.register(self.dispatcher)
 
-    # -- the rooms' views of the core: bound methods, never lambdas. A deep copy of the core (the
-    # failure flights fly copies of one hover) rebinds a bound method to the copy; a lambda's
-    # closure would go on reading and steering the original.
+    # -- the rooms' views of the core: bound methods, never lambdas (a deep copy of the core rebinds
+    # a bound method to the copy; a lambda's closure would go on reading the original).
     def _sim_time(self) -> float:
         return self.sim_time
 
