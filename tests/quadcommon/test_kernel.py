@@ -161,3 +161,55 @@ def test_without_numba_the_same_source_runs_in_python(tmp_path):
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["False", "list", str(3.0 * 2.0 * 2 + 0.5 + 1.0 + 1.0), "1.0", "False"]
+
+
+INLINED = '''
+from quadcommon.kernel import inlined_kernel, kernel
+
+
+@kernel
+def square(x):
+    return x * x
+
+
+def applied_twice(f):
+    def twice_of(x):
+        return f(f(x))
+
+    twice_of.__name__ = twice_of.__qualname__ = f"twice_of_{f.__name__}"
+    return inlined_kernel(twice_of)
+
+
+twice_square = applied_twice(square)
+
+
+@kernel
+def plain_twice(x):
+    return square(square(x))
+
+
+@kernel
+def through_inlined(x):
+    return twice_square(x) + 1.0
+
+
+@kernel
+def through_plain(x):
+    return plain_twice(x) + 1.0
+'''
+
+
+def test_an_inlined_kernel_leaves_no_call_of_its_own_in_its_callers_code(tmp_path, cache):
+    """The one RK4 (simulator.dynamics.equations.rk4_of) is made this way: a kernel over a kernel
+    it is handed, inlined where it is called; a plain kernel stays a call."""
+    path = tmp_path / "toy_inlined.py"
+    path.write_text(INLINED)
+    spec = importlib.util.spec_from_file_location("toy_inlined", path)
+    toy = importlib.util.module_from_spec(spec)
+    sys.modules["toy_inlined"] = toy
+    spec.loader.exec_module(toy)
+    inlined, plain = compiled(toy.through_inlined), compiled(toy.through_plain)
+    assert inlined(3.0) == plain(3.0) == toy.through_inlined(3.0) == 82.0  # Python runs it as it is
+    code = inlined.inspect_llvm(inlined.signatures[0])
+    assert "twice_of_square" not in code and "square" in code
+    assert "plain_twice" in plain.inspect_llvm(plain.signatures[0])
