@@ -28,6 +28,8 @@ from collections import namedtuple
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
+from .kernel import kernel
+
 
 class Field(NamedTuple):
     """One field of a layout: its name, how many floats it holds, its unit and what it is."""
@@ -115,3 +117,28 @@ def describe(record_layout: Any) -> str:
         unit = f" [{f.unit}]" if f.unit else ""
         lines.append(f"  {at:4d} {f.width():3d}  {f.name}{unit}  {f.doc}".rstrip())
     return "\n".join(lines)
+
+
+# -- a field's floats in compiled code (kernels: the same source in Python and numba) -------------
+@kernel
+def vector_at(memory: Any, at: int) -> tuple[float, float, float]:
+    """The three floats of ``memory`` from offset ``at`` (a vector field of a layout)."""
+    return (memory[at], memory[at + 1], memory[at + 2])
+
+
+@kernel
+def set_vector_at(memory: Any, at: int, v: Any) -> None:
+    """Write the vector ``v`` into ``memory`` from offset ``at``."""
+    memory[at], memory[at + 1], memory[at + 2] = v[0], v[1], v[2]
+
+
+@kernel
+def quaternion_at(memory: Any, at: int) -> tuple[float, float, float, float]:
+    """The quaternion (w, x, y, z) of ``memory`` from offset ``at``."""
+    return (memory[at], memory[at + 1], memory[at + 2], memory[at + 3])
+
+
+@kernel
+def set_quaternion_at(memory: Any, at: int, q: Any) -> None:
+    """Write the quaternion ``q`` into ``memory`` from offset ``at``."""
+    memory[at], memory[at + 1], memory[at + 2], memory[at + 3] = q[0], q[1], q[2], q[3]

@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, quaternion_at, set_quaternion_at, set_vector_at, vector_at
 from quadcommon.rigid_body import (
     Quaternion,
     Vector3,
@@ -187,33 +187,9 @@ def new_memory() -> FilterArrays:
 # Reading and writing the memory
 # =================================================================================================
 @kernel
-def vec3(a: Any, i: int) -> Vector3:
-    """The three floats of ``a`` from offset ``i``."""
-    return (a[i], a[i + 1], a[i + 2])
-
-
-@kernel
-def set3(a: Any, i: int, v: Vector3) -> None:
-    """Write ``v`` into ``a`` from offset ``i``."""
-    a[i], a[i + 1], a[i + 2] = v[0], v[1], v[2]
-
-
-@kernel
-def quat(a: Any, i: int) -> Quaternion:
-    """The quaternion (w, x, y, z) of ``a`` from offset ``i``."""
-    return (a[i], a[i + 1], a[i + 2], a[i + 3])
-
-
-@kernel
-def set4(a: Any, i: int, q: Quaternion) -> None:
-    """Write the quaternion ``q`` into ``a`` from offset ``i``."""
-    a[i], a[i + 1], a[i + 2], a[i + 3] = q[0], q[1], q[2], q[3]
-
-
-@kernel
 def world_force(F: Any, force: Vector3) -> Vector3:
     """``R (f - b_a)``: a body specific force in the world frame."""
-    q = quat(F, MEMORY.q)
+    q = quaternion_at(F, MEMORY.q)
     R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
     return matrix_times(
         R,
@@ -228,10 +204,10 @@ def world_force(F: Any, force: Vector3) -> Vector3:
 @kernel
 def restart_trapezoid(F: Any, rate: Vector3, force: Vector3) -> None:
     """The trapezoid starts again from this sample (after a gap, at the start, after a reset)."""
-    set3(F, MEMORY.prev_rate, rate)
-    set3(F, MEMORY.prev_force, force)
-    set3(F, MEMORY.prev_acc, world_force(F, force))
-    set3(
+    set_vector_at(F, MEMORY.prev_rate, rate)
+    set_vector_at(F, MEMORY.prev_force, force)
+    set_vector_at(F, MEMORY.prev_acc, world_force(F, force))
+    set_vector_at(
         F,
         MEMORY.rate,
         (rate[0] - F[MEMORY.gyro_bias], rate[1] - F[MEMORY.gyro_bias + 1], rate[2] - F[MEMORY.gyro_bias + 2]),
@@ -264,9 +240,9 @@ def start(F: Any, ring: Any, t: float, dt: float, rate: Vector3, force: Vector3)
         F[MEMORY.dt_avg] = dt
     F[MEMORY.time] = t
     restart_trapezoid(F, rate, force)
-    set3(F, MEMORY.correction_p, (0.0, 0.0, 0.0))
-    set3(F, MEMORY.correction_v, (0.0, 0.0, 0.0))
-    set4(F, MEMORY.correction_q, (1.0, 0.0, 0.0, 0.0))
+    set_vector_at(F, MEMORY.correction_p, (0.0, 0.0, 0.0))
+    set_vector_at(F, MEMORY.correction_v, (0.0, 0.0, 0.0))
+    set_quaternion_at(F, MEMORY.correction_q, (1.0, 0.0, 0.0, 0.0))
     F[MEMORY.last_h_aid] = t
     F[MEMORY.last_v_aid] = t
     store(F, ring, 0)
@@ -280,10 +256,10 @@ def reset_state(F: Any, P: Any, A: Any, position: Vector3, velocity: Vector3, q:
     """A known state (an in-air start, a test): attitude uncertainty from EKF2_ANGERR_INIT (tilt)
     and 5 deg of yaw, biases zero with their EKF2_*BIAS_INIT priors; ``baro_offset``: the baro
     height minus ``position``'s z (0 without a baro sample). Then :func:`start`."""
-    set3(F, MEMORY.p, position)
-    set3(F, MEMORY.v, velocity)
+    set_vector_at(F, MEMORY.p, position)
+    set_vector_at(F, MEMORY.v, velocity)
     n = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    set4(F, MEMORY.q, (q[0] * n, q[1] * n, q[2] * n, q[3] * n))
+    set_quaternion_at(F, MEMORY.q, (q[0] * n, q[1] * n, q[2] * n, q[3] * n))
     for i in range(9):
         F[MEMORY.gyro_bias + i] = 0.0
     F[MEMORY.baro_bias] = baro_offset
@@ -334,19 +310,19 @@ def predict_step(
     F[MEMORY.dt_avg] += 0.01 * (dt - F[MEMORY.dt_avg])
     if abs(dt - F[MEMORY.q_dt]) > 1e-9:  # time stamps jitter in the last bits: keep the noise
         process_noise(F, A, dt)
-    bg = vec3(F, MEMORY.gyro_bias)
+    bg = vector_at(F, MEMORY.gyro_bias)
     qdiag = F[MEMORY.qdiag : MEMORY.qdiag + N]
-    imu = ImuStep(rate, force, vec3(F, MEMORY.prev_rate), vec3(F, MEMORY.prev_acc))
-    nominal = NominalState(quat(F, MEMORY.q), vec3(F, MEMORY.p), vec3(F, MEMORY.v), bg,
-                           vec3(F, MEMORY.accel_bias))  # fmt: skip
+    imu = ImuStep(rate, force, vector_at(F, MEMORY.prev_rate), vector_at(F, MEMORY.prev_acc))
+    nominal = NominalState(quaternion_at(F, MEMORY.q), vector_at(F, MEMORY.p), vector_at(F, MEMORY.v), bg,
+                           vector_at(F, MEMORY.accel_bias))  # fmt: skip
     q, p, v, a1 = predict(P, qdiag, dt, A[PARAMETERS.gravity], imu, nominal)
-    set4(F, MEMORY.q, q)
-    set3(F, MEMORY.p, p)
-    set3(F, MEMORY.v, v)
-    set3(F, MEMORY.prev_acc, a1)
-    set3(F, MEMORY.prev_rate, rate)
-    set3(F, MEMORY.prev_force, force)
-    set3(F, MEMORY.rate, (rate[0] - bg[0], rate[1] - bg[1], rate[2] - bg[2]))
+    set_quaternion_at(F, MEMORY.q, q)
+    set_vector_at(F, MEMORY.p, p)
+    set_vector_at(F, MEMORY.v, v)
+    set_vector_at(F, MEMORY.prev_acc, a1)
+    set_vector_at(F, MEMORY.prev_rate, rate)
+    set_vector_at(F, MEMORY.prev_force, force)
+    set_vector_at(F, MEMORY.rate, (rate[0] - bg[0], rate[1] - bg[1], rate[2] - bg[2]))
     if t < F[MEMORY.bad_accel_until]:
         P[IV + 2, IV + 2] += BAD_ACCEL_VEL_DENSITY**2 * dt
         P[IBA + 2, IBA + 2] += BAD_ACCEL_BIAS_RW**2 * dt
@@ -366,7 +342,8 @@ def state_at(F: Any, ring: Any, t_m: float) -> DelayedState:
     the buffer."""
     now = F[MEMORY.time]
     if t_m >= now - 1e-9:
-        return DelayedState(True, vec3(F, MEMORY.p), vec3(F, MEMORY.v), quat(F, MEMORY.q), 0.0)
+        position, velocity = vector_at(F, MEMORY.p), vector_at(F, MEMORY.v)
+        return DelayedState(True, position, velocity, quaternion_at(F, MEMORY.q), 0.0)
     dt_avg = F[MEMORY.dt_avg]
     count, head = int(F[MEMORY.count_held]), int(F[MEMORY.head])
     k = int((now - t_m) / dt_avg + 0.5)
@@ -408,8 +385,8 @@ def state_at(F: Any, ring: Any, t_m: float) -> DelayedState:
         r[RING_ROW.v + 1] + F[MEMORY.correction_v + 1] - r[RING_ROW.correction_v + 1],
         r[RING_ROW.v + 2] + F[MEMORY.correction_v + 2] - r[RING_ROW.correction_v + 2],
     )
-    q = quat(r, RING_ROW.q)
-    cq, cq_now = quat(r, RING_ROW.correction_q), quat(F, MEMORY.correction_q)
+    q = quaternion_at(r, RING_ROW.q)
+    cq, cq_now = quaternion_at(r, RING_ROW.correction_q), quaternion_at(F, MEMORY.correction_q)
     if cq != cq_now:  # corrected since it was stored: the corrections since, cq_now (x) cq^-1
         q = quaternion_multiply(quaternion_multiply(cq_now, quaternion_conjugate(cq)), q)
     return DelayedState(True, pm, vm, q, now - t_m)

@@ -19,6 +19,7 @@ import numpy as np
 
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import kernel
+from quadcommon.layout import quaternion_at, set_quaternion_at, set_vector_at, vector_at
 from quadcommon.rigid_body import (
     Quaternion,
     Vector3,
@@ -37,7 +38,7 @@ from .checks import (
     window_append,
     window_of,
 )
-from .filter import MEMORY, PARAMETERS, STATS, FilterArrays, quat, set3, set4, state_at, vec3, world_force
+from .filter import MEMORY, PARAMETERS, STATS, FilterArrays, state_at, world_force
 from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N, joseph_update, prior_variances
 from .parameters import (  # the EKF2_* bit fields and values, defined with the parameters
     EV_CTRL_HPOS,
@@ -272,10 +273,10 @@ def inject(F: Any, P: Any, dx: Any) -> None:
         F[MEMORY.correction_v + i] += dx[IV + i]
     F[MEMORY.baro_bias] += dx[IBH]
     dq = quaternion_exp(dx[ITH], dx[ITH + 1], dx[ITH + 2])
-    set4(F, MEMORY.q, quaternion_normalised(quaternion_multiply(dq, quat(F, MEMORY.q))))
-    set4(F, MEMORY.correction_q, quaternion_multiply(dq, quat(F, MEMORY.correction_q)))
+    set_quaternion_at(F, MEMORY.q, quaternion_normalised(quaternion_multiply(dq, quaternion_at(F, MEMORY.q))))
+    set_quaternion_at(F, MEMORY.correction_q, quaternion_multiply(dq, quaternion_at(F, MEMORY.correction_q)))
     # The previous sample's world force and the reported rate follow the new q and biases.
-    set3(F, MEMORY.prev_acc, world_force(F, vec3(F, MEMORY.prev_force)))
+    set_vector_at(F, MEMORY.prev_acc, world_force(F, vector_at(F, MEMORY.prev_force)))
     for i in range(3):
         F[MEMORY.rate + i] = F[MEMORY.prev_rate + i] - F[MEMORY.gyro_bias + i]
     # Reset, Solà §7.3.3: P <- G P G^T with G_theta = I + [dtheta/2]_x. Below 1 mrad, G - I
@@ -467,13 +468,13 @@ def fuse_mag(memory: FilterArrays, A: Any, t: float, m: Vector3) -> None:
         H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
         rows = MeasurementRows(H, r, y, row_group)
         phi, theta, _ = euler_from_quaternion(q[0], q[1], q[2], q[3])
-        measured = mag_heading(A, m, phi, theta, vec3(F, MEMORY.mag_bias))
+        measured = mag_heading(A, m, phi, theta, vector_at(F, MEMORY.mag_bias))
         yaw_row(rows, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[PARAMETERS.heading_noise_rad] ** 2
         )
         source, gate = np.full(1, float(SOURCE.heading)), np.full(1, A[PARAMETERS.heading_gate])
         fuse(memory, rows, Groups(source, gate, np.zeros(1)))
         return
-    pred, J = mag_model(q, vec3(A, PARAMETERS.field), vec3(F, MEMORY.mag_bias))
+    pred, J = mag_model(q, vector_at(A, PARAMETERS.field), vector_at(F, MEMORY.mag_bias))
     H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
     rows = MeasurementRows(H, r, y, row_group)
     var = A[PARAMETERS.mag_noise_gauss] ** 2

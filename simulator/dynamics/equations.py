@@ -33,7 +33,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from quadcommon.kernel import borrowed, inlined_kernel, kernel
-from quadcommon.layout import Field, layout
+from quadcommon.layout import Field, layout, quaternion_at, set_quaternion_at, vector_at
 from quadcommon.rigid_body import (
     body_torque_from_euler_torque_sincos,
     cross,
@@ -107,19 +107,6 @@ STATE = layout("PlantState", (
           "state ends before them"),
 ))  # fmt: skip
 WRENCH_STATE_SIZE = STATE.rotor_speeds  # the ideal-wrench vehicle's state: no rotor speeds
-
-
-@kernel
-def state3(s, i: int) -> tuple:
-    """The three floats of the state from its field's offset ``i`` (:data:`STATE`)."""
-    return (s[i], s[i + 1], s[i + 2])
-
-
-@kernel
-def state_attitude(s) -> tuple:
-    """The state's attitude quaternion (w, x, y, z)."""
-    a = STATE.attitude
-    return (s[a], s[a + 1], s[a + 2], s[a + 3])
 
 
 @kernel
@@ -257,9 +244,9 @@ def rotor_faults_due(P, faults, row: int, t: float, u) -> int:
 def derivative(s, out, P, u) -> None:
     """``out = ds/dt`` with the inputs ``u`` held: Newton-Euler about G, thrust and control
     torques at O, rotor lag and gyroscopic terms, disturbances, drag."""
-    v = state3(s, STATE.velocity)
-    q = state_attitude(s)
-    w = state3(s, STATE.body_rates)
+    v = vector_at(s, STATE.velocity)
+    q = quaternion_at(s, STATE.attitude)
+    w = vector_at(s, STATE.body_rates)
     R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
     r_G = com_offset(P)
 
@@ -373,19 +360,18 @@ def rk4_step(s, k1, k2, k3, k4, tmp, P, u, h: float) -> None:
     """One RK4 step of the coupled plant's :func:`derivative` (:data:`rk4_coupled`), then the
     quaternion put back on the unit sphere (RK4 drifts off it by O(h^5) per step)."""
     rk4_coupled(s, k1, k2, k3, k4, tmp, P, u, h)
-    a = STATE.attitude
-    s[a], s[a + 1], s[a + 2], s[a + 3] = quaternion_normalised(state_attitude(s))
+    set_quaternion_at(s, STATE.attitude, quaternion_normalised(quaternion_at(s, STATE.attitude)))
 
 
 @kernel
 def motion_of_O(s, P) -> tuple:
     """``(R, p_O, v_O)``: the rotation, and the position and velocity of O (world)."""
-    q = state_attitude(s)
+    q = quaternion_at(s, STATE.attitude)
     R = rotation_from_quaternion(q[0], q[1], q[2], q[3])
     r_G = com_offset(P)
     Rr = matrix_times(R, r_G)
-    Rc = matrix_times(R, cross(state3(s, STATE.body_rates), r_G))
-    p_G, v_G = state3(s, STATE.position), state3(s, STATE.velocity)
+    Rc = matrix_times(R, cross(vector_at(s, STATE.body_rates), r_G))
+    p_G, v_G = vector_at(s, STATE.position), vector_at(s, STATE.velocity)
     p_O = (p_G[0] - Rr[0], p_G[1] - Rr[1], p_G[2] - Rr[2])
     return R, p_O, (v_G[0] - Rc[0], v_G[1] - Rc[1], v_G[2] - Rc[2])
 
@@ -438,16 +424,16 @@ def truth(work, P, u) -> tuple:
     derivative(s, ds, P, u)
     R, p_O, v_O = motion_of_O(s, P)
     r_G = com_offset(P)
-    w = state3(s, STATE.body_rates)
+    w = vector_at(s, STATE.body_rates)
     grounded = on_ground(s, P)
     if grounded:
         a_O = (0.0, 0.0, 0.0)
     else:
         # a_O = a_G - R (w_dot x r_G + w x (w x r_G))
-        a1 = cross(state3(ds, STATE.body_rates), r_G)
+        a1 = cross(vector_at(ds, STATE.body_rates), r_G)
         a2 = cross(w, cross(w, r_G))
         Ra = matrix_times(R, (a1[0] + a2[0], a1[1] + a2[1], a1[2] + a2[2]))
-        a_G = state3(ds, STATE.velocity)  # the velocity's derivative
+        a_G = vector_at(ds, STATE.velocity)  # the velocity's derivative
         a_O = (a_G[0] - Ra[0], a_G[1] - Ra[1], a_G[2] - Ra[2])
     specific = transpose_times(R, (a_O[0], a_O[1], a_O[2] + P[PLANT.gravity]))
     euler = euler_from_rotation(R)
@@ -462,7 +448,7 @@ def truth(work, P, u) -> tuple:
             tau = INPUTS.torque
             thrust, tx, ty, tz = faulted_wrench(P, u[INPUTS.thrust], u[tau], u[tau + 1], u[tau + 2])
             torque = (tx, ty, tz)
-    q = state_attitude(s)
+    q = quaternion_at(s, STATE.attitude)
     return TruthState(p_O, v_O, a_O, q, euler, w, euler_rates, specific, speeds, thrust, torque, grounded)
 
 

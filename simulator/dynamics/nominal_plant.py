@@ -23,7 +23,7 @@ import numpy as np
 
 from quadcommon.config import VehicleConfig
 from quadcommon.kernel import borrowed, kernel
-from quadcommon.layout import Field, layout, values
+from quadcommon.layout import Field, layout, values, vector_at
 from quadcommon.rigid_body import (
     body_rates_from_euler_rates,
     coriolis_times,
@@ -36,7 +36,7 @@ from quadcommon.rigid_body import (
     transpose_times,
 )
 
-from .equations import INPUTS, PLANT, TruthState, rk4_of, state3
+from .equations import INPUTS, PLANT, TruthState, rk4_of
 from .plant import ZERO3, Plant, PlantEntries, Vector3, warmed_entries
 
 NOMINAL_STATE = layout("NominalState", (
@@ -58,9 +58,9 @@ def nominal_derivative(s, out, P, u) -> None:
     m, g = P[PLANT.mass], P[PLANT.gravity]
     J = PLANT.inertia  # row-major: the principal moments on its diagonal
     inertia = (P[J], P[J + 4], P[J + 8])
-    eta = state3(s, NOMINAL_STATE.euler)
+    eta = vector_at(s, NOMINAL_STATE.euler)
     phi, theta, psi = eta
-    eta_dot = state3(s, NOMINAL_STATE.euler_rates)
+    eta_dot = vector_at(s, NOMINAL_STATE.euler_rates)
     U1 = u[INPUTS.thrust]
     f = INPUTS.disturbance_force
     # eq. (2): m xi'' = R e3 U1 + F_d - m g e3 (R e3: the last column of R)
@@ -117,17 +117,17 @@ def nominal_truth(work, P, u) -> tuple:
     work, P, u = borrowed(work), borrowed(P), borrowed(u)  # the caller's: no counting per call
     s, ds = work[0], work[1]
     nominal_derivative(s, ds, P, u)
-    euler = state3(s, NOMINAL_STATE.euler)
-    eta_dot = state3(s, NOMINAL_STATE.euler_rates)
+    euler = vector_at(s, NOMINAL_STATE.euler)
+    eta_dot = vector_at(s, NOMINAL_STATE.euler_rates)
     R = rotation_matrix(euler[0], euler[1], euler[2])
     w = body_rates_from_euler_rates(euler[0], euler[1], eta_dot)  # eq. (3)
     grounded = nominal_on_ground(s, P)
-    acc = (0.0, 0.0, 0.0) if grounded else state3(ds, NOMINAL_STATE.velocity)
+    acc = (0.0, 0.0, 0.0) if grounded else vector_at(ds, NOMINAL_STATE.velocity)
     specific = transpose_times(R, (acc[0], acc[1], acc[2] + P[PLANT.gravity]))
     q = quaternion_from_euler(euler[0], euler[1], euler[2])
     t = INPUTS.torque
     torque = (u[t], u[t + 1], u[t + 2])
-    position, velocity = state3(s, NOMINAL_STATE.position), state3(s, NOMINAL_STATE.velocity)
+    position, velocity = vector_at(s, NOMINAL_STATE.position), vector_at(s, NOMINAL_STATE.velocity)
     return TruthState(position, velocity, acc, q, euler, w, eta_dot, specific,
                       (0.0, 0.0, 0.0, 0.0), u[INPUTS.thrust], torque, grounded)  # fmt: skip
 

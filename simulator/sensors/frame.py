@@ -49,7 +49,7 @@ import numpy as np
 from quadcommon.atmosphere import isa_altitude_m
 from quadcommon.failures import Type, effect_of_kind
 from quadcommon.kernel import kernel
-from quadcommon.layout import Field, fields_of, layout, values
+from quadcommon.layout import Field, fields_of, layout, values, vector_at
 from quadcommon.rigid_body import Quaternion, Vector3
 from quadcommon.rng import normal, uniform
 from simulator.dynamics.equations import TruthState
@@ -296,12 +296,6 @@ def initial_state(rng: Any, C: Any, accel_bias: Vector3, gyro_bias: Vector3, mag
 
 
 @kernel
-def at3(a: Any, i: int) -> Vector3:
-    """The three values of ``a`` from index ``i`` as a vector."""
-    return (a[i], a[i + 1], a[i + 2])
-
-
-@kernel
 def fault_sum(faults: Any, kind: int, t: float) -> Vector3:
     """The summed value of the faults of ``kind`` active at ``t`` (``[start, start + duration)``)."""
     x = y = z = 0.0
@@ -542,17 +536,17 @@ def gps_fix(rng: Any, S: Any, C: Any, faults: Any, t: float, position: Vector3, 
         dt = t - S[STATE.t_gps]
         e = gauss_markov(
             rng,
-            at3(S, STATE.gps_position_error),
+            vector_at(S, STATE.gps_position_error),
             dt,
             C[FIGURES.gps_tau_position],
-            at3(C, FIGURES.gps_std_position),
+            vector_at(C, FIGURES.gps_std_position),
         )
         u = gauss_markov(
             rng,
-            at3(S, STATE.gps_velocity_error),
+            vector_at(S, STATE.gps_velocity_error),
             dt,
             C[FIGURES.gps_tau_velocity],
-            at3(C, FIGURES.gps_std_velocity),
+            vector_at(C, FIGURES.gps_std_velocity),
         )
         for i in range(3):
             S[STATE.gps_position_error + i] = e[i]

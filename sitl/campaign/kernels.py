@@ -56,7 +56,7 @@ from autopilot.estimation.filter import FilterArrays
 from autopilot.records import StateEstimate
 from quadcommon.frames import wrap_pi
 from quadcommon.kernel import borrowed, kernel
-from quadcommon.layout import Field, column_names, layout
+from quadcommon.layout import Field, column_names, layout, quaternion_at, vector_at
 from quadcommon.numerics import clip
 from quadcommon.rigid_body import (
     euler_from_quaternion,
@@ -86,8 +86,6 @@ from simulator.dynamics.equations import (  # the plant (what the simulator step
     motion_of_O,
     rk4_step,
     rotor_faults_due,
-    state3,
-    state_attitude,
     truth,
 )
 from simulator.environment.gust_profile import one_minus_cosine_wind, steps_and_ramps
@@ -254,12 +252,6 @@ def _through_fields(wire: bool, v: tuple) -> tuple:
 
 
 @kernel
-def _vector_at(memory, at: int) -> tuple:
-    """The three floats of a record's vector field at ``at``."""
-    return (memory[at], memory[at + 1], memory[at + 2])
-
-
-@kernel
 def _home(S) -> tuple:
     """The geodetic home the GNSS fixes cross the wire about."""
     return (S[SETTINGS.home], S[SETTINGS.home + 1], S[SETTINGS.home + 2])
@@ -286,8 +278,8 @@ def estimate(k, t, dt, S, plant, pose, t_previous, est):
     tr = truth(plant_work, P, u)  # what the simulator's frame reads: the inputs held since the last step
     sensors.sensor_frame(sensors.SensorMemory(rng, sensor, sensor_figures, faults), t, tr, delivered)
     t_autopilot = frame_time_s(frame_time_usec(k, S[SETTINGS.usec_per_frame])) if wire else t
-    force = _through_fields(wire, _vector_at(delivered, DELIVERY.force))
-    rate = _through_fields(wire, _vector_at(delivered, DELIVERY.rate))
+    force = _through_fields(wire, vector_at(delivered, DELIVERY.force))
+    rate = _through_fields(wire, vector_at(delivered, DELIVERY.rate))
     if k == 0:
         offset = 0.0
         if delivered[DELIVERY.baro_fresh] != 0.0:
@@ -303,10 +295,10 @@ def estimate(k, t, dt, S, plant, pose, t_previous, est):
         ekf.predict_step(F, Pf, ring, A, t_autopilot, t_autopilot - t_previous, rate, force)
     else:
         t_autopilot = t_previous
-    q = ekf.quat(F, ekf.MEMORY.q)
+    q = quaternion_at(F, ekf.MEMORY.q)
     euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
-    rates = euler_rates_from_body_rates(euler[0], euler[1], ekf.vec3(F, ekf.MEMORY.rate))
-    return StateEstimate(ekf.vec3(F, ekf.MEMORY.p), ekf.vec3(F, ekf.MEMORY.v), euler, rates), t_autopilot
+    rates = euler_rates_from_body_rates(euler[0], euler[1], vector_at(F, ekf.MEMORY.rate))
+    return StateEstimate(vector_at(F, ekf.MEMORY.p), vector_at(F, ekf.MEMORY.v), euler, rates), t_autopilot
 
 
 @kernel
@@ -322,18 +314,18 @@ def fuse_aiding(t, S, est):
     aiding (:func:`autopilot.estimation.aiding.fuse_frame`: PX4's order)."""
     wire = S[SETTINGS.wire] != 0.0
     d, D = est.delivered, DELIVERY
-    mag = _through_fields(wire, _vector_at(d, D.mag_field))
+    mag = _through_fields(wire, vector_at(d, D.mag_field))
     height = d[D.baro_altitude]
     if wire:  # HIL_SENSOR's pressure altitude
         height = float_field(height)
-    position, velocity = _vector_at(d, D.gps_position), _vector_at(d, D.gps_velocity)
+    position, velocity = vector_at(d, D.gps_position), vector_at(d, D.gps_velocity)
     eph, epv, speed_accuracy = d[D.gps_eph], d[D.gps_epv], d[D.gps_speed_accuracy]
     if wire and d[D.gps_fresh] != 0.0:  # through HIL_GPS's fields (it has no speed accuracy)
         home = _home(S)
         f = gps_values(position, velocity, eph, epv, home)
         position, velocity, eph, epv = gps_fix(f[0], f[1], f[2], f[6], f[7], f[8], f[3], f[4], home)
         speed_accuracy = 0.0
-    vision_position = _vector_at(d, D.vision_position)
+    vision_position = vector_at(d, D.vision_position)
     yaw, position_std, yaw_std = d[D.vision_yaw], d[D.vision_position_std], d[D.vision_yaw_std]
     if wire and d[D.vision_fresh] != 0.0:  # through VISION_POSITION_ESTIMATE's fields
         p_ned, yaw_ned, p_var, yaw_var = vision_values(vision_position, yaw, position_std, yaw_std)
@@ -504,10 +496,10 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
             next_fault = rotor_faults_due(P, faults_tab, next_fault, t, u)
         R, pos, vel = motion_of_O(s, P)
         euler, cos_tilt = euler_from_rotation(R), R[2][2]
-        p_w, q_w, r_w = state3(s, STATE.body_rates)
+        p_w, q_w, r_w = vector_at(s, STATE.body_rates)
         if wire:  # through ODOMETRY's fields, read as the autopilot reads them
             c_pos, c_vel, c_euler, c_rates = odometry_state(
-                *odometry_values(pos, vel, state_attitude(s), (p_w, q_w, r_w))
+                *odometry_values(pos, vel, quaternion_at(s, STATE.attitude), (p_w, q_w, r_w))
             )
         else:
             c_pos, c_vel, c_euler = pos, vel, euler

@@ -7,7 +7,18 @@ import numpy as np
 import pytest
 
 from quadcommon.kernel import compiled, kernel
-from quadcommon.layout import Field, column_names, describe, fields_of, layout, values
+from quadcommon.layout import (
+    Field,
+    column_names,
+    describe,
+    fields_of,
+    layout,
+    quaternion_at,
+    set_quaternion_at,
+    set_vector_at,
+    values,
+    vector_at,
+)
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -53,6 +64,22 @@ def test_column_names_and_description():
 def test_bad_declarations_are_refused(fields, message):
     with pytest.raises(ValueError, match=message):
         layout("Bad", fields)
+
+
+@kernel
+def move_home(memory):
+    """Home's vector shifted by one along each axis, and a quaternion at the final field's offset."""
+    h = vector_at(memory, SETTINGS.home)
+    set_vector_at(memory, SETTINGS.home, (h[0] + 1.0, h[1] + 1.0, h[2] + 1.0))
+    q = quaternion_at(memory, SETTINGS.final)
+    set_quaternion_at(memory, SETTINGS.final, (q[3], q[2], q[1], q[0]))
+    return vector_at(memory, SETTINGS.home)
+
+
+def test_a_fields_floats_are_read_and_written_at_its_offset_compiled_and_in_python():
+    python, memory = np.arange(8.0), np.arange(8.0)
+    assert move_home(python) == compiled(move_home)(memory) == (2.0, 3.0, 4.0)
+    assert python.tolist() == memory.tolist() == [0.0, 2.0, 3.0, 4.0, 7.0, 6.0, 5.0, 4.0]
 
 
 def test_compiled_code_reads_the_generated_offsets():
