@@ -101,17 +101,20 @@ class ImpairedLinks:
         self.config = config
         self.process = process  # named in the replies (both processes answer quadsitl/<N>/impair)
         self.endpoints: dict[tuple[str, str], ImpairedSender | ImpairedReceiver] = {}
+        self._active = False  # any endpoint with a channel (endpoints_active)
 
     def sender(self, sock: Any, link: str, direction: str, clock: Callable[[], float] = time.monotonic):
         """An impaired sender on ``sock`` for ``link`` in ``direction``, kept to answer status requests."""
         endpoint = ImpairedSender(sock, self.config.channel(link, direction), clock)
         self.endpoints[(link, direction)] = endpoint
+        self._endpoints_changed()
         return endpoint
 
     def receiver(self, link: str, direction: str) -> ImpairedReceiver:
         """An impaired receiver for ``link`` in ``direction``, kept to answer status requests."""
         endpoint = ImpairedReceiver(self.config.channel(link, direction))
         self.endpoints[(link, direction)] = endpoint
+        self._endpoints_changed()
         return endpoint
 
     def change(self, payload: bytes) -> tuple[bool, bytes]:
@@ -134,12 +137,16 @@ class ImpairedLinks:
                 endpoint.channel.set(changed[link])
             else:
                 endpoint.channel = self.config.channel(link, direction)
+        self._endpoints_changed()
         return True, json.dumps({"process": self.process, "accepted": True, "links": self.info()}).encode()
 
     @property
     def endpoints_active(self) -> bool:
         """True if any endpoint has a channel (the shell's loop then flushes them)."""
-        return any(e.channel is not None for e in self.endpoints.values())
+        return self._active  # (asked every frame: kept up to date by what gives channels)
+
+    def _endpoints_changed(self) -> None:
+        self._active = any(e.channel is not None for e in self.endpoints.values())
 
     def info(self) -> dict[str, Any]:
         """Per endpoint that has a channel: its impairment and counts (for ``info``)."""

@@ -35,6 +35,7 @@ def compile_target(target: str) -> tuple[str, float]:
     if kind == "plant":
         from dataclasses import replace
 
+        from autopilot.mavlink.hil import odometry_state_entry
         from quadcommon.config import load_vehicle
         from simulator.dynamics.nominal_plant import NominalPlant
         from simulator.dynamics.plant import Plant
@@ -44,6 +45,7 @@ def compile_target(target: str) -> tuple[str, float]:
         Plant(vehicle, 0.001)
         NominalPlant(replace(vehicle, plant=replace(vehicle.plant, model="nominal")), 0.001)
         frame_float_fields_entry()  # the frame encoder's float fields
+        odometry_state_entry()  # and the decoder's state from them
     elif kind == "estimator":
         from autopilot.estimation.eskf import ErrorStateEkf
 
@@ -72,11 +74,12 @@ def entries_of(target: str) -> list[tuple]:
     """The kernel entries a target compiles, as :func:`quadcommon.kernel.compiled` arguments."""
     kind, _, name = target.partition(":")
     if kind == "plant":
-        from quadcommon.wire_values import frame_float_fields
+        from quadcommon.wire_values import frame_float_fields, odometry_state
         from simulator.dynamics.nominal_plant import nominal_kernels
         from simulator.dynamics.plant import plant_kernels
 
-        return [*((fn,) for fn in (*plant_kernels(), *nominal_kernels())), (frame_float_fields,)]
+        kernels = (*plant_kernels(), *nominal_kernels(), frame_float_fields, odometry_state)
+        return [(fn,) for fn in kernels]
     if kind == "estimator":
         from autopilot.estimation.eskf import filter_kernels
 

@@ -293,7 +293,8 @@ class Lockstep:
             inbox, self._inbox = self._inbox, []
             for link, address, data in inbox:
                 self._dispatch(ap.on_gcs_datagram(link, address, data, t))
-        if self.impaired.endpoints_active:
+        impaired = self.impaired.endpoints_active  # (the cores never change the stack's links)
+        if impaired:
             self._ground_links_due(t)
         if t >= self._next_tick:
             self._next_tick = t + HOUSEKEEPING_S
@@ -308,7 +309,8 @@ class Lockstep:
         if not self.answer_frames:  # the link is cut: the simulator flies its emergency descent
             if not sim.emergency:
                 sim.autopilot_lost()
-        elif self.channels[(HIL_LINK, "sim->ap")].channel or self.channels[(HIL_LINK, "ap->sim")].channel:
+        elif impaired and (self.channels[(HIL_LINK, "sim->ap")].channel
+                           or self.channels[(HIL_LINK, "ap->sim")].channel):  # fmt: skip
             answer, done = self._impaired_exchange(datagram, t)
             self.clock = max(self.clock, done)  # a slow exchange holds the stack up, as in the SITL
         else:

@@ -104,8 +104,9 @@ def fuse_frame(memory: FilterArrays, A: Any, t: float, aiding: Aiding) -> None:
 
 
 @kernel
-def fuse_frame_fields(F: Any, P: Any, ring: Any, stats: Any, W: Any, A: Any, t: float, fields: tuple) -> None:
+def fuse_frame_fields(memory: tuple, A: Any, t: float, fields: tuple) -> None:
     """:func:`fuse_frame` as the entry Python calls, for a frame's aiding and for each sample the
-    filter is given on its own: the memory's arrays and the :class:`Aiding` as plain arguments (a
-    compiled call types a plain tuple in C, a named tuple through Python: microseconds a call)."""
-    fuse_frame(FilterArrays(F, P, ring, stats, W), A, t, Aiding(*fields))
+    filter is given on its own: the memory's arrays (a :class:`~.filter.FilterArrays`) and the
+    :class:`Aiding` as plain tuples (a compiled call types a plain tuple in C, a named tuple through
+    Python: microseconds a call)."""
+    fuse_frame(FilterArrays(*memory), A, t, Aiding(*fields))

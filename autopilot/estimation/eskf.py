@@ -66,16 +66,16 @@ the compiled entries, the records and the messages; the kernels are in :mod:`.fi
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
-from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from quadcommon import frames
 from quadcommon.kernel import compiled, compiling, freeze
-from quadcommon.layout import fields_of
+from quadcommon.layout import fields_of, reader
 from quadcommon.rigid_body import (
     euler_from_quaternion,
     euler_rates_from_body_rates,
@@ -87,7 +87,7 @@ from ..records import BaroSample, GpsFix, ImuSample, MagSample, VisionPose
 from . import aiding, checks, fusion, kernels
 from . import filter as fk
 from .aiding import NO_AIDING, Aiding
-from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N
+from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N, update_work_size
 from .parameters import (
     DEFAULT_PARAMS,
     EV_CTRL_HPOS,
@@ -131,6 +131,9 @@ _Z3 = (0.0, 0.0, 0.0)
 
 
 _STATS_INTEGERS = {f.name for f in fields_of(fk.STATS) if isinstance(getattr(SourceStats, f.name), int)}
+_STATS_INTEGER_AT = tuple(i for i, f in enumerate(fields_of(fk.STATS)) if f.name in _STATS_INTEGERS)
+if [f.name for f in dataclasses.fields(SourceStats)] != [f.name for f in fields_of(fk.STATS)]:
+    raise ImportError("SourceStats's fields must be the filter's STATS layout, in its order")
 
 
 class SourceRow:
@@ -145,8 +148,9 @@ class SourceRow:
     def snapshot(self) -> SourceStats:
         """The row as a :class:`~.status.SourceStats` record (a copy: it no longer follows the filter)."""
         values = self._row.tolist()
-        return SourceStats(**{f.name: (int(v) if f.name in _STATS_INTEGERS else v)
-                              for f, v in zip(fields_of(fk.STATS), values, strict=True)})  # fmt: skip
+        for i in _STATS_INTEGER_AT:
+            values[i] = int(values[i])
+        return SourceStats(*values)  # (its fields are the layout's, in order: checked below)
 
 
 def _stats_property(index: int, integer: bool, doc: str) -> property:
@@ -181,26 +185,11 @@ def _state_property(name: str, doc: str) -> property:
     return property(get, put, doc=doc)
 
 
-def _fields_reader(names: tuple[str, ...]) -> Callable[[list[float]], tuple[Any, ...]]:
-    """A function of the memory as a list giving its fields ``names`` (layout :data:`.filter.MEMORY`),
-    a tuple each (a float for a one-float field). Its source is generated from the layout with the
-    offsets as literals: CPython reads a list fastest at a literal index, and :meth:`estimate` runs
-    every control step."""
-    items = []
-    for name in names:
-        start, end = _span(name)
-        floats = ", ".join(f"x[{i}]" for i in range(start, end))
-        items.append(f"({floats},)" if end - start > 1 else floats)
-    namespace: dict[str, Any] = {}
-    exec(f"def read(x):\n    return ({', '.join(items)})\n", namespace)  # text generated just above
-    return namespace["read"]
-
-
 # What estimate() reads: one list of the memory's head, then its fields.
 _ESTIMATED = ("p", "v", "q", "rate", "gyro_bias", "accel_bias", "mag_bias", "baro_bias")
 _ESTIMATE_END = max(_span(name)[1] for name in _ESTIMATED)
-_READ_ESTIMATED = _fields_reader(_ESTIMATED)
-_READ_BIASES = _fields_reader(("gyro_bias", "accel_bias"))
+_READ_ESTIMATED = reader(fk.MEMORY, _ESTIMATED)
+_READ_BIASES = reader(fk.MEMORY, ("gyro_bias", "accel_bias"))
 
 
 class ErrorStateEkf:
@@ -224,7 +213,7 @@ class ErrorStateEkf:
     ) -> None:
         self.gravity = gravity_m_s2
         self.earth_field = tuple(float(c) for c in earth_field_world_gauss)
-        self._F, self.P, self._ring, self._stats, self._windows = fk.new_memory()
+        self._F, self.P, self._ring, self._stats, self._windows, self._scratch = fk.new_memory()
         self.set_params(params)
         self._entries = filter_entries()
         self.sources: dict[str, SourceRow] = {
@@ -232,6 +221,7 @@ class ErrorStateEkf:
         }
         self.initialised = False
         self.init_time_s = -1.0
+        self._last_estimate: tuple[list[float], Estimate] | None = None  # (what it was read from, it)
 
         # Alignment accumulators.
         self._align_n = 0
@@ -532,8 +522,8 @@ class ErrorStateEkf:
 
     def _fuse(self, t: float, aiding: Aiding) -> None:
         """One compiled call of :func:`.aiding.fuse_frame`: a frame's aiding or a single sample."""
-        self._entries.fuse_frame(self._F, self.P, self._ring, self._stats, self._windows, self._A, float(t),
-                                 tuple(aiding))  # fmt: skip
+        memory = (self._F, self.P, self._ring, self._stats, self._windows, self._scratch)  # a FilterArrays
+        self._entries.fuse_frame(memory, self._A, float(t), tuple(aiding))
 
     def fuse_vision(self, pose: VisionPose) -> None:
         """Motion capture / vision position and yaw, and its velocity when it has one (EKF2_EV_CTRL
@@ -555,10 +545,18 @@ class ErrorStateEkf:
     # ------------------------------------------------------------------------------------------
     def estimate(self) -> Estimate:
         """The current state estimate (what the controllers are fed)."""
-        p, v, q, rate, bg, ba, bm, bh = _READ_ESTIMATED(self._F[:_ESTIMATE_END].tolist())
+        memory = self._F[:_ESTIMATE_END].tolist()
+        time_s = self.time_s
+        last = self._last_estimate
+        # The estimate is a function of these floats and the time alone: read twice in a frame
+        # (before and after a fusion that most frames do not bring), the same floats give the same
+        # record without the attitude's conversions again.
+        if last is not None and last[0] == memory and last[1].time_s == time_s:
+            return last[1]
+        p, v, q, rate, bg, ba, bm, bh = _READ_ESTIMATED(memory)
         euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
-        return Estimate(
-            self.time_s,
+        estimate = Estimate(
+            time_s,
             p,
             v,
             q,
@@ -570,6 +568,8 @@ class ErrorStateEkf:
             bm,
             bh,
         )
+        self._last_estimate = (memory, estimate)
+        return estimate
 
     def estimate_biases(self) -> tuple[Vector3, Vector3]:
         """The gyro and accelerometer bias estimates (cheaper than :meth:`estimate`)."""
@@ -689,7 +689,8 @@ def filter_entries() -> FilterEntries:
     type is refused (TypeError) instead of stalling a flight for a compilation. Once per process."""
     entries = FilterEntries(*(compiled(fn) for fn in filter_kernels()))
     if compiling():
-        F, P, ring, stats, windows = fk.new_memory()
+        memory = fk.new_memory()
+        F, P, ring = memory.state, memory.covariance, memory.ring
         A = fk.parameter_array(DEFAULT_PARAMS, 9.81, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
         z3, g3, q = (0.0, 0.0, 0.0), (0.0, 0.0, 9.81), (1.0, 0.0, 0.0, 0.0)
         H = np.zeros((2, N))
@@ -697,11 +698,12 @@ def filter_entries() -> FilterEntries:
         entries.predict(P, np.zeros(N), 0.002, 9.81, kernels.ImuStep(z3, z3, z3, z3),
                         kernels.NominalState(q, z3, z3, z3, z3))
         entries.prior_variances(P, H, np.empty(2))
-        entries.joseph_update(np.eye(N), H, np.ones(2), np.zeros(2), np.empty(N))
+        work = np.empty(update_work_size(2, N))
+        entries.joseph_update(np.eye(N), H, np.ones(2), np.zeros(2), np.empty(N), work)
         entries.reset_state(F, P, A, z3, z3, q, 0.1, 0.1, 0.0)
         entries.start(F, ring, 0.0, 0.002, z3, g3)
         entries.predict_step(F, P, ring, A, 0.002, 0.002, z3, g3)
-        entries.fuse_frame(F, P, ring, stats, windows, A, 0.002, tuple(aiding.NO_AIDING))
+        entries.fuse_frame(tuple(memory), A, 0.002, tuple(aiding.NO_AIDING))
         entries.not_converged(F, P, A)
         for entry in entries:
             freeze(entry)

@@ -12,7 +12,7 @@ records it reports and the messages); a batch engine calls them from its own com
 (:func:`sitl.campaign.kernels.simulate_estimated`), so both fly one filter. The equations are
 those of :mod:`.eskf`'s docstring.
 
-A filter's memory is five float arrays (:func:`new_memory`), each laid out by a layout below
+A filter's memory is six float arrays (:func:`new_memory`), each laid out by a layout below
 (:mod:`quadcommon.layout`: fields declared once, offsets generated):
 
 * ``F`` (``MEMORY.size``): the nominal state, the trapezoid's previous sample, the cumulative
@@ -24,6 +24,8 @@ A filter's memory is five float arrays (:func:`new_memory`), each laid out by a 
   :data:`.status.SOURCE`) the counters and last innovation :class:`~.status.SourceStats` reports;
 * ``windows`` (``INNOVATION_WINDOWS.size`` x ``WINDOW_ROW.size``): the recent normalised vertical
   innovations (GNSS vertical velocity, vision height) the bad-vertical-acceleration check averages;
+* ``scratch`` (``SCRATCH.size``): where a fusion forms its rows, gates and batch update
+  (:mod:`.fusion` cuts its arrays from it), so that a running filter allocates nothing;
 
 and the parameters are one more (``A``, :func:`parameter_array`, layout :data:`PARAMETERS`). Flags
 and counts are floats in these arrays (``int(F[MEMORY.head])``): one array type for everything.
@@ -48,7 +50,7 @@ from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
 
-from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, ImuStep, N, NominalState, predict
+from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, ImuStep, N, NominalState, predict, update_work_size
 from .parameters import EstimatorParams
 from .status import SOURCE, SourceStats
 
@@ -110,6 +112,19 @@ INNOVATION_WINDOWS = layout("InnovationWindows", (
     Field("ev_hgt", doc="vision height, normalised innovations"),
 ))  # fmt: skip
 
+# -- a fusion's work arrays (:mod:`.fusion`), one buffer cut into views: nothing allocated per sample --
+MAX_ROWS = 6  # the largest measurement: GNSS horizontal and vertical position and velocity
+MAX_GROUPS = 4  # its groups, gated apart: horizontal and vertical position, horizontal and vertical velocity
+SCRATCH = layout("FusionScratch", (
+    Field("H", MAX_ROWS * N, doc="a measurement's rows, MAX_ROWS x N"),
+    Field("r", MAX_ROWS, unit="variance"), Field("y", MAX_ROWS, doc="innovations"),
+    Field("row_group", MAX_ROWS), Field("group_source", MAX_GROUPS), Field("group_gate", MAX_GROUPS),
+    Field("accepted", MAX_GROUPS), Field("prior", MAX_ROWS, unit="variance"),
+    Field("kept_H", MAX_ROWS * N, doc="the accepted rows, MAX_ROWS x N"), Field("kept_r", MAX_ROWS),
+    Field("kept_y", MAX_ROWS), Field("dx", N, doc="the error K y"),
+    Field("update", update_work_size(MAX_ROWS, N), doc="the batch update's products (kernels.joseph_update)"),
+))  # fmt: skip
+
 MAX_IMU_DT_S = 0.1  # a longer gap is a lost link, not an interval to integrate across
 # While a bad vertical acceleration holds (:func:`.checks.check_vertical_accel`), the vertical
 # velocity gets PX4's BADACC_BIAS_PNOISE (4.9 m/s^2 per 10 ms prediction, i.e. 0.49
@@ -141,6 +156,7 @@ class FilterArrays(NamedTuple):
     ring: np.ndarray  # RING x RING_ROW.size
     stats: np.ndarray  # SOURCE.size x STATS.size
     windows: np.ndarray  # INNOVATION_WINDOWS.size x WINDOW_ROW.size
+    scratch: np.ndarray  # SCRATCH.size: a fusion's work arrays
 
 
 class Accuracies(NamedTuple):
@@ -180,7 +196,8 @@ def new_memory() -> FilterArrays:
     F[MEMORY.q_dt] = -1.0
     stats = np.tile(np.array(STATS_INITIAL), (SOURCE.size, 1))
     windows = np.zeros((INNOVATION_WINDOWS.size, WINDOW_ROW.size))
-    return FilterArrays(F, np.zeros((N, N)), np.zeros((RING, RING_ROW.size)), stats, windows)
+    ring, scratch = np.zeros((RING, RING_ROW.size)), np.zeros(SCRATCH.size)
+    return FilterArrays(F, np.zeros((N, N)), ring, stats, windows, scratch)
 
 
 # =================================================================================================

@@ -38,7 +38,17 @@ from .checks import (
     window_append,
     window_of,
 )
-from .filter import MEMORY, PARAMETERS, STATS, FilterArrays, state_at, world_force
+from .filter import (
+    MAX_GROUPS,
+    MAX_ROWS,
+    MEMORY,
+    PARAMETERS,
+    SCRATCH,
+    STATS,
+    FilterArrays,
+    state_at,
+    world_force,
+)
 from .kernels import IBA, IBG, IBH, IBM, IP, ITH, IV, N, joseph_update, prior_variances
 from .parameters import (  # the EKF2_* bit fields and values, defined with the parameters
     EV_CTRL_HPOS,
@@ -184,6 +194,33 @@ class Groups(NamedTuple):
     accepted: np.ndarray  # out: 1.0 fused, 0.0 rejected
 
 
+@kernel
+def measurement_rows(scratch: Any, m: int) -> MeasurementRows:
+    """``m`` rows cut from the memory's scratch (:data:`.filter.SCRATCH`), H and the groups zeroed."""
+    H = scratch[SCRATCH.H : SCRATCH.H + m * N].reshape((m, N))
+    H[:] = 0.0
+    group = scratch[SCRATCH.row_group : SCRATCH.row_group + m]
+    group[:] = 0.0
+    return MeasurementRows(H, scratch[SCRATCH.r : SCRATCH.r + m], scratch[SCRATCH.y : SCRATCH.y + m], group)
+
+
+@kernel
+def measurement_groups(scratch: Any, g: int) -> Groups:
+    """``g`` groups cut from the memory's scratch, none accepted yet."""
+    accepted = scratch[SCRATCH.accepted : SCRATCH.accepted + g]
+    accepted[:] = 0.0
+    return Groups(scratch[SCRATCH.group_source : SCRATCH.group_source + g],
+                  scratch[SCRATCH.group_gate : SCRATCH.group_gate + g], accepted)  # fmt: skip
+
+
+@kernel
+def used(rows: MeasurementRows, k: int, groups: Groups, g: int) -> tuple[MeasurementRows, Groups]:
+    """The first ``k`` rows and ``g`` groups (a measurement whose parts are switched off by EKF2_*_CTRL)."""
+    H, r, y, group = rows
+    return MeasurementRows(H[:k], r[:k], y[:k], group[:k]), Groups(groups.source[:g], groups.gate[:g],
+                                                                    groups.accepted[:g])  # fmt: skip
+
+
 # =================================================================================================
 # Gates, update, injection
 # =================================================================================================
@@ -199,12 +236,12 @@ def fuse(memory: FilterArrays, rows: MeasurementRows, groups: Groups) -> None:
     (:func:`inject`). A batch equals the sequence of scalar updates for a linear ``h`` and costs
     one set of 19x19 products instead of one per axis.
     """
-    F, P, _, stats, W = memory
+    F, P, _, stats, W, scratch = memory
     H, r, y, row_group = rows
     group_source, group_gate, accepted = groups
     m = H.shape[0]
     n_groups = group_source.shape[0]
-    prior = np.empty(m)
+    prior = scratch[SCRATCH.prior : SCRATCH.prior + m]
     prior_variances(P, H, prior)
     now = F[MEMORY.time]
     kept = 0
@@ -243,9 +280,9 @@ def fuse(memory: FilterArrays, rows: MeasurementRows, groups: Groups) -> None:
             kept += k - first
     if kept == 0:
         return
-    Hk = np.empty((kept, N))
-    rk = np.empty(kept)
-    yk = np.empty(kept)
+    Hk = scratch[SCRATCH.kept_H : SCRATCH.kept_H + kept * N].reshape((kept, N))
+    rk = scratch[SCRATCH.kept_r : SCRATCH.kept_r + kept]
+    yk = scratch[SCRATCH.kept_y : SCRATCH.kept_y + kept]
     i = 0
     for j in range(m):
         if accepted[int(row_group[j])] != 0.0:
@@ -254,8 +291,8 @@ def fuse(memory: FilterArrays, rows: MeasurementRows, groups: Groups) -> None:
             rk[i] = r[j]
             yk[i] = y[j]
             i += 1
-    dx = np.empty(N)
-    joseph_update(P, Hk, rk, yk, dx)
+    dx = scratch[SCRATCH.dx : SCRATCH.dx + N]
+    joseph_update(P, Hk, rk, yk, dx, scratch[SCRATCH.update : SCRATCH.size])
     inject(F, P, dx)
 
 
@@ -357,7 +394,7 @@ class VisionMeasurement(NamedTuple):
 @kernel
 def fuse_gps(memory: FilterArrays, A: Any, t: float, gnss: GnssMeasurement) -> None:
     """GNSS position (horizontal, height) and velocity arrived at ``t``, valid EKF2_GPS_DELAY before."""
-    F, P, ring, stats, W = memory
+    F, P, ring, stats, W, scratch = memory
     position, velocity = gnss.position_m, gnss.velocity_m_s
     eph, epv, speed_accuracy = gnss.eph_m, gnss.epv_m, gnss.speed_accuracy_m_s
     fix_type, satellites = gnss.fix_type, gnss.satellites
@@ -371,9 +408,8 @@ def fuse_gps(memory: FilterArrays, A: Any, t: float, gnss: GnssMeasurement) -> N
     pm, vm, D = past.position_m, past.velocity_m_s, past.age_s
     hv, vv, sv = gps_variances(A, eph, epv, speed_accuracy)
     ctrl = int(A[PARAMETERS.gps_ctrl])
-    H, r, y, row_group = np.zeros((6, N)), np.empty(6), np.empty(6), np.empty(6)
-    rows = MeasurementRows(H, r, y, row_group)
-    group_source, group_gate = np.empty(4), np.empty(4)
+    rows, groups = measurement_rows(scratch, MAX_ROWS), measurement_groups(scratch, MAX_GROUPS)
+    group_source, group_gate, accepted = groups
     k = g = 0
     if ctrl & GPS_CTRL_HPOS:
         k = position_rows(rows, k, g, 0, D, position[0] - pm[0], hv)
@@ -396,9 +432,8 @@ def fuse_gps(memory: FilterArrays, A: Any, t: float, gnss: GnssMeasurement) -> N
         g += 1
     if g == 0:
         return
-    accepted = np.zeros(g)
-    fuse(memory, MeasurementRows(H[:k], r[:k], y[:k], row_group[:k]),
-         Groups(group_source[:g], group_gate[:g], accepted))  # fmt: skip
+    fused_rows, fused_groups = used(rows, k, groups, g)
+    fuse(memory, fused_rows, fused_groups)
     now = F[MEMORY.time]
     for j in range(g):
         src, ok = int(group_source[j]), accepted[j] != 0.0
@@ -419,7 +454,7 @@ def fuse_gps(memory: FilterArrays, A: Any, t: float, gnss: GnssMeasurement) -> N
 @kernel
 def fuse_baro(memory: FilterArrays, A: Any, t: float, height: float) -> None:
     """Barometric height arrived at ``t``: ``h = z + b_h`` (the offset is a state), at most EKF2_BARO_RATE."""
-    F, P, ring, stats, W = memory
+    F, P, ring, stats, W, scratch = memory
     if A[PARAMETERS.baro_enabled] == 0.0:
         return
     s = stats[SOURCE.baro]
@@ -432,14 +467,13 @@ def fuse_baro(memory: FilterArrays, A: Any, t: float, height: float) -> None:
         s[STATS.too_old] += 1.0
         return
     pm, D = past.position_m, past.age_s
-    H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
-    rows = MeasurementRows(H, r, y, row_group)
+    rows, groups = measurement_rows(scratch, 1), measurement_groups(scratch, 1)
+    H, r, y, _ = rows
     H[0, IP + 2], H[0, IV + 2], H[0, IBH] = 1.0, -D, 1.0
     r[0], y[0] = A[PARAMETERS.baro_noise_m] ** 2, height - pm[2] - F[MEMORY.baro_bias]
-    accepted = np.zeros(1)
-    groups = Groups(np.full(1, float(SOURCE.baro)), np.full(1, A[PARAMETERS.baro_gate]), accepted)
+    groups.source[0], groups.gate[0] = SOURCE.baro, A[PARAMETERS.baro_gate]
     fuse(memory, rows, groups)
-    if accepted[0] != 0.0:
+    if groups.accepted[0] != 0.0:
         F[MEMORY.last_v_aid] = F[MEMORY.time]
     check_vertical_accel(F, stats, W)
 
@@ -448,7 +482,7 @@ def fuse_baro(memory: FilterArrays, A: Any, t: float, height: float) -> None:
 def fuse_mag(memory: FilterArrays, A: Any, t: float, m: Vector3) -> None:
     """Magnetometer arrived at ``t``, at most EKF2_MAG_RATE: the 3-axis field ``m = R^T m_earth +
     b_m`` (EKF2_MAG_TYPE 0) or the tilt-compensated heading (1)."""
-    F, P, ring, stats, W = memory
+    F, P, ring, stats, W, scratch = memory
     mag_type = int(A[PARAMETERS.mag_type])
     if mag_type == MAG_TYPE_NONE:
         return
@@ -465,31 +499,30 @@ def fuse_mag(memory: FilterArrays, A: Any, t: float, m: Vector3) -> None:
     if not mag_checks(F, stats, A, src, m, q):
         return
     if mag_type == MAG_TYPE_HEADING:
-        H, r, y, row_group = np.zeros((1, N)), np.empty(1), np.empty(1), np.zeros(1)
-        rows = MeasurementRows(H, r, y, row_group)
+        rows, groups = measurement_rows(scratch, 1), measurement_groups(scratch, 1)
         phi, theta, _ = euler_from_quaternion(q[0], q[1], q[2], q[3])
         measured = mag_heading(A, m, phi, theta, vector_at(F, MEMORY.mag_bias))
         yaw_row(rows, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[PARAMETERS.heading_noise_rad] ** 2
         )
-        source, gate = np.full(1, float(SOURCE.heading)), np.full(1, A[PARAMETERS.heading_gate])
-        fuse(memory, rows, Groups(source, gate, np.zeros(1)))
+        groups.source[0], groups.gate[0] = SOURCE.heading, A[PARAMETERS.heading_gate]
+        fuse(memory, rows, groups)
         return
     pred, J = mag_model(q, vector_at(A, PARAMETERS.field), vector_at(F, MEMORY.mag_bias))
-    H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
-    rows = MeasurementRows(H, r, y, row_group)
+    rows, groups = measurement_rows(scratch, 3), measurement_groups(scratch, 1)
+    H, r, y, _ = rows
     var = A[PARAMETERS.mag_noise_gauss] ** 2
     for i in range(3):
         H[i, ITH], H[i, ITH + 1], H[i, ITH + 2] = J[i][0], J[i][1], J[i][2]
         H[i, IBM + i] = 1.0
         r[i], y[i] = var, m[i] - pred[i]
-    groups = Groups(np.full(1, float(SOURCE.mag)), np.full(1, A[PARAMETERS.mag_gate]), np.zeros(1))
+    groups.source[0], groups.gate[0] = SOURCE.mag, A[PARAMETERS.mag_gate]
     fuse(memory, rows, groups)
 
 
 @kernel
 def fuse_vision(memory: FilterArrays, A: Any, t: float, vision: VisionMeasurement) -> None:
     """Motion capture / vision position and yaw arrived at ``t``, valid EKF2_EV_DELAY before."""
-    F, P, ring, stats, W = memory
+    F, P, ring, stats, W, scratch = memory
     position, yaw = vision.position_m, vision.yaw_rad
     position_std, yaw_std = vision.position_std_m, vision.yaw_std_rad
     past = state_at(F, ring, t - A[PARAMETERS.ev_delay_s])
@@ -499,9 +532,8 @@ def fuse_vision(memory: FilterArrays, A: Any, t: float, vision: VisionMeasuremen
     pm, qm, D = past.position_m, past.attitude, past.age_s
     var = ev_pos_variance(A, position_std)
     ctrl = int(A[PARAMETERS.ev_ctrl])
-    H, r, y, row_group = np.zeros((4, N)), np.empty(4), np.empty(4), np.empty(4)
-    rows = MeasurementRows(H, r, y, row_group)
-    group_source, group_gate = np.empty(3), np.empty(3)
+    rows, groups = measurement_rows(scratch, 4), measurement_groups(scratch, 3)
+    group_source, group_gate, accepted = groups
     k = g = 0
     if ctrl & EV_CTRL_HPOS:
         k = position_rows(rows, k, g, 0, D, position[0] - pm[0], var)
@@ -518,9 +550,8 @@ def fuse_vision(memory: FilterArrays, A: Any, t: float, vision: VisionMeasuremen
         g += 1
     if g == 0:
         return
-    accepted = np.zeros(g)
-    fuse(memory, MeasurementRows(H[:k], r[:k], y[:k], row_group[:k]),
-         Groups(group_source[:g], group_gate[:g], accepted))  # fmt: skip
+    fused_rows, fused_groups = used(rows, k, groups, g)
+    fuse(memory, fused_rows, fused_groups)
     now = F[MEMORY.time]
     for j in range(g):
         src, ok = int(group_source[j]), accepted[j] != 0.0
@@ -541,7 +572,7 @@ def fuse_vision_velocity(memory: FilterArrays, A: Any, t: float, velocity: Vecto
     """External vision velocity (world, paper frame) arrived at ``t``, valid EKF2_EV_DELAY before:
     the three axes gated together (EKF2_EVV_GATE), as PX4's EKF2 fuses ``ev_vel`` when
     EKF2_EV_CTRL bit 2 is set. Accepted, it is horizontal aiding (no dead reckoning)."""
-    F, P, ring, stats, W = memory
+    F, P, ring, stats, W, scratch = memory
     if not int(A[PARAMETERS.ev_ctrl]) & EV_CTRL_VEL:
         return
     past = state_at(F, ring, t - A[PARAMETERS.ev_delay_s])
@@ -550,14 +581,12 @@ def fuse_vision_velocity(memory: FilterArrays, A: Any, t: float, velocity: Vecto
         return
     vm = past.velocity_m_s
     var = ev_vel_variance(A, velocity_std)
-    H, r, y, row_group = np.zeros((3, N)), np.empty(3), np.empty(3), np.zeros(3)
-    rows = MeasurementRows(H, r, y, row_group)
+    rows, groups = measurement_rows(scratch, 3), measurement_groups(scratch, 1)
     k = 0
     for axis in range(3):
         k = velocity_row(rows, k, 0, axis, velocity[axis] - vm[axis], var)
-    accepted = np.zeros(1)
-    source, gate = np.full(1, float(SOURCE.ev_vel)), np.full(1, A[PARAMETERS.ev_vel_gate])
-    fuse(memory, rows, Groups(source, gate, accepted))
-    if accepted[0] != 0.0:
+    groups.source[0], groups.gate[0] = SOURCE.ev_vel, A[PARAMETERS.ev_vel_gate]
+    fuse(memory, rows, groups)
+    if groups.accepted[0] != 0.0:
         F[MEMORY.last_h_aid] = F[MEMORY.time]
     check_vertical_accel(F, stats, W)

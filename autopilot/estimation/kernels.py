@@ -184,19 +184,43 @@ def prior_variances(P: np.ndarray, H: np.ndarray, out: np.ndarray) -> None:
         out[k] = s
 
 
+def update_work_size(m: int, n: int) -> int:
+    """Floats :func:`joseph_update` works in for ``m`` rows of an ``n``-state filter: P H^T, K and
+    X H^T (n x m each), S and its factor L (m x m), a solve's vector (m), H P (m x n), X (n x n)."""
+    return 3 * n * m + 2 * m * m + m + m * n + n * n
+
+
 @kernel
-def joseph_update(P: np.ndarray, H: np.ndarray, r: np.ndarray, y: np.ndarray, dx: np.ndarray) -> None:
+def joseph_update(
+    P: np.ndarray, H: np.ndarray, r: np.ndarray, y: np.ndarray, dx: np.ndarray, work: np.ndarray
+) -> None:
     """One batch update of ``P`` (in place, Joseph form, see the module) for the rows ``H`` (m x N)
-    with noise variances ``r`` and innovations ``y``; the error ``K y`` into ``dx`` (N)."""
+    with noise variances ``r`` and innovations ``y``; the error ``K y`` into ``dx`` (N). ``work``:
+    at least :func:`update_work_size` floats, where the products are formed (a filter updating at
+    sensor rate allocates nothing)."""
     m, n = H.shape
-    PHt = np.empty((n, m))
+    at = 0
+    PHt = work[at : at + n * m].reshape((n, m))
+    at += n * m
+    S = work[at : at + m * m].reshape((m, m))
+    at += m * m
+    L = work[at : at + m * m].reshape((m, m))
+    at += m * m
+    K = work[at : at + n * m].reshape((n, m))
+    at += n * m
+    z = work[at : at + m]
+    at += m
+    HP = work[at : at + m * n].reshape((m, n))
+    at += m * n
+    X = work[at : at + n * n].reshape((n, n))
+    at += n * n
+    XHt = work[at : at + n * m].reshape((n, m))
     matrix_product(P, H.T, PHt)
     # S = H P H^T + R and its Cholesky factor L (S = L L^T).
-    S = np.empty((m, m))
     matrix_product(H, PHt, S)
     for a in range(m):
         S[a, a] += r[a]
-    L = np.zeros((m, m))
+    L[:] = 0.0
     for a in range(m):
         for b in range(a + 1):
             s = S[a, b]
@@ -207,8 +231,6 @@ def joseph_update(P: np.ndarray, H: np.ndarray, r: np.ndarray, y: np.ndarray, dx
             else:
                 L[a, b] = s / L[b, b]
     # K = P H^T S^-1: row i of K solves S k = (P H^T)_i (forward, then back substitution).
-    K = np.empty((n, m))
-    z = np.empty(m)
     for i in range(n):
         for a in range(m):
             s = PHt[i, a]
@@ -226,9 +248,7 @@ def joseph_update(P: np.ndarray, H: np.ndarray, r: np.ndarray, y: np.ndarray, dx
             s += K[i, k] * y[k]
         dx[i] = s
     # X = (I - K H) P = P - K (H P); H P = (P H^T)^T only for an exactly symmetric P, so computed.
-    HP = np.empty((m, n))
     matrix_product(H, P, HP)
-    X = np.empty((n, n))
     for i in range(n):
         for j in range(n):
             s = P[i, j]
@@ -236,7 +256,6 @@ def joseph_update(P: np.ndarray, H: np.ndarray, r: np.ndarray, y: np.ndarray, dx
                 s -= K[i, k] * HP[k, j]
             X[i, j] = s
     # P = X (I - K H)^T + K R K^T = X - (X H^T) K^T + K R K^T, upper triangle then mirrored.
-    XHt = np.empty((n, m))
     matrix_product(X, H.T, XHt)
     for i in range(n):
         for j in range(i, n):

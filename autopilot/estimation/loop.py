@@ -68,6 +68,7 @@ class EstimatorLoop:
         self._pending: SensorSamples | None = None  # the aiding of the last predict(), not yet fused
         self._external: VisionPose | None = None  # a client's vision pose, fused with the next frame's aiding
         self._converged_since: float | None = None  # filter time of the first "converged" in a row
+        self._estimate_of: tuple[object, StateEstimate | None] = (None, None)  # (the filter's, ours)
 
     def step(self, t: float, samples: SensorSamples) -> StateEstimate | None:
         """Predict with this frame's IMU sample, fuse what arrived; the estimate, or None while
@@ -134,7 +135,10 @@ class EstimatorLoop:
         if not ekf.initialised:
             return None
         e = ekf.estimate()
-        return StateEstimate(e.position_m, e.velocity_m_s, e.euler_rad, e.euler_rates_rad_s)
+        if e is not self._estimate_of[0]:  # (the filter's own record again when nothing changed)
+            state = StateEstimate(e.position_m, e.velocity_m_s, e.euler_rad, e.euler_rates_rad_s)
+            self._estimate_of = (e, state)
+        return self._estimate_of[1]
 
     def start_in_air(self, t: float, samples: SensorSamples, pose: StateEstimate) -> None:
         """Initialise from ``pose`` at this frame instead of :meth:`step` (an in-air start: no

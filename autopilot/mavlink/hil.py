@@ -8,11 +8,13 @@ request, from HIL_STATE_QUATERNION (position quantised to 1e-7 deg ~ 1 cm, veloc
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 from typing import NamedTuple
 
 from quadcommon import frames, wire
+from quadcommon.kernel import compiled, compiling, freeze
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.rigid_body import (
     rotation_from_quaternion,
@@ -97,9 +99,12 @@ def _decode_frame(datagram: bytes, parser, home, use_odometry: bool, sensors: bo
     if raw is not None and (use_odometry or _ID_STATE not in parts):
         payload = _ODOMETRY.payload(raw)
         t, x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r = _ODOMETRY_STATE.unpack_from(payload)
-        state = state_from_odometry_fields(
-            (qw, qx, qy, qz), (x, y, z), (vx, vy, vz), (p, q, r), payload[_ODOMETRY_CHILD_FRAME]
-        )
+        child_frame_id = payload[_ODOMETRY_CHILD_FRAME]
+        position, velocity, q_ned, rates = (x, y, z), (vx, vy, vz), (qw, qx, qy, qz), (p, q, r)
+        if child_frame_id in _BODY_FRAMES:
+            state = state_from_odometry_fields(q_ned, position, velocity, rates, child_frame_id)
+        else:  # (every frame of the simulator's: compiled, the struct's floats as they are)
+            state = StateEstimate(*odometry_state_entry()(position, velocity, q_ned, rates))
         return Frame(t, state, samples, parts, streams)
     raw = parts.get(_ID_STATE)
     if raw is None:
@@ -401,12 +406,28 @@ def state_from_odometry(msg) -> StateEstimate:
     )
 
 
+@functools.cache
+def odometry_state_entry():
+    """ODOMETRY's state with a world twist (:func:`quadcommon.wire_values.odometry_state`) as the
+    frame decoder reads it every frame: compiled (or loaded from numba's cache) and run once at
+    start, then frozen (a flight never waits for a compilation). Floats only."""
+    entry = compiled(odometry_state)
+    if compiling():
+        z3 = (0.0, 0.0, 0.0)
+        entry(z3, z3, (1.0, 0.0, 0.0, 0.0), z3)
+        freeze(entry)
+    return entry
+
+
+_BODY_FRAMES = (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED)
+
+
 def state_from_odometry_fields(
     q_ned, position_ned, velocity_child, rates_frd, child_frame_id
 ) -> StateEstimate:
     """ODOMETRY fields (NED pose, twist in ``child_frame_id``, FRD rates) -> paper frames
     (:func:`quadcommon.wire_values.odometry_state`; a body twist rotated by the attitude)."""
-    if child_frame_id in (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED):
+    if child_frame_id in _BODY_FRAMES:
         q, euler, euler_rates = attitude_from_fields(tuple(q_ned), rates_frd)
         v_body = frames.vector_from_ned(velocity_child)
         R = rotation_from_quaternion(*q)

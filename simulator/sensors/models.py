@@ -43,6 +43,7 @@ import numpy as np
 from quadcommon import rng as random_stream
 from quadcommon.failures import Type
 from quadcommon.kernel import compiled, compiling, freeze
+from quadcommon.layout import reader
 
 from ..dynamics.plant import TruthState
 from . import frame, kernels
@@ -122,6 +123,20 @@ class SensorFrame(NamedTuple):
     baro: BaroReading | None = None
     gps: GpsReading | None = None
     vision: VisionReading | None = None
+
+
+# What step() reads of a frame's delivery (generated reads, literal offsets): every frame, then each
+# sensor's reading when it delivered.
+_READ_EVERY_FRAME = reader(frame.DELIVERY, (
+    "force", "rate", "mag_fresh", "baro_fresh", "gps_fresh", "vision_fresh", "held_mag", "held_baro_pressure",
+    "held_baro_altitude", "held_baro_temperature", "held_baro_time", "accel_fresh", "gyro_fresh",
+))  # fmt: skip
+_READ_MAG = reader(frame.DELIVERY, ("mag_time", "mag_field"))
+_READ_BARO = reader(frame.DELIVERY, ("baro_pressure", "baro_altitude", "baro_temperature", "baro_time"))
+_READ_GPS = reader(frame.DELIVERY, ("gps_position", "gps_velocity", "gps_eph", "gps_epv", "gps_satellites",
+                                    "gps_time", "gps_speed_accuracy", "gps_fix_type"))  # fmt: skip
+_READ_VISION = reader(frame.DELIVERY, ("vision_time", "vision_position", "vision_yaw", "vision_position_std",
+                                       "vision_yaw_std"))  # fmt: skip
 
 
 class SensorSuite:
@@ -221,31 +236,20 @@ class SensorSuite:
     def step(self, t_s: float, truth: TruthState) -> SensorFrame:
         """Advance the sensors' random walks to ``t_s`` and return what is delivered at ``t_s``."""
         self._k.sensor_frame_fields(self.rng, self._S, self._C, self._faults, t_s, tuple(truth), self._out)
-        o, D = self._out.tolist(), frame.DELIVERY
-        f, r = D.force, D.rate
-        imu = ImuReading((o[f], o[f + 1], o[f + 2]), (o[r], o[r + 1], o[r + 2]), t_s)
-        m = D.mag_field
-        mag = MagReading(o[D.mag_time], (o[m], o[m + 1], o[m + 2])) if o[D.mag_fresh] else None
-        baro = None
-        if o[D.baro_fresh]:
-            baro = BaroReading(o[D.baro_pressure], o[D.baro_altitude], o[D.baro_temperature], o[D.baro_time])
+        o = self._out.tolist()
+        (force, rate, mag_fresh, baro_fresh, gps_fresh, vision_fresh, held_mag, *held_baro, accel_fresh,
+         gyro_fresh) = _READ_EVERY_FRAME(o)  # fmt: skip
+        imu = ImuReading(force, rate, t_s)
+        mag = MagReading(*_READ_MAG(o)) if mag_fresh else None
+        baro = BaroReading(*_READ_BARO(o)) if baro_fresh else None
         gps = None
-        if o[D.gps_fresh]:
-            p, v = D.gps_position, D.gps_velocity
-            gps = GpsReading((o[p], o[p + 1], o[p + 2]), (o[v], o[v + 1], o[v + 2]), o[D.gps_eph],
-                             o[D.gps_epv], int(o[D.gps_satellites]), o[D.gps_time], o[D.gps_speed_accuracy],
-                             int(o[D.gps_fix_type]))  # fmt: skip
-        vision = None
-        if o[D.vision_fresh]:
-            p = D.vision_position
-            vision = VisionReading(o[D.vision_time], (o[p], o[p + 1], o[p + 2]), o[D.vision_yaw],
-                                   o[D.vision_position_std], o[D.vision_yaw_std])  # fmt: skip
-        held_baro = BaroReading(o[D.held_baro_pressure], o[D.held_baro_altitude], o[D.held_baro_temperature],
-                                o[D.held_baro_time])  # fmt: skip
-        m = D.held_mag
-        readings = SensorReadings(imu, (o[m], o[m + 1], o[m + 2]), held_baro, mag is not None,
-                                  baro is not None, o[D.accel_fresh] != 0.0,
-                                  o[D.gyro_fresh] != 0.0)  # fmt: skip
+        if gps_fresh:
+            position, velocity, eph, epv, satellites, t_fix, speed_accuracy, fix_type = _READ_GPS(o)
+            gps = GpsReading(position, velocity, eph, epv, int(satellites), t_fix, speed_accuracy,
+                             int(fix_type))  # fmt: skip
+        vision = VisionReading(*_READ_VISION(o)) if vision_fresh else None
+        readings = SensorReadings(imu, held_mag, BaroReading(*held_baro), mag is not None, baro is not None,
+                                  accel_fresh != 0.0, gyro_fresh != 0.0)  # fmt: skip
         return SensorFrame(t_s, imu, readings, mag, baro, gps, vision)
 
     # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------

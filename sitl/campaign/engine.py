@@ -240,18 +240,18 @@ def estimator_memory(sensors: SensorConfig, params: EstimatorParams, gravity_m_s
     autopilot's parameters and field. Fresh per flight: the flight writes into it."""
     rng, S, C = sensor_frame.new_sensors(sensors, home_altitude_m, imu_rate_hz)
     faults = sensor_frame.fault_array(sensors.faults)
-    F, P, ring, stats, windows = ekf.new_memory()
+    F, P, ring, stats, windows, scratch = ekf.new_memory()
     A = ekf.parameter_array(params, gravity_m_s2, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
     delivery = np.zeros(sensor_frame.DELIVERY.size)
     rng = np.asarray(rng, dtype=float)
-    return lay.EstimatorArrays(rng, S, C, faults, delivery, F, P, ring, stats, windows, A)
+    return lay.EstimatorArrays(rng, S, C, faults, delivery, F, P, ring, stats, windows, scratch, A)
 
 
 def no_estimation() -> lay.EstimatorArrays:
     """Placeholder memory of a flight on the truth (the types :func:`estimator_memory`'s has)."""
     one, square = np.zeros(1), np.zeros((1, 1))
     no_faults = np.zeros((0, sensor_frame.FAULT.size))
-    return lay.EstimatorArrays(one, one, one, no_faults, one, one, square, square, square, square, one)
+    return lay.EstimatorArrays(one, one, one, no_faults, one, one, square, square, square, square, one, one)
 
 
 @functools.cache

@@ -215,6 +215,7 @@ class EstimatorArrays(NamedTuple):
     ring: Any
     stats: Any
     windows: Any
+    scratch: Any  # filter.SCRATCH
     parameters: Any  # filter.PARAMETERS
 
 
@@ -330,7 +331,7 @@ def fuse_aiding(t, S, est):
     if wire and d[D.vision_fresh] != 0.0:  # through VISION_POSITION_ESTIMATE's fields
         p_ned, yaw_ned, p_var, yaw_var = vision_values(vision_position, yaw, position_std, yaw_std)
         vision_position, yaw, position_std, yaw_std = vision_pose(p_ned, yaw_ned, p_var, yaw_var)
-    memory = FilterArrays(est.memory, est.covariance, est.ring, est.stats, est.windows)
+    memory = FilterArrays(est.memory, est.covariance, est.ring, est.stats, est.windows, est.scratch)
     fuse_frame(memory, est.parameters, t, Aiding(
         d[D.mag_fresh] != 0.0, mag, d[D.baro_fresh] != 0.0, height,
         d[D.gps_fresh] != 0.0, position, velocity, (eph, epv, speed_accuracy),
@@ -471,7 +472,7 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
         borrowed(est.rng), borrowed(est.sensor_state), borrowed(est.sensor_figures),
         borrowed(est.sensor_faults),
         borrowed(est.delivered), borrowed(est.memory), borrowed(est.covariance), borrowed(est.ring),
-        borrowed(est.stats), borrowed(est.windows), borrowed(est.parameters),
+        borrowed(est.stats), borrowed(est.windows), borrowed(est.scratch), borrowed(est.parameters),
     )
     plant_work = np.zeros((2, n))  # truth()'s state and derivative
     t_estimator = 0.0

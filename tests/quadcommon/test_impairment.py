@@ -173,3 +173,20 @@ def test_a_live_change_applies_to_the_links_it_names_and_reports_them():
     assert '"api in": {"impairment": "loss=100%"' in reply.decode()
     ok, reply = links.change(b"api:loss=500%")
     assert not ok and "loss=500% is out of range" in reply.decode() and links.config.api.loss == 1.0
+
+
+def test_endpoints_are_active_once_a_link_has_a_channel_at_start_or_by_a_live_change():
+    """What a shell's loop asks every frame (flush the held datagrams?) follows the channels."""
+    from quadcommon.impaired_udp import ImpairedLinks
+
+    perfect = ImpairedLinks(ImpairConfig(), "in-process")
+    perfect.receiver("gcs", "in")
+    perfect.receiver("api", "out")
+    assert not perfect.endpoints_active
+    ok, _ = perfect.change(b"gcs:delay=20ms")
+    assert ok and perfect.endpoints_active
+    impaired = ImpairedLinks(ImpairConfig().with_specs(["hil:loss=1%"]), "simulator")
+    impaired.receiver("gcs", "in")
+    assert not impaired.endpoints_active
+    impaired.receiver("hil", "sim->ap")
+    assert impaired.endpoints_active

@@ -14,6 +14,7 @@ from quadcommon.layout import (
     fields_of,
     layout,
     quaternion_at,
+    reader,
     set_quaternion_at,
     set_vector_at,
     values,
@@ -95,3 +96,12 @@ def test_values_are_ordered_by_the_layout_and_checked_by_name():
         values(SETTINGS, dtt=0.5, home=(1, 2, 3), final=(1, 2, 3))
     with pytest.raises(ValueError, match="home: 2 values for 3"):
         values(SETTINGS, dt=0.5, home=(1, 2), final=(1, 2, 3))
+
+
+def test_a_reader_gives_the_named_fields_of_a_record_in_the_order_asked():
+    read = reader(SETTINGS, ("final", "dt", "home"))
+    memory = [0.5, 1.0, 2.0, 3.0, 7.0, 8.0, 9.0]
+    assert read(memory) == ((7.0, 8.0, 9.0), 0.5, (1.0, 2.0, 3.0))
+    assert reader(EXTRA, ("extra",))([*memory, 4.0]) == (4.0,)  # a layout after another: its offsets
+    with pytest.raises(ValueError, match="Settings has no field 'speed'"):
+        reader(SETTINGS, ("speed",))

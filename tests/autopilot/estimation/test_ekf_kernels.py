@@ -62,7 +62,8 @@ def flight(steps: int = 1500):
 
 def fly_kernels(entries, params, frames):
     """The filter's memory after ``frames``, driven by calling ``entries`` directly."""
-    F, P, ring, stats, W = fk.new_memory()
+    memory = fk.new_memory()
+    F, P, ring = memory.state, memory.covariance, memory.ring
     A = fk.parameter_array(params, G, DEFAULT_EARTH_FIELD_WORLD_GAUSS)
     first = frames[0]["imu"]
     q0 = quaternion_from_euler(0.02, -0.01, 0.0)
@@ -91,8 +92,8 @@ def fly_kernels(entries, params, frames):
                                      vision_yaw_rad=v.yaw_rad,
                                      vision_std=(v.position_std_m, v.yaw_std_rad))  # fmt: skip
         if aiding is not NO_AIDING:
-            entries.fuse_frame(F, P, ring, stats, W, A, imu.time_s, tuple(aiding))
-    return F, P, stats, int(entries.not_converged(F, P, A))
+            entries.fuse_frame(tuple(memory), A, imu.time_s, tuple(aiding))
+    return F, P, memory.stats, int(entries.not_converged(F, P, A))
 
 
 def fly_class(params, frames) -> ErrorStateEkf:

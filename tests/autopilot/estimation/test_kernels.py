@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from autopilot.estimation import load_estimator_params
 from autopilot.estimation.eskf import filter_entries
-from autopilot.estimation.kernels import IBA, IBG, IP, ITH, IV, ImuStep, N, NominalState
+from autopilot.estimation.kernels import IBA, IBG, IP, ITH, IV, ImuStep, N, NominalState, update_work_size
 from quadcommon.kernel import PROJECT_ROOT, compiling
 from simulator.sensors import load_sensors
 
@@ -111,7 +111,8 @@ def test_the_joseph_update_is_the_textbook_kalman_update(rows):
         assert prior == pytest.approx(np.diag(H @ P0 @ H.T), rel=1e-12)
 
         P, dx = P0.copy(), np.empty(N)
-        entries.joseph_update(P, H, r, y, dx)
+        work = np.full(update_work_size(rows, N), np.nan)  # (nothing read before it is written)
+        entries.joseph_update(P, H, r, y, dx, work)
         S = H @ P0 @ H.T + np.diag(r)
         K = P0 @ H.T @ np.linalg.inv(S)
         A = np.eye(N) - K @ H
