@@ -198,7 +198,8 @@ class SimulatorCore:
         self._probe = new_parser()  # for is_autopilot: never touches the lockstep decoder
         self.k = 0  # the frame being flown
         self.time_usec = 0
-        self.truth_row: tuple[float, ...] = ()
+        self._truth_row_of: tuple = ()  # what frame k's truth row is made of (truth_row)
+        self._truth_row: tuple[float, ...] | None = ()
         self.disturbance_report = DisturbanceReport()
         self.frame_datagram = b""  # the current frame's, as sent: a resend repeats it byte for byte
         self.resends = 0  # frames sent again for want of an answer (a lost frame or answer)
@@ -233,7 +234,7 @@ class SimulatorCore:
         force, torque, wind = self.schedule.evaluate(t)
         sensed = self.sensors.step(t, truth)
         health = self.rotor_health
-        self.truth_row = truth_row(t, truth, force, torque, wind, health)
+        self._truth_row_of, self._truth_row = (t, truth, force, torque, wind, health), None
         report = self.disturbance_report.due(time_usec, (force, torque, health))
         battery = self.battery.frame(t, self.dt_control if k > 0 else 0.0, truth, self._armed)
         try:
@@ -244,6 +245,14 @@ class SimulatorCore:
             raise PlantDiverged(f"the plant state no longer fits the wire's float32 at t={t:.3f} s") from exc
         self.frame_datagram = datagram
         return datagram
+
+    @property
+    def truth_row(self) -> tuple[float, ...]:
+        """Frame ``k``'s truth row (:func:`~.truth_bus.truth_row`), made when first read: the
+        process reads it after the frame is out, while the autopilot computes its answer."""
+        if self._truth_row is None:
+            self._truth_row = truth_row(*self._truth_row_of)
+        return self._truth_row
 
     def resend_frame(self) -> bytes:
         """The current frame again, unchanged (its answer is overdue: the frame or the answer was
