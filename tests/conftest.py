@@ -72,13 +72,14 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         raise pytest.UsageError(f"quadsitl compile failed:\n{compiled.stdout}{compiled.stderr}")
 
 
-# The longest tests and modules (measured: a minute or more of wall time on two cores, most of it
-# waiting on vehicles), handed out first in this order: (node id prefix).
+# The longest tests and modules (measured: 30 s to a minute or more of wall time with three workers
+# on two cores), handed out first in this order (node id prefixes).
 FIRST = (
-    "tests/compat/test_mavsdk3.py::test_mavsdk_python3s_own_follow_me_orbit",
-    "tests/sitl/test_inprocess.py",
     "tests/compat/test_mavsdk3.py::test_mavsdk_python3_examples_fly",
+    "tests/sitl/test_inprocess.py",
     "tests/compat/test_mavsdk3.py",
+    "tests/sitl/test_failures_flown.py",
+    "tests/sitl/test_fuzz.py",
     "tests/compat/test_mavsdk.py::test_the_geofence_and_manual_control_examples",
     "tests/sitl/test_manual_modes_sitl.py",
     "tests/sitl/campaign/test_cli.py",
