@@ -161,8 +161,9 @@ CLIENT_EXAMPLES_LIMIT_S = 150
 # examples start their own on udpin://0.0.0.0:14540, as written. The download example's file is a PX4
 # flight-controller firmware image: the one change is that path, to a log on this vehicle (sed on
 # a temporary copy). The IMU example prints until it is stopped (10 s: it prints at 200 Hz once
-# connected). The shell example is given "ver all" on its stdin after 8 s; the script does not wait
-# for that input to be written when the example has left before (it leaves at the prompt).
+# connected), maybe in the middle of a line: its exit status goes on a line of its own. The shell
+# example is given "ver all" on its stdin after 8 s; the script does not wait for that input to be
+# written when the example has left before (it leaves at the prompt).
 INSIDE_CLIENT_EXAMPLES = """
 set -u
 ip link set lo up
@@ -175,7 +176,7 @@ echo "=== ftp_list_dir"; timeout 40 "{client}" "{examples}/ftp_list_dir.py"; ech
 echo "=== ftp_download_file"; timeout 40 "{client}" "{download}"; echo "=== rc $?"
 kill $server; wait $server
 echo "=== logfile_download"; timeout 60 "{client}" "{examples}/logfile_download.py"; echo "=== rc $?"
-echo "=== highres_imu"; timeout 10 "{client}" "{examples}/highres_imu.py"; echo "=== rc $?"
+echo "=== highres_imu"; timeout 10 "{client}" "{examples}/highres_imu.py"; rc=$?; echo; echo "=== rc $rc"
 echo "=== shell"; timeout 20 "{client}" "{examples}/shell.py" < <(exec 2>/dev/null; sleep 8; echo "ver all")
 rc=$?; echo; echo "=== rc $rc"
 kill -INT $up 2>/dev/null; wait $up
