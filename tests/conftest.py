@@ -17,7 +17,8 @@ with third-party clients ``compat`` as well): ``-m "not processes"`` runs the in
   process takes the core its peer or the other workers need. The benchmarks measure the SITL with
   its default spin.
 * The order xdist hands the tests out in (:func:`pytest_collection_modifyitems`): the longest
-  first (:data:`FIRST`), so none is left to run alone at the end; then the modules that start
+  first, so none is left to run alone at the end, and the live view's wall-clock tests beside them
+  (:data:`FIRST`); then the modules that start
   processes (marked ``processes``: they wait on real processes and the wall clock) one for one with
   the in-process ones, so that while a worker waits on a vehicle the others keep the cores busy.
   A module's tests run on one worker (``--dist loadfile``), in order, except those of
@@ -72,12 +73,16 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         raise pytest.UsageError(f"quadsitl compile failed:\n{compiled.stdout}{compiled.stderr}")
 
 
-# The longest tests and modules (measured: 30 s to a minute or more of wall time with three workers
-# on two cores), handed out first in this order (node id prefixes).
+# Handed out first, in this order (node id prefixes): the longest tests and modules (30 s to a minute
+# or more of wall time with three workers on two cores), and the live view's browser tests, which
+# watch a vehicle at the wall clock's pace (a page's update rate, a gust sent while it flies): they
+# start beside the MAVSDK-Python 3 tests, which mostly wait, rather than beside two workers computing.
 FIRST = (
     "tests/compat/test_mavsdk3.py::test_mavsdk_python3_examples_fly",
-    "tests/sitl/test_inprocess.py",
+    "tests/gcs_scripts/view/test_browser_sitl.py",
     "tests/compat/test_mavsdk3.py",
+    "tests/gcs_scripts/view/test_live_sitl.py",
+    "tests/sitl/test_inprocess.py",
     "tests/sitl/test_failures_flown.py",
     "tests/sitl/test_fuzz.py",
     "tests/compat/test_mavsdk.py::test_the_geofence_and_manual_control_examples",
