@@ -16,8 +16,13 @@ with third-party clients ``compat`` as well): ``-m "not processes"`` runs the in
   (``QUADSITL_LOCKSTEP_SPIN_S=0``, docs/running.md): three workers share two cores, and a spinning
   process takes the core its peer or the other workers need. The benchmarks measure the SITL with
   its default spin.
-* The modules marked ``processes`` are collected first: they wait on real processes and the wall
-  clock, so xdist hands them out before the short in-process ones that fill the gaps.
+* The order xdist hands the tests out in (:func:`pytest_collection_modifyitems`): the longest
+  first, so none is left to run alone at the end, and the live view's wall-clock tests beside them
+  (:data:`FIRST`); then the modules that start
+  processes (marked ``processes``: they wait on real processes and the wall clock) one for one with
+  the in-process ones, so that while a worker waits on a vehicle the others keep the cores busy.
+  A module's tests run on one worker (``--dist loadfile``), in order, except those of
+  :data:`PER_TEST`, whose tests each start a vehicle of their own and are handed out one by one.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from itertools import zip_longest
 
 import pytest
 
@@ -67,6 +73,59 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         raise pytest.UsageError(f"quadsitl compile failed:\n{compiled.stdout}{compiled.stderr}")
 
 
+# Handed out first, in this order (node id prefixes): the longest tests and modules (30 s to a minute
+# or more of wall time with three workers on two cores), and the live view's browser tests, which
+# watch a vehicle at the wall clock's pace (a page's update rate, a gust sent while it flies): they
+# start beside the MAVSDK-Python 3 tests, which mostly wait, rather than beside two workers computing.
+FIRST = (
+    "tests/compat/test_mavsdk3.py::test_mavsdk_python3_examples_fly",
+    "tests/gcs_scripts/view/test_browser_sitl.py",
+    "tests/compat/test_mavsdk3.py",
+    "tests/gcs_scripts/view/test_live_sitl.py",
+    "tests/sitl/test_inprocess.py",
+    "tests/sitl/test_failures_flown.py",
+    "tests/sitl/test_fuzz.py",
+    "tests/compat/test_mavsdk.py::test_the_geofence_and_manual_control_examples",
+    "tests/sitl/test_manual_modes_sitl.py",
+    "tests/sitl/campaign/test_cli.py",
+    "tests/sitl/campaign/test_dask.py",
+)
+# Modules whose tests share no costly fixture (each flies a vehicle of its own): with -n, each test is
+# a unit of work of its own, so a module's minutes spread over the workers.
+PER_TEST = ("tests/compat/test_mavsdk3.py", "tests/compat/test_mavsdk.py")
+
+
+def _unit(nodeid: str) -> str:
+    """The unit of work a test is handed out in: its module, or itself in a :data:`PER_TEST` module."""
+    path = nodeid.split("::", 1)[0]
+    return nodeid if path in PER_TEST else path
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    # Stable: the order within each group stays pytest's.
-    items.sort(key=lambda item: item.get_closest_marker("processes") is None)
+    units: dict[str, list[pytest.Item]] = {}
+    for item in items:
+        units.setdefault(_unit(item.nodeid), []).append(item)
+
+    def rank(unit: str) -> int:
+        return next((i for i, prefix in enumerate(FIRST) if unit.startswith(prefix)), len(FIRST))
+
+    first = sorted((u for u in units if rank(u) < len(FIRST)), key=rank)  # stable: pytest's order within
+    rest = [u for u in units if rank(u) == len(FIRST)]
+    waiting = [u for u in rest if units[u][0].get_closest_marker("processes") is not None]
+    computing = [u for u in rest if units[u][0].get_closest_marker("processes") is None]
+    mixed = [u for pair in zip_longest(waiting, computing) for u in pair if u is not None]
+    items[:] = [item for unit in first + mixed for item in units[unit]]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """``--dist loadfile`` with the tests of :data:`PER_TEST` modules handed out one by one."""
+    if config.getoption("dist", None) != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class Scheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return _unit(nodeid)
+
+    return Scheduling(config, log)

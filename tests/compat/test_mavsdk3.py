@@ -43,7 +43,11 @@ ORBIT_EXAMPLE = Path(__file__).with_name("upstream") / "do_orbit.py"
 ORBIT_EXAMPLE_BLOB = "d824308bd682c21deb9d1bba4595e48fb3777670"
 ATTITUDE_EXAMPLE = Path(__file__).with_name("upstream") / "offboard_attitude.py"
 ATTITUDE_EXAMPLE_BLOB = "b1ca62589ed4ef4035533cfbbe30a2dfef12ec4f"
-ORBIT_FOLLOW_LIMIT_S = 170  # the examples sleep 27 s, 70 s and 8 s of wall time
+ORBIT_FOLLOW_LIMIT_S = 170  # the examples wait 27 s, 70 s and 8 s: 105 s at real time
+# The vehicle's speed for the three examples; paced.py divides their waits by it, so they wait the
+# simulated seconds they wait against a vehicle at real time (35 s of wall time in all).
+ORBIT_FOLLOW_SPEED = 3
+PACED = Path(__file__).with_name("paced.py")
 
 INSIDE = """
 set -u
@@ -57,21 +61,22 @@ exit $rc
 """
 
 
-# The three examples on one vehicle at the wall clock's pace (they sleep in wall seconds, as against
-# PX4 SITL): follow-me first (it ends landing), then, once the vehicle has landed and disarmed, the
-# orbit (it ends with a return to launch, left to fly when the script leaves), then offboard attitude
-# (taken over in the air: its arm is answered "already armed", its sequence then flown whole).
+# The three examples on one vehicle at --speed ORBIT_FOLLOW_SPEED, each run unchanged by paced.py with
+# its waits (asyncio.sleep: wall seconds, against PX4 SITL at real time) divided by that factor:
+# follow-me first (it ends landing), then, once the vehicle has landed and disarmed, the orbit (it
+# ends with a return to launch, left to fly when the script leaves), then offboard attitude (taken
+# over in the air: its arm is answered "already armed", its sequence then flown whole).
 INSIDE_ORBIT_FOLLOW = """
 set -u
 ip link set lo up
-{quadsitl} up --speed 1 --no-log > "{log}" 2>&1 &
+{quadsitl} up --speed {speed} --no-log > "{log}" 2>&1 &
 up=$!
-timeout {limit} "{client}" "{follow}"
+timeout {limit} "{client}" "{paced}" {speed} "{follow}"
 follow=$?
 for i in $(seq 120); do grep -q "landed: disarmed" "{log}" && break; sleep 0.25; done
-timeout {limit} "{client}" "{orbit}"
+timeout {limit} "{client}" "{paced}" {speed} "{orbit}"
 orbit=$?
-timeout {limit} "{client}" "{attitude}"
+timeout {limit} "{client}" "{paced}" {speed} "{attitude}"
 attitude=$?
 kill -INT $up 2>/dev/null; wait $up
 echo "exit codes: follow $follow orbit $orbit attitude $attitude"
@@ -155,7 +160,10 @@ CLIENT_EXAMPLES_LIMIT_S = 150
 # ``mavsdk_server_address``), so the script starts one for the vehicle; the log, IMU and shell
 # examples start their own on udpin://0.0.0.0:14540, as written. The download example's file is a PX4
 # flight-controller firmware image: the one change is that path, to a log on this vehicle (sed on
-# a temporary copy).
+# a temporary copy). The IMU example prints until it is stopped (10 s: it prints at 200 Hz once
+# connected), maybe in the middle of a line: its exit status goes on a line of its own. The shell
+# example is given "ver all" on its stdin after 8 s; the script does not wait for that input to be
+# written when the example has left before (it leaves at the prompt).
 INSIDE_CLIENT_EXAMPLES = """
 set -u
 ip link set lo up
@@ -168,8 +176,8 @@ echo "=== ftp_list_dir"; timeout 40 "{client}" "{examples}/ftp_list_dir.py"; ech
 echo "=== ftp_download_file"; timeout 40 "{client}" "{download}"; echo "=== rc $?"
 kill $server; wait $server
 echo "=== logfile_download"; timeout 60 "{client}" "{examples}/logfile_download.py"; echo "=== rc $?"
-echo "=== highres_imu"; timeout 20 "{client}" "{examples}/highres_imu.py"; echo "=== rc $?"
-echo "=== shell"; (sleep 8; echo "ver all") | timeout 20 "{client}" "{examples}/shell.py"
+echo "=== highres_imu"; timeout 10 "{client}" "{examples}/highres_imu.py"; rc=$?; echo; echo "=== rc $rc"
+echo "=== shell"; timeout 20 "{client}" "{examples}/shell.py" < <(exec 2>/dev/null; sleep 8; echo "ver all")
 rc=$?; echo; echo "=== rc $rc"
 kill -INT $up 2>/dev/null; wait $up
 """
@@ -255,7 +263,8 @@ def test_mavsdk_python3s_own_log_ftp_imu_and_shell_examples_run(tmp_path, flight
 @pytest.mark.timeout(ORBIT_FOLLOW_LIMIT_S + 60)
 def test_mavsdk_python3s_own_follow_me_orbit_and_offboard_attitude_examples_run_unchanged(tmp_path):
     """``examples/follow_me_example.py``, ``examples/do_orbit.py`` and
-    ``examples/offboard_attitude.py`` of MAVSDK-Python 3.15.3, unchanged, against one vehicle: every
+    ``examples/offboard_attitude.py`` of MAVSDK-Python 3.15.3, unchanged, against one vehicle (at
+    ``--speed 3``, their waits paced to it by ``paced.py``: the same simulated seconds): every
     call they make succeeds (the FLW_TGT_* configuration, AUTO.FOLLOW_TARGET, the target reports,
     DO_ORBIT, the return, OFFBOARD on SET_ATTITUDE_TARGET and its stop), and the vehicle says it flew
     them. What they fly is checked in simulation time (tests/sitl/test_orbit_follow.py,
@@ -270,8 +279,8 @@ def test_mavsdk_python3s_own_follow_me_orbit_and_offboard_attitude_examples_run_
     up_log = tmp_path / "up.log"
     each = ORBIT_FOLLOW_LIMIT_S // 2 + 10
     script = INSIDE_ORBIT_FOLLOW.format(quadsitl=QUADSITL, log=up_log, limit=each, client=CLIENT,
-                                        follow=FOLLOW_EXAMPLE, orbit=ORBIT_EXAMPLE,
-                                        attitude=ATTITUDE_EXAMPLE)  # fmt: skip
+                                        speed=ORBIT_FOLLOW_SPEED, paced=PACED, follow=FOLLOW_EXAMPLE,
+                                        orbit=ORBIT_EXAMPLE, attitude=ATTITUDE_EXAMPLE)  # fmt: skip
     result = subprocess.run(["unshare", "-n", "bash", "-c", script], capture_output=True, text=True,
                             timeout=ORBIT_FOLLOW_LIMIT_S + 30, cwd=REPO,
                             env=shipped_ports_environment())  # fmt: skip

@@ -6,11 +6,15 @@ magnetometer lost or stuck lets the mission go on; an IMU that stops ends in fli
 Each reaction is announced, reported (SYS_STATUS bits, HEARTBEAT, GPS_RAW_INT, the failsafe flags)
 and undone when the data returns. PX4's own tests of the same: test/mavsdk_tests/
 test_multicopter_failsafe.cpp ("Land on GPS lost during mission", "Continue on mag/baro
-lost/stuck during mission")."""
+lost/stuck during mission"). The flights with a failure in the square mission start from copies of
+one flight of it to its takeoff (:func:`mission`), so each costs only its own seconds."""
 
 from __future__ import annotations
 
+import copy
+import copyreg
 import math
+import struct
 
 import pytest
 from pymavlink.dialects.v20 import common as m
@@ -24,6 +28,10 @@ from sitl.inprocess import Lockstep
 from tests.stack import Gcs, connect
 
 pytestmark = pytest.mark.timeout(300)
+
+# The flight is copied for each test; pymavlink's codec keeps precompiled struct.Struct objects,
+# which copy by their format string.
+copyreg.pickle(struct.Struct, lambda s: (struct.Struct, (s.format,)))
 LAND_MODE = (4 << 16) | (6 << 24)  # AUTO.LAND: PX4 shows Descend as it
 SQUARE = {
     "frame": "paper",
@@ -97,6 +105,19 @@ def fly_mission(stack: Lockstep) -> Gcs:
     return gcs
 
 
+@pytest.fixture(scope="module")
+def _mission_taken_off() -> tuple[Lockstep, Gcs]:
+    stack = stack_with("gps")
+    return stack, fly_mission(stack)
+
+
+@pytest.fixture
+def mission(_mission_taken_off) -> tuple[Lockstep, Gcs]:
+    """The square mission on the EKF over GPS, flown to its takeoff (:func:`fly_mission`): a copy of
+    one such flight for each test, the same as flying it again (the stack is deterministic)."""
+    return copy.deepcopy(_mission_taken_off)
+
+
 def fresh(gcs: Gcs, kind: str):
     gcs.last.pop(kind, None)
     gcs.wait(lambda g: kind in g.last, sim_timeout=2.0, what=kind)
@@ -112,9 +133,8 @@ def texts(gcs: Gcs) -> str:
     return "".join(gcs.statustext)  # (a long STATUSTEXT comes in 50-byte chunks)
 
 
-def test_gps_lost_in_a_mission_falls_back_to_descend_and_lands(monkeypatch):
-    stack = stack_with("gps")
-    gcs = fly_mission(stack)
+def test_gps_lost_in_a_mission_falls_back_to_descend_and_lands(mission):
+    stack, gcs = mission
     commander = stack.autopilot.commander
     t_lost = stack.t
     stack.sim.sensors.add_fault(SensorFault("gps_outage", t_lost, 1000.0))
@@ -142,9 +162,8 @@ def test_gps_lost_in_a_mission_falls_back_to_descend_and_lands(monkeypatch):
     assert texts(gcs).count("Failsafe activated") == 1  # taken once
 
 
-def test_gps_back_during_the_descent_resumes_the_mission(monkeypatch):
-    stack = stack_with("gps")
-    gcs = fly_mission(stack)
+def test_gps_back_during_the_descent_resumes_the_mission(mission):
+    stack, gcs = mission
     commander = stack.autopilot.commander
     stack.sim.sensors.add_fault(SensorFault("gps_outage", stack.sim.t, 7.0))
     gcs.wait(lambda g: "triggering Descend" in texts(g), sim_timeout=10.0, what="the descent")
@@ -180,10 +199,9 @@ def test_vision_lost_under_motion_capture_descends_and_lands():
 
 @pytest.mark.parametrize("sensor, how", [("baro", "lost"), ("baro", "stuck"), ("mag", "lost"),
                                          ("mag", "stuck")])  # fmt: skip
-def test_a_mission_goes_on_without_its_barometer_or_magnetometer(sensor, how, monkeypatch):
-    stack = stack_with("gps")
-    broken = break_sensors(stack, monkeypatch)
-    gcs = fly_mission(stack)
+def test_a_mission_goes_on_without_its_barometer_or_magnetometer(sensor, how, mission, monkeypatch):
+    stack, gcs = mission
+    broken = break_sensors(stack, monkeypatch)  # (nothing broken yet: the frames as they were)
     commander = stack.autopilot.commander
     broken[sensor] = how
     seen = set()

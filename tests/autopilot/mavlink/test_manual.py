@@ -6,7 +6,10 @@ override and the loss of the stream: test_rc_override_loss.py."""
 
 from __future__ import annotations
 
+import copy
+import copyreg
 import math
+import struct
 from types import SimpleNamespace
 
 import pytest
@@ -34,13 +37,24 @@ MANUAL_MAINS = (MAIN_MANUAL, MAIN_STABILIZED, MAIN_ALTCTL, MAIN_POSCTL, MAIN_ACR
 
 
 # -- helpers shared by the manual-mode tests ----------------------------------------------------------
+# The takeoffs flown in this process, by (altitude, controller); pymavlink's codec keeps precompiled
+# struct.Struct objects, which copy by their format string.
+_AIRBORNE: dict[tuple[float, str], tuple] = {}
+copyreg.pickle(struct.Struct, lambda s: (struct.Struct, (s.format,)))
+
+
 def airborne(altitude: float = 2.5, controller: str = "intbs_nlhinf"):
-    """A vehicle holding at ``altitude`` in AUTO.LOITER (the takeoff the failsafe tests use)."""
-    stack = make_stack(controller=controller)
-    gcs = Gcs(stack)
-    gcs.wait_heartbeat()
-    take_off(gcs, altitude)
-    return stack, gcs
+    """A vehicle holding at ``altitude`` in AUTO.LOITER (the takeoff the failsafe tests use): a copy
+    of the one takeoff to it this process flies, the same as flying it again (the stack is
+    deterministic)."""
+    key = (altitude, controller)
+    if key not in _AIRBORNE:
+        stack = make_stack(controller=controller)
+        gcs = Gcs(stack)
+        gcs.wait_heartbeat()
+        take_off(gcs, altitude)
+        _AIRBORNE[key] = (stack, gcs)
+    return copy.deepcopy(_AIRBORNE[key])
 
 
 def hold_sticks(stack, gcs, seconds: float, x=0, y=0, z=500, r=0, every_s: float = 0.1, sample=None) -> None:
