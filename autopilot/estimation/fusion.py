@@ -214,7 +214,7 @@ def measurement_groups(scratch: Any, g: int) -> Groups:
 
 
 @kernel
-def used(rows: MeasurementRows, k: int, groups: Groups, g: int) -> tuple[MeasurementRows, Groups]:
+def first_parts(rows: MeasurementRows, k: int, groups: Groups, g: int) -> tuple[MeasurementRows, Groups]:
     """The first ``k`` rows and ``g`` groups (a measurement whose parts are switched off by EKF2_*_CTRL)."""
     H, r, y, group = rows
     return MeasurementRows(H[:k], r[:k], y[:k], group[:k]), Groups(groups.source[:g], groups.gate[:g],
@@ -432,7 +432,7 @@ def fuse_gps(memory: FilterArrays, A: Any, t: float, gnss: GnssMeasurement) -> N
         g += 1
     if g == 0:
         return
-    fused_rows, fused_groups = used(rows, k, groups, g)
+    fused_rows, fused_groups = first_parts(rows, k, groups, g)
     fuse(memory, fused_rows, fused_groups)
     now = F[MEMORY.time]
     for j in range(g):
@@ -550,7 +550,7 @@ def fuse_vision(memory: FilterArrays, A: Any, t: float, vision: VisionMeasuremen
         g += 1
     if g == 0:
         return
-    fused_rows, fused_groups = used(rows, k, groups, g)
+    fused_rows, fused_groups = first_parts(rows, k, groups, g)
     fuse(memory, fused_rows, fused_groups)
     now = F[MEMORY.time]
     for j in range(g):
