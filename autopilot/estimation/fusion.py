@@ -214,6 +214,15 @@ def measurement_groups(scratch: Any, g: int) -> Groups:
 
 
 @kernel
+def one_group(scratch: Any, source: int, gate: float) -> Groups:
+    """The one group of a measurement gated as a whole: its ``source`` (a row of :data:`SOURCE`)
+    and ``gate``, cut from the memory's scratch."""
+    groups = measurement_groups(scratch, 1)
+    groups.source[0], groups.gate[0] = source, gate
+    return groups
+
+
+@kernel
 def first_parts(rows: MeasurementRows, k: int, groups: Groups, g: int) -> tuple[MeasurementRows, Groups]:
     """The first ``k`` rows and ``g`` groups (a measurement whose parts are switched off by EKF2_*_CTRL)."""
     H, r, y, group = rows
@@ -467,11 +476,10 @@ def fuse_baro(memory: FilterArrays, A: Any, t: float, height: float) -> None:
         s[STATS.too_old] += 1.0
         return
     pm, D = past.position_m, past.age_s
-    rows, groups = measurement_rows(scratch, 1), measurement_groups(scratch, 1)
+    rows, groups = measurement_rows(scratch, 1), one_group(scratch, SOURCE.baro, A[PARAMETERS.baro_gate])
     H, r, y, _ = rows
     H[0, IP + 2], H[0, IV + 2], H[0, IBH] = 1.0, -D, 1.0
     r[0], y[0] = A[PARAMETERS.baro_noise_m] ** 2, height - pm[2] - F[MEMORY.baro_bias]
-    groups.source[0], groups.gate[0] = SOURCE.baro, A[PARAMETERS.baro_gate]
     fuse(memory, rows, groups)
     if groups.accepted[0] != 0.0:
         F[MEMORY.last_v_aid] = F[MEMORY.time]
@@ -499,24 +507,21 @@ def fuse_mag(memory: FilterArrays, A: Any, t: float, m: Vector3) -> None:
     if not mag_checks(F, stats, A, src, m, q):
         return
     if mag_type == MAG_TYPE_HEADING:
-        rows, groups = measurement_rows(scratch, 1), measurement_groups(scratch, 1)
+        rows = measurement_rows(scratch, 1)
         phi, theta, _ = euler_from_quaternion(q[0], q[1], q[2], q[3])
         measured = mag_heading(A, m, phi, theta, vector_at(F, MEMORY.mag_bias))
-        yaw_row(rows, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[PARAMETERS.heading_noise_rad] ** 2
-        )
-        groups.source[0], groups.gate[0] = SOURCE.heading, A[PARAMETERS.heading_gate]
-        fuse(memory, rows, groups)
+        yaw_row(rows, 0, 0, q, wrap_pi(measured - yaw_of(q)), A[PARAMETERS.heading_noise_rad] ** 2)
+        fuse(memory, rows, one_group(scratch, SOURCE.heading, A[PARAMETERS.heading_gate]))
         return
     pred, J = mag_model(q, vector_at(A, PARAMETERS.field), vector_at(F, MEMORY.mag_bias))
-    rows, groups = measurement_rows(scratch, 3), measurement_groups(scratch, 1)
+    rows = measurement_rows(scratch, 3)
     H, r, y, _ = rows
     var = A[PARAMETERS.mag_noise_gauss] ** 2
     for i in range(3):
         H[i, ITH], H[i, ITH + 1], H[i, ITH + 2] = J[i][0], J[i][1], J[i][2]
         H[i, IBM + i] = 1.0
         r[i], y[i] = var, m[i] - pred[i]
-    groups.source[0], groups.gate[0] = SOURCE.mag, A[PARAMETERS.mag_gate]
-    fuse(memory, rows, groups)
+    fuse(memory, rows, one_group(scratch, SOURCE.mag, A[PARAMETERS.mag_gate]))
 
 
 @kernel
@@ -581,11 +586,10 @@ def fuse_vision_velocity(memory: FilterArrays, A: Any, t: float, velocity: Vecto
         return
     vm = past.velocity_m_s
     var = ev_vel_variance(A, velocity_std)
-    rows, groups = measurement_rows(scratch, 3), measurement_groups(scratch, 1)
+    rows, groups = measurement_rows(scratch, 3), one_group(scratch, SOURCE.ev_vel, A[PARAMETERS.ev_vel_gate])
     k = 0
     for axis in range(3):
         k = velocity_row(rows, k, 0, axis, velocity[axis] - vm[axis], var)
-    groups.source[0], groups.gate[0] = SOURCE.ev_vel, A[PARAMETERS.ev_vel_gate]
     fuse(memory, rows, groups)
     if groups.accepted[0] != 0.0:
         F[MEMORY.last_h_aid] = F[MEMORY.time]

@@ -99,12 +99,9 @@ def _decode_frame(datagram: bytes, parser, home, use_odometry: bool, sensors: bo
     if raw is not None and (use_odometry or _ID_STATE not in parts):
         payload = _ODOMETRY.payload(raw)
         t, x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r = _ODOMETRY_STATE.unpack_from(payload)
-        child_frame_id = payload[_ODOMETRY_CHILD_FRAME]
-        position, velocity, q_ned, rates = (x, y, z), (vx, vy, vz), (qw, qx, qy, qz), (p, q, r)
-        if child_frame_id in _BODY_FRAMES:
-            state = state_from_odometry_fields(q_ned, position, velocity, rates, child_frame_id)
-        else:  # (every frame of the simulator's: compiled, the struct's floats as they are)
-            state = StateEstimate(*odometry_state_entry()(position, velocity, q_ned, rates))
+        state = state_from_odometry_fields(
+            (qw, qx, qy, qz), (x, y, z), (vx, vy, vz), (p, q, r), payload[_ODOMETRY_CHILD_FRAME]
+        )
         return Frame(t, state, samples, parts, streams)
     raw = parts.get(_ID_STATE)
     if raw is None:
@@ -395,22 +392,11 @@ def disturbance_of(parts: dict) -> DisturbanceReport | None:
                              tuple(data[6:10]), tuple(int(f) for f in failure))  # fmt: skip
 
 
-def state_from_odometry(msg) -> StateEstimate:
-    """The state in an ODOMETRY message object (pymavlink)."""
-    return state_from_odometry_fields(
-        tuple(msg.q),
-        (msg.x, msg.y, msg.z),
-        (msg.vx, msg.vy, msg.vz),
-        (msg.rollspeed, msg.pitchspeed, msg.yawspeed),
-        msg.child_frame_id,
-    )
-
-
 @functools.cache
 def odometry_state_entry():
     """ODOMETRY's state with a world twist (:func:`quadcommon.wire_values.odometry_state`) as the
     frame decoder reads it every frame: compiled (or loaded from numba's cache) and run once at
-    start, then frozen (a flight never waits for a compilation). Floats only."""
+    start, then frozen (a flight never waits for a compilation). Tuples of floats only."""
     entry = compiled(odometry_state)
     if compiling():
         z3 = (0.0, 0.0, 0.0)
@@ -423,18 +409,18 @@ _BODY_FRAMES = (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED)
 
 
 def state_from_odometry_fields(
-    q_ned, position_ned, velocity_child, rates_frd, child_frame_id
+    q_ned: tuple, position_ned: tuple, velocity_child: tuple, rates_frd: tuple, child_frame_id: int
 ) -> StateEstimate:
-    """ODOMETRY fields (NED pose, twist in ``child_frame_id``, FRD rates) -> paper frames
-    (:func:`quadcommon.wire_values.odometry_state`; a body twist rotated by the attitude)."""
+    """ODOMETRY fields (NED pose, twist in ``child_frame_id``, FRD rates; tuples of floats, as the
+    wire's struct gives them) -> paper frames (:func:`quadcommon.wire_values.odometry_state`,
+    compiled; a body twist rotated by the attitude)."""
     if child_frame_id in _BODY_FRAMES:
-        q, euler, euler_rates = attitude_from_fields(tuple(q_ned), rates_frd)
+        q, euler, euler_rates = attitude_from_fields(q_ned, rates_frd)
         v_body = frames.vector_from_ned(velocity_child)
         R = rotation_from_quaternion(*q)
         velocity = tuple(R[i][0] * v_body[0] + R[i][1] * v_body[1] + R[i][2] * v_body[2] for i in range(3))
         return StateEstimate(frames.vector_from_ned(position_ned), velocity, euler, euler_rates)  # type: ignore[arg-type]
-    state = odometry_state(tuple(position_ned), tuple(velocity_child), tuple(q_ned), tuple(rates_frd))
-    return StateEstimate(*state)
+    return StateEstimate(*odometry_state_entry()(position_ned, velocity_child, q_ned, rates_frd))
 
 
 def state_from_hil_state(msg, home: tuple[float, float, float]) -> StateEstimate:

@@ -355,8 +355,11 @@ def sensor_entries() -> SensorEntries:
         S, out = np.zeros(frame.STATE.size), np.zeros(frame.DELIVERY.size)
         faults = frame.fault_array(config.faults)
         entries.initial_state(rng, C, z3, z3, z3, 0.1, 0.1, 0.1, S)
-        truth = (z3, z3, z3, q, z3, z3, z3, (0.0, 0.0, 9.81), (0.0, 0.0, 0.0, 0.0), 0.0, z3, True)
-        entries.sensor_frame_fields(rng, S, C, faults, 0.0, truth, out)
+        truth = TruthState(position_m=z3, velocity_m_s=z3, acceleration_m_s2=z3, quaternion=q,
+                           euler_rad=z3, body_rates_rad_s=z3, euler_rates_rad_s=z3,
+                           specific_force_body_m_s2=(0.0, 0.0, 9.81), rotor_speeds_rad_s=(0.0, 0.0, 0.0, 0.0),
+                           thrust_n=0.0, torque_body_n_m=z3, on_ground=True)  # fmt: skip
+        entries.sensor_frame_fields(rng, S, C, faults, 0.0, tuple(truth), out)
         entries.gps_fix(rng, S, C, faults, 0.1, z3, z3, np.empty(12))
         entries.magnetometer(rng, S, C, faults, q, 0.0)
         entries.barometer(rng, S, C, 1.0)
