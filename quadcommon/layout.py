@@ -24,6 +24,7 @@ another (``after=``): its offsets start where the other ends, for a record that 
 
 from __future__ import annotations
 
+import textwrap
 from collections import namedtuple
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
@@ -109,23 +110,46 @@ def column_names(record_layout: Any) -> tuple[str, ...]:
     return tuple(out)
 
 
+def field_read(record_layout: Any, name: str, source: str = "x") -> str:
+    """The Python expression reading the field ``name`` of the record held in the list ``source``
+    at its literal offsets: ``x[7]`` for a one-float field, ``(x[3], x[4], x[5],)`` for a wider one."""
+    by_name = {f.name: f for f in fields_of(record_layout)}
+    if name not in by_name:
+        raise ValueError(f"{type(record_layout).__name__} has no field {name!r}")
+    start = getattr(record_layout, name)
+    width = by_name[name].width()
+    floats = ", ".join(f"{source}[{i}]" for i in range(start, start + width))
+    return f"({floats},)" if width > 1 else floats
+
+
 def reader(record_layout: Any, names: Sequence[str]) -> Callable[[Sequence[float]], tuple[Any, ...]]:
     """A function of a record's floats (a list: ``memory.tolist()``) giving its fields ``names``,
     in that order: a tuple each, a float for a one-float field. Python reads a record every frame
     through it: its source is generated from the layout with the offsets as literals (CPython
     reads a list fastest at a literal index), one call instead of an attribute lookup per float."""
-    by_name = {f.name: f for f in fields_of(record_layout)}
-    items = []
-    for name in names:
-        if name not in by_name:
-            raise ValueError(f"{type(record_layout).__name__} has no field {name!r}")
-        start = getattr(record_layout, name)
-        width = by_name[name].width()
-        floats = ", ".join(f"x[{i}]" for i in range(start, start + width))
-        items.append(f"({floats},)" if width > 1 else floats)
-    namespace: dict[str, Any] = {}
-    exec(f"def read(x):\n    return ({', '.join(items)},)\n", namespace)  # text generated just above
-    return namespace["read"]
+    items = ", ".join(field_read(record_layout, name) for name in names)
+    return generated(record_layout, f"def read(x):\n    return ({items},)\n", {})
+
+
+def generated(record_layout: Any, source: str, namespace: dict[str, Any]) -> Callable[..., Any]:
+    """The one function ``source`` defines, with every ``{name}`` in it replaced by the read of the
+    record's field ``name`` from its first argument, a list of the record's floats
+    (:func:`field_read`), and its other names looked up in ``namespace``: a read that builds its
+    result's objects straight from the record, at literal offsets generated from the layout (what
+    Python reads a record with every frame: no offset written by hand, no intermediate tuple)."""
+    header = source.lstrip().split("(", 1)
+    if not header[0].startswith("def ") or len(header) < 2:
+        raise ValueError(f"not one function definition: {source[:40]!r}")
+    function_name = header[0][4:].strip()
+    argument = header[1].split(",", 1)[0].split(")", 1)[0].strip()
+    fields = [f.name for f in fields_of(record_layout)]
+    try:
+        text = source.format(**{name: field_read(record_layout, name, argument) for name in fields})
+    except KeyError as unknown:
+        raise ValueError(f"{type(record_layout).__name__} has no field {unknown.args[0]!r}") from None
+    scope = dict(namespace)
+    exec(textwrap.dedent(text), scope)  # text generated from the declaration just above
+    return scope[function_name]
 
 
 def describe(record_layout: Any) -> str:

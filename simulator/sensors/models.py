@@ -43,7 +43,7 @@ import numpy as np
 from quadcommon import rng as random_stream
 from quadcommon.failures import Type
 from quadcommon.kernel import compiled, compiling, freeze
-from quadcommon.layout import reader
+from quadcommon.layout import generated
 
 from ..dynamics.plant import TruthState
 from . import frame, kernels
@@ -125,18 +125,28 @@ class SensorFrame(NamedTuple):
     vision: VisionReading | None = None
 
 
-# What step() reads of a frame's delivery (generated reads, literal offsets): every frame, then each
-# sensor's reading when it delivered.
-_READ_EVERY_FRAME = reader(frame.DELIVERY, (
-    "force", "rate", "mag_fresh", "baro_fresh", "gps_fresh", "vision_fresh", "held_mag", "held_baro_pressure",
-    "held_baro_altitude", "held_baro_temperature", "held_baro_time", "accel_fresh", "gyro_fresh",
-))  # fmt: skip
-_READ_MAG = reader(frame.DELIVERY, ("mag_time", "mag_field"))
-_READ_BARO = reader(frame.DELIVERY, ("baro_pressure", "baro_altitude", "baro_temperature", "baro_time"))
-_READ_GPS = reader(frame.DELIVERY, ("gps_position", "gps_velocity", "gps_eph", "gps_epv", "gps_satellites",
-                                    "gps_time", "gps_speed_accuracy", "gps_fix_type"))  # fmt: skip
-_READ_VISION = reader(frame.DELIVERY, ("vision_time", "vision_position", "vision_yaw", "vision_position_std",
-                                       "vision_yaw_std"))  # fmt: skip
+# What step() makes of a frame's delivery: its readings, read at offsets generated from the layout.
+_delivered = generated(frame.DELIVERY, """
+def delivered(x, t_s):
+    imu = ImuReading({force}, {rate}, t_s)
+    mag = MagReading({mag_time}, {mag_field}) if {mag_fresh} else None
+    baro = None
+    if {baro_fresh}:
+        baro = BaroReading({baro_pressure}, {baro_altitude}, {baro_temperature}, {baro_time})
+    gps = None
+    if {gps_fresh}:
+        gps = GpsReading({gps_position}, {gps_velocity}, {gps_eph}, {gps_epv}, int({gps_satellites}),
+                         {gps_time}, {gps_speed_accuracy}, int({gps_fix_type}))
+    vision = None
+    if {vision_fresh}:
+        vision = VisionReading({vision_time}, {vision_position}, {vision_yaw}, {vision_position_std},
+                               {vision_yaw_std})
+    held_baro = BaroReading({held_baro_pressure}, {held_baro_altitude}, {held_baro_temperature},
+                            {held_baro_time})
+    readings = SensorReadings(imu, {held_mag}, held_baro, mag is not None, baro is not None,
+                              {accel_fresh} != 0.0, {gyro_fresh} != 0.0)
+    return SensorFrame(t_s, imu, readings, mag, baro, gps, vision)
+""", globals())  # fmt: skip
 
 
 class SensorSuite:
@@ -236,21 +246,7 @@ class SensorSuite:
     def step(self, t_s: float, truth: TruthState) -> SensorFrame:
         """Advance the sensors' random walks to ``t_s`` and return what is delivered at ``t_s``."""
         self._k.sensor_frame_fields(self.rng, self._S, self._C, self._faults, t_s, tuple(truth), self._out)
-        o = self._out.tolist()
-        (force, rate, mag_fresh, baro_fresh, gps_fresh, vision_fresh, held_mag, *held_baro, accel_fresh,
-         gyro_fresh) = _READ_EVERY_FRAME(o)  # fmt: skip
-        imu = ImuReading(force, rate, t_s)
-        mag = MagReading(*_READ_MAG(o)) if mag_fresh else None
-        baro = BaroReading(*_READ_BARO(o)) if baro_fresh else None
-        gps = None
-        if gps_fresh:
-            position, velocity, eph, epv, satellites, t_fix, speed_accuracy, fix_type = _READ_GPS(o)
-            gps = GpsReading(position, velocity, eph, epv, int(satellites), t_fix, speed_accuracy,
-                             int(fix_type))  # fmt: skip
-        vision = VisionReading(*_READ_VISION(o)) if vision_fresh else None
-        readings = SensorReadings(imu, held_mag, BaroReading(*held_baro), mag is not None, baro is not None,
-                                  accel_fresh != 0.0, gyro_fresh != 0.0)  # fmt: skip
-        return SensorFrame(t_s, imu, readings, mag, baro, gps, vision)
+        return _delivered(self._out.tolist(), t_s)
 
     # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------
     def _time(self) -> float:

@@ -12,6 +12,7 @@ from quadcommon.layout import (
     column_names,
     describe,
     fields_of,
+    generated,
     layout,
     quaternion_at,
     reader,
@@ -105,3 +106,20 @@ def test_a_reader_gives_the_named_fields_of_a_record_in_the_order_asked():
     assert reader(EXTRA, ("extra",))([*memory, 4.0]) == (4.0,)  # a layout after another: its offsets
     with pytest.raises(ValueError, match="Settings has no field 'speed'"):
         reader(SETTINGS, ("speed",))
+
+
+def test_a_generated_read_builds_its_objects_from_the_fields_it_names():
+    source = """
+    def home_and_final(x, scale):
+        if {dt} > 0.0:
+            return Point(*{home}), scale * {final}[2]
+        return None
+    """
+    read = generated(SETTINGS, source, {"Point": lambda *p: ("point", p)})
+    memory = [0.5, 1.0, 2.0, 3.0, 7.0, 8.0, 9.0]
+    assert read(memory, 2.0) == (("point", (1.0, 2.0, 3.0)), 18.0)
+    assert read([-1.0, *memory[1:]], 2.0) is None
+    with pytest.raises(ValueError, match="Settings has no field 'speed'"):
+        generated(SETTINGS, "def f(x):\n    return {speed}\n", {})
+    with pytest.raises(ValueError, match="not one function definition"):
+        generated(SETTINGS, "x = {dt}", {})
