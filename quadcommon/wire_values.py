@@ -12,18 +12,22 @@ same order, nowhere written a second time.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from . import frames
-from .kernel import kernel
+from .kernel import compiled, compiling, freeze, kernel
 from .rigid_body import euler_from_quaternion, euler_rates_from_body_rates
 
 Vector3 = tuple[float, float, float]
 
 GPS_UNKNOWN_ACCURACY = 65535  # HIL_GPS eph/epv: "unknown"
 GPS_ACCURACY_UNKNOWN_M = 99.0  # what the autopilot reads an unknown eph/epv as
+STANDARD_GRAVITY_M_S2 = 9.80665  # 1 G, for HIL_STATE_QUATERNION's mG fields
 
 
 # -------------------------------------------------------------------------------------------------
@@ -115,16 +119,35 @@ def odometry_values(position: Vector3, velocity: Vector3, quaternion, body_rates
 
 
 @kernel
-def frame_float_fields(position: Vector3, velocity: Vector3, quaternion, body_rates: Vector3,
-                       specific_force: Vector3, angular_rate: Vector3, magnetic_field: Vector3,
-                       pressure_altitude: float):  # fmt: skip
-    """The float fields a lockstep frame carries every frame, in one call (the simulator's encoder
-    calls it compiled: one call instead of some twenty float32 roundings in Python): HIL_SENSOR's
-    ``(specific force, rates, field, pressure altitude)`` (FRD) and ODOMETRY's
-    :func:`odometry_values` of the truth."""
-    odometry = odometry_values(position, velocity, quaternion, body_rates)
-    return (vector_field(specific_force), vector_field(angular_rate), vector_field(magnetic_field),
-            float_field(pressure_altitude), odometry)  # fmt: skip
+def hil_state_values(position: Vector3, velocity: Vector3, specific_force_body: Vector3, wind: Vector3, home):
+    """HIL_STATE_QUATERNION's scaled integer fields of the truth about ``home`` (lat deg, lon deg,
+    alt m): ``(lat 1e-7 deg, lon 1e-7 deg, alt mm, vx, vy, vz cm/s NED, airspeed cm/s (the speed
+    through the air ``wind``), xacc, yacc, zacc mG FRD)``."""
+    p = frames.vector_to_ned(position)
+    v = frames.vector_to_ned(velocity)
+    lat, lon, alt = frames.ned_to_geodetic(p[0], p[1], p[2], home)
+    f = frames.vector_to_ned(specific_force_body)
+    to_mg = 1000.0 / STANDARD_GRAVITY_M_S2
+    air = (velocity[0] - wind[0], velocity[1] - wind[1], velocity[2] - wind[2])
+    airspeed = sat_u16(100.0 * math.sqrt(air[0] * air[0] + air[1] * air[1] + air[2] * air[2]))
+    return (sat_i32(lat * 1e7), sat_i32(lon * 1e7), sat_i32(alt * 1000.0),
+            sat_i16(v[0] * 100.0), sat_i16(v[1] * 100.0), sat_i16(v[2] * 100.0), airspeed,
+            sat_i16(f[0] * to_mg), sat_i16(f[1] * to_mg), sat_i16(f[2] * to_mg))  # fmt: skip
+
+
+@kernel
+def frame_fields(position: Vector3, velocity: Vector3, quaternion, body_rates: Vector3,
+                 specific_force_body: Vector3, wind: Vector3, home, imu_specific_force: Vector3,
+                 imu_angular_rate: Vector3, magnetic_field: Vector3, pressure_altitude: float):  # fmt: skip
+    """The fields a lockstep frame carries every frame, in one call (the simulator's encoder calls
+    it compiled, instead of some forty roundings, scalings and sign flips in Python): HIL_SENSOR's
+    ``(specific force, rates, field, pressure altitude)`` (FRD floats) of the sensors' readings,
+    then of the truth (``position`` ... ``specific_force_body``, with the ``wind`` and the
+    ``home``) ODOMETRY's :func:`odometry_values` (whose attitude and rates HIL_STATE_QUATERNION
+    carries too) and HIL_STATE_QUATERNION's :func:`hil_state_values`."""
+    return (vector_field(imu_specific_force), vector_field(imu_angular_rate), vector_field(magnetic_field),
+            float_field(pressure_altitude), odometry_values(position, velocity, quaternion, body_rates),
+            hil_state_values(position, velocity, specific_force_body, wind, home))  # fmt: skip
 
 
 @kernel
@@ -186,3 +209,33 @@ def gps_fix(lat: int, lon: int, alt: int, vn: int, ve: int, vd: int, eph: int, e
     return (frames.vector_from_ned(ned), frames.vector_from_ned((vn * 0.01, ve * 0.01, vd * 0.01)),
             eph * 0.01 if eph != GPS_UNKNOWN_ACCURACY else GPS_ACCURACY_UNKNOWN_M,
             epv * 0.01 if epv != GPS_UNKNOWN_ACCURACY else GPS_ACCURACY_UNKNOWN_M)  # fmt: skip
+
+
+# -------------------------------------------------------------------------------------------------
+# The entries Python calls every frame
+# -------------------------------------------------------------------------------------------------
+_Z3 = (0.0, 0.0, 0.0)
+_HOME = (0.0, 0.0, 0.0)
+# The kernels the processes' encoder and decoder call from Python, each with the argument types it
+# is called with (tuples of floats; HIL_GPS's integers as Python ints): warmed once, then frozen.
+FRAME_ENTRIES = {
+    frame_fields: (_Z3, _Z3, (1.0, 0.0, 0.0, 0.0), _Z3, _Z3, _Z3, _HOME, _Z3, _Z3, _Z3, 0.0),
+    odometry_state: (_Z3, _Z3, (1.0, 0.0, 0.0, 0.0), _Z3),
+    vision_values: (_Z3, 0.0, 0.0, 0.0),
+    vision_pose: (_Z3, 0.0, 0.0, 0.0),
+    gps_values: (_Z3, _Z3, 0.0, 0.0, _HOME),
+    gps_fix: (0, 0, 0, 0, 0, 0, 0, 0, _HOME),
+}
+
+
+@functools.cache
+def entry(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` (one of :data:`FRAME_ENTRIES`) as the processes call it every frame: compiled (or
+    loaded from numba's cache) and run once on its warm-up arguments, then frozen, so a flight
+    never waits for a compilation (the Python kernel itself where nothing compiles). A compiled
+    call is a fraction of a microsecond where the kernel run by Python takes two."""
+    compiled_fn = compiled(fn)
+    if compiling():
+        compiled_fn(*FRAME_ENTRIES[fn])
+        freeze(compiled_fn)
+    return compiled_fn

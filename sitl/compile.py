@@ -35,17 +35,16 @@ def compile_target(target: str) -> tuple[str, float]:
     if kind == "plant":
         from dataclasses import replace
 
-        from autopilot.mavlink.hil import odometry_state_entry
         from quadcommon.config import load_vehicle
+        from quadcommon.wire_values import FRAME_ENTRIES, entry
         from simulator.dynamics.nominal_plant import NominalPlant
         from simulator.dynamics.plant import Plant
-        from simulator.mavlink.hil import frame_float_fields_entry
 
         vehicle = load_vehicle("paper_quad")
         Plant(vehicle, 0.001)
         NominalPlant(replace(vehicle, plant=replace(vehicle.plant, model="nominal")), 0.001)
-        frame_float_fields_entry()  # the frame encoder's float fields
-        odometry_state_entry()  # and the decoder's state from them
+        for fn in FRAME_ENTRIES:  # the frame encoder's and decoder's wire values
+            entry(fn)
     elif kind == "estimator":
         from autopilot.estimation.eskf import ErrorStateEkf
 
@@ -74,11 +73,11 @@ def entries_of(target: str) -> list[tuple]:
     """The kernel entries a target compiles, as :func:`quadcommon.kernel.compiled` arguments."""
     kind, _, name = target.partition(":")
     if kind == "plant":
-        from quadcommon.wire_values import frame_float_fields, odometry_state
+        from quadcommon.wire_values import FRAME_ENTRIES
         from simulator.dynamics.nominal_plant import nominal_kernels
         from simulator.dynamics.plant import plant_kernels
 
-        kernels = (*plant_kernels(), *nominal_kernels(), frame_float_fields, odometry_state)
+        kernels = (*plant_kernels(), *nominal_kernels(), *FRAME_ENTRIES)
         return [(fn,) for fn in kernels]
     if kind == "estimator":
         from autopilot.estimation.eskf import filter_kernels

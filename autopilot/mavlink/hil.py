@@ -8,18 +8,16 @@ request, from HIL_STATE_QUATERNION (position quantised to 1e-7 deg ~ 1 cm, veloc
 
 from __future__ import annotations
 
-import functools
 import math
 import struct
 from typing import NamedTuple
 
 from quadcommon import frames, wire
-from quadcommon.kernel import compiled, compiling, freeze
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
-from quadcommon.wire_values import attitude_from_fields, gps_fix, odometry_state, vision_pose
+from quadcommon.wire_values import attitude_from_fields, entry, gps_fix, odometry_state, vision_pose
 
 from ..records import (
     STREAM_BARO,
@@ -207,13 +205,13 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
     raw = parts.get(_ID_GPS)
     if raw is not None:
         fix, lat, lon, alt_mm, eph, epv, vn, ve, vd, sats = _fields(_GPS, raw, _GPS_FIELDS)
-        position, velocity, eph_m, epv_m = gps_fix(lat, lon, alt_mm, vn, ve, vd, eph, epv, home)
+        position, velocity, eph_m, epv_m = entry(gps_fix)(lat, lon, alt_mm, vn, ve, vd, eph, epv, home)
         gps = GpsFix(0.0, position, velocity, eph_m, epv_m, 0.0, fix, sats)  # (no speed accuracy field)
     raw = parts.get(_ID_VISION)
     if raw is not None:
         (n, e, d, yaw, cov), finite = _vision(raw)
         if finite:
-            vision = VisionPose(0.0, *vision_pose((n, e, d), yaw, cov[0], cov[20]))
+            vision = VisionPose(0.0, *entry(vision_pose)((n, e, d), yaw, cov[0], cov[20]))
         else:
             refused.append("vision")
     return SensorSamples(to_paper((gx, gy, gz)), to_paper((ax, ay, az)), mag, baro, gps, vision,
@@ -392,19 +390,6 @@ def disturbance_of(parts: dict) -> DisturbanceReport | None:
                              tuple(data[6:10]), tuple(int(f) for f in failure))  # fmt: skip
 
 
-@functools.cache
-def odometry_state_entry():
-    """ODOMETRY's state with a world twist (:func:`quadcommon.wire_values.odometry_state`) as the
-    frame decoder reads it every frame: compiled (or loaded from numba's cache) and run once at
-    start, then frozen (a flight never waits for a compilation). Tuples of floats only."""
-    entry = compiled(odometry_state)
-    if compiling():
-        z3 = (0.0, 0.0, 0.0)
-        entry(z3, z3, (1.0, 0.0, 0.0, 0.0), z3)
-        freeze(entry)
-    return entry
-
-
 _BODY_FRAMES = (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED)
 
 
@@ -420,7 +405,7 @@ def state_from_odometry_fields(
         R = rotation_from_quaternion(*q)
         velocity = tuple(R[i][0] * v_body[0] + R[i][1] * v_body[1] + R[i][2] * v_body[2] for i in range(3))
         return StateEstimate(frames.vector_from_ned(position_ned), velocity, euler, euler_rates)  # type: ignore[arg-type]
-    return StateEstimate(*odometry_state_entry()(position_ned, velocity_child, q_ned, rates_frd))
+    return StateEstimate(*entry(odometry_state)(position_ned, velocity_child, q_ned, rates_frd))
 
 
 def state_from_hil_state(msg, home: tuple[float, float, float]) -> StateEstimate:

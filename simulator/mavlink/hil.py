@@ -43,7 +43,6 @@ Integer fields are clamped to their wire range so that a wild state cannot crash
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import NamedTuple
 
@@ -51,10 +50,9 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
-from quadcommon.kernel import compiled, compiling, freeze
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
-from quadcommon.wire import sat_i16, sat_i32, sat_u16
-from quadcommon.wire_values import frame_float_fields, gps_values, vision_values
+from quadcommon.wire import sat_i16, sat_u16
+from quadcommon.wire_values import entry, frame_fields, gps_values, vision_values
 
 from ..battery import BatteryReading
 from ..dynamics.plant import TruthState
@@ -62,7 +60,6 @@ from ..sensors.models import GpsReading, SensorReadings, VisionReading
 
 Vector3 = tuple[float, float, float]
 
-STANDARD_GRAVITY_M_S2 = 9.80665  # 1 G for the mG fields of HIL_STATE_QUATERNION
 FIELDS_UPDATED_ALL = 0x1FFF  # HIL_SENSOR_UPDATED_{X,Y,Z}{ACC,GYRO,MAG}, ABS/DIFF_PRESSURE, PRESSURE_ALT, TEMP
 FIELDS_MAG = 0x1C0  # bits 6-8
 FIELDS_BARO = 0x1A00  # bits 9 (abs pressure), 11 (pressure altitude), 12 (temperature)
@@ -81,9 +78,9 @@ class HilFrameEncoder:
     its flat field list refilled each frame (the constant fields stay as the templates set them)."""
 
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
-        self.home = home
-        self._float_fields = frame_float_fields_entry()
-        self._home_about = (*home, *frames.home_terms(home[0], home[1]))  # (per frame: computed once)
+        self.home = (float(home[0]), float(home[1]), float(home[2]))  # (as the compiled entries take it)
+        self._fields = entry(frame_fields)
+        self._vision_values, self._gps_values = entry(vision_values), entry(gps_values)
         self.seq = 0
         ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
         z3 = (0.0, 0.0, 0.0)
@@ -157,10 +154,6 @@ class HilFrameEncoder:
         + VISION_POSITION_ESTIMATE when ``vision``, + the ``DISTURB`` array when ``disturbance``:
         its sample time (µs) and (force (world), torque (Euler coordinates), the rotors' health) in
         the paper's frames, + BATTERY_STATUS when ``battery``)."""
-        to_ned = frames.vector_to_ned
-        pos_ned = to_ned(truth.position_m)
-        vel_ned = to_ned(truth.velocity_m_s)
-
         v, i = self._sensor.values, self._s
         updated = FIELDS_UPDATED_ALL
         if not readings.mag_fresh:
@@ -172,47 +165,35 @@ class HilFrameEncoder:
         if not readings.gyro_fresh:
             updated &= ~FIELDS_GYRO
         v[self._s_updated] = updated
-        baro = readings.baro
-        force, rate, field, pressure_altitude, odometry = self._float_fields(
+        baro, imu = readings.baro, readings.imu
+        force, rate, field, pressure_altitude, odometry, state = self._fields(
             truth.position_m, truth.velocity_m_s, truth.quaternion, truth.body_rates_rad_s,
-            readings.imu.specific_force_m_s2, readings.imu.angular_rate_rad_s, readings.magnetic_field_gauss,
-            baro.pressure_altitude_m,
-        )
+            truth.specific_force_body_m_s2, wind_world_m_s, self.home, imu.specific_force_m_s2,
+            imu.angular_rate_rad_s, readings.magnetic_field_gauss, baro.pressure_altitude_m,
+        )  # fmt: skip
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]], v[i[12]]) = (
             time_usec, *force, *rate, *field, baro.pressure_hpa, pressure_altitude, baro.temperature_c,
         )  # fmt: skip
 
-        lat, lon, alt = frames.ned_to_geodetic_about(pos_ned[0], pos_ned[1], pos_ned[2], *self._home_about)
-        f_frd = to_ned(truth.specific_force_body_m_s2)
-        to_mg = 1000.0 / STANDARD_GRAVITY_M_S2
-        wx, wy, wz = wind_world_m_s
-        w = truth.velocity_m_s
-        airspeed_cm_s = sat_u16(100.0 * math.sqrt((w[0] - wx) ** 2 + (w[1] - wy) ** 2 + (w[2] - wz) ** 2))
+        o_position, o_velocity, q_ned, rates_frd = odometry
         # HIL_STATE_QUATERNION's attitude and rates are float fields too: ODOMETRY's, the same bits.
-        _, _, q_ned, rates_frd = odometry
+        lat, lon, alt, vn, ve, vd, airspeed_cm_s, xacc, yacc, zacc = state
         v, i = self._state.values, self._h
         v[self._h_q] = q_ned
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
          v[i[10]], v[i[11]], v[i[12]], v[i[13]], v[i[14]]) = (
-            time_usec, *rates_frd, sat_i32(lat * 1e7), sat_i32(lon * 1e7), sat_i32(alt * 1000.0),
-            sat_i16(vel_ned[0] * 100.0), sat_i16(vel_ned[1] * 100.0), sat_i16(vel_ned[2] * 100.0),
-            airspeed_cm_s, airspeed_cm_s,
-            sat_i16(f_frd[0] * to_mg), sat_i16(f_frd[1] * to_mg), sat_i16(f_frd[2] * to_mg),
+            time_usec, *rates_frd, lat, lon, alt, vn, ve, vd, airspeed_cm_s, airspeed_cm_s, xacc, yacc, zacc,
         )  # fmt: skip
 
         v, i = self._odometry.values, self._o
-        o_position, o_velocity, o_q, o_rates = odometry
-        p, w, r = o_position, o_velocity, o_rates
+        p, w, r = o_position, o_velocity, rates_frd
         if not math.isfinite(p[0] + p[1] + p[2] + w[0] + w[1] + w[2] + r[0] + r[1] + r[2]):
             raise OverflowError("the state is past the range of ODOMETRY's float32 fields")
-        v[self._o_q] = o_q
+        v[self._o_q] = q_ned
         (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]]) = (
-            time_usec,
-            *o_position,
-            *o_velocity,
-            *o_rates,
-        )
+            time_usec, *o_position, *o_velocity, *rates_frd,
+        )  # fmt: skip
 
         datagram = self._frame(self._sensor) + self._frame(self._state) + self._frame(self._odometry)
         if gps is not None:
@@ -226,7 +207,9 @@ class HilFrameEncoder:
             v = self._disturbance.values
             v[self._d_time] = stamp_usec
             start = self._d_data.start
-            v[start : start + wire.DISTURB_SIZE] = (*to_ned(force), *frames.euler_to_ned(torque), *health)
+            v[start : start + wire.DISTURB_SIZE] = (
+                *frames.vector_to_ned(force), *frames.euler_to_ned(torque), *health
+            )
             datagram += self._frame(self._disturbance)
         if battery is not None:
             self._fill_battery(battery)
@@ -252,7 +235,7 @@ class HilFrameEncoder:
         covariance's upper triangle (x, y, z, roll, pitch, yaw: entries 0, 6, 11, 15, 18, 20;
         roll and pitch are not measured: NaN, as MAVLink has it for unknown)."""
         v, i = self._vision.values, self._v
-        (n, e, d), yaw, position_variance, yaw_variance = vision_values(
+        (n, e, d), yaw, position_variance, yaw_variance = self._vision_values(
             reading.position_m, reading.yaw_rad, reading.position_std_m, reading.yaw_std_rad
         )
         v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]] = time_usec, n, e, d, yaw
@@ -267,22 +250,11 @@ class HilFrameEncoder:
         satellites."""
         v, i = self._gps.values, self._g
         v[self._g_fix] = reading.fix_type
-        fields = gps_values(reading.position_m, reading.velocity_m_s, reading.eph_m, reading.epv_m, self.home)
+        fields = self._gps_values(
+            reading.position_m, reading.velocity_m_s, reading.eph_m, reading.epv_m, self.home
+        )
         (v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]], v[i[10]]) = fields
         v[i[0]], v[i[11]] = time_usec, reading.satellites_visible
-
-
-@functools.cache
-def frame_float_fields_entry():
-    """The frame's float fields' entry (:func:`quadcommon.wire_values.frame_float_fields`),
-    compiled (or loaded from numba's cache) and run once at start, then frozen: a flight never
-    waits for a compilation."""
-    entry = compiled(frame_float_fields)
-    if compiling():
-        z3 = (0.0, 0.0, 0.0)
-        entry(z3, z3, (1.0, 0.0, 0.0, 0.0), z3, z3, z3, z3, 0.0)
-        freeze(entry)
-    return entry
 
 
 def _slots(encoder: FastEncoder, *names: str) -> tuple[int, ...]:

@@ -81,3 +81,29 @@ def test_a_vision_pose_carries_variances_and_reads_back_standard_deviations():
     assert position == (1.0, 2.0, 3.0) and yaw_back == pytest.approx(0.3, abs=1e-7)
     assert p_std == pytest.approx(0.01, rel=1e-6) and yaw_std == pytest.approx(0.02, rel=1e-6)
     assert w.vision_pose((0.0, 0.0, 0.0), 0.0, -1.0, math.nan)[2:] == (0.0, 0.0)
+
+
+def test_the_frames_compiled_entries_give_the_python_kernels_values_exactly():
+    arguments = {
+        w.frame_fields: ((1.5, -2.25, 3.0), (0.4, -0.3, 0.2), (0.9, 0.1, -0.2, 0.3), (0.01, -0.02, 0.3),
+                          (0.1, 0.2, 9.7), (1.0, -1.0, 0.5), HOME, (0.11, 0.19, 9.69), (0.012, -0.018, 0.29),
+                          (0.2, 0.01, -0.4), 490.123),  # fmt: skip
+        w.odometry_state: ((1.5, -2.25, -3.0), (0.4, 0.3, -0.2), (0.9, 0.1, 0.2, -0.3), (0.01, 0.02, -0.3)),
+        w.vision_values: ((1.5, -2.25, 3.0), 0.7, 0.01, 0.02),
+        w.vision_pose: ((1.5, 2.25, -3.0), -0.7, 1e-4, 4e-4),
+        w.gps_values: ((1.5, -2.25, 3.0), (0.4, -0.3, 0.2), 0.8, 1.2, HOME),
+        w.gps_fix: (473977540, 85455700, 491000, 40, -30, -20, 80, 120, HOME),
+    }
+    assert set(arguments) == set(w.FRAME_ENTRIES)
+    for fn, args in arguments.items():
+        assert w.entry(fn)(*args) == fn(*args), fn.__name__
+
+
+def test_hil_state_fields_scale_and_saturate_the_truth():
+    lat, lon, alt, vx, vy, vz, airspeed, xacc, yacc, zacc = w.hil_state_values(
+        (0.0, 0.0, 2.0), (1.0, -2.0, 400.0), (0.0, 0.0, 9.80665), (1.0, 0.0, 0.0), HOME
+    )
+    assert (lat, lon, alt) == (473977420, 85455940, 490000)  # 1e-7 deg, mm
+    assert (vx, vy, vz) == (100, 200, -32767)  # cm/s NED, saturated at int16
+    assert airspeed == round(100.0 * math.hypot(2.0, 400.0))  # through the air: the wind taken off
+    assert (xacc, yacc, zacc) == (0, 0, -1000)  # mG, FRD: 1 g up is -1000 down
