@@ -130,6 +130,17 @@ def borrowed(array: Any) -> Any:
     return array
 
 
+def matrix_view(buffer: Any, at: int, rows: int, cols: int) -> Any:
+    """The ``rows`` x ``cols`` matrix (C order) that the flat ``buffer`` holds from offset ``at``: a
+    view, no copy (``buffer[at : at + rows * cols].reshape((rows, cols))``). In compiled code the
+    view is made in place: a reshape calls into numba's C helper (some 12 ns, and a fusion cuts
+    several matrices from its work buffer), and, as :func:`borrowed`, the view carries no
+    reference count: it is valid while ``buffer`` is alive. Outside the buffer: IndexError."""
+    if at < 0 or rows < 0 or cols < 0 or at + rows * cols > len(buffer):
+        raise IndexError(f"matrix_view: {rows}x{cols} from {at} is outside a buffer of {len(buffer)}")
+    return buffer[at : at + rows * cols].reshape((rows, cols))
+
+
 def freeze(entry: Callable[..., Any]) -> None:
     """No compiling from now on (after a warm-up call): a call whose argument types match no
     compiled signature, even after numba's safe conversions, raises TypeError instead of stalling
@@ -182,6 +193,7 @@ def _load_numba() -> None:
             _register(fn)
         _pending.clear()
         _register_borrowed()
+        _register_matrix_view()
         _numba_loaded = True
 
 
@@ -224,6 +236,44 @@ def _register_borrowed() -> None:
         return None
 
     overload(borrowed, jit_options=JIT_OPTIONS)(implementation)
+
+
+def _register_matrix_view() -> None:
+    """:func:`matrix_view` in compiled code: the bounds checked, then the 2-D array struct built on
+    the buffer's data pointer (strides ``(cols, 1)`` items, no meminfo, no parent)."""
+    from numba.core import types
+    from numba.extending import intrinsic, overload
+    from numba.np.arrayobj import populate_array
+
+    @intrinsic
+    def view_2d(typingctx: Any, buffer: Any, at: Any, rows: Any, cols: Any) -> Any:
+        result = types.Array(buffer.dtype, 2, "C")
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            source = context.make_array(signature.args[0])(context, builder, value=args[0])
+            start, n_rows, n_cols = (context.cast(builder, value, of, types.intp)
+                                     for value, of in zip(args[1:], signature.args[1:]))  # fmt: skip
+            itemsize = context.get_constant(types.intp, context.get_abi_sizeof(context.get_data_type(buffer.dtype)))
+            view = context.make_array(result)(context, builder)
+            populate_array(view, data=builder.gep(source.data, [start]), shape=[n_rows, n_cols],
+                           strides=[builder.mul(n_cols, itemsize), itemsize], itemsize=itemsize,
+                           meminfo=None)  # fmt: skip
+            return view._getvalue()
+
+        return result(buffer, at, rows, cols), codegen
+
+    def implementation(buffer, at, rows, cols):  # noqa: ANN001, ANN202 - numba matches the signature
+        if isinstance(buffer, types.Array) and buffer.ndim == 1 and buffer.layout == "C":
+
+            def view(buffer, at, rows, cols):  # noqa: ANN001, ANN202
+                if at < 0 or rows < 0 or cols < 0 or at + rows * cols > buffer.shape[0]:
+                    raise IndexError("matrix_view: outside the buffer")
+                return view_2d(buffer, at, rows, cols)
+
+            return view
+        return None
+
+    overload(matrix_view, jit_options=JIT_OPTIONS)(implementation)
 
 
 def _qualified(fn: Callable[..., Any]) -> str:

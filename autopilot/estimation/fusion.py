@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from quadcommon.frames import wrap_pi
-from quadcommon.kernel import kernel
+from quadcommon.kernel import kernel, matrix_view
 from quadcommon.layout import quaternion_at, set_quaternion_at, set_vector_at, vector_at
 from quadcommon.rigid_body import (
     Quaternion,
@@ -197,7 +197,7 @@ class Groups(NamedTuple):
 @kernel
 def measurement_rows(scratch: Any, m: int) -> MeasurementRows:
     """``m`` rows cut from the memory's scratch (:data:`.filter.SCRATCH`), H and the groups zeroed."""
-    H = scratch[SCRATCH.H : SCRATCH.H + m * N].reshape((m, N))
+    H = matrix_view(scratch, SCRATCH.H, m, N)
     H[:] = 0.0
     group = scratch[SCRATCH.row_group : SCRATCH.row_group + m]
     group[:] = 0.0
@@ -289,7 +289,7 @@ def fuse(memory: FilterArrays, rows: MeasurementRows, groups: Groups) -> None:
             kept += k - first
     if kept == 0:
         return
-    Hk = scratch[SCRATCH.kept_H : SCRATCH.kept_H + kept * N].reshape((kept, N))
+    Hk = matrix_view(scratch, SCRATCH.kept_H, kept, N)
     rk = scratch[SCRATCH.kept_r : SCRATCH.kept_r + kept]
     yk = scratch[SCRATCH.kept_y : SCRATCH.kept_y + kept]
     i = 0

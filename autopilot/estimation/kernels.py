@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from quadcommon.kernel import kernel
+from quadcommon.kernel import kernel, matrix_view
 from quadcommon.layout import Field, fields_of, layout
 from quadcommon.rigid_body import (
     Matrix3,
@@ -200,21 +200,21 @@ def joseph_update(
     sensor rate allocates nothing)."""
     m, n = H.shape
     at = 0
-    PHt = work[at : at + n * m].reshape((n, m))
+    PHt = matrix_view(work, at, n, m)
     at += n * m
-    S = work[at : at + m * m].reshape((m, m))
+    S = matrix_view(work, at, m, m)
     at += m * m
-    L = work[at : at + m * m].reshape((m, m))
+    L = matrix_view(work, at, m, m)
     at += m * m
-    K = work[at : at + n * m].reshape((n, m))
+    K = matrix_view(work, at, n, m)
     at += n * m
     z = work[at : at + m]
     at += m
-    HP = work[at : at + m * n].reshape((m, n))
+    HP = matrix_view(work, at, m, n)
     at += m * n
-    X = work[at : at + n * n].reshape((n, n))
+    X = matrix_view(work, at, n, n)
     at += n * n
-    XHt = work[at : at + n * m].reshape((n, m))
+    XHt = matrix_view(work, at, n, m)
     matrix_product(P, H.T, PHt)
     # S = H P H^T + R and its Cholesky factor L (S = L L^T).
     matrix_product(H, PHt, S)

@@ -474,7 +474,8 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
         borrowed(est.delivered), borrowed(est.memory), borrowed(est.covariance), borrowed(est.ring),
         borrowed(est.stats), borrowed(est.windows), borrowed(est.scratch), borrowed(est.parameters),
     )
-    plant_work = np.zeros((2, n))  # truth()'s state and derivative
+    owned_plant_work = np.zeros((2, n))  # truth()'s state and derivative
+    plant_work = borrowed(owned_plant_work)  # (in PlantNow every step: no counting)
     t_estimator = 0.0
     squared_error = 0.0
 
@@ -633,6 +634,6 @@ def simulate(translational, rotational, estimate_step, after_step, rejected, fli
             metrics[j] = np.nan
     metrics[RUN_END.failure] = fail
     # (reads of work, plant_work and est: their arrays stay alive until here)
-    metrics[RUN_END.end_time] = t + 0.0 * (work.shape[0] + plant_work.shape[0] + owned.rng.shape[0]
+    metrics[RUN_END.end_time] = t + 0.0 * (work.shape[0] + owned_plant_work.shape[0] + owned.rng.shape[0]
                                            + owned.covariance.shape[0] + flight_P.shape[0])  # fmt: skip
     return metrics

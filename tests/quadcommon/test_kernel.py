@@ -12,13 +12,13 @@ import textwrap
 import numpy as np
 import pytest
 
-from quadcommon.kernel import borrowed, compiled, compiling, freeze, vector
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, matrix_view, vector
 
 pytestmark = pytest.mark.skipif(not compiling(), reason="numba is not installed or QUADSITL_PURE_PYTHON=1")
 
 TOY = '''
 import math
-from quadcommon.kernel import borrowed, kernel
+from quadcommon.kernel import borrowed, kernel, matrix_view
 
 GAIN = {gain}
 
@@ -43,6 +43,17 @@ def accumulate(f, g, state, e, dt, n):
         a, _ = f(g, view, e, dt)
         total += a
     return total + 0.0 * len(state)  # (state read after the loop: alive while the view is used)
+
+
+@kernel
+def cut(buffer, at, rows, cols):
+    """A matrix cut from a flat buffer, written through, and the sum of its rows' last entries."""
+    M = matrix_view(buffer, at, rows, cols)
+    M[0, 0] = -1.0
+    total = 0.0
+    for i in range(rows):
+        total += M[i, cols - 1]
+    return total
 
 
 @kernel
@@ -92,6 +103,23 @@ def test_a_borrowed_array_is_the_same_memory_in_python_and_compiled(tmp_path, ca
     expected = toy.accumulate(toy.law, [3.0], expected_state, 0.5, 0.1, 4)
     assert state[0] == pytest.approx(expected_state[0]) == pytest.approx(0.2)  # writes reach the caller
     assert total == pytest.approx(expected, rel=1e-15)
+
+
+def test_a_matrix_view_is_the_same_memory_in_python_and_compiled_and_refuses_to_leave_its_buffer(
+    tmp_path, cache
+):
+    toy = load(tmp_path, "toy_view", 1.0)
+    entry = compiled(toy.cut)
+    flat = np.arange(20.0)
+    python_copy = flat.copy()
+    assert entry(flat, 3, 4, 4) == toy.cut(python_copy, 3, 4, 4) == 6.0 + 10.0 + 14.0 + 18.0
+    assert flat[3] == python_copy[3] == -1.0  # written through the view
+    np.testing.assert_array_equal(flat, python_copy)
+    for at, rows, cols in ((5, 4, 4), (-1, 2, 2), (0, 3, 7)):  # past the end, before the start
+        with pytest.raises(IndexError):
+            entry(np.arange(20.0), at, rows, cols)
+        with pytest.raises(IndexError):
+            toy.cut(np.arange(20.0), at, rows, cols)
 
 
 def test_an_entry_is_loaded_from_the_cache_by_a_new_process_and_recompiled_when_a_source_changes(
