@@ -251,9 +251,10 @@ def _register_matrix_view() -> None:
 
         def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
             source = context.make_array(signature.args[0])(context, builder, value=args[0])
-            start, n_rows, n_cols = (context.cast(builder, value, of, types.intp)
-                                     for value, of in zip(args[1:], signature.args[1:]))  # fmt: skip
-            itemsize = context.get_constant(types.intp, context.get_abi_sizeof(context.get_data_type(buffer.dtype)))
+            given = zip(args[1:], signature.args[1:], strict=True)
+            start, n_rows, n_cols = (context.cast(builder, value, of, types.intp) for value, of in given)
+            size = context.get_abi_sizeof(context.get_data_type(buffer.dtype))
+            itemsize = context.get_constant(types.intp, size)
             view = context.make_array(result)(context, builder)
             populate_array(view, data=builder.gep(source.data, [start]), shape=[n_rows, n_cols],
                            strides=[builder.mul(n_cols, itemsize), itemsize], itemsize=itemsize,

@@ -75,7 +75,7 @@ import numpy as np
 
 from quadcommon import frames
 from quadcommon.kernel import compiled, compiling, freeze
-from quadcommon.layout import fields_of, reader
+from quadcommon.layout import fields_of, generated, reader
 from quadcommon.rigid_body import (
     euler_from_quaternion,
     euler_rates_from_body_rates,
@@ -185,10 +185,17 @@ def _state_property(name: str, doc: str) -> property:
     return property(get, put, doc=doc)
 
 
-# What estimate() reads: one list of the memory's head, then its fields.
+# What estimate() reads: one list of the memory's head, its fields at offsets generated from the layout.
 _ESTIMATED = ("p", "v", "q", "rate", "gyro_bias", "accel_bias", "mag_bias", "baro_bias")
 _ESTIMATE_END = max(_span(name)[1] for name in _ESTIMATED)
-_READ_ESTIMATED = reader(fk.MEMORY, _ESTIMATED)
+_estimate_of = generated(fk.MEMORY, """
+def estimate_of(x, time_s):
+    q, rate = {q}, {rate}
+    euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
+    return Estimate(time_s, {p}, {v}, q, euler, rate, euler_rates_from_body_rates(euler[0], euler[1], rate),
+                    {gyro_bias}, {accel_bias}, {mag_bias}, {baro_bias})
+""", {"Estimate": Estimate, "euler_from_quaternion": euler_from_quaternion,
+      "euler_rates_from_body_rates": euler_rates_from_body_rates})  # fmt: skip
 _READ_BIASES = reader(fk.MEMORY, ("gyro_bias", "accel_bias"))
 
 
@@ -221,7 +228,6 @@ class ErrorStateEkf:
         }
         self.initialised = False
         self.init_time_s = -1.0
-        self._last_estimate: tuple[list[float], Estimate] | None = None  # (what it was read from, it)
 
         # Alignment accumulators.
         self._align_n = 0
@@ -545,31 +551,7 @@ class ErrorStateEkf:
     # ------------------------------------------------------------------------------------------
     def estimate(self) -> Estimate:
         """The current state estimate (what the controllers are fed)."""
-        memory = self._F[:_ESTIMATE_END].tolist()
-        time_s = self.time_s
-        last = self._last_estimate
-        # The estimate is a function of these floats and the time alone: read twice in a frame
-        # (before and after a fusion that most frames do not bring), the same floats give the same
-        # record without the attitude's conversions again.
-        if last is not None and last[0] == memory and last[1].time_s == time_s:
-            return last[1]
-        p, v, q, rate, bg, ba, bm, bh = _READ_ESTIMATED(memory)
-        euler = euler_from_quaternion(q[0], q[1], q[2], q[3])
-        estimate = Estimate(
-            time_s,
-            p,
-            v,
-            q,
-            euler,
-            rate,
-            euler_rates_from_body_rates(euler[0], euler[1], rate),
-            bg,
-            ba,
-            bm,
-            bh,
-        )
-        self._last_estimate = (memory, estimate)
-        return estimate
+        return _estimate_of(self._F[:_ESTIMATE_END].tolist(), float(self._F[fk.MEMORY.time]))
 
     def estimate_biases(self) -> tuple[Vector3, Vector3]:
         """The gyro and accelerometer bias estimates (cheaper than :meth:`estimate`)."""

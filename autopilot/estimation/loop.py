@@ -68,7 +68,10 @@ class EstimatorLoop:
         self._pending: SensorSamples | None = None  # the aiding of the last predict(), not yet fused
         self._external: VisionPose | None = None  # a client's vision pose, fused with the next frame's aiding
         self._converged_since: float | None = None  # filter time of the first "converged" in a row
-        self._estimate_of: tuple[object, StateEstimate | None] = (None, None)  # (the filter's, ours)
+        # The estimate as last read, until this loop changes the filter again (a prediction, a
+        # fusion, a reset): a frame that brings no aiding reads it twice, before and after its
+        # answer, and the second read costs nothing.
+        self._estimate: StateEstimate | None = None
 
     def step(self, t: float, samples: SensorSamples) -> StateEstimate | None:
         """Predict with this frame's IMU sample, fuse what arrived; the estimate, or None while
@@ -86,6 +89,7 @@ class EstimatorLoop:
         dt = self.dt if self._last_t is None else t - self._last_t
         self._last_t = t
         imu = ImuSample(t, dt, samples.angular_rate_rad_s, samples.specific_force_m_s2)
+        self._estimate = None
         self.ekf.predict(imu)
         self._pending = samples
         if self.last_status is None:  # the first sample: a verdict from the start (aligning)
@@ -100,10 +104,13 @@ class EstimatorLoop:
         ekf, t = self.ekf, self._last_t
         if ekf.initialised:  # the frame's aiding in PX4's order, one compiled call (.aiding)
             if _brings_aiding(samples):  # (most frames at 500 Hz bring none: no call)
+                self._estimate = None
                 ekf.fuse_frame(t, aiding_of(samples))
         else:  # each sensor's own method holds what the alignment waits for
+            self._estimate = None
             self._hold_for_alignment(samples, t)
         if self._external is not None:
+            self._estimate = None
             ekf.fuse_vision(self._external)
             self._external = None
         self._frames += 1
@@ -134,17 +141,17 @@ class EstimatorLoop:
         ekf = self.ekf
         if not ekf.initialised:
             return None
-        e = ekf.estimate()
-        if e is not self._estimate_of[0]:  # (the filter's own record again when nothing changed)
-            state = StateEstimate(e.position_m, e.velocity_m_s, e.euler_rad, e.euler_rates_rad_s)
-            self._estimate_of = (e, state)
-        return self._estimate_of[1]
+        if self._estimate is None:
+            e = ekf.estimate()
+            self._estimate = StateEstimate(e.position_m, e.velocity_m_s, e.euler_rad, e.euler_rates_rad_s)
+        return self._estimate
 
     def start_in_air(self, t: float, samples: SensorSamples, pose: StateEstimate) -> None:
         """Initialise from ``pose`` at this frame instead of :meth:`step` (an in-air start: no
         alignment possible); see the module."""
         imu = ImuSample(t, self.dt, samples.angular_rate_rad_s, samples.specific_force_m_s2)
         self._pending = None
+        self._estimate = None
         self.ekf.reset_to(imu, pose.position_m, pose.velocity_m_s, quaternion_from_euler(*pose.euler_rad),
                           baro_height_m=samples.baro_height_m)  # fmt: skip
         self._last_t = t

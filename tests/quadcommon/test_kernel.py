@@ -12,7 +12,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from quadcommon.kernel import borrowed, compiled, compiling, freeze, matrix_view, vector
+from quadcommon.kernel import borrowed, compiled, compiling, freeze, vector
 
 pytestmark = pytest.mark.skipif(not compiling(), reason="numba is not installed or QUADSITL_PURE_PYTHON=1")
 

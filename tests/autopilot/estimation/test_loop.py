@@ -13,6 +13,9 @@ from pymavlink.dialects.v20 import common as m
 
 from autopilot.control.config import load_controller
 from autopilot.core import AutopilotSetup
+from autopilot.estimation.loop import EstimatorLoop
+from autopilot.estimation.parameters import estimator_params
+from autopilot.records import SensorSamples, StateEstimate, VisionPose
 from quadcommon.atmosphere import isa_altitude_m
 from simulator.core import SimulatorSetup
 from simulator.sensors import SensorFault
@@ -203,3 +206,26 @@ def test_highres_imu_on_request_reports_the_sensors_on_the_ekf(sensors):
     assert isa_altitude_m(imu.abs_pressure) == pytest.approx(imu.pressure_alt, abs=0.01)
     assert imu.temperature == pytest.approx(11.8, abs=0.1)  # ISA at ~488 m: 15 - 6.5 K/km
     assert imu.diff_pressure == 0.0  # no airspeed sensor: its bit is clear
+
+
+def test_the_loop_reads_the_estimate_again_only_after_it_changed_the_filter():
+    """A frame without aiding reads the estimate twice (before and after its answer): the same
+    record; a prediction, a fusion of the frame's aiding or of a client's vision gives a new one."""
+    loop = EstimatorLoop(estimator_params({"EKF2_EV_CTRL": 15}), 0.002)  # vision fused too
+    imu_only = SensorSamples((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), None, None, None, None, (), True)
+    loop.start_in_air(0.0, imu_only, StateEstimate((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                                   (0.0, 0.0, 0.0)))  # fmt: skip
+    before = loop.predict(0.002, imu_only)
+    loop.fuse()  # nothing to fuse
+    assert loop.estimate() is before
+    with_baro = imu_only._replace(baro_height_m=5.5)
+    predicted = loop.predict(0.004, with_baro)
+    assert predicted is not before
+    loop.fuse()
+    fused = loop.estimate()
+    assert fused is not predicted and fused.position_m[2] > predicted.position_m[2]  # pulled up to 5.5 m
+    loop.external_vision(VisionPose(0.004, (0.2, 0.0, 5.0), 0.0, 0.05, 0.05))
+    predicted = loop.predict(0.006, imu_only)
+    loop.fuse()
+    assert loop.estimate() is not predicted
+    assert loop.estimate().position_m[0] > predicted.position_m[0]  # the client's pose, 0.2 m ahead
