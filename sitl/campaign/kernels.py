@@ -313,8 +313,11 @@ def fuse_aiding(t, S, est):
     """The step's magnetometer, barometer, GNSS and vision samples into the filter as the wire
     delivers them (:mod:`quadcommon.wire_values`), through the autopilot's own fusion of a frame's
     aiding (:func:`autopilot.estimation.aiding.fuse_frame`: PX4's order)."""
-    wire = S[SETTINGS.wire] != 0.0
     d, D = est.delivered, DELIVERY
+    if (d[D.mag_fresh] == 0.0 and d[D.baro_fresh] == 0.0 and d[D.gps_fresh] == 0.0
+            and d[D.vision_fresh] == 0.0):  # fmt: skip
+        return  # (most steps at 500 Hz bring no aiding: nothing to read, as the autopilot reads nothing)
+    wire = S[SETTINGS.wire] != 0.0
     mag = _through_fields(wire, vector_at(d, D.mag_field))
     height = d[D.baro_altitude]
     if wire:  # HIL_SENSOR's pressure altitude
