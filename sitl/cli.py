@@ -319,6 +319,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--view-port", type=int, default=8080, help="the view's port on 127.0.0.1 (default 8080)")
     p.set_defaults(func=_cmd_up)
 
+    p = sub.add_parser("fleet", help="K vehicles in one process, each on its own MAVLink ports "
+                                     "(quadsitl fleet --help)", add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=lambda a: __import__("sitl.fleet", fromlist=["main"]).main(a.rest))
+
     p = sub.add_parser(
         "view",
         help="live 3-D view and plots in the browser, or replays of logs (quadsitl view --help)",
@@ -459,6 +464,10 @@ def _dispatch(argv: list[str]) -> int:
         from sitl.compile import main as compile_main
 
         return compile_main(argv[1:])
+    if argv[:1] == ["fleet"]:  # its own parser too (sitl/fleet.py)
+        from sitl.fleet import main as fleet_main
+
+        return fleet_main(argv[1:])
     if argv[:1] == ["tune"]:  # its own parser too (sitl/tune.py)
         from sitl.tune import main as tune_main
 

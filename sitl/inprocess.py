@@ -204,6 +204,8 @@ class Lockstep:
         }
         self.stations: dict[tuple[str, int], GroundStation] = {}
         self.observers: list[Callable[[Outgoing], None]] = []  # see every datagram the vehicle sends
+        # Where a datagram for no in-process station goes (a fleet's sockets: sitl.fleet); None: nowhere.
+        self.outbound: Callable[[Outgoing], None] | None = None
         self.truth_rows: list[tuple[float, ...]] = []
         self.controller_rows: list[tuple[float, ...]] = []
         self.estimator_rows: list[tuple[float, ...]] = []  # on the EKF: one per frame (ESTIMATOR_FIELDS)
@@ -272,6 +274,8 @@ class Lockstep:
         station = self.stations.get(address) if address is not None else None
         if station is not None:
             station.receive(record[2])
+        elif self.outbound is not None:
+            self.outbound(record)
 
     def _ground_links_due(self, now: float) -> None:
         """Datagrams held by impaired ground-station links whose time has come, both ways."""

@@ -1,0 +1,103 @@
+"""A fleet in one process (``quadsitl fleet``, :mod:`sitl.fleet`): what a vehicle costs.
+
+For each fleet size K of ``--counts`` it builds K vehicles on their own MAVLink ports (the
+instances from ``--instance``), binds them, and flies them ``--seconds`` of simulation as fast as
+the one process goes (one core), at 1 kHz physics and 500 Hz control, either idle on the ground
+(``--flight idle``: the commander, telemetry and the plant run, the cascade does not) or every
+vehicle flying the paper's circle from t = 0 (``--flight circle``, the default: a mission's cost).
+It reports, per K:
+
+* the real-time factor one process holds (simulated over wall seconds): K vehicles hold real time
+  on one core while it is at least 1;
+* the CPU per vehicle per simulated second, and from it the largest fleet one core holds at real
+  time (1 / that);
+* the resident memory per vehicle (the process's growth over K vehicles, after they flew);
+* the start-up: building and binding the K vehicles (to "all linked": each answers on its ports
+  from its first frame).
+
+Run: ``.venv/bin/python benchmarks/fleet.py [--counts 1 10 20] [--seconds 10] [--flight circle]
+[--instance 0]``. The ports of instances ``--instance`` .. + K - 1 must be free. Last lines:
+``name: value unit`` (for the largest K).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import resource
+import subprocess
+import sys
+import time
+
+from sitl.fleet import Fleet, FleetOptions, make_vehicle
+
+
+def resident_mb() -> float:
+    """This process's resident set now (MB), from /proc (ru_maxrss is the peak)."""
+    with open("/proc/self/statm") as statm:
+        pages = int(statm.read().split()[1])
+    return pages * resource.getpagesize() / 1e6
+
+
+def fly(count: int, args: argparse.Namespace) -> dict:
+    """K vehicles built, bound and flown in this process: its figures."""
+    options = FleetOptions()  # idle: on the ground, disarmed
+    if args.flight == "circle":
+        options = FleetOptions(scenario="circle", autostart="circle")
+    make_vehicle(args.instance, options).close()  # imports, kernels loaded: not a vehicle's cost
+    gc.collect()
+    before = resident_mb()
+    start = time.perf_counter()
+    fleet = Fleet([make_vehicle(args.instance + k, options) for k in range(count)])
+    fleet.open()
+    startup_s = time.perf_counter() - start
+    frames = int(round(args.seconds / fleet.dt))
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    for _ in range(frames):
+        fleet.step()
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    memory_mb = (resident_mb() - before) / count
+    fleet.close()
+    simulated = frames * fleet.dt
+    return {"count": count, "rtf": simulated / wall, "cpu_per_vehicle_s": cpu / (count * simulated),
+            "memory_mb": memory_mb, "startup_s": startup_s, "baseline_mb": before}  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("--counts", type=int, nargs="+", default=[1, 10, 20])
+    parser.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per fleet")
+    parser.add_argument("--flight", choices=("circle", "idle"), default="circle")
+    parser.add_argument("--instance", type=int, default=0, help="the first vehicle's instance")
+    parser.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)  # one K, JSON out
+    args = parser.parse_args()
+    if args.child is not None:
+        print(json.dumps(fly(args.child, args)), flush=True)
+        return
+    results = []
+    for count in args.counts:  # each fleet in a process of its own: its memory is its own
+        command = [sys.executable, __file__, "--child", str(count), "--seconds", str(args.seconds),
+                   "--flight", args.flight, "--instance", str(args.instance)]  # fmt: skip
+        out = subprocess.run(command, capture_output=True, text=True, check=True).stdout
+        r = json.loads(out.strip().splitlines()[-1])
+        results.append(r)
+        per = r["cpu_per_vehicle_s"]
+        print(f"K={count:4d} ({args.flight}): {r['rtf']:6.2f}x real time in one process, "
+              f"CPU {per * 1e3:6.1f} ms per vehicle per simulated s (one core holds "
+              f"{1.0 / per:5.1f} vehicles at 1x), {r['memory_mb']:5.1f} MB per vehicle "
+              f"(process {r['baseline_mb']:.0f} MB before them), start-up {r['startup_s']:5.2f} s",
+              flush=True)  # fmt: skip
+    r = results[-1]
+    name = f"fleet_{args.flight}"
+    print(f"{name}_k: {r['count']} vehicles")
+    print(f"{name}_real_time_factor: {r['rtf']:.2f} x")
+    print(f"{name}_cpu_per_vehicle_per_sim_s: {r['cpu_per_vehicle_s'] * 1e3:.1f} ms")
+    print(f"{name}_vehicles_per_core_at_1x: {1.0 / r['cpu_per_vehicle_s']:.1f} vehicles")
+    print(f"{name}_memory_per_vehicle: {r['memory_mb']:.1f} MB")
+    print(f"{name}_startup: {r['startup_s']:.2f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,250 @@
+"""A fleet in one process: K vehicles, each the in-process stack (:class:`~sitl.inprocess.Lockstep`:
+the simulator's and the autopilot's cores, the very cores the two processes of ``quadsitl up``
+run), each with its own MAVLink endpoints on loopback, numbered as PX4 numbers its instances, all
+stepped frame by frame on one loop paced to the wall clock.
+
+A vehicle of the fleet is instance N (system id N + 1): its ground-station link sends from
+``18570 + N`` to 14550 (one QGroundControl or MAVProxy there sees the whole fleet), its API link
+from ``14580 + N`` to ``14540 + N`` (MAVSDK's port; PX4's 14549 past N = 9), as ``quadsitl up``
+(:func:`quadcommon.wire.ports`); every port is bound at start and a taken one is refused naming
+the port and the instance. A vehicle's frames never leave the process: the lockstep between its
+simulator and its autopilot is a function call (no HIL port), which is what makes a vehicle cheap
+(one process of ~200 MB for the fleet instead of two per vehicle).
+
+Per frame and vehicle: the datagrams waiting on its two sockets go in (at most
+:data:`~autopilot.app.GCS_DATAGRAMS_PER_FRAME` per link, as the autopilot process takes them, so
+a flood on one vehicle's port cannot starve the others), then its frame is flown; whatever the
+autopilot sends on a ground-station link goes out on that link's socket. A vehicle flies exactly
+as it flies alone in the in-process stack (``tests/sitl/test_fleet.py``): the vehicles share
+nothing but the loop.
+
+Run: ``quadsitl fleet --count K [--instance N] [--speed S] [--scenario NAME] [--controller NAME]``.
+Not yet: zenoh (truth, recorder, live view), the EKF per vehicle's own sensors profile, parameter
+files kept across restarts, impairment; a fleet spread over processes or hosts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from autopilot.app import GCS_DATAGRAMS_PER_FRAME, MAX_DATAGRAM
+from autopilot.control.config import load_controller
+from autopilot.logger.logger import LogOptions
+from autopilot.mavlink.links import API_LINK, GCS_LINK, Outgoing
+from autopilot.setup import AutopilotSetup
+from quadcommon import wire
+from quadcommon.config import load_scenario
+from quadcommon.schema import ConfigError
+from quadcommon.trajectories import trajectory_from_spec
+from quadcommon.udp import PortInUse, bind_udp
+from simulator.core import SimulatorSetup
+from simulator.pacing import Pacer
+
+from .inprocess import Lockstep, estimator_profile_for
+
+LINKS = ((GCS_LINK, "GCS link"), (API_LINK, "API link"))
+
+
+@dataclass(frozen=True)
+class FleetOptions:
+    """What every vehicle of the fleet is (the same for all; each has its own instance)."""
+
+    scenario: str = "hover"
+    controller: str = "intbs_nlhinf"
+    vehicle: str | None = None
+    sensors: str | None = None
+    estimator: str = "truth"
+    log_directory: str | None = None  # each vehicle's flight logs (ULog) under DIR/<instance>; None: none
+    autostart: str | None = None  # a scenario whose trajectory each vehicle flies, armed at t = 0
+
+
+class FleetVehicle:
+    """One vehicle: its stack and, once :meth:`open`, its two ground-station sockets."""
+
+    def __init__(self, stack: Lockstep, instance: int) -> None:
+        self.stack = stack
+        self.instance = instance
+        self.ports = stack.autopilot.setup.sitl.ports(instance)
+        self.socks: dict[int, object] = {}
+        stack.record_rows = False  # (a fleet flies for hours: nothing kept per frame)
+        stack.outbound = self.send
+
+    def open(self) -> None:
+        """Bind its ports; PortInUse names the port, the link and the instance."""
+        own = {GCS_LINK: self.ports.gcs_local, API_LINK: self.ports.api_local}
+        try:
+            for link, what in LINKS:
+                self.socks[link] = bind_udp(own[link], f"{what} of instance {self.instance}")
+        except PortInUse:
+            self.close()
+            raise
+
+    def send(self, record: Outgoing) -> None:
+        """A datagram the autopilot sends on a ground-station link, out on its socket (nobody
+        listening is normal for a GCS port: the send is dropped)."""
+        link, address, data = record
+        sock = self.socks.get(link)
+        if sock is not None and address is not None:
+            try:
+                sock.sendto(data, address)
+            except OSError:
+                pass
+
+    def take_datagrams(self) -> None:
+        """What waits on its sockets, into the stack (at most GCS_DATAGRAMS_PER_FRAME a link)."""
+        stack = self.stack
+        for link, sock in self.socks.items():
+            for _ in range(GCS_DATAGRAMS_PER_FRAME):
+                try:
+                    data, address = sock.recvfrom(MAX_DATAGRAM)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:
+                    continue  # ICMP unreachable from an earlier send: ignore
+                stack.deliver(link, address, data)
+
+    def close(self) -> list:
+        """The sockets closed, the flight log ended; the logs written."""
+        for sock in self.socks.values():
+            sock.close()
+        self.socks = {}
+        return self.stack.close()
+
+
+def make_vehicle(
+    instance: int, options: FleetOptions, log: Callable[[str], None] = lambda text: None
+) -> FleetVehicle:
+    """Vehicle ``instance`` as ``quadsitl up --instance N`` would make its two processes' setups
+    (ConfigError names a bad name)."""
+    sim = SimulatorSetup.load(instance=instance, scenario=options.scenario, vehicle=options.vehicle,
+                              sensors=options.sensors)  # fmt: skip
+    profile = estimator_profile_for(options.sensors or "default") if options.estimator == "ekf" else "default"
+    log_dir = None if options.log_directory is None else f"{options.log_directory}/{instance}"
+    trajectory = None
+    if options.autostart is not None:
+        trajectory = trajectory_from_spec(load_scenario(options.autostart).trajectory)
+    ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller(options.controller), instance=instance,
+                        autostart=trajectory, estimator=options.estimator, estimator_profile=profile,
+                        log=LogOptions(log_dir))  # fmt: skip
+    return FleetVehicle(Lockstep(sim, ap, log=lambda text: log(f"[{instance}] {text}")), instance)
+
+
+class Fleet:
+    """K vehicles stepped together: :meth:`step` flies one frame of each."""
+
+    def __init__(self, vehicles: Sequence[FleetVehicle]) -> None:
+        if not vehicles:
+            raise ValueError("a fleet needs at least one vehicle")
+        self.vehicles = list(vehicles)
+        self.dt = vehicles[0].stack.sim.dt_control
+        self.frames = 0
+
+    @property
+    def t(self) -> float:
+        """The fleet's simulation time (s)."""
+        return self.frames * self.dt
+
+    def open(self) -> None:
+        """Bind every vehicle's ports, or none (PortInUse names the first taken)."""
+        opened: list[FleetVehicle] = []
+        try:
+            for vehicle in self.vehicles:
+                vehicle.open()
+                opened.append(vehicle)
+        except PortInUse:
+            for vehicle in opened:
+                vehicle.close()
+            raise
+
+    def step(self) -> None:
+        """One frame of every vehicle: its datagrams in, its frame, its answer, its plant."""
+        for vehicle in self.vehicles:
+            vehicle.take_datagrams()
+            vehicle.stack.step()
+        self.frames += 1
+
+    def close(self) -> list:
+        """Every vehicle's sockets closed and flight log ended; the logs written."""
+        written: list = []
+        for vehicle in self.vehicles:
+            written += vehicle.close()
+        return written
+
+
+def run(fleet: Fleet, speed: float | None, duration_s: float | None, log: Callable[[str], None],
+        running: Callable[[], bool]) -> None:  # fmt: skip
+    """Fly ``fleet`` at ``speed`` times real time (None: as fast as it goes) until ``running()`` is
+    false or ``duration_s`` of simulation time has flown."""
+    pacer = Pacer(speed, log, running)
+    while running() and (duration_s is None or fleet.t < duration_s):
+        fleet.step()
+        pacer.pace(fleet.t)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``quadsitl fleet``: the fleet's vehicles until Ctrl-C (or ``--duration``)."""
+    parser = argparse.ArgumentParser(prog="quadsitl fleet", description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("--count", type=int, default=2, help="vehicles (default 2)")
+    parser.add_argument("--instance", type=int, default=0, help="the first vehicle's instance N (default 0)")
+    parser.add_argument("--speed", default="1", help="times real time, or 'max' (default 1)")
+    parser.add_argument("--duration", type=float, default=None, help="simulated seconds, then exit")
+    parser.add_argument("--scenario", default="hover")
+    parser.add_argument("--controller", default="intbs_nlhinf")
+    parser.add_argument("--vehicle", default=None)
+    parser.add_argument("--estimator", choices=("truth", "ekf"), default="truth")
+    parser.add_argument("--sensors", default=None, help="sensor profile (the EKF's parameters follow it)")
+    parser.add_argument("--autostart", default=None, metavar="SCENARIO",
+                        help="every vehicle armed at t = 0, flying the scenario's trajectory")
+    parser.add_argument("--log-dir", default=None, help="each vehicle's flight logs (ULog) under DIR/<N>")
+    args = parser.parse_args(argv)
+    first, last = args.instance, args.instance + args.count - 1
+    if args.count < 1 or not wire.INSTANCE_MIN <= first <= last <= wire.INSTANCE_MAX:
+        parser.error(f"--instance {first} --count {args.count}: instances must be in "
+                     f"[{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}] (got {first}..{last})")  # fmt: skip
+    try:
+        speed = None if args.speed == "max" else float(args.speed)
+    except ValueError:
+        parser.error(f"--speed {args.speed!r}: a number or 'max'")
+    if speed is not None and not speed > 0.0:
+        parser.error(f"--speed {args.speed}: must be above 0")
+
+    def log(text: str) -> None:
+        print(f"fleet: {text}", flush=True)
+
+    options = FleetOptions(args.scenario, args.controller, args.vehicle, args.sensors, args.estimator,
+                           args.log_dir, args.autostart)  # fmt: skip
+    started = time.monotonic()
+    try:
+        fleet = Fleet([make_vehicle(n, options, log) for n in range(first, last + 1)])
+        fleet.open()
+    except (ConfigError, PortInUse) as exc:
+        print(f"quadsitl fleet: {exc}", file=sys.stderr)
+        return 2
+    stop = {"asked": False}
+
+    def ask_stop(*_args: object) -> None:
+        stop["asked"] = True
+
+    signal.signal(signal.SIGINT, ask_stop)
+    signal.signal(signal.SIGTERM, ask_stop)
+    p0 = fleet.vehicles[0].ports
+    log(f"{args.count} vehicles, instances {first}..{last} (system ids {first + 1}..{last + 1}), "
+        f"ready in {time.monotonic() - started:.1f} s; GCS links udp {wire.LOOPBACK}:{p0.gcs_local}.. "
+        f"-> {p0.gcs_remote}, API links {p0.api_local}.. -> {p0.api_remote}..")  # fmt: skip
+    try:
+        run(fleet, speed, args.duration, log, lambda: not stop["asked"])
+    finally:
+        for path in fleet.close():
+            log(f"flight log {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

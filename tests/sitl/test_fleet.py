@@ -1,0 +1,109 @@
+"""A fleet in one process (sitl/fleet.py): a vehicle flies in a fleet exactly as it flies alone;
+each vehicle answers on its own ports as PX4 numbers them, one ground station on the GCS port sees
+them all, and a client on one vehicle's API port drives that vehicle alone."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as m
+
+from sitl.fleet import Fleet, FleetOptions, make_vehicle
+from sitl.launcher import Child
+from tests.ports import instance_ports
+
+pytestmark = pytest.mark.timeout(240)
+
+CIRCLE = FleetOptions(scenario="circle", autostart="circle")  # armed at t = 0, flying the paper's circle
+IDLE = FleetOptions(scenario="hover")  # on the ground, disarmed
+
+
+def test_a_vehicle_flies_in_a_fleet_of_20_as_it_flies_alone():
+    """Instance 7 flying the paper's circle under its gusts, alone and among 19 others (half of
+    them flying the circle, half idle on the ground): the same truth, bit for bit, every frame."""
+    frames = 1500  # 3 s: the climb onto the circle and the first gust
+    alone = make_vehicle(7, CIRCLE)
+    alone.stack.record_rows = True
+    for _ in range(frames):
+        alone.stack.step()
+    fleet = Fleet([make_vehicle(n, CIRCLE if n % 2 else IDLE) for n in range(20)])
+    ours = fleet.vehicles[7]
+    ours.stack.record_rows = True
+    for _ in range(frames):
+        fleet.step()
+    assert fleet.t == pytest.approx(alone.stack.t)
+    assert len(ours.stack.truth_rows) == len(alone.stack.truth_rows) == frames
+    assert ours.stack.truth_rows == alone.stack.truth_rows
+    climbed = [row for row in alone.stack.truth_rows if row[3] > 0.5]  # (t, x, y, z, ...): it flew
+    assert climbed
+    idle = fleet.vehicles[6].stack
+    assert not idle.autopilot.commander.armed
+
+
+def heartbeat_senders(conn, wall_s: float) -> set[int]:
+    """The system ids heard on ``conn`` within ``wall_s`` of wall time."""
+    heard: set[int] = set()
+    deadline = time.monotonic() + wall_s
+    while time.monotonic() < deadline:
+        msg = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+        if msg is not None and msg.get_srcComponent() == 1:
+            heard.add(msg.get_srcSystem())
+    return heard
+
+
+def relative_altitude(conn, system_id: int, wall_s: float = 5.0) -> float:
+    """The next GLOBAL_POSITION_INT's relative altitude (m) from ``system_id``."""
+    deadline = time.monotonic() + wall_s
+    while time.monotonic() < deadline:
+        msg = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=0.2)
+        if msg is not None and msg.get_srcSystem() == system_id:
+            return msg.relative_alt * 1e-3
+    raise AssertionError(f"no GLOBAL_POSITION_INT from system {system_id}")
+
+
+def command(conn, target: int, command_id: int, *params: float, wall_s: float = 20.0) -> None:
+    """COMMAND_LONG to ``target`` until it is accepted (a vehicle refuses to arm until its checks
+    pass); AssertionError with the last refusal after ``wall_s``."""
+    p = list(params) + [0.0] * (7 - len(params))
+    deadline, last = time.monotonic() + wall_s, None
+    while time.monotonic() < deadline:
+        conn.mav.command_long_send(target, 1, command_id, 0, *p)
+        ack = conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=0.5)
+        if ack is not None and ack.get_srcSystem() == target and ack.command == command_id:
+            if ack.result == m.MAV_RESULT_ACCEPTED:
+                return
+            last = ack.result
+    raise AssertionError(f"command {command_id} to system {target} not accepted (last result {last})")
+
+
+@pytest.mark.processes
+def test_one_ground_station_sees_the_fleet_and_a_client_drives_one_vehicle_alone():
+    """`quadsitl fleet --count 2`: on the GCS port both system ids; through vehicle 1's API port
+    (14541 as PX4 numbers it) arm and take off: vehicle 1 climbs, vehicle 0 stays on the ground."""
+    first = 3
+    ports = [instance_ports(first), instance_ports(first + 1)]
+    gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[0].gcs_remote}", source_system=255)
+    api = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[1].api_remote}", source_system=245)
+    child = Child("quadsitl fleet", [sys.executable, "-u", "-m", "sitl.cli", "fleet", "--count", "2",
+                                     "--instance", str(first), "--speed", "2"])  # fmt: skip
+    try:
+        child.wait_line("vehicles, instances", timeout=60.0)
+        assert heartbeat_senders(gcs, 3.0) == {first + 1, first + 2}  # system id = instance + 1
+        target = first + 2
+        assert api.wait_heartbeat(timeout=10.0).get_srcSystem() == target
+        command(api, target, m.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+        nan = float("nan")
+        command(api, target, m.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, nan, nan, nan, 3.0)
+        deadline = time.monotonic() + 30.0
+        while relative_altitude(gcs, target) < 1.5:
+            assert time.monotonic() < deadline, "vehicle 1 did not climb"
+        assert abs(relative_altitude(gcs, first + 1)) < 0.2  # vehicle 0: still on the ground
+        assert child.alive
+    finally:
+        child.stop()
+        gcs.close()
+        api.close()
+    assert child.returncode == 0, child.tail()
