@@ -15,8 +15,11 @@ It reports, per K:
 * the start-up: building and binding the K vehicles (to "all linked": each answers on its ports
   from its first frame).
 
+``--processes P`` splits each fleet over P processes flown side by side (``quadsitl fleet
+--processes P``): the real-time factor is the slowest process's.
+
 Run: ``.venv/bin/python benchmarks/fleet.py [--counts 1 10 20] [--seconds 10] [--flight circle]
-[--instance 0]``. The ports of instances ``--instance`` .. + K - 1 must be free. Last lines:
+[--instance 0] [--processes 1]``. The ports of instances ``--instance`` .. + K - 1 must be free. Last lines:
 ``name: value unit`` (for the largest K).
 """
 
@@ -71,26 +74,43 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per fleet")
     parser.add_argument("--flight", choices=("circle", "idle"), default="circle")
     parser.add_argument("--instance", type=int, default=0, help="the first vehicle's instance")
+    parser.add_argument("--processes", type=int, default=1, help="the fleet split over P processes")
     parser.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)  # one K, JSON out
     args = parser.parse_args()
     if args.child is not None:
         print(json.dumps(fly(args.child, args)), flush=True)
         return
     results = []
-    for count in args.counts:  # each fleet in a process of its own: its memory is its own
-        command = [sys.executable, __file__, "--child", str(count), "--seconds", str(args.seconds),
-                   "--flight", args.flight, "--instance", str(args.instance)]  # fmt: skip
-        out = subprocess.run(command, capture_output=True, text=True, check=True).stdout
-        r = json.loads(out.strip().splitlines()[-1])
+    for count in args.counts:  # each fleet in processes of its own: their memory is their own
+        shares = [count // args.processes + (1 if k < count % args.processes else 0)
+                  for k in range(args.processes)]  # fmt: skip
+        children, at = [], args.instance
+        for share in shares:  # side by side, as quadsitl fleet --processes P runs them
+            command = [sys.executable, __file__, "--child", str(share), "--seconds", str(args.seconds),
+                       "--flight", args.flight, "--instance", str(at)]  # fmt: skip
+            children.append(subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
+            at += share
+        parts = []
+        for child in children:
+            out, _ = child.communicate()
+            if child.returncode != 0:
+                raise SystemExit(f"a fleet process failed (exit {child.returncode})")
+            parts.append(json.loads(out.strip().splitlines()[-1]))
+        r = {"count": count, "rtf": min(p["rtf"] for p in parts),
+             "cpu_per_vehicle_s": sum(p["cpu_per_vehicle_s"] * p["count"] for p in parts) / count,
+             "memory_mb": sum(p["memory_mb"] * p["count"] for p in parts) / count,
+             "startup_s": max(p["startup_s"] for p in parts),
+             "baseline_mb": parts[0]["baseline_mb"]}  # fmt: skip
         results.append(r)
         per = r["cpu_per_vehicle_s"]
-        print(f"K={count:4d} ({args.flight}): {r['rtf']:6.2f}x real time in one process, "
+        where = "one process" if args.processes == 1 else f"{args.processes} processes side by side"
+        print(f"K={count:4d} ({args.flight}): {r['rtf']:6.2f}x real time in {where}, "
               f"CPU {per * 1e3:6.1f} ms per vehicle per simulated s (one core holds "
               f"{1.0 / per:5.1f} vehicles at 1x), {r['memory_mb']:5.1f} MB per vehicle "
               f"(process {r['baseline_mb']:.0f} MB before them), start-up {r['startup_s']:5.2f} s",
               flush=True)  # fmt: skip
     r = results[-1]
-    name = f"fleet_{args.flight}"
+    name = f"fleet_{args.flight}" + (f"_{args.processes}_processes" if args.processes > 1 else "")
     print(f"{name}_k: {r['count']} vehicles")
     print(f"{name}_real_time_factor: {r['rtf']:.2f} x")
     print(f"{name}_cpu_per_vehicle_per_sim_s: {r['cpu_per_vehicle_s'] * 1e3:.1f} ms")

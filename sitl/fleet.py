@@ -18,9 +18,12 @@ autopilot sends on a ground-station link goes out on that link's socket. A vehic
 as it flies alone in the in-process stack (``tests/sitl/test_fleet.py``): the vehicles share
 nothing but the loop.
 
-Run: ``quadsitl fleet --count K [--instance N] [--speed S] [--scenario NAME] [--controller NAME]``.
-Not yet: zenoh (truth, recorder, live view), the EKF per vehicle's own sensors profile, parameter
-files kept across restarts, impairment; a fleet spread over processes or hosts.
+``--processes P`` flies the fleet in P processes, one core each, a lost one restarted
+(:mod:`sitl.fleet_processes`).
+
+Run: ``quadsitl fleet --count K [--instance N] [--speed S] [--scenario NAME] [--controller NAME]
+[--processes P]``. Not yet: zenoh (truth, recorder, live view), parameter files kept across
+restarts, impairment; a fleet spread over hosts.
 """
 
 from __future__ import annotations
@@ -202,6 +205,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--autostart", default=None, metavar="SCENARIO",
                         help="every vehicle armed at t = 0, flying the scenario's trajectory")
     parser.add_argument("--log-dir", default=None, help="each vehicle's flight logs (ULog) under DIR/<N>")
+    parser.add_argument("--processes", type=int, default=1,
+                        help="fly the fleet in P processes (one core each), a lost one restarted")
+    parser.add_argument("--no-restart", action="store_true",
+                        help="with --processes: a lost process stays down")
     args = parser.parse_args(argv)
     first, last = args.instance, args.instance + args.count - 1
     if args.count < 1 or not wire.INSTANCE_MIN <= first <= last <= wire.INSTANCE_MAX:
@@ -213,6 +220,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--speed {args.speed!r}: a number or 'max'")
     if speed is not None and not speed > 0.0:
         parser.error(f"--speed {args.speed}: must be above 0")
+
+    if args.processes < 1:
+        parser.error(f"--processes {args.processes}: at least 1")
+    if args.processes > 1:
+        from .fleet_processes import supervise
+        from .supervise import RestartPolicy
+
+        passed = ["--speed", args.speed, "--scenario", args.scenario, "--controller", args.controller,
+                  "--estimator", args.estimator]  # fmt: skip
+        for flag, value in (("--duration", args.duration), ("--vehicle", args.vehicle),
+                            ("--sensors", args.sensors), ("--log-dir", args.log_dir)):  # fmt: skip
+            if value is not None:
+                passed += [flag, str(value)]
+        autostart = ["--autostart", args.autostart] if args.autostart else []
+        return supervise(first, args.count, args.processes, passed, autostart,
+                         RestartPolicy(enabled=not args.no_restart))  # fmt: skip
 
     def log(text: str) -> None:
         print(f"fleet: {text}", flush=True)

@@ -1,11 +1,15 @@
 """A fleet in one process (sitl/fleet.py): a vehicle flies in a fleet exactly as it flies alone;
 each vehicle answers on its own ports as PX4 numbers them, one ground station on the GCS port sees
-them all, and a client on one vehicle's API port drives that vehicle alone."""
+them all, and a client on one vehicle's API port drives that vehicle alone; over several
+processes (sitl/fleet_processes.py) a lost one is restarted while the others fly on."""
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
@@ -79,18 +83,37 @@ def command(conn, target: int, command_id: int, *params: float, wall_s: float = 
     raise AssertionError(f"command {command_id} to system {target} not accepted (last result {last})")
 
 
+def fleet_child_of(supervisor_pid: int, instance: int) -> int:
+    """The fleet process (a child of the supervisor) flying ``instance`` first (Linux /proc)."""
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        ours = int(stat.rsplit(")", 1)[1].split()[1]) == supervisor_pid and b"--instance" in cmdline
+        if ours and cmdline[cmdline.index(b"--instance") + 1] == str(instance).encode():
+            return int(entry.name)
+    raise AssertionError(f"no fleet process for instance {instance} under {supervisor_pid}")
+
+
 @pytest.mark.processes
-def test_one_ground_station_sees_the_fleet_and_a_client_drives_one_vehicle_alone():
-    """`quadsitl fleet --count 2`: on the GCS port both system ids; through vehicle 1's API port
-    (14541 as PX4 numbers it) arm and take off: vehicle 1 climbs, vehicle 0 stays on the ground."""
+def test_a_fleet_in_two_processes_seen_by_one_station_driven_one_by_one_a_lost_process_restarted():
+    """`quadsitl fleet --count 2 --processes 2`: on the GCS port both system ids; through vehicle
+    1's API port arm and take off: vehicle 1 climbs, vehicle 0 stays on the ground. Vehicle 0's
+    process killed: it is restarted (its vehicle back on the GCS port) while vehicle 1 flies on."""
     first = 3
     ports = [instance_ports(first), instance_ports(first + 1)]
     gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[0].gcs_remote}", source_system=255)
     api = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[1].api_remote}", source_system=245)
-    child = Child("quadsitl fleet", [sys.executable, "-u", "-m", "sitl.cli", "fleet", "--count", "2",
-                                     "--instance", str(first), "--speed", "2"])  # fmt: skip
+    command_line = [sys.executable, "-u", "-m", "sitl.cli", "fleet", "--count", "2", "--instance", str(first),
+                    "--speed", "2", "--processes", "2"]  # fmt: skip
+    child = Child("quadsitl fleet", command_line)
     try:
-        child.wait_line("vehicles, instances", timeout=60.0)
+        child.wait_line("[0] fleet: 1 vehicles, instances", timeout=60.0)
+        child.wait_line("[1] fleet: 1 vehicles, instances", timeout=60.0)
         assert heartbeat_senders(gcs, 3.0) == {first + 1, first + 2}  # system id = instance + 1
         target = first + 2
         assert api.wait_heartbeat(timeout=10.0).get_srcSystem() == target
@@ -101,7 +124,12 @@ def test_one_ground_station_sees_the_fleet_and_a_client_drives_one_vehicle_alone
         while relative_altitude(gcs, target) < 1.5:
             assert time.monotonic() < deadline, "vehicle 1 did not climb"
         assert abs(relative_altitude(gcs, first + 1)) < 0.2  # vehicle 0: still on the ground
-        assert child.alive
+
+        os.kill(fleet_child_of(child.pid, first), signal.SIGKILL)
+        child.wait_line("fleet process 0 (instances 3..3) lost: killed by SIGKILL", timeout=10.0)
+        child.wait_line("fleet process 0 relinked", timeout=60.0)
+        assert first + 1 in heartbeat_senders(gcs, 2.0)  # vehicle 0 is back
+        assert relative_altitude(gcs, target) > 1.5  # vehicle 1 flew on
     finally:
         child.stop()
         gcs.close()
