@@ -57,9 +57,12 @@ class FleetProcess:
 
     @property
     def instances(self) -> str:
+        """Its instances, ``A..B``."""
         return f"{self.first}..{self.first + self.count - 1}"
 
     def start(self, first_start: bool) -> None:
+        """Start its process (``--autostart`` only on the first start: a restarted vehicle waits on
+        the ground)."""
         cmd = [sys.executable, "-u", "-m", "sitl.cli", "fleet", "--processes", "1",
                "--count", str(self.count), "--instance", str(self.first), *self.arguments,
                *(self.autostart if first_start else [])]  # fmt: skip
