@@ -11,12 +11,12 @@ the port and the instance. A vehicle's frames never leave the process: the locks
 simulator and its autopilot is a function call (no HIL port), which is what makes a vehicle cheap
 (one process of ~200 MB for the fleet instead of two per vehicle).
 
-Per frame and vehicle: the datagrams waiting on its two sockets go in (at most
-:data:`~autopilot.app.GCS_DATAGRAMS_PER_FRAME` per link, as the autopilot process takes them, so
-a flood on one vehicle's port cannot starve the others), then its frame is flown; whatever the
-autopilot sends on a ground-station link goes out on that link's socket. A vehicle flies exactly
-as it flies alone in the in-process stack (``tests/sitl/test_fleet.py``): the vehicles share
-nothing but the loop.
+Per frame: one poll of every vehicle's sockets; what waits on a vehicle's sockets goes in (at
+most :data:`~autopilot.app.GCS_DATAGRAMS_PER_FRAME` per link, as the autopilot process takes
+them, so a flood on one vehicle's port cannot starve the others), then each vehicle's frame is
+flown; whatever the autopilot sends on a ground-station link goes out on that link's socket. A
+vehicle flies exactly as it flies alone in the in-process stack (``tests/sitl/test_fleet.py``):
+the vehicles share nothing but the loop.
 
 ``--processes P`` flies the fleet in P processes, one core each, a lost one restarted
 (:mod:`sitl.fleet_processes`).
@@ -29,6 +29,7 @@ restarts, impairment; a fleet spread over hosts.
 from __future__ import annotations
 
 import argparse
+import selectors
 import signal
 import sys
 import time
@@ -98,18 +99,17 @@ class FleetVehicle:
             except OSError:
                 pass
 
-    def take_datagrams(self) -> None:
-        """What waits on its sockets, into the stack (at most GCS_DATAGRAMS_PER_FRAME a link)."""
-        stack = self.stack
-        for link, sock in self.socks.items():
-            for _ in range(GCS_DATAGRAMS_PER_FRAME):
-                try:
-                    data, address = sock.recvfrom(MAX_DATAGRAM)
-                except (BlockingIOError, InterruptedError):
-                    break
-                except OSError:
-                    continue  # ICMP unreachable from an earlier send: ignore
-                stack.deliver(link, address, data)
+    def take_datagrams(self, link: int) -> None:
+        """What waits on the link's socket, into the stack (at most GCS_DATAGRAMS_PER_FRAME)."""
+        sock, stack = self.socks[link], self.stack
+        for _ in range(GCS_DATAGRAMS_PER_FRAME):
+            try:
+                data, address = sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                continue  # ICMP unreachable from an earlier send: ignore
+            stack.deliver(link, address, data)
 
     def close(self) -> list:
         """The sockets closed, the flight log ended; the logs written."""
@@ -146,6 +146,9 @@ class Fleet:
         self.vehicles = list(vehicles)
         self.dt = vehicles[0].stack.sim.dt_control
         self.frames = 0
+        # Every vehicle's sockets in one poll a frame (one system call for the fleet, not two
+        # receive attempts per vehicle).
+        self.selector = selectors.DefaultSelector()
 
     @property
     def t(self) -> float:
@@ -163,17 +166,24 @@ class Fleet:
             for vehicle in opened:
                 vehicle.close()
             raise
+        for vehicle in self.vehicles:
+            for link, sock in vehicle.socks.items():
+                self.selector.register(sock, selectors.EVENT_READ, (vehicle, link))
 
     def step(self) -> None:
         """One frame of every vehicle: its datagrams in, its frame, its answer, its plant."""
+        if self.selector.get_map():
+            for key, _ in self.selector.select(0):
+                vehicle, link = key.data
+                vehicle.take_datagrams(link)
         for vehicle in self.vehicles:
-            vehicle.take_datagrams()
             vehicle.stack.step()
         self.frames += 1
 
     def close(self) -> list:
         """Every vehicle's sockets closed and flight log ended; the logs written."""
         written: list = []
+        self.selector.close()
         for vehicle in self.vehicles:
             written += vehicle.close()
         return written
