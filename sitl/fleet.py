@@ -34,7 +34,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from autopilot.app import GCS_DATAGRAMS_PER_FRAME, MAX_DATAGRAM
 from autopilot.control.config import load_controller
@@ -138,14 +138,28 @@ def make_vehicle(
 
 
 class Fleet:
-    """K vehicles stepped together: :meth:`step` flies one frame of each."""
+    """K vehicles stepped together: :meth:`step` flies one frame of each.
 
-    def __init__(self, vehicles: Sequence[FleetVehicle]) -> None:
+    A vehicle whose frame fails (its plant diverged, a law failed past the autopilot's own
+    handling) must not end the others' flights: it is reported through ``log`` and, when the fleet
+    has a ``restart`` (instance -> a new vehicle), replaced by a new one on the ground on the same
+    ports, as a lost process is restarted; else it is left out."""
+
+    def __init__(
+        self,
+        vehicles: Sequence[FleetVehicle],
+        log: Callable[[str], None] = lambda text: None,
+        restart: Callable[[int], FleetVehicle] | None = None,
+    ) -> None:
         if not vehicles:
             raise ValueError("a fleet needs at least one vehicle")
         self.vehicles = list(vehicles)
         self.dt = vehicles[0].stack.sim.dt_control
         self.frames = 0
+        self.log = log
+        self.restart = restart
+        self.restarts: dict[int, int] = {}  # instance -> vehicles replaced
+        self.opened = False  # the vehicles' ports bound (open)
         # Every vehicle's sockets in one poll a frame (one system call for the fleet, not two
         # receive attempts per vehicle).
         self.selector = selectors.DefaultSelector()
@@ -167,8 +181,12 @@ class Fleet:
                 vehicle.close()
             raise
         for vehicle in self.vehicles:
-            for link, sock in vehicle.socks.items():
-                self.selector.register(sock, selectors.EVENT_READ, (vehicle, link))
+            self._watch(vehicle)
+        self.opened = True
+
+    def _watch(self, vehicle: FleetVehicle) -> None:
+        for link, sock in vehicle.socks.items():
+            self.selector.register(sock, selectors.EVENT_READ, (vehicle, link))
 
     def step(self) -> None:
         """One frame of every vehicle: its datagrams in, its frame, its answer, its plant."""
@@ -176,9 +194,43 @@ class Fleet:
             for key, _ in self.selector.select(0):
                 vehicle, link = key.data
                 vehicle.take_datagrams(link)
+        failed = None
         for vehicle in self.vehicles:
-            vehicle.stack.step()
+            try:
+                vehicle.stack.step()
+            except Exception as exc:  # one vehicle's failure is not the fleet's
+                failed = [*(failed or []), (vehicle, exc)]
+        for vehicle, exc in failed or ():
+            self._replace(vehicle, exc)
         self.frames += 1
+
+    def _replace(self, vehicle: FleetVehicle, exc: Exception) -> None:
+        """``vehicle`` lost: out of the fleet, and a new one in its place when there is a restart."""
+        n, why = vehicle.instance, f"{type(exc).__name__}: {exc}"
+        for sock in vehicle.socks.values():
+            self.selector.unregister(sock)
+        try:
+            vehicle.close()  # (its flight log ended, as far as it goes)
+        except Exception as closing:
+            self.log(f"vehicle {n}: closing it failed: {closing}")
+        index = self.vehicles.index(vehicle)
+        new = None
+        if self.restart is not None:
+            try:
+                new = self.restart(n)
+                if self.opened:
+                    new.open()
+                    self._watch(new)
+            except Exception as again:
+                self.log(f"vehicle {n}: restarting it failed: {again}")
+                new = None
+        if new is None:
+            del self.vehicles[index]
+            self.log(f"vehicle {n} lost ({why}); left out")
+            return
+        self.vehicles[index] = new
+        self.restarts[n] = self.restarts.get(n, 0) + 1
+        self.log(f"vehicle {n} lost ({why}); restarted on the ground")
 
     def close(self) -> list:
         """Every vehicle's sockets closed and flight log ended; the logs written."""
@@ -254,7 +306,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                            args.log_dir, args.autostart)  # fmt: skip
     started = time.monotonic()
     try:
-        fleet = Fleet([make_vehicle(n, options, log) for n in range(first, last + 1)])
+        on_ground = replace(options, autostart=None)  # a restarted vehicle does not take off by itself
+        fleet = Fleet([make_vehicle(n, options, log) for n in range(first, last + 1)], log,
+                      restart=lambda n: make_vehicle(n, on_ground, log))  # fmt: skip
         fleet.open()
     except (ConfigError, PortInUse) as exc:
         print(f"quadsitl fleet: {exc}", file=sys.stderr)

@@ -135,3 +135,27 @@ def test_a_fleet_in_two_processes_seen_by_one_station_driven_one_by_one_a_lost_p
         gcs.close()
         api.close()
     assert child.returncode == 0, child.tail()
+
+
+def test_a_vehicle_whose_frame_fails_is_restarted_on_the_ground_and_the_others_fly_on():
+    """Vehicle 0's plant diverges (its state made NaN): it is reported and replaced by a new one on
+    the ground, disarmed; vehicle 1 flies on as if nothing happened."""
+    said: list[str] = []
+    fleet = Fleet([make_vehicle(n, CIRCLE) for n in range(2)], said.append,
+                  restart=lambda n: make_vehicle(n, IDLE))  # fmt: skip
+    alone = make_vehicle(1, CIRCLE)
+    alone.stack.record_rows = fleet.vehicles[1].stack.record_rows = True
+    for _ in range(300):
+        fleet.step()
+    broken = fleet.vehicles[0]
+    broken.stack.sim.plant.state = [float("nan")] * len(broken.stack.sim.plant.state)
+    for _ in range(300):
+        fleet.step()
+    for _ in range(600):
+        alone.stack.step()
+    assert fleet.restarts == {0: 1}
+    assert len(said) == 1 and said[0].startswith("vehicle 0 lost (PlantDiverged: ") and "restarted" in said[0]
+    restarted = fleet.vehicles[0]
+    assert restarted is not broken and not restarted.stack.autopilot.commander.armed
+    assert restarted.stack.frames > 0  # it flies its own frames from its own t = 0
+    assert fleet.vehicles[1].stack.truth_rows == alone.stack.truth_rows
