@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from typing import Any
 
 from quadcommon import bus, wire
 from quadcommon.bus_records import CONTROLLER_CODEC, ESTIMATOR_CODEC
@@ -31,14 +32,18 @@ class AutopilotBus:
         self.session = self.controller_pub = self.estimator_pub = None
         self.info_queryable = self.impair_queryable = None
         self._hold_rows_until: float | None = None
+        self._owns_session = True
 
-    def open(self, port: int) -> None:
-        """Join the bus (peer on ``port``, or the configured router); BusError names what failed."""
+    def open(self, port: int, session: Any = None) -> None:
+        """Join the bus (peer on ``port``, or the configured router); BusError names what failed.
+        ``session``: serve on this one instead (a fleet's vehicle, whose simulator shares it); it
+        stays open at :meth:`close`."""
         import zenoh
 
         core = self.core
         n = core.setup.instance
-        self.session = bus.open_peer(port, core.setup.sitl.zenoh_router)
+        self._owns_session = session is None
+        self.session = session if session is not None else bus.open_peer(port, core.setup.sitl.zenoh_router)
         self.controller_pub = self.session.declare_publisher(wire.zenoh_key(n, "controller"))
         self._hold_rows_until = time.monotonic() + SUBSCRIBER_GRACE_S
         self.estimator_pub = self.session.declare_publisher(wire.zenoh_key(n, "estimator"))
@@ -50,8 +55,8 @@ class AutopilotBus:
         )
 
     def close(self) -> None:
-        """Leave the bus."""
-        if self.session is not None:
+        """Leave the bus (a shared session stays open: its owner closes it)."""
+        if self.session is not None and self._owns_session:
             self.session.close()
 
     def publish_rows(self, force: bool = False) -> None:

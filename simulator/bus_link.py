@@ -29,12 +29,16 @@ class SimulatorBus:
         self.session: Any = None
         self.truth: TruthStream | None = None
         self.services: list = []  # zenoh queryables polled from the loop
+        self._owns_session = True
 
-    def open(self, port: int) -> None:
-        """Open the hub on ``port`` (or join the configured router); bus.BusError names what failed."""
+    def open(self, port: int, session: Any = None) -> None:
+        """Open the hub on ``port`` (or join the configured router); bus.BusError names what failed.
+        ``session``: serve on this one instead (a fleet's vehicle, whose autopilot shares it); it
+        stays open at :meth:`close`."""
         core = self.core
         n = core.setup.instance
-        self.session = bus.open_hub(port, core.setup.sitl.zenoh_router)
+        self._owns_session = session is None
+        self.session = session if session is not None else bus.open_hub(port, core.setup.sitl.zenoh_router)
         self.truth = TruthStream(self.session, wire.zenoh_key(n, "truth"))
         self.services = [
             InfoServer(self.session, wire.zenoh_key(n, "info"), self.describe),
@@ -68,6 +72,6 @@ class SimulatorBus:
         for service in self.services:
             service.close()
         self.services = []
-        if self.session is not None:
+        if self.session is not None and self._owns_session:
             self.session.close()
-            self.session = None
+        self.session = None

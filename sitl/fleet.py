@@ -18,12 +18,16 @@ flown; whatever the autopilot sends on a ground-station link goes out on that li
 vehicle flies exactly as it flies alone in the in-process stack (``tests/sitl/test_fleet.py``):
 the vehicles share nothing but the loop.
 
-``--processes P`` flies the fleet in P processes, one core each, a lost one restarted
-(:mod:`sitl.fleet_processes`).
+``--zenoh``: each vehicle serves its zenoh keys ``quadsitl/<N>/...`` as its two processes do (the
+truth, the controller's and estimator's rows, ``info``, ``autopilot/info``, ``sim/gusts``,
+``impair``), on one session per vehicle listening on its zenoh port (the processes' own bus
+classes, :mod:`simulator.bus_link` and :mod:`autopilot.bus_link`, on a shared session); its
+queries are answered every 50 ms of simulation time. ``--processes P`` flies the fleet in P
+processes, one core each, a lost one restarted (:mod:`sitl.fleet_processes`).
 
 Run: ``quadsitl fleet --count K [--instance N] [--speed S] [--scenario NAME] [--controller NAME]
-[--processes P]``. Not yet: zenoh (truth, recorder, live view), parameter files kept across
-restarts, impairment; a fleet spread over hosts.
+[--zenoh] [--processes P]``. Not yet: parameter files kept across restarts; a fleet spread over
+hosts (a zenoh router and globally unique instances).
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ from autopilot.logger.logger import LogOptions
 from autopilot.mavlink.links import API_LINK, GCS_LINK, Outgoing
 from autopilot.setup import AutopilotSetup
 from quadcommon import wire
+from quadcommon.bus import BusError
 from quadcommon.config import load_scenario
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import trajectory_from_spec
@@ -49,7 +54,7 @@ from quadcommon.udp import PortInUse, bind_udp
 from simulator.core import SimulatorSetup
 from simulator.pacing import Pacer
 
-from .inprocess import Lockstep, estimator_profile_for
+from .inprocess import HOUSEKEEPING_S, Lockstep, estimator_profile_for
 
 LINKS = ((GCS_LINK, "GCS link"), (API_LINK, "API link"))
 
@@ -77,6 +82,7 @@ class FleetVehicle:
         self.socks: dict[int, object] = {}
         stack.record_rows = False  # (a fleet flies for hours: nothing kept per frame)
         stack.outbound = self.send
+        self.session = self.sim_bus = self.ap_bus = None  # zenoh, once open_bus
 
     def open(self) -> None:
         """Bind its ports; PortInUse names the port, the link and the instance."""
@@ -111,11 +117,46 @@ class FleetVehicle:
                 continue  # ICMP unreachable from an earlier send: ignore
             stack.deliver(link, address, data)
 
+    def open_bus(self, speed: float | None, log: Callable[[str], None]) -> None:
+        """Its zenoh keys ``quadsitl/<N>/...`` as its two processes serve them (truth, controller
+        and estimator rows, ``info``, ``autopilot/info``, ``sim/gusts``, ``impair``), on one
+        session listening on its zenoh port (or joining the configured router); BusError names
+        the port."""
+        from autopilot.bus_link import AutopilotBus
+        from quadcommon import bus
+        from simulator.bus_link import SimulatorBus
+
+        stack, port = self.stack, self.ports.zenoh
+        self.session = bus.open_hub(port, stack.sim.setup.sitl.zenoh_router)
+        self.sim_bus = SimulatorBus(stack.sim, stack.impaired, speed, log)
+        self.sim_bus.open(port, self.session)
+        self.ap_bus = AutopilotBus(stack.autopilot, stack.impaired, log)
+        self.ap_bus.open(port, self.session)
+        stack.rows_taken_elsewhere = True  # the autopilot's rows wait in its core for the bus
+
+    def after_frame(self) -> None:
+        """The frame's truth row out on zenoh (batched), when on the bus."""
+        if self.sim_bus is not None:
+            self.sim_bus.truth.append(self.stack.sim.truth_row)
+
+    def housekeeping(self) -> None:
+        """On the bus: the autopilot's rows out, the queries answered."""
+        if self.sim_bus is not None:
+            self.sim_bus.poll()
+            self.ap_bus.poll()
+            self.ap_bus.publish_rows()
+
     def close(self) -> list:
-        """The sockets closed, the flight log ended; the logs written."""
+        """The sockets and the bus closed, the flight log ended; the logs written."""
         for sock in self.socks.values():
             sock.close()
         self.socks = {}
+        if self.sim_bus is not None:
+            self.ap_bus.publish_rows(force=True)
+            self.sim_bus.close()
+            self.ap_bus.close()
+            self.session.close()
+            self.sim_bus = self.ap_bus = self.session = None
         return self.stack.close()
 
 
@@ -150,6 +191,7 @@ class Fleet:
         vehicles: Sequence[FleetVehicle],
         log: Callable[[str], None] = lambda text: None,
         restart: Callable[[int], FleetVehicle] | None = None,
+        zenoh_speed: float | None | bool = False,
     ) -> None:
         if not vehicles:
             raise ValueError("a fleet needs at least one vehicle")
@@ -160,6 +202,10 @@ class Fleet:
         self.restart = restart
         self.restarts: dict[int, int] = {}  # instance -> vehicles replaced
         self.opened = False  # the vehicles' ports bound (open)
+        # On zenoh (each vehicle's keys, as its processes serve them): the pacing factor its info
+        # reports (None: max); False: no zenoh.
+        self.zenoh_speed = zenoh_speed
+        self._housekeeping_every = max(1, round(HOUSEKEEPING_S / self.dt))
         # Every vehicle's sockets in one poll a frame (one system call for the fleet, not two
         # receive attempts per vehicle).
         self.selector = selectors.DefaultSelector()
@@ -182,6 +228,9 @@ class Fleet:
             raise
         for vehicle in self.vehicles:
             self._watch(vehicle)
+        if self.zenoh_speed is not False:
+            for vehicle in self.vehicles:
+                vehicle.open_bus(self.zenoh_speed, self.log)
         self.opened = True
 
     def _watch(self, vehicle: FleetVehicle) -> None:
@@ -203,6 +252,12 @@ class Fleet:
         for vehicle, exc in failed or ():
             self._replace(vehicle, exc)
         self.frames += 1
+        if self.zenoh_speed is not False and self.opened:
+            for vehicle in self.vehicles:
+                vehicle.after_frame()
+            if self.frames % self._housekeeping_every == 0:
+                for vehicle in self.vehicles:
+                    vehicle.housekeeping()
 
     def _replace(self, vehicle: FleetVehicle, exc: Exception) -> None:
         """``vehicle`` lost: out of the fleet, and a new one in its place when there is a restart."""
@@ -221,6 +276,8 @@ class Fleet:
                 if self.opened:
                     new.open()
                     self._watch(new)
+                    if self.zenoh_speed is not False:
+                        new.open_bus(self.zenoh_speed, self.log)
             except Exception as again:
                 self.log(f"vehicle {n}: restarting it failed: {again}")
                 new = None
@@ -269,6 +326,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--log-dir", default=None, help="each vehicle's flight logs (ULog) under DIR/<N>")
     parser.add_argument("--processes", type=int, default=1,
                         help="fly the fleet in P processes (one core each), a lost one restarted")
+    parser.add_argument("--zenoh", action="store_true",
+                        help="each vehicle's zenoh keys (truth, rows, info, gusts, impair) on its zenoh port")
     parser.add_argument("--no-restart", action="store_true",
                         help="with --processes: a lost process stays down")
     args = parser.parse_args(argv)
@@ -290,7 +349,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from .supervise import RestartPolicy
 
         passed = ["--speed", args.speed, "--scenario", args.scenario, "--controller", args.controller,
-                  "--estimator", args.estimator]  # fmt: skip
+                  "--estimator", args.estimator, *(["--zenoh"] if args.zenoh else [])]  # fmt: skip
         for flag, value in (("--duration", args.duration), ("--vehicle", args.vehicle),
                             ("--sensors", args.sensors), ("--log-dir", args.log_dir)):  # fmt: skip
             if value is not None:
@@ -308,9 +367,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         on_ground = replace(options, autostart=None)  # a restarted vehicle does not take off by itself
         fleet = Fleet([make_vehicle(n, options, log) for n in range(first, last + 1)], log,
-                      restart=lambda n: make_vehicle(n, on_ground, log))  # fmt: skip
+                      restart=lambda n: make_vehicle(n, on_ground, log),
+                      zenoh_speed=speed if args.zenoh else False)  # fmt: skip
         fleet.open()
-    except (ConfigError, PortInUse) as exc:
+    except (ConfigError, PortInUse, BusError) as exc:
         print(f"quadsitl fleet: {exc}", file=sys.stderr)
         return 2
     stop = {"asked": False}

@@ -210,6 +210,9 @@ class Lockstep:
         self.controller_rows: list[tuple[float, ...]] = []
         self.estimator_rows: list[tuple[float, ...]] = []  # on the EKF: one per frame (ESTIMATOR_FIELDS)
         self.record_rows = True
+        # With record_rows False: True leaves the autopilot's rows in its core for a bus to take (a
+        # fleet's vehicle on zenoh), False drops them each frame.
+        self.rows_taken_elsewhere = False
         self.answer_frames = True  # False: the autopilot sees no frame (it is gone: the simulator
         # flies its emergency descent)
         self.frames_flow = True  # False: the simulator is gone (no frames; the autopilot's clock runs)
@@ -329,7 +332,7 @@ class Lockstep:
             self.truth_rows.append(sim.truth_row)
             self.controller_rows.extend(ap.take_controller_rows())
             self.estimator_rows.extend(ap.take_estimator_rows())
-        else:
+        elif not self.rows_taken_elsewhere:
             ap.controller_rows.clear()
             ap.estimator_rows.clear()
         sim.end_frame(answer)

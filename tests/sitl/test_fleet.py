@@ -11,13 +11,16 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as m
 
+from quadcommon import bus
 from sitl.fleet import Fleet, FleetOptions, make_vehicle
 from sitl.launcher import Child
 from tests.ports import instance_ports
+from tests.sitl.harness import ZenohTap
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -159,3 +162,27 @@ def test_a_vehicle_whose_frame_fails_is_restarted_on_the_ground_and_the_others_f
     assert restarted is not broken and not restarted.stack.autopilot.commander.armed
     assert restarted.stack.frames > 0  # it flies its own frames from its own t = 0
     assert fleet.vehicles[1].stack.truth_rows == alone.stack.truth_rows
+
+
+def test_a_fleet_vehicle_streams_its_truth_on_its_zenoh_keys():
+    """`--zenoh`: each vehicle's truth on ``quadsitl/<N>/truth`` as its simulator process streams
+    it (a recorder or the live view subscribes there): every frame's row, the same numbers."""
+    fleet = Fleet([make_vehicle(n, CIRCLE) for n in (5, 6)], zenoh_speed=None)
+    fleet.open()
+    tap = None
+    try:
+        ours = fleet.vehicles[1]
+        tap = ZenohTap(6, "truth")
+        assert bus.wait_matching(ours.sim_bus.truth.publisher, 10.0)
+        ours.stack.record_rows = True
+        for _ in range(500):
+            fleet.step()
+        ours.sim_bus.truth.flush()
+        deadline = time.monotonic() + 10.0
+        while len(tap.rows()) < 500 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        np.testing.assert_array_equal(tap.rows(), np.array(ours.stack.truth_rows))
+    finally:
+        if tap is not None:
+            tap.close()
+        fleet.close()
