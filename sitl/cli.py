@@ -324,6 +324,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("rest", nargs=argparse.REMAINDER)
     p.set_defaults(func=lambda a: __import__("sitl.fleet", fromlist=["main"]).main(a.rest))
 
+    p = sub.add_parser("router", help="a zenoh router for a fleet over several launches or hosts "
+                                      "(quadsitl router --help)", add_help=False)  # fmt: skip
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+
     p = sub.add_parser(
         "view",
         help="live 3-D view and plots in the browser, or replays of logs (quadsitl view --help)",
@@ -464,6 +468,10 @@ def _dispatch(argv: list[str]) -> int:
         from sitl.compile import main as compile_main
 
         return compile_main(argv[1:])
+    if argv[:1] == ["router"]:  # its own parser too (sitl/router.py)
+        from sitl.router import main as router_main
+
+        return router_main(argv[1:])
     if argv[:1] == ["fleet"]:  # its own parser too (sitl/fleet.py)
         from sitl.fleet import main as fleet_main
 

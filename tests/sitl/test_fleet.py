@@ -6,6 +6,7 @@ processes (sitl/fleet_processes.py) a lost one is restarted while the others fly
 from __future__ import annotations
 
 import os
+import re
 import signal
 import sys
 import time
@@ -19,7 +20,7 @@ from pymavlink.dialects.v20 import common as m
 from quadcommon import bus
 from sitl.fleet import Fleet, FleetOptions, make_vehicle
 from sitl.launcher import Child
-from tests.ports import instance_ports
+from tests.ports import block_config_dir, instance_ports
 from tests.sitl.harness import ZenohTap
 
 pytestmark = pytest.mark.timeout(240)
@@ -186,3 +187,44 @@ def test_a_fleet_vehicle_streams_its_truth_on_its_zenoh_keys():
         if tap is not None:
             tap.close()
         fleet.close()
+
+
+@pytest.mark.processes
+def test_two_fleet_launches_meet_through_a_router(tmp_path):
+    """Across hosts, shown on loopback: `quadsitl router` and two fleet launches (instances 10 and
+    20) whose sitl.toml names it; a client of the router hears both vehicles' truth."""
+    endpoint = f"tcp/127.0.0.1:{instance_ports(240).zenoh}"  # a port of this test's block
+    config = tmp_path / "config"
+    config.mkdir()
+    text = (block_config_dir() / "sitl.toml").read_text()
+    (config / "sitl.toml").write_text(re.sub(r"(?m)^router\s*=.*$", f'router = "{endpoint}"', text))
+    quadsitl = [sys.executable, "-u", "-m", "sitl.cli"]
+    children = [Child("router", [*quadsitl, "router", "--listen", endpoint])]
+    session = None
+    try:
+        children[0].wait_line("router: listening", timeout=20.0)
+        for n in (10, 20):
+            launch = [*quadsitl, "--config-dir", str(config), "fleet", "--count", "1", "--instance", str(n),
+                      "--zenoh", "--speed", "2"]  # fmt: skip
+            children.append(Child(f"fleet {n}", launch))
+        for child in children[1:]:
+            child.wait_line("vehicles, instances", timeout=60.0)
+        session = bus.open_peer(0, router=endpoint)
+        import zenoh
+
+        sub = session.declare_subscriber("quadsitl/*/truth", zenoh.handlers.FifoChannel(10_000))
+        heard: set[str] = set()
+        deadline = time.monotonic() + 20.0
+        while heard != {"quadsitl/10/truth", "quadsitl/20/truth"} and time.monotonic() < deadline:
+            sample = sub.try_recv()
+            if sample is None:
+                time.sleep(0.01)
+            else:
+                heard.add(str(sample.key_expr))
+        assert heard == {"quadsitl/10/truth", "quadsitl/20/truth"}
+    finally:
+        if session is not None:
+            session.close()
+        for child in reversed(children):
+            child.stop()
+    assert all(child.returncode == 0 for child in children), [child.tail() for child in children]
