@@ -16,7 +16,9 @@ It reports, per K:
   from its first frame).
 
 ``--processes P`` splits each fleet over P processes flown side by side (``quadsitl fleet
---processes P``): the real-time factor is the slowest process's.
+--processes P``): the real-time factor is the slowest process's. ``--compare-up K`` flies the same
+for K vehicles with ``quadsitl up --count K`` (two processes per vehicle, lockstep over UDP, at
+``--speed max``) in the same run: its real-time factor, CPU and memory per vehicle, start-up.
 
 Run: ``.venv/bin/python benchmarks/fleet.py [--counts 1 10 20] [--seconds 10] [--flight circle]
 [--instance 0] [--processes 1]``. The ports of instances ``--instance`` .. + K - 1 must be free. Last lines:
@@ -28,6 +30,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -67,6 +70,74 @@ def fly(count: int, args: argparse.Namespace) -> dict:
             "memory_mb": memory_mb, "startup_s": startup_s, "baseline_mb": before}  # fmt: skip
 
 
+def up_figures(count: int, args: argparse.Namespace) -> dict:
+    """The same flight with today's process-per-vehicle launch (``quadsitl up --count K``: two
+    processes per vehicle, lockstep over UDP), at ``--speed max`` for ``--seconds``: its real-time
+    factor (the whole launch's wall time from "linked" to exit), CPU per vehicle per simulated
+    second (every process, ``RUSAGE_CHILDREN``, less what they had spent starting), resident
+    memory per vehicle (its two processes, once linked) and start-up to all linked."""
+    command = [sys.executable, "-u", "-m", "sitl.cli", "up", "--count", str(count),
+               "--instance", str(args.instance), "--speed", "max", "--duration", str(args.seconds),
+               "--no-log", "--no-restart"]  # fmt: skip
+    if args.flight == "circle":
+        command += ["--scenario", "circle", "--autostart"]
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    launch = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert launch.stdout is not None
+    for line in launch.stdout:
+        if "Ctrl-C stops every process" in line:
+            break
+    linked = time.perf_counter()
+    processes = _descendants(launch.pid)
+    memory_mb = sum(_resident_mb_of(pid) for pid in processes) / count
+    startup_cpu = sum(_cpu_s_of(pid) for pid in [launch.pid, *processes])  # (not the flight's)
+    for _ in launch.stdout:
+        pass
+    launch.wait()
+    wall = time.perf_counter() - linked
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime) - startup_cpu
+    return {"count": count, "rtf": args.seconds / wall, "cpu_per_vehicle_s": cpu / (count * args.seconds),
+            "memory_mb": memory_mb, "startup_s": linked - start}  # fmt: skip
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every process under ``pid`` (Linux /proc)."""
+    parent_of = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as stat:
+                    parent_of[int(entry)] = int(stat.read().rsplit(")", 1)[1].split()[1])
+            except OSError:
+                continue
+    found, frontier = [], [pid]
+    while frontier:
+        below = [p for p, parent in parent_of.items() if parent in frontier]
+        found += below
+        frontier = below
+    return found
+
+
+def _cpu_s_of(pid: int) -> float:
+    """User + system CPU seconds of ``pid`` so far (Linux /proc; 0 once it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _resident_mb_of(pid: int) -> float:
+    try:
+        with open(f"/proc/{pid}/statm") as statm:
+            return int(statm.read().split()[1]) * resource.getpagesize() / 1e6
+    except OSError:
+        return 0.0
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -75,6 +146,8 @@ def main() -> None:
     parser.add_argument("--flight", choices=("circle", "idle"), default="circle")
     parser.add_argument("--instance", type=int, default=0, help="the first vehicle's instance")
     parser.add_argument("--processes", type=int, default=1, help="the fleet split over P processes")
+    parser.add_argument("--compare-up", type=int, default=0, metavar="K",
+                        help="also the same flight with quadsitl up --count K (two processes per vehicle)")
     parser.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)  # one K, JSON out
     args = parser.parse_args()
     if args.child is not None:
@@ -109,6 +182,13 @@ def main() -> None:
               f"{1.0 / per:5.1f} vehicles at 1x), {r['memory_mb']:5.1f} MB per vehicle "
               f"(process {r['baseline_mb']:.0f} MB before them), start-up {r['startup_s']:5.2f} s",
               flush=True)  # fmt: skip
+    if args.compare_up:
+        u = up_figures(args.compare_up, args)
+        print(f"K={u['count']:4d} ({args.flight}) with quadsitl up (two processes per vehicle): "
+              f"{u['rtf']:6.2f}x real time, CPU {u['cpu_per_vehicle_s'] * 1e3:6.1f} ms per vehicle "
+              f"per simulated s, "
+              f"{u['memory_mb']:5.1f} MB per vehicle, start-up to all linked {u['startup_s']:5.2f} s",
+              flush=True)  # fmt: skip
     r = results[-1]
     name = f"fleet_{args.flight}" + (f"_{args.processes}_processes" if args.processes > 1 else "")
     print(f"{name}_k: {r['count']} vehicles")
@@ -117,6 +197,12 @@ def main() -> None:
     print(f"{name}_vehicles_per_core_at_1x: {1.0 / r['cpu_per_vehicle_s']:.1f} vehicles")
     print(f"{name}_memory_per_vehicle: {r['memory_mb']:.1f} MB")
     print(f"{name}_startup: {r['startup_s']:.2f} s")
+    if args.compare_up:
+        print(f"up_{args.flight}_k: {u['count']} vehicles")
+        print(f"up_{args.flight}_real_time_factor: {u['rtf']:.2f} x")
+        print(f"up_{args.flight}_cpu_per_vehicle_per_sim_s: {u['cpu_per_vehicle_s'] * 1e3:.1f} ms")
+        print(f"up_{args.flight}_memory_per_vehicle: {u['memory_mb']:.1f} MB")
+        print(f"up_{args.flight}_startup: {u['startup_s']:.2f} s")
 
 
 if __name__ == "__main__":
