@@ -344,7 +344,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.processes < 1:
         parser.error(f"--processes {args.processes}: at least 1")
+    options = FleetOptions(args.scenario, args.controller, args.vehicle, args.sensors, args.estimator,
+                           args.log_dir, args.autostart)  # fmt: skip
     if args.processes > 1:
+        try:  # a bad name fails here, naming file and key, before any process starts
+            make_vehicle(first, options).close()
+        except ConfigError as exc:
+            print(f"quadsitl fleet: {exc}", file=sys.stderr)
+            return 2
         from .fleet_processes import supervise
         from .supervise import RestartPolicy
 
@@ -361,8 +368,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     def log(text: str) -> None:
         print(f"fleet: {text}", flush=True)
 
-    options = FleetOptions(args.scenario, args.controller, args.vehicle, args.sensors, args.estimator,
-                           args.log_dir, args.autostart)  # fmt: skip
     started = time.monotonic()
     try:
         on_ground = replace(options, autostart=None)  # a restarted vehicle does not take off by itself
