@@ -37,13 +37,16 @@ import sys
 import time
 
 from sitl.fleet import Fleet, FleetOptions, make_vehicle
+from sitl.fleet_processes import shares
 
 
-def resident_mb() -> float:
-    """This process's resident set now (MB), from /proc (ru_maxrss is the peak)."""
-    with open("/proc/self/statm") as statm:
-        pages = int(statm.read().split()[1])
-    return pages * resource.getpagesize() / 1e6
+def resident_mb(pid: int | str = "self") -> float:
+    """A process's resident set now (MB), from /proc (ru_maxrss is the peak); 0 once it is gone."""
+    try:
+        with open(f"/proc/{pid}/statm") as statm:
+            return int(statm.read().split()[1]) * resource.getpagesize() / 1e6
+    except OSError:
+        return 0.0
 
 
 def fly(count: int, args: argparse.Namespace) -> dict:
@@ -90,7 +93,7 @@ def up_figures(count: int, args: argparse.Namespace) -> dict:
             break
     linked = time.perf_counter()
     processes = _descendants(launch.pid)
-    memory_mb = sum(_resident_mb_of(pid) for pid in processes) / count
+    memory_mb = sum(resident_mb(pid) for pid in processes) / count
     startup_cpu = sum(_cpu_s_of(pid) for pid in [launch.pid, *processes])  # (not the flight's)
     for _ in launch.stdout:
         pass
@@ -130,14 +133,6 @@ def _cpu_s_of(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _resident_mb_of(pid: int) -> float:
-    try:
-        with open(f"/proc/{pid}/statm") as statm:
-            return int(statm.read().split()[1]) * resource.getpagesize() / 1e6
-    except OSError:
-        return 0.0
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -155,14 +150,11 @@ def main() -> None:
         return
     results = []
     for count in args.counts:  # each fleet in processes of its own: their memory is their own
-        shares = [count // args.processes + (1 if k < count % args.processes else 0)
-                  for k in range(args.processes)]  # fmt: skip
-        children, at = [], args.instance
-        for share in shares:  # side by side, as quadsitl fleet --processes P runs them
+        children = []
+        for at, share in shares(args.instance, count, args.processes):  # as quadsitl fleet --processes P
             command = [sys.executable, __file__, "--child", str(share), "--seconds", str(args.seconds),
                        "--flight", args.flight, "--instance", str(at)]  # fmt: skip
             children.append(subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
-            at += share
         parts = []
         for child in children:
             out, _ = child.communicate()

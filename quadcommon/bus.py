@@ -84,6 +84,17 @@ def open_peer(hub_port: int, router: str = "") -> zenoh.Session:
         raise BusError(f"cannot open a zenoh session towards port {hub_port}: {exc}") from None
 
 
+def open_router(endpoint: str) -> zenoh.Session:
+    """A zenoh router listening on ``endpoint`` (``quadsitl router``): the sessions of launches
+    whose ``[zenoh] router`` names it meet there."""
+    cfg = session_config(listen=[endpoint])
+    cfg.insert_json5("mode", json.dumps("router"))
+    try:
+        return zenoh.open(cfg)
+    except zenoh.ZError as exc:
+        raise BusError(f"cannot open a zenoh router on {endpoint}: {exc}") from None
+
+
 def publisher_matched(publisher: zenoh.Publisher) -> bool:
     """True once ``publisher`` has a matching subscriber (its samples reach someone)."""
     try:

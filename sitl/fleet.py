@@ -26,8 +26,8 @@ queries are answered every 50 ms of simulation time. ``--processes P`` flies the
 processes, one core each, a lost one restarted (:mod:`sitl.fleet_processes`).
 
 Run: ``quadsitl fleet --count K [--instance N] [--speed S] [--scenario NAME] [--controller NAME]
-[--zenoh] [--processes P]``. Not yet: parameter files kept across restarts; a fleet spread over
-hosts (a zenoh router and globally unique instances).
+[--zenoh] [--processes P]``; launches on several hosts meet through a zenoh router
+(``quadsitl router``, :mod:`sitl.router`). Not yet: parameter files kept across restarts.
 """
 
 from __future__ import annotations
@@ -191,7 +191,8 @@ class Fleet:
         vehicles: Sequence[FleetVehicle],
         log: Callable[[str], None] = lambda text: None,
         restart: Callable[[int], FleetVehicle] | None = None,
-        zenoh_speed: float | None | bool = False,
+        zenoh: bool = False,
+        speed: float | None = 1.0,
     ) -> None:
         if not vehicles:
             raise ValueError("a fleet needs at least one vehicle")
@@ -202,9 +203,8 @@ class Fleet:
         self.restart = restart
         self.restarts: dict[int, int] = {}  # instance -> vehicles replaced
         self.opened = False  # the vehicles' ports bound (open)
-        # On zenoh (each vehicle's keys, as its processes serve them): the pacing factor its info
-        # reports (None: max); False: no zenoh.
-        self.zenoh_speed = zenoh_speed
+        self.zenoh = zenoh  # each vehicle's keys, as its processes serve them
+        self.speed = speed  # the pacing factor a vehicle's info reports on zenoh (None: max)
         self._housekeeping_every = max(1, round(HOUSEKEEPING_S / self.dt))
         # Every vehicle's sockets in one poll a frame (one system call for the fleet, not two
         # receive attempts per vehicle).
@@ -228,9 +228,9 @@ class Fleet:
             raise
         for vehicle in self.vehicles:
             self._watch(vehicle)
-        if self.zenoh_speed is not False:
+        if self.zenoh:
             for vehicle in self.vehicles:
-                vehicle.open_bus(self.zenoh_speed, self.log)
+                vehicle.open_bus(self.speed, self.log)
         self.opened = True
 
     def _watch(self, vehicle: FleetVehicle) -> None:
@@ -243,16 +243,16 @@ class Fleet:
             for key, _ in self.selector.select(0):
                 vehicle, link = key.data
                 vehicle.take_datagrams(link)
-        failed = None
+        failed = []
         for vehicle in self.vehicles:
             try:
                 vehicle.stack.step()
             except Exception as exc:  # one vehicle's failure is not the fleet's
-                failed = [*(failed or []), (vehicle, exc)]
-        for vehicle, exc in failed or ():
+                failed.append((vehicle, exc))
+        for vehicle, exc in failed:
             self._replace(vehicle, exc)
         self.frames += 1
-        if self.zenoh_speed is not False and self.opened:
+        if self.zenoh and self.opened:
             for vehicle in self.vehicles:
                 vehicle.after_frame()
             if self.frames % self._housekeeping_every == 0:
@@ -276,8 +276,8 @@ class Fleet:
                 if self.opened:
                     new.open()
                     self._watch(new)
-                    if self.zenoh_speed is not False:
-                        new.open_bus(self.zenoh_speed, self.log)
+                    if self.zenoh:
+                        new.open_bus(self.speed, self.log)
             except Exception as again:
                 self.log(f"vehicle {n}: restarting it failed: {again}")
                 new = None
@@ -373,7 +373,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         on_ground = replace(options, autostart=None)  # a restarted vehicle does not take off by itself
         fleet = Fleet([make_vehicle(n, options, log) for n in range(first, last + 1)], log,
                       restart=lambda n: make_vehicle(n, on_ground, log),
-                      zenoh_speed=speed if args.zenoh else False)  # fmt: skip
+                      zenoh=args.zenoh, speed=speed)  # fmt: skip
         fleet.open()
     except (ConfigError, PortInUse, BusError) as exc:
         print(f"quadsitl fleet: {exc}", file=sys.stderr)

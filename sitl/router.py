@@ -16,30 +16,14 @@ Run: ``quadsitl router [--port 7446] [--listen tcp/HOST:PORT]``; Ctrl-C stops it
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 import threading
 from collections.abc import Sequence
 
-from quadcommon import wire
+from quadcommon import bus, wire
 
 DEFAULT_PORT = 7446  # below the vehicles' hubs (7447 + N)
-
-
-def open_router(endpoint: str):  # noqa: ANN201 - a zenoh.Session
-    """A zenoh session in router mode listening on ``endpoint``; RuntimeError names it if it cannot."""
-    import zenoh
-
-    cfg = zenoh.Config()
-    cfg.insert_json5("mode", json.dumps("router"))
-    cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    cfg.insert_json5("scouting/multicast/enabled", "false")
-    cfg.insert_json5("transport/shared_memory/enabled", "false")
-    try:
-        return zenoh.open(cfg)
-    except zenoh.ZError as exc:
-        raise RuntimeError(f"cannot open a zenoh router on {endpoint}: {exc}") from None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -53,8 +37,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--port {args.port}: must be in 1..65535")
     endpoint = args.listen or f"tcp/{wire.LOOPBACK}:{args.port}"
     try:
-        session = open_router(endpoint)
-    except RuntimeError as exc:
+        session = bus.open_router(endpoint)
+    except bus.BusError as exc:
         print(f"quadsitl router: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()

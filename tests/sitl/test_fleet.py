@@ -22,6 +22,7 @@ from sitl.fleet import Fleet, FleetOptions, make_vehicle
 from sitl.launcher import Child
 from tests.ports import block_config_dir, instance_ports
 from tests.sitl.harness import ZenohTap
+from tests.sitl.test_up_cli import children_of
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -89,17 +90,13 @@ def command(conn, target: int, command_id: int, *params: float, wall_s: float = 
 
 def fleet_child_of(supervisor_pid: int, instance: int) -> int:
     """The fleet process (a child of the supervisor) flying ``instance`` first (Linux /proc)."""
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
+    for pid in children_of(supervisor_pid):
         try:
-            stat = (entry / "stat").read_text()
-            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+            cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
         except OSError:
             continue
-        ours = int(stat.rsplit(")", 1)[1].split()[1]) == supervisor_pid and b"--instance" in cmdline
-        if ours and cmdline[cmdline.index(b"--instance") + 1] == str(instance).encode():
-            return int(entry.name)
+        if b"--instance" in cmdline and cmdline[cmdline.index(b"--instance") + 1] == str(instance).encode():
+            return pid
     raise AssertionError(f"no fleet process for instance {instance} under {supervisor_pid}")
 
 
@@ -168,7 +165,7 @@ def test_a_vehicle_whose_frame_fails_is_restarted_on_the_ground_and_the_others_f
 def test_a_fleet_vehicle_streams_its_truth_on_its_zenoh_keys():
     """`--zenoh`: each vehicle's truth on ``quadsitl/<N>/truth`` as its simulator process streams
     it (a recorder or the live view subscribes there): every frame's row, the same numbers."""
-    fleet = Fleet([make_vehicle(n, CIRCLE) for n in (5, 6)], zenoh_speed=None)
+    fleet = Fleet([make_vehicle(n, CIRCLE) for n in (5, 6)], zenoh=True, speed=None)
     fleet.open()
     tap = None
     try:
