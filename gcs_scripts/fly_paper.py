@@ -56,7 +56,9 @@ def build_parser(prog: str = "fly_paper.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
-    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
+    parser.add_argument("--instance", type=int, default=0,
+                        help="vehicle instance N (default 0); through quadsitl also a range, "
+                        "0-9 or 3,5,8: the script once per vehicle")
     parser.add_argument("--scenario", default="helix", help="paper scenario: helix (default) or circle")
     parser.add_argument("--gusts", default=None, help="gust profile (default: the scenario's)")
     parser.add_argument(
@@ -66,7 +68,8 @@ def build_parser(prog: str = "fly_paper.py") -> argparse.ArgumentParser:
         help="time of the curve's first sample after the mission start, s (default 12)",
     )
     parser.add_argument("--rate", type=float, default=20.0, help="curve samples per second (default 20)")
-    parser.add_argument("--out", default=None, help="log path without extension (default runs/paper_<time>)")
+    parser.add_argument("--out", default=None, help="log path without extension (default runs/paper_<time>, "
+                        "+ _instance_N past instance 0)")
     parser.add_argument("--timeout", type=float, default=300.0, help="simulation seconds allowed")
     return parser
 
@@ -130,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     trajectory = trajectory_from_spec(scenario.trajectory)
     gusts = load_gust_profile_mapping(args.gusts or scenario.gusts) if (args.gusts or scenario.gusts) else {}
-    out = Path(args.out) if args.out else Path("runs") / time.strftime("paper_%Y%m%d_%H%M%S")
+    default = time.strftime("paper_%Y%m%d_%H%M%S") + (f"_instance_{args.instance}" if args.instance else "")
+    out = Path(args.out) if args.out else Path("runs") / default  # (one per vehicle: --instance 0-9)
     out.parent.mkdir(parents=True, exist_ok=True)
     link = upload_mission.connect(None, args.instance)
     from quadcommon.config import load_sitl

@@ -124,7 +124,9 @@ def build_parser(prog: str = "fly_setpoints.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
-    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
+    parser.add_argument("--instance", type=int, default=0,
+                        help="vehicle instance N (default 0); through quadsitl also a range, "
+                        "0-9 or 3,5,8: the script once per vehicle")
     parser.add_argument(
         "--url", default=None,
         help="MAVLink URL (default udpin:127.0.0.1:14540+N; from N=10 udpout:127.0.0.1:14580+N)"

@@ -537,7 +537,9 @@ def build_parser(prog: str = "upload_mission.py") -> argparse.ArgumentParser:
     source.add_argument("--curve", choices=("circle", "helix"), help="sample the paper's trajectory")
     source.add_argument("--download", action="store_true", help="print the vehicle's mission")
     source.add_argument("--clear", action="store_true", help="clear the vehicle's mission")
-    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
+    parser.add_argument("--instance", type=int, default=0,
+                        help="vehicle instance N (default 0); through quadsitl also a range, "
+                        "0-9 or 3,5,8: the script once per vehicle")
     parser.add_argument(
         "--url",
         default=None,

@@ -8,6 +8,7 @@ quadsitl tune [--rise-time S] [--out FILE]          PX4's attitude autotune in-p
 quadsitl view [--instance N ...] [LOG ...]         live view / replays in the browser
 quadsitl fly setpoints|trajectory|paper ...        fly a running SITL (gcs_scripts/fly_*.py)
 quadsitl mission upload|download|clear ...         the mission protocol (gcs_scripts/upload_mission.py)
+  ... --instance 0-9 (or 0..9, 3,5,8)              the script once per vehicle, side by side
 quadsitl gusts upload PROFILE ...                  disturbances (gcs_scripts/upload_gusts.py)
 quadsitl record [--out DIR/NAME] ...               record a session (gcs_scripts/record.py)
 quadsitl fail UNIT TYPE [--instance N] [--enable]  inject a failure, as PX4's failure command
@@ -57,6 +58,27 @@ def version() -> str:
         return metadata.version("quadsitl")
     except metadata.PackageNotFoundError:  # a checkout run without installing it
         return "unknown (not installed)"
+
+
+FAN_OUT_GROUPS = ("fly", "mission")  # --instance takes a range: the script once per vehicle (sitl/fan_out.py)
+
+
+def _each_instance(argv: list[str]) -> int | None:
+    """``quadsitl fly|mission NAME ... --instance 0-9``: the script once per instance, side by side
+    (:mod:`sitl.fan_out`); None when ``--instance`` names one vehicle (or none)."""
+    from . import fan_out
+
+    prog = f"quadsitl {argv[0]} {argv[1]}"
+    try:
+        instances = fan_out.several_instances(argv[2:])
+        if instances is None:
+            return None
+        fan_out.check_several(argv[2:])
+    except fan_out.InstanceError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
+    command = [sys.executable, "-m", "sitl.cli", argv[0], argv[1]]  # (--config-dir: in the environment)
+    return fan_out.run_each(command, argv[2:], instances, prog)
 
 
 def _delegate(module: str, argv: list[str], prog: str) -> int:
@@ -488,6 +510,10 @@ def _dispatch(argv: list[str]) -> int:
         return _delegate(FAIL_MODULE, argv[1:], "quadsitl fail")
     if tuple(argv[:2]) in DELEGATED:
         module, before, _ = DELEGATED[(argv[0], argv[1])]
+        if argv[0] in FAN_OUT_GROUPS:
+            ran = _each_instance(argv)
+            if ran is not None:
+                return ran
         return _delegate(module, [*before, *argv[2:]], f"quadsitl {argv[0]} {argv[1]}")
     args = build_parser().parse_args(argv)
     return args.func(args)

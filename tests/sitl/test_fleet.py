@@ -8,7 +8,9 @@ from __future__ import annotations
 import os
 import re
 import signal
+import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -17,9 +19,12 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as m
 
+from autopilot.mavlink.links import API_LINK
 from quadcommon import bus
+from quadcommon.failures import Type, Unit
 from sitl.fleet import Fleet, FleetOptions, make_vehicle
 from sitl.launcher import Child
+from tests.compat.vehicles import run_flow
 from tests.ports import block_config_dir, instance_ports
 from tests.sitl.harness import ZenohTap
 from tests.sitl.test_up_cli import children_of
@@ -50,6 +55,44 @@ def test_a_vehicle_flies_in_a_fleet_of_20_as_it_flies_alone():
     assert climbed
     idle = fleet.vehicles[6].stack
     assert not idle.autopilot.commander.armed
+
+
+def fly_with_battery_failure(vehicle, frames: int, inject_at: int, step) -> list[str]:
+    """Fly ``frames`` with ``step()``; at frame ``inject_at`` a ground station on the vehicle's API
+    link injects PX4's battery failure (``failure battery off``) with COM_LOW_BAT_ACT 3 (the
+    emergency level lands). What the vehicle said (STATUSTEXT), in order."""
+    stack = vehicle.stack
+    stack.record_rows = True
+    stack.autopilot.params.set("SYS_FAILURE_EN", 1.0)
+    stack.autopilot.params.set("COM_LOW_BAT_ACT", 3.0)
+    gcs = stack.ground_station(API_LINK)
+    for frame in range(frames):
+        if frame == inject_at:
+            gcs.command(m.MAV_CMD_INJECT_FAILURE, Unit.battery, Type.off, 0)
+        step()
+    assert [ack.result for ack in gcs.acks(m.MAV_CMD_INJECT_FAILURE)] == [m.MAV_RESULT_ACCEPTED]
+    return gcs.statustext
+
+
+def test_a_failsafe_acts_in_a_fleet_as_it_acts_alone():
+    """Instance 1 flying the circle loses its battery monitor in flight (PX4's failure injection):
+    alone and in a fleet of 3 it announces the emergency-battery failsafe, lands and disarms, and its truth is
+    the same bit for bit; the other vehicles fly on untouched."""
+    frames, inject_at = 5000, 500  # the failure 1 s into the circle; 9 s after it
+    alone = make_vehicle(1, CIRCLE)
+    said_alone = fly_with_battery_failure(alone, frames, inject_at, alone.stack.step)
+    fleet = Fleet([make_vehicle(n, CIRCLE) for n in range(3)])
+    ours = fleet.vehicles[1]
+    said = fly_with_battery_failure(ours, frames, inject_at, fleet.step)
+    landing = "Failsafe activated due to emergency battery level, triggering land"
+    assert landing in "".join(said_alone) and "landed: disarmed" in said_alone
+    assert said == said_alone
+    assert ours.stack.truth_rows == alone.stack.truth_rows
+    heights = [row[3] for row in ours.stack.truth_rows]  # (t, x, y, z, ...)
+    assert max(heights) > 0.5 and heights[-1] < 0.05  # it climbed, and came down
+    assert not ours.stack.autopilot.commander.armed
+    neighbour = fleet.vehicles[2].stack.autopilot.commander
+    assert neighbour.armed and not neighbour.in_failsafe
 
 
 def heartbeat_senders(conn, wall_s: float) -> set[int]:
@@ -101,21 +144,28 @@ def fleet_child_of(supervisor_pid: int, instance: int) -> int:
 
 
 @pytest.mark.processes
-def test_a_fleet_in_two_processes_seen_by_one_station_driven_one_by_one_a_lost_process_restarted():
-    """`quadsitl fleet --count 2 --processes 2`: on the GCS port both system ids; through vehicle
-    1's API port arm and take off: vehicle 1 climbs, vehicle 0 stays on the ground. Vehicle 0's
-    process killed: it is restarted (its vehicle back on the GCS port) while vehicle 1 flies on."""
+def test_a_fleet_in_two_processes_driven_by_mavsdk_and_pymavlink_a_lost_process_restarted():
+    """`quadsitl fleet --count 2 --processes 2`: on the GCS port both system ids. At the same time
+    MAVSDK flies vehicle 0 through its API port (discovery, health, arm, take off, land, disarm:
+    the flow a PX4 user's first script is) and a pymavlink client arms vehicle 1 and takes it off
+    through its own: each vehicle does what its own client said and nothing the other's did.
+    `quadsitl mission download --instance 3-4` reads both vehicles' missions side by side. Vehicle
+    0's process killed: it is restarted (its vehicle back on the GCS port) while vehicle 1 flies on."""
     first = 3
     ports = [instance_ports(first), instance_ports(first + 1)]
     gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[0].gcs_remote}", source_system=255)
     api = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[1].api_remote}", source_system=245)
-    command_line = [sys.executable, "-u", "-m", "sitl.cli", "fleet", "--count", "2", "--instance", str(first),
-                    "--speed", "2", "--processes", "2"]  # fmt: skip
-    child = Child("quadsitl fleet", command_line)
+    quadsitl = [sys.executable, "-u", "-m", "sitl.cli"]
+    child = Child("quadsitl fleet", [*quadsitl, "fleet", "--count", "2", "--instance", str(first),
+                                     "--speed", "2", "--processes", "2"])  # fmt: skip
+    mavsdk: list = []
     try:
         child.wait_line("[0] fleet: 1 vehicles, instances", timeout=60.0)
         child.wait_line("[1] fleet: 1 vehicles, instances", timeout=60.0)
         assert heartbeat_senders(gcs, 3.0) == {first + 1, first + 2}  # system id = instance + 1
+        url = f"udpin://127.0.0.1:{ports[0].api_remote}"
+        flying = threading.Thread(target=lambda: mavsdk.append(run_flow("action", url, 50.0)), daemon=True)
+        flying.start()
         target = first + 2
         assert api.wait_heartbeat(timeout=10.0).get_srcSystem() == target
         command(api, target, m.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
@@ -124,7 +174,19 @@ def test_a_fleet_in_two_processes_seen_by_one_station_driven_one_by_one_a_lost_p
         deadline = time.monotonic() + 30.0
         while relative_altitude(gcs, target) < 1.5:
             assert time.monotonic() < deadline, "vehicle 1 did not climb"
-        assert abs(relative_altitude(gcs, first + 1)) < 0.2  # vehicle 0: still on the ground
+        flying.join(60.0)
+        (flow,) = mavsdk
+        assert flow.returncode == 0 and not flow.timed_out, flow.transcript()
+        assert flow.event("discovered")["sysid"] == first + 1  # vehicle 0's port: vehicle 0
+        assert flow.event("took_off") and flow.event("disarmed")  # up to 2.5 m, down, disarmed
+        assert relative_altitude(gcs, target) > 1.5  # vehicle 1 flew on: MAVSDK's land was not for it
+
+        missions = subprocess.run([*quadsitl, "mission", "download", "--instance", f"{first}-{first + 1}"],
+                                  capture_output=True, text=True, timeout=60.0)  # fmt: skip
+        assert missions.returncode == 0, missions.stdout + missions.stderr
+        for n in (first, first + 1):
+            assert f"[{n}] QGC WPL 110" in missions.stdout.splitlines(), missions.stdout  # (empty)
+        assert f"instances {first}..{first + 1}: all 2 succeeded" in missions.stdout
 
         os.kill(fleet_child_of(child.pid, first), signal.SIGKILL)
         child.wait_line("fleet process 0 (instances 3..3) lost: killed by SIGKILL", timeout=10.0)
