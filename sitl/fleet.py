@@ -27,7 +27,8 @@ processes, one core each, a lost one restarted (:mod:`sitl.fleet_processes`).
 
 Run: ``quadsitl fleet --count K [--instance N] [--speed S] [--scenario NAME] [--controller NAME]
 [--zenoh] [--processes P]``; launches on several hosts meet through a zenoh router
-(``quadsitl router``, :mod:`sitl.router`). Not yet: parameter files kept across restarts.
+(``quadsitl router``, :mod:`sitl.router`). ``--params params-{instance}.toml`` gives each vehicle
+its parameter file, saved on every change and loaded again when the vehicle is restarted.
 """
 
 from __future__ import annotations
@@ -70,6 +71,9 @@ class FleetOptions:
     estimator: str = "truth"
     log_directory: str | None = None  # each vehicle's flight logs (ULog) under DIR/<instance>; None: none
     autostart: str | None = None  # a scenario whose trajectory each vehicle flies, armed at t = 0
+    # Each vehicle's parameter file ({instance} in the path: its number), loaded at its start (and
+    # at a restart) and saved on every PARAM_SET, as ``quadsitl up --params``; None: none.
+    params: str | None = None
 
 
 class FleetVehicle:
@@ -172,9 +176,10 @@ def make_vehicle(
     trajectory = None
     if options.autostart is not None:
         trajectory = trajectory_from_spec(load_scenario(options.autostart).trajectory)
+    params_file = None if options.params is None else options.params.replace("{instance}", str(instance))
     ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller(options.controller), instance=instance,
                         autostart=trajectory, estimator=options.estimator, estimator_profile=profile,
-                        log=LogOptions(log_dir))  # fmt: skip
+                        log=LogOptions(log_dir), params_file=params_file)  # fmt: skip
     return FleetVehicle(Lockstep(sim, ap, log=lambda text: log(f"[{instance}] {text}")), instance)
 
 
@@ -324,6 +329,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--autostart", default=None, metavar="SCENARIO",
                         help="every vehicle armed at t = 0, flying the scenario's trajectory")
     parser.add_argument("--log-dir", default=None, help="each vehicle's flight logs (ULog) under DIR/<N>")
+    parser.add_argument("--params", default=None, metavar="FILE",
+                        help="each vehicle's parameters: loaded at its start and restart, saved on every "
+                        "change; with --count > 1 put {instance} in the path, e.g. params-{instance}.toml")
     parser.add_argument("--processes", type=int, default=1,
                         help="fly the fleet in P processes (one core each), a lost one restarted")
     parser.add_argument("--zenoh", action="store_true",
@@ -344,8 +352,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.processes < 1:
         parser.error(f"--processes {args.processes}: at least 1")
+    if args.params is not None and args.count > 1 and "{instance}" not in args.params:
+        parser.error(f"--params {args.params}: with --count {args.count} the path must contain {{instance}} "
+                     "(each vehicle saves its own parameters), e.g. params-{instance}.toml")  # fmt: skip
     options = FleetOptions(args.scenario, args.controller, args.vehicle, args.sensors, args.estimator,
-                           args.log_dir, args.autostart)  # fmt: skip
+                           args.log_dir, args.autostart, args.params)  # fmt: skip
     if args.processes > 1:
         try:  # a bad name fails here, naming file and key, before any process starts
             make_vehicle(first, options).close()
@@ -358,7 +369,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         passed = ["--speed", args.speed, "--scenario", args.scenario, "--controller", args.controller,
                   "--estimator", args.estimator, *(["--zenoh"] if args.zenoh else [])]  # fmt: skip
         for flag, value in (("--duration", args.duration), ("--vehicle", args.vehicle),
-                            ("--sensors", args.sensors), ("--log-dir", args.log_dir)):  # fmt: skip
+                            ("--sensors", args.sensors), ("--log-dir", args.log_dir),
+                            ("--params", args.params)):  # fmt: skip
             if value is not None:
                 passed += [flag, str(value)]
         autostart = ["--autostart", args.autostart] if args.autostart else []

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -224,6 +225,29 @@ def test_a_vehicle_whose_frame_fails_is_restarted_on_the_ground_and_the_others_f
     assert fleet.vehicles[1].stack.truth_rows == alone.stack.truth_rows
 
 
+def test_a_restarted_vehicle_comes_back_with_the_parameters_it_was_given(tmp_path):
+    """`--params DIR/params-{instance}.toml`: a PARAM_SET to vehicle 0 is saved in its own file;
+    its plant diverges, and the vehicle that replaces it starts from that file (vehicle 1's file
+    is not touched)."""
+    template = str(tmp_path / "params-{instance}.toml")
+    options = replace(IDLE, params=template)
+    fleet = Fleet([make_vehicle(n, options) for n in range(2)], restart=lambda n: make_vehicle(n, options))
+    gcs = fleet.vehicles[0].stack.ground_station(API_LINK)
+    gcs.mav.param_set_send(1, 1, b"MPC_XY_VEL_MAX", 7.5, m.MAV_PARAM_TYPE_REAL32)
+    for _ in range(50):
+        fleet.step()
+    assert gcs.last["PARAM_VALUE"].param_id == "MPC_XY_VEL_MAX" and gcs.last["PARAM_VALUE"].param_value == 7.5
+    assert "MPC_XY_VEL_MAX" in (tmp_path / "params-0.toml").read_text()
+    assert not (tmp_path / "params-1.toml").exists()
+    broken = fleet.vehicles[0]
+    broken.stack.sim.plant.state = [float("nan")] * len(broken.stack.sim.plant.state)
+    for _ in range(5):
+        fleet.step()
+    assert fleet.restarts == {0: 1} and fleet.vehicles[0] is not broken
+    assert fleet.vehicles[0].stack.autopilot.params.values["MPC_XY_VEL_MAX"] == 7.5
+    assert fleet.vehicles[1].stack.autopilot.params.values["MPC_XY_VEL_MAX"] != 7.5
+
+
 def test_a_fleet_vehicle_streams_its_truth_on_its_zenoh_keys():
     """`--zenoh`: each vehicle's truth on ``quadsitl/<N>/truth`` as its simulator process streams
     it (a recorder or the live view subscribes there): every frame's row, the same numbers."""
@@ -287,3 +311,12 @@ def test_two_fleet_launches_meet_through_a_router(tmp_path):
         for child in reversed(children):
             child.stop()
     assert all(child.returncode == 0 for child in children), [child.tail() for child in children]
+
+
+def test_one_parameter_file_for_several_vehicles_is_refused(capsys):
+    from sitl.fleet import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["--count", "2", "--params", "params.toml"])
+    assert info.value.code == 2
+    assert "--params params.toml: with --count 2 the path must contain {instance}" in capsys.readouterr().err
