@@ -237,6 +237,17 @@ class Ports:
     zenoh: int
 
 
+def instance_ranges(instances) -> str:
+    """Instances as a person reads them: [0, 1, 2, 5] -> ``"0..2, 5"`` (in the order given)."""
+    runs: list[list[int]] = []
+    for n in instances:
+        if runs and n == runs[-1][1] + 1:
+            runs[-1][1] = n
+        else:
+            runs.append([n, n])
+    return ", ".join(f"{a}" if a == b else f"{a}..{b}" for a, b in runs)
+
+
 def ports(
     instance: int,
     hil_base: int = HIL_PORT_BASE,

@@ -137,19 +137,9 @@ def run_each(command: Sequence[str], argv: Sequence[str], instances: Sequence[in
         reader.join()
     failed = [(n, code) for n, code in codes if code != 0]
     if not failed:
-        print(f"{prog}: instances {_names(instances)}: all {len(instances)} succeeded")
+        print(f"{prog}: instances {wire.instance_ranges(instances)}: all {len(instances)} succeeded")
         return 0
     print(f"{prog}: {len(failed)} of {len(instances)} failed: "
           + ", ".join(f"instance {n} (exit {code})" for n, code in failed), file=sys.stderr)  # fmt: skip
     return failed[0][1] if failed[0][1] > 0 else 1
 
-
-def _names(instances: Sequence[int]) -> str:
-    """[0, 1, 2, 5] -> "0..2, 5"."""
-    runs: list[list[int]] = []
-    for n in instances:
-        if runs and n == runs[-1][1] + 1:
-            runs[-1][1] = n
-        else:
-            runs.append([n, n])
-    return ", ".join(f"{a}" if a == b else f"{a}..{b}" for a, b in runs)

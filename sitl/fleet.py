@@ -165,10 +165,10 @@ class FleetVehicle:
 
 
 def make_vehicle(
-    instance: int, options: FleetOptions, log: Callable[[str], None] = lambda text: None
+    instance: int, options: FleetOptions, log: Callable[[int, str], None] = lambda instance, text: None
 ) -> FleetVehicle:
     """Vehicle ``instance`` as ``quadsitl up --instance N`` would make its two processes' setups
-    (ConfigError names a bad name)."""
+    (ConfigError names a bad name); what it says goes to ``log(instance, text)``."""
     sim = SimulatorSetup.load(instance=instance, scenario=options.scenario, vehicle=options.vehicle,
                               sensors=options.sensors)  # fmt: skip
     profile = estimator_profile_for(options.sensors or "default") if options.estimator == "ekf" else "default"
@@ -180,7 +180,7 @@ def make_vehicle(
     ap = AutopilotSetup(sim.sitl, sim.vehicle, load_controller(options.controller), instance=instance,
                         autostart=trajectory, estimator=options.estimator, estimator_profile=profile,
                         log=LogOptions(log_dir), params_file=params_file)  # fmt: skip
-    return FleetVehicle(Lockstep(sim, ap, log=lambda text: log(f"[{instance}] {text}")), instance)
+    return FleetVehicle(Lockstep(sim, ap, log=lambda text: log(instance, text)), instance)
 
 
 class Fleet:
@@ -303,13 +303,40 @@ class Fleet:
         return written
 
 
+class VehicleLines:
+    """What the vehicles say, as ``[N] text`` lines; at start the K vehicles of a fleet say the same
+    things (their signing state, "linked with simulator"): until :meth:`flush`, one line per text
+    with the instances that said it (``[0..99] linked with simulator ...``), then each line as it
+    comes."""
+
+    def __init__(self, out: Callable[[str], None]) -> None:
+        self.out = out
+        self._held: dict[str, list[int]] | None = {}  # text -> instances, in the order first said
+
+    def say(self, instance: int, text: str) -> None:
+        if self._held is None:
+            self.out(f"[{instance}] {text}")
+        else:
+            self._held.setdefault(text, []).append(instance)
+
+    def flush(self) -> None:
+        """The lines held, grouped; from now on each line as it comes."""
+        held, self._held = self._held or {}, None
+        for text, instances in held.items():
+            self.out(f"[{wire.instance_ranges(instances)}] {text}")
+
+
 def run(fleet: Fleet, speed: float | None, duration_s: float | None, log: Callable[[str], None],
-        running: Callable[[], bool]) -> None:  # fmt: skip
+        running: Callable[[], bool], started: Callable[[], None] = lambda: None) -> None:  # fmt: skip
     """Fly ``fleet`` at ``speed`` times real time (None: as fast as it goes) until ``running()`` is
-    false or ``duration_s`` of simulation time has flown."""
+    false or ``duration_s`` of simulation time has flown; ``started()`` after the first frame."""
     pacer = Pacer(speed, log, running)
+    first = True
     while running() and (duration_s is None or fleet.t < duration_s):
         fleet.step()
+        if first:
+            started()
+            first = False
         pacer.pace(fleet.t)
 
 
@@ -381,13 +408,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fleet: {text}", flush=True)
 
     started = time.monotonic()
+    lines = VehicleLines(log)
     try:
         on_ground = replace(options, autostart=None)  # a restarted vehicle does not take off by itself
-        fleet = Fleet([make_vehicle(n, options, log) for n in range(first, last + 1)], log,
-                      restart=lambda n: make_vehicle(n, on_ground, log),
+        fleet = Fleet([make_vehicle(n, options, lines.say) for n in range(first, last + 1)], log,
+                      restart=lambda n: make_vehicle(n, on_ground, lines.say),
                       zenoh=args.zenoh, speed=speed)  # fmt: skip
         fleet.open()
     except (ConfigError, PortInUse, BusError) as exc:
+        lines.flush()
         print(f"quadsitl fleet: {exc}", file=sys.stderr)
         return 2
     stop = {"asked": False}
@@ -402,8 +431,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"ready in {time.monotonic() - started:.1f} s; GCS links udp {wire.LOOPBACK}:{p0.gcs_local}.. "
         f"-> {p0.gcs_remote}, API links {p0.api_local}.. -> {p0.api_remote}..")  # fmt: skip
     try:
-        run(fleet, speed, args.duration, log, lambda: not stop["asked"])
+        run(fleet, speed, args.duration, log, lambda: not stop["asked"], started=lines.flush)
     finally:
+        lines.flush()  # (stopped before the first frame)
         for path in fleet.close():
             log(f"flight log {path}")
     return 0

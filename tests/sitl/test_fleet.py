@@ -23,7 +23,7 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.mavlink.links import API_LINK
 from quadcommon import bus
 from quadcommon.failures import Type, Unit
-from sitl.fleet import Fleet, FleetOptions, make_vehicle
+from sitl.fleet import Fleet, FleetOptions, VehicleLines, make_vehicle
 from sitl.launcher import Child
 from tests.compat.vehicles import run_flow
 from tests.ports import block_config_dir, instance_ports
@@ -320,3 +320,19 @@ def test_one_parameter_file_for_several_vehicles_is_refused(capsys):
         main(["--count", "2", "--params", "params.toml"])
     assert info.value.code == 2
     assert "--params params.toml: with --count 2 the path must contain {instance}" in capsys.readouterr().err
+
+
+def test_what_the_vehicles_say_alike_at_start_is_one_line():
+    """100 vehicles linking print one line, not 100; after the start each line as it comes."""
+    out: list[str] = []
+    lines = VehicleLines(out.append)
+    for n in (0, 1, 2, 3, 7):
+        lines.say(n, "signing off")
+    for n in (0, 1, 2, 3, 7):
+        lines.say(n, "linked with simulator")
+    lines.say(2, "a parameter file loaded")
+    assert out == []
+    lines.flush()
+    assert out == ["[0..3, 7] signing off", "[0..3, 7] linked with simulator", "[2] a parameter file loaded"]
+    lines.say(7, "vehicle lost")
+    assert out[-1] == "[7] vehicle lost"
