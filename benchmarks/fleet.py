@@ -3,12 +3,15 @@
 For each fleet size K of ``--counts`` it builds K vehicles on their own MAVLink ports (the
 instances from ``--instance``), binds them, and flies them ``--seconds`` of simulation as fast as
 the one process goes (one core), at 1 kHz physics and 500 Hz control, either idle on the ground
-(``--flight idle``: the commander, telemetry and the plant run, the cascade does not) or every
-vehicle flying the paper's circle from t = 0 (``--flight circle``, the default: a mission's cost).
+(``--flight idle``: the commander, telemetry and the plant run, the cascade does not), every
+vehicle hovering at 2.5 m (``--flight hover``: armed at t = 0, the climb and the hold) or every
+vehicle flying the paper's circle from t = 0 (``--flight circle``, the default: a mission's cost,
+the vehicle in AUTO.MISSION).
 It reports, per K:
 
 * the real-time factor one process holds (simulated over wall seconds): K vehicles hold real time
-  on one core while it is at least 1;
+  on one core while it is at least 1; the largest K measured that held it, and how many the
+  processes' cores would hold at the largest K's CPU per vehicle;
 * the CPU per vehicle per simulated second, and from it the largest fleet one core holds at real
   time (1 / that);
 * the resident memory per vehicle (the process's growth over K vehicles, after they flew);
@@ -52,8 +55,8 @@ def resident_mb(pid: int | str = "self") -> float:
 def fly(count: int, args: argparse.Namespace) -> dict:
     """K vehicles built, bound and flown in this process: its figures."""
     options = FleetOptions()  # idle: on the ground, disarmed
-    if args.flight == "circle":
-        options = FleetOptions(scenario="circle", autostart="circle")
+    if args.flight in ("circle", "hover"):  # armed at t = 0, the scenario's flight (AUTO.MISSION)
+        options = FleetOptions(scenario=args.flight, autostart=args.flight)
     make_vehicle(args.instance, options).close()  # imports, kernels loaded: not a vehicle's cost
     gc.collect()
     before = resident_mb()
@@ -138,7 +141,7 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     parser.add_argument("--counts", type=int, nargs="+", default=[1, 10, 20])
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per fleet")
-    parser.add_argument("--flight", choices=("circle", "idle"), default="circle")
+    parser.add_argument("--flight", choices=("circle", "hover", "idle"), default="circle")
     parser.add_argument("--instance", type=int, default=0, help="the first vehicle's instance")
     parser.add_argument("--processes", type=int, default=1, help="the fleet split over P processes")
     parser.add_argument("--compare-up", type=int, default=0, metavar="K",
@@ -183,6 +186,10 @@ def main() -> None:
               flush=True)  # fmt: skip
     r = results[-1]
     name = f"fleet_{args.flight}" + (f"_{args.processes}_processes" if args.processes > 1 else "")
+    held = [x["count"] for x in results if x["rtf"] >= 1.0]
+    print(f"{name}_largest_k_measured_at_1x: {max(held) if held else 0} vehicles")
+    cores = args.processes
+    print(f"{name}_vehicles_at_1x_on_{cores}_cores: {cores / r['cpu_per_vehicle_s']:.0f} vehicles")
     print(f"{name}_k: {r['count']} vehicles")
     print(f"{name}_real_time_factor: {r['rtf']:.2f} x")
     print(f"{name}_cpu_per_vehicle_per_sim_s: {r['cpu_per_vehicle_s'] * 1e3:.1f} ms")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import socket
+import sys
 import threading
 import time
 
@@ -20,7 +21,7 @@ from gcs_scripts import link as mavlink_link
 from gcs_scripts.view.live import VIEW_SYSTEM_ID
 from gcs_scripts.view.server import LiveSource
 from quadcommon import wire
-from sitl.launcher import Launcher, VehicleSpec
+from sitl.launcher import Child, Launcher, VehicleSpec
 from tests.ports import instance_ports
 
 pytestmark = [pytest.mark.processes, pytest.mark.timeout(180)]
@@ -151,21 +152,25 @@ def test_offboard_loss_shows_as_the_active_failsafe_until_the_pilot_takes_over(v
         source.close()
 
 
-def test_two_vehicles_in_one_page_each_with_its_colour(vehicle):
-    """A second vehicle (instance 68) beside the first: one scene, one card and one colour each."""
+def test_a_fleet_beside_a_vehicle_in_one_page_each_with_its_colour(vehicle):
+    """Beside the first vehicle (two processes), a fleet of two (instances 68 and 69, one process,
+    `quadsitl fleet --zenoh`): one scene, one card and one colour each, the fleet's vehicles drawn
+    as any other."""
     from .helpers import ARTIFACTS, browser_page, served, view_state
 
-    second = 68
+    fleet = (68, 69)
     # At a finite speed, as the fixture's: one at max would take a core from Chromium (2 cores here;
     # the page then took > 60 s to start under the rest of the suite). Colours and cards do not
     # depend on the speed.
-    with Launcher() as launcher:
-        spec = VehicleSpec(instance=second, speed="4", scenario="circle", autostart=True)
-        launcher.start_vehicles([spec])
-        source = LiveSource([INSTANCE, second])
+    child = Child("quadsitl fleet", [sys.executable, "-u", "-m", "sitl.cli", "fleet", "--count", "2",
+                                     "--instance", str(fleet[0]), "--zenoh", "--speed", "4",
+                                     "--scenario", "circle", "--autostart", "circle"])  # fmt: skip
+    try:
+        child.wait_line("vehicles, instances", timeout=60.0)
+        source = LiveSource([INSTANCE, *fleet])
         with served(source) as server, browser_page(server.url) as page:
             page.wait_for_function(
-                "() => { const s = window.quadsitlView; return s.tracks.length === 2"
+                "() => { const s = window.quadsitlView; return s.tracks.length === 3"
                 " && s.tracks.every(t => t.cols.t.length > 5 && t.obj.body.visible); }",
                 timeout=30000,
             )
@@ -173,10 +178,14 @@ def test_two_vehicles_in_one_page_each_with_its_colour(vehicle):
             colours = page.evaluate("() => window.quadsitlView.tracks.map(t => t.color)")
             cards = page.locator(".card").all_inner_texts()
             ARTIFACTS.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=str(ARTIFACTS / "live_two_vehicles.png"))
-    assert len(set(colours)) == 2
-    assert f"vehicle {INSTANCE}" in cards[0] and f"vehicle {second}" in cards[1]
+            page.screenshot(path=str(ARTIFACTS / "live_fleet_beside_a_vehicle.png"))
+    finally:
+        child.stop()
+    assert len(set(colours)) == 3
+    for card, n in zip(cards, (INSTANCE, *fleet), strict=True):
+        assert f"vehicle {n}" in card
     assert all(n > 5 for n in state["samples"]) and state["errors"] == []
+    assert child.returncode == 0, child.tail()
 
 
 def test_cpu_priority_yields_only_while_the_simulation_runs_much_faster_than_real_time(monkeypatch):
