@@ -28,7 +28,8 @@ processes, one core each, a lost one restarted (:mod:`sitl.fleet_processes`).
 Run: ``quadsitl fleet --count K [--instance N] [--speed S] [--scenario NAME] [--controller NAME]
 [--zenoh] [--processes P]``; launches on several hosts meet through a zenoh router
 (``quadsitl router``, :mod:`sitl.router`). ``--params params-{instance}.toml`` gives each vehicle
-its parameter file, saved on every change and loaded again when the vehicle is restarted.
+its parameter file, saved on every change and loaded again when the vehicle is restarted;
+``--spacing M`` puts instance N's home N x M metres north of the configured one.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ from autopilot.control.config import load_controller
 from autopilot.logger.logger import LogOptions
 from autopilot.mavlink.links import API_LINK, GCS_LINK, Outgoing
 from autopilot.setup import AutopilotSetup
-from quadcommon import wire
+from quadcommon import frames, wire
 from quadcommon.bus import BusError
 from quadcommon.config import load_scenario
 from quadcommon.schema import ConfigError
@@ -58,6 +59,9 @@ from simulator.pacing import Pacer
 from .inprocess import HOUSEKEEPING_S, Lockstep, estimator_profile_for
 
 LINKS = ((GCS_LINK, "GCS link"), (API_LINK, "API link"))
+# --spacing's bound: instance 249 stays within 5 km of the configured home, where the local frames'
+# projection (quadcommon.frames.ned_to_geodetic) is millimetre-exact.
+MAX_SPACING_M = 20.0
 
 
 @dataclass(frozen=True)
@@ -74,6 +78,10 @@ class FleetOptions:
     # Each vehicle's parameter file ({instance} in the path: its number), loaded at its start (and
     # at a restart) and saved on every PARAM_SET, as ``quadsitl up --params``; None: none.
     params: str | None = None
+    # Instance N's home this far north of the configured home, times N (PX4's multi-vehicle SITL
+    # spawns its instances 3 m apart): the vehicles stand apart on a ground station's map, each
+    # flying its own local frame about its own home. 0: every vehicle at the configured home.
+    spacing_m: float = 0.0
 
 
 class FleetVehicle:
@@ -171,6 +179,9 @@ def make_vehicle(
     (ConfigError names a bad name); what it says goes to ``log(instance, text)``."""
     sim = SimulatorSetup.load(instance=instance, scenario=options.scenario, vehicle=options.vehicle,
                               sensors=options.sensors)  # fmt: skip
+    if options.spacing_m:
+        home = frames.ned_to_geodetic(instance * options.spacing_m, 0.0, 0.0, sim.sitl.home)
+        sim = replace(sim, sitl=replace(sim.sitl, home=home))  # (the autopilot's setup takes it from here)
     profile = estimator_profile_for(options.sensors or "default") if options.estimator == "ekf" else "default"
     log_dir = None if options.log_directory is None else f"{options.log_directory}/{instance}"
     trajectory = None
@@ -359,6 +370,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--params", default=None, metavar="FILE",
                         help="each vehicle's parameters: loaded at its start and restart, saved on every "
                         "change; with --count > 1 put {instance} in the path, e.g. params-{instance}.toml")
+    parser.add_argument("--spacing", type=float, default=0.0, metavar="M",
+                        help="instance N's home N x M metres north of the configured one (PX4's "
+                        "multi-vehicle SITL: 3), so a ground station's map shows the vehicles apart; 0: all "
+                        "at home")
     parser.add_argument("--processes", type=int, default=1,
                         help="fly the fleet in P processes (one core each), a lost one restarted")
     parser.add_argument("--zenoh", action="store_true",
@@ -379,11 +394,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.processes < 1:
         parser.error(f"--processes {args.processes}: at least 1")
+    if not 0.0 <= args.spacing <= MAX_SPACING_M:
+        parser.error(f"--spacing {args.spacing}: metres between homes, in [0, {MAX_SPACING_M:g}]")
     if args.params is not None and args.count > 1 and "{instance}" not in args.params:
         parser.error(f"--params {args.params}: with --count {args.count} the path must contain {{instance}} "
                      "(each vehicle saves its own parameters), e.g. params-{instance}.toml")  # fmt: skip
     options = FleetOptions(args.scenario, args.controller, args.vehicle, args.sensors, args.estimator,
-                           args.log_dir, args.autostart, args.params)  # fmt: skip
+                           args.log_dir, args.autostart, args.params, args.spacing)  # fmt: skip
     if args.processes > 1:
         try:  # a bad name fails here, naming file and key, before any process starts
             make_vehicle(first, options).close()
@@ -397,7 +414,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                   "--estimator", args.estimator, *(["--zenoh"] if args.zenoh else [])]  # fmt: skip
         for flag, value in (("--duration", args.duration), ("--vehicle", args.vehicle),
                             ("--sensors", args.sensors), ("--log-dir", args.log_dir),
-                            ("--params", args.params)):  # fmt: skip
+                            ("--params", args.params), ("--spacing", args.spacing or None)):  # fmt: skip
             if value is not None:
                 passed += [flag, str(value)]
         autostart = ["--autostart", args.autostart] if args.autostart else []

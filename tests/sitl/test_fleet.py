@@ -5,6 +5,7 @@ processes (sitl/fleet_processes.py) a lost one is restarted while the others fly
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import signal
@@ -21,7 +22,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as m
 
 from autopilot.mavlink.links import API_LINK
-from quadcommon import bus
+from quadcommon import bus, frames
 from quadcommon.failures import Type, Unit
 from sitl.fleet import Fleet, FleetOptions, VehicleLines, make_vehicle
 from sitl.launcher import Child
@@ -336,3 +337,40 @@ def test_what_the_vehicles_say_alike_at_start_is_one_line():
     assert out == ["[0..3, 7] signing off", "[0..3, 7] linked with simulator", "[2] a parameter file loaded"]
     lines.say(7, "vehicle lost")
     assert out[-1] == "[7] vehicle lost"
+
+
+def test_spaced_homes_put_the_vehicles_apart_on_the_map_and_fly_them_as_alone():
+    """`--spacing 3`: instance N's home 3 N m north of the configured one, as PX4's multi-vehicle
+    SITL spawns its instances. A ground station reads the vehicles 3 m apart (GLOBAL_POSITION_INT,
+    HOME_POSITION), while each flies its local frame as it does at the configured home."""
+    spaced = replace(CIRCLE, spacing_m=3.0)
+    fleet = Fleet([make_vehicle(n, spaced) for n in (4, 5)])
+    stations = [vehicle.stack.ground_station(API_LINK) for vehicle in fleet.vehicles]
+    fleet.vehicles[1].stack.record_rows = True
+    for _ in range(500):
+        fleet.step()
+    alone = make_vehicle(5, CIRCLE)
+    stations.append(alone.stack.ground_station(API_LINK))
+    alone.stack.record_rows = True
+    for _ in range(500):
+        alone.stack.step()
+    assert fleet.vehicles[1].stack.truth_rows == alone.stack.truth_rows  # the same local flight
+    metres_per_degree = frames.EARTH_RADIUS_M * math.pi / 180.0  # (PX4's projection's radius)
+    north, lon = [], []
+    for station in stations:  # each station's latest report was sent at the same time of the flight
+        position = station.last["GLOBAL_POSITION_INT"]
+        north.append(position.lat * 1e-7 * metres_per_degree)
+        lon.append(position.lon)
+    assert north[1] - north[0] == pytest.approx(3.0, abs=0.02)  # instances 4 and 5: 3 m apart
+    assert north[1] - north[2] == pytest.approx(15.0, abs=0.02)  # instance 5: 5 x 3 m from home
+    assert abs(lon[1] - lon[0]) <= 1 and abs(lon[1] - lon[2]) <= 1  # due north (1e-7 deg: < 1 cm)
+
+
+def test_a_spacing_out_of_bounds_is_refused(capsys):
+    from sitl.fleet import main
+
+    for spacing in ("-1", "nan", "21"):
+        with pytest.raises(SystemExit) as info:
+            main(["--spacing", spacing])
+        assert info.value.code == 2
+        assert f"--spacing {float(spacing)}: metres between homes, in [0, 20]" in capsys.readouterr().err
