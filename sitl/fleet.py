@@ -325,6 +325,7 @@ class VehicleLines:
         self._held: dict[str, list[int]] | None = {}  # text -> instances, in the order first said
 
     def say(self, instance: int, text: str) -> None:
+        """Vehicle ``instance`` said ``text``: held until :meth:`flush`, then out as it comes."""
         if self._held is None:
             self.out(f"[{instance}] {text}")
         else:

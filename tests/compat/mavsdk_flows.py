@@ -82,6 +82,7 @@ from quadcommon import frames
 
 T0 = time.monotonic()
 TEARDOWN_S = 10.0
+POSE_ATTEMPTS = 12  # a Mocap pose sent once a second until the vehicle answers it (12 s of wall time)
 
 
 class FlowError(AssertionError):
@@ -323,8 +324,17 @@ async def streams_on_request(system, tel: TelemetryAsync, watch: Watch) -> None:
     counts = {name: sum(window[0] <= t < window[1] for t, _ in values) for name, values in got.items()}
     truth, imu = got["ground_truth"][-1][1], got["imu"][-1][1]
     pose = MocapPose(0, PositionBody(0.0, 0.0, 0.0), AngleBody(0.0, 0.0, 0.0), Covariance([math.nan]))
-    await MocapAsync(system).set_vision_position_estimate(pose)
-    await watch.until("the Mocap pose answered", lambda w: any("vision refused" in t for t in w.texts), 5.0)
+    # Sent again each second until answered: over a lossy link the pose or the answer can be lost,
+    # and the vehicle says a refusal's reason again only after 10 s (vision_in.ANNOUNCE_EVERY_S).
+    answered = lambda w: any("vision refused" in t for t in w.texts)  # noqa: E731
+    for attempt in range(POSE_ATTEMPTS):
+        await MocapAsync(system).set_vision_position_estimate(pose)
+        try:
+            await watch.until("the Mocap pose answered", answered, 1.0)
+            break
+        except FlowError:
+            if attempt == POSE_ATTEMPTS - 1:
+                raise
     a, g, mag = imu.acceleration_frd, imu.angular_velocity_frd, imu.magnetic_field_frd
     emit("streams", counts=counts,
          ground_truth=(truth.latitude_deg, truth.longitude_deg, truth.absolute_altitude_m),
