@@ -17,6 +17,7 @@ start), so a range suits a handful to a few dozen vehicles; Ctrl-C stops them al
 from __future__ import annotations
 
 import re
+import signal
 import subprocess
 import sys
 import threading
@@ -117,8 +118,11 @@ def run_each(command: Sequence[str], argv: Sequence[str], instances: Sequence[in
 
     try:
         for n in instances:
+            # errors="replace": a byte that is not UTF-8 must not stop the relay (the child would
+            # then block on a full pipe).
             child = subprocess.Popen([*command, *script_argv(argv, n)], stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, bufsize=1)  # fmt: skip
+                                     stderr=subprocess.STDOUT, text=True, errors="replace",
+                                     bufsize=1)  # fmt: skip
             children.append((n, child))
             reader = threading.Thread(target=relay, args=(n, child.stdout), daemon=True)
             reader.start()
@@ -126,7 +130,7 @@ def run_each(command: Sequence[str], argv: Sequence[str], instances: Sequence[in
         codes = [(n, child.wait()) for n, child in children]
     except KeyboardInterrupt:
         for _, child in children:
-            child.send_signal(subprocess.signal.SIGINT)
+            child.send_signal(signal.SIGINT)
         for _, child in children:
             try:
                 child.wait(STOP_WAIT_S)

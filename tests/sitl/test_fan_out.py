@@ -71,6 +71,7 @@ def test_the_cli_refuses_a_bad_range_with_status_2(capsys):
 def test_the_scripts_run_side_by_side_their_lines_prefixed_the_first_failure_returned(capfd):
     """Real processes: instance 4 fails with 3, 6 with 5; every line comes out under its instance."""
     script = ("import sys; n = int(sys.argv[sys.argv.index('--instance') + 1]); "
+              "sys.stdout.buffer.write(b'\\xff not UTF-8\\n'); sys.stdout.flush(); "
               "print('flying', sys.argv[1:]); sys.exit({4: 3, 6: 5}.get(n, 0))")  # fmt: skip
     argv = ["--log", "l{instance}", "--instance", "3-6"]
     code = run_each([sys.executable, "-c", script], argv, [3, 4, 5, 6], "quadsitl fly x")
@@ -78,6 +79,7 @@ def test_the_scripts_run_side_by_side_their_lines_prefixed_the_first_failure_ret
     assert code == 3
     for n in (3, 4, 5, 6):
         assert f"[{n}] flying ['--log', 'l{n}', '--instance', '{n}']" in out.splitlines()
+        assert f"[{n}] \ufffd not UTF-8" in out.splitlines()  # (relayed, not a stopped relay)
     assert "quadsitl fly x: 2 of 4 failed: instance 4 (exit 3), instance 6 (exit 5)" in err
     assert run_each([sys.executable, "-c", "pass"], ["--instance", "0,2"], [0, 2], "p") == 0
     assert "p: instances 0, 2: all 2 succeeded" in capfd.readouterr().out
