@@ -35,6 +35,7 @@ its parameter file, saved on every change and loaded again when the vehicle is r
 from __future__ import annotations
 
 import argparse
+import resource
 import selectors
 import signal
 import sys
@@ -62,6 +63,10 @@ LINKS = ((GCS_LINK, "GCS link"), (API_LINK, "API link"))
 # --spacing's bound: instance 249 stays within 5 km of the configured home, where the local frames'
 # projection (quadcommon.frames.ned_to_geodetic) is millimetre-exact.
 MAX_SPACING_M = 20.0
+# Open files a vehicle holds at most: its two sockets, its flight log, its zenoh session's (6
+# measured with --zenoh and --log-dir); the fleet asks the system for room for all of them.
+FILES_PER_VEHICLE = 8
+FILES_BESIDE_VEHICLES = 64  # the interpreter's own, the selector, the kernel caches' files
 
 
 @dataclass(frozen=True)
@@ -338,6 +343,17 @@ class VehicleLines:
             self.out(f"[{wire.instance_ranges(instances)}] {text}")
 
 
+def room_for_files(count: int) -> int:
+    """Raise this process's soft limit on open files to what ``count`` vehicles need, as far as the
+    hard limit allows (a desktop's default soft limit, 1024, holds ~120 vehicles); the limit now."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    wanted = FILES_BESIDE_VEHICLES + FILES_PER_VEHICLE * count
+    if soft != resource.RLIM_INFINITY and soft < wanted:
+        soft = wanted if hard == resource.RLIM_INFINITY else min(wanted, hard)
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+    return soft
+
+
 def run(fleet: Fleet, speed: float | None, duration_s: float | None, log: Callable[[str], None],
         running: Callable[[], bool], started: Callable[[], None] = lambda: None) -> None:  # fmt: skip
     """Fly ``fleet`` at ``speed`` times real time (None: as fast as it goes) until ``running()`` is
@@ -427,6 +443,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     started = time.monotonic()
     lines = VehicleLines(log)
+    files = room_for_files(args.count)
     try:
         on_ground = replace(options, autostart=None)  # a restarted vehicle does not take off by itself
         fleet = Fleet([make_vehicle(n, options, lines.say) for n in range(first, last + 1)], log,
@@ -436,6 +453,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, PortInUse, BusError) as exc:
         lines.flush()
         print(f"quadsitl fleet: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # out of open files (EMFILE), most likely: say what would help
+        lines.flush()
+        print(f"quadsitl fleet: {exc} (open files allowed: {files}; a vehicle needs up to "
+              f"{FILES_PER_VEHICLE}: raise `ulimit -n`, or split the fleet with --processes)",
+              file=sys.stderr)  # fmt: skip
         return 2
     stop = {"asked": False}
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import resource
 import signal
 import subprocess
 import sys
@@ -24,7 +25,7 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.mavlink.links import API_LINK
 from quadcommon import bus, frames
 from quadcommon.failures import Type, Unit
-from sitl.fleet import Fleet, FleetOptions, VehicleLines, make_vehicle
+from sitl.fleet import Fleet, FleetOptions, VehicleLines, make_vehicle, room_for_files
 from sitl.launcher import Child
 from tests.compat.vehicles import run_flow
 from tests.ports import block_config_dir, instance_ports
@@ -374,3 +375,26 @@ def test_a_spacing_out_of_bounds_is_refused(capsys):
             main(["--spacing", spacing])
         assert info.value.code == 2
         assert f"--spacing {float(spacing)}: metres between homes, in [0, 20]" in capsys.readouterr().err
+
+
+@pytest.mark.processes
+def test_the_fleet_asks_for_room_for_its_files_and_says_so_when_there_is_none():
+    """A soft limit on open files too low for the fleet is raised (as far as the hard limit
+    allows); a hard limit too low ends the launch with a clear error, exit 2, no traceback."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    try:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (256, hard))
+        assert room_for_files(100) == 64 + 8 * 100
+        assert resource.getrlimit(resource.RLIMIT_NOFILE)[0] == 864
+    finally:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+
+    def few_files() -> None:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (48, 48))
+
+    launch = subprocess.run([sys.executable, "-m", "sitl.cli", "fleet", "--count", "40", "--instance", "200",
+                             "--duration", "0.1"], capture_output=True, text=True, timeout=60.0,
+                            preexec_fn=few_files)  # fmt: skip
+    assert launch.returncode == 2, launch.stdout + launch.stderr
+    assert "Too many open files" in launch.stderr and "raise `ulimit -n`" in launch.stderr
+    assert "Traceback" not in launch.stderr
