@@ -160,7 +160,7 @@ def test_a_fleet_in_two_processes_driven_by_mavsdk_and_pymavlink_a_lost_process_
     api = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[1].api_remote}", source_system=245)
     quadsitl = [sys.executable, "-u", "-m", "sitl.cli"]
     child = Child("quadsitl fleet", [*quadsitl, "fleet", "--count", "2", "--instance", str(first),
-                                     "--speed", "2", "--processes", "2"])  # fmt: skip
+                                     "--speed", "4", "--processes", "2"])  # fmt: skip
     mavsdk: list = []
     try:
         child.wait_line("[0] fleet: 1 vehicles, instances", timeout=60.0)
