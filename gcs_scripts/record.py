@@ -24,6 +24,12 @@ rates, the two info answers, the recording's start simulation time and the STATU
 Stops after ``--duration`` seconds of SIMULATION time, when ``--until-disarmed`` and the vehicle
 has been armed then disarmed, or on SIGINT/SIGTERM (Ctrl-C). Exit 0 on a clean stop, 2 on bad
 arguments or when the link cannot be opened.
+
+Several vehicles (a fleet, ``quadsitl up --count K``): ``--instance 0-9`` (or ``0..9``,
+``3,5,8``) records each of them in one process, from the one ground-station port (each vehicle's
+messages by its system id) and each vehicle's zenoh keys: one recording per vehicle, named by
+``--out`` with ``{instance}`` in it (default ``runs/<timestamp>-{instance}``), each stopping on its
+own condition; the lines it prints start with ``[N]``.
 """
 
 from __future__ import annotations
@@ -81,8 +87,9 @@ class Recorder:
     zenoh subscriptions, the .tlog writer and the Parquet parts; :meth:`open`, then the loop, until
     the duration is reached or :meth:`request_stop`."""
 
-    def __init__(self, options: RecorderOptions) -> None:
+    def __init__(self, options: RecorderOptions, label: str = "") -> None:
         self.options = options
+        self.label = label  # what its lines start with ("[N] " when recording several vehicles)
         self.sitl = load_sitl(options.sitl_config)
         self.ports = self.sitl.ports(options.instance)
         self.url = options.url or f"udpin:127.0.0.1:{self.ports.gcs_remote}"
@@ -109,28 +116,40 @@ class Recorder:
         self._stop_requested = False
         self.decode_errors = 0
         self.was_armed = False
+        self._owns_conn = True  # False: the MAVLink connection is shared (several vehicles): not closed here
+        # The loop's clocks (wall): the next part and progress line, the stop's deadline once asked.
+        self._next_part = self._next_progress = 0.0
+        self._stop_at: float | None = None
+        self.done = False  # stopped, its last part written
 
     def log(self, text: str) -> None:
         """Print ``text`` as a ``record:`` line stamped with the latest simulation time (unless quiet)."""
         if not self.options.quiet:
             t = self.assembler.latest_time_s
             stamp = f"t={t:.2f} s " if t is not None else ""
-            print(f"record: {stamp}{text}", flush=True)
+            print(f"record: {self.label}{stamp}{text}", flush=True)
 
     # -- setup / teardown --------------------------------------------------------------------------
-    def open(self) -> None:
-        """Open the MAVLink connection, the zenoh session and subscriptions and the .tlog; refuses
-        (FileExistsError) to overwrite an existing .tlog, .parquet or parts directory."""
-        import zenoh
-
+    def check_out(self) -> None:
+        """FileExistsError if the recording would overwrite a .tlog, .parquet or parts directory."""
         for path in (self.tlog_path, self.parquet_path):
             if path.exists():
                 raise FileExistsError(f"{path} exists already: choose another --out")
         if self.parts_dir.exists() and part_paths(self.parts_dir):
             raise FileExistsError(f"{self.parts_dir} holds parts of another recording: choose another --out")
-        self.conn = mavutil.mavlink_connection(
-            self.url, source_system=mavlink_link.GCS_SYSTEM_ID, source_component=191, dialect="common"
-        )
+
+    def open(self, conn: Any = None) -> None:
+        """Open the MAVLink connection (or take ``conn``, shared with other recordings and closed
+        by its owner), the zenoh session and subscriptions and the .tlog; refuses
+        (FileExistsError) to overwrite an existing .tlog, .parquet or parts directory."""
+        import zenoh
+
+        self.check_out()
+        if conn is None:
+            conn = open_ground_link(self.url)
+        else:
+            self._owns_conn = False
+        self.conn = conn
         self.session = bus.open_peer(self.ports.zenoh, self.sitl.zenoh_router)
         n = self.options.instance
         self.truth_sub = self.session.declare_subscriber(
@@ -149,7 +168,7 @@ class Recorder:
         """Close every source, then merge the parts (returns the merged file, if any rows)."""
         for closer in (
             lambda: self.session.close() if self.session is not None else None,
-            lambda: self.conn.close() if self.conn is not None else None,
+            lambda: self.conn.close() if self.conn is not None and self._owns_conn else None,
             lambda: self.tlog.close() if self.tlog is not None else None,
         ):
             try:
@@ -216,23 +235,12 @@ class Recorder:
             add(rows, wall)
         return n
 
-    def _drain_mavlink(self, wall: float) -> int:
-        n = 0
-        now_unix = time.time()
-        for _ in range(MAX_DRAIN):
-            msg = self.conn.recv_msg()
-            if msg is None:
-                break
-            if msg.get_type() == "BAD_DATA":
-                continue
-            n += 1
-            if msg.get_srcSystem() != self.assembler.system_id:
-                continue  # another vehicle: every instance's GCS link sends to the one port 14550
-            self.tlog.write(msg.get_msgbuf(), now_unix)
-            self.assembler.add_mavlink(msg, wall)
-            if msg.get_type() == "STATUSTEXT" and msg.get_srcSystem() == self.assembler.system_id:
-                self.log(f"vehicle: {self.assembler.statustext[-1][2]}")
-        return n
+    def take_mavlink(self, msg: Any, wall: float, now_unix: float) -> None:
+        """One message from this vehicle (its system id) into the .tlog and the table."""
+        self.tlog.write(msg.get_msgbuf(), now_unix)
+        self.assembler.add_mavlink(msg, wall)
+        if msg.get_type() == "STATUSTEXT":
+            self.log(f"vehicle: {self.assembler.statustext[-1][2]}")
 
     def _write_part(self, wall: float, final: bool = False) -> None:
         table = self.assembler.take(wall, final=final)
@@ -256,47 +264,99 @@ class Recorder:
 
     def run(self, max_wall_s: float | None = None) -> int:
         """Record until a stop condition (or ``max_wall_s`` of wall time, for tests)."""
-        start_wall = time.monotonic()
+        record([self], max_wall_s)
+        return 0
+
+    def start(self, wall: float) -> None:
+        """The loop begins (:func:`record`): the first part and progress line due from ``wall``."""
         self.log(
             f"recording instance {self.options.instance}: MAVLink {self.url}, zenoh "
             f"{bus.hub_endpoint(self.ports.zenoh)} -> {self.tlog_path}, {self.parquet_path} "
             f"(parts in {self.parts_dir}/)"
         )
-        next_part = start_wall + self.options.part_interval_s
-        next_progress = start_wall + PROGRESS_WALL_S
-        stop_at: float | None = None
+        self._next_part = wall + self.options.part_interval_s
+        self._next_progress = wall + PROGRESS_WALL_S
+
+    def drain_bus(self, wall: float) -> int:
+        """The zenoh rows waiting, into the table; how many samples."""
         a = self.assembler
-        while True:
-            wall = time.monotonic()
-            n = self._drain_zenoh(self.truth_sub, TRUTH_CODEC, a.add_truth, wall)
-            n += self._drain_zenoh(self.controller_sub, CONTROLLER_CODEC, a.add_controller, wall)
-            n += self._drain_zenoh(self.estimator_sub, ESTIMATOR_CODEC, a.add_estimator, wall)
-            n += self._drain_mavlink(wall)
-            for name, request in (("simulator", self.truth_info), ("autopilot", self.autopilot_info)):
-                if request.poll(self.session, wall):
-                    self.log(f"{name} info: {json.dumps(request.answer)}")
-            if wall >= next_part:
-                self._write_part(wall)
-                next_part = wall + self.options.part_interval_s
-            if wall >= next_progress:
-                next_progress = wall + PROGRESS_WALL_S
-                self.log(
-                    f"{a.rows_emitted} rows, {a.mav_messages} MAVLink messages, {self.parts.index} parts"
-                )
-            if stop_at is None:
-                reason = self._should_stop()
-                if not reason and max_wall_s is not None and wall - start_wall > max_wall_s:
-                    reason = f"wall limit {max_wall_s:g} s"
-                if reason:
-                    self.stop_reason = reason
-                    # Rows of the last instants may still be in flight on the other streams.
-                    stop_at = wall + (0.0 if reason == "signal" else STOP_GRACE_WALL_S)
-            if stop_at is not None and wall >= stop_at:
-                break
-            if n == 0:
-                time.sleep(0.001)
-        self._write_part(time.monotonic(), final=True)
-        return 0
+        n = self._drain_zenoh(self.truth_sub, TRUTH_CODEC, a.add_truth, wall)
+        n += self._drain_zenoh(self.controller_sub, CONTROLLER_CODEC, a.add_controller, wall)
+        return n + self._drain_zenoh(self.estimator_sub, ESTIMATOR_CODEC, a.add_estimator, wall)
+
+    def after_drain(self, wall: float, wall_limit_s: float | None = None) -> None:
+        """One turn's rest: the info answers, a part when due, progress, the stop condition
+        (``wall_limit_s``: the loop's ``max_wall_s``, once it has passed); the last part once
+        stopped."""
+        for name, request in (("simulator", self.truth_info), ("autopilot", self.autopilot_info)):
+            if request.poll(self.session, wall):
+                self.log(f"{name} info: {json.dumps(request.answer)}")
+        if wall >= self._next_part:
+            self._write_part(wall)
+            self._next_part = wall + self.options.part_interval_s
+        if wall >= self._next_progress:
+            self._next_progress = wall + PROGRESS_WALL_S
+            a = self.assembler
+            self.log(f"{a.rows_emitted} rows, {a.mav_messages} MAVLink messages, {self.parts.index} parts")
+        if self._stop_at is None:
+            reason = self._should_stop()
+            if not reason and wall_limit_s is not None:
+                reason = f"wall limit {wall_limit_s:g} s"
+            if reason:
+                self.stop_reason = reason
+                # Rows of the last instants may still be in flight on the other streams.
+                self._stop_at = wall + (0.0 if reason == "signal" else STOP_GRACE_WALL_S)
+        if self._stop_at is not None and wall >= self._stop_at:
+            self._write_part(time.monotonic(), final=True)
+            self.done = True
+
+
+def open_ground_link(url: str) -> Any:
+    """The ground station's MAVLink connection the recordings read (pymavlink)."""
+    return mavutil.mavlink_connection(
+        url, source_system=mavlink_link.GCS_SYSTEM_ID, source_component=191, dialect="common"
+    )
+
+
+def record(recorders: list[Recorder], max_wall_s: float | None = None) -> None:
+    """Record every vehicle of ``recorders`` (opened, sharing one MAVLink connection) until each
+    has stopped: every turn the zenoh rows of each, the MAVLink messages waiting (each to the
+    recording of its system id; other vehicles' left out), then each one's parts and stop."""
+    start_wall = time.monotonic()
+    conn = recorders[0].conn
+    for recorder in recorders:
+        recorder.start(start_wall)
+    by_system = {recorder.assembler.system_id: recorder for recorder in recorders}
+    while True:
+        wall = time.monotonic()
+        active = [recorder for recorder in recorders if not recorder.done]
+        if not active:
+            return
+        n = sum(recorder.drain_bus(wall) for recorder in active)
+        n += _drain_mavlink(conn, by_system, wall)
+        passed = max_wall_s if max_wall_s is not None and wall - start_wall > max_wall_s else None
+        for recorder in active:
+            recorder.after_drain(wall, passed)
+        if n == 0:
+            time.sleep(0.001)
+
+
+def _drain_mavlink(conn: Any, by_system: dict[int, Recorder], wall: float) -> int:
+    """The messages waiting on ``conn``, each to the recording of its system id (a vehicle not
+    recorded: left out, every instance's GCS link sends to the one port 14550); how many."""
+    n = 0
+    now_unix = time.time()
+    for _ in range(MAX_DRAIN):
+        msg = conn.recv_msg()
+        if msg is None:
+            break
+        if msg.get_type() == "BAD_DATA":
+            continue
+        n += 1
+        recorder = by_system.get(msg.get_srcSystem())
+        if recorder is not None and not recorder.done:
+            recorder.take_mavlink(msg, wall, now_unix)
+    return n
 
 
 def default_out() -> Path:
@@ -309,9 +369,12 @@ def build_parser(prog: str = "record.py") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=HelpFormatter
     )
-    parser.add_argument("--instance", type=int, default=0, help="vehicle instance N (default 0)")
+    parser.add_argument("--instance", default="0",
+                        help="vehicle instance N (default 0), or several: 0-9, 0..9, 3,5,8 (one recording "
+                        "each, from the one ground-station port)")  # fmt: skip
     parser.add_argument(
-        "--out", type=Path, default=None, help="output DIR/NAME without suffix (default runs/<timestamp>)"
+        "--out", default=None, help="output DIR/NAME without suffix (default runs/<timestamp>; with "
+        "several instances {instance} in it, default runs/<timestamp>-{instance})"
     )
     parser.add_argument(
         "--url", default=None, help="MAVLink URL (default udpin:127.0.0.1:14550, kept: system id 1+N)"
@@ -329,49 +392,70 @@ def build_parser(prog: str = "record.py") -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None, prog: str = "record.py") -> int:
     """Record until ``--duration`` s of simulation time or Ctrl-C; the exit status. Refuses an instance
-    outside [0, 99] and a non-positive duration."""
+    outside [0, 249] and a non-positive duration."""
     parser = build_parser(prog)
     args = parser.parse_args(argv)
-    if not wire.INSTANCE_MIN <= args.instance <= wire.INSTANCE_MAX:
-        parser.error(f"--instance must be in [{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}], got {args.instance}")
-    if args.duration is not None and not (args.duration > 0.0 and math.isfinite(args.duration)):
-        parser.error(f"--duration must be > 0 s, got {args.duration}")
-    options = RecorderOptions(
-        instance=args.instance,
-        out=args.out or default_out(),
-        url=args.url,
-        duration_s=args.duration,
-        until_disarmed=args.until_disarmed,
-        sitl_config=args.sitl_config,
-        quiet=args.quiet,
-    )
     try:
-        recorder = Recorder(options)
+        instances = wire.parse_instances(args.instance)
     except ValueError as exc:
         parser.error(str(exc))
-    signal.signal(signal.SIGINT, recorder.request_stop)
-    signal.signal(signal.SIGTERM, recorder.request_stop)
+    if args.duration is not None and not (args.duration > 0.0 and math.isfinite(args.duration)):
+        parser.error(f"--duration must be > 0 s, got {args.duration}")
+    several = len(instances) > 1
+    out = str(args.out) if args.out is not None else str(default_out()) + ("-{instance}" if several else "")
+    if several and "{instance}" not in out:
+        parser.error(f"--out {out}: with several instances it must contain {{instance}} (one recording "
+                     "per vehicle), e.g. runs/fleet-{instance}")  # fmt: skip
+    recorders = []
+    for n in instances:
+        options = RecorderOptions(
+            instance=n,
+            out=Path(out.replace("{instance}", str(n))),
+            url=args.url,
+            duration_s=args.duration,
+            until_disarmed=args.until_disarmed,
+            sitl_config=args.sitl_config,
+            quiet=args.quiet,
+        )
+        try:
+            recorders.append(Recorder(options, label=f"[{n}] " if several else ""))
+        except ValueError as exc:
+            parser.error(str(exc))
+
+    def stop_all(*_args: Any) -> None:
+        for recorder in recorders:
+            recorder.request_stop()
+
+    signal.signal(signal.SIGINT, stop_all)
+    signal.signal(signal.SIGTERM, stop_all)
+    opened: list[Recorder] = []
     try:
-        recorder.open()
+        for recorder in recorders:
+            recorder.check_out()  # (every name before any file is written)
+        for recorder in recorders:
+            recorder.open(opened[0].conn if opened else None)
+            opened.append(recorder)
     except (FileExistsError, OSError, bus.BusError) as exc:
         print(f"record: {exc}", file=sys.stderr)
-        recorder.close()
+        for recorder in opened:
+            recorder.close()
         return 2
-    merged = None
+    merged: list[Path | None] = []
     try:
-        recorder.run()
+        record(recorders)
     finally:
-        merged = recorder.close()
-    a = recorder.assembler
-    span = ""
-    if a.first_time_s is not None:
-        span = f" covering t={a.first_time_s:.3f}..{a.latest_time_s:.3f} s"
-    print(
-        f"record: stopped ({recorder.stop_reason or 'error'}): {a.rows_emitted} rows{span}, "
-        f"{recorder.tlog.records if recorder.tlog else 0} MAVLink messages -> "
-        f"{merged or '(no rows)'}, {recorder.tlog_path}",
-        flush=True,
-    )
+        merged = [recorder.close() for recorder in recorders]
+    for recorder, path in zip(recorders, merged, strict=True):
+        a = recorder.assembler
+        span = ""
+        if a.first_time_s is not None:
+            span = f" covering t={a.first_time_s:.3f}..{a.latest_time_s:.3f} s"
+        print(
+            f"record: {recorder.label}stopped ({recorder.stop_reason or 'error'}): {a.rows_emitted} rows"
+            f"{span}, {recorder.tlog.records if recorder.tlog else 0} MAVLink messages -> "
+            f"{path or '(no rows)'}, {recorder.tlog_path}",
+            flush=True,
+        )
     return 0
 
 

@@ -101,6 +101,7 @@ a truncated frame cannot swallow the frames of the next datagram.
 
 from __future__ import annotations
 
+import re
 import select
 import time
 from collections.abc import Callable, Iterable
@@ -235,6 +236,27 @@ class Ports:
     api_remote: int
     api_local: int
     zenoh: int
+
+
+_INSTANCE_PART = re.compile(r"^(\d+)(?:(?:-|\.\.)(\d+))?$")
+
+
+def parse_instances(text: str) -> list[int]:
+    """``--instance``'s value as a list: ``"3"`` -> [3]; ``"0-2"``/``"0..2"`` -> [0, 1, 2];
+    ``"3,5,7-8"`` -> [3, 5, 7, 8] (sorted, each once). ValueError names the part that is not an
+    instance or a range of them in [INSTANCE_MIN, INSTANCE_MAX]."""
+    found: set[int] = set()
+    for part in text.split(","):
+        match = _INSTANCE_PART.match(part.strip())
+        if match is None:
+            raise ValueError(f"--instance {text!r}: {part!r} is not N, N-M or N..M")
+        first = int(match.group(1))
+        last = first if match.group(2) is None else int(match.group(2))
+        if last < first or not INSTANCE_MIN <= first <= last <= INSTANCE_MAX:
+            raise ValueError(f"--instance {text!r}: {part!r} must be within "
+                             f"[{INSTANCE_MIN}, {INSTANCE_MAX}], first <= last")  # fmt: skip
+        found.update(range(first, last + 1))
+    return sorted(found)
 
 
 def instance_ranges(instances) -> str:

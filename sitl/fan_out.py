@@ -26,7 +26,6 @@ from collections.abc import Sequence
 from quadcommon import wire
 
 OWN_FILE_OPTIONS = ("--save", "--out")  # options that name one file: {instance} needed with several
-_PART = re.compile(r"^(\d+)(?:(?:-|\.\.)(\d+))?$")
 STOP_WAIT_S = 10.0  # after Ctrl-C, how long a script has to land its vehicle and exit
 
 
@@ -35,21 +34,11 @@ class InstanceError(ValueError):
 
 
 def parse_instances(text: str) -> list[int]:
-    """``"3"`` -> [3]; ``"0-2"``/``"0..2"`` -> [0, 1, 2]; ``"3,5,7-8"`` -> [3, 5, 7, 8] (sorted,
-    each once). InstanceError names the part that is not an instance or a range of them in
-    [:data:`~quadcommon.wire.INSTANCE_MIN`, :data:`~quadcommon.wire.INSTANCE_MAX`]."""
-    found: set[int] = set()
-    for part in text.split(","):
-        match = _PART.match(part.strip())
-        if match is None:
-            raise InstanceError(f"--instance {text!r}: {part!r} is not N, N-M or N..M")
-        first = int(match.group(1))
-        last = first if match.group(2) is None else int(match.group(2))
-        if last < first or not wire.INSTANCE_MIN <= first <= last <= wire.INSTANCE_MAX:
-            raise InstanceError(f"--instance {text!r}: {part!r} must be within "
-                                f"[{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}], first <= last")  # fmt: skip
-        found.update(range(first, last + 1))
-    return sorted(found)
+    """:func:`quadcommon.wire.parse_instances`, its ValueError as an InstanceError."""
+    try:
+        return wire.parse_instances(text)
+    except ValueError as exc:
+        raise InstanceError(str(exc)) from None
 
 
 def instance_argument(argv: Sequence[str]) -> tuple[int, int] | None:

@@ -18,6 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as m
@@ -275,9 +276,11 @@ def test_a_fleet_vehicle_streams_its_truth_on_its_zenoh_keys():
 
 
 @pytest.mark.processes
-def test_two_fleet_launches_meet_through_a_router(tmp_path):
+def test_two_fleet_launches_meet_through_a_router_and_one_recorder_records_both(tmp_path):
     """Across hosts, shown on loopback: `quadsitl router` and two fleet launches (instances 10 and
-    20) whose sitl.toml names it; a client of the router hears both vehicles' truth."""
+    20) whose sitl.toml names it; a client of the router hears both vehicles' truth, and one
+    `quadsitl record --instance 10,20` records each vehicle (its MAVLink from the one ground-station
+    port, its truth and rows through the router) into a recording of its own."""
     endpoint = f"tcp/127.0.0.1:{instance_ports(240).zenoh}"  # a port of this test's block
     config = tmp_path / "config"
     config.mkdir()
@@ -307,6 +310,22 @@ def test_two_fleet_launches_meet_through_a_router(tmp_path):
             else:
                 heard.add(str(sample.key_expr))
         assert heard == {"quadsitl/10/truth", "quadsitl/20/truth"}
+
+        # One recorder for the whole fleet: `quadsitl record --instance 10,20` through the router.
+        recording = subprocess.run([*quadsitl, "--config-dir", str(config), "record", "--instance", "10,20",
+                                    "--out", str(tmp_path / "fleet-{instance}"), "--duration", "2"],
+                                   capture_output=True, text=True, timeout=60.0)  # fmt: skip
+        assert recording.returncode == 0, recording.stdout + recording.stderr
+        for n in (10, 20):
+            assert f"record: [{n}] stopped (duration 2 s)" in recording.stdout, recording.stdout
+            table = pq.read_table(tmp_path / f"fleet-{n}.parquet")
+            assert table.num_rows >= 900  # 2 s at 500 Hz
+            assert set(table.column("x_m").to_pylist()) != {None}  # the truth joined in
+            tlog = mavutil.mavlink_connection(str(tmp_path / f"fleet-{n}.tlog"))
+            senders = set()
+            while (msg := tlog.recv_match()) is not None:
+                senders.add(msg.get_srcSystem())
+            assert senders == {n + 1}  # its own vehicle's messages, the other's left out
     finally:
         if session is not None:
             session.close()
