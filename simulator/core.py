@@ -503,6 +503,7 @@ class SimulatorCore:
             "actuation": setup.vehicle.actuation.mode,
             "physics_hz": self.physics_hz,
             "control_hz": self.control_hz,
+            "home": list(setup.sitl.home),  # lat deg, lon deg, alt m: where its local frame is
             "sim_time_s": self.t,
             "resends": self.resends,
             "battery": self.battery.info(),

@@ -20,6 +20,7 @@ Everything is polled from the view's tick (:meth:`LiveVehicle.poll`); nothing bl
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 import time
@@ -187,6 +188,15 @@ class LiveVehicle:
             "vehicle": sim.get("vehicle", ap.get("vehicle", "")),
             "speed": sim.get("speed"),
         }
+
+    def home(self) -> tuple[float, float, float] | None:
+        """Its simulator's home (lat deg, lon deg, alt m) from its info, None until it answers."""
+        home = (self.sim_info.answer or {}).get("home")
+        try:
+            lat, lon, alt = (float(value) for value in home)
+        except (TypeError, ValueError):  # not there yet (or not three numbers)
+            return None
+        return (lat, lon, alt) if math.isfinite(lat + lon + alt) else None
 
     def status(self) -> dict[str, Any]:
         """Mode, armed, landed, active failsafe and whether heartbeats arrive, for the page."""

@@ -37,7 +37,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from quadcommon import wire
+from quadcommon import frames, wire
 from quadcommon.cli_help import HelpFormatter
 
 from . import build as vendor_build
@@ -59,6 +59,17 @@ def track_color(index: int) -> str:
 # --------------------------------------------------------------------------------------------
 # Sources
 # --------------------------------------------------------------------------------------------
+
+def home_offset_m(home: tuple[float, float, float] | None,
+                  origin: tuple[float, float, float] | None) -> list[float] | None:  # fmt: skip
+    """Where ``home`` sits in the local frame about ``origin`` (paper frame: x north, y west, z up;
+    m), None when either is unknown."""
+    if home is None or origin is None:
+        return None
+    ned = frames.geodetic_to_ned(home[0], home[1], home[2], origin)
+    return [round(value, 4) for value in frames.vector_from_ned(ned)]
+
+
 class LiveSource:
     """Live vehicles; :meth:`tick` drains them and returns the frame to push (or None)."""
 
@@ -93,8 +104,13 @@ class LiveSource:
             v.close()
 
     def tracks(self) -> list[dict[str, Any]]:
-        """Each vehicle's description with its track id and colour."""
-        return [{"id": i, "color": track_color(i), **v.describe()} for i, v in enumerate(self.vehicles)]
+        """Each vehicle's description with its track id, colour and where its local frame's origin
+        (its home) sits in the first vehicle's (``offset_m``, paper frame; None until its home is
+        known): vehicles with homes apart (``quadsitl fleet --spacing``) are drawn apart."""
+        homes = [v.home() for v in self.vehicles]
+        origin = next((home for home in homes if home is not None), None)
+        return [{"id": i, "color": track_color(i), "offset_m": home_offset_m(home, origin), **v.describe()}
+                for i, (v, home) in enumerate(zip(self.vehicles, homes, strict=True))]  # fmt: skip
 
     def hello(self) -> list[dict[str, Any]]:
         """The first messages a page receives: the source kind and its tracks."""

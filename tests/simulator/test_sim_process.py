@@ -107,7 +107,7 @@ def test_truth_stream_and_info_on_zenoh():
             assert info == {
                 "instance": n, "vehicle": "paper_quad", "scenario": "hover", "actuation": "wrench",
                 "physics_hz": RATES.physics_hz, "control_hz": RATES.control_hz, "speed": "max",
-                "sim_time_s": 0.0, "resends": 0, "impairment": {}, "failures": {},
+                "home": list(HOME), "sim_time_s": 0.0, "resends": 0, "impairment": {}, "failures": {},
                 "requests": {"applied": 0, "refused": {}},
             }  # fmt: skip
             # The info reply above is the barrier: our subscription was declared before the query

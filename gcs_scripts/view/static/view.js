@@ -212,8 +212,18 @@ function makeTrackObjects(tr) {
   const name = label3d(tr.label, 'vehicle', new THREE.Vector3(0, 0, 0.35));
   name.element.style.color = tr.color;
   body.add(name);
-  scene.add(path.line, ref.line, body, stem);
-  tr.obj = { path, ref, body, stem, name, refT: [] };
+  // One group per vehicle, placed where its local frame's origin (its home) sits in the first
+  // vehicle's: a fleet's vehicles with homes apart (quadsitl fleet --spacing) are drawn apart.
+  const group = new THREE.Group();
+  group.add(path.line, ref.line, body, stem);
+  scene.add(group);
+  tr.obj = { path, ref, body, stem, name, group, refT: [] };
+  placeTrack(tr);
+}
+
+function placeTrack(tr) {
+  const off = tr.desc.offset_m;
+  if (tr.obj) tr.obj.group.position.set(off ? off[0] : 0, off ? off[1] : 0, off ? off[2] : 0);
 }
 
 function removeTrackObjects(tr) {
@@ -221,7 +231,7 @@ function removeTrackObjects(tr) {
   const o = tr.obj;
   o.body.remove(o.name);
   o.name.element.remove();
-  scene.remove(o.path.line, o.ref.line, o.body, o.stem);
+  scene.remove(o.group);
   for (const l of [o.path.line, o.ref.line, o.stem]) l.geometry.dispose();
 }
 
@@ -313,7 +323,7 @@ function render3d() {
   poseTracks(state.kind === 'replay' ? state.replay.t : null);
   if ($('follow').checked) {
     const tr = state.tracks.find((t) => t.obj && t.obj.body.visible);
-    if (tr) { controls.target.copy(tr.obj.body.position); controls.update(); }
+    if (tr) { tr.obj.body.getWorldPosition(controls.target); controls.update(); }   // (in its group)
   }
   renderer.render(scene, camera);
   labels.render(scene, camera);
@@ -324,8 +334,10 @@ function render3d() {
 function fit() {
   const box = new THREE.Box3();
   for (const tr of state.tracks) {
-    const c = tr.cols;
-    for (let i = 0; i < c.t.length; i += 5) if (c.x[i] !== null) box.expandByPoint(new THREE.Vector3(c.x[i], c.y[i], c.z[i]));
+    const c = tr.cols, off = tr.desc.offset_m || [0, 0, 0];
+    for (let i = 0; i < c.t.length; i += 5) {
+      if (c.x[i] !== null) box.expandByPoint(new THREE.Vector3(c.x[i] + off[0], c.y[i] + off[1], c.z[i] + off[2]));
+    }
   }
   if (box.isEmpty()) box.set(new THREE.Vector3(-1, -1, 0), new THREE.Vector3(3, 3, 3));
   box.expandByPoint(new THREE.Vector3(box.min.x, box.min.y, 0));
@@ -671,6 +683,8 @@ function onTracks(m) {
     if (!tr) continue;
     tr.desc = d; tr.label = d.label;
     tr.obj.name.element.textContent = d.label;
+    placeTrack(tr);
+    state.dirty3d = true;
   }
   buildCards();
   buildPlots();

@@ -154,8 +154,8 @@ def test_offboard_loss_shows_as_the_active_failsafe_until_the_pilot_takes_over(v
 
 def test_a_fleet_beside_a_vehicle_in_one_page_each_with_its_colour(vehicle):
     """Beside the first vehicle (two processes), a fleet of two (instances 68 and 69, one process,
-    `quadsitl fleet --zenoh`): one scene, one card and one colour each, the fleet's vehicles drawn
-    as any other."""
+    `quadsitl fleet --zenoh --spacing 3`): one scene, one card and one colour each, and each fleet
+    vehicle drawn about its own home, 3 m x its instance north of the configured one."""
     from .helpers import ARTIFACTS, browser_page, served, view_state
 
     fleet = (68, 69)
@@ -163,7 +163,7 @@ def test_a_fleet_beside_a_vehicle_in_one_page_each_with_its_colour(vehicle):
     # the page then took > 60 s to start under the rest of the suite). Colours and cards do not
     # depend on the speed.
     child = Child("quadsitl fleet", [sys.executable, "-u", "-m", "sitl.cli", "fleet", "--count", "2",
-                                     "--instance", str(fleet[0]), "--zenoh", "--speed", "4",
+                                     "--instance", str(fleet[0]), "--zenoh", "--speed", "4", "--spacing", "3",
                                      "--scenario", "circle", "--autostart", "circle"])  # fmt: skip
     try:
         child.wait_line("vehicles, instances", timeout=60.0)
@@ -171,17 +171,22 @@ def test_a_fleet_beside_a_vehicle_in_one_page_each_with_its_colour(vehicle):
         with served(source) as server, browser_page(server.url) as page:
             page.wait_for_function(
                 "() => { const s = window.quadsitlView; return s.tracks.length === 3"
-                " && s.tracks.every(t => t.cols.t.length > 5 && t.obj.body.visible); }",
+                " && s.tracks.every(t => t.cols.t.length > 5 && t.obj.body.visible && t.desc.offset_m); }",
                 timeout=30000,
             )
             state = view_state(page)
             colours = page.evaluate("() => window.quadsitlView.tracks.map(t => t.color)")
+            where = "() => window.quadsitlView.tracks.map(t => t.obj.group.position.toArray())"
+            placed = page.evaluate(where)  # each vehicle's frame in the scene (m)
             cards = page.locator(".card").all_inner_texts()
             ARTIFACTS.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(ARTIFACTS / "live_fleet_beside_a_vehicle.png"))
     finally:
         child.stop()
     assert len(set(colours)) == 3
+    assert placed[0] == [0, 0, 0]  # the first vehicle's frame is the scene's
+    for (x, y, z), n in zip(placed[1:], fleet, strict=True):
+        assert x == pytest.approx(3.0 * n, abs=0.01) and abs(y) < 0.01 and abs(z) < 0.01
     for card, n in zip(cards, (INSTANCE, *fleet), strict=True):
         assert f"vehicle {n}" in card
     assert all(n > 5 for n in state["samples"]) and state["errors"] == []

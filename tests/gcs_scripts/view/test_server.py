@@ -118,3 +118,17 @@ def test_replay_page_shows_the_recorded_failsafe_and_modes_at_the_slider_time(tm
         texts = page.locator("#texts li").all_inner_texts()
         assert any("offboard setpoints lost" in t for t in texts)
         assert page.errors == []
+
+
+def test_a_vehicle_is_placed_where_its_home_is_in_the_first_ones_frame():
+    """The scene is the first vehicle's local frame; another vehicle's home 3 m north and 4 m east
+    of it is drawn at x = 3 (north), y = -4 (west), z = 1 (up), its home 1 m higher."""
+    from gcs_scripts.view.server import home_offset_m
+    from quadcommon import frames
+
+    origin = (47.397742, 8.545594, 488.0)
+    there = frames.ned_to_geodetic(3.0, 4.0, -1.0, origin)
+    x, y, z = home_offset_m(there, origin)
+    assert (x, y, z) == pytest.approx((3.0, -4.0, 1.0), abs=1e-3)
+    assert home_offset_m(origin, origin) == [0.0, 0.0, 0.0]
+    assert home_offset_m(None, origin) is None and home_offset_m(there, None) is None
