@@ -57,6 +57,9 @@ def main(argv: list[str] | None = None) -> int:
                         "them (default: log under the working directory)")  # fmt: skip
     parser.add_argument("--no-log", action="store_true",
                         help="no flight log at all (the log download lists none)")  # fmt: skip
+    parser.add_argument("--spacing", type=float, default=0.0, metavar="M",
+                        help="this instance's home N x M metres north of sitl.toml's (quadsitl up --spacing; "
+                        "the simulator takes the same)")  # fmt: skip
     parser.add_argument("--impair", action="append", default=[], metavar="LINK:SPEC",
                         help="impair a link, e.g. gcs:loss=5%%,delay=50ms (repeatable; replaces that link's "
                         "[impair] entry of sitl.toml; docs/links.md)")  # fmt: skip
@@ -68,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         signing = SigningOptions(args.signing_key, args.signing_state, epoch_clock=time.time)
         build = this_build()  # AUTOPILOT_VERSION and the flight log's version
         log = LogOptions(None if args.no_log else args.log_dir, utc_clock=time.time, version=build.version)
-        setup = dataclasses.replace(setup, signing=signing, log=log, build=build)
+        setup = dataclasses.replace(setup, signing=signing, log=log, build=build,
+                                    sitl=setup.sitl.spaced(args.instance, args.spacing))
         if args.impair:
             impair = setup.sitl.impair.with_specs(args.impair)
             setup = dataclasses.replace(setup, sitl=dataclasses.replace(setup.sitl, impair=impair))

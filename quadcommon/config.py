@@ -537,6 +537,24 @@ class SitlConfig:
         return wire.ports(instance, self.hil_port_base, self.gcs_port_base, self.api_port_base,
                           self.zenoh_port_base)  # fmt: skip
 
+    def spaced(self, instance: int, spacing_m: float) -> SitlConfig:
+        """This configuration with vehicle ``instance``'s home ``instance * spacing_m`` metres north
+        of :attr:`home` (``--spacing``: PX4's multi-vehicle SITL spawns its instances 3 m apart), so
+        a ground station's map shows several vehicles apart; each flies its own local frame about
+        its own home. ValueError outside [0, :data:`MAX_SPACING_M`]."""
+        if not 0.0 <= spacing_m <= MAX_SPACING_M:
+            raise ValueError(f"--spacing {spacing_m}: metres between homes, in [0, {MAX_SPACING_M:g}]")
+        if spacing_m == 0.0:
+            return self
+        from .frames import ned_to_geodetic  # (frames compiles kernels: imported when spaced)
+
+        return replace(self, home=ned_to_geodetic(instance * spacing_m, 0.0, 0.0, self.home))
+
+
+# --spacing's bound: instance 249 stays within 5 km of the configured home, where the local frames'
+# projection (quadcommon.frames.ned_to_geodetic) is millimetre-exact.
+MAX_SPACING_M = 20.0
+
 
 def load_rates(sec: Section) -> Rates:
     """The ``[rates]`` section: physics, control and GPS rates (Hz), validated against their ranges."""

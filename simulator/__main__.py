@@ -64,6 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--sitl-config", default=None, help="path of an alternative sitl.toml")
     parser.add_argument("--sensors", default=None,
                         help="sensor profile: ideal, mocap, gps (config/sensors; default: the scenario's)")
+    parser.add_argument("--spacing", type=float, default=0.0, metavar="M",
+                        help="this instance's home N x M metres north of sitl.toml's (quadsitl up --spacing; "
+                        "the autopilot takes the same)")  # fmt: skip
     parser.add_argument("--impair", action="append", default=[], metavar="LINK:SPEC",
                         help="impair a link, e.g. hil:loss=1%%,delay=5ms (repeatable; replaces that link's "
                         "[impair] entry of sitl.toml; docs/links.md)")  # fmt: skip
@@ -84,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         setup = SimulatorSetup.load(
             args.instance, args.scenario, args.vehicle, args.sitl_config, args.sensors
         )
+        if args.spacing:
+            setup = dataclasses.replace(setup, sitl=setup.sitl.spaced(args.instance, args.spacing))
         if args.impair:
             setup = with_impairments(setup, args.impair)
         app = Simulator(setup, args.speed, args.duration)

@@ -206,7 +206,7 @@ def _log_dir(args: argparse.Namespace, instance: int) -> str | None:
 def _cmd_up(args: argparse.Namespace) -> int:
     from autopilot.control.config import load_controller
     from quadcommon import wire
-    from quadcommon.config import load_scenario, load_vehicle
+    from quadcommon.config import MAX_SPACING_M, load_scenario, load_vehicle
 
     from .up import RestartPolicy, VehicleSpec, run_up
 
@@ -218,6 +218,10 @@ def _cmd_up(args: argparse.Namespace) -> int:
         return 2
     if args.max_restarts < 0:
         print(f"quadsitl up: --max-restarts {args.max_restarts}: must be >= 0", file=sys.stderr)
+        return 2
+    if not 0.0 <= args.spacing <= MAX_SPACING_M:
+        print(f"quadsitl up: --spacing {args.spacing}: metres between homes, in [0, {MAX_SPACING_M:g}]",
+              file=sys.stderr)  # fmt: skip
         return 2
     restart = not args.no_restart and args.max_restarts > 0
     policy = RestartPolicy(enabled=restart, max_restarts=args.max_restarts)
@@ -241,7 +245,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
             duration_s=args.duration, sitl_config=args.sitl_config, params_file=params[k],
             signing_key_file=str(Path(args.signing_key).resolve()) if args.signing_key else None,
             sensors=args.sensors, estimator=args.estimator, impair=tuple(args.impair),
-            log_dir=_log_dir(args, args.instance + k),
+            log_dir=_log_dir(args, args.instance + k), spacing_m=args.spacing,
         )
         for k in range(args.count)
     ]  # fmt: skip
@@ -333,6 +337,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="restarts of one process per 60 s before it is left down (default 3; 0 = --no-restart)",
     )
     _estimation_arguments(p)
+    p.add_argument("--spacing", type=float, default=0.0, metavar="M",
+                   help="instance N's home N x M metres north of the configured one (PX4's multi-vehicle "
+                   "SITL spawns its instances 3 m apart), so a ground station's map shows them apart")
     p.add_argument("--impair", action="append", default=[], metavar="LINK:SPEC",
                    help="faults on a link, LINK one of hil, gcs, api: e.g. gcs:loss=5%%,delay=50ms,"
                    "jitter=20ms,dup=1%%,reorder=1%% (repeatable; replaces sitl.toml's [impair] entry; "

@@ -48,9 +48,9 @@ from autopilot.control.config import load_controller
 from autopilot.logger.logger import LogOptions
 from autopilot.mavlink.links import API_LINK, GCS_LINK, Outgoing
 from autopilot.setup import AutopilotSetup
-from quadcommon import frames, wire
+from quadcommon import wire
 from quadcommon.bus import BusError
-from quadcommon.config import load_scenario
+from quadcommon.config import MAX_SPACING_M, load_scenario
 from quadcommon.schema import ConfigError
 from quadcommon.trajectories import trajectory_from_spec
 from quadcommon.udp import PortInUse, bind_udp
@@ -60,9 +60,6 @@ from simulator.pacing import Pacer
 from .inprocess import HOUSEKEEPING_S, Lockstep, estimator_profile_for
 
 LINKS = ((GCS_LINK, "GCS link"), (API_LINK, "API link"))
-# --spacing's bound: instance 249 stays within 5 km of the configured home, where the local frames'
-# projection (quadcommon.frames.ned_to_geodetic) is millimetre-exact.
-MAX_SPACING_M = 20.0
 # Open files a vehicle holds at most: its two sockets, its flight log, its zenoh session's (6
 # measured with --zenoh and --log-dir); the fleet asks the system for room for all of them.
 FILES_PER_VEHICLE = 8
@@ -184,9 +181,8 @@ def make_vehicle(
     (ConfigError names a bad name); what it says goes to ``log(instance, text)``."""
     sim = SimulatorSetup.load(instance=instance, scenario=options.scenario, vehicle=options.vehicle,
                               sensors=options.sensors)  # fmt: skip
-    if options.spacing_m:
-        home = frames.ned_to_geodetic(instance * options.spacing_m, 0.0, 0.0, sim.sitl.home)
-        sim = replace(sim, sitl=replace(sim.sitl, home=home))  # (the autopilot's setup takes it from here)
+    if options.spacing_m:  # (the autopilot's setup takes its configuration from here)
+        sim = replace(sim, sitl=sim.sitl.spaced(instance, options.spacing_m))
     profile = estimator_profile_for(options.sensors or "default") if options.estimator == "ekf" else "default"
     log_dir = None if options.log_directory is None else f"{options.log_directory}/{instance}"
     trajectory = None

@@ -193,6 +193,7 @@ class VehicleSpec:
     estimator: str | None = None  # "truth" or "ekf"; None: the scenario's
     log_dir: str | None = None  # the autopilot's flight logs (ULog); None: no flight log (--no-log)
     impair: tuple[str, ...] = ()  # --impair LINK:SPEC for both processes (docs/links.md)
+    spacing_m: float = 0.0  # --spacing: its home instance x spacing_m north (SitlConfig.spaced)
     extra_simulator_args: tuple[str, ...] = ()
     extra_autopilot_args: tuple[str, ...] = ()
 
@@ -233,6 +234,8 @@ class VehicleSpec:
         common = ["--instance", str(self.instance), "--vehicle", self.vehicle]
         for spec in self.impair:
             common += ["--impair", spec]
+        if self.spacing_m:
+            common += ["--spacing", repr(self.spacing_m)]
         return common + (["--sitl-config", self.sitl_config] if self.sitl_config else [])
 
     def ports(self) -> wire.Ports:

@@ -33,8 +33,9 @@ os.environ.setdefault("MAVLINK_DIALECT", "common")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import common as m  # noqa: E402
 
-from quadcommon import bus, wire  # noqa: E402
+from quadcommon import bus, frames, wire  # noqa: E402
 from quadcommon.bus_records import TRUTH_CODEC  # noqa: E402
+from quadcommon.config import load_sitl  # noqa: E402
 from sitl.launcher import Child, LaunchError, VehicleSpec, check_ports  # noqa: E402
 
 from .vehicles import ports  # noqa: E402
@@ -59,6 +60,7 @@ class Client:
         )
         self.heartbeat = None
         self.position = None  # paper frame
+        self.global_position = None  # GLOBAL_POSITION_INT
         self.acks: list = []
         self.foreign: set[int] = set()  # sysids seen on this port other than ours
 
@@ -77,6 +79,8 @@ class Client:
                 self.heartbeat = msg
             elif kind == "LOCAL_POSITION_NED":
                 self.position = (msg.x, -msg.y, -msg.z)
+            elif kind == "GLOBAL_POSITION_INT":
+                self.global_position = msg
             elif kind == "COMMAND_ACK":
                 self.acks.append(msg)
 
@@ -134,7 +138,8 @@ def wait(clients, what: str, predicate, timeout_s: float, each=None) -> None:
 
 
 def start_up(config, params_dir) -> tuple[Child, Child]:
-    """``quadsitl up --instance 7 --count 2``, the command a user types; returns it twice (as the
+    """``quadsitl up --instance 7 --count 2 --spacing 3`` (each vehicle's home 3 m x its instance
+    north of the configured one), the command a user types; returns it twice (as the
     process and as its collected output: one Child is both). Each vehicle's COM_OF_LOSS_T is 5 s
     of simulation time: the test is about addressing, and its one thread streams both vehicles'
     setpoints on the wall clock, which a loaded machine (two checkouts testing at once) can stall
@@ -142,7 +147,7 @@ def start_up(config, params_dir) -> tuple[Child, Child]:
     for n in (FIRST, FIRST + 1):
         (params_dir / f"params-{n}.toml").write_text("COM_OF_LOSS_T = 5.0\n")
     cmd = [sys.executable, "-u", "-m", "sitl.cli", "up", "--instance", str(FIRST), "--count", "2",
-           "--speed", "2", "--sitl-config", str(config), "--no-log",
+           "--speed", "2", "--sitl-config", str(config), "--no-log", "--spacing", "3",
            "--params", str(params_dir / "params-{instance}.toml")]  # fmt: skip
     up = Child("quadsitl up", cmd)
     try:
@@ -260,6 +265,17 @@ def test_two_vehicles_fly_their_own_setpoints(compat_sitl_config, tmp_path):
         settle_end = time.monotonic() + 1.0
         wait(clients, "1 s at the setpoints", lambda: time.monotonic() > settle_end, 3, stream)
         shared.poll()
+
+        # On the map each vehicle stands at its own home (3 m x its instance north of the configured
+        # one, --spacing 3) plus where it flew in its local frame.
+        home = load_sitl(str(compat_sitl_config)).home
+        metres_per_degree = frames.EARTH_RADIUS_M * math.pi / 180.0
+        for c in clients:
+            g, (x, y, _) = c.global_position, TARGETS[c.instance]
+            north = (g.lat * 1e-7 - home[0]) * metres_per_degree
+            east = (g.lon * 1e-7 - home[1]) * metres_per_degree * math.cos(math.radians(home[0]))
+            assert north == pytest.approx(3.0 * c.instance + x, abs=0.05)
+            assert east == pytest.approx(-y, abs=0.05)  # (paper y: west)
 
         # Each vehicle's truth went only to its own setpoint, never towards the other's ALIEN one.
         assert set(shared.rows) == {f"quadsitl/{FIRST}/truth", f"quadsitl/{FIRST + 1}/truth"}
