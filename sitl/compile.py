@@ -5,9 +5,10 @@ caches it on disk, so after an install, an upgrade or an edited equation the fir
 autopilot or campaign of each controller spends seconds compiling (~3-10 s per entry). Here the
 entries a flight needs are compiled up front, one process per core: the plant (coupled and
 nominal) and the frame encoder's float fields, the sensor models, the estimator, the cascade of
-each controller and the campaign engine's flight of each controller. Already cached entries cost
-a fraction of a second each. ``make test`` runs it before the suite, so no test's process waits
-on a compilation.
+each controller and the campaign engine's flight of each controller on the truth (``--estimate``:
+also its flight on the EKF, what a campaign with a ``[estimation]`` section flies, several times
+longer to compile). Already cached entries cost a fraction of a second each. ``make test`` runs it
+before the suite, so no test's process waits on a compilation.
 """
 
 from __future__ import annotations
@@ -18,11 +19,16 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 
+ESTIMATED_CAMPAIGN = "paper_box_gps"  # a shipped campaign flown on the EKF (what --estimate warms)
 
-def targets(controllers: Sequence[str], campaign: bool = True) -> list[str]:
-    """What to compile: ``plant``, ``estimator``, ``sensors``, ``cascade:NAME`` and ``campaign:NAME``,
-    the slowest first (they are handed out in this order)."""
+
+def targets(controllers: Sequence[str], campaign: bool = True, estimate: bool = False) -> list[str]:
+    """What to compile: ``plant``, ``estimator``, ``sensors``, ``cascade:NAME``, ``campaign:NAME``
+    and with ``estimate`` ``campaign-ekf:NAME`` (the campaign's flight on the EKF), the slowest
+    first (they are handed out in this order)."""
     out = ["plant", "estimator", "sensors"]
+    if campaign and estimate:
+        out += [f"campaign-ekf:{name}" for name in controllers]
     if campaign:
         out += [f"campaign:{name}" for name in controllers]
     return out + [f"cascade:{name}" for name in controllers]
@@ -59,11 +65,12 @@ def compile_target(target: str) -> tuple[str, float]:
         from quadcommon.config import load_vehicle
 
         Cascade(load_controller(name), load_vehicle("paper_quad"), 0.002)
-    elif kind == "campaign":
+    elif kind in ("campaign", "campaign-ekf"):
         from sitl.campaign.batch import warm_up
         from sitl.campaign.spec import flown_by, load_campaign
 
-        warm_up(flown_by(load_campaign("paper_box", runs=1), name))
+        spec = ESTIMATED_CAMPAIGN if kind == "campaign-ekf" else "paper_box"
+        warm_up(flown_by(load_campaign(spec, runs=1), name))
     else:
         raise ValueError(f"unknown target {target!r}")
     return target, time.perf_counter() - start
@@ -96,9 +103,10 @@ def entries_of(target: str) -> list[tuple]:
             registry.law(registry.ROTATIONAL, config.rotational.law).step)  # fmt: skip
     if kind == "cascade":
         return [(buffered_step, *laws)]
-    from sitl.campaign.kernels import ON_TRUTH, simulate
+    from sitl.campaign.kernels import ON_ESTIMATE, ON_TRUTH, simulate
 
-    return [(simulate, *laws, *ON_TRUTH, True)]  # nogil; a campaign on the estimate compiles its own
+    on = ON_ESTIMATE if kind == "campaign-ekf" else ON_TRUTH
+    return [(simulate, *laws, *on, True)]  # nogil
 
 
 def missing(names: Sequence[str]) -> list[str]:
@@ -141,12 +149,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="the controllers whose cascade and campaign flight to compile (default: "
                         "the shipped ones; yours by name from your configuration directory)")  # fmt: skip
     parser.add_argument("--no-campaign", action="store_true", help="not the campaign engine's flights")
+    parser.add_argument("--estimate", action="store_true",
+                        help="also the campaign engine's flights on the EKF (campaigns with [estimation], "
+                        "e.g. paper_box_gps)")  # fmt: skip
     parser.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
     parser.add_argument("--missing", action="store_true",
                         help="only the targets with an entry not in numba's cache yet (checked without "
                         "loading any: nothing to do costs a fraction of a second, not a process per core)")
     args = parser.parse_args(argv)
-    names = targets(args.controllers, campaign=not args.no_campaign)
+    names = targets(args.controllers, campaign=not args.no_campaign, estimate=args.estimate)
     if args.missing:
         names = missing(names)
         if not names:

@@ -228,3 +228,19 @@ def test_fail_takes_the_motor_before_the_type_and_its_effectiveness_after():
     ):
         with pytest.raises(ValueError, match=re.escape(why)):
             parse_words("motor", words, instance)
+
+
+@pytest.mark.timeout(30)
+def test_compile_estimate_adds_the_campaign_flights_on_the_ekf():
+    """``quadsitl compile --estimate``: each controller's campaign flight on the EKF too (the
+    entry an ``[estimation]`` campaign flies), the slowest first; without it, not."""
+    from sitl.campaign.kernels import ON_ESTIMATE, ON_TRUTH
+    from sitl.compile import entries_of, targets
+
+    assert targets(["a", "b"]) == ["plant", "estimator", "sensors", "campaign:a", "campaign:b", "cascade:a",
+                                   "cascade:b"]  # fmt: skip
+    assert targets(["a"], estimate=True) == ["plant", "estimator", "sensors", "campaign-ekf:a", "campaign:a",
+                                             "cascade:a"]  # fmt: skip
+    ((_, _, _, *on_ekf, nogil),) = entries_of("campaign-ekf:intbs_nlhinf")
+    ((_, _, _, *on_truth, _),) = entries_of("campaign:intbs_nlhinf")
+    assert tuple(on_ekf) == ON_ESTIMATE and tuple(on_truth) == ON_TRUTH and nogil is True
