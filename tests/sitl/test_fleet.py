@@ -24,7 +24,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as m
 
 from autopilot.mavlink.links import API_LINK
-from quadcommon import bus, frames
+from quadcommon import bus, frames, wire
 from quadcommon.failures import Type, Unit
 from sitl.fleet import Fleet, FleetOptions, VehicleLines, make_vehicle, room_for_files
 from sitl.launcher import Child
@@ -149,16 +149,19 @@ def fleet_child_of(supervisor_pid: int, instance: int) -> int:
 
 @pytest.mark.processes
 def test_a_fleet_in_two_processes_driven_by_mavsdk_and_pymavlink_a_lost_process_restarted():
-    """`quadsitl fleet --count 2 --processes 2`: on the GCS port both system ids. At the same time
-    MAVSDK flies vehicle 0 through its API port (discovery, health, arm, take off, land, disarm:
-    the flow a PX4 user's first script is) and a pymavlink client arms vehicle 1 and takes it off
-    through its own: each vehicle does what its own client said and nothing the other's did.
-    `quadsitl mission download --instance 3-4` reads both vehicles' missions side by side. Vehicle
-    0's process killed: it is restarted (its vehicle back on the GCS port) while vehicle 1 flies on."""
-    first = 3
+    """`quadsitl fleet --count 2 --processes 2` (instances 12 and 13): on the GCS port both system
+    ids. At the same time MAVSDK flies vehicle 0 through its API port (discovery, health, arm, take
+    off, land, disarm: the flow a PX4 user's first script is) and a pymavlink client arms vehicle 1
+    and takes it off through its own: each vehicle does what its own client said and nothing the
+    other's did. Past instance 9 PX4 sends every API link to one port (14549), so both clients talk
+    to their vehicle's own API link (``udpout``, :func:`quadcommon.wire.api_connect_url`).
+    `quadsitl mission download --instance 12-13` reads both vehicles' missions side by side.
+    Vehicle 0's process killed: it is restarted (its vehicle back on the GCS port) while vehicle 1
+    flies on."""
+    first = 12
     ports = [instance_ports(first), instance_ports(first + 1)]
     gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[0].gcs_remote}", source_system=255)
-    api = mavutil.mavlink_connection(f"udpin:127.0.0.1:{ports[1].api_remote}", source_system=245)
+    api = mavutil.mavlink_connection(f"udpout:127.0.0.1:{ports[1].api_local}", source_system=245)
     quadsitl = [sys.executable, "-u", "-m", "sitl.cli"]
     child = Child("quadsitl fleet", [*quadsitl, "fleet", "--count", "2", "--instance", str(first),
                                      "--speed", "4", "--processes", "2"])  # fmt: skip
@@ -167,10 +170,12 @@ def test_a_fleet_in_two_processes_driven_by_mavsdk_and_pymavlink_a_lost_process_
         child.wait_line("[0] fleet: 1 vehicles, instances", timeout=60.0)
         child.wait_line("[1] fleet: 1 vehicles, instances", timeout=60.0)
         assert heartbeat_senders(gcs, 3.0) == {first + 1, first + 2}  # system id = instance + 1
-        url = f"udpin://127.0.0.1:{ports[0].api_remote}"
+        url = wire.api_connect_url(ports[0], first)
+        assert url.startswith("udpout://127.0.0.1:")
         flying = threading.Thread(target=lambda: mavsdk.append(run_flow("action", url, 50.0)), daemon=True)
         flying.start()
         target = first + 2
+        api.mav.heartbeat_send(m.MAV_TYPE_GCS, m.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # (talks first: udpout)
         assert api.wait_heartbeat(timeout=10.0).get_srcSystem() == target
         command(api, target, m.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
         nan = float("nan")
@@ -193,7 +198,7 @@ def test_a_fleet_in_two_processes_driven_by_mavsdk_and_pymavlink_a_lost_process_
         assert f"instances {first}..{first + 1}: all 2 succeeded" in missions.stdout
 
         os.kill(fleet_child_of(child.pid, first), signal.SIGKILL)
-        child.wait_line("fleet process 0 (instances 3..3) lost: killed by SIGKILL", timeout=10.0)
+        child.wait_line(f"fleet process 0 (instances {first}..{first}) lost: killed by SIGKILL", timeout=10.0)
         child.wait_line("fleet process 0 relinked", timeout=60.0)
         assert first + 1 in heartbeat_senders(gcs, 2.0)  # vehicle 0 is back
         assert relative_altitude(gcs, target) > 1.5  # vehicle 1 flew on
