@@ -14,6 +14,7 @@ from quadcommon.schema import ConfigError
 
 from .app import Simulator, StartupError
 from .core import SimulatorSetup
+from .pacing import parse_speed
 
 
 def with_impairments(setup: SimulatorSetup, specs: list[str]) -> SimulatorSetup:
@@ -24,16 +25,10 @@ def with_impairments(setup: SimulatorSetup, specs: list[str]) -> SimulatorSetup:
 
 # -- command line -----------------------------------------------------------------------------------
 def _speed(text: str) -> float | None:
-    if text == "max":
-        return None
-    message = f"--speed must be a positive number or 'max', got {text!r}"
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(message) from None
-    if not (value > 0.0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(message)
-    return value
+        return parse_speed(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _duration(text: str) -> float:

@@ -9,12 +9,27 @@ speed is reported at most every :data:`RATE_REPORT_WALL_S`.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
 RESYNC_BEHIND_S = 0.2
 RATE_REPORT_WALL_S = 10.0
 SLEEP_SLICE_S = 0.05  # sleeps in slices so that a stop request is seen
+
+
+def parse_speed(text: str) -> float | None:
+    """``--speed``: ``"max"`` -> None (as fast as it goes), else the factor of real time, a finite
+    number above 0; ValueError naming the value otherwise."""
+    if text == "max":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0.0 and math.isfinite(value)):
+        raise ValueError(f"--speed must be a positive number or 'max', got {text!r}")
+    return value
 
 
 class Pacer:

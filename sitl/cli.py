@@ -160,17 +160,15 @@ def _estimation_arguments(p: argparse.ArgumentParser) -> None:
                    help="sensor profile: ideal, mocap, gps (config/sensors; default: the scenario's, ideal)")
 
 
-def _speed(text: str) -> str:
-    if text == "max":
-        return text
+def speed_text(text: str) -> str:
+    """``--speed`` checked (:func:`simulator.pacing.parse_speed`) and kept as text: the processes
+    started get it as typed."""
+    from simulator.pacing import parse_speed
+
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--speed must be a positive number or 'max', got {text!r}"
-        ) from None
-    if not value > 0.0:
-        raise argparse.ArgumentTypeError(f"--speed must be > 0, got {text!r}")
+        parse_speed(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return text
 
 
@@ -288,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--vehicle", default="paper_quad", help="vehicle model and plant (config/vehicle)")
     p.add_argument(
         "--speed",
-        type=_speed,
+        type=speed_text,
         default="1",
         help="wall-clock pacing: 1 = real time (default), a factor, or max",
     )
@@ -378,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="the paper's helix through the SITL for the three cascades (make demo)")
     p.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
     p.add_argument("--instance", type=int, default=0, help="vehicle instance used for the runs")
-    p.add_argument("--speed", type=_speed, default="max", help="SITL pacing (default max)")
+    p.add_argument("--speed", type=speed_text, default="max", help="SITL pacing (default max)")
     p.set_defaults(
         func=lambda a: __import__("sitl.demo", fromlist=["main_demo"]).main_demo(a.out, a.instance, a.speed)
     )

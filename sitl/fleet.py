@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import resource
 import selectors
-import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -55,9 +54,11 @@ from quadcommon.schema import ConfigError
 from quadcommon.trajectories import trajectory_from_spec
 from quadcommon.udp import PortInUse, bind_udp
 from simulator.core import SimulatorSetup
-from simulator.pacing import Pacer
+from simulator.pacing import Pacer, parse_speed
 
+from .cli import speed_text
 from .inprocess import HOUSEKEEPING_S, Lockstep, estimator_profile_for
+from .supervise import stop_on_signals
 
 LINKS = ((GCS_LINK, "GCS link"), (API_LINK, "API link"))
 # Open files a vehicle holds at most: its two sockets, its flight log, its zenoh session's (6
@@ -370,7 +371,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     parser.add_argument("--count", type=int, default=2, help="vehicles (default 2)")
     parser.add_argument("--instance", type=int, default=0, help="the first vehicle's instance N (default 0)")
-    parser.add_argument("--speed", default="1", help="times real time, or 'max' (default 1)")
+    parser.add_argument("--speed", default="1", type=speed_text, help="times real time, or 'max' (default 1)")
     parser.add_argument("--duration", type=float, default=None, help="simulated seconds, then exit")
     parser.add_argument("--scenario", default="hover")
     parser.add_argument("--controller", default="intbs_nlhinf")
@@ -398,12 +399,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.count < 1 or not wire.INSTANCE_MIN <= first <= last <= wire.INSTANCE_MAX:
         parser.error(f"--instance {first} --count {args.count}: instances must be in "
                      f"[{wire.INSTANCE_MIN}, {wire.INSTANCE_MAX}] (got {first}..{last})")  # fmt: skip
-    try:
-        speed = None if args.speed == "max" else float(args.speed)
-    except ValueError:
-        parser.error(f"--speed {args.speed!r}: a number or 'max'")
-    if speed is not None and not speed > 0.0:
-        parser.error(f"--speed {args.speed}: must be above 0")
+    speed = parse_speed(args.speed)  # (checked by its type)
 
     if args.processes < 1:
         parser.error(f"--processes {args.processes}: at least 1")
@@ -456,19 +452,13 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"{FILES_PER_VEHICLE}: raise `ulimit -n`, or split the fleet with --processes)",
               file=sys.stderr)  # fmt: skip
         return 2
-    stop = {"asked": False}
-
-    def ask_stop(*_args: object) -> None:
-        stop["asked"] = True
-
-    signal.signal(signal.SIGINT, ask_stop)
-    signal.signal(signal.SIGTERM, ask_stop)
+    stop = stop_on_signals()
     p0 = fleet.vehicles[0].ports
     log(f"{args.count} vehicles, instances {first}..{last} (system ids {first + 1}..{last + 1}), "
         f"ready in {time.monotonic() - started:.1f} s; GCS links udp {wire.LOOPBACK}:{p0.gcs_local}.. "
         f"-> {p0.gcs_remote}, API links {p0.api_local}.. -> {p0.api_remote}..")  # fmt: skip
     try:
-        run(fleet, speed, args.duration, log, lambda: not stop["asked"], started=lines.flush)
+        run(fleet, speed, args.duration, log, lambda: not stop.is_set(), started=lines.flush)
     finally:
         lines.flush()  # (stopped before the first frame)
         for path in fleet.close():

@@ -15,14 +15,13 @@ stops them all).
 
 from __future__ import annotations
 
-import signal
 import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from .launcher import Child
-from .supervise import RestartPolicy, exit_reason, write_line
+from .supervise import RestartPolicy, exit_reason, stop_on_signals, write_line
 
 READY = "vehicles, instances"  # the line a fleet process prints once its vehicles fly (sitl/fleet.py)
 POLL_S = 0.2
@@ -77,19 +76,13 @@ def supervise(first: int, count: int, processes: int, arguments: Sequence[str], 
     for good."""
     fleet = [FleetProcess(k, n0, n, list(arguments), list(autostart))
              for k, (n0, n) in enumerate(shares(first, count, processes))]  # fmt: skip
-    stop = {"asked": False}
-
-    def ask_stop(*_args: object) -> None:
-        stop["asked"] = True
-
-    signal.signal(signal.SIGINT, ask_stop)
-    signal.signal(signal.SIGTERM, ask_stop)
+    stop = stop_on_signals()
     for share in fleet:
         share.start(first_start=True)
     write_line(f"quadsitl: fleet of {count} vehicles in {len(fleet)} processes: "
                + ", ".join(f"process {s.index} instances {s.instances}" for s in fleet))  # fmt: skip
     try:
-        while not stop["asked"] and any(s.child is not None or s.restart_at is not None for s in fleet):
+        while not stop.is_set() and any(s.child is not None or s.restart_at is not None for s in fleet):
             now = time.monotonic()
             for share in fleet:
                 _watch(share, now, policy)

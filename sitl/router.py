@@ -16,12 +16,12 @@ Run: ``quadsitl router [--port 7446] [--listen tcp/HOST:PORT]``; Ctrl-C stops it
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 from collections.abc import Sequence
 
 from quadcommon import bus, wire
+
+from .supervise import stop_on_signals
 
 DEFAULT_PORT = 7446  # below the vehicles' hubs (7447 + N)
 
@@ -41,9 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except bus.BusError as exc:
         print(f"quadsitl router: {exc}", file=sys.stderr)
         return 2
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     print(f'router: listening on {endpoint}; in each launch\'s sitl.toml: [zenoh] router = "{endpoint}"',
           flush=True)  # fmt: skip
     try:

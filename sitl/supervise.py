@@ -107,6 +107,15 @@ def _restarts(n: int) -> str:
 _OUTPUT = threading.Lock()
 
 
+def stop_on_signals() -> threading.Event:
+    """An event that Ctrl-C (SIGINT) or SIGTERM sets: a foreground command's loop runs until it is
+    set, then stops its processes or vehicles cleanly."""
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    return stop
+
+
 def write_line(text: str, error: bool = False) -> None:
     """One whole line on stdout (stderr if ``error``), never interleaved with another thread's: the
     children's output is echoed by reader threads while the supervisor reports."""

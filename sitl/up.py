@@ -18,14 +18,12 @@ could not start.
 
 from __future__ import annotations
 
-import signal
-import threading
 from collections.abc import Sequence
 
 from quadcommon import wire
 
 from .launcher import Launcher, LaunchError, VehicleSpec, port_notes
-from .supervise import RestartPolicy, Supervisor, write_line
+from .supervise import RestartPolicy, Supervisor, stop_on_signals, write_line
 from .view_process import check_view_port, start_view
 
 __all__ = ["LaunchError", "RestartPolicy", "VehicleSpec", "endpoints_banner", "run_up"]
@@ -85,9 +83,7 @@ def run_up(
     vehicles are linked (:mod:`sitl.view_process`), print its URL and stop it with the rest.
     """
     policy = RestartPolicy() if policy is None else policy
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     launcher = Launcher(echo=_echo)
     view_url = None
     try:
