@@ -424,3 +424,16 @@ def test_the_fleet_asks_for_room_for_its_files_and_says_so_when_there_is_none():
     assert launch.returncode == 2, launch.stdout + launch.stderr
     assert "Too many open files" in launch.stderr and "raise `ulimit -n`" in launch.stderr
     assert "Traceback" not in launch.stderr
+
+
+@pytest.mark.parametrize("speed", ["0", "-1", "inf", "nan", "fast"])
+def test_a_speed_that_is_not_a_finite_factor_or_max_is_refused(capsys, speed):
+    """`quadsitl fleet` and `quadsitl up` read --speed as the simulator does (one parser)."""
+    from sitl import cli
+    from sitl.fleet import main
+
+    for run in (lambda: main(["--speed", speed]), lambda: cli.main(["up", "--speed", speed])):
+        with pytest.raises(SystemExit) as info:
+            run()
+        assert info.value.code == 2
+        assert f"--speed must be a positive number or 'max', got '{speed}'" in capsys.readouterr().err
