@@ -43,7 +43,7 @@ from collections.abc import Callable
 
 from quadcommon import wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
-from quadcommon.mavlink_fast import DecodeError
+from quadcommon.mavlink_fast import DecodeError, MessageParts
 from quadcommon.wire_values import frame_time_s
 
 from .battery.estimator import BatteryEstimator
@@ -263,9 +263,15 @@ class AutopilotCore:
     # -- entry points ---------------------------------------------------------------------------
     def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:
         """One datagram on the HIL link: a lockstep frame is answered (controls), else None."""
+        return self.on_hil_frame(MessageParts.of_datagram(data), now)
+
+    def on_hil_frame(self, parts: MessageParts, now: float) -> bytes | None:
+        """The messages of one datagram on the HIL link (:meth:`on_hil_datagram`), or of a frame
+        the in-process runner hands over unframed (``MessageParts.of_payloads``): a lockstep frame
+        is answered (controls), else None."""
         self.wall_now = now
         try:
-            return self._frame(data, now)
+            return self._frame(parts, now)
         except Exception as exc:
             self.faults.record("HIL frame", exc, now)
             return None
@@ -366,10 +372,10 @@ class AutopilotCore:
         return taken
 
     # -- frames ---------------------------------------------------------------------------------
-    def _frame(self, data: bytes, now: float) -> bytes | None:
+    def _frame(self, parts: MessageParts, now: float) -> bytes | None:
         link = self.simulator
         try:
-            frame = link.decode(data, sensors=self.estimators.loop is not None)
+            frame = link.decode(parts, sensors=self.estimators.loop is not None)
         except CorruptFrame:
             self.on_foreign_datagram("HIL frame with a bad checksum")
             return None  # the simulator resends a frame it gets no answer to
@@ -460,20 +466,20 @@ class AutopilotCore:
         # The requests to the simulator ride in the answer.
         return self.simulator.answer(self.actuators.encode(frame.time_usec, controls, commander.armed))
 
-    def _battery_step(self, t: float, parts: dict | None) -> None:
+    def _battery_step(self, t: float, parts: MessageParts | None) -> None:
         """The frame's battery report (if any) into the estimate, refused at the edge when it is no
         reading (counted); the estimate to the commander."""
-        raw = parts.get(BATTERY_ID) if parts is not None else None
-        if raw is not None:
+        if parts is not None and BATTERY_ID in parts:
             try:
-                report = battery_report(raw)
+                report = battery_report(parts)
             except RefusedReport as refused:
                 self.on_foreign_datagram(f"HIL BATTERY_STATUS refused: {refused}")
             else:
-                self.battery.update(t, report.voltage_v, report.current_a, self.commander.armed)
+                if report is not None:
+                    self.battery.update(t, report.voltage_v, report.current_a, self.commander.armed)
         self.commander.update_battery(self.battery.status, self.battery.unhealthy(t))
 
-    def _sensor_samples(self, parts: dict) -> SensorSamples | None:
+    def _sensor_samples(self, parts: MessageParts) -> SensorSamples | None:
         try:
             return sensor_samples(parts, self.setup.sitl.home)
         except DecodeError:  # (decode_frame checked the messages already: not expected)

@@ -155,13 +155,77 @@ class FastEncoder:
             self._tail = struct.pack("<" + "".join(codes[start:]), *flat[start:])
             self.values = flat[:start]
 
+    def payload(self) -> bytes:
+        """The whole payload of :attr:`values` (every field, wire order): what a decoder's
+        :meth:`FastDecoder.payload` gives back of the :meth:`frame`, trailing zeros and all."""
+        if self._prefix is None:
+            return self.packer.pack(*self.values)
+        return self._prefix.pack(*self.values) + self._tail
+
     def frame(self, seq: int) -> bytes:
         """The MAVLink 2 frame of :attr:`values` with sequence number ``seq`` (0-255)."""
-        if self._prefix is None:
-            payload = self.packer.pack(*self.values)
-        else:
-            payload = self._prefix.pack(*self.values) + self._tail
+        return self.frame_of(self.payload(), seq)
+
+    def frame_of(self, payload: bytes, seq: int) -> bytes:
+        """The MAVLink 2 frame of a :meth:`payload` made earlier, with sequence number ``seq``."""
         return _frame(payload, seq, self._ids, self._crc_extra)
+
+
+class MessageParts:
+    """The MAVLink 2 messages of one datagram by message id (the last one of each id), each read
+    as its checked payload (:meth:`FastDecoder.payload`, zero-padded to the full size) when asked.
+
+    Two ways in, one way out: :meth:`of_datagram` splits bytes that came over a socket (each
+    message's CRC and length checked when it is first read, DecodeError if they fail);
+    :meth:`of_payloads` takes the payloads a :class:`FastEncoder` packed in this process (a
+    lockstep frame that never became bytes on a wire: the in-process runner and the fleet). A
+    payload is the same bytes either way (the framing drops trailing zeros that the decoder puts
+    back), so what is read of a frame does not depend on how it came.
+    """
+
+    __slots__ = ("_frames", "_payloads", "_component_id")
+
+    def __init__(
+        self, frames: dict[int, bytes], payloads: dict[int, bytes], component_id: int | None
+    ) -> None:
+        self._frames = frames  # msg id -> the frame, unchecked (of_datagram)
+        self._payloads = payloads  # msg id -> its checked payload
+        self._component_id = component_id  # of every message (of_payloads), else read from each frame
+
+    @classmethod
+    def of_datagram(cls, datagram: bytes) -> MessageParts:
+        """The messages of a datagram (:func:`split_frames`), checked when read."""
+        return cls(dict(split_frames(datagram)), {}, None)
+
+    @classmethod
+    def of_payloads(cls, payloads: dict[int, bytes], component_id: int) -> MessageParts:
+        """Payloads packed in this process (:meth:`FastEncoder.payload`) by ``component_id``."""
+        return cls({}, payloads, component_id)
+
+    def __contains__(self, msg_id: object) -> bool:
+        return msg_id in self._payloads or msg_id in self._frames
+
+    def ids(self) -> list[int]:
+        """The message ids, in the datagram's order."""
+        return list(self._payloads) + [i for i in self._frames if i not in self._payloads]
+
+    def payload(self, decoder: FastDecoder) -> bytes | None:
+        """The checked payload of ``decoder``'s message, or None when there is none;
+        DecodeError if its frame is corrupt."""
+        payload = self._payloads.get(decoder.msg_id)
+        if payload is None:
+            frame = self._frames.get(decoder.msg_id)
+            if frame is None:
+                return None
+            payload = self._payloads[decoder.msg_id] = decoder.payload(frame)
+        return payload
+
+    def component_id(self, msg_id: int) -> int | None:
+        """The component that sent message ``msg_id``, or None when there is none."""
+        if self._component_id is not None:
+            return self._component_id if msg_id in self._payloads else None
+        frame = self._frames.get(msg_id)
+        return frame[6] if frame is not None else None
 
 
 def frame_payload(message_class, payload: bytes, seq: int, system_id: int, component_id: int) -> bytes:

@@ -48,6 +48,7 @@ from quadcommon.config import (
     load_sitl,
     load_vehicle,
 )
+from quadcommon.mavlink_fast import MessageParts
 from quadcommon.wire import new_parser, restart_parser
 from quadcommon.wire_values import frame_time_usec
 
@@ -201,7 +202,8 @@ class SimulatorCore:
         self._truth_row_of: tuple = ()  # what frame k's truth row is made of (truth_row)
         self._truth_row: tuple[float, ...] | None = ()
         self.disturbance_report = DisturbanceReport()
-        self.frame_datagram = b""  # the current frame's, as sent: a resend repeats it byte for byte
+        self._frame_payloads: dict[int, bytes] = {}  # the current frame's messages (begin_frame_parts)
+        self._frame_datagram: bytes | None = b""  # ... framed (frame_datagram)
         self.resends = 0  # frames sent again for want of an answer (a lost frame or answer)
         self.resend_after_s = resend_after_s(setup.sitl)
         self.warnings: list[str] = []  # once each: for the shell's stderr
@@ -219,8 +221,15 @@ class SimulatorCore:
 
     # -- the lockstep period --------------------------------------------------------------------
     def begin_frame(self) -> bytes:
-        """Frame ``k``'s datagram; also sets :attr:`truth_row`. Raises PlantDiverged when the state
-        is not finite or too large for the wire."""
+        """Frame ``k``'s datagram (:meth:`begin_frame_parts`, framed)."""
+        self.begin_frame_parts()
+        return self.frame_datagram
+
+    def begin_frame_parts(self) -> MessageParts:
+        """Frame ``k``'s messages, unframed: what the autopilot reads of :meth:`begin_frame`'s
+        datagram, for a runner that hands the frame over in the process (the in-process stack, the
+        fleet); :attr:`frame_datagram` frames them when asked. Also sets :attr:`truth_row`. Raises
+        PlantDiverged when the state is not finite or too large for the wire."""
         if self._pending_schedule is not None:
             self.schedule, self._pending_schedule = self._pending_schedule, None
         k, t = self.k, self.k * self.dt_control
@@ -238,13 +247,21 @@ class SimulatorCore:
         report = self.disturbance_report.due(time_usec, (force, torque, health))
         battery = self.battery.frame(t, self.dt_control if k > 0 else 0.0, truth, self._armed)
         try:
-            datagram = self.encoder.encode(
+            payloads = self.encoder.payloads(
                 time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision, report, battery
             )
         except OverflowError as exc:  # finite but past float32: a blow-up a frame or two away
             raise PlantDiverged(f"the plant state no longer fits the wire's float32 at t={t:.3f} s") from exc
-        self.frame_datagram = datagram
-        return datagram
+        self._frame_payloads, self._frame_datagram = payloads, None
+        return MessageParts.of_payloads(payloads, wire.SIMULATOR_COMPONENT_ID)
+
+    @property
+    def frame_datagram(self) -> bytes:
+        """The current frame's datagram, framed once (on the encoder's sequence) when first asked:
+        a resend repeats it byte for byte."""
+        if self._frame_datagram is None:
+            self._frame_datagram = self.encoder.datagram(self._frame_payloads)
+        return self._frame_datagram
 
     @property
     def truth_row(self) -> tuple[float, ...]:

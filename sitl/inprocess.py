@@ -311,17 +311,19 @@ class Lockstep:
         self.clock = t + sim.dt_control
         if not self.frames_flow:
             return
-        datagram = sim.begin_frame()
+        # The frame's messages cross unframed (the bytes the autopilot would read of the datagram,
+        # without the framing and the checksums); framed when an impaired link carries them.
+        parts = sim.begin_frame_parts()
         answer = None
         if not self.answer_frames:  # the link is cut: the simulator flies its emergency descent
             if not sim.emergency:
                 sim.autopilot_lost()
         elif impaired and (self.channels[(HIL_LINK, "sim->ap")].channel
                            or self.channels[(HIL_LINK, "ap->sim")].channel):  # fmt: skip
-            answer, done = self._impaired_exchange(datagram, t)
+            answer, done = self._impaired_exchange(sim.frame_datagram, t)
             self.clock = max(self.clock, done)  # a slow exchange holds the stack up, as in the SITL
         else:
-            data = ap.on_hil_datagram(datagram, t)
+            data = ap.on_hil_frame(parts, t)
             self._dispatch(ap.after_frame())
             if sim.emergency:
                 if data is not None:
@@ -400,8 +402,7 @@ class Lockstep:
         """The last frame of a run: sent, answered and recorded, not stepped (as the SITL's
         ``--duration``)."""
         sim, ap, t = self.sim, self.autopilot, self.clock
-        datagram = sim.begin_frame()
-        ap.on_hil_datagram(datagram, t)
+        ap.on_hil_frame(sim.begin_frame_parts(), t)
         self._dispatch(ap.after_frame())
         if self.record_rows:
             self.truth_rows.append(sim.truth_row)

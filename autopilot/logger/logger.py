@@ -27,6 +27,7 @@ from typing import NamedTuple
 
 from quadcommon import ulog_topics
 from quadcommon.build_info import flight_sw_version
+from quadcommon.mavlink_fast import MessageParts
 
 from ..params.store import INT32, ParameterStore
 from . import topics, ulog
@@ -177,7 +178,9 @@ class FlightLogger:
                 self.stop()
         return self.logging
 
-    def frame(self, t_us: int, armed: bool, truth, row: tuple, parts: dict | None, estimate, output) -> bool:
+    def frame(
+        self, t_us: int, armed: bool, truth, row: tuple, parts: MessageParts | None, estimate, output
+    ) -> bool:
         """One control step: :meth:`update`, then, while a log is open, the topics of every step
         (interval 0: ``paper_tracking``, the IMU, the body rates, the torque and thrust setpoints)
         from the frame's ``truth``, controller ``row``, undecoded messages ``parts``, the

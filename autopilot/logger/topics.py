@@ -54,6 +54,7 @@ from typing import NamedTuple
 
 from quadcommon import frames
 from quadcommon.bus_records import CONTROLLER_FIELDS
+from quadcommon.mavlink_fast import MessageParts
 from quadcommon.rigid_body import body_rates_from_euler_rates, quaternion_from_euler
 from quadcommon.ulog_topics import (
     CASCADE_FIELDS,
@@ -108,7 +109,7 @@ ACTUATOR_OUTPUTS = 16  # actuator_outputs.output[16]
 GPS_ID = mavlink.MAVLINK_MSG_ID_HIL_GPS
 
 
-def gps_of(parts: dict) -> GpsFields | None:
+def gps_of(parts: MessageParts) -> GpsFields | None:
     """The frame's HIL_GPS as sent, or None (none in the frame, or corrupt)."""
     try:
         return gps_fields(parts)
@@ -116,7 +117,7 @@ def gps_of(parts: dict) -> GpsFields | None:
         return None
 
 
-def imu_of(parts: dict) -> tuple | None:
+def imu_of(parts: MessageParts) -> tuple | None:
     """The frame's HIL_SENSOR accelerometer and gyro as sent (FRD), or None (none, or corrupt)."""
     try:
         return imu_fields(parts)
@@ -139,7 +140,7 @@ class Snapshot:
     commander: object = None  # the Commander (its landed state is read when a sample needs it)
     estimator: object = None  # EstimatorStatus | None (flying on truth: None)
     battery: object = None  # autopilot.battery.estimator.BatteryStatus | None (no battery reported)
-    parts: dict | None = None  # the frame's undecoded messages (sensor_combined reads HIL_SENSOR's)
+    parts: MessageParts | None = None  # the frame's undecoded messages (sensor_combined reads HIL_SENSOR's)
     gps: object = None  # hil.GpsFields of this frame's HIL_GPS, or None
     thrust_max_n: float = 1.0  # the actuators' U1_max: 1 of PX4's normalised thrust
     torque_max_n_m: tuple = (1.0, 1.0, 1.0)  # the actuators' tau_max per body axis: 1 of PX4's torque

@@ -13,7 +13,7 @@ import struct
 from typing import NamedTuple
 
 from quadcommon import frames, wire
-from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
+from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, MessageParts
 from quadcommon.rigid_body import (
     rotation_from_quaternion,
 )
@@ -49,7 +49,7 @@ class Frame(NamedTuple):
     sensors: SensorSamples | None = None  # decoded when asked (decode_frame(..., sensors=True))
     # The frame's messages by id, undecoded (a log decodes HIL_SENSOR / HIL_GPS from them at its
     # own rate: sensor_samples(), gps_fields()).
-    parts: dict[int, bytes] | None = None
+    parts: MessageParts | None = None
     # The sensor streams that delivered in this frame (STREAM_* bits), decoded or not: the same as
     # ``sensors.streams`` (frame_streams without the samples).
     streams: int = 0
@@ -68,43 +68,51 @@ class CorruptFrame(ValueError):
 
 def decode_frame(
     datagram: bytes,
-    parser,
     home: tuple[float, float, float],
     use_odometry: bool = True,
     sensors: bool = False,
 ) -> Frame | None:
-    """The lockstep frame in one datagram, or None if it holds no state (e.g. a heartbeat).
+    """The lockstep frame in one datagram (:func:`frame_of` its messages)."""
+    return frame_of(MessageParts.of_datagram(datagram), home, use_odometry, sensors)
+
+
+def frame_of(
+    parts: MessageParts,
+    home: tuple[float, float, float],
+    use_odometry: bool = True,
+    sensors: bool = False,
+) -> Frame | None:
+    """The lockstep frame of a datagram's messages (``MessageParts.of_datagram``, or the
+    in-process runner's ``MessageParts.of_payloads``), or None if it holds no state (e.g. a
+    heartbeat).
 
     Decodes (CRC checked) only the state message it needs: ODOMETRY (the fast decoder of
     :mod:`quadcommon.mavlink_fast`, it is on the lockstep critical path), or HIL_STATE_QUATERNION
-    (pymavlink) when asked to or when there is no ODOMETRY; with ``sensors`` also what an
-    estimator reads (:class:`SensorSamples`). CorruptFrame if one of those messages is bad.
+    when asked to or when there is no ODOMETRY; with ``sensors`` also what an estimator reads
+    (:class:`SensorSamples`). CorruptFrame if one of those messages is bad.
     """
     try:
-        return _decode_frame(datagram, parser, home, use_odometry, sensors)
-    except (DecodeError, mavlink.MAVError, struct.error) as exc:
+        return _decode_frame(parts, home, use_odometry, sensors)
+    except (DecodeError, struct.error) as exc:
         raise CorruptFrame(str(exc)) from exc
 
 
-def _decode_frame(datagram: bytes, parser, home, use_odometry: bool, sensors: bool) -> Frame | None:
-    parts = dict(split_frames(datagram))
-    raw = parts.get(_ID_ODOMETRY)
+def _decode_frame(parts: MessageParts, home, use_odometry: bool, sensors: bool) -> Frame | None:
     if sensors:
         samples = sensor_samples(parts, home)
         streams = samples.streams if samples is not None else 0
     else:
         samples, streams = None, frame_streams(parts)
-    if raw is not None and (use_odometry or _ID_STATE not in parts):
-        payload = _ODOMETRY.payload(raw)
+    payload = parts.payload(_ODOMETRY) if use_odometry or _ID_STATE not in parts else None
+    if payload is not None:
         t, x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r = _ODOMETRY_STATE.unpack_from(payload)
         state = state_from_odometry_fields(
             (qw, qx, qy, qz), (x, y, z), (vx, vy, vz), (p, q, r), payload[_ODOMETRY_CHILD_FRAME]
         )
         return Frame(t, state, samples, parts, streams)
-    raw = parts.get(_ID_STATE)
-    if raw is None:
+    msg = _state_message(parts)
+    if msg is None:
         return None
-    msg = parser.decode(bytearray(raw))
     return Frame(msg.time_usec, state_from_hil_state(msg, home), samples, parts, streams)
 
 
@@ -121,8 +129,8 @@ def _where(decoder: FastDecoder, *names: str) -> tuple:
     return tuple(decoder.slices[name] for name in names)
 
 
-def _fields(decoder: FastDecoder, raw: bytes, where: tuple) -> list:
-    values = decoder.unpack(raw)
+def _fields(decoder: FastDecoder, payload: bytes, where: tuple) -> list:
+    values = decoder.unpacker.unpack_from(payload)
     return [values[i] for i in where]
 
 
@@ -138,12 +146,12 @@ _VISION_FIELDS = _where(_VISION, "x", "y", "z", "yaw", "covariance")
 _REFUSED_NAMES = ((STREAM_IMU, "imu"), (STREAM_MAG, "mag"), (STREAM_BARO, "baro"))  # SensorSamples.refused
 
 
-def _hil_sensor(raw: bytes) -> tuple[tuple, int, int]:
+def _hil_sensor(payload: bytes) -> tuple[tuple, int, int]:
     """HIL_SENSOR's values (``_SENSOR_VALUES``) and which of its streams are fresh and which
     refused (``STREAM_*`` bits): each stream when fields_updated says so (the IMU: its six
     accelerometer and gyro bits, which a failure clears); a stream with a non-finite value is
     refused."""
-    values = _SENSOR_VALUES.unpack_from(_SENSOR.payload(raw))
+    values = _SENSOR_VALUES.unpack_from(payload)
     ax, ay, az, gx, gy, gz, mx, my, mz, alt, updated = values
     fresh, refused = 0, 0
     if updated & _IMU_BITS == _IMU_BITS:
@@ -161,40 +169,38 @@ def _hil_sensor(raw: bytes) -> tuple[tuple, int, int]:
     return values, fresh, refused
 
 
-def _vision(raw: bytes) -> tuple[list, bool]:
+def _vision(payload: bytes) -> tuple[list, bool]:
     """VISION_POSITION_ESTIMATE's values (``_VISION_FIELDS``) and whether its pose is finite."""
-    values = _fields(_VISION, raw, _VISION_FIELDS)
+    values = _fields(_VISION, payload, _VISION_FIELDS)
     n, e, d, yaw, _ = values
     return values, math.isfinite(n + e + d + yaw)
 
 
-def frame_streams(parts: dict) -> int:
+def frame_streams(parts: MessageParts) -> int:
     """The sensor streams that delivered in a frame (``STREAM_*`` bits): ``sensor_samples(parts,
     home).streams`` without building the samples (where nothing flies on them, the health checks
     read this every frame and the samples only when a check is due). DecodeError if a message is
     corrupt."""
-    raw = parts.get(_ID_SENSOR)
-    if raw is None:
+    payload = parts.payload(_SENSOR)
+    if payload is None:
         return 0
-    _, fresh, refused = _hil_sensor(raw)
+    _, fresh, refused = _hil_sensor(payload)
     streams = fresh & ~refused
-    raw = parts.get(_ID_GPS)
-    if raw is not None:
-        _GPS.payload(raw)  # (its checksum, as sensor_samples checks it)
+    if parts.payload(_GPS) is not None:  # (its checksum, as sensor_samples checks it)
         streams |= STREAM_GPS
-    raw = parts.get(_ID_VISION)
-    if raw is not None and _vision(raw)[1]:
+    payload = parts.payload(_VISION)
+    if payload is not None and _vision(payload)[1]:
         streams |= STREAM_VISION
     return streams
 
 
-def sensor_samples(parts: dict, home) -> SensorSamples | None:
+def sensor_samples(parts: MessageParts, home) -> SensorSamples | None:
     """What an estimator reads of a frame's messages (``Frame.parts``); None without HIL_SENSOR.
     DecodeError (quadcommon.mavlink_fast) if a message is corrupt."""
-    raw = parts.get(_ID_SENSOR)
-    if raw is None:
+    payload = parts.payload(_SENSOR)
+    if payload is None:
         return None
-    (ax, ay, az, gx, gy, gz, mx, my, mz, alt, _), fresh, refused_streams = _hil_sensor(raw)
+    (ax, ay, az, gx, gy, gz, mx, my, mz, alt, _), fresh, refused_streams = _hil_sensor(payload)
     imu_fresh = bool(fresh & STREAM_IMU)
     to_paper = frames.vector_from_ned
     usable = fresh & ~refused_streams
@@ -202,14 +208,14 @@ def sensor_samples(parts: dict, home) -> SensorSamples | None:
     baro = alt if usable & STREAM_BARO else None
     refused = [name for bit, name in _REFUSED_NAMES if refused_streams & bit] if refused_streams else []
     gps = vision = None
-    raw = parts.get(_ID_GPS)
-    if raw is not None:
-        fix, lat, lon, alt_mm, eph, epv, vn, ve, vd, sats = _fields(_GPS, raw, _GPS_FIELDS)
+    payload = parts.payload(_GPS)
+    if payload is not None:
+        fix, lat, lon, alt_mm, eph, epv, vn, ve, vd, sats = _fields(_GPS, payload, _GPS_FIELDS)
         position, velocity, eph_m, epv_m = entry(gps_fix)(lat, lon, alt_mm, vn, ve, vd, eph, epv, home)
         gps = GpsFix(0.0, position, velocity, eph_m, epv_m, 0.0, fix, sats)  # (no speed accuracy field)
-    raw = parts.get(_ID_VISION)
-    if raw is not None:
-        (n, e, d, yaw, cov), finite = _vision(raw)
+    payload = parts.payload(_VISION)
+    if payload is not None:
+        (n, e, d, yaw, cov), finite = _vision(payload)
         if finite:
             vision = VisionPose(0.0, *entry(vision_pose)((n, e, d), yaw, cov[0], cov[20]))
         else:
@@ -224,30 +230,28 @@ _IMU = struct.Struct("<8x6f")
 assert _SENSOR.slices["xacc"] == 1 and _SENSOR.slices["zgyro"] == 6
 
 
-def imu_fields(parts: dict) -> tuple | None:
+def imu_fields(parts: MessageParts) -> tuple | None:
     """The frame's HIL_SENSOR accelerometer (m/s²) and gyro (rad/s) as sent, FRD body axes
     (``xacc, yacc, zacc, xgyro, ygyro, zgyro``), or None when the frame has none (a log's raw
     sensor topic: no conversion, no checks). DecodeError if it is corrupt."""
-    raw = parts.get(_ID_SENSOR)
-    return None if raw is None else _IMU.unpack_from(_SENSOR.payload(raw))
+    payload = parts.payload(_SENSOR)
+    return None if payload is None else _IMU.unpack_from(payload)
 
 
 _HIGHRES_FIELDS = _where(_SENSOR, "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag",
                          "abs_pressure", "diff_pressure", "pressure_alt", "temperature")  # fmt: skip
 
 
-def sensor_fields(parts: dict) -> list | None:
+def sensor_fields(parts: MessageParts) -> list | None:
     """The frame's HIL_SENSOR readings as sent, in HIGHRES_IMU's field order and units (FRD body
     axes: specific force m/s², rates rad/s, field gauss; pressures hPa, pressure altitude m AMSL,
     temperature deg C), or None when the frame has none or it is corrupt. Decoded when asked (a
     requested HIGHRES_IMU), not every frame."""
-    raw = parts.get(_ID_SENSOR)
-    if raw is None:
-        return None
     try:
-        return _fields(_SENSOR, raw, _HIGHRES_FIELDS)
+        payload = parts.payload(_SENSOR)
     except DecodeError:
         return None
+    return None if payload is None else _fields(_SENSOR, payload, _HIGHRES_FIELDS)
 
 
 _STATE = FastDecoder(mavlink.MAVLink_hil_state_quaternion_message)
@@ -257,25 +261,34 @@ _STATE_FLOATS = tuple(
 )  # fmt: skip
 
 
-def ground_truth(parts: dict):
-    """The simulator's HIL_STATE_QUATERNION of this frame (its ground truth: attitude, rates,
-    lat/lon/alt, NED velocity, specific force) as a message to send on (pymavlink), or None when
-    the frame has none, or one that is corrupt or not finite. Decoded when asked."""
-    raw = parts.get(_ID_STATE)
-    if raw is None:
+def _state_message(parts: MessageParts):
+    """The frame's HIL_STATE_QUATERNION as a message (pymavlink's class), or None when it has
+    none; DecodeError if it is corrupt."""
+    payload = parts.payload(_STATE)
+    if payload is None:
         return None
-    try:
-        values = _STATE.unpack(raw)
-    except DecodeError:
-        return None
+    values = _STATE.unpacker.unpack_from(payload)
     slices = _STATE.slices
     fields = {name: values[slices[name]] for name in _STATE.message_class.fieldnames}
     fields["attitude_quaternion"] = list(fields["attitude_quaternion"])
+    return _STATE.message_class(**fields)
+
+
+def ground_truth(parts: MessageParts):
+    """The simulator's HIL_STATE_QUATERNION of this frame (its ground truth: attitude, rates,
+    lat/lon/alt, NED velocity, specific force) as a message to send on (pymavlink), or None when
+    the frame has none, or one that is corrupt or not finite. Decoded when asked."""
+    try:
+        msg = _state_message(parts)
+    except DecodeError:
+        return None
+    if msg is None:
+        return None
     for name in _STATE_FLOATS:
-        value = fields[name]
+        value = getattr(msg, name)
         if not all(math.isfinite(v) for v in (value if isinstance(value, list) else (value,))):
             return None
-    return _STATE.message_class(**fields)
+    return msg
 
 
 class GpsFields(NamedTuple):
@@ -298,12 +311,13 @@ class GpsFields(NamedTuple):
 _GPS_RAW_FIELDS = _where(_GPS, *GpsFields._fields)
 
 
-def gps_fields(parts: dict) -> GpsFields | None:
-    """The frame's HIL_GPS fields as sent (``Frame.parts``), or None when the frame has no fix."""
-    raw = parts.get(_ID_GPS)
-    if raw is None:
+def gps_fields(parts: MessageParts) -> GpsFields | None:
+    """The frame's HIL_GPS fields as sent (``Frame.parts``), or None when the frame has no fix;
+    DecodeError if it is corrupt."""
+    payload = parts.payload(_GPS)
+    if payload is None:
         return None
-    return GpsFields(*_fields(_GPS, raw, _GPS_RAW_FIELDS))
+    return GpsFields(*_fields(_GPS, payload, _GPS_RAW_FIELDS))
 
 
 _DISTURBANCE = FastDecoder(mavlink.MAVLink_debug_float_array_message)
@@ -332,16 +346,19 @@ class RefusedReport(ValueError):
     fixed words: the refusals are counted by them)."""
 
 
-def battery_report(raw: bytes) -> BatteryReport:
-    """The reading in one BATTERY_STATUS frame of the HIL link (``Frame.parts[BATTERY_ID]``).
+def battery_report(parts: MessageParts) -> BatteryReport | None:
+    """The reading in a frame's BATTERY_STATUS (``Frame.parts``), None when it carries none.
     RefusedReport, saying why, when it is corrupt, not from the simulator's component, of another
     battery than battery 0, without a voltage (``voltages[0]`` unknown) or with a current below -1 cA
     (-1: not measured; a flying pack does not charge)."""
     try:
-        values = _BATTERY.unpack(raw)
+        payload = parts.payload(_BATTERY)
     except DecodeError:
         raise RefusedReport("corrupt") from None
-    if raw[6] != wire.SIMULATOR_COMPONENT_ID:
+    if payload is None:
+        return None
+    values = _BATTERY.unpacker.unpack_from(payload)
+    if parts.component_id(BATTERY_ID) != wire.SIMULATOR_COMPONENT_ID:
         raise RefusedReport("not from the simulator's component")
     if values[_BATTERY_NUMBER] != 0:
         raise RefusedReport("not battery 0")
@@ -366,18 +383,18 @@ class DisturbanceReport(NamedTuple):
     rotor_failure: tuple[int, int, int, int]  # their FAILURE_TYPE (0 none)
 
 
-def disturbance_of(parts: dict) -> DisturbanceReport | None:
+def disturbance_of(parts: MessageParts) -> DisturbanceReport | None:
     """The disturbance and the rotors' health the simulator reports in this frame (``DISTURB``,
     see :mod:`quadcommon.wire`), in the paper's frames; None when the frame carries none, or one
     that is corrupt, named otherwise, not finite, or with a failure type that is not a byte
     (never logged)."""
-    raw = parts.get(_ID_DISTURBANCE)
-    if raw is None:
-        return None
     try:
-        values = _DISTURBANCE.unpack(raw)
+        payload = parts.payload(_DISTURBANCE)
     except DecodeError:
         return None
+    if payload is None:
+        return None
+    values = _DISTURBANCE.unpacker.unpack_from(payload)
     if values[_DISTURBANCE_NAME].rstrip(b"\0") != wire.DISTURBANCE_NAME:
         return None
     data = values[_DISTURBANCE_DATA : _DISTURBANCE_DATA + wire.DISTURB_SIZE]

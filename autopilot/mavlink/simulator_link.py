@@ -17,10 +17,11 @@ from enum import Enum
 
 from quadcommon import wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
+from quadcommon.mavlink_fast import MessageParts
 
 from ..params.store import ParameterStore
-from .codec import Encoder, mavlink, new_parser
-from .hil import Frame, SimulatorRequests, decode_frame
+from .codec import Encoder, mavlink
+from .hil import Frame, SimulatorRequests, frame_of
 
 HIL_HELLO_S = 0.2  # heartbeat to the simulator until frames flow: it learns our address from it
 # A frame for t = 0 this long (s of ``now``) after the run's first one is a restarted simulator's,
@@ -47,7 +48,6 @@ class SimulatorLink:
         self.home = home
         self.use_odometry = use_odometry
         self.system_id = system_id
-        self.parser = new_parser()
         self.requests = SimulatorRequests(encoder, system_id)  # ride in the next answer
         self.last_time_usec = -1  # the frame answered last (-1: none in this run)
         self.last_answer: bytes | None = None  # sent again for a resent or duplicated frame
@@ -58,10 +58,11 @@ class SimulatorLink:
         self._first_frame_wall = 0.0  # ``now`` at this run's first frame (see order)
         self._next_hello = 0.0
 
-    def decode(self, data: bytes, sensors: bool) -> Frame | None:
-        """The lockstep frame in ``data`` (None: no state in it, e.g. the simulator's heartbeat);
-        with ``sensors`` the samples an estimator reads too. CorruptFrame if its checksum fails."""
-        return decode_frame(data, self.parser, self.home, self.use_odometry, sensors=sensors)
+    def decode(self, parts: MessageParts, sensors: bool) -> Frame | None:
+        """The lockstep frame of a datagram's messages (None: no state in them, e.g. the
+        simulator's heartbeat); with ``sensors`` the samples an estimator reads too. CorruptFrame if
+        a checksum fails."""
+        return frame_of(parts, self.home, self.use_odometry, sensors=sensors)
 
     def order(self, time_usec: int, now: float) -> FrameOrder:
         """Where the frame stamped ``time_usec`` stands. An older frame than the last answered one

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 from quadcommon import frames
+from quadcommon.mavlink_fast import MessageParts
 from quadcommon.rigid_body import quaternion_from_euler
 from quadcommon.trajectories import Reference
 from quadcommon.wire import sat_i16, sat_i32, sat_u16
@@ -102,7 +103,7 @@ class VehicleStatus:
     estimator: EstimatorStatus | None = None  # flying on the EKF: its last status (else None)
     # The latest lockstep frame's messages by id, undecoded (autopilot.mavlink.hil.Frame.parts):
     # HIGHRES_IMU and the ground truth are decoded from them when one is sent.
-    parts: dict[int, bytes] | None = None
+    parts: MessageParts | None = None
     battery: BatteryStatus | None = None  # the battery's estimate (None: no battery has reported)
     battery_unhealthy: bool = False  # its reports stopped
     flags: FailsafeFlags | None = None  # the commander's failsafe flags and sensor health (None: none yet)

@@ -44,7 +44,7 @@ Integer fields are clamped to their wire range so that a wild state cannot crash
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -71,6 +71,13 @@ _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 UINT16_UNKNOWN = 65535
 CELL_VOLTAGE_MAX_MV = 65534  # BATTERY_STATUS voltages[0]: above it, the rest goes to voltages[1]
 _ID_CONTROLS = mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS
+_ID_SENSOR = mavlink.MAVLINK_MSG_ID_HIL_SENSOR
+_ID_STATE = mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION
+_ID_ODOMETRY = mavlink.MAVLINK_MSG_ID_ODOMETRY
+_ID_GPS = mavlink.MAVLINK_MSG_ID_HIL_GPS
+_ID_VISION = mavlink.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
+_ID_DISTURBANCE = mavlink.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY
+_ID_BATTERY = mavlink.MAVLINK_MSG_ID_BATTERY_STATUS
 
 
 class HilFrameEncoder:
@@ -133,13 +140,24 @@ class HilFrameEncoder:
         self._battery = FastEncoder(mavlink.MAVLink_battery_status_message, *ids, battery)
         self._b_cells = self._battery.slices["voltages"].start
         self._b_current = _slots(self._battery, "current_battery")[0]
+        every = (self._sensor, self._state, self._odometry, self._gps, self._vision, self._disturbance,
+                 self._battery)  # fmt: skip
+        self._encoders = {encoder.msg_id: encoder for encoder in every}
 
-    def _frame(self, encoder: FastEncoder) -> bytes:
-        data = encoder.frame(self.seq)
-        self.seq = (self.seq + 1) & 0xFF
-        return data
+    def encode(self, *args: Any, **kw: Any) -> bytes:
+        """One datagram: :meth:`datagram` of :meth:`payloads` (the same arguments)."""
+        return self.datagram(self.payloads(*args, **kw))
 
-    def encode(
+    def datagram(self, payloads: dict[int, bytes]) -> bytes:
+        """The frames of :meth:`payloads`, one after the other on this encoder's sequence."""
+        out = b""
+        encoders = self._encoders
+        for msg_id, payload in payloads.items():
+            out += encoders[msg_id].frame_of(payload, self.seq)
+            self.seq = (self.seq + 1) & 0xFF
+        return out
+
+    def payloads(
         self,
         time_usec: int,
         truth: TruthState,
@@ -149,8 +167,9 @@ class HilFrameEncoder:
         vision: VisionReading | None = None,
         disturbance: tuple[int, tuple[Vector3, Vector3, tuple[float, ...]]] | None = None,
         battery: BatteryReading | None = None,
-    ) -> bytes:
-        """One datagram: HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``,
+    ) -> dict[int, bytes]:
+        """One frame's messages by id, as payloads (:meth:`FastEncoder.payload`; :meth:`datagram`
+        frames them): HIL_SENSOR, HIL_STATE_QUATERNION, ODOMETRY (+ HIL_GPS when ``gps``,
         + VISION_POSITION_ESTIMATE when ``vision``, + the ``DISTURB`` array when ``disturbance``:
         its sample time (µs) and (force (world), torque (Euler coordinates), the rotors' health) in
         the paper's frames, + BATTERY_STATUS when ``battery``)."""
@@ -195,13 +214,14 @@ class HilFrameEncoder:
             time_usec, *o_position, *o_velocity, *rates_frd,
         )  # fmt: skip
 
-        datagram = self._frame(self._sensor) + self._frame(self._state) + self._frame(self._odometry)
+        out = {_ID_SENSOR: self._sensor.payload(), _ID_STATE: self._state.payload(),
+               _ID_ODOMETRY: self._odometry.payload()}  # fmt: skip
         if gps is not None:
             self._fill_gps(time_usec, gps)
-            datagram += self._frame(self._gps)
+            out[_ID_GPS] = self._gps.payload()
         if vision is not None:
             self._fill_vision(time_usec, vision)
-            datagram += self._frame(self._vision)
+            out[_ID_VISION] = self._vision.payload()
         if disturbance is not None:
             stamp_usec, (force, torque, health) = disturbance
             v = self._disturbance.values
@@ -210,11 +230,11 @@ class HilFrameEncoder:
             v[start : start + wire.DISTURB_SIZE] = (
                 *frames.vector_to_ned(force), *frames.euler_to_ned(torque), *health
             )
-            datagram += self._frame(self._disturbance)
+            out[_ID_DISTURBANCE] = self._disturbance.payload()
         if battery is not None:
             self._fill_battery(battery)
-            datagram += self._frame(self._battery)
-        return datagram
+            out[_ID_BATTERY] = self._battery.payload()
+        return out
 
     def _fill_battery(self, reading: BatteryReading) -> None:
         """The monitor's reading as BATTERY_STATUS: mV in voltages[0] (and [1] past 65 534 mV),

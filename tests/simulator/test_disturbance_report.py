@@ -11,7 +11,7 @@ import pytest
 from autopilot.mavlink.hil import DISTURBANCE_ID, disturbance_of
 from quadcommon import wire
 from quadcommon.bus_records import TRUTH_FIELDS
-from quadcommon.mavlink_fast import split_frames
+from quadcommon.mavlink_fast import MessageParts, split_frames
 from simulator.core import DisturbanceReport, SimulatorCore, SimulatorSetup
 from simulator.environment.gust_profile import load_gust_profile
 
@@ -72,7 +72,7 @@ def mixed_flight():
     current = None
     for _ in range(round(sim.control_hz * 16)):
         datagram = sim.begin_frame()
-        parts = dict(split_frames(datagram))
+        parts = MessageParts.of_datagram(datagram)
         if DISTURBANCE_ID in parts:
             report = disturbance_of(parts)
             assert report.time_usec <= sim.time_usec

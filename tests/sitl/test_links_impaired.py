@@ -14,6 +14,7 @@ from gcs_scripts.link import land_and_disarm
 from gcs_scripts.upload_mission import MissionLink, items_from_list, same_item
 from quadcommon.config import load_scenario
 from quadcommon.impairment import ImpairConfig
+from quadcommon.mavlink_fast import MessageParts
 from quadcommon.trajectories import trajectory_from_spec
 from quadcommon.wire import new_parser, parse_datagram
 from simulator.core import SimulatorCore, SimulatorSetup
@@ -258,17 +259,18 @@ def test_a_sensor_stream_that_stops_in_flight_is_announced_and_flown_through():
                         RunOptions(estimator="ekf", sensors="gps"))  # fmt: skip
     texts: list[str] = []
     stack.autopilot.log = lambda text: texts.append(text)
-    parser, frame = new_parser(), stack.sim.begin_frame
+    parser, frame = new_parser(), stack.sim.begin_frame_parts
     cut = (6.0, 9.0)
 
-    def begin_frame() -> bytes:
-        data = frame()
+    def begin_frame_parts() -> MessageParts:
+        parts = frame()
         if cut[0] <= stack.sim.t < cut[1]:  # the GPS stream stops (and comes back)
-            data = b"".join(bytes(msg.get_msgbuf()) for msg in parse_datagram(parser, data)
-                            if msg.get_type() != "HIL_GPS")  # fmt: skip
-        return data
+            sent = parse_datagram(parser, stack.sim.frame_datagram)
+            data = b"".join(bytes(msg.get_msgbuf()) for msg in sent if msg.get_type() != "HIL_GPS")
+            parts = MessageParts.of_datagram(data)
+        return parts
 
-    stack.sim.begin_frame = begin_frame
+    stack.sim.begin_frame_parts = begin_frame_parts
     _fly(stack, 12.0)
     stopped = [t for t in texts if "sensor stream stopped: GPS (HIL_GPS)" in t]
     resumed = [t for t in texts if "sensor stream resumed: GPS (HIL_GPS)" in t]

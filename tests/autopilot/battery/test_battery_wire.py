@@ -11,7 +11,7 @@ from pymavlink.dialects.v20 import common as m
 
 from autopilot.mavlink.hil import BATTERY_ID, RefusedReport, battery_report
 from quadcommon import wire
-from quadcommon.mavlink_fast import split_frames
+from quadcommon.mavlink_fast import MessageParts
 from simulator.battery import BatteryReading
 from simulator.core import SimulatorCore, SimulatorSetup
 from simulator.mavlink.hil import HilFrameEncoder
@@ -20,13 +20,13 @@ from tests.stack import Gcs, make_stack
 HOME = (47.397742, 8.545594, 488.0)
 
 
-def encoded(reading: BatteryReading) -> bytes:
-    """The BATTERY_STATUS frame the simulator's encoder makes of ``reading``."""
+def encoded(reading: BatteryReading) -> MessageParts:
+    """The frame's messages with the BATTERY_STATUS the simulator's encoder makes of ``reading``."""
     core = SimulatorCore(SimulatorSetup.load())
     truth = core.plant.truth()
     readings = core.sensors.step(0.0, truth).readings
     datagram = HilFrameEncoder(1, HOME).encode(0, truth, readings, battery=reading)
-    return dict(split_frames(datagram))[BATTERY_ID]
+    return MessageParts.of_datagram(datagram)
 
 
 @pytest.mark.parametrize("volts, amps", [(12.6, 0.24), (9.81, 63.5), (0.0, 0.0), (100.0, 1.5)])
@@ -100,10 +100,10 @@ def test_the_frame_carries_the_monitor_at_its_rate_from_the_simulators_component
     core = SimulatorCore(SimulatorSetup.load())
     count = 0
     for _ in range(500):  # one second at 500 Hz
-        parts = dict(split_frames(core.begin_frame()))
+        parts = MessageParts.of_datagram(core.begin_frame())
         if BATTERY_ID in parts:
             count += 1
-            assert parts[BATTERY_ID][6] == wire.SIMULATOR_COMPONENT_ID
+            assert parts.component_id(BATTERY_ID) == wire.SIMULATOR_COMPONENT_ID
         core.end_frame(None)
     assert count == wire.BATTERY_REPORT_HZ
 

@@ -12,9 +12,10 @@ from pymavlink.dialects.v20 import common as m
 from autopilot.control.config import load_controller
 from autopilot.core import AutopilotSetup
 from autopilot.logger.logger import LogOptions
-from autopilot.mavlink.hil import DISTURBANCE_ID, disturbance_of
+from autopilot.mavlink.hil import disturbance_of
 from quadcommon import wire
 from quadcommon.config import load_scenario
+from quadcommon.mavlink_fast import MessageParts
 from quadcommon.ulog_topics import DISTURBANCE
 from simulator.core import SimulatorSetup
 from simulator.environment.gust_profile import load_gust_profile
@@ -44,14 +45,14 @@ def debug_array(name: bytes, data: list[float], system_id: int = 1) -> bytes:
     ],
 )
 def test_a_report_that_is_not_a_sound_disturbance_is_ignored(frame, why):
-    assert disturbance_of({DISTURBANCE_ID: frame}) is None, why
+    assert disturbance_of(MessageParts.of_datagram(frame)) is None, why
 
 
 def test_a_report_comes_in_the_papers_frames():
     # NED force (1, 2, 3) is the paper's (1, -2, -3); MAVLink Euler torque (4, 5, 6) is (4, -5, -6);
     # the rotors' health as it is (rotor 2 at 70 %, a loss of effectiveness; rotor 4 off)
     frame = debug_array(b"DISTURB", [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 1.0, 0.75, 1.0, 0.0, 0.0, 4.0, 0.0, 1.0])
-    assert disturbance_of({DISTURBANCE_ID: frame}) == (
+    assert disturbance_of(MessageParts.of_datagram(frame)) == (
         123, (1.0, -2.0, -3.0), (4.0, -5.0, -6.0), (1.0, 0.75, 1.0, 0.0), (0, 4, 0, 1)
     )
 

@@ -16,7 +16,7 @@ from autopilot.core import AutopilotSetup
 from gcs_scripts.fail import inject
 from quadcommon.config import estimator_profile_for
 from quadcommon.failures import FAILURES, Type, Unit, Where
-from quadcommon.mavlink_fast import split_frames
+from quadcommon.mavlink_fast import MessageParts, split_frames
 from quadcommon.wire import new_parser, parse_datagram
 from simulator.core import SimulatorSetup
 from simulator.dynamics.plant import ROTOR_POSITIONS
@@ -36,19 +36,19 @@ class Wire:
         self.frames: list[tuple[int, bytes]] = []
         self.answers: list[tuple[int, bytes | None]] = []
         sim, ap = stack.sim, stack.autopilot
-        begin, answer = sim.begin_frame, ap.on_hil_datagram
+        begin, answer = sim.begin_frame_parts, ap.on_hil_frame
 
-        def frame() -> bytes:
-            data = begin()
-            self.frames.append((sim.k, data))
-            return data
+        def frame() -> MessageParts:
+            parts = begin()
+            self.frames.append((sim.k, sim.frame_datagram))
+            return parts
 
-        def answered(data: bytes, now: float) -> bytes | None:
-            reply = answer(data, now)
+        def answered(parts: MessageParts, now: float) -> bytes | None:
+            reply = answer(parts, now)
             self.answers.append((sim.k, reply))
             return reply
 
-        sim.begin_frame, ap.on_hil_datagram = frame, answered
+        sim.begin_frame_parts, ap.on_hil_frame = frame, answered
 
     def request_frames(self) -> list[int]:
         """The frames whose answers carried a request to the simulator (a COMMAND_LONG)."""

@@ -14,7 +14,7 @@ import numpy as np
 
 from autopilot.control.cascade import Cascade
 from autopilot.control.config import ControllerConfig
-from autopilot.mavlink.codec import Encoder, new_parser
+from autopilot.mavlink.codec import Encoder
 from autopilot.mavlink.hil import ActuatorEncoder, decode_frame
 from autopilot.records import StateEstimate
 from quadcommon import wire as wire_contract
@@ -45,7 +45,6 @@ def fly_scalar(spec: CampaignSpec, sample: RunSample, controller: ControllerConf
         home = load_sitl().home
         frames_out = HilFrameEncoder(1, home)
         sensors = SensorSuite(load_sensors("default"), home[2])
-        parser = new_parser()
         answers = ActuatorEncoder(
             Encoder(1, wire_contract.AUTOPILOT_COMPONENT_ID), sample.vehicle.actuation.mode == "wrench"
         )
@@ -59,7 +58,7 @@ def fly_scalar(spec: CampaignSpec, sample: RunSample, controller: ControllerConf
             truth = plant.truth()
             time_usec = round(k * usec_per_frame)
             frame = decode_frame(
-                frames_out.encode(time_usec, truth, sensors.sample(truth), wind), parser, home
+                frames_out.encode(time_usec, truth, sensors.sample(truth), wind), home
             )
             estimate = frame.state
             t_ref = frame.time_usec * 1e-6
