@@ -131,3 +131,43 @@ def test_fast_encoder_with_a_constant_tail_frames_what_pymavlink_packs(seed):
         assert fast.frame(mav.seq) == bytes(msg.pack(mav))
     with pytest.raises(ValueError, match="constant_from"):
         FastEncoder(m.MAVLink_odometry_message, 7, 51, template=template, constant_from="no_such_field")
+
+
+def test_message_parts_read_the_same_payloads_framed_or_not():
+    """A simulator frame with every message it sends (GPS, the disturbance report, the battery):
+    what the autopilot reads of its datagram is what the in-process runner hands over unframed,
+    byte for byte, and both name the simulator's component."""
+    from autopilot.mavlink.hil import _BATTERY, _DISTURBANCE, _GPS, _ODOMETRY, _SENSOR, _STATE
+    from quadcommon import wire
+    from quadcommon.mavlink_fast import MessageParts
+    from simulator.core import SimulatorCore, SimulatorSetup
+
+    core = SimulatorCore(SimulatorSetup.load(scenario="circle", sensors="gps"))
+    seen: set[int] = set()
+    for _ in range(150):
+        unframed = core.begin_frame_parts()
+        framed = MessageParts.of_datagram(core.frame_datagram)
+        assert framed.ids() == unframed.ids()
+        for decoder in (_SENSOR, _STATE, _ODOMETRY, _GPS, _DISTURBANCE, _BATTERY):
+            assert framed.payload(decoder) == unframed.payload(decoder)
+            if decoder.msg_id in unframed:
+                seen.add(decoder.msg_id)
+                assert framed.component_id(decoder.msg_id) == wire.SIMULATOR_COMPONENT_ID
+                assert unframed.component_id(decoder.msg_id) == wire.SIMULATOR_COMPONENT_ID
+        core.end_frame(None)
+    assert len(seen) == 6  # every kind of message crossed at least once
+
+
+def test_message_parts_check_a_frame_when_it_is_read():
+    from quadcommon.mavlink_fast import MessageParts
+
+    odometry = FastDecoder(m.MAVLink_odometry_message)
+    good = packed(m.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3), component=7)
+    bad = bytearray(packed(random_odometry(random.Random(2))))
+    bad[12] ^= 0x55
+    parts = MessageParts.of_datagram(good + bytes(bad))  # split, not checked yet
+    assert m.MAVLINK_MSG_ID_ODOMETRY in parts and parts.component_id(m.MAVLINK_MSG_ID_HEARTBEAT) == 7
+    with pytest.raises(DecodeError, match="CRC"):
+        parts.payload(odometry)
+    assert parts.payload(FastDecoder(m.MAVLink_hil_gps_message)) is None  # none in the datagram
+    assert parts.component_id(m.MAVLINK_MSG_ID_HIL_GPS) is None
