@@ -262,13 +262,15 @@ class AutopilotCore:
 
     # -- entry points ---------------------------------------------------------------------------
     def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:
-        """One datagram on the HIL link: a lockstep frame is answered (controls), else None."""
-        return self.on_hil_frame(MessageParts.of_datagram(data), now)
+        """One datagram on the HIL link: a lockstep frame is answered (the answer's datagram),
+        else None."""
+        answer = self.on_hil_frame(MessageParts.of_datagram(data), now)
+        return answer.datagram if answer is not None else None
 
-    def on_hil_frame(self, parts: MessageParts, now: float) -> bytes | None:
+    def on_hil_frame(self, parts: MessageParts, now: float) -> wire.LockstepAnswer | None:
         """The messages of one datagram on the HIL link (:meth:`on_hil_datagram`), or of a frame
         the in-process runner hands over unframed (``MessageParts.of_payloads``): a lockstep frame
-        is answered (controls), else None."""
+        is answered (controls, and the requests to the simulator), else None."""
         self.wall_now = now
         try:
             return self._frame(parts, now)
@@ -372,7 +374,7 @@ class AutopilotCore:
         return taken
 
     # -- frames ---------------------------------------------------------------------------------
-    def _frame(self, parts: MessageParts, now: float) -> bytes | None:
+    def _frame(self, parts: MessageParts, now: float) -> wire.LockstepAnswer | None:
         link = self.simulator
         try:
             frame = link.decode(parts, sensors=self.estimators.loop is not None)
@@ -397,7 +399,8 @@ class AutopilotCore:
             # A broken simulator (or a forged frame): fly on the last good state for this frame.
             self.on_foreign_datagram("HIL frame with a non-finite state")
             if self.commander.state is None:
-                return self.actuators.encode(frame.time_usec, (0.0, 0.0, 0.0, 0.0), False)
+                controls = self.actuators.payload(frame.time_usec, (0.0, 0.0, 0.0, 0.0), False)
+                return wire.LockstepAnswer(controls, b"", self.actuators.frame)
             c = self.commander.state
             frame = frame._replace(
                 state=StateEstimate(c.position_m, c.velocity_m_s, c.euler_rad, c.euler_rates_rad_s)
@@ -423,7 +426,7 @@ class AutopilotCore:
         self.missions.restart_clock()
         self.commander.health.restart_clock()
 
-    def _control_step(self, frame) -> bytes:
+    def _control_step(self, frame) -> wire.LockstepAnswer:
         self._frame_truth = frame.state
         t = frame_time_s(frame.time_usec)
         self.sim_time = t
@@ -464,7 +467,9 @@ class AutopilotCore:
         self._controls = controls
         self._frame_done = (frame, guidance, output)
         # The requests to the simulator ride in the answer.
-        return self.simulator.answer(self.actuators.encode(frame.time_usec, controls, commander.armed))
+        actuators = self.actuators
+        controls_payload = actuators.payload(frame.time_usec, controls, commander.armed)
+        return self.simulator.answer(controls_payload, actuators.frame)
 
     def _battery_step(self, t: float, parts: MessageParts | None) -> None:
         """The frame's battery report (if any) into the estimate, refused at the edge when it is no

@@ -143,6 +143,30 @@ HIL_FLAG_WRENCH = 2
 MAX_REQUESTS_PER_ANSWER = 4
 
 
+class LockstepAnswer:
+    """The autopilot's answer to one lockstep frame: the HIL_ACTUATOR_CONTROLS payload
+    (``controls``, every field in wire order) and the requests that ride after it (``requests``:
+    MAVLink 2 frames, possibly none). ``frame`` frames a payload on the sender's sequence;
+    :attr:`datagram` is the answer as it goes on the wire, framed once when first asked (so an
+    answer sent again is the same bytes). The in-process runner hands the answer over unframed,
+    and the simulator reads ``controls`` as it reads the payload of the datagram's frame."""
+
+    __slots__ = ("controls", "requests", "_frame", "_datagram")
+
+    def __init__(self, controls: bytes, requests: bytes, frame: Callable[[bytes], bytes]) -> None:
+        self.controls = controls
+        self.requests = requests
+        self._frame = frame
+        self._datagram: bytes | None = None
+
+    @property
+    def datagram(self) -> bytes:
+        """The answer's bytes: the controls' frame, then the requests."""
+        if self._datagram is None:
+            self._datagram = self._frame(self.controls) + self.requests
+        return self._datagram
+
+
 def spin_until_readable(sock, seconds: float) -> bool:
     """Busy-wait up to ``seconds`` for ``sock`` to become readable; True if it did.
 

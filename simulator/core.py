@@ -49,7 +49,7 @@ from quadcommon.config import (
     load_vehicle,
 )
 from quadcommon.mavlink_fast import MessageParts
-from quadcommon.wire import new_parser, restart_parser
+from quadcommon.wire import LockstepAnswer, new_parser, restart_parser
 from quadcommon.wire_values import frame_time_usec
 
 from .battery import BatteryModel
@@ -293,10 +293,14 @@ class SimulatorCore:
             msg.get_msgId() >= 0 and (msg.get_srcSystem(), msg.get_srcComponent()) == ids for msg in messages
         )
 
-    def answer_to_frame(self, datagram: bytes) -> ActuatorAnswer | None:
-        """The HIL_ACTUATOR_CONTROLS for the current frame in ``datagram``, else None (a heartbeat,
-        a late answer to an earlier frame, garbage)."""
-        answer = self.decoder.decode(datagram)
+    def answer_to_frame(self, datagram: bytes | LockstepAnswer) -> ActuatorAnswer | None:
+        """The HIL_ACTUATOR_CONTROLS for the current frame in ``datagram`` (or in an answer the
+        in-process runner hands over unframed), else None (a heartbeat, a late answer to an earlier
+        frame, garbage)."""
+        if isinstance(datagram, LockstepAnswer):
+            answer = self.decoder.decode_unframed(datagram)
+        else:
+            answer = self.decoder.decode(datagram)
         return answer if answer is not None and answer.time_usec == self.time_usec else None
 
     def end_frame(self, answer: ActuatorAnswer | None) -> None:

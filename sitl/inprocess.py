@@ -327,7 +327,7 @@ class Lockstep:
             self._dispatch(ap.after_frame())
             if sim.emergency:
                 if data is not None:
-                    sim.answers_again(data)
+                    sim.answers_again(data.datagram)
             elif data is None or (answer := sim.answer_to_frame(data)) is None:
                 raise RuntimeError(f"the autopilot did not answer frame t={t:.3f} s")
         if self.record_rows:

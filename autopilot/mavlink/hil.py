@@ -452,15 +452,22 @@ class ActuatorEncoder:
         self._zeros = [0.0] * 16
 
     def encode(self, time_usec: int, controls: tuple[float, ...], armed: bool) -> bytes:
-        """The HIL_ACTUATOR_CONTROLS frame of one lockstep answer: ``controls`` (the first four, zero while
-        disarmed), the armed flag in ``mode`` and the lockstep (and wrench) flags, on the encoder's
-        sequence."""
+        """The HIL_ACTUATOR_CONTROLS frame of one lockstep answer (:meth:`frame` of :meth:`payload`)."""
+        return self.frame(self.payload(time_usec, controls, armed))
+
+    def payload(self, time_usec: int, controls: tuple[float, ...], armed: bool) -> bytes:
+        """The HIL_ACTUATOR_CONTROLS payload of one lockstep answer: ``controls`` (the first four,
+        zero while disarmed), the armed flag in ``mode`` and the lockstep (and wrench) flags."""
         v = self._fast.values
         v[self._time] = time_usec
         v[self._mode] = _CUSTOM | (_ARMED if armed else 0)
         v[self._controls] = [*controls[:4], *self._zeros[4:]] if armed else self._zeros
+        return self._fast.payload()
+
+    def frame(self, payload: bytes) -> bytes:
+        """A :meth:`payload` framed, on the encoder's sequence."""
         mav = self.encoder.mav
-        data = self._fast.frame(mav.seq)
+        data = self._fast.frame_of(payload, mav.seq)
         mav.seq = (mav.seq + 1) % 256
         return data
 

@@ -12,7 +12,7 @@ contract).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from enum import Enum
 
 from quadcommon import wire
@@ -50,7 +50,7 @@ class SimulatorLink:
         self.system_id = system_id
         self.requests = SimulatorRequests(encoder, system_id)  # ride in the next answer
         self.last_time_usec = -1  # the frame answered last (-1: none in this run)
-        self.last_answer: bytes | None = None  # sent again for a resent or duplicated frame
+        self.last_answer: wire.LockstepAnswer | None = None  # sent again for a resent or duplicated frame
         self.linked = False  # frames have flowed
         self.lost = False  # no frame for COM_SIM_LOSS_T (reported once, until frames resume)
         self.last_frame_wall = 0.0  # ``now`` at the latest frame
@@ -96,13 +96,13 @@ class SimulatorLink:
         self.linked, self.lost = True, False
         return became
 
-    def answer(self, controls: bytes) -> bytes:
-        """The answer to the frame just stepped: its HIL_ACTUATOR_CONTROLS then the requests that
-        wait (as many as one answer carries); kept to be sent again for a resent frame."""
-        if self.requests.pending:
-            controls += self.requests.take()
-        self.last_answer = controls
-        return controls
+    def answer(self, controls: bytes, frame: Callable[[bytes], bytes]) -> wire.LockstepAnswer:
+        """The answer to the frame just stepped: its HIL_ACTUATOR_CONTROLS payload (framed by
+        ``frame`` when sent) then the requests that wait (as many as one answer carries); kept to be
+        sent again for a resent frame."""
+        requests = self.requests.take() if self.requests.pending else b""
+        self.last_answer = wire.LockstepAnswer(controls, requests, frame)
+        return self.last_answer
 
     def silent(self, now: float, loss_s: float) -> bool:
         """No frame within ``loss_s`` (COM_SIM_LOSS_T) of ``now``, or none yet."""

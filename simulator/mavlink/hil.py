@@ -51,7 +51,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from quadcommon import frames, wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
-from quadcommon.wire import sat_i16, sat_u16
+from quadcommon.wire import LockstepAnswer, sat_i16, sat_u16
 from quadcommon.wire_values import entry, frame_fields, gps_values, vision_values
 
 from ..battery import BatteryReading
@@ -433,20 +433,31 @@ class ActuatorDecoder:
                 others.append((msg_id, frame))
                 continue
             try:
-                v = self.decoder.unpack(frame)
+                answer = self._answer(self.decoder.unpack(frame))
             except DecodeError:  # a malformed frame must never stop the simulator
                 continue
-            c = v[self._controls]
-            flags = v[self._flags]
-            answer = ActuatorAnswer(
-                v[self._time],
-                (c[0], c[1], c[2], c[3]),
-                bool(v[self._mode] & _ARMED),
-                bool(flags & wire.HIL_FLAG_LOCKSTEP),
-                bool(flags & wire.HIL_FLAG_WRENCH),
-            )
         if consumed != len(datagram):
             others.append((NOT_MAVLINK, datagram[consumed:]))
         if answer is not None and others:
             answer = answer._replace(others=tuple(others))
         return answer
+
+    def decode_unframed(self, answer: LockstepAnswer) -> ActuatorAnswer | None:
+        """An answer handed over in the process: what :meth:`decode` reads of its datagram. Its
+        controls' payload is read as the frame's would be; an answer carrying requests (rare: a
+        failure injected, a parameter set) is decoded from its datagram."""
+        if answer.requests:
+            return self.decode(answer.datagram)
+        return self._answer(self.decoder.unpacker.unpack_from(answer.controls))
+
+    def _answer(self, v: tuple) -> ActuatorAnswer:
+        """The answer in HIL_ACTUATOR_CONTROLS's flat field tuple ``v``."""
+        c = v[self._controls]
+        flags = v[self._flags]
+        return ActuatorAnswer(
+            v[self._time],
+            (c[0], c[1], c[2], c[3]),
+            bool(v[self._mode] & _ARMED),
+            bool(flags & wire.HIL_FLAG_LOCKSTEP),
+            bool(flags & wire.HIL_FLAG_WRENCH),
+        )

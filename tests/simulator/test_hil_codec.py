@@ -8,6 +8,7 @@ from dataclasses import replace
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from autopilot.mavlink.hil import ActuatorEncoder
 from quadcommon import frames, wire
 from quadcommon.bus_records import TRUTH_FIELDS
 from quadcommon.config import load_vehicle
@@ -136,6 +137,28 @@ def test_actuator_decoder_ignores_other_messages_and_garbage():
     assert decoder.decode(b"\x00\x01garbage\xfd\xfd") is None
     # and the parser still works afterwards
     assert decoder.decode(controls_message(7, (0.1, 0, 0, 0), 128, 3)).time_usec == 7
+
+
+@pytest.mark.parametrize("armed", [True, False])
+@pytest.mark.parametrize("requests", [0, 2])
+def test_an_answer_handed_over_unframed_reads_as_its_datagram(armed, requests):
+    """The autopilot's answer as the in-process runner hands it over (the controls' payload, the
+    requests after it) decodes to what its datagram decodes to, float32 rounding included."""
+    from autopilot.mavlink.codec import Encoder
+    from autopilot.mavlink.simulator_link import SimulatorLink
+
+    encoder = Encoder(1, wire.AUTOPILOT_COMPONENT_ID)
+    actuators = ActuatorEncoder(encoder, wrench=True)
+    link = SimulatorLink(encoder, 1, HOME)
+    for _ in range(requests):
+        link.request_failure(1, 1, 0, 0.0)
+    controls = (0.1 + 1e-9, -1.0 / 3.0, math.pi / 10.0, 2.0 / 7.0)  # none exact in float32
+    answer = link.answer(actuators.payload(123_456, controls, armed), actuators.frame)
+    decoder = ActuatorDecoder()
+    unframed = decoder.decode_unframed(answer)
+    assert unframed == decoder.decode(answer.datagram)
+    assert unframed.armed == armed and len(unframed.others) == requests
+    assert unframed.controls != controls if armed else unframed.controls == (0.0,) * 4  # float32 on the way
 
 
 def test_truth_row_follows_the_field_layout():

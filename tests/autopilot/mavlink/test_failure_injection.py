@@ -17,7 +17,7 @@ from gcs_scripts.fail import inject
 from quadcommon.config import estimator_profile_for
 from quadcommon.failures import FAILURES, Type, Unit, Where
 from quadcommon.mavlink_fast import MessageParts, split_frames
-from quadcommon.wire import new_parser, parse_datagram
+from quadcommon.wire import LockstepAnswer, new_parser, parse_datagram
 from simulator.core import SimulatorSetup
 from simulator.dynamics.plant import ROTOR_POSITIONS
 from sitl.inprocess import Lockstep
@@ -43,9 +43,9 @@ class Wire:
             self.frames.append((sim.k, sim.frame_datagram))
             return parts
 
-        def answered(parts: MessageParts, now: float) -> bytes | None:
+        def answered(parts: MessageParts, now: float) -> LockstepAnswer | None:
             reply = answer(parts, now)
-            self.answers.append((sim.k, reply))
+            self.answers.append((sim.k, reply.datagram if reply is not None else None))
             return reply
 
         sim.begin_frame_parts, ap.on_hil_frame = frame, answered

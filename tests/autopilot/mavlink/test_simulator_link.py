@@ -25,7 +25,8 @@ def test_frames_in_order_resent_late_and_restarted():
     link = new_link()
     assert link.order(0, now=0.0) is FrameOrder.NEW
     assert link.arrived(0, now=0.0) == "linked"
-    assert link.answer(b"controls") == b"controls" and link.last_answer == b"controls"
+    answer = link.answer(b"controls", lambda payload: b"<" + payload + b">")
+    assert answer.datagram == b"<controls>" and link.last_answer is answer  # framed when sent
     assert link.order(0, now=0.001) is FrameOrder.AGAIN  # resent: the same answer again
     assert link.order(2000, now=0.002) is FrameOrder.NEW
     assert link.arrived(2000, now=0.002) is None
@@ -64,9 +65,9 @@ def test_the_requests_ride_in_the_answer_and_only_the_changed_sim_parameters_go(
     params.values[name] = params.specs[name].default + 1.0
     link.forward_parameters(params)
     assert link.request_failure(1, 1, 0, 0.0)
-    answer = link.answer(b"")
+    answer = link.answer(b"", lambda payload: payload)
     parser = new_parser()
-    messages = [parser.parse_char(bytes([byte])) for byte in answer]
+    messages = [parser.parse_char(bytes([byte])) for byte in answer.datagram]
     sent = [msg for msg in messages if msg is not None]
     assert [msg.get_type() for msg in sent] == ["PARAM_SET", "COMMAND_LONG"]
     assert sent[0].param_id == name and sent[0].target_component == wire.SIMULATOR_COMPONENT_ID
