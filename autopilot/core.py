@@ -6,7 +6,8 @@ to the links, and runs them behind four entry points, each given the time by its
 
 * :meth:`~AutopilotCore.on_hil_datagram` ``(data, now) -> answer``: one lockstep frame from the
   simulator; runs exactly one control step and returns the ``HIL_ACTUATOR_CONTROLS`` datagram to
-  send back at once (the simulator is waiting);
+  send back at once (the simulator is waiting); :meth:`~AutopilotCore.on_hil_frame` the same for
+  a frame's messages handed over unframed (the in-process runner);
 * :meth:`~AutopilotCore.after_frame` ``() -> [Outgoing]``: that frame's bookkeeping (telemetry
   due on the simulation clock, STATUSTEXT, mission progress), deliberately after the answer;
 * :meth:`~AutopilotCore.on_gcs_datagram` ``(link, address, data, now) -> [Outgoing]``: one datagram
@@ -25,7 +26,7 @@ the core goes on (:mod:`.mavlink.dispatch`).
 
 The process shell (:mod:`autopilot.app`) owns the sockets, the selector and the pacing; the
 in-process runner (:mod:`sitl.inprocess`) couples this core with the simulator's through the same
-bytes.
+messages, unframed.
 
 The rules live in the rooms, each given a narrow context (the commander, the parameters, the
 clocks, the refusal and STATUSTEXT sinks it needs), never the core: the ground station's messages
@@ -66,7 +67,6 @@ from .mavlink.failure_injection import FailureInjection
 from .mavlink.ftp import FileSystem, FtpServer, NoFiles
 from .mavlink.handlers import HandlerContext, MessageHandlers
 from .mavlink.hil import (
-    BATTERY_ID,
     ActuatorEncoder,
     CorruptFrame,
     RefusedReport,
@@ -174,11 +174,8 @@ class AutopilotCore:
                                           setup.vehicle.nominal.gravity_m_s2, log, self.on_foreign_datagram)
 
         ports = sitl.ports(setup.instance)
-        remotes = (
-            ((wire.LOOPBACK, ports.gcs_remote), (wire.LOOPBACK, ports.api_remote))
-            if setup.default_remotes
-            else (None, None)
-        )
+        remotes = (((wire.LOOPBACK, ports.gcs_remote), (wire.LOOPBACK, ports.api_remote))
+                   if setup.default_remotes else (None, None))  # fmt: skip
         self.links = [GcsLink(GCS_LINK, remotes[0], self._out, self.dt),
                       GcsLink(API_LINK, remotes[1], self._out, self.dt)]  # fmt: skip
         self.faults = FaultLog(log, self._error_text)
@@ -262,8 +259,7 @@ class AutopilotCore:
 
     # -- entry points ---------------------------------------------------------------------------
     def on_hil_datagram(self, data: bytes, now: float) -> bytes | None:
-        """One datagram on the HIL link: a lockstep frame is answered (the answer's datagram),
-        else None."""
+        """One datagram on the HIL link: a lockstep frame is answered (its datagram), else None."""
         answer = self.on_hil_frame(MessageParts.of_datagram(data), now)
         return answer.datagram if answer is not None else None
 
@@ -366,11 +362,8 @@ class AutopilotCore:
         self.dropped[what] = self.dropped.get(what, 0) + 1
 
     def _take(self) -> list[Outgoing]:
-        out = self._out
-        if not out:
-            return []
-        taken = out[:]
-        out.clear()
+        taken = self._out[:]
+        self._out.clear()
         return taken
 
     # -- frames ---------------------------------------------------------------------------------
@@ -474,14 +467,13 @@ class AutopilotCore:
     def _battery_step(self, t: float, parts: MessageParts | None) -> None:
         """The frame's battery report (if any) into the estimate, refused at the edge when it is no
         reading (counted); the estimate to the commander."""
-        if parts is not None and BATTERY_ID in parts:
-            try:
-                report = battery_report(parts)
-            except RefusedReport as refused:
-                self.on_foreign_datagram(f"HIL BATTERY_STATUS refused: {refused}")
-            else:
-                if report is not None:
-                    self.battery.update(t, report.voltage_v, report.current_a, self.commander.armed)
+        try:
+            report = battery_report(parts) if parts is not None else None
+        except RefusedReport as refused:
+            self.on_foreign_datagram(f"HIL BATTERY_STATUS refused: {refused}")
+        else:
+            if report is not None:
+                self.battery.update(t, report.voltage_v, report.current_a, self.commander.armed)
         self.commander.update_battery(self.battery.status, self.battery.unhealthy(t))
 
     def _sensor_samples(self, parts: MessageParts) -> SensorSamples | None:
@@ -570,9 +562,8 @@ class AutopilotCore:
             self.simulator.forward_parameter(name, value)
         if name.startswith(("GF_", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "MPC_", "BAT")):
             for problem in consistency_problems(self.params):
-                self.statustext(
-                    m.MAV_SEVERITY_WARNING, f"parameters inconsistent (arming refused): {problem}"
-                )
+                text = f"parameters inconsistent (arming refused): {problem}"
+                self.statustext(m.MAV_SEVERITY_WARNING, text)
 
     # -- wall-clock housekeeping ----------------------------------------------------------------
     def _housekeeping(self, now: float) -> None:
@@ -594,10 +585,8 @@ class AutopilotCore:
             # resume after a stall (a loaded machine) continue the same flight, as in-process. A
             # restarted simulator shows as time going backwards (_simulator_restarted: disarm).
             self.commander.simulator_lost()  # no position: arming refused until frames resume
-            self.statustext(
-                m.MAV_SEVERITY_CRITICAL,
-                f"simulator lost: no sensor frame for {sim_loss_s:g} s (COM_SIM_LOSS_T); motors off",
-            )
+            lost = f"simulator lost: no sensor frame for {sim_loss_s:g} s (COM_SIM_LOSS_T); motors off"
+            self.statustext(m.MAV_SEVERITY_CRITICAL, lost)
         if now >= self._next_wall_heartbeat:  # no frames: ground stations still see the vehicle
             self._next_wall_heartbeat = now + WALL_HEARTBEAT_S
             heartbeat = self.encoder.pack(telemetry.heartbeat(self.status))
