@@ -1,10 +1,13 @@
 """The whole flight stack in one process: the simulator's and the autopilot's cores in lockstep.
 
 :class:`Lockstep` couples :class:`~simulator.core.SimulatorCore` and
-:class:`~autopilot.core.AutopilotCore` through the bytes they exchange over UDP in the SITL (real
-MAVLink encoding and decoding, no sockets): per frame the simulator's datagram goes to the
+:class:`~autopilot.core.AutopilotCore` through the messages they exchange over UDP in the SITL (real
+MAVLink encoding and decoding, no sockets): per frame the simulator's messages go to the
 autopilot, its answer back, the autopilot's output to the in-process ground stations, then the
-plant steps. So the commander, missions, parameters, failsafes and telemetry all run, in
+plant steps. The messages cross unframed, as the payloads the other side reads of the datagram
+(:class:`~quadcommon.mavlink_fast.MessageParts`, :class:`~quadcommon.wire.LockstepAnswer`): the
+same bytes without the framing and the checksums, which only a link that can lose or damage them
+needs (an impaired HIL link carries the datagrams). So the commander, missions, parameters, failsafes and telemetry all run, in
 simulation time, deterministically; the SITL is the same two cores with UDP in between, and
 their trajectories are identical.
 
