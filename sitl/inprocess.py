@@ -7,9 +7,9 @@ autopilot, its answer back, the autopilot's output to the in-process ground stat
 plant steps. The messages cross unframed, as the payloads the other side reads of the datagram
 (:class:`~quadcommon.mavlink_fast.MessageParts`, :class:`~quadcommon.wire.LockstepAnswer`): the
 same bytes without the framing and the checksums, which only a link that can lose or damage them
-needs (an impaired HIL link carries the datagrams). So the commander, missions, parameters, failsafes and telemetry all run, in
-simulation time, deterministically; the SITL is the same two cores with UDP in between, and
-their trajectories are identical.
+needs (an impaired HIL link carries the datagrams). So the commander, missions, parameters,
+failsafes and telemetry all run, in simulation time, deterministically; the SITL is the same two
+cores with UDP in between, and their trajectories are identical.
 
 The autopilot's wall clock (``now``: mission transfer timeouts, parameter list pacing, simulator
 loss) is simulation time here: nothing waits on anything real.
