@@ -297,7 +297,13 @@ class Recorder:
         if wall >= self._next_progress:
             self._next_progress = wall + PROGRESS_WALL_S
             a = self.assembler
-            self.log(f"{a.rows_emitted} rows, {a.mav_messages} MAVLink messages, {self.parts.index} parts")
+            if a.mav_messages == 0 and a.first_time_s is None:  # (the vehicle may not be up yet)
+                n = self.options.instance
+                self.log(f"nothing heard from instance {n} yet (system id {wire.system_id(n)} on {self.url}, "
+                         f"zenoh {wire.zenoh_key(n, '*')}): waiting for it; Ctrl-C stops")  # fmt: skip
+            else:
+                self.log(f"{a.rows_emitted} rows, {a.mav_messages} MAVLink messages, {self.parts.index} "
+                         "parts")  # fmt: skip
         if self._stop_at is None:
             reason = self._should_stop()
             if not reason and wall_limit_s is not None:

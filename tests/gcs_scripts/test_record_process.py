@@ -271,3 +271,21 @@ def test_recorder_stores_the_estimate_beside_the_truth(tmp_path: Path) -> None:
     assert meta["estimator_rows"] == have.sum()
     record = read_session(tmp_path / "ekf.parquet")
     assert record.estimator is not None and len(record.estimator) == len(record.time_s)
+
+
+def test_a_recorder_whose_vehicle_is_not_up_says_what_it_waits_for(tmp_path: Path, capsys) -> None:
+    """No vehicle at its instance (one of a range that was never started): its progress line says
+    what it waits for, where, and how to stop, instead of counting zeros (in this process, at the
+    loop's wall times given)."""
+    recorder = record_module.Recorder(record_module.RecorderOptions(instance=37, out=tmp_path / "r"))
+    recorder.open()
+    try:
+        recorder.start(0.0)
+        recorder.after_drain(record_module.PROGRESS_WALL_S)
+    finally:
+        recorder.close()
+    out = capsys.readouterr().out
+    port = instance_ports(37).gcs_remote
+    where = f"(system id 38 on udpin:127.0.0.1:{port}, zenoh quadsitl/37/*)"
+    assert f"nothing heard from instance 37 yet {where}" in out
+    assert "Ctrl-C stops" in out and "0 rows" not in out
