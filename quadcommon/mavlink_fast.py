@@ -207,7 +207,7 @@ class MessageParts:
 
     def ids(self) -> list[int]:
         """The message ids, in the datagram's order."""
-        return list(self._payloads) + [i for i in self._frames if i not in self._payloads]
+        return list(self._frames or self._payloads)
 
     def payload(self, decoder: FastDecoder) -> bytes | None:
         """The checked payload of ``decoder``'s message, or None when there is none;

@@ -20,8 +20,10 @@ flown when the autopilot is lost. One lockstep period is two calls:
 Between the two, whoever couples the core to an autopilot delivers the datagram and finds the
 answer (:meth:`~SimulatorCore.answer_to_frame` picks it out of any datagram): the simulator
 process over UDP with a wall-clock timeout and pacing (:mod:`simulator.app`), the in-process
-runner by calling the autopilot's core directly (:mod:`sitl.inprocess`). That is the one
-lockstep loop; both paths run it, so their trajectories are identical.
+runner by calling the autopilot's core directly (:mod:`sitl.inprocess`), with the frame's
+messages unframed (:meth:`~SimulatorCore.begin_frame_parts`: the payloads the autopilot reads of
+the datagram) and the answer likewise. That is the one lockstep loop; both paths run it, so their
+trajectories are identical.
 
 The autopilot's requests to the simulator ride in the answer (:mod:`quadcommon.wire`):
 :meth:`~SimulatorCore.end_frame` takes those of the answer it applies, once, and carries them out
