@@ -71,13 +71,6 @@ _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 UINT16_UNKNOWN = 65535
 CELL_VOLTAGE_MAX_MV = 65534  # BATTERY_STATUS voltages[0]: above it, the rest goes to voltages[1]
 _ID_CONTROLS = mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS
-_ID_SENSOR = mavlink.MAVLINK_MSG_ID_HIL_SENSOR
-_ID_STATE = mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION
-_ID_ODOMETRY = mavlink.MAVLINK_MSG_ID_ODOMETRY
-_ID_GPS = mavlink.MAVLINK_MSG_ID_HIL_GPS
-_ID_VISION = mavlink.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
-_ID_DISTURBANCE = mavlink.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY
-_ID_BATTERY = mavlink.MAVLINK_MSG_ID_BATTERY_STATUS
 
 
 class HilFrameEncoder:
@@ -214,14 +207,13 @@ class HilFrameEncoder:
             time_usec, *o_position, *o_velocity, *rates_frd,
         )  # fmt: skip
 
-        out = {_ID_SENSOR: self._sensor.payload(), _ID_STATE: self._state.payload(),
-               _ID_ODOMETRY: self._odometry.payload()}  # fmt: skip
+        sent = [self._sensor, self._state, self._odometry]
         if gps is not None:
             self._fill_gps(time_usec, gps)
-            out[_ID_GPS] = self._gps.payload()
+            sent.append(self._gps)
         if vision is not None:
             self._fill_vision(time_usec, vision)
-            out[_ID_VISION] = self._vision.payload()
+            sent.append(self._vision)
         if disturbance is not None:
             stamp_usec, (force, torque, health) = disturbance
             v = self._disturbance.values
@@ -230,11 +222,11 @@ class HilFrameEncoder:
             v[start : start + wire.DISTURB_SIZE] = (
                 *frames.vector_to_ned(force), *frames.euler_to_ned(torque), *health
             )
-            out[_ID_DISTURBANCE] = self._disturbance.payload()
+            sent.append(self._disturbance)
         if battery is not None:
             self._fill_battery(battery)
-            out[_ID_BATTERY] = self._battery.payload()
-        return out
+            sent.append(self._battery)
+        return {encoder.msg_id: encoder.payload() for encoder in sent}
 
     def _fill_battery(self, reading: BatteryReading) -> None:
         """The monitor's reading as BATTERY_STATUS: mV in voltages[0] (and [1] past 65 534 mV),
