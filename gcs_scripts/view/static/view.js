@@ -49,6 +49,7 @@ const state = {
   drawing: { softwareGl: SOFTWARE_GL, fps3d: FPS_3D, plotHz: PLOT_HZ, uiHz: UI_HZ, antialias: ANTIALIAS },
   tracks: [], modeHistory: {}, windowS: 30, dirty3d: true, dirtyPlots: true, dirtyUi: true,
   renders3d: 0, plotDraws: 0, errors: [], rtf: null, yielding: false,
+  cameraMoved: false, cameraTarget: null,   // the user moved the camera; where the last framing looks
   replay: { t: 0, t0: 0, t1: 0, playing: false, ended: false, speed: 1, lastTs: null, textsUpTo: -Infinity },
 };
 window.quadsitlView = state;
@@ -124,6 +125,7 @@ const controls = new OrbitControls(camera, renderer.domElement);
 controls.target.set(1, 1, 1.3);
 controls.update();
 controls.addEventListener('change', () => { state.dirty3d = true; });
+controls.addEventListener('start', () => { state.cameraMoved = true; });   // the user's own view from now on
 scene.add(new THREE.AmbientLight(0xffffff, 0.7));
 const sun = new THREE.DirectionalLight(0xffffff, 1.6);
 sun.position.set(-3, -5, 10);
@@ -340,15 +342,37 @@ function fit() {
     }
   }
   if (box.isEmpty()) box.set(new THREE.Vector3(-1, -1, 0), new THREE.Vector3(3, 3, 3));
+  frameBox(box);
+}
+
+// Live, a fleet spaced apart (--spacing) stands beyond the first view: until the user moves the
+// camera, the scene is framed about every vehicle's home as the homes become known (the first
+// view's few metres about each). Vehicles all at one home keep the first view.
+function frameHomes() {
+  if (state.kind !== 'live' || state.cameraMoved) return;
+  const homes = state.tracks.map((tr) => tr.desc.offset_m || [0, 0, 0]);
+  if (!homes.some((o) => Math.hypot(o[0], o[1]) > 3)) return;
+  const box = new THREE.Box3();
+  for (const o of homes) {
+    box.expandByPoint(new THREE.Vector3(o[0] - 1, o[1] - 1, 0));
+    box.expandByPoint(new THREE.Vector3(o[0] + 3, o[1] + 3, 3));
+  }
+  frameBox(box);
+}
+
+function frameBox(box) {
   box.expandByPoint(new THREE.Vector3(box.min.x, box.min.y, 0));
   const center = box.getCenter(new THREE.Vector3());
   const size = Math.max(box.getSize(new THREE.Vector3()).length(), 2);
   controls.target.copy(center);
   camera.position.copy(center).add(new THREE.Vector3(-0.55, -0.8, 0.5).multiplyScalar(size * 1.25));
+  camera.far = Math.max(500, 4 * size);   // a fleet a few hundred metres long stays in view
+  camera.updateProjectionMatrix();
   controls.update();
+  state.cameraTarget = center.toArray();
   state.dirty3d = true;
 }
-$('fit').addEventListener('click', fit);
+$('fit').addEventListener('click', () => { state.cameraMoved = true; fit(); });   // (the user's framing)
 $('follow').addEventListener('change', () => { state.dirty3d = true; });
 
 // ------------------------------------------------------------------------------------------
@@ -673,7 +697,7 @@ function onHello(m) {
   for (const tr of state.tracks) makeTrackObjects(tr);
   buildCards();
   buildPlots();
-  if (m.kind === 'replay') { setReplayTime(r.t0); fit(); }
+  if (m.kind === 'replay') { setReplayTime(r.t0); fit(); } else frameHomes();
   state.dirty3d = true;
 }
 
@@ -686,6 +710,7 @@ function onTracks(m) {
     placeTrack(tr);
     state.dirty3d = true;
   }
+  frameHomes();
   buildCards();
   buildPlots();
 }

@@ -178,6 +178,7 @@ def test_a_fleet_beside_a_vehicle_in_one_page_each_with_its_colour(vehicle):
             colours = page.evaluate("() => window.quadsitlView.tracks.map(t => t.color)")
             where = "() => window.quadsitlView.tracks.map(t => t.obj.group.position.toArray())"
             placed = page.evaluate(where)  # each vehicle's frame in the scene (m)
+            target = page.evaluate("() => window.quadsitlView.cameraTarget")  # framed about the homes
             cards = page.locator(".card").all_inner_texts()
             ARTIFACTS.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(ARTIFACTS / "live_fleet_beside_a_vehicle.png"))
@@ -187,6 +188,9 @@ def test_a_fleet_beside_a_vehicle_in_one_page_each_with_its_colour(vehicle):
     assert placed[0] == [0, 0, 0]  # the first vehicle's frame is the scene's
     for (x, y, z), n in zip(placed[1:], fleet, strict=True):
         assert x == pytest.approx(3.0 * n, abs=0.01) and abs(y) < 0.01 and abs(z) < 0.01
+    # The homes 0 m and 204-207 m north: the first view would show only the first vehicle, so the
+    # page frames them all (the first view's few metres about each home: x from -1 to 210 m).
+    assert target is not None and target[0] == pytest.approx((-1.0 + 3.0 * fleet[1] + 3.0) / 2, abs=0.01)
     for card, n in zip(cards, (INSTANCE, *fleet), strict=True):
         assert f"vehicle {n}" in card
     assert all(n > 5 for n in state["samples"]) and state["errors"] == []
