@@ -479,7 +479,7 @@ class AutopilotCore:
     def _sensor_samples(self, parts: MessageParts) -> SensorSamples | None:
         try:
             return sensor_samples(parts, self.setup.sitl.home)
-        except DecodeError:  # (decode_frame checked the messages already: not expected)
+        except DecodeError:  # (frame_of checked the messages already: not expected)
             return None
 
     def _controller_failed(self, t: float, failure: ControllerFailure) -> tuple[float, float, float, float]:

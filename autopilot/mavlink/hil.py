@@ -45,7 +45,7 @@ _CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 class Frame(NamedTuple):
     time_usec: int
     state: StateEstimate  # paper frames: the truth (ODOMETRY or HIL_STATE_QUATERNION)
-    sensors: SensorSamples | None = None  # decoded when asked (decode_frame(..., sensors=True))
+    sensors: SensorSamples | None = None  # decoded when asked (frame_of(..., sensors=True))
     # The frame's messages by id, undecoded (a log decodes HIL_SENSOR / HIL_GPS from them at its
     # own rate: sensor_samples(), gps_fields()).
     parts: MessageParts | None = None
@@ -63,16 +63,6 @@ _ODOMETRY_CHILD_FRAME = 8 + 4 * (13 + 21 + 21) + 1
 
 class CorruptFrame(ValueError):
     """The state message of a lockstep frame failed its checksum or could not be decoded."""
-
-
-def decode_frame(
-    datagram: bytes,
-    home: tuple[float, float, float],
-    use_odometry: bool = True,
-    sensors: bool = False,
-) -> Frame | None:
-    """The lockstep frame in one datagram (:func:`frame_of` its messages)."""
-    return frame_of(MessageParts.of_datagram(datagram), home, use_odometry, sensors)
 
 
 def frame_of(

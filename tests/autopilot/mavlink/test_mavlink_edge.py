@@ -6,14 +6,20 @@ import pytest
 
 from autopilot.mavlink import telemetry
 from autopilot.mavlink.codec import Encoder, mavlink, new_parser
-from autopilot.mavlink.hil import ActuatorEncoder, CorruptFrame, decode_frame
+from autopilot.mavlink.hil import ActuatorEncoder, CorruptFrame, frame_of
 from autopilot.mavlink.offboard import decode_setpoint
 from autopilot.records import StateEstimate
 from quadcommon import frames
+from quadcommon.mavlink_fast import MessageParts
 from quadcommon.rigid_body import quaternion_from_euler
 
 m = mavlink
 HOME = (47.397742, 8.545594, 488.0)
+
+
+def decode(datagram: bytes, home, use_odometry: bool = True):
+    """The lockstep frame in a datagram, as the autopilot reads it off its HIL socket."""
+    return frame_of(MessageParts.of_datagram(datagram), home, use_odometry)
 
 
 def setpoint(
@@ -162,7 +168,7 @@ def test_hil_frame_decoding_prefers_odometry():
     )
     hb = m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)
     data = enc.pack(hb) + enc.pack(odo)
-    frame = decode_frame(data, HOME)
+    frame = decode(data, HOME)
     assert frame.time_usec == 5_000_000
     assert frame.state.position_m == pytest.approx((1.234567, 2.0, 3.0), abs=1e-6)
     assert frame.state.velocity_m_s == pytest.approx((0.1, -0.2, -0.3), abs=1e-7)
@@ -201,7 +207,7 @@ def test_hil_state_quaternion_source_and_corruption():
         0,
         1000,
     )
-    frame = decode_frame(enc.pack(hsq), HOME, use_odometry=True)
+    frame = decode(enc.pack(hsq), HOME, use_odometry=True)
     assert frame.time_usec == 7_000
     # quantised: 1e-7 deg of latitude is ~1.1 cm
     assert frame.state.position_m == pytest.approx((1.0, -2.0, 3.0), abs=0.01)
@@ -210,8 +216,8 @@ def test_hil_state_quaternion_source_and_corruption():
     data = bytearray(enc.pack(hsq))
     data[20] ^= 0xFF  # corrupt the payload: the CRC check refuses it
     with pytest.raises(CorruptFrame):
-        decode_frame(bytes(data), HOME)
-    assert decode_frame(enc.pack(m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)), HOME) is None
+        decode(bytes(data), HOME)
+    assert decode(enc.pack(m.MAVLink_heartbeat_message(1, 12, 0, 0, 0, 3)), HOME) is None
 
 
 def test_setpoint_sample_time_comes_from_time_boot_ms_on_our_clock():
@@ -233,5 +239,5 @@ def test_odometry_with_a_body_frame_twist_is_rotated_into_the_world():
         7_000, m.MAV_FRAME_LOCAL_NED, m.MAV_FRAME_BODY_FRD, 0.0, 0.0, -1.0, list(q_ned),
         2.0, 0.0, 0.0, 0.0, 0.0, 0.0, [math.nan] * 21, [math.nan] * 21, 0, m.MAV_ESTIMATOR_TYPE_MOCAP, 100,
     )  # fmt: skip
-    frame = decode_frame(enc.pack(odo), HOME)
+    frame = decode(enc.pack(odo), HOME)
     assert frame.state.velocity_m_s == pytest.approx((0.0, 2.0, 0.0), abs=1e-6)  # forward = world +y

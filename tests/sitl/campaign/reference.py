@@ -4,7 +4,7 @@
 without sockets, zero-order hold, the disturbance at every physics step), generalised to what a
 campaign samples and ``run_scenario`` cannot take (a plant whose rotor constants differ from the
 allocator's, an initial velocity). With ``wire=True`` every frame crosses the MAVLink HIL wire as
-in the SITL: ``plant.truth()`` -> ``HilFrameEncoder.encode`` -> ``decode_frame`` (ODOMETRY, float32)
+in the SITL: ``plant.truth()`` -> ``HilFrameEncoder.encode`` -> ``frame_of`` (ODOMETRY, float32)
 -> cascade -> ``ActuatorEncoder.encode`` -> ``ActuatorDecoder.decode`` (float32 controls) -> plant.
 """
 
@@ -15,10 +15,11 @@ import numpy as np
 from autopilot.control.cascade import Cascade
 from autopilot.control.config import ControllerConfig
 from autopilot.mavlink.codec import Encoder
-from autopilot.mavlink.hil import ActuatorEncoder, decode_frame
+from autopilot.mavlink.hil import ActuatorEncoder, frame_of
 from autopilot.records import StateEstimate
 from quadcommon import wire as wire_contract
 from quadcommon.config import load_sitl
+from quadcommon.mavlink_fast import MessageParts
 from quadcommon.trajectories import trajectory_from_spec
 from simulator.dynamics.plant import make_plant
 from simulator.environment.gust_profile import DisturbanceSchedule
@@ -57,9 +58,8 @@ def fly_scalar(spec: CampaignSpec, sample: RunSample, controller: ControllerConf
         if wire:
             truth = plant.truth()
             time_usec = round(k * usec_per_frame)
-            frame = decode_frame(
-                frames_out.encode(time_usec, truth, sensors.sample(truth), wind), home
-            )
+            datagram = frames_out.encode(time_usec, truth, sensors.sample(truth), wind)
+            frame = frame_of(MessageParts.of_datagram(datagram), home)
             estimate = frame.state
             t_ref = frame.time_usec * 1e-6
             position, euler = truth.position_m, truth.euler_rad
