@@ -176,8 +176,8 @@ class AutopilotCore:
         ports = sitl.ports(setup.instance)
         remotes = (((wire.LOOPBACK, ports.gcs_remote), (wire.LOOPBACK, ports.api_remote))
                    if setup.default_remotes else (None, None))  # fmt: skip
-        self.links = [GcsLink(GCS_LINK, remotes[0], self._out, self.dt),
-                      GcsLink(API_LINK, remotes[1], self._out, self.dt)]  # fmt: skip
+        self.links = [GcsLink(link, remote, self._out, self.dt, self.encoder.mav.signing)
+                      for link, remote in zip((GCS_LINK, API_LINK), remotes, strict=True)]  # fmt: skip
         self.faults = FaultLog(log, self._error_text)
         self.refusals = RefusalNotices(self.statustext, self._wall_time)
         self.dispatcher = MessageDispatcher(self.faults)

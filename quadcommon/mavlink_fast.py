@@ -20,6 +20,7 @@ through pymavlink as usual.
 
 from __future__ import annotations
 
+import hashlib
 import struct
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -245,6 +246,34 @@ def _frame(payload: bytes, seq: int, ids: tuple[int, int, int, int], crc_extra: 
     body += payload
     crc = _crc(body[1:] + crc_extra, 0xFFFF)
     return body + bytes((crc & 0xFF, crc >> 8))
+
+
+def with_sequence(frame: bytes, seq: int, secret_key: bytes | None = None) -> bytes:
+    """``frame`` (one MAVLink 2 frame of a message of the dialect) with sequence number ``seq``
+    (0-255): the header's seq byte, then the CRC over it again; a signed frame is signed again with
+    ``secret_key`` under its own link id and timestamp (the spec's signature: the first 6 bytes of
+    SHA-256 over key + frame up to them). Anything else comes back unchanged: not one whole
+    MAVLink 2 frame, an unknown message id, a signed frame without the key.
+
+    What lets one packed message go out on several links, each numbered on its own, as PX4
+    numbers each MAVLink channel: a ground station counts its losses from the gaps."""
+    if len(frame) < _HEADER_LEN + 2 or frame[0] != _STX_V2 or frame[4] == seq:
+        return frame
+    end = _HEADER_LEN + frame[1]
+    signed = frame[2] & _SIGNED
+    if len(frame) != end + 2 + (_SIGNATURE_LEN if signed else 0) or (signed and secret_key is None):
+        return frame
+    message_class = mavlink.mavlink_map.get(frame[7] | frame[8] << 8 | frame[9] << 16)
+    if message_class is None:
+        return frame
+    out = bytearray(frame)
+    out[4] = seq
+    crc = _crc(bytes(out[1:end]) + bytes((message_class.crc_extra,)), 0xFFFF)
+    out[end], out[end + 1] = crc & 0xFF, crc >> 8
+    if signed:  # link id and timestamp (7 bytes) stay; the 6 bytes of signature after them
+        signed_part = end + 2 + _SIGNATURE_LEN - 6
+        out[signed_part:] = hashlib.sha256(secret_key + out[:signed_part]).digest()[:6]
+    return bytes(out)
 
 
 def _codes(fmt: str) -> list[str]:

@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from quadcommon.mavlink_fast import with_sequence
+
 from .codec import new_parser, restart_parser
 from .telemetry import StreamTable
 
@@ -75,9 +77,12 @@ class GcsLink:
     its stream table, the messages queued for it in the shared outbox."""
 
     def __init__(
-        self, index: int, default_remote: Address | None, outbox: list[Outgoing], frame_period_s: float = 0.0
+        self, index: int, default_remote: Address | None, outbox: list[Outgoing], frame_period_s: float = 0.0,
+        signing=None,
     ) -> None:
-        """``frame_period_s``: the control frames' period, the shortest stream interval."""
+        """``frame_period_s``: the control frames' period, the shortest stream interval;
+        ``signing``: the encoder's signing state (pymavlink's ``MAVLinkSigning``), whose key signs a
+        signed frame again once the link has numbered it (None: frames go out as packed)."""
         self.index = index
         self.name = LINK_NAMES[index]
         self.default_remote = default_remote
@@ -90,17 +95,33 @@ class GcsLink:
         self.last_heartbeat_s: float | None = None  # simulation time of the last GCS heartbeat
         self.oversize = 0  # datagrams cut at MAX_DATAGRAM_BYTES
         self.evicted = 0  # peers dropped to make room for a new one
+        self.seq = 0  # the sequence number of the link's next frame
+        self._signing = signing
         self._outbox = outbox
 
     def send(self, data: bytes) -> None:
-        """To every peer of the link."""
+        """``data`` (one packed MAVLink frame) to every peer of the link, numbered on the link."""
+        if not self.peers:
+            return
+        data = self._numbered(data)
         index, append = self.index, self._outbox.append
         for address in self.peers:
             append(Outgoing(index, address, data))
 
     def send_to(self, data: bytes, address: Address) -> None:
-        """Queue ``data`` (a packed MAVLink frame) for one address of the link only."""
-        self._outbox.append(Outgoing(self.index, address, data))
+        """Queue ``data`` (one packed MAVLink frame) for one address of the link only, numbered on
+        the link."""
+        self._outbox.append(Outgoing(self.index, address, self._numbered(data)))
+
+    def _numbered(self, data: bytes) -> bytes:
+        """The frame with the link's next sequence number. The core packs a message once for every
+        link that sends it; each link numbers what it sends on its own, as PX4 numbers each MAVLink
+        channel, so a ground station sees no gap on a loss-free link (MAVProxy, QGroundControl and
+        pymavlink count gaps as lost packets)."""
+        signing = self._signing
+        data = with_sequence(data, self.seq, signing.secret_key if signing is not None else None)
+        self.seq = (self.seq + 1) & 0xFF
+        return data
 
     def listen(self, address: Address) -> None:
         """Send to ``address`` from now on, whether it talks or not (a default remote)."""

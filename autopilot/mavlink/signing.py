@@ -17,7 +17,9 @@ fresh timestamp, and every frame the autopilot sends on those links is signed:
   inject it and cannot sign).
 * **Outgoing.** The core's one :class:`~.codec.Encoder` signs (pymavlink's ``_pack`` signs when
   ``mav.signing.sign_outgoing``), so telemetry, ACKs, PARAM_VALUE, mission messages and STATUSTEXT
-  are all signed, as one stream (link id 0). The HIL link stays unsigned: its answers come from
+  are all signed, as one stream (link id 0); a frame packed once for both links is signed again by
+  each link once it has put its own sequence number in (:meth:`.links.GcsLink.send`, the same link id
+  and timestamp). The HIL link stays unsigned: its answers come from
   :class:`~.hil.ActuatorEncoder` (a FastEncoder, never signed) and its hello from
   :meth:`~.codec.Encoder.pack_unsigned`.
 * **Keys.** From a key file (:func:`read_key_file`: 64 hex digits, or a passphrase hashed as

@@ -6,7 +6,7 @@ import random
 import pytest
 from pymavlink.dialects.v20 import common as m
 
-from quadcommon.mavlink_fast import DecodeError, FastDecoder, split_frames
+from quadcommon.mavlink_fast import DecodeError, FastDecoder, split_frames, with_sequence
 
 
 def packed(msg, system=1, component=51):
@@ -171,3 +171,49 @@ def test_message_parts_check_a_frame_when_it_is_read():
         parts.payload(odometry)
     assert parts.payload(FastDecoder(m.MAVLink_hil_gps_message)) is None  # none in the datagram
     assert parts.component_id(m.MAVLINK_MSG_ID_HIL_GPS) is None
+
+
+KEY = bytes(range(32))
+
+
+def parsed(data: bytes, key: bytes | None = None) -> list:
+    """What a fresh pymavlink parser makes of ``data`` (checking signatures with ``key``)."""
+    parser = m.MAVLink(None)
+    parser.robust_parsing = True
+    parser.signing.secret_key = key
+    return parser.parse_buffer(data) or []
+
+
+def signer(link_id: int = 4, timestamp: int = 123_456_789):
+    mav = m.MAVLink(None, srcSystem=3, srcComponent=1)
+    mav.signing.secret_key, mav.signing.sign_outgoing = KEY, True
+    mav.signing.link_id, mav.signing.timestamp = link_id, timestamp
+    return mav
+
+
+def test_with_sequence_numbers_a_frame_again_crc_and_signature_included():
+    msg = m.MAVLink_attitude_message(1000, 0.1, -0.2, 0.3, 0.0, 0.5, 0.0)
+    frame = packed(msg, system=3, component=1)  # seq 0
+    (again,) = parsed(with_sequence(frame, 200))
+    assert again.get_type() == "ATTITUDE" and again.get_seq() == 200
+    assert (again.time_boot_ms, again.roll, again.yawspeed) == (1000, pytest.approx(0.1), 0.0)
+
+    signed = bytes(msg.pack(signer()))
+    renumbered = with_sequence(signed, 17, KEY)
+    (checked,) = parsed(renumbered, KEY)  # pymavlink checks the signature against the key
+    assert checked.get_type() == "ATTITUDE" and checked.get_signed() and checked.get_seq() == 17
+    assert renumbered[-13:-6] == signed[-13:-6]  # the same link id and timestamp
+    assert renumbered[-6:] != signed[-6:]
+    # Signed with another key, pymavlink refuses it: the check above is a real one.
+    assert [x.get_type() for x in parsed(with_sequence(signed, 17, bytes(32)), KEY)] == ["BAD_DATA"]
+
+
+def test_with_sequence_leaves_what_it_cannot_number_as_it_is():
+    frame = packed(m.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3))
+    unknown_id = bytearray(frame)
+    unknown_id[7:10] = (0xFF, 0xFF, 0xFF)
+    signed = bytes(m.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(signer()))
+    mavlink1 = b"\xfe" + frame[1:]  # (MAVLink 1's start byte)
+    for data in (b"", b"garbage", frame[:-1], frame + frame, mavlink1, bytes(unknown_id), signed):
+        assert with_sequence(data, 9) is data  # (signed: no key to sign it again with)
+    assert with_sequence(frame, 0) is frame  # already numbered so

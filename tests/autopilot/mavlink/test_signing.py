@@ -22,6 +22,7 @@ from autopilot.mavlink.signing import SigningOptions, mavlink_timestamp, passphr
 from quadcommon.schema import ConfigError
 from simulator.core import SimulatorSetup
 from sitl.inprocess import API_LINK, Lockstep, mavlink
+from tests.autopilot.mavlink.test_telemetry import sequence_gaps
 
 m = mavlink
 T0 = 1.75e9  # the fake wall clock at the stack's t = 0 (s since 1970; mid-2025)
@@ -202,6 +203,7 @@ def test_everything_the_vehicle_sends_on_the_gcs_links_is_signed_in_order(tmp_pa
         kinds = {msg.get_type() for msg in station.messages}
         assert "BAD_DATA" not in kinds, [str(x) for x in station.messages if x.get_type() == "BAD_DATA"][:3]
         assert all(msg.get_signed() for msg in station.messages)
+        assert sequence_gaps(station.messages) == []  # each link numbers (and so signs) its own frames
     kinds = {msg.get_type() for msg in api.messages}
     assert {"HEARTBEAT", "COMMAND_ACK", "AUTOPILOT_VERSION", "PARAM_VALUE", "MISSION_COUNT",
             "STATUSTEXT"} <= kinds  # fmt: skip

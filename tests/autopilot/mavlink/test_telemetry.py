@@ -12,6 +12,7 @@ import pytest
 from pymavlink.dialects.v20 import common as m
 
 from autopilot.mavlink import telemetry
+from autopilot.mavlink.links import API_LINK, GCS_LINK
 from quadcommon import frames
 from quadcommon.bus_records import TRUTH_FIELDS
 from quadcommon.rigid_body import quaternion_from_euler
@@ -172,3 +173,29 @@ def test_highres_imu_on_the_truth_is_the_simulators_sensors_at_the_rate_granted(
     assert imu.pressure_alt == pytest.approx(stack.autopilot.setup.sitl.home[2], abs=1e-3)
     assert imu.diff_pressure == 0.0
     assert [msg.time_usec for msg in imus] == sorted({msg.time_usec for msg in imus})
+
+
+def sequence_gaps(messages: list) -> list[tuple[int, int]]:
+    """(previous, next) for every pair of consecutive frames whose sequence numbers do not follow
+    one another (modulo 256): what pymavlink, MAVProxy and QGroundControl count as lost."""
+    seqs = [msg.get_seq() for msg in messages if msg.get_type() != "BAD_DATA"]
+    return [(a, b) for a, b in zip(seqs, seqs[1:], strict=False) if b != (a + 1) % 256]
+
+
+def test_each_link_numbers_its_frames_on_its_own_so_a_loss_free_link_shows_no_loss():
+    """As PX4 numbers each MAVLink channel: a station on the GCS link and one on the API link each
+    get gapless sequence numbers, through the wrap past 255, although the vehicle packs most
+    messages once for both and answers the API station's commands on the API link alone."""
+    stack = make_stack()
+    gcs, api = stack.ground_station(GCS_LINK), stack.ground_station(API_LINK)
+    system = stack.autopilot.system_id
+    for _ in range(5):
+        api.command(m.MAV_CMD_REQUEST_MESSAGE, m.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        api.mav.param_request_read_send(system, 1, b"MIS_TAKEOFF_ALT", -1)
+        gcs.command(m.MAV_CMD_SET_MESSAGE_INTERVAL, m.MAVLINK_MSG_ID_ATTITUDE, 20_000)
+        stack.run_for(0.6)
+    for station in (gcs, api):
+        assert len(station.messages) > 300  # the sequence wrapped
+        assert sequence_gaps(station.messages) == []
+    assert len(api.acks(m.MAV_CMD_REQUEST_MESSAGE)) == 5 and gcs.acks(m.MAV_CMD_REQUEST_MESSAGE) == []
+    assert len(gcs.of_type("ATTITUDE")) > len(api.of_type("ATTITUDE"))  # 50 Hz against 20 Hz on the GCS
