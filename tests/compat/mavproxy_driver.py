@@ -23,7 +23,7 @@ if not MAVPROXY.exists():
     MAVPROXY = Path(shutil.which("mavproxy.py") or MAVPROXY)
 # The modules a console session needs; the default set adds GUI and hardware modules that only
 # print "Failed to load module" without their (uninstalled) dependencies.
-MODULES = "log,signing,wp,rally,fence,ftp,param,arm,mode,cmdlong,misc"
+MODULES = "log,signing,wp,rally,fence,ftp,param,arm,mode,cmdlong,misc,link"
 # The console prompt ("MAV> ", "LOITER> ", one per command typed) is printed in front of output
 # lines; expect() matches what follows it.
 PROMPT = re.compile(r"^(?:[A-Za-z0-9_.]+> )+")

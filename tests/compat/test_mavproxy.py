@@ -1,7 +1,8 @@
 """MAVProxy (headless, scripted on stdin) flies a quadsitl vehicle as it would a PX4 SITL.
 
 Connect, parameters (fetch, show, set: float and PX4's bytewise int32), mode changes, ``arm
-throttle``, ``takeoff``, ``wp load`` of a QGC WPL 110 file, ``wp list``, the mission flown, land.
+throttle``, ``takeoff``, ``wp load`` of a QGC WPL 110 file, ``wp list``, the mission flown,
+``link`` (no packet counted lost), land.
 What each command did to the vehicle is checked on the simulator's ground truth (zenoh), not only
 on what MAVProxy prints.
 
@@ -140,6 +141,10 @@ def test_mavproxy_flies_a_vehicle(tmp_path, compat_sitl_config, flight_logs):
                 closest = min(math.dist((r[1], r[2], r[3]), target) for r in track)
                 assert closest < 0.3, (target, closest)
 
+            # MAVProxy's link statistics count a gap in a link's sequence numbers as lost packets:
+            # none on loopback (each of the vehicle's links numbers its own frames, as PX4's).
+            stats = mp.command("link", r"link 1 OK \((\d+) packets, .*?(\d+) lost, ([\d.]+)% loss", 5)
+            assert int(stats.group(1)) > 500 and float(stats.group(3)) < 5.0, stats.group(0)
             mp.command("long NAV_LAND", r"Got COMMAND_ACK: NAV_LAND: ACCEPTED", 5)
             mp.expect(r"^DISARMED", 30)  # landed; disarmed after COM_DISARM_LAND
             row = truth.latest()
