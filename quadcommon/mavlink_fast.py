@@ -248,12 +248,18 @@ def _frame(payload: bytes, seq: int, ids: tuple[int, int, int, int], crc_extra: 
     return body + bytes((crc & 0xFF, crc >> 8))
 
 
+def signature(secret_key: bytes, signed_part: bytes | bytearray) -> bytes:
+    """MAVLink 2's signature of a frame: the first 6 bytes of SHA-256 over the key and
+    ``signed_part``, the frame up to the signature (header, payload, CRC, link id, timestamp)."""
+    return hashlib.sha256(secret_key + signed_part).digest()[:6]
+
+
 def with_sequence(frame: bytes, seq: int, secret_key: bytes | None = None) -> bytes:
     """``frame`` (one MAVLink 2 frame of a message of the dialect) with sequence number ``seq``
     (0-255): the header's seq byte, then the CRC over it again; a signed frame is signed again with
-    ``secret_key`` under its own link id and timestamp (the spec's signature: the first 6 bytes of
-    SHA-256 over key + frame up to them). Anything else comes back unchanged: not one whole
-    MAVLink 2 frame, an unknown message id, a signed frame without the key.
+    ``secret_key`` under its own link id and timestamp (:func:`signature`). Anything else comes
+    back unchanged: not one whole MAVLink 2 frame, an unknown message id, a signed frame without
+    the key.
 
     What lets one packed message go out on several links, each numbered on its own, as PX4
     numbers each MAVLink channel: a ground station counts its losses from the gaps."""
@@ -272,7 +278,7 @@ def with_sequence(frame: bytes, seq: int, secret_key: bytes | None = None) -> by
     out[end], out[end + 1] = crc & 0xFF, crc >> 8
     if signed:  # link id and timestamp (7 bytes) stay; the 6 bytes of signature after them
         signed_part = end + 2 + _SIGNATURE_LEN - 6
-        out[signed_part:] = hashlib.sha256(secret_key + out[:signed_part]).digest()[:6]
+        out[signed_part:] = signature(secret_key, out[:signed_part])
     return bytes(out)
 
 

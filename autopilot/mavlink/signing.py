@@ -61,6 +61,7 @@ from functools import partial
 from pathlib import Path
 
 from quadcommon import wire
+from quadcommon.mavlink_fast import signature
 from quadcommon.schema import ConfigError
 
 from .codec import Encoder
@@ -346,7 +347,7 @@ class Signing:
         key = self.key
         if key is None:  # not reachable: pymavlink asks only while a key is set
             return False
-        expected = hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6]
+        expected = signature(key, bytes(msgbuf[:-6]))
         if not hmac.compare_digest(expected, bytes(msgbuf[-6:])):
             self._pending[link.index] = BAD_SIGNATURE
             return False
