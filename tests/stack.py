@@ -15,6 +15,13 @@ from simulator.core import SimulatorSetup
 from sitl.inprocess import API_LINK, Lockstep, StackConnection
 
 
+def sequence_gaps(messages: list) -> list[tuple[int, int]]:
+    """(previous, next) for every pair of consecutive frames whose sequence numbers do not follow
+    one another (modulo 256): what pymavlink, MAVProxy and QGroundControl count as lost."""
+    seqs = [msg.get_seq() for msg in messages if msg.get_type() != "BAD_DATA"]
+    return [(a, b) for a, b in zip(seqs, seqs[1:], strict=False) if b != (a + 1) % 256]
+
+
 def make_stack(
     scenario: str = "hover",
     controller: str = "intbs_nlhinf",

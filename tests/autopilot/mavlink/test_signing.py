@@ -22,7 +22,7 @@ from autopilot.mavlink.signing import SigningOptions, mavlink_timestamp, passphr
 from quadcommon.schema import ConfigError
 from simulator.core import SimulatorSetup
 from sitl.inprocess import API_LINK, Lockstep, mavlink
-from tests.autopilot.mavlink.test_telemetry import sequence_gaps
+from tests.stack import sequence_gaps
 
 m = mavlink
 T0 = 1.75e9  # the fake wall clock at the stack's t = 0 (s since 1970; mid-2025)

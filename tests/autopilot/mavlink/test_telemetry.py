@@ -17,7 +17,7 @@ from quadcommon import frames
 from quadcommon.bus_records import TRUTH_FIELDS
 from quadcommon.rigid_body import quaternion_from_euler
 from tests.sitl.test_params_failsafes import take_off
-from tests.stack import Gcs, make_stack
+from tests.stack import Gcs, make_stack, sequence_gaps
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -175,13 +175,6 @@ def test_highres_imu_on_the_truth_is_the_simulators_sensors_at_the_rate_granted(
     assert [msg.time_usec for msg in imus] == sorted({msg.time_usec for msg in imus})
 
 
-def sequence_gaps(messages: list) -> list[tuple[int, int]]:
-    """(previous, next) for every pair of consecutive frames whose sequence numbers do not follow
-    one another (modulo 256): what pymavlink, MAVProxy and QGroundControl count as lost."""
-    seqs = [msg.get_seq() for msg in messages if msg.get_type() != "BAD_DATA"]
-    return [(a, b) for a, b in zip(seqs, seqs[1:], strict=False) if b != (a + 1) % 256]
-
-
 def test_each_link_numbers_its_frames_on_its_own_so_a_loss_free_link_shows_no_loss():
     """As PX4 numbers each MAVLink channel: a station on the GCS link and one on the API link each
     get gapless sequence numbers, through the wrap past 255, although the vehicle packs most
@@ -198,4 +191,4 @@ def test_each_link_numbers_its_frames_on_its_own_so_a_loss_free_link_shows_no_lo
         assert len(station.messages) > 300  # the sequence wrapped
         assert sequence_gaps(station.messages) == []
     assert len(api.acks(m.MAV_CMD_REQUEST_MESSAGE)) == 5 and gcs.acks(m.MAV_CMD_REQUEST_MESSAGE) == []
-    assert len(gcs.of_type("ATTITUDE")) > len(api.of_type("ATTITUDE"))  # 50 Hz against 20 Hz on the GCS
+    assert len(gcs.of_type("ATTITUDE")) > len(api.of_type("ATTITUDE"))  # the GCS asked for 50 Hz
