@@ -33,11 +33,7 @@ from ..records import (
 from .codec import Encoder, mavlink
 
 Vector3 = tuple[float, float, float]
-_ID_SENSOR = mavlink.MAVLINK_MSG_ID_HIL_SENSOR
 _ID_STATE = mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION
-_ID_GPS = mavlink.MAVLINK_MSG_ID_HIL_GPS
-_ID_VISION = mavlink.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
-_ID_DISTURBANCE = mavlink.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 _CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
@@ -314,7 +310,7 @@ _DISTURBANCE_NAME = _where(_DISTURBANCE, "name")[0]
 _DISTURBANCE_DATA = _DISTURBANCE.slices["data"].start
 
 
-DISTURBANCE_ID = _ID_DISTURBANCE
+DISTURBANCE_ID = mavlink.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY
 BATTERY_ID = mavlink.MAVLINK_MSG_ID_BATTERY_STATUS
 _BATTERY = FastDecoder(mavlink.MAVLink_battery_status_message)
 _BATTERY_NUMBER, _BATTERY_CURRENT = _where(_BATTERY, "id", "current_battery")
