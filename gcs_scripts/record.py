@@ -197,7 +197,7 @@ class Recorder:
             "controller_rows": a.controller.count,
             "estimator_rows": a.estimator.count,
             "mavlink_messages": a.mav_messages,
-            "recording_end_sim_time_s": a.latest_time_s,
+            "recording_end_sim_time_s": a.last_row_time_s,
             "complete": final,
             "stopped_by": self.stop_reason,
         }
@@ -243,7 +243,10 @@ class Recorder:
             self.log(f"vehicle: {self.assembler.statustext[-1][2]}")
 
     def _write_part(self, wall: float, final: bool = False) -> None:
-        table = self.assembler.take(wall, final=final)
+        # Stopped by its own condition, the vehicle still streams: the last part ends where every
+        # stream has arrived. Stopped by a signal, it keeps everything received.
+        whole_rows = final and self.stop_reason != "signal"
+        table = self.assembler.take(wall, final=final, whole_rows=whole_rows)
         if table is not None and table.num_rows:
             self.parts.write(table, self.metadata())
         self.tlog.flush()

@@ -478,6 +478,11 @@ class SessionAssembler:
         return None if self.latest_key is None else self.latest_key * 1e-6
 
     @property
+    def last_row_time_s(self) -> float | None:
+        """The simulation time of the last row handed out (s), or None before any."""
+        return None if self.emitted_until is None else self.emitted_until * 1e-6
+
+    @property
     def first_time_s(self) -> float | None:
         """The first simulation time seen (s), or None before any row."""
         return None if self.first_key is None else self.first_key * 1e-6
@@ -492,13 +497,18 @@ class SessionAssembler:
         known = [s.latest_key for s in streams if s.latest_key is not None]
         return max(known) if known else None
 
-    def take(self, wall: float, final: bool = False) -> pa.Table | None:
-        """Joined rows up to the watermark (everything if ``final``); None if there are none."""
+    def take(self, wall: float, final: bool = False, whole_rows: bool = False) -> pa.Table | None:
+        """Joined rows up to the watermark (everything if ``final``); None if there are none.
+
+        ``final`` and ``whole_rows``: the last rows of a recording that ends while the vehicle still
+        streams. They stop at the watermark, so the rows still in flight on one stream and not yet
+        on another (a ragged tail of empty cells) are left out; a stream gone silent does not hold
+        them back (:meth:`watermark`)."""
         if self._pending_untimed and (final or not self.mav_stream.live(wall)):
             for g, v in self._pending_untimed:  # no later stamp is coming: use the latest
                 self._append(g, self.mav_stream.latest_key or 0, v)
             self._pending_untimed.clear()
-        watermark = None if final else self.watermark(wall)
+        watermark = None if final and not whole_rows else self.watermark(wall)
         if watermark is None and not final:
             return None
         truth_keys, truth_rows = self.truth.split(watermark)

@@ -303,16 +303,19 @@ async def flow_action(system, args) -> None:
 
 async def streams_on_request(system, tel: TelemetryAsync, watch: Watch) -> None:
     """What a PX4 user asks for beside the default streams: the ground truth and the IMU at a
-    rate (set_rate_ground_truth 10 Hz, set_rate_imu 50 Hz; 2 s of each, stamped with the
-    vehicle's clock at arrival), and a Mocap pose (this vehicle flies on the simulator's truth,
-    EKF2_EN 0: it refuses the pose and says why)."""
+    rate (set_rate_ground_truth 10 Hz, set_rate_imu 50 Hz; 2 s of each, on the vehicle's clock),
+    and a Mocap pose (this vehicle flies on the simulator's truth, EKF2_EN 0: it refuses the pose
+    and says why)."""
     await tel.set_rate_ground_truth(10.0)
     await tel.set_rate_imu(50.0)
     got: dict[str, list] = {"ground_truth": [], "imu": []}
 
     async def pump(name: str) -> None:
         async for value in getattr(tel, f"subscribe_{name}")():
-            got[name].append((watch.sim_time(), value))
+            # The IMU carries its own stamp (HIGHRES_IMU.time_usec, the vehicle's clock); the ground
+            # truth has none, so it is stamped at arrival, which a loaded machine can bunch.
+            stamp = value.timestamp_us * 1e-6 if name == "imu" else watch.sim_time()
+            got[name].append((stamp, value))
 
     tasks = [asyncio.create_task(pump(name)) for name in got]
     start = watch.sim_time()
