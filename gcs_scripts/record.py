@@ -120,6 +120,7 @@ class Recorder:
         # The loop's clocks (wall): the next part and progress line, the stop's deadline once asked.
         self._next_part = self._next_progress = 0.0
         self._stop_at: float | None = None
+        self._stop_decided = 0.0  # (wall s) when the stop condition was met
         self.done = False  # stopped, its last part written
 
     def log(self, text: str) -> None:
@@ -244,9 +245,9 @@ class Recorder:
 
     def _write_part(self, wall: float, final: bool = False) -> None:
         # Stopped by its own condition, the vehicle still streams: the last part ends where every
-        # stream has arrived. Stopped by a signal, it keeps everything received.
-        whole_rows = final and self.stop_reason != "signal"
-        table = self.assembler.take(wall, final=final, whole_rows=whole_rows)
+        # stream still flowing at the stop has arrived. Stopped by a signal, it keeps everything.
+        flowing_since = self._stop_decided if final and self.stop_reason != "signal" else None
+        table = self.assembler.take(wall, final=final, flowing_since=flowing_since)
         if table is not None and table.num_rows:
             self.parts.write(table, self.metadata())
         self.tlog.flush()
@@ -313,6 +314,7 @@ class Recorder:
                 reason = f"wall limit {wall_limit_s:g} s"
             if reason:
                 self.stop_reason = reason
+                self._stop_decided = wall
                 # Rows of the last instants may still be in flight on the other streams.
                 self._stop_at = wall + (0.0 if reason == "signal" else STOP_GRACE_WALL_S)
         if self._stop_at is not None and wall >= self._stop_at:

@@ -497,18 +497,29 @@ class SessionAssembler:
         known = [s.latest_key for s in streams if s.latest_key is not None]
         return max(known) if known else None
 
-    def take(self, wall: float, final: bool = False, whole_rows: bool = False) -> pa.Table | None:
+    def _reached_by_flowing(self, since: float) -> int | None:
+        """The latest key every stream that advanced at or after wall time ``since`` has reached
+        (None: no stream did, everything is complete)."""
+        streams = (self.truth_stream, self.controller_stream, self.estimator_stream, self.mav_stream)
+        # (a stream's latest key and the wall time it advanced are set together)
+        flowing = [s.latest_key for s in streams if s.latest_key is not None and s.advanced_wall >= since]
+        return min(flowing) if flowing else None
+
+    def take(self, wall: float, final: bool = False, flowing_since: float | None = None) -> pa.Table | None:
         """Joined rows up to the watermark (everything if ``final``); None if there are none.
 
-        ``final`` and ``whole_rows``: the last rows of a recording that ends while the vehicle still
-        streams. They stop at the watermark, so the rows still in flight on one stream and not yet
-        on another (a ragged tail of empty cells) are left out; a stream gone silent does not hold
-        them back (:meth:`watermark`)."""
+        ``final`` with ``flowing_since`` (wall s): the last rows of a recording that ends while the
+        vehicle still streams. They stop at the latest time every stream still flowing since then
+        has reached, so the rows in flight on one stream and not yet on another (a ragged tail of
+        empty cells) are left out; a stream that stopped before does not hold them back."""
         if self._pending_untimed and (final or not self.mav_stream.live(wall)):
             for g, v in self._pending_untimed:  # no later stamp is coming: use the latest
                 self._append(g, self.mav_stream.latest_key or 0, v)
             self._pending_untimed.clear()
-        watermark = None if final and not whole_rows else self.watermark(wall)
+        if final:
+            watermark = None if flowing_since is None else self._reached_by_flowing(flowing_since)
+        else:
+            watermark = self.watermark(wall)
         if watermark is None and not final:
             return None
         truth_keys, truth_rows = self.truth.split(watermark)

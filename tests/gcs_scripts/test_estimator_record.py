@@ -158,22 +158,23 @@ def test_estimator_rows_after_the_watermark_wait_and_come_out_on_the_final_take(
 
 
 def test_a_recording_that_ends_while_streaming_leaves_out_the_ragged_tail() -> None:
-    """Stopped on its own condition (``whole_rows``), the last take ends where every live stream
-    has arrived: the truth rows whose estimate is still in flight are left out, not given empty
-    estimator cells. A stream gone silent does not hold the end back; a plain final take (Ctrl-C)
-    keeps everything."""
+    """Stopped on its own condition, the last take ends where every stream still flowing at the
+    stop has arrived: the truth rows whose estimate is still in flight are left out, not given
+    empty estimator cells. A stream that stopped before does not hold the end back; a plain final
+    take (Ctrl-C) keeps everything."""
     times = control_times(0.0, 300)
 
-    def assembler() -> sl.SessionAssembler:
+    def assembler(estimator_wall: float = 0.1) -> sl.SessionAssembler:
         a = sl.SessionAssembler(system_id=1, wall=0.0)
         a.add_truth(truth_rows(times), wall=0.1)
         a.add_controller(controller_rows(times), wall=0.1)
-        a.add_estimator(estimator_rows(times[:280]), wall=0.1)  # its last 20 rows still in flight
+        a.add_estimator(estimator_rows(times[:280]), wall=estimator_wall)  # its last 20 rows behind
         return a
 
-    whole = assembler().take(wall=0.2, final=True, whole_rows=True)
+    whole = assembler().take(wall=0.2, final=True, flowing_since=0.1)
     assert whole.num_rows == 280 and not np.isnan(whole.column("x_est_m").to_numpy()).any()
     everything = assembler().take(wall=0.2, final=True)
     assert everything.num_rows == 300 and np.isnan(everything.column("x_est_m").to_numpy()[280:]).all()
-    silent = assembler().take(wall=0.1 + sl.STALE_WALL_S + 1.0, final=True, whole_rows=True)
-    assert silent.num_rows == 300  # every stream silent: what arrived is complete
+    # The estimator stopped (wall 0.05) before the stop was decided (0.1): its rows are complete.
+    stopped = assembler(estimator_wall=0.05).take(wall=0.2, final=True, flowing_since=0.1)
+    assert stopped.num_rows == 300
