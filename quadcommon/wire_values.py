@@ -18,13 +18,21 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
 
 from . import frames
 from .kernel import compiled, compiling, freeze, kernel
+from .mavlink_fast import record_dtype
 from .rigid_body import euler_from_quaternion, euler_rates_from_body_rates
 
 Vector3 = tuple[float, float, float]
 
+FLOAT32_MAX = 3.4028234663852886e38  # the largest finite float32
+# The messages every lockstep frame carries, in :func:`frame_records`' order, and their payloads as
+# records (compile-time constants of the kernels that fill them).
+FRAME_RECORD_MESSAGES = (mavlink.MAVLink_hil_sensor_message, mavlink.MAVLink_hil_state_quaternion_message,
+                         mavlink.MAVLink_odometry_message)  # fmt: skip
+HIL_SENSOR_RECORD, HIL_STATE_RECORD, ODOMETRY_RECORD = (record_dtype(c) for c in FRAME_RECORD_MESSAGES)
 GPS_UNKNOWN_ACCURACY = 65535  # HIL_GPS eph/epv: "unknown"
 GPS_ACCURACY_UNKNOWN_M = 99.0  # what the autopilot reads an unknown eph/epv as
 STANDARD_GRAVITY_M_S2 = 9.80665  # 1 G, for HIL_STATE_QUATERNION's mG fields
@@ -151,6 +159,59 @@ def frame_fields(position: Vector3, velocity: Vector3, quaternion, body_rates: V
 
 
 @kernel
+def frame_records(sensor, state, odometry, time_usec: int, fields_updated: int, position: Vector3,
+                  velocity: Vector3, quaternion, body_rates: Vector3, specific_force_body: Vector3,
+                  wind: Vector3, home, imu_specific_force: Vector3, imu_angular_rate: Vector3,
+                  magnetic_field: Vector3, pressure_hpa: float, pressure_altitude: float,
+                  temperature: float) -> bool:  # fmt: skip
+    """:func:`frame_fields` written into the payloads of the three messages every frame carries
+    (byte buffers, each viewed as its message's record: :data:`HIL_SENSOR_RECORD`,
+    :data:`HIL_STATE_RECORD`, :data:`ODOMETRY_RECORD`), with the frame's ``time_usec``, HIL_SENSOR's
+    ``fields_updated`` and its barometer's pressure (hPa) and temperature (deg C); the fields not
+    named here keep their values. False, and nothing written, when a float field would not fit a
+    float32: ODOMETRY's position, velocity or rates not finite once rounded, or the pressure or the
+    temperature finite and past float32's range (``struct`` refuses to pack those)."""
+    force, rate, field, altitude, odometry_fields, hil = frame_fields(
+        position, velocity, quaternion, body_rates, specific_force_body, wind, home, imu_specific_force,
+        imu_angular_rate, magnetic_field, pressure_altitude,
+    )  # fmt: skip
+    p, v, q, w = odometry_fields
+    if not math.isfinite(p[0] + p[1] + p[2] + v[0] + v[1] + v[2] + w[0] + w[1] + w[2]):
+        return False
+    for raw in (pressure_hpa, temperature):
+        if math.isfinite(raw) and abs(raw) > FLOAT32_MAX:
+            return False
+    s = sensor.view(HIL_SENSOR_RECORD)[0]
+    s["time_usec"] = time_usec
+    s["xacc"], s["yacc"], s["zacc"] = force[0], force[1], force[2]
+    s["xgyro"], s["ygyro"], s["zgyro"] = rate[0], rate[1], rate[2]
+    s["xmag"], s["ymag"], s["zmag"] = field[0], field[1], field[2]
+    s["abs_pressure"] = pressure_hpa
+    s["pressure_alt"] = altitude
+    s["temperature"] = temperature
+    s["fields_updated"] = fields_updated
+    # HIL_STATE_QUATERNION's attitude and rates are float fields too: ODOMETRY's, the same bits.
+    h = state.view(HIL_STATE_RECORD)[0]
+    h["time_usec"] = time_usec
+    hq = h["attitude_quaternion"]
+    hq[0], hq[1], hq[2], hq[3] = q[0], q[1], q[2], q[3]
+    h["rollspeed"], h["pitchspeed"], h["yawspeed"] = w[0], w[1], w[2]
+    lat, lon, alt, vn, ve, vd, airspeed, xacc, yacc, zacc = hil
+    h["lat"], h["lon"], h["alt"] = lat, lon, alt
+    h["vx"], h["vy"], h["vz"] = vn, ve, vd
+    h["ind_airspeed"], h["true_airspeed"] = airspeed, airspeed
+    h["xacc"], h["yacc"], h["zacc"] = xacc, yacc, zacc
+    o = odometry.view(ODOMETRY_RECORD)[0]
+    o["time_usec"] = time_usec
+    o["x"], o["y"], o["z"] = p[0], p[1], p[2]
+    oq = o["q"]
+    oq[0], oq[1], oq[2], oq[3] = q[0], q[1], q[2], q[3]
+    o["vx"], o["vy"], o["vz"] = v[0], v[1], v[2]
+    o["rollspeed"], o["pitchspeed"], o["yawspeed"] = w[0], w[1], w[2]
+    return True
+
+
+@kernel
 def attitude_from_fields(q_ned, rates_frd: Vector3):
     """A NED/FRD quaternion and FRD body rates (ODOMETRY, HIL_STATE_QUATERNION) as the autopilot
     reads them: ``(quaternion, ZYX Euler angles, Euler rates)`` in the paper's frames."""
@@ -216,10 +277,13 @@ def gps_fix(lat: int, lon: int, alt: int, vn: int, ve: int, vd: int, eph: int, e
 # -------------------------------------------------------------------------------------------------
 _Z3 = (0.0, 0.0, 0.0)
 _HOME = (0.0, 0.0, 0.0)
+
 # The kernels the processes' encoder and decoder call from Python, each with the argument types it
 # is called with (tuples of floats; HIL_GPS's integers as Python ints): warmed once, then frozen.
 FRAME_ENTRIES = {
-    frame_fields: (_Z3, _Z3, (1.0, 0.0, 0.0, 0.0), _Z3, _Z3, _Z3, _HOME, _Z3, _Z3, _Z3, 0.0),
+    frame_records: (*(np.zeros(r.itemsize, np.uint8) for r in (HIL_SENSOR_RECORD, HIL_STATE_RECORD,
+                                                                ODOMETRY_RECORD)), 0, 0, _Z3, _Z3,
+                    (1.0, 0.0, 0.0, 0.0), _Z3, _Z3, _Z3, _HOME, _Z3, _Z3, _Z3, 0.0, 0.0, 0.0),  # fmt: skip
     odometry_state: (_Z3, _Z3, (1.0, 0.0, 0.0, 0.0), _Z3),
     vision_values: (_Z3, 0.0, 0.0, 0.0),
     vision_pose: (_Z3, 0.0, 0.0, 0.0),

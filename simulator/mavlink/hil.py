@@ -52,7 +52,7 @@ from quadcommon import frames, wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import LockstepAnswer, sat_i16, sat_u16
-from quadcommon.wire_values import entry, frame_fields, gps_values, vision_values
+from quadcommon.wire_values import entry, frame_records, gps_values, vision_values
 
 from ..battery import BatteryReading
 from ..dynamics.plant import TruthState
@@ -71,6 +71,9 @@ _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 UINT16_UNKNOWN = 65535
 CELL_VOLTAGE_MAX_MV = 65534  # BATTERY_STATUS voltages[0]: above it, the rest goes to voltages[1]
 _ID_CONTROLS = mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS
+_ID_SENSOR = mavlink.MAVLINK_MSG_ID_HIL_SENSOR
+_ID_STATE = mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION
+_ID_ODOMETRY = mavlink.MAVLINK_MSG_ID_ODOMETRY
 
 
 class HilFrameEncoder:
@@ -79,7 +82,7 @@ class HilFrameEncoder:
 
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = (float(home[0]), float(home[1]), float(home[2]))  # (as the compiled entries take it)
-        self._fields = entry(frame_fields)
+        self._frame_records = entry(frame_records)
         self._vision_values, self._gps_values = entry(vision_values), entry(gps_values)
         self.seq = 0
         ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
@@ -97,27 +100,16 @@ class HilFrameEncoder:
             [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             list(_UNKNOWN_COVARIANCE), list(_UNKNOWN_COVARIANCE), 0, mavlink.MAV_ESTIMATOR_TYPE_MOCAP, 100,
         )  # fmt: skip
-        # From the covariances on (and the frame ids) nothing changes: packed once.
-        self._odometry = FastEncoder(
-            mavlink.MAVLink_odometry_message, *ids, odometry, constant_from="pose_covariance"
-        )
+        self._odometry = FastEncoder(mavlink.MAVLink_odometry_message, *ids, odometry)
         gps = mavlink.MAVLink_hil_gps_message(0, GPS_FIX_3D, 0, 0, 0, 100, 100, 0, 0, 0, 0, 0, 10, 0, 0)
         self._gps = FastEncoder(mavlink.MAVLink_hil_gps_message, *ids, gps)
         vision = mavlink.MAVLink_vision_position_estimate_message(0, *(0.0,) * 6, [0.0] * 21, 0)
         self._vision = FastEncoder(mavlink.MAVLink_vision_position_estimate_message, *ids, vision)
         self._v = _slots(self._vision, "usec", "x", "y", "z", "yaw")
         self._v_cov = self._vision.slices["covariance"]
-        # Where the per-frame fields sit in each flat list.
-        self._s = _slots(self._sensor, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro",
-                         "xmag", "ymag", "zmag", "abs_pressure", "pressure_alt", "temperature")  # fmt: skip
-        self._s_updated = _slots(self._sensor, "fields_updated")[0]
-        self._h = _slots(self._state, "time_usec", "rollspeed", "pitchspeed", "yawspeed", "lat", "lon",
-                         "alt", "vx", "vy", "vz", "ind_airspeed", "true_airspeed",
-                         "xacc", "yacc", "zacc")  # fmt: skip
-        self._h_q = self._state.slices["attitude_quaternion"]
-        self._o = _slots(self._odometry, "time_usec", "x", "y", "z", "vx", "vy", "vz",
-                         "rollspeed", "pitchspeed", "yawspeed")  # fmt: skip
-        self._o_q = self._odometry.slices["q"]
+        # The three messages of every frame as payload buffers, filled in compiled code (the constant
+        # fields as the templates set them), in frame_records' order.
+        self._buffers = tuple(encoder.buffer() for encoder in (self._sensor, self._state, self._odometry))
         self._g = _slots(self._gps, "time_usec", "lat", "lon", "alt", "eph", "epv", "vel", "vn", "ve", "vd",
                          "cog", "satellites_visible")  # fmt: skip
         self._g_fix = _slots(self._gps, "fix_type")[0]
@@ -166,7 +158,6 @@ class HilFrameEncoder:
         + VISION_POSITION_ESTIMATE when ``vision``, + the ``DISTURB`` array when ``disturbance``:
         its sample time (µs) and (force (world), torque (Euler coordinates), the rotors' health) in
         the paper's frames, + BATTERY_STATUS when ``battery``)."""
-        v, i = self._sensor.values, self._s
         updated = FIELDS_UPDATED_ALL
         if not readings.mag_fresh:
             updated &= ~FIELDS_MAG
@@ -176,38 +167,19 @@ class HilFrameEncoder:
             updated &= ~FIELDS_ACCEL
         if not readings.gyro_fresh:
             updated &= ~FIELDS_GYRO
-        v[self._s_updated] = updated
         baro, imu = readings.baro, readings.imu
-        force, rate, field, pressure_altitude, odometry, state = self._fields(
-            truth.position_m, truth.velocity_m_s, truth.quaternion, truth.body_rates_rad_s,
-            truth.specific_force_body_m_s2, wind_world_m_s, self.home, imu.specific_force_m_s2,
-            imu.angular_rate_rad_s, readings.magnetic_field_gauss, baro.pressure_altitude_m,
-        )  # fmt: skip
-        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
-         v[i[10]], v[i[11]], v[i[12]]) = (
-            time_usec, *force, *rate, *field, baro.pressure_hpa, pressure_altitude, baro.temperature_c,
-        )  # fmt: skip
-
-        o_position, o_velocity, q_ned, rates_frd = odometry
-        # HIL_STATE_QUATERNION's attitude and rates are float fields too: ODOMETRY's, the same bits.
-        lat, lon, alt, vn, ve, vd, airspeed_cm_s, xacc, yacc, zacc = state
-        v, i = self._state.values, self._h
-        v[self._h_q] = q_ned
-        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]],
-         v[i[10]], v[i[11]], v[i[12]], v[i[13]], v[i[14]]) = (
-            time_usec, *rates_frd, lat, lon, alt, vn, ve, vd, airspeed_cm_s, airspeed_cm_s, xacc, yacc, zacc,
-        )  # fmt: skip
-
-        v, i = self._odometry.values, self._o
-        p, w, r = o_position, o_velocity, rates_frd
-        if not math.isfinite(p[0] + p[1] + p[2] + w[0] + w[1] + w[2] + r[0] + r[1] + r[2]):
-            raise OverflowError("the state is past the range of ODOMETRY's float32 fields")
-        v[self._o_q] = q_ned
-        (v[i[0]], v[i[1]], v[i[2]], v[i[3]], v[i[4]], v[i[5]], v[i[6]], v[i[7]], v[i[8]], v[i[9]]) = (
-            time_usec, *o_position, *o_velocity, *rates_frd,
-        )  # fmt: skip
-
-        sent = [self._sensor, self._state, self._odometry]
+        sensor, state, odometry = self._buffers
+        if not self._frame_records(
+            sensor, state, odometry, time_usec, updated, truth.position_m, truth.velocity_m_s,
+            truth.quaternion, truth.body_rates_rad_s, truth.specific_force_body_m_s2, wind_world_m_s,
+            self.home, imu.specific_force_m_s2, imu.angular_rate_rad_s, readings.magnetic_field_gauss,
+            baro.pressure_hpa, baro.pressure_altitude_m, baro.temperature_c,
+        ):  # fmt: skip
+            raise OverflowError("the state is past the range of the frame's float32 fields")
+        payloads = {
+            _ID_SENSOR: sensor.tobytes(), _ID_STATE: state.tobytes(), _ID_ODOMETRY: odometry.tobytes()
+        }
+        sent = []
         if gps is not None:
             self._fill_gps(time_usec, gps)
             sent.append(self._gps)
@@ -226,7 +198,9 @@ class HilFrameEncoder:
         if battery is not None:
             self._fill_battery(battery)
             sent.append(self._battery)
-        return {encoder.msg_id: encoder.payload() for encoder in sent}
+        for encoder in sent:
+            payloads[encoder.msg_id] = encoder.payload()
+        return payloads
 
     def _fill_battery(self, reading: BatteryReading) -> None:
         """The monitor's reading as BATTERY_STATUS: mV in voltages[0] (and [1] past 65 534 mV),

@@ -11,6 +11,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import wire_values as w
+from quadcommon.mavlink_fast import record_dtype
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -83,20 +84,33 @@ def test_a_vision_pose_carries_variances_and_reads_back_standard_deviations():
     assert w.vision_pose((0.0, 0.0, 0.0), 0.0, -1.0, math.nan)[2:] == (0.0, 0.0)
 
 
+# frame_records' arguments after the records, time and flags: the truth (position ... specific
+# force, wind, home) and the sensors' readings (specific force, rates, field).
+FRAME_TRUTH = (
+    (1.5, -2.25, 3.0), (0.4, -0.3, 0.2), (0.9, 0.1, -0.2, 0.3), (0.01, -0.02, 0.3), (0.1, 0.2, 9.7),
+    (1.0, -1.0, 0.5), HOME, (0.11, 0.19, 9.69), (0.012, -0.018, 0.29), (0.2, 0.01, -0.4),
+)  # fmt: skip
+
+
 def test_the_frames_compiled_entries_give_the_python_kernels_values_exactly():
     arguments = {
-        w.frame_fields: ((1.5, -2.25, 3.0), (0.4, -0.3, 0.2), (0.9, 0.1, -0.2, 0.3), (0.01, -0.02, 0.3),
-                          (0.1, 0.2, 9.7), (1.0, -1.0, 0.5), HOME, (0.11, 0.19, 9.69), (0.012, -0.018, 0.29),
-                          (0.2, 0.01, -0.4), 490.123),  # fmt: skip
         w.odometry_state: ((1.5, -2.25, -3.0), (0.4, 0.3, -0.2), (0.9, 0.1, 0.2, -0.3), (0.01, 0.02, -0.3)),
         w.vision_values: ((1.5, -2.25, 3.0), 0.7, 0.01, 0.02),
         w.vision_pose: ((1.5, 2.25, -3.0), -0.7, 1e-4, 4e-4),
         w.gps_values: ((1.5, -2.25, 3.0), (0.4, -0.3, 0.2), 0.8, 1.2, HOME),
         w.gps_fix: (473977540, 85455700, 491000, 40, -30, -20, 80, 120, HOME),
     }
-    assert set(arguments) == set(w.FRAME_ENTRIES)
+    assert set(arguments) | {w.frame_records} == set(w.FRAME_ENTRIES)
     for fn, args in arguments.items():
         assert w.entry(fn)(*args) == fn(*args), fn.__name__
+    # The records of a frame: the same bytes filled by the compiled entry and by the Python kernel.
+    truth = FRAME_TRUTH
+    filled = []
+    for fill in (w.entry(w.frame_records), w.frame_records):
+        records = [np.zeros(record_dtype(c).itemsize, np.uint8) for c in w.FRAME_RECORD_MESSAGES]
+        assert fill(*records, 123_456_789, 0x1FFF, *truth, 963.25, 490.123, 11.8) is True
+        filled.append([r.tobytes() for r in records])
+    assert filled[0] == filled[1]
 
 
 def test_hil_state_fields_scale_and_saturate_the_truth():
@@ -107,3 +121,46 @@ def test_hil_state_fields_scale_and_saturate_the_truth():
     assert (vx, vy, vz) == (100, 200, -32767)  # cm/s NED, saturated at int16
     assert airspeed == round(100.0 * math.hypot(2.0, 400.0))  # through the air: the wind taken off
     assert (xacc, yacc, zacc) == (0, 0, -1000)  # mG, FRD: 1 g up is -1000 down
+
+
+def test_a_frames_records_carry_frame_fields_values_as_pymavlink_reads_them():
+    """frame_records writes what frame_fields computes, each value in its field: pymavlink's
+    decoder reads the records' bytes back as those values (float fields as float32)."""
+    truth = FRAME_TRUTH
+    records = [np.zeros(record_dtype(c).itemsize, np.uint8) for c in w.FRAME_RECORD_MESSAGES]
+    assert w.entry(w.frame_records)(*records, 123_456_789, 0x1C0, *truth, 963.25, 490.123, 11.8)
+    sensor, state, odometry = (
+        dict(zip(c.ordered_fieldnames, _grouped(c, c.unpacker.unpack(r.tobytes())), strict=True))
+        for c, r in zip(w.FRAME_RECORD_MESSAGES, records, strict=True)
+    )
+    force, rate, field, altitude, (p, v, q, rates), hil = w.frame_fields(*truth, 490.123)
+    f32 = w.float_field
+    assert sensor["time_usec"] == state["time_usec"] == odometry["time_usec"] == 123_456_789
+    assert (sensor["xacc"], sensor["yacc"], sensor["zacc"]) == force
+    assert (sensor["xgyro"], sensor["ygyro"], sensor["zgyro"]) == rate
+    assert (sensor["xmag"], sensor["ymag"], sensor["zmag"]) == field
+    assert sensor["pressure_alt"] == altitude and sensor["fields_updated"] == 0x1C0
+    assert (sensor["abs_pressure"], sensor["temperature"]) == (f32(963.25), f32(11.8))
+    assert tuple(state["attitude_quaternion"]) == q == tuple(odometry["q"])
+    assert (state["rollspeed"], state["pitchspeed"], state["yawspeed"]) == rates
+    assert (odometry["rollspeed"], odometry["pitchspeed"], odometry["yawspeed"]) == rates
+    assert (odometry["x"], odometry["y"], odometry["z"]) == p
+    assert (odometry["vx"], odometry["vy"], odometry["vz"]) == v
+    names = ("lat", "lon", "alt", "vx", "vy", "vz", "ind_airspeed", "xacc", "yacc", "zacc")
+    assert tuple(state[n] for n in names) == hil and state["true_airspeed"] == hil[6]
+    # A state past float32's range: refused, nothing written.
+    before = [r.tobytes() for r in records]
+    far = ((1e39, 0.0, 0.0), *truth[1:])
+    assert not w.entry(w.frame_records)(*records, 1, 0, *far, 963.25, 490.123, 11.8)
+    assert not w.entry(w.frame_records)(*records, 1, 0, *truth, 1e39, 490.123, 11.8)
+    assert [r.tobytes() for r in records] == before
+
+
+def _grouped(message_class, flat: tuple) -> list:
+    """A struct's flat values grouped per field (array fields as tuples)."""
+    out, at = [], 0
+    for length in (message_class.lengths[message_class.ordered_fieldnames.index(n)]
+                   for n in message_class.ordered_fieldnames):  # fmt: skip
+        out.append(flat[at] if length == 1 else tuple(flat[at : at + length]))
+        at += length
+    return out
