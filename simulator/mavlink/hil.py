@@ -77,8 +77,10 @@ _ID_ODOMETRY = mavlink.MAVLINK_MSG_ID_ODOMETRY
 
 
 class HilFrameEncoder:
-    """Packs the lockstep datagram: one :class:`~quadcommon.mavlink_fast.FastEncoder` per message,
-    its flat field list refilled each frame (the constant fields stay as the templates set them)."""
+    """Packs the lockstep datagram: one :class:`~quadcommon.mavlink_fast.FastEncoder` per message
+    (its framing). The three messages of every frame are byte buffers filled in one compiled call
+    (:func:`~quadcommon.wire_values.frame_records`), the others flat field lists refilled when they
+    are sent; the constant fields stay as the templates set them."""
 
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = (float(home[0]), float(home[1]), float(home[2]))  # (as the compiled entries take it)
