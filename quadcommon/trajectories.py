@@ -65,16 +65,19 @@ class HarmonicTrajectory:
 
     def sample(self, t: float) -> Reference:
         """The reference at ``t`` (s from the start), the harmonic path and its first two derivatives."""
+        # (sampled at every control step: the three axes written out, the same arithmetic per axis)
         w = self.w
-        pos, vel, acc = [], [], []
-        for i in range(3):
-            arg = w * t + self.phase[i]
-            a = self.amplitude[i]
-            c, s = math.cos(arg), math.sin(arg)
-            pos.append(self.offset[i] + a * c + self.rate[i] * t)
-            vel.append(-a * w * s + self.rate[i])
-            acc.append(-a * w * w * c)
-        return Reference(tuple(pos), tuple(vel), tuple(acc), self.yaw, 0.0, 0.0)  # type: ignore[arg-type]
+        (ox, oy, oz), (ax, ay, az) = self.offset, self.amplitude
+        (px, py, pz), (rx, ry, rz) = self.phase, self.rate
+        cx, sx = math.cos(w * t + px), math.sin(w * t + px)
+        cy, sy = math.cos(w * t + py), math.sin(w * t + py)
+        cz, sz = math.cos(w * t + pz), math.sin(w * t + pz)
+        return Reference(
+            (ox + ax * cx + rx * t, oy + ay * cy + ry * t, oz + az * cz + rz * t),
+            (-ax * w * sx + rx, -ay * w * sy + ry, -az * w * sz + rz),
+            (-ax * w * w * cx, -ay * w * w * cy, -az * w * w * cz),
+            self.yaw, 0.0, 0.0,
+        )  # fmt: skip
 
 
 def circle(
