@@ -199,6 +199,16 @@ def flight(tmp_path_factory):
             if seen["labels"][-1] != label:
                 seen["labels"].append(label)
             seen["after"] = view_state(page)
+            if gust_sent:
+                from playwright.sync_api import Error as PlaywrightError  # (its timeout's base)
+
+                # A gust sent late in OFFBOARD (a loaded machine starts upload_gusts.py slowly) may
+                # end after the disarm: the simulation flies on, so its end still reaches the page.
+                try:
+                    page.wait_for_function("() => window.quadsitlView.tracks[0].events.length >= 2",
+                                           timeout=20000)  # fmt: skip
+                except PlaywrightError:
+                    pass  # (test_gust_instants_reach_the_page says what arrived)
             seen["events"] = page.evaluate("() => window.quadsitlView.tracks[0].events")
             seen["texts"] = page.evaluate("() => window.quadsitlView.tracks[0].texts.map(t => t[2])")
             seen["page_errors"] = list(page.errors)
