@@ -69,6 +69,7 @@ from .mavlink.hil import (
 )
 from .safety import MOTORS_OFF, emergency_descent, touched_down
 from .sensors import SensorConfig, SensorSuite, load_sensors
+from .sensors.frame import DELIVERY
 from .truth_bus import truth_row
 
 Controls = tuple[float, float, float, float]
@@ -243,14 +244,18 @@ class SimulatorCore:
         if not math.isfinite(p[0] + p[1] + p[2]):
             raise PlantDiverged(f"the plant state is not finite at t={t:.3f} s")
         force, torque, wind = self.schedule.evaluate(t)
-        sensed = self.sensors.step(t, truth)
+        delivery = self.sensors.deliver(t, truth)
+        gps = vision = None
+        if delivery[DELIVERY.gps_fresh] != 0.0 or delivery[DELIVERY.vision_fresh] != 0.0:
+            sensed = self.sensors.delivered(t)  # (the readings of a fix or a pose, when one came)
+            gps, vision = sensed.gps, sensed.vision
         health = self.rotor_health
         self._truth_row_of, self._truth_row = (t, truth, force, torque, wind, health), None
         report = self.disturbance_report.due(time_usec, (force, torque, health))
         battery = self.battery.frame(t, self.dt_control if k > 0 else 0.0, truth, self._armed)
         try:
-            payloads = self.encoder.payloads(
-                time_usec, truth, sensed.readings, wind, sensed.gps, sensed.vision, report, battery
+            payloads = self.encoder.frame_payloads(
+                time_usec, truth, delivery, wind, gps, vision, report, battery
             )
         except OverflowError as exc:  # finite but past float32: a blow-up a frame or two away
             raise PlantDiverged(f"the plant state no longer fits the wire's float32 at t={t:.3f} s") from exc

@@ -43,19 +43,31 @@ Integer fields are clamped to their wire range so that a wild state cannot crash
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, NamedTuple
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
+from quadcommon.kernel import compiled, compiling, freeze, kernel
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import LockstepAnswer, sat_i16, sat_u16
-from quadcommon.wire_values import entry, frame_records, gps_values, vision_values
+from quadcommon.wire_values import (
+    HIL_SENSOR_RECORD,
+    HIL_STATE_RECORD,
+    ODOMETRY_RECORD,
+    entry,
+    frame_records,
+    gps_values,
+    vision_values,
+)
 
 from ..battery import BatteryReading
 from ..dynamics.plant import TruthState
+from ..sensors.frame import DELIVERY
 from ..sensors.models import GpsReading, SensorReadings, VisionReading
 
 Vector3 = tuple[float, float, float]
@@ -76,6 +88,56 @@ _ID_STATE = mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION
 _ID_ODOMETRY = mavlink.MAVLINK_MSG_ID_ODOMETRY
 
 
+@kernel
+def fields_updated(mag_fresh: bool, baro_fresh: bool, accel_fresh: bool, gyro_fresh: bool) -> int:
+    """HIL_SENSOR's ``fields_updated``: every field's bit but those of a sensor that holds its last
+    sample (the magnetometer and the barometer between their samples) or that a failure stops
+    (the accelerometer, the gyro)."""
+    updated = FIELDS_UPDATED_ALL
+    if not mag_fresh:
+        updated &= ~FIELDS_MAG
+    if not baro_fresh:
+        updated &= ~FIELDS_BARO
+    if not accel_fresh:
+        updated &= ~FIELDS_ACCEL
+    if not gyro_fresh:
+        updated &= ~FIELDS_GYRO
+    return updated
+
+
+@kernel
+def delivery_records(sensor, state, odometry, time_usec: int, delivery, position: Vector3, velocity: Vector3,
+                     quaternion, body_rates: Vector3, specific_force_body: Vector3, wind: Vector3,
+                     home) -> bool:  # fmt: skip
+    """:func:`~quadcommon.wire_values.frame_records` of a frame's sensor delivery
+    (:data:`~simulator.sensors.frame.DELIVERY`): the IMU sample, the held magnetometer and
+    barometer readings, HIL_SENSOR's :func:`fields_updated` from the delivery's flags."""
+    d, at = delivery, DELIVERY
+    updated = fields_updated(d[at.mag_fresh] != 0.0, d[at.baro_fresh] != 0.0, d[at.accel_fresh] != 0.0,
+                             d[at.gyro_fresh] != 0.0)  # fmt: skip
+    f, r, m = at.force, at.rate, at.held_mag
+    return frame_records(
+        sensor, state, odometry, time_usec, updated, position, velocity, quaternion, body_rates,
+        specific_force_body, wind, home, (d[f], d[f + 1], d[f + 2]), (d[r], d[r + 1], d[r + 2]),
+        (d[m], d[m + 1], d[m + 2]), d[at.held_baro_pressure], d[at.held_baro_altitude],
+        d[at.held_baro_temperature],
+    )  # fmt: skip
+
+
+@functools.cache
+def _delivery_records_entry() -> Any:
+    """:func:`delivery_records` compiled (or loaded from numba's cache), called once on scratch
+    buffers, then frozen (as :func:`quadcommon.wire_values.entry` makes the frame's other entries)."""
+    compiled_fn = compiled(delivery_records)
+    if compiling():
+        z3 = (0.0, 0.0, 0.0)
+        records = (HIL_SENSOR_RECORD, HIL_STATE_RECORD, ODOMETRY_RECORD)
+        buffers = (np.zeros(record.itemsize, np.uint8) for record in records)
+        compiled_fn(*buffers, 0, np.zeros(DELIVERY.size), z3, z3, (1.0, 0.0, 0.0, 0.0), z3, z3, z3, z3)
+        freeze(compiled_fn)
+    return compiled_fn
+
+
 class HilFrameEncoder:
     """Packs the lockstep datagram: one :class:`~quadcommon.mavlink_fast.FastEncoder` per message
     (its framing). The three messages of every frame are byte buffers filled in one compiled call
@@ -85,6 +147,7 @@ class HilFrameEncoder:
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = (float(home[0]), float(home[1]), float(home[2]))  # (as the compiled entries take it)
         self._frame_records = entry(frame_records)
+        self._delivery_records = _delivery_records_entry()
         self._vision_values, self._gps_values = entry(vision_values), entry(gps_values)
         self.seq = 0
         ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
@@ -160,24 +223,49 @@ class HilFrameEncoder:
         + VISION_POSITION_ESTIMATE when ``vision``, + the ``DISTURB`` array when ``disturbance``:
         its sample time (µs) and (force (world), torque (Euler coordinates), the rotors' health) in
         the paper's frames, + BATTERY_STATUS when ``battery``)."""
-        updated = FIELDS_UPDATED_ALL
-        if not readings.mag_fresh:
-            updated &= ~FIELDS_MAG
-        if not readings.baro_fresh:
-            updated &= ~FIELDS_BARO
-        if not readings.accel_fresh:
-            updated &= ~FIELDS_ACCEL
-        if not readings.gyro_fresh:
-            updated &= ~FIELDS_GYRO
+        updated = fields_updated(readings.mag_fresh, readings.baro_fresh, readings.accel_fresh,
+                                 readings.gyro_fresh)  # fmt: skip
         baro, imu = readings.baro, readings.imu
         sensor, state, odometry = self._buffers
-        if not self._frame_records(
+        fits = self._frame_records(
             sensor, state, odometry, time_usec, updated, truth.position_m, truth.velocity_m_s,
             truth.quaternion, truth.body_rates_rad_s, truth.specific_force_body_m_s2, wind_world_m_s,
             self.home, imu.specific_force_m_s2, imu.angular_rate_rad_s, readings.magnetic_field_gauss,
             baro.pressure_hpa, baro.pressure_altitude_m, baro.temperature_c,
-        ):  # fmt: skip
+        )  # fmt: skip
+        return self._with_the_others(fits, time_usec, gps, vision, disturbance, battery)
+
+    def frame_payloads(
+        self,
+        time_usec: int,
+        truth: TruthState,
+        delivery: Any,
+        wind_world_m_s: Vector3,
+        gps: GpsReading | None,
+        vision: VisionReading | None,
+        disturbance: tuple[int, tuple[Vector3, Vector3, tuple[float, ...]]] | None,
+        battery: BatteryReading | None,
+    ) -> dict[int, bytes]:
+        """:meth:`payloads` of a frame's sensor delivery as the sensor suite left it
+        (:meth:`~simulator.sensors.models.SensorSuite.deliver`, the
+        :data:`~simulator.sensors.frame.DELIVERY` layout), read in the same compiled call that
+        fills the messages: the simulator's every frame."""
+        sensor, state, odometry = self._buffers
+        fits = self._delivery_records(
+            sensor, state, odometry, time_usec, delivery, truth.position_m, truth.velocity_m_s,
+            truth.quaternion, truth.body_rates_rad_s, truth.specific_force_body_m_s2, wind_world_m_s,
+            self.home,
+        )  # fmt: skip
+        return self._with_the_others(fits, time_usec, gps, vision, disturbance, battery)
+
+    def _with_the_others(
+        self, fits: bool, time_usec: int, gps, vision, disturbance, battery
+    ) -> dict[int, bytes]:
+        """The three every-frame payloads just filled (``fits``: else OverflowError), then the
+        messages this frame also carries."""
+        if not fits:
             raise OverflowError("the state is past the range of the frame's float32 fields")
+        sensor, state, odometry = self._buffers
         payloads = {
             _ID_SENSOR: sensor.tobytes(), _ID_STATE: state.tobytes(), _ID_ODOMETRY: odometry.tobytes()
         }

@@ -245,7 +245,16 @@ class SensorSuite:
     # -- the timed interface ------------------------------------------------------------------------
     def step(self, t_s: float, truth: TruthState) -> SensorFrame:
         """Advance the sensors' random walks to ``t_s`` and return what is delivered at ``t_s``."""
+        return _delivered(self.deliver(t_s, truth).tolist(), t_s)
+
+    def deliver(self, t_s: float, truth: TruthState) -> np.ndarray:
+        """:meth:`step` as the flat delivery (:data:`.frame.DELIVERY`; the suite's own buffer,
+        overwritten by the next call), for compiled code that reads it: the simulator's frame."""
         self._k.sensor_frame_fields(self.rng, self._S, self._C, self._faults, t_s, tuple(truth), self._out)
+        return self._out
+
+    def delivered(self, t_s: float) -> SensorFrame:
+        """What the last :meth:`deliver` (at ``t_s``) delivered, as :meth:`step` returns it."""
         return _delivered(self._out.tolist(), t_s)
 
     # -- instantaneous reads (no time: codec tests, single samples) -----------------------------------

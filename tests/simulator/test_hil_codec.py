@@ -47,6 +47,30 @@ def test_one_datagram_carries_the_frame_with_one_time_and_rising_sequence_number
     assert [m.get_seq() for m in again] == [4, 5, 6]  # no GPS this time
 
 
+def test_a_frame_from_the_sensors_delivery_is_the_frame_from_its_readings():
+    """What the simulator sends every frame (the delivery read in compiled code, frame_payloads) is
+    what payloads makes of the same frame's readings, byte for byte: sensors at their own rates
+    (fields_updated), noise, a failure that stops the gyro, GPS fixes."""
+    config = replace(EXACT, magnetometer=replace(EXACT.magnetometer, rate_hz=100.0),
+                     barometer=replace(EXACT.barometer, rate_hz=50.0))  # fmt: skip
+    suites = [SensorSuite(config, HOME[2], imu_rate_hz=500.0) for _ in range(2)]
+    for suite in suites:
+        suite.inject_failure("gyro", 1, 0.05)  # MAV_CMD_INJECT_FAILURE off from t = 0.05 s
+    by_readings, by_delivery = HilFrameEncoder(1, HOME), HilFrameEncoder(1, HOME)
+    truth, wind = make_truth(), (1.0, -0.5, 0.25)
+    kinds = set()
+    for k in range(60):
+        t = k / 500.0
+        frame = suites[0].step(t, truth)
+        delivery = suites[1].deliver(t, truth)
+        gps = suites[1].delivered(t).gps
+        expected = by_readings.payloads(k * 2000, truth, frame.readings, wind, frame.gps, None, None, None)
+        got = by_delivery.frame_payloads(k * 2000, truth, delivery, wind, gps, None, None, None)
+        assert got == expected, t
+        kinds.add(decode(by_delivery.datagram(got))["HIL_SENSOR"].fields_updated)
+    assert len(kinds) >= 3  # fresh, held and failed sensors among the frames
+
+
 def test_gps_fix_fields():
     truth = make_truth(velocity=(0.0, -3.0, 1.0))  # paper: 3 m/s toward +y... negative: east
     encoder = HilFrameEncoder(system_id=1, home=HOME)
