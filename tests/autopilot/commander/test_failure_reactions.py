@@ -24,6 +24,7 @@ from autopilot.core import AutopilotSetup
 from gcs_scripts.upload_mission import MissionLink, items_from_list
 from simulator.core import SimulatorSetup
 from simulator.sensors import SensorFault
+from simulator.sensors.frame import BARO_READING, DELIVERY
 from sitl.inprocess import Lockstep
 from tests.stack import Gcs, connect
 
@@ -55,33 +56,32 @@ def stack_with(sensors: str, estimator: str = "ekf") -> Lockstep:
 def break_sensors(stack: Lockstep, monkeypatch) -> dict:
     """The simulator's frames with a sensor broken as the returned dict says (set its keys):
     ``baro``/``mag`` "lost" (no fresh sample) or "stuck" (the value at that moment, repeated),
-    ``imu`` "nan" (non-finite samples)."""
+    ``imu`` "nan" (non-finite samples). Broken in the sensors' delivery, which the frame reads
+    (``SensorSuite.deliver``, the ``DELIVERY`` layout)."""
     suite = stack.sim.sensors
-    step = suite.step
+    deliver = suite.deliver
     broken: dict = {}
     held: dict = {}
+    at = DELIVERY
+    baro = slice(at.held_baro_time, at.held_baro_time + BARO_READING.size)
+    mag = slice(at.held_mag, at.held_mag + 3)
 
-    def broken_step(t, truth):
-        f = step(t, truth)
-        r = f.readings
-        baro, mag, imu = broken.get("baro"), broken.get("mag"), broken.get("imu")
-        if baro == "lost":
-            r = r._replace(baro_fresh=False)
-        elif baro == "stuck":
-            held.setdefault("baro", r.baro)
-            r = r._replace(baro=held["baro"])
-        if mag == "lost":
-            r = r._replace(mag_fresh=False)
-        elif mag == "stuck":
-            held.setdefault("mag", r.magnetic_field_gauss)
-            r = r._replace(magnetic_field_gauss=held["mag"])
-        if imu == "nan":
-            nan = math.nan
-            bad = f.imu._replace(specific_force_m_s2=(nan, nan, nan), angular_rate_rad_s=(nan, nan, nan))
-            f, r = f._replace(imu=bad), r._replace(imu=bad)
-        return f._replace(readings=r)
+    def broken_deliver(t, truth):
+        d = deliver(t, truth)
+        if broken.get("baro") == "lost":
+            d[at.baro_fresh] = 0.0
+        elif broken.get("baro") == "stuck":
+            d[baro] = held.setdefault("baro", d[baro].copy())
+        if broken.get("mag") == "lost":
+            d[at.mag_fresh] = 0.0
+        elif broken.get("mag") == "stuck":
+            d[mag] = held.setdefault("mag", d[mag].copy())
+        if broken.get("imu") == "nan":
+            d[at.force : at.force + 3] = math.nan
+            d[at.rate : at.rate + 3] = math.nan
+        return d
 
-    monkeypatch.setattr(suite, "step", broken_step)
+    monkeypatch.setattr(suite, "deliver", broken_deliver)
     return broken
 
 

@@ -19,6 +19,7 @@ from autopilot.records import SensorSamples, StateEstimate, VisionPose
 from quadcommon.atmosphere import isa_altitude_m
 from simulator.core import SimulatorSetup
 from simulator.sensors import SensorFault
+from simulator.sensors.frame import DELIVERY
 from sitl.inprocess import Lockstep
 from tests.sitl.test_params_failsafes import INT32, param_set
 from tests.stack import Gcs, make_stack
@@ -145,23 +146,19 @@ def test_non_finite_sensor_samples_are_refused_at_the_edge_and_the_flight_goes_o
     stack = Lockstep(sim, replace(ap, autostart=trajectory_from_spec(load_scenario("helix").trajectory)))
     stack.run_for(2.0)
     suite, nan = stack.sim.sensors, math.nan
-    step, broken = suite.step, set()
+    deliver, broken, at = suite.deliver, set(), DELIVERY
 
-    def broken_step(t, truth):  # the suite's frame with the broken fields
-        f = step(t, truth)
-        r = f.readings
+    def broken_deliver(t, truth):  # the suite's delivery with the broken fields, as the frame reads it
+        d = deliver(t, truth)
         if "imu" in broken:
-            imu = f.imu._replace(specific_force_m_s2=(nan, 0.0, 9.8))
-            f, r = f._replace(imu=imu), r._replace(imu=imu)
+            d[at.force] = nan
         if "aiding" in broken:
-            r = r._replace(
-                magnetic_field_gauss=(nan, 0.2, 0.4), baro=r.baro._replace(pressure_altitude_m=math.inf)
-            )
-            if f.vision is not None:
-                f = f._replace(vision=f.vision._replace(position_m=(nan, 0.0, 1.0)))
-        return f._replace(readings=r)
+            d[at.held_mag] = nan
+            d[at.held_baro_altitude] = math.inf
+            d[at.vision_position] = nan  # (counted only when a pose is due)
+        return d
 
-    monkeypatch.setattr(suite, "step", broken_step)
+    monkeypatch.setattr(suite, "deliver", broken_deliver)
     broken.add("imu")
     stack.run_for(0.01)  # 5 frames
     broken.clear()
