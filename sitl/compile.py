@@ -51,6 +51,9 @@ def compile_target(target: str) -> tuple[str, float]:
         NominalPlant(replace(vehicle, plant=replace(vehicle.plant, model="nominal")), 0.001)
         for fn in FRAME_ENTRIES:  # the frame encoder's and decoder's wire values
             entry(fn)
+        from simulator.mavlink.hil import delivery_records_entry
+
+        delivery_records_entry()  # the frame's messages from the sensors' delivery
     elif kind == "estimator":
         from autopilot.estimation.eskf import ErrorStateEkf
 
@@ -83,8 +86,9 @@ def entries_of(target: str) -> list[tuple]:
         from quadcommon.wire_values import FRAME_ENTRIES
         from simulator.dynamics.nominal_plant import nominal_kernels
         from simulator.dynamics.plant import plant_kernels
+        from simulator.mavlink.hil import delivery_records
 
-        kernels = (*plant_kernels(), *nominal_kernels(), *FRAME_ENTRIES)
+        kernels = (*plant_kernels(), *nominal_kernels(), *FRAME_ENTRIES, delivery_records)
         return [(fn,) for fn in kernels]
     if kind == "estimator":
         from autopilot.estimation.eskf import filter_kernels

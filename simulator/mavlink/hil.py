@@ -125,7 +125,7 @@ def delivery_records(sensor, state, odometry, time_usec: int, delivery, position
 
 
 @functools.cache
-def _delivery_records_entry() -> Any:
+def delivery_records_entry() -> Any:
     """:func:`delivery_records` compiled (or loaded from numba's cache), called once on scratch
     buffers, then frozen (as :func:`quadcommon.wire_values.entry` makes the frame's other entries)."""
     compiled_fn = compiled(delivery_records)
@@ -147,7 +147,7 @@ class HilFrameEncoder:
     def __init__(self, system_id: int, home: tuple[float, float, float]) -> None:
         self.home = (float(home[0]), float(home[1]), float(home[2]))  # (as the compiled entries take it)
         self._frame_records = entry(frame_records)
-        self._delivery_records = _delivery_records_entry()
+        self._delivery_records = delivery_records_entry()
         self._vision_values, self._gps_values = entry(vision_values), entry(gps_values)
         self.seq = 0
         ids = (system_id, wire.SIMULATOR_COMPONENT_ID)
