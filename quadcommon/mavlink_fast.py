@@ -162,7 +162,6 @@ class FastEncoder:
     def __init__(self, message_class, system_id: int, component_id: int, template=None) -> None:
         self.msg_id = message_class.id
         self.packer = message_class.unpacker
-        self.dtype = record_dtype(message_class)
         self.slices = _flat_slices(message_class)
         self._crc_extra = bytes((message_class.crc_extra,))
         self._ids = (system_id, component_id, self.msg_id & 0xFFFF, self.msg_id >> 16)
@@ -182,8 +181,8 @@ class FastEncoder:
 
     def buffer(self) -> np.ndarray:
         """:meth:`payload` as a uint8 array to fill in place, the template's values in it: compiled
-        code views it as one record of :attr:`dtype` (an array's view is a fraction of the cost of
-        passing it a record array); its ``tobytes()`` is a payload."""
+        code views it as one record of the message's :func:`record_dtype` (an array's view is a
+        fraction of the cost of passing it a record array); its ``tobytes()`` is a payload."""
         return np.frombuffer(self.payload(), dtype=np.uint8).copy()
 
     def frame(self, seq: int) -> bytes:
