@@ -109,6 +109,17 @@ def compiled(fn: Callable[..., Any], *bound: Callable[..., Any], nogil: bool = F
     return _entry(fn, tuple(bound), nogil)
 
 
+def warmed(fn: Callable[..., Any], *args: Any) -> Callable[..., Any]:
+    """:func:`compiled` ``fn`` as a process calls it every frame: where kernels compile, run once
+    on ``args`` (compiled now or loaded from numba's cache) and then :func:`frozen <freeze>`, so a
+    flight never waits for a compilation; ``fn`` itself where nothing compiles."""
+    entry = compiled(fn)
+    if compiling():
+        entry(*args)
+        freeze(entry)
+    return entry
+
+
 def vector(values: Sequence[float] | int) -> Any:
     """A kernel's mutable float buffer: a float64 numpy array where kernels compile, a list of
     floats where Python runs them (list indexing is Python's fastest). An int gives zeros."""

@@ -21,7 +21,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from . import frames
-from .kernel import compiled, compiling, freeze, kernel
+from .kernel import kernel, warmed
 from .mavlink_fast import record_dtype
 from .rigid_body import euler_from_quaternion, euler_rates_from_body_rates
 
@@ -298,8 +298,4 @@ def entry(fn: Callable[..., Any]) -> Callable[..., Any]:
     loaded from numba's cache) and run once on its warm-up arguments, then frozen, so a flight
     never waits for a compilation (the Python kernel itself where nothing compiles). A compiled
     call is a fraction of a microsecond where the kernel run by Python takes two."""
-    compiled_fn = compiled(fn)
-    if compiling():
-        compiled_fn(*FRAME_ENTRIES[fn])
-        freeze(compiled_fn)
-    return compiled_fn
+    return warmed(fn, *FRAME_ENTRIES[fn])

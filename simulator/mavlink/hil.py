@@ -52,7 +52,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from quadcommon import frames, wire
 from quadcommon.config import SIM_BATTERY_PARAMETERS
-from quadcommon.kernel import compiled, compiling, freeze, kernel
+from quadcommon.kernel import kernel, warmed
 from quadcommon.mavlink_fast import DecodeError, FastDecoder, FastEncoder, split_frames
 from quadcommon.wire import LockstepAnswer, sat_i16, sat_u16
 from quadcommon.wire_values import (
@@ -126,16 +126,14 @@ def delivery_records(sensor, state, odometry, time_usec: int, delivery, position
 
 @functools.cache
 def delivery_records_entry() -> Any:
-    """:func:`delivery_records` compiled (or loaded from numba's cache), called once on scratch
-    buffers, then frozen (as :func:`quadcommon.wire_values.entry` makes the frame's other entries)."""
-    compiled_fn = compiled(delivery_records)
-    if compiling():
-        z3 = (0.0, 0.0, 0.0)
-        records = (HIL_SENSOR_RECORD, HIL_STATE_RECORD, ODOMETRY_RECORD)
-        buffers = (np.zeros(record.itemsize, np.uint8) for record in records)
-        compiled_fn(*buffers, 0, np.zeros(DELIVERY.size), z3, z3, (1.0, 0.0, 0.0, 0.0), z3, z3, z3, z3)
-        freeze(compiled_fn)
-    return compiled_fn
+    """:func:`delivery_records` as the simulator calls it every frame, warmed on scratch buffers
+    (:func:`~quadcommon.kernel.warmed`, as :func:`quadcommon.wire_values.entry` makes the frame's
+    other entries)."""
+    z3 = (0.0, 0.0, 0.0)
+    buffers = (np.zeros(record.itemsize, np.uint8) for record in (HIL_SENSOR_RECORD, HIL_STATE_RECORD,
+                                                                   ODOMETRY_RECORD))  # fmt: skip
+    quaternion = (1.0, 0.0, 0.0, 0.0)
+    return warmed(delivery_records, *buffers, 0, np.zeros(DELIVERY.size), z3, z3, quaternion, z3, z3, z3, z3)
 
 
 class HilFrameEncoder:

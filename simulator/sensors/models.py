@@ -245,7 +245,8 @@ class SensorSuite:
     # -- the timed interface ------------------------------------------------------------------------
     def step(self, t_s: float, truth: TruthState) -> SensorFrame:
         """Advance the sensors' random walks to ``t_s`` and return what is delivered at ``t_s``."""
-        return _delivered(self.deliver(t_s, truth).tolist(), t_s)
+        self.deliver(t_s, truth)
+        return self.delivered(t_s)
 
     def deliver(self, t_s: float, truth: TruthState) -> np.ndarray:
         """:meth:`step` as the flat delivery (:data:`.frame.DELIVERY`; the suite's own buffer,

@@ -164,3 +164,16 @@ def _grouped(message_class, flat: tuple) -> list:
         out.append(flat[at] if length == 1 else tuple(flat[at : at + length]))
         at += length
     return out
+
+
+def test_a_frame_entry_is_warmed_then_frozen_it_refuses_a_new_type_instead_of_compiling():
+    from quadcommon.kernel import compiling
+
+    if not compiling():
+        pytest.skip("nothing compiles (QUADSITL_PURE_PYTHON=1): the entries are the Python kernels")
+    fix = w.entry(w.gps_fix)
+    assert fix(473977540, 85455700, 491000, 40, -30, -20, 80, 120, HOME) == w.gps_fix(
+        473977540, 85455700, 491000, 40, -30, -20, 80, 120, HOME
+    )
+    with pytest.raises(TypeError):
+        fix(np.zeros(2), 85455700, 491000, 40, -30, -20, 80, 120, HOME)  # an array where an int was
